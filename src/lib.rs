@@ -1,0 +1,17 @@
+//! binpick: a headless, simulation-in-the-loop digital twin of a robotic bin-picking cell
+//! (an OMRON Viper s650 with a suction hand, a fixed overhead 3D sensor, a pick and a place tray).
+//!
+//! The modules follow one pick through the data flow:
+//!
+//! 1. [`config`]: the cell (scene) file and the workpiece files: strict parsing and validation.
+//! 2. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
+//!
+//! Later stages (physics world, sensor, grasp selection, planning, trajectory, execution, cycle,
+//! recording, report) are added as their issues land; see README.md.
+//!
+//! Units are SI inside the crate (m, rad, s, kg, N m); degrees appear only at the file and
+//! command-line boundary. Frame names read `target_from_source` (e.g. `world_from_tool`).
+
+pub mod bench;
+pub mod config;
+pub mod robot;

@@ -1,0 +1,595 @@
+//! The `binpick` command line: validate files, interrogate the robot, run benchmarks.
+//!
+//! Exit codes: 0 success; 2 bad input (invalid file, bad argument, unreachable target), with one
+//! clear line per problem on stderr; 1 any other failure. Nothing is written on bad input.
+
+use std::path::{Path, PathBuf};
+use std::process::ExitCode;
+
+use anyhow::{Context, Result};
+use clap::{Args, Parser, Subcommand};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion};
+use serde_json::json;
+
+use binpick::config::{ConfigError, LoadedScene, LoadedWorkpiece, Source};
+use binpick::robot::{JointVector, Payload, RobotModel};
+
+/// A digital twin of a robotic bin-picking cell (OMRON Viper s650).
+#[derive(Parser)]
+#[command(name = "binpick", version, about, long_about = None)]
+struct Cli {
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Validate scene (.toml with [robot]), workpiece (.toml) and URDF (.urdf) files.
+    Check {
+        /// Files to check.
+        #[arg(required = true)]
+        files: Vec<PathBuf>,
+        /// Scene that workpieces are checked against (default: the embedded default cell).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+    },
+    /// Interrogate the simulated robot.
+    Robot {
+        #[command(subcommand)]
+        command: RobotCommand,
+        /// Scene file (default: the embedded default cell).
+        #[arg(long, global = true)]
+        scene: Option<PathBuf>,
+        /// Machine-readable JSON output.
+        #[arg(long, global = true)]
+        json: bool,
+    },
+    /// Benchmarks: our code beside a baseline doing the same work.
+    Bench {
+        #[command(subcommand)]
+        command: BenchCommand,
+    },
+}
+
+#[derive(Subcommand)]
+enum RobotCommand {
+    /// Links, masses, joint limits and drives.
+    Info,
+    /// Forward kinematics: every link frame, the flange and the tool in the world frame.
+    Fk {
+        /// Joint positions q1..q6 [deg].
+        #[arg(long, num_args = 6, allow_negative_numbers = true, required = true)]
+        deg: Vec<f64>,
+    },
+    /// Inverse kinematics of a tool (or flange) pose in the world frame.
+    Ik {
+        /// Position x y z [m].
+        #[arg(long, num_args = 3, allow_negative_numbers = true, required = true)]
+        xyz: Vec<f64>,
+        /// Orientation roll pitch yaw, fixed axes x, y, z [deg].
+        #[arg(long, num_args = 3, allow_negative_numbers = true, required = true)]
+        rpy_deg: Vec<f64>,
+        /// List every in-limit solution instead of the one nearest the seed.
+        #[arg(long)]
+        all: bool,
+        /// Seed configuration q1..q6 [deg] (default: the cell's home).
+        #[arg(long, num_args = 6, allow_negative_numbers = true)]
+        seed_deg: Option<Vec<f64>>,
+        /// The pose is the flange's, not the tool's.
+        #[arg(long)]
+        flange: bool,
+    },
+    /// Joint torques by inverse dynamics (gravity, inertia, Coriolis, armature, friction).
+    Torque(TorqueArgs),
+}
+
+#[derive(Args)]
+struct TorqueArgs {
+    /// Joint positions q1..q6 [deg].
+    #[arg(long, num_args = 6, allow_negative_numbers = true, required = true)]
+    deg: Vec<f64>,
+    /// Joint velocities [deg/s] (default 0).
+    #[arg(long, num_args = 6, allow_negative_numbers = true)]
+    vel_deg: Option<Vec<f64>>,
+    /// Joint accelerations [deg/s^2] (default 0).
+    #[arg(long, num_args = 6, allow_negative_numbers = true)]
+    acc_deg: Option<Vec<f64>>,
+    /// Held part: a point mass at the tool tip [kg] (default 0).
+    #[arg(long, default_value_t = 0.0)]
+    payload_kg: f64,
+    /// Leave the hand off the flange.
+    #[arg(long)]
+    no_gripper: bool,
+}
+
+#[derive(Subcommand)]
+enum BenchCommand {
+    /// Robot model: IK, FK, inverse and forward dynamics per call, beside baselines.
+    Robot {
+        /// Runs to take the median over.
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        /// Calls per run.
+        #[arg(long, default_value_t = 200_000)]
+        calls: usize,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// Bad input from the user: reported on one line, exit code 2.
+#[derive(Debug, thiserror::Error)]
+#[error("{0}")]
+struct InputError(String);
+
+fn main() -> ExitCode {
+    let cli = Cli::parse();
+    match run(cli) {
+        Ok(()) => ExitCode::SUCCESS,
+        Err(e) => {
+            if let Some(c) = e.downcast_ref::<ConfigError>() {
+                eprintln!("{c}");
+                ExitCode::from(2)
+            } else if let Some(i) = e.downcast_ref::<InputError>() {
+                eprintln!("error: {i}");
+                ExitCode::from(2)
+            } else {
+                eprintln!("error: {e:#}");
+                ExitCode::from(1)
+            }
+        }
+    }
+}
+
+fn run(cli: Cli) -> Result<()> {
+    match cli.command {
+        Command::Check { files, scene } => check(&files, scene.as_deref()),
+        Command::Robot {
+            command,
+            scene,
+            json,
+        } => {
+            let loaded = LoadedScene::load(scene.as_deref())?;
+            let robot = RobotModel::from_scene(&loaded)?;
+            match command {
+                RobotCommand::Info => robot_info(&loaded, &robot, json),
+                RobotCommand::Fk { deg } => robot_fk(&robot, &deg, json),
+                RobotCommand::Ik {
+                    xyz,
+                    rpy_deg,
+                    all,
+                    seed_deg,
+                    flange,
+                } => {
+                    let seed = match seed_deg {
+                        Some(s) => joints_from_deg("--seed-deg", &s)?,
+                        None => JointVector::from(loaded.scene.robot.home_rad()),
+                    };
+                    robot_ik(&robot, &xyz, &rpy_deg, all, &seed, flange, json)
+                }
+                RobotCommand::Torque(args) => robot_torque(&loaded, &robot, &args, json),
+            }
+        }
+        Command::Bench {
+            command: BenchCommand::Robot { runs, calls, json },
+        } => {
+            let loaded = LoadedScene::embedded_default()?;
+            let robot = RobotModel::from_scene(&loaded)?;
+            bench_robot(&loaded, &robot, runs, calls, json)
+        }
+    }
+}
+
+fn finite_args(name: &str, v: &[f64]) -> Result<()> {
+    if let Some(bad) = v.iter().find(|x| !x.is_finite()) {
+        return Err(InputError(format!("{name} must be finite numbers, got {bad}")).into());
+    }
+    Ok(())
+}
+
+fn joints_from_deg(name: &str, v: &[f64]) -> Result<JointVector> {
+    finite_args(name, v)?;
+    Ok(JointVector::from_fn(|i, _| v[i].to_radians()))
+}
+
+fn deg_list(q: &JointVector) -> Vec<f64> {
+    q.iter().map(|v| round(v.to_degrees(), 6)).collect()
+}
+
+fn round(v: f64, digits: i32) -> f64 {
+    let s = 10f64.powi(digits);
+    (v * s).round() / s
+}
+
+fn pose_json(p: &Isometry3<f64>) -> serde_json::Value {
+    let (r, pi, y) = p.rotation.euler_angles();
+    json!({
+        "xyz_m": p.translation.vector.iter().map(|v| round(*v, 9)).collect::<Vec<_>>(),
+        "rpy_deg": [round(r.to_degrees(), 6), round(pi.to_degrees(), 6), round(y.to_degrees(), 6)],
+    })
+}
+
+fn pose_text(p: &Isometry3<f64>) -> String {
+    let (r, pi, y) = p.rotation.euler_angles();
+    let t = p.translation.vector;
+    format!(
+        "xyz [{:9.5} {:9.5} {:9.5}] m  rpy [{:8.3} {:8.3} {:8.3}] deg",
+        t.x,
+        t.y,
+        t.z,
+        r.to_degrees(),
+        pi.to_degrees(),
+        y.to_degrees()
+    )
+}
+
+// ---------------------------------------------------------------------------------------------
+
+fn check(files: &[PathBuf], scene_path: Option<&Path>) -> Result<()> {
+    let mut problems = Vec::new();
+    let reference_scene = match LoadedScene::load(scene_path) {
+        Ok(s) => Some(s),
+        Err(e) => {
+            problems.extend(e.problems);
+            None
+        }
+    };
+    for f in files {
+        match check_one(f, reference_scene.as_ref()) {
+            Ok(what) => println!("ok: {} ({what})", f.display()),
+            Err(e) => problems.extend(e.problems),
+        }
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(ConfigError { problems }.into())
+    }
+}
+
+fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, ConfigError> {
+    let label = path.display().to_string();
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    match ext {
+        "urdf" => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ConfigError::one(&label, "", format!("cannot read file: {e}")))?;
+            let base = LoadedScene::embedded_default()?;
+            let robot =
+                RobotModel::from_urdf(&label, &text, &base.scene.robot, &base.scene.gripper)?;
+            Ok(format!(
+                "URDF: robot {:?}, {} joints, {:.2} kg moving",
+                robot.name,
+                robot.joints.len(),
+                robot.moving_mass_kg()
+            ))
+        }
+        "toml" => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ConfigError::one(&label, "", format!("cannot read file: {e}")))?;
+            let table: toml::Table = binpick::config::parse_toml(&label, &text)?;
+            if table.contains_key("robot") {
+                let scene =
+                    LoadedScene::from_text(&label, Source::File(path.to_path_buf()), &text)?;
+                let robot = RobotModel::from_scene(&scene)?;
+                robot.check_scene_reach(&label, &scene.scene)?;
+                Ok(format!(
+                    "scene {:?}: robot {:?}, trays reachable, sensor sees the pick tray",
+                    scene.scene.name, robot.name
+                ))
+            } else {
+                let wp =
+                    LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
+                if let Some(s) = reference {
+                    wp.workpiece.check_fits_scene(&label, &s.scene)?;
+                }
+                Ok(format!(
+                    "workpiece {:?}: {}",
+                    wp.workpiece.name, wp.workpiece.kind
+                ))
+            }
+        }
+        _ => Err(ConfigError::one(
+            &label,
+            "",
+            "is neither a .toml (scene or workpiece) nor a .urdf file",
+        )),
+    }
+}
+
+fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()> {
+    let g = &loaded.scene.gripper;
+    let hand = Payload::from_gripper(g);
+    if json {
+        let joints: Vec<_> = robot
+            .joints
+            .iter()
+            .map(|j| {
+                json!({
+                    "name": j.name, "child_link": j.child_link,
+                    "lower_deg": round(j.lower_rad.to_degrees(), 4), "upper_deg": round(j.upper_rad.to_degrees(), 4),
+                    "max_vel_deg_s": round(j.max_vel_rad_s.to_degrees(), 4),
+                    "max_accel_deg_s2": round(j.max_accel_rad_s2.to_degrees(), 4),
+                    "torque_limit_nm": j.torque_limit_nm, "armature_kg_m2": j.armature_kg_m2,
+                    "coulomb_nm": j.coulomb_nm, "viscous_nm_s_per_rad": j.viscous_nm_s_per_rad,
+                })
+            })
+            .collect();
+        let links: Vec<_> = robot
+            .links
+            .iter()
+            .map(|l| json!({"name": l.name, "mass_kg": l.inertial.mass_kg, "com_m": l.inertial.com_m.as_slice(), "collision_shapes": l.shapes.len()}))
+            .collect();
+        let out = json!({
+            "scene": loaded.label, "urdf": loaded.urdf_label, "robot": robot.name,
+            "world_from_base": pose_json(&robot.world_from_base),
+            "flange_from_tool": pose_json(&robot.flange_from_tool),
+            "moving_mass_kg": robot.moving_mass_kg(),
+            "joints": joints, "links": links,
+            "gripper": {"kind": format!("{:?}", g.kind).to_lowercase(), "mass_kg": hand.mass_kg, "com_flange_m": hand.com_flange_m.as_slice(),
+                         "tool_length_m": g.tool_length_m, "cup_diameter_m": g.cup_diameter_m},
+            "ik": {"shoulder_height_m": robot.ik_geometry.shoulder_height_m, "shoulder_offset_m": robot.ik_geometry.shoulder_offset_m,
+                   "upper_arm_m": robot.ik_geometry.upper_arm_m, "forearm_m": robot.ik_geometry.forearm_m,
+                   "wrist_to_flange_m": robot.ik_geometry.wrist_to_flange_m},
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "robot {:?} from {} (scene {})",
+        robot.name, loaded.urdf_label, loaded.label
+    );
+    println!("base in world: {}", pose_text(&robot.world_from_base));
+    println!(
+        "tool: {:?} hand, {:.3} kg, tool frame {:.3} m beyond the flange, cup {:.1} mm",
+        g.kind,
+        g.mass_kg,
+        g.tool_length_m,
+        g.cup_diameter_m * 1000.0
+    );
+    println!(
+        "moving mass {:.3} kg (links 1-6, without hand)",
+        robot.moving_mass_kg()
+    );
+    println!();
+    println!("links    mass_kg  com_m (link frame)             shapes");
+    for l in &robot.links {
+        let c = l.inertial.com_m;
+        println!(
+            "{:<8} {:7.3}  [{:7.4} {:7.4} {:7.4}]        {}",
+            l.name,
+            l.inertial.mass_kg,
+            c.x,
+            c.y,
+            c.z,
+            l.shapes.len()
+        );
+    }
+    println!();
+    println!(
+        "joint     lower_deg upper_deg  vmax_deg_s  amax_deg_s2  torque_nm  armature  coulomb_nm  viscous_nm_s"
+    );
+    for j in &robot.joints {
+        println!(
+            "{:<9} {:9.1} {:9.1} {:11.1} {:12.0} {:10.1} {:9.3} {:11.2} {:13.2}",
+            j.name,
+            j.lower_rad.to_degrees(),
+            j.upper_rad.to_degrees(),
+            j.max_vel_rad_s.to_degrees(),
+            j.max_accel_rad_s2.to_degrees(),
+            j.torque_limit_nm,
+            j.armature_kg_m2,
+            j.coulomb_nm,
+            j.viscous_nm_s_per_rad
+        );
+    }
+    Ok(())
+}
+
+fn robot_fk(robot: &RobotModel, deg: &[f64], json: bool) -> Result<()> {
+    let q = joints_from_deg("--deg", deg)?;
+    let frames = robot.world_from_links(&q);
+    let tool = robot.world_from_tool(&q);
+    let within = robot.within_limits(&q, 0.0);
+    let manip = robot.manipulability(&q);
+    if json {
+        let links: Vec<_> = robot
+            .links
+            .iter()
+            .zip(&frames)
+            .map(|(l, f)| json!({"link": l.name, "world_from_link": pose_json(f)}))
+            .collect();
+        let out = json!({
+            "q_deg": deg_list(&q), "within_limits": within, "links": links,
+            "world_from_flange": pose_json(&frames[frames.len() - 1]),
+            "world_from_tool": pose_json(&tool), "manipulability": manip,
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    for (l, f) in robot.links.iter().zip(&frames) {
+        println!("{:<10} {}", l.name, pose_text(f));
+    }
+    println!("{:<10} {}", "flange", pose_text(&frames[frames.len() - 1]));
+    println!("{:<10} {}", "tool", pose_text(&tool));
+    println!("manipulability {manip:.5}; within joint limits: {within}");
+    Ok(())
+}
+
+fn robot_ik(
+    robot: &RobotModel,
+    xyz: &[f64],
+    rpy_deg: &[f64],
+    all: bool,
+    seed: &JointVector,
+    flange: bool,
+    json: bool,
+) -> Result<()> {
+    finite_args("--xyz", xyz)?;
+    finite_args("--rpy-deg", rpy_deg)?;
+    let target = Isometry3::from_parts(
+        Translation3::new(xyz[0], xyz[1], xyz[2]),
+        UnitQuaternion::from_euler_angles(
+            rpy_deg[0].to_radians(),
+            rpy_deg[1].to_radians(),
+            rpy_deg[2].to_radians(),
+        ),
+    );
+    let base_from_flange = if flange {
+        robot.world_from_base.inverse() * target
+    } else {
+        robot.base_from_flange_for_tool(&target)
+    };
+    let frame = if flange { "flange" } else { "tool" };
+    let sols = if all {
+        robot.ik_flange_all(&base_from_flange)
+    } else {
+        robot
+            .ik_flange_nearest(&base_from_flange, seed)
+            .map(|s| vec![s])
+    }
+    .map_err(|e| {
+        InputError(format!(
+            "no {frame} pose solution for xyz {xyz:?} m, rpy {rpy_deg:?} deg: {e}"
+        ))
+    })?;
+    if json {
+        let list: Vec<_> = sols
+            .iter()
+            .map(|s| {
+                json!({"q_deg": deg_list(&s.q), "front": s.branch.front, "elbow": s.branch.elbow, "wrist_positive": s.branch.wrist_positive})
+            })
+            .collect();
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({"frame": frame, "solutions": list}))?
+        );
+        return Ok(());
+    }
+    println!(
+        "{} solution(s) for the {frame} at {}:",
+        sols.len(),
+        pose_text(&target)
+    );
+    for s in &sols {
+        let q: Vec<String> =
+            s.q.iter()
+                .map(|v| format!("{:9.3}", v.to_degrees()))
+                .collect();
+        println!(
+            "  q_deg [{}]  ({}, elbow {}, J5 {})",
+            q.join(" "),
+            if s.branch.front { "front" } else { "back" },
+            s.branch.elbow,
+            if s.branch.wrist_positive { "+" } else { "-" }
+        );
+    }
+    Ok(())
+}
+
+fn robot_torque(
+    loaded: &LoadedScene,
+    robot: &RobotModel,
+    a: &TorqueArgs,
+    json: bool,
+) -> Result<()> {
+    let q = joints_from_deg("--deg", &a.deg)?;
+    let qd = a
+        .vel_deg
+        .as_deref()
+        .map(|v| joints_from_deg("--vel-deg", v))
+        .transpose()?
+        .unwrap_or_default();
+    let qdd = a
+        .acc_deg
+        .as_deref()
+        .map(|v| joints_from_deg("--acc-deg", v))
+        .transpose()?
+        .unwrap_or_default();
+    if !(a.payload_kg.is_finite() && a.payload_kg >= 0.0) {
+        return Err(InputError(format!(
+            "--payload-kg must be a finite number >= 0, got {}",
+            a.payload_kg
+        ))
+        .into());
+    }
+    let hand = if a.no_gripper {
+        Payload::none()
+    } else {
+        Payload::from_gripper(&loaded.scene.gripper)
+    };
+    let part = Payload::point(a.payload_kg, robot.flange_from_tool.translation.vector);
+    let payload = hand.combined(&part);
+    let dynamics = robot.dynamics(&payload);
+    let tau = dynamics.inverse_dynamics(&q, &qd, &qdd);
+    let gravity = dynamics.gravity_torques(&q);
+    let limit = robot.torque_limit_nm();
+    if json {
+        let rows: Vec<_> = (0..6)
+            .map(|i| {
+                json!({"joint": robot.joints[i].name, "torque_nm": round(tau[i], 6), "gravity_nm": round(gravity[i], 6),
+                       "limit_nm": limit[i], "ratio": round(tau[i].abs() / limit[i], 6)})
+            })
+            .collect();
+        let out = json!({"q_deg": deg_list(&q), "payload_kg": payload.mass_kg, "joints": rows,
+                         "within_limits": (0..6).all(|i| tau[i].abs() <= limit[i])});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "payload on the flange: {:.3} kg (hand {:.3} kg + part {:.3} kg at the tool tip)",
+        payload.mass_kg, hand.mass_kg, a.payload_kg
+    );
+    println!("joint     torque_nm  gravity_nm  limit_nm  |tau|/limit");
+    for i in 0..6 {
+        let flag = if tau[i].abs() > limit[i] {
+            "  OVER LIMIT"
+        } else {
+            ""
+        };
+        println!(
+            "{:<9} {:9.3} {:11.3} {:9.1} {:11.3}{flag}",
+            robot.joints[i].name,
+            tau[i],
+            gravity[i],
+            limit[i],
+            tau[i].abs() / limit[i]
+        );
+    }
+    Ok(())
+}
+
+fn bench_robot(
+    loaded: &LoadedScene,
+    robot: &RobotModel,
+    runs: usize,
+    calls: usize,
+    json: bool,
+) -> Result<()> {
+    if runs == 0 || calls == 0 {
+        return Err(InputError("--runs and --calls must be > 0".into()).into());
+    }
+    let payload = Payload::from_gripper(&loaded.scene.gripper);
+    let result = binpick::bench::robot_bench(robot, &payload, runs, calls);
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&result).context("serialising the benchmark")?
+        );
+        return Ok(());
+    }
+    println!("robot model, one core, {runs} runs (median, min..max of the per-run mean per call)");
+    println!(
+        "{:<55} {:>10} {:>21} {:>9}  note",
+        "what", "median_ns", "min..max_ns", "target"
+    );
+    for t in &result.timings {
+        let target = t.target_ns.map_or(String::new(), |v| format!("<= {v:.0}"));
+        println!(
+            "{:<55} {:>10.1} {:>10.1}..{:<10.1} {:>9}  {}",
+            t.name, t.median_ns, t.min_ns, t.max_ns, target, t.note
+        );
+    }
+    Ok(())
+}

@@ -1,0 +1,554 @@
+//! Robot model: the Viper s650 built from its URDF plus the cell file's drive data.
+//!
+//! Job: load and check the URDF (a serial chain of six revolute joints from the root link to the
+//! flange link), and hold everything the kinematics and dynamics need: joint origins and axes,
+//! limits, link inertials, drive data (armature, friction, acceleration and torque limits),
+//! collision geometry, the base pose in the world and the tool on the flange.
+//!
+//! Units: SI (m, rad, s, kg, N m). Frames: `base` is the robot's root link frame; link `i` is the
+//! URDF child frame of joint `i` (the joint-zero frame); `flange` is link 6; `tool` is the cup
+//! lip, `gripper.tool_length_m` along the flange z axis. `world_from_base` places the robot.
+//!
+//! Submodules: [`kinematics`] (forward kinematics, Jacobian), [`ik`] (closed-form inverse
+//! kinematics), [`dynamics`] (recursive Newton-Euler, mass matrix, forward dynamics, payload).
+
+pub mod dynamics;
+pub mod ik;
+pub mod kinematics;
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
+
+use crate::config::{Checker, ConfigError, GripperConfig, RobotConfig};
+
+pub use dynamics::{DynamicsModel, Payload};
+pub use ik::{IkError, IkSolution};
+
+/// Number of joints.
+pub const DOF: usize = 6;
+
+/// Joint-space vector (positions [rad], velocities [rad/s], accelerations [rad/s^2] or torques [N m]).
+pub type JointVector = Vector6<f64>;
+
+/// Standard gravity [m/s^2].
+pub const GRAVITY_M_S2: f64 = 9.80665;
+
+/// One revolute joint with its limits and drive data.
+#[derive(Debug, Clone)]
+pub struct Joint {
+    /// URDF joint name.
+    pub name: String,
+    /// Child link name.
+    pub child_link: String,
+    /// `parent_from_joint_zero`: the joint origin in the parent link frame.
+    pub parent_from_origin: Isometry3<f64>,
+    /// Rotation part of `parent_from_origin` as a matrix (cached for the hot paths).
+    pub origin_rot: Matrix3<f64>,
+    /// Translation part of `parent_from_origin` [m] (cached for the hot paths).
+    pub origin_pos_m: Vector3<f64>,
+    /// Rotation axis, unit, in the child link frame.
+    pub axis: Vector3<f64>,
+    /// Lower position limit [rad].
+    pub lower_rad: f64,
+    /// Upper position limit [rad].
+    pub upper_rad: f64,
+    /// Maximum speed [rad/s].
+    pub max_vel_rad_s: f64,
+    /// Specification acceleration [rad/s^2].
+    pub max_accel_rad_s2: f64,
+    /// Peak torque limit [N m].
+    pub torque_limit_nm: f64,
+    /// Reflected rotor inertia [kg m^2].
+    pub armature_kg_m2: f64,
+    /// Coulomb friction [N m].
+    pub coulomb_nm: f64,
+    /// Viscous friction [N m s/rad].
+    pub viscous_nm_s_per_rad: f64,
+}
+
+/// Mass properties of a rigid body in its own frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Inertial {
+    /// Mass [kg].
+    pub mass_kg: f64,
+    /// Centre of mass in the body frame [m].
+    pub com_m: Vector3<f64>,
+    /// Inertia about the centre of mass, axes along the body frame [kg m^2].
+    pub inertia_com_kg_m2: Matrix3<f64>,
+}
+
+/// A collision/visual primitive in a link frame.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Primitive {
+    /// Box with half extents [m].
+    Box {
+        /// Half extents [m].
+        half_extents_m: Vector3<f64>,
+    },
+    /// Cylinder along the local z axis.
+    Cylinder {
+        /// Radius [m].
+        radius_m: f64,
+        /// Half length [m].
+        half_length_m: f64,
+    },
+    /// Sphere.
+    Sphere {
+        /// Radius [m].
+        radius_m: f64,
+    },
+    /// Capsule along the local z axis.
+    Capsule {
+        /// Radius [m].
+        radius_m: f64,
+        /// Half length of the segment [m].
+        half_length_m: f64,
+    },
+}
+
+/// A primitive placed in a link frame.
+#[derive(Debug, Clone, PartialEq)]
+pub struct LinkShape {
+    /// `link_from_shape`.
+    pub link_from_shape: Isometry3<f64>,
+    /// The primitive.
+    pub primitive: Primitive,
+}
+
+/// A link: name, mass properties, collision geometry.
+#[derive(Debug, Clone)]
+pub struct Link {
+    /// URDF link name.
+    pub name: String,
+    /// Mass properties.
+    pub inertial: Inertial,
+    /// Collision geometry (URDF `<collision>` elements).
+    pub shapes: Vec<LinkShape>,
+}
+
+/// The robot: six revolute joints in series, links 0 (base) to 6 (flange).
+#[derive(Debug, Clone)]
+pub struct RobotModel {
+    /// URDF robot name.
+    pub name: String,
+    /// The joints, base to flange.
+    pub joints: Vec<Joint>,
+    /// The links: index 0 is the base (fixed), index i the child of joint i.
+    pub links: Vec<Link>,
+    /// Where the base stands in the world.
+    pub world_from_base: Isometry3<f64>,
+    /// The tool frame on the flange.
+    pub flange_from_tool: Isometry3<f64>,
+    /// Gravity in the base frame [m/s^2].
+    pub gravity_base_m_s2: Vector3<f64>,
+    /// Coulomb friction smoothing speed: friction = coulomb * tanh(qd / this) [rad/s].
+    pub coulomb_smoothing_rad_s: f64,
+    /// Parameters of the closed-form inverse kinematics, derived from the joint origins.
+    pub ik_geometry: ik::IkGeometry,
+}
+
+fn vec3(v: &urdf_rs::Vec3) -> Vector3<f64> {
+    Vector3::new(v[0], v[1], v[2])
+}
+
+fn pose(p: &urdf_rs::Pose) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::new(p.xyz[0], p.xyz[1], p.xyz[2]),
+        UnitQuaternion::from_euler_angles(p.rpy[0], p.rpy[1], p.rpy[2]),
+    )
+}
+
+fn all_finite(vals: &[f64]) -> bool {
+    vals.iter().all(|v| v.is_finite())
+}
+
+impl RobotModel {
+    /// Builds the model from URDF text and the cell's robot and gripper sections.
+    /// `label` names the URDF in error messages.
+    pub fn from_urdf(
+        label: &str,
+        urdf_text: &str,
+        robot: &RobotConfig,
+        gripper: &GripperConfig,
+    ) -> Result<Self, ConfigError> {
+        let urdf = urdf_rs::read_from_string(urdf_text).map_err(|e| {
+            let msg = e.to_string().replace('\n', " ");
+            ConfigError::one(label, "", format!("is not a valid URDF: {msg}"))
+        })?;
+        let mut c = Checker::new(label);
+
+        // Walk from the flange link up to the root through the joints' child links.
+        let by_child: BTreeMap<&str, &urdf_rs::Joint> = urdf
+            .joints
+            .iter()
+            .map(|j| (j.child.link.as_str(), j))
+            .collect();
+        let links_by_name: BTreeMap<&str, &urdf_rs::Link> =
+            urdf.links.iter().map(|l| (l.name.as_str(), l)).collect();
+        if !links_by_name.contains_key(robot.flange_link.as_str()) {
+            return Err(ConfigError::one(
+                label,
+                "",
+                format!(
+                    "has no link named {:?} (the cell's robot.flange_link)",
+                    robot.flange_link
+                ),
+            ));
+        }
+        let mut chain: Vec<&urdf_rs::Joint> = Vec::new();
+        let mut link = robot.flange_link.as_str();
+        while let Some(j) = by_child.get(link) {
+            chain.push(j);
+            link = j.parent.link.as_str();
+            if chain.len() > urdf.joints.len() {
+                return Err(ConfigError::one(label, "", "has a cycle in its joint tree"));
+            }
+        }
+        chain.reverse();
+        let root = link;
+        let root_is_a_child_nowhere = urdf
+            .links
+            .iter()
+            .filter(|l| !by_child.contains_key(l.name.as_str()))
+            .count();
+        if chain.len() != DOF {
+            let names: Vec<&str> = chain.iter().map(|j| j.name.as_str()).collect();
+            let hint = if root_is_a_child_nowhere > 1 {
+                format!(
+                    "; link {root:?} is the child of no joint, so a joint between it and its parent is missing"
+                )
+            } else {
+                String::new()
+            };
+            return Err(ConfigError::one(
+                label,
+                "",
+                format!(
+                    "needs a chain of {DOF} revolute joints from its root link to {:?}, found {} ({}){hint}",
+                    robot.flange_link,
+                    chain.len(),
+                    names.join(", ")
+                ),
+            ));
+        }
+
+        let d = &robot.drives;
+        let mut joints = Vec::with_capacity(DOF);
+        for (i, j) in chain.iter().enumerate() {
+            let key = format!("joint[{}]", j.name);
+            if j.joint_type != urdf_rs::JointType::Revolute {
+                c.fail(&key, format!("must be revolute, got {:?}", j.joint_type));
+            }
+            if !all_finite(&[
+                j.origin.xyz[0],
+                j.origin.xyz[1],
+                j.origin.xyz[2],
+                j.origin.rpy[0],
+                j.origin.rpy[1],
+                j.origin.rpy[2],
+            ]) {
+                c.fail(
+                    &format!("{key}.origin"),
+                    format!(
+                        "must be finite, got xyz {:?} rpy {:?}",
+                        j.origin.xyz.0, j.origin.rpy.0
+                    ),
+                );
+            }
+            let axis = vec3(&j.axis.xyz);
+            let axis = match axis.try_normalize(1e-9) {
+                Some(a) if all_finite(axis.as_slice()) => a,
+                _ => {
+                    c.fail(
+                        &format!("{key}.axis"),
+                        format!("must be a finite non-zero vector, got {:?}", j.axis.xyz.0),
+                    );
+                    Vector3::z()
+                }
+            };
+            let l = &j.limit;
+            if !all_finite(&[l.lower, l.upper]) {
+                c.fail(
+                    &format!("{key}.limit"),
+                    format!(
+                        "lower and upper must be finite, got {} and {}",
+                        l.lower, l.upper
+                    ),
+                );
+            } else if l.lower >= l.upper {
+                c.fail(
+                    &format!("{key}.limit"),
+                    format!(
+                        "is inverted or empty: lower {} must be < upper {}",
+                        l.lower, l.upper
+                    ),
+                );
+            }
+            if !(l.velocity.is_finite() && l.velocity > 0.0) {
+                c.fail(
+                    &format!("{key}.limit.velocity"),
+                    format!("must be > 0, got {}", l.velocity),
+                );
+            }
+            let torque = d.torque_limit_nm.map_or(l.effort, |t| t[i]);
+            if !(torque.is_finite() && torque > 0.0) {
+                c.fail(
+                    &format!("{key}.limit.effort"),
+                    format!("must be > 0 (or set robot.drives.torque_limit_nm), got {torque}"),
+                );
+            }
+            joints.push(Joint {
+                name: j.name.clone(),
+                child_link: j.child.link.clone(),
+                parent_from_origin: pose(&j.origin),
+                origin_rot: *pose(&j.origin).rotation.to_rotation_matrix().matrix(),
+                origin_pos_m: pose(&j.origin).translation.vector,
+                axis,
+                lower_rad: l.lower,
+                upper_rad: l.upper,
+                max_vel_rad_s: l.velocity,
+                max_accel_rad_s2: d.max_accel_deg_s2[i].to_radians(),
+                torque_limit_nm: torque,
+                armature_kg_m2: d.armature_kg_m2[i],
+                coulomb_nm: d.coulomb_friction_nm[i],
+                viscous_nm_s_per_rad: d.viscous_friction_nm_s_per_rad[i],
+            });
+        }
+
+        let mut links = Vec::with_capacity(DOF + 1);
+        let link_names: Vec<&str> = std::iter::once(root)
+            .chain(chain.iter().map(|j| j.child.link.as_str()))
+            .collect();
+        for (i, name) in link_names.iter().enumerate() {
+            let l = links_by_name[name];
+            let key = format!("link[{name}].inertial");
+            let inn = &l.inertial;
+            let m = inn.mass.value;
+            let it = &inn.inertia;
+            let inertia = Matrix3::new(
+                it.ixx, it.ixy, it.ixz, it.ixy, it.iyy, it.iyz, it.ixz, it.iyz, it.izz,
+            );
+            if i > 0 && !(m.is_finite() && m > 0.0) {
+                c.fail(&format!("{key}.mass"), format!("must be > 0, got {m}"));
+            }
+            if !all_finite(inertia.as_slice())
+                || !all_finite(&inn.origin.xyz.0)
+                || !all_finite(&inn.origin.rpy.0)
+            {
+                c.fail(&key, "must be finite");
+            } else if i > 0 && inertia.cholesky().is_none() {
+                c.fail(
+                    &format!("{key}.inertia"),
+                    format!("must be positive definite, got {inertia:?}"),
+                );
+            }
+            // Rotate the inertia into the link frame if the inertial origin has an rpy.
+            let com_pose = pose(&inn.origin);
+            let r = com_pose.rotation.to_rotation_matrix();
+            let inertia_link = r.matrix() * inertia * r.matrix().transpose();
+            let mut shapes = Vec::new();
+            for (k, col) in l.collision.iter().enumerate() {
+                let skey = format!("link[{name}].collision[{k}]");
+                let prim = match &col.geometry {
+                    urdf_rs::Geometry::Box { size } => Some(Primitive::Box {
+                        half_extents_m: vec3(size) / 2.0,
+                    }),
+                    urdf_rs::Geometry::Cylinder { radius, length } => Some(Primitive::Cylinder {
+                        radius_m: *radius,
+                        half_length_m: length / 2.0,
+                    }),
+                    urdf_rs::Geometry::Sphere { radius } => {
+                        Some(Primitive::Sphere { radius_m: *radius })
+                    }
+                    urdf_rs::Geometry::Capsule { radius, length } => Some(Primitive::Capsule {
+                        radius_m: *radius,
+                        half_length_m: length / 2.0,
+                    }),
+                    urdf_rs::Geometry::Mesh { filename, .. } => {
+                        c.fail(&skey, format!("mesh geometry is not supported for the arm's collision model, got {filename:?}"));
+                        None
+                    }
+                };
+                if let Some(p) = prim {
+                    let dims: Vec<f64> = match &p {
+                        Primitive::Box { half_extents_m } => {
+                            half_extents_m.iter().copied().collect()
+                        }
+                        Primitive::Cylinder {
+                            radius_m,
+                            half_length_m,
+                        }
+                        | Primitive::Capsule {
+                            radius_m,
+                            half_length_m,
+                        } => {
+                            vec![*radius_m, *half_length_m]
+                        }
+                        Primitive::Sphere { radius_m } => vec![*radius_m],
+                    };
+                    if dims.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
+                        c.fail(&skey, format!("dimensions must be > 0, got {dims:?}"));
+                    }
+                    shapes.push(LinkShape {
+                        link_from_shape: pose(&col.origin),
+                        primitive: p,
+                    });
+                }
+            }
+            links.push(Link {
+                name: name.to_string(),
+                inertial: Inertial {
+                    mass_kg: m,
+                    com_m: com_pose.translation.vector,
+                    inertia_com_kg_m2: inertia_link,
+                },
+                shapes,
+            });
+        }
+        c.finish()?;
+
+        let ik_geometry =
+            ik::IkGeometry::from_joints(&joints).map_err(|m| ConfigError::one(label, "", m))?;
+        let world_from_base = robot.world_from_base();
+        let gravity_world = Vector3::new(0.0, 0.0, -GRAVITY_M_S2);
+        Ok(RobotModel {
+            name: urdf.name.clone(),
+            joints,
+            links,
+            world_from_base,
+            flange_from_tool: gripper.flange_from_tool(),
+            gravity_base_m_s2: world_from_base.rotation.inverse() * gravity_world,
+            coulomb_smoothing_rad_s: d.coulomb_smoothing_deg_s.to_radians(),
+            ik_geometry,
+        })
+    }
+
+    /// Builds the model of a loaded scene.
+    pub fn from_scene(scene: &crate::config::LoadedScene) -> Result<Self, ConfigError> {
+        Self::from_urdf(
+            &scene.urdf_label,
+            &scene.urdf_text,
+            &scene.scene.robot,
+            &scene.scene.gripper,
+        )
+    }
+
+    /// Lower position limits [rad].
+    pub fn lower_rad(&self) -> JointVector {
+        JointVector::from_fn(|i, _| self.joints[i].lower_rad)
+    }
+
+    /// Upper position limits [rad].
+    pub fn upper_rad(&self) -> JointVector {
+        JointVector::from_fn(|i, _| self.joints[i].upper_rad)
+    }
+
+    /// Maximum joint speeds [rad/s].
+    pub fn max_vel_rad_s(&self) -> JointVector {
+        JointVector::from_fn(|i, _| self.joints[i].max_vel_rad_s)
+    }
+
+    /// Specification accelerations [rad/s^2].
+    pub fn max_accel_rad_s2(&self) -> JointVector {
+        JointVector::from_fn(|i, _| self.joints[i].max_accel_rad_s2)
+    }
+
+    /// Torque limits [N m].
+    pub fn torque_limit_nm(&self) -> JointVector {
+        JointVector::from_fn(|i, _| self.joints[i].torque_limit_nm)
+    }
+
+    /// Whether `q` is within the position limits (inclusive, with `tol_rad` slack).
+    pub fn within_limits(&self, q: &JointVector, tol_rad: f64) -> bool {
+        self.joints
+            .iter()
+            .zip(q.iter())
+            .all(|(j, v)| *v >= j.lower_rad - tol_rad && *v <= j.upper_rad + tol_rad)
+    }
+
+    /// Total mass of the moving links [kg].
+    pub fn moving_mass_kg(&self) -> f64 {
+        self.links[1..].iter().map(|l| l.inertial.mass_kg).sum()
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod test_support {
+    use super::*;
+    use crate::config::LoadedScene;
+
+    /// The default cell's robot.
+    pub fn default_robot() -> RobotModel {
+        let scene = LoadedScene::embedded_default().expect("embedded default scene");
+        RobotModel::from_scene(&scene).expect("embedded robot")
+    }
+
+    /// Uniformly random in-limit configuration from a simple deterministic generator.
+    pub fn random_q(robot: &RobotModel, rng: &mut impl rand::RngExt) -> JointVector {
+        JointVector::from_fn(|i, _| {
+            rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad)
+        })
+    }
+}
+
+/// `world_from_tool` with the tool's z axis pointing straight down at `xyz`, turned by `yaw_rad`.
+pub fn tool_down_pose(xyz: Vector3<f64>, yaw_rad: f64) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(xyz),
+        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw_rad)
+            * UnitQuaternion::from_euler_angles(std::f64::consts::PI, 0.0, 0.0),
+    )
+}
+
+impl RobotModel {
+    /// Whether the tool can point straight down at `xyz` (world) at any yaw (tried every 15 deg).
+    pub fn reaches_tool_down(&self, xyz: Vector3<f64>) -> Result<(), IkError> {
+        let mut last = None;
+        for k in 0..24 {
+            match self.ik_tool_all(&tool_down_pose(xyz, (k as f64 * 15.0).to_radians())) {
+                Ok(_) => return Ok(()),
+                Err(e) => last = Some(e),
+            }
+        }
+        Err(last.expect("tried at least one yaw"))
+    }
+
+    /// Checks that the arm reaches, with the tool pointing down, every corner of both trays' inner
+    /// floors (1 cm in from the walls), their centres, and the points 5 cm above their rims.
+    pub fn check_scene_reach(
+        &self,
+        label: &str,
+        scene: &crate::config::Scene,
+    ) -> Result<(), ConfigError> {
+        let mut c = Checker::new(label);
+        for (key, tray) in [
+            ("pick_tray", &scene.pick_tray),
+            ("place_tray.tray", &scene.place_tray.tray),
+        ] {
+            let world_from_tray = tray.world_from_tray();
+            let (hx, hy) = (
+                tray.inner_size_m[0] / 2.0 - 0.01,
+                tray.inner_size_m[1] / 2.0 - 0.01,
+            );
+            let mut points = vec![(0.0, 0.0, 0.002), (0.0, 0.0, tray.wall_height_m + 0.05)];
+            for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                points.push((sx * hx.max(0.0), sy * hy.max(0.0), 0.002));
+            }
+            for (x, y, z) in points {
+                let p = world_from_tray * nalgebra::Point3::new(x, y, z);
+                if let Err(e) = self.reaches_tool_down(p.coords) {
+                    c.fail(
+                        key,
+                        format!(
+                            "is out of the arm's reach: the tool cannot point down at ({:.3}, {:.3}, {:.3}) m: {e}",
+                            p.x, p.y, p.z
+                        ),
+                    );
+                    break;
+                }
+            }
+        }
+        c.finish()
+    }
+}
