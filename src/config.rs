@@ -1230,14 +1230,17 @@ impl Workpiece {
     /// on at least one face of the body.
     pub fn check_fits_scene(&self, file: &str, scene: &Scene) -> Result<(), ConfigError> {
         let mut c = Checker::new(file);
-        let longest = self.size_m.iter().cloned().fold(0.0, f64::max);
+        // Lying flat, the part's two longest edges must fit the tray's inner floor.
+        let mut dims = self.size_m;
+        dims.sort_by(|a, b| b.total_cmp(a));
         let [tx, ty] = scene.pick_tray.inner_size_m;
-        let tray_diag = (tx * tx + ty * ty).sqrt();
-        if longest > tx.max(ty) && longest > tray_diag * 0.9 {
+        let (tray_long, tray_short) = (tx.max(ty), tx.min(ty));
+        if dims[0] > tray_long || dims[1] > tray_short {
             c.fail(
                 "size_m",
                 format!(
-                    "is larger than the pick tray (inner {tx} x {ty} m): longest edge {longest} m"
+                    "is larger than the pick tray: a part of {} x {} m lying flat does not fit its {tx} x {ty} m inner floor",
+                    dims[0], dims[1]
                 ),
             );
         }

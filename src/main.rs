@@ -95,7 +95,7 @@ struct TorqueArgs {
     #[arg(long, num_args = 6, allow_negative_numbers = true)]
     acc_deg: Option<Vec<f64>>,
     /// Held part: a point mass at the tool tip [kg] (default 0).
-    #[arg(long, default_value_t = 0.0)]
+    #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     payload_kg: f64,
     /// Leave the hand off the flange.
     #[arg(long)]

@@ -473,25 +473,6 @@ impl RobotModel {
     }
 }
 
-#[cfg(test)]
-pub(crate) mod test_support {
-    use super::*;
-    use crate::config::LoadedScene;
-
-    /// The default cell's robot.
-    pub fn default_robot() -> RobotModel {
-        let scene = LoadedScene::embedded_default().expect("embedded default scene");
-        RobotModel::from_scene(&scene).expect("embedded robot")
-    }
-
-    /// Uniformly random in-limit configuration from a simple deterministic generator.
-    pub fn random_q(robot: &RobotModel, rng: &mut impl rand::RngExt) -> JointVector {
-        JointVector::from_fn(|i, _| {
-            rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad)
-        })
-    }
-}
-
 /// `world_from_tool` with the tool's z axis pointing straight down at `xyz`, turned by `yaw_rad`.
 pub fn tool_down_pose(xyz: Vector3<f64>, yaw_rad: f64) -> Isometry3<f64> {
     Isometry3::from_parts(
@@ -550,5 +531,24 @@ impl RobotModel {
             }
         }
         c.finish()
+    }
+}
+
+#[cfg(test)]
+pub(crate) mod test_support {
+    use super::*;
+    use crate::config::LoadedScene;
+
+    /// The default cell's robot.
+    pub fn default_robot() -> RobotModel {
+        let scene = LoadedScene::embedded_default().expect("embedded default scene");
+        RobotModel::from_scene(&scene).expect("embedded robot")
+    }
+
+    /// Uniformly random in-limit configuration from a simple deterministic generator.
+    pub fn random_q(robot: &RobotModel, rng: &mut impl rand::RngExt) -> JointVector {
+        JointVector::from_fn(|i, _| {
+            rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad)
+        })
     }
 }

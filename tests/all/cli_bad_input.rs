@@ -1,0 +1,367 @@
+//! Bad input: each case gives one clear line naming file, key and bad value, exit code 2,
+//! no panic, and nothing written.
+
+use crate::support::{Workspace, binpick_in, stderr};
+
+/// Runs `binpick check FILE` in the workspace and asserts exit 2, no panic, no new files,
+/// and that stderr contains every expected fragment.
+fn rejects(ws: &Workspace, file: &str, expected: &[&str]) -> String {
+    let before = ws.listing();
+    let out = binpick_in(ws.dir.path(), &["check", file]);
+    let err = stderr(&out);
+    assert_eq!(
+        out.status.code(),
+        Some(2),
+        "exit code for {file}; stderr:\n{err}"
+    );
+    assert!(!err.contains("panicked"), "panic for {file}: {err}");
+    for e in expected {
+        assert!(err.contains(e), "stderr for {file} lacks {e:?}:\n{err}");
+    }
+    assert_eq!(ws.listing(), before, "check wrote files");
+    err
+}
+
+#[test]
+fn malformed_toml() {
+    let ws = Workspace::new();
+    ws.edit(
+        "workpieces/B.toml",
+        "workpieces/bad.toml",
+        "name = \"B\"",
+        "name = \"B",
+    );
+    rejects(
+        &ws,
+        "workpieces/bad.toml",
+        &["workpieces/bad.toml: malformed TOML", "line 3"],
+    );
+}
+
+#[test]
+fn unknown_key_names_the_key() {
+    let ws = Workspace::new();
+    ws.edit(
+        "workpieces/B.toml",
+        "workpieces/bad.toml",
+        "friction = 0.40",
+        "friction = 0.40\ncolour = \"grey\"",
+    );
+    rejects(
+        &ws,
+        "workpieces/bad.toml",
+        &["workpieces/bad.toml:", "unknown field `colour`"],
+    );
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/bad.toml",
+        "latency_s = 1.1",
+        "latency_s = 1.1\nlatency_ms = 1100",
+    );
+    rejects(
+        &ws,
+        "scenes/bad.toml",
+        &["scenes/bad.toml: sensor", "unknown field `latency_ms`"],
+    );
+}
+
+#[test]
+fn negative_size_names_file_key_and_value() {
+    let ws = Workspace::new();
+    ws.edit(
+        "workpieces/C.toml",
+        "workpieces/C.toml",
+        "size_m = [0.150, 0.010, 0.005]",
+        "size_m = [0.150, 0.010, -0.005]",
+    );
+    let err = rejects(
+        &ws,
+        "workpieces/C.toml",
+        &["workpieces/C.toml: size_m[2] must be > 0, got -0.005"],
+    );
+    assert_eq!(err.lines().count(), 1, "one line per problem: {err}");
+}
+
+#[test]
+fn zero_size() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/bad.toml",
+        "inner_size_m = [0.30, 0.24]",
+        "inner_size_m = [0.0, 0.24]",
+    );
+    rejects(
+        &ws,
+        "scenes/bad.toml",
+        &["scenes/bad.toml: pick_tray.inner_size_m[0] must be > 0, got 0"],
+    );
+}
+
+#[test]
+fn several_problems_one_line_each() {
+    let ws = Workspace::new();
+    let p = ws.edit(
+        "workpieces/F.toml",
+        "workpieces/bad.toml",
+        "mass_kg = 0.0025",
+        "mass_kg = -1.0",
+    );
+    let text = std::fs::read_to_string(&p)
+        .unwrap()
+        .replace("friction = 0.40", "friction = 7.0");
+    std::fs::write(&p, text).unwrap();
+    let err = rejects(
+        &ws,
+        "workpieces/bad.toml",
+        &[
+            "mass_kg must be > 0, got -1",
+            "friction must be within [0, 2], got 7",
+        ],
+    );
+    assert_eq!(err.lines().count(), 2, "{err}");
+}
+
+#[test]
+fn non_finite_number() {
+    let ws = Workspace::new();
+    ws.edit(
+        "workpieces/D.toml",
+        "workpieces/bad.toml",
+        "mass_kg = 0.0015",
+        "mass_kg = nan",
+    );
+    rejects(
+        &ws,
+        "workpieces/bad.toml",
+        &["workpieces/bad.toml: mass_kg must be a finite number, got NaN"],
+    );
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/bad.toml",
+        "latency_s = 1.1",
+        "latency_s = inf",
+    );
+    rejects(
+        &ws,
+        "scenes/bad.toml",
+        &["scenes/bad.toml: sensor.latency_s must be a finite number, got inf"],
+    );
+}
+
+#[test]
+fn missing_urdf() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/bad.toml",
+        "urdf = \"viper_s650.urdf\"",
+        "urdf = \"nope.urdf\"",
+    );
+    rejects(
+        &ws,
+        "scenes/bad.toml",
+        &["scenes/bad.toml: robot.urdf cannot read", "nope.urdf"],
+    );
+}
+
+#[test]
+fn urdf_lacking_a_joint() {
+    let ws = Workspace::new();
+    let text = std::fs::read_to_string(ws.path("scenes/viper_s650.urdf")).unwrap();
+    let start = text.find("<joint name=\"joint_4\"").unwrap();
+    let end = start + text[start..].find("</joint>").unwrap() + "</joint>".len();
+    std::fs::write(
+        ws.path("scenes/no_j4.urdf"),
+        format!("{}{}", &text[..start], &text[end..]),
+    )
+    .unwrap();
+    rejects(
+        &ws,
+        "scenes/no_j4.urdf",
+        &[
+            "scenes/no_j4.urdf:",
+            "chain of 6 revolute joints",
+            "found 2",
+            "\"link_4\"",
+        ],
+    );
+    // And through a scene that names it.
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/bad.toml",
+        "urdf = \"viper_s650.urdf\"",
+        "urdf = \"no_j4.urdf\"",
+    );
+    rejects(
+        &ws,
+        "scenes/bad.toml",
+        &["no_j4.urdf:", "chain of 6 revolute joints"],
+    );
+}
+
+#[test]
+fn urdf_not_xml() {
+    let ws = Workspace::new();
+    std::fs::write(ws.path("scenes/garbage.urdf"), "this is not xml").unwrap();
+    rejects(
+        &ws,
+        "scenes/garbage.urdf",
+        &["scenes/garbage.urdf: is not a valid URDF"],
+    );
+}
+
+#[test]
+fn joint_limits_inverted() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/viper_s650.urdf",
+        "scenes/inverted.urdf",
+        "lower=\"-0.506145\" upper=\"4.468043\"",
+        "lower=\"4.468043\" upper=\"-0.506145\"",
+    );
+    rejects(
+        &ws,
+        "scenes/inverted.urdf",
+        &[
+            "scenes/inverted.urdf: joint[joint_3].limit is inverted or empty: lower 4.468043 must be < upper -0.506145",
+        ],
+    );
+}
+
+#[test]
+fn tray_out_of_reach() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/bad.toml",
+        "center_m = [0.40, -0.22, 0.006]",
+        "center_m = [1.10, -0.22, 0.006]",
+    );
+    rejects(
+        &ws,
+        "scenes/bad.toml",
+        &[
+            "scenes/bad.toml: place_tray.tray is out of the arm's reach",
+            "target out of reach",
+        ],
+    );
+}
+
+#[test]
+fn sensor_not_looking_at_the_pick_tray() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/bad.toml",
+        "look_at_m = [0.10, 0.45, 0.008]",
+        "look_at_m = [0.60, 0.45, 0.008]",
+    );
+    rejects(
+        &ws,
+        "scenes/bad.toml",
+        &["scenes/bad.toml: sensor does not see the whole pick tray floor"],
+    );
+}
+
+#[test]
+fn cup_larger_than_every_face() {
+    let ws = Workspace::new();
+    ws.edit(
+        "workpieces/E.toml",
+        "workpieces/tiny.toml",
+        "size_m = [0.010, 0.005, 0.010]",
+        "size_m = [0.004, 0.005, 0.004]",
+    );
+    rejects(
+        &ws,
+        "workpieces/tiny.toml",
+        &["workpieces/tiny.toml: size_m has no face the suction cup fits on"],
+    );
+}
+
+#[test]
+fn workpiece_larger_than_the_tray() {
+    let ws = Workspace::new();
+    ws.edit(
+        "workpieces/C.toml",
+        "workpieces/long.toml",
+        "size_m = [0.150, 0.010, 0.005]",
+        "size_m = [0.450, 0.010, 0.005]",
+    );
+    rejects(
+        &ws,
+        "workpieces/long.toml",
+        &["workpieces/long.toml: size_m is larger than the pick tray"],
+    );
+}
+
+#[test]
+fn unreadable_and_unknown_files() {
+    let ws = Workspace::new();
+    rejects(
+        &ws,
+        "scenes/does_not_exist.toml",
+        &["scenes/does_not_exist.toml: cannot read file"],
+    );
+    std::fs::write(ws.path("notes.txt"), "hello").unwrap();
+    rejects(&ws, "notes.txt", &["notes.txt: is neither a .toml"]);
+}
+
+#[test]
+fn bad_robot_arguments_exit_2() {
+    let ws = Workspace::new();
+    for (args, expect) in [
+        (
+            &[
+                "robot",
+                "ik",
+                "--xyz",
+                "2",
+                "0",
+                "0",
+                "--rpy-deg",
+                "180",
+                "0",
+                "0",
+            ][..],
+            "target out of reach",
+        ),
+        (
+            &["robot", "fk", "--deg", "nan", "0", "0", "0", "0", "0"][..],
+            "--deg must be finite numbers, got NaN",
+        ),
+        (
+            &[
+                "robot",
+                "torque",
+                "--deg",
+                "0",
+                "0",
+                "0",
+                "0",
+                "0",
+                "0",
+                "--payload-kg",
+                "-1",
+            ][..],
+            "--payload-kg must be a finite number >= 0",
+        ),
+        (&["robot", "fk", "--deg", "0", "0"][..], "6 values required"),
+        (
+            &["robot", "info", "--scene", "scenes/missing.toml"][..],
+            "scenes/missing.toml: cannot read file",
+        ),
+    ] {
+        let before = ws.listing();
+        let out = binpick_in(ws.dir.path(), args);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains(expect),
+            "{args:?}: stderr lacks {expect:?}: {err}"
+        );
+        assert!(!err.contains("panicked"));
+        assert_eq!(ws.listing(), before);
+    }
+}

@@ -1,0 +1,5 @@
+//! Integration tests, one binary: the command line end to end on good and bad input.
+
+mod cli_bad_input;
+mod cli_robot;
+mod support;

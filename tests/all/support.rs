@@ -1,0 +1,86 @@
+//! Helpers: run the binary, make edited copies of the shipped files in a temporary folder.
+
+use std::path::{Path, PathBuf};
+use std::process::Output;
+
+/// The repository root.
+pub fn repo() -> PathBuf {
+    PathBuf::from(env!("CARGO_MANIFEST_DIR"))
+}
+
+/// Runs `binpick ARGS` in `dir`.
+pub fn binpick_in(dir: &Path, args: &[&str]) -> Output {
+    std::process::Command::new(env!("CARGO_BIN_EXE_binpick"))
+        .args(args)
+        .current_dir(dir)
+        .output()
+        .expect("binpick runs")
+}
+
+/// Runs `binpick ARGS` in the repository root.
+pub fn binpick(args: &[&str]) -> Output {
+    binpick_in(&repo(), args)
+}
+
+/// stdout as text.
+pub fn stdout(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stdout).into_owned()
+}
+
+/// stderr as text.
+pub fn stderr(o: &Output) -> String {
+    String::from_utf8_lossy(&o.stderr).into_owned()
+}
+
+/// A temporary folder holding the shipped scene, URDF and workpieces, to edit copies of.
+pub struct Workspace {
+    /// Keeps the folder alive.
+    pub dir: tempfile::TempDir,
+}
+
+impl Workspace {
+    /// Copies `scenes/` and `workpieces/` into a new temporary folder.
+    pub fn new() -> Self {
+        let dir = tempfile::tempdir().expect("tempdir");
+        for sub in ["scenes", "workpieces"] {
+            std::fs::create_dir_all(dir.path().join(sub)).unwrap();
+            for e in std::fs::read_dir(repo().join(sub)).unwrap() {
+                let p = e.unwrap().path();
+                std::fs::copy(&p, dir.path().join(sub).join(p.file_name().unwrap())).unwrap();
+            }
+        }
+        Workspace { dir }
+    }
+
+    /// Path of a file in the workspace.
+    pub fn path(&self, rel: &str) -> PathBuf {
+        self.dir.path().join(rel)
+    }
+
+    /// Replaces `from` by `to` in `rel` (which must contain `from`), writing it as `out`.
+    pub fn edit(&self, rel: &str, out: &str, from: &str, to: &str) -> PathBuf {
+        let text = std::fs::read_to_string(self.path(rel)).unwrap();
+        assert!(text.contains(from), "{rel} does not contain {from:?}");
+        let p = self.path(out);
+        std::fs::write(&p, text.replacen(from, to, 1)).unwrap();
+        p
+    }
+
+    /// Every file below the workspace, sorted.
+    pub fn listing(&self) -> Vec<PathBuf> {
+        fn walk(p: &Path, out: &mut Vec<PathBuf>) {
+            for e in std::fs::read_dir(p).unwrap() {
+                let p = e.unwrap().path();
+                if p.is_dir() {
+                    walk(&p, out);
+                } else {
+                    out.push(p);
+                }
+            }
+        }
+        let mut v = Vec::new();
+        walk(self.dir.path(), &mut v);
+        v.sort();
+        v
+    }
+}
