@@ -22,9 +22,7 @@ fn main() -> anyhow::Result<()> {
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(1);
     let (mut worst_bare, mut worst_loaded) = ([0.0f64; 6], [0.0f64; 6]);
     for _ in 0..200_000 {
-        let q = JointVector::from_fn(|i, _| {
-            rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad)
-        });
+        let q = JointVector::from_fn(|i, _| rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad));
         let (m0, m1) = (bare.mass_matrix(&q), loaded.mass_matrix(&q));
         for i in 0..6 {
             worst_bare[i] = worst_bare[i].max(m0[(i, i)]);

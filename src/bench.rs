@@ -114,11 +114,7 @@ pub fn robot_bench(robot: &RobotModel, payload: &Payload, runs: usize, calls: us
     let mut rng = ChaCha8Rng::seed_from_u64(0xB1_4B1C);
     let n = 1024usize;
     let qs: Vec<JointVector> = (0..n)
-        .map(|_| {
-            JointVector::from_fn(|i, _| {
-                rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad)
-            })
-        })
+        .map(|_| JointVector::from_fn(|i, _| rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad)))
         .collect();
     let qds: Vec<JointVector> = (0..n)
         .map(|_| JointVector::from_fn(|_, _| rng.random_range(-3.0..3.0)))
@@ -180,15 +176,9 @@ pub fn robot_bench(robot: &RobotModel, payload: &Payload, runs: usize, calls: us
         100.0 * ok as f64 / total.max(1) as f64
     );
     timings.push(t);
-    timings.push(time_per_call(
-        "fk all link frames",
-        runs,
-        calls,
-        None,
-        |i| {
-            black_box(robot.link_frames(black_box(&qs[i % n])));
-        },
-    ));
+    timings.push(time_per_call("fk all link frames", runs, calls, None, |i| {
+        black_box(robot.link_frames(black_box(&qs[i % n])));
+    }));
     timings.push(time_per_call(
         "inverse dynamics RNEA, full model (ours)",
         runs,
@@ -211,15 +201,9 @@ pub fn robot_bench(robot: &RobotModel, payload: &Payload, runs: usize, calls: us
             black_box(m * qdds[k] + bias);
         },
     ));
-    timings.push(time_per_call(
-        "mass matrix CRBA",
-        runs,
-        calls / 4,
-        None,
-        |i| {
-            black_box(dynamics.mass_matrix(black_box(&qs[i % n])));
-        },
-    ));
+    timings.push(time_per_call("mass matrix CRBA", runs, calls / 4, None, |i| {
+        black_box(dynamics.mass_matrix(black_box(&qs[i % n])));
+    }));
     let taus: Vec<JointVector> = (0..n)
         .map(|k| dynamics.inverse_dynamics(&qs[k], &qds[k], &qdds[k]))
         .collect();

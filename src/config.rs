@@ -162,10 +162,7 @@ impl Checker {
 }
 
 /// Parses strict TOML into `T`, reporting the key path, line and column of a bad or unknown key.
-pub fn parse_toml<T: serde::de::DeserializeOwned>(
-    file: &str,
-    text: &str,
-) -> Result<T, ConfigError> {
+pub fn parse_toml<T: serde::de::DeserializeOwned>(file: &str, text: &str) -> Result<T, ConfigError> {
     let located = |span: Option<std::ops::Range<usize>>| -> String {
         match span {
             Some(s) => {
@@ -181,11 +178,7 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(
         ConfigError::one(
             file,
             "",
-            format!(
-                "malformed TOML: {}{}",
-                e.message().trim(),
-                located(e.span())
-            ),
+            format!("malformed TOML: {}{}", e.message().trim(), located(e.span())),
         )
     })?;
     serde_path_to_error::deserialize(de).map_err(|e| {
@@ -494,10 +487,7 @@ impl RobotConfig {
     /// `world_from_base` as an isometry.
     pub fn world_from_base(&self) -> Isometry3<f64> {
         let r = self.world_from_base_rpy_deg;
-        pose_from_xyz_rpy(
-            self.world_from_base_xyz_m,
-            [deg(r[0]), deg(r[1]), deg(r[2])],
-        )
+        pose_from_xyz_rpy(self.world_from_base_xyz_m, [deg(r[0]), deg(r[1]), deg(r[2])])
     }
 
     /// Home configuration [rad].
@@ -539,8 +529,7 @@ impl SensorConfig {
         let y = -(up - z * up.dot(&z));
         let y = y.try_normalize(1e-6)?;
         let x = y.cross(&z);
-        let rot =
-            nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_columns(&[x, y, z]));
+        let rot = nalgebra::Rotation3::from_matrix_unchecked(nalgebra::Matrix3::from_columns(&[x, y, z]));
         Some(Isometry3::from_parts(
             Translation3::from(p),
             UnitQuaternion::from_rotation_matrix(&rot),
@@ -553,12 +542,7 @@ impl PlaceTrayConfig {
     /// footprint `[length_m, width_m]` (along the slot's own x and y).
     pub fn slots_in_tray(&self, footprint_m: [f64; 2]) -> Vec<(f64, f64, f64)> {
         match self.pattern {
-            SlotPattern::List => self
-                .poses
-                .iter()
-                .flatten()
-                .map(|p| (p[0], p[1], deg(p[2])))
-                .collect(),
+            SlotPattern::List => self.poses.iter().flatten().map(|p| (p[0], p[1], deg(p[2]))).collect(),
             SlotPattern::Grid => {
                 let gap = self.gap_m.unwrap_or(0.0);
                 let yaw = deg(self.slot_yaw_deg.unwrap_or(0.0));
@@ -614,10 +598,7 @@ impl Scene {
             "robot.drives.viscous_friction_nm_s_per_rad",
             &d.viscous_friction_nm_s_per_rad,
         );
-        c.positive(
-            "robot.drives.coulomb_smoothing_deg_s",
-            d.coulomb_smoothing_deg_s,
-        );
+        c.positive("robot.drives.coulomb_smoothing_deg_s", d.coulomb_smoothing_deg_s);
         c.positive_all("robot.drives.max_accel_deg_s2", &d.max_accel_deg_s2);
         if let Some(t) = &d.torque_limit_nm {
             c.positive_all("robot.drives.torque_limit_nm", t);
@@ -627,10 +608,7 @@ impl Scene {
         c.positive("gripper.tool_length_m", g.tool_length_m);
         c.positive("gripper.body_diameter_m", g.body_diameter_m);
         c.positive("gripper.cup_diameter_m", g.cup_diameter_m);
-        c.non_negative(
-            "gripper.cup_flatness_tolerance_m",
-            g.cup_flatness_tolerance_m,
-        );
+        c.non_negative("gripper.cup_flatness_tolerance_m", g.cup_flatness_tolerance_m);
         c.within("gripper.max_tilt_deg", g.max_tilt_deg, 0.0, 90.0);
         c.within("gripper.vacuum_kpa", g.vacuum_kpa, 0.0, 101.325);
         c.non_negative("gripper.vacuum_build_up_s", g.vacuum_build_up_s);
@@ -665,8 +643,7 @@ impl Scene {
         c.finite_all("sensor.principal_point_px", &s.principal_point_px);
         c.positive("sensor.min_range_m", s.min_range_m);
         c.positive("sensor.max_range_m", s.max_range_m);
-        if s.min_range_m.is_finite() && s.max_range_m.is_finite() && s.min_range_m >= s.max_range_m
-        {
+        if s.min_range_m.is_finite() && s.max_range_m.is_finite() && s.min_range_m >= s.max_range_m {
             c.fail(
                 "sensor.max_range_m",
                 format!(
@@ -678,18 +655,8 @@ impl Scene {
         c.non_negative("sensor.latency_s", s.latency_s);
         c.positive("sensor.exposure_s", s.exposure_s);
         c.non_negative("sensor.depth_noise_at_1m_m", s.depth_noise_at_1m_m);
-        c.within(
-            "sensor.dropout_grazing_deg",
-            s.dropout_grazing_deg,
-            0.0,
-            90.0,
-        );
-        c.within(
-            "sensor.dropout_probability",
-            s.dropout_probability,
-            0.0,
-            1.0,
-        );
+        c.within("sensor.dropout_grazing_deg", s.dropout_grazing_deg, 0.0, 90.0);
+        c.within("sensor.dropout_probability", s.dropout_probability, 0.0, 1.0);
         c.within(
             "sensor.detect_min_visible_fraction",
             s.detect_min_visible_fraction,
@@ -727,32 +694,30 @@ impl Scene {
                     c.finite("place_tray.slot_yaw_deg", y);
                 }
                 if p.poses.is_some() {
-                    c.fail(
-                        "place_tray.poses",
-                        "is only allowed when pattern = \"list\"",
-                    );
+                    c.fail("place_tray.poses", "is only allowed when pattern = \"list\"");
                 }
             }
-            SlotPattern::List => {
-                match &p.poses {
-                    None => c.fail("place_tray.poses", "is required when pattern = \"list\""),
-                    Some(v) if v.is_empty() => {
-                        c.fail("place_tray.poses", "must list at least one pose")
-                    }
-                    Some(v) => {
-                        let [lx, ly] = p.tray.inner_size_m;
-                        for (i, pose) in v.iter().enumerate() {
-                            c.finite_all(&format!("place_tray.poses[{i}]"), pose);
-                            if pose[0].abs() > lx / 2.0 || pose[1].abs() > ly / 2.0 {
-                                c.fail(
+            SlotPattern::List => match &p.poses {
+                None => c.fail("place_tray.poses", "is required when pattern = \"list\""),
+                Some(v) if v.is_empty() => c.fail("place_tray.poses", "must list at least one pose"),
+                Some(v) => {
+                    let [lx, ly] = p.tray.inner_size_m;
+                    for (i, pose) in v.iter().enumerate() {
+                        c.finite_all(&format!("place_tray.poses[{i}]"), pose);
+                        if pose[0].abs() > lx / 2.0 || pose[1].abs() > ly / 2.0 {
+                            c.fail(
                                 &format!("place_tray.poses[{i}]"),
-                                format!("must lie inside the tray's inner floor (±{}, ±{}), got {:?}", lx / 2.0, ly / 2.0, pose),
+                                format!(
+                                    "must lie inside the tray's inner floor (±{}, ±{}), got {:?}",
+                                    lx / 2.0,
+                                    ly / 2.0,
+                                    pose
+                                ),
                             );
-                            }
                         }
                     }
                 }
-            }
+            },
         }
 
         let t = &self.table;
@@ -766,14 +731,8 @@ impl Scene {
             c.positive_all(&format!("{k}.size_m"), &o.size_m);
             c.finite(&format!("{k}.yaw_deg"), o.yaw_deg);
         }
-        c.non_negative(
-            "compute.grasp_estimation_s",
-            self.compute.grasp_estimation_s,
-        );
-        c.non_negative(
-            "compute.motion_generation_s",
-            self.compute.motion_generation_s,
-        );
+        c.non_negative("compute.grasp_estimation_s", self.compute.grasp_estimation_s);
+        c.non_negative("compute.motion_generation_s", self.compute.motion_generation_s);
         c.within("sim.physics_dt_s", self.sim.physics_dt_s, 1e-5, 0.02);
         c.within("sim.control_dt_s", self.sim.control_dt_s, 1e-5, 0.01);
         if self.sim.control_dt_s.is_finite()
@@ -812,15 +771,11 @@ impl Scene {
             let in_view = pc.z > 0.0 && {
                 let u = s.focal_px[0] * pc.x / pc.z + s.principal_point_px[0];
                 let v = s.focal_px[1] * pc.y / pc.z + s.principal_point_px[1];
-                (0.0..=s.resolution_px[0] as f64).contains(&u)
-                    && (0.0..=s.resolution_px[1] as f64).contains(&v)
+                (0.0..=s.resolution_px[0] as f64).contains(&u) && (0.0..=s.resolution_px[1] as f64).contains(&v)
             };
             let range = pc.coords.norm();
             if !in_view || range < s.min_range_m || range > s.max_range_m {
-                outside.push(format!(
-                    "({:.3}, {:.3}, {:.3})",
-                    corner.x, corner.y, corner.z
-                ));
+                outside.push(format!("({:.3}, {:.3}, {:.3})", corner.x, corner.y, corner.z));
             }
         }
         if !outside.is_empty() {
@@ -832,10 +787,7 @@ impl Scene {
                 ),
             );
         }
-        for (key, t) in [
-            ("pick_tray", tray),
-            ("place_tray.tray", &self.place_tray.tray),
-        ] {
+        for (key, t) in [("pick_tray", tray), ("place_tray.tray", &self.place_tray.tray)] {
             let bottom = t.center_m[2] - t.floor_thickness_m;
             if (bottom - self.table.top_z_m).abs() > 1e-3 {
                 c.fail(
@@ -866,18 +818,13 @@ pub struct LoadedScene {
 }
 
 fn read_text(label: &str, path: &Path) -> Result<String, ConfigError> {
-    std::fs::read_to_string(path)
-        .map_err(|e| ConfigError::one(label, "", format!("cannot read file: {e}")))
+    std::fs::read_to_string(path).map_err(|e| ConfigError::one(label, "", format!("cannot read file: {e}")))
 }
 
 impl LoadedScene {
     /// The default cell, built into the binary.
     pub fn embedded_default() -> Result<Self, ConfigError> {
-        Self::from_text(
-            "embedded:default",
-            Source::Embedded,
-            embedded::DEFAULT_SCENE,
-        )
+        Self::from_text("embedded:default", Source::Embedded, embedded::DEFAULT_SCENE)
     }
 
     /// Reads a scene file from disk, with the URDF it names.
@@ -906,13 +853,8 @@ impl LoadedScene {
                 let base = p.parent().unwrap_or(Path::new("."));
                 let urdf_path = base.join(&scene.robot.urdf);
                 let urdf_label = urdf_path.display().to_string();
-                let t = std::fs::read_to_string(&urdf_path).map_err(|e| {
-                    ConfigError::one(
-                        label,
-                        "robot.urdf",
-                        format!("cannot read {urdf_label:?}: {e}"),
-                    )
-                })?;
+                let t = std::fs::read_to_string(&urdf_path)
+                    .map_err(|e| ConfigError::one(label, "robot.urdf", format!("cannot read {urdf_label:?}: {e}")))?;
                 (urdf_label, t)
             }
         };
@@ -1105,12 +1047,7 @@ impl Workpiece {
                 format!("must be within [1, 1000], got {}", self.pile_count),
             );
         }
-        c.within(
-            "grasp.yaw_symmetry_deg",
-            self.grasp.yaw_symmetry_deg,
-            0.0,
-            360.0,
-        );
+        c.within("grasp.yaw_symmetry_deg", self.grasp.yaw_symmetry_deg, 0.0, 360.0);
         c.finite("grasp.place_yaw_deg", self.grasp.place_yaw_deg);
         c.non_negative("grasp.face_margin_m", self.grasp.face_margin_m);
         let sh = &self.shape;
@@ -1131,10 +1068,7 @@ impl Workpiece {
                     );
                 }
                 if !sh.parts.iter().any(|p| p.role == PartRole::Body) {
-                    c.fail(
-                        "shape.parts",
-                        "must contain at least one part with role = \"body\"",
-                    );
+                    c.fail("shape.parts", "must contain at least one part with role = \"body\"");
                 }
                 let half = self.size_m.map(|s| s / 2.0);
                 for (i, p) in sh.parts.iter().enumerate() {
@@ -1148,15 +1082,11 @@ impl Workpiece {
                         Primitive::Cylinder => {
                             match p.radius_m {
                                 Some(r) => c.positive(&format!("{k}.radius_m"), r),
-                                None => {
-                                    c.fail(&format!("{k}.radius_m"), "is required for a cylinder")
-                                }
+                                None => c.fail(&format!("{k}.radius_m"), "is required for a cylinder"),
                             }
                             match p.length_m {
                                 Some(l) => c.positive(&format!("{k}.length_m"), l),
-                                None => {
-                                    c.fail(&format!("{k}.length_m"), "is required for a cylinder")
-                                }
+                                None => c.fail(&format!("{k}.length_m"), "is required for a cylinder"),
                             }
                             if p.axis.is_none() {
                                 c.fail(&format!("{k}.axis"), "is required for a cylinder");
@@ -1183,10 +1113,9 @@ impl Workpiece {
             ShapeKind::Mesh => {
                 match &sh.mesh_file {
                     None => c.fail("shape.mesh_file", "is required when kind = \"mesh\""),
-                    Some(f) if !(f.ends_with(".obj") || f.ends_with(".stl")) => c.fail(
-                        "shape.mesh_file",
-                        format!("must be an .obj or .stl file, got {f:?}"),
-                    ),
+                    Some(f) if !(f.ends_with(".obj") || f.ends_with(".stl")) => {
+                        c.fail("shape.mesh_file", format!("must be an .obj or .stl file, got {f:?}"))
+                    }
                     _ => {}
                 }
                 if let Some(s) = sh.mesh_scale {
@@ -1281,21 +1210,12 @@ impl LoadedWorkpiece {
         if arg.contains('/') || arg.ends_with(".toml") {
             return Self::from_file(Path::new(arg));
         }
-        match embedded::WORKPIECES
-            .iter()
-            .find(|(n, _)| n.eq_ignore_ascii_case(arg))
-        {
-            Some((n, text)) => Self::from_text(
-                &format!("embedded:workpieces/{n}.toml"),
-                Source::Embedded,
-                text,
-            ),
+        match embedded::WORKPIECES.iter().find(|(n, _)| n.eq_ignore_ascii_case(arg)) {
+            Some((n, text)) => Self::from_text(&format!("embedded:workpieces/{n}.toml"), Source::Embedded, text),
             None => Err(ConfigError::one(
                 "--workpiece",
                 "",
-                format!(
-                    "names no built-in workpiece (A, B, C, D, E, F) and is not a .toml path, got {arg:?}"
-                ),
+                format!("names no built-in workpiece (A, B, C, D, E, F) and is not a .toml path, got {arg:?}"),
             )),
         }
     }
@@ -1311,8 +1231,7 @@ impl LoadedWorkpiece {
     pub fn from_text(label: &str, source: Source, text: &str) -> Result<Self, ConfigError> {
         let workpiece: Workpiece = parse_toml(label, text)?;
         workpiece.validate(label)?;
-        if let (ShapeKind::Mesh, Source::File(p), Some(f)) =
-            (workpiece.shape.kind, &source, &workpiece.shape.mesh_file)
+        if let (ShapeKind::Mesh, Source::File(p), Some(f)) = (workpiece.shape.kind, &source, &workpiece.shape.mesh_file)
         {
             let mesh = p.parent().unwrap_or(Path::new(".")).join(f);
             if !mesh.is_file() {
@@ -1334,13 +1253,7 @@ impl LoadedWorkpiece {
     pub fn all_embedded() -> Result<Vec<Self>, ConfigError> {
         embedded::WORKPIECES
             .iter()
-            .map(|(n, t)| {
-                Self::from_text(
-                    &format!("embedded:workpieces/{n}.toml"),
-                    Source::Embedded,
-                    t,
-                )
-            })
+            .map(|(n, t)| Self::from_text(&format!("embedded:workpieces/{n}.toml"), Source::Embedded, t))
             .collect()
     }
 }

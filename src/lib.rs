@@ -5,6 +5,9 @@
 //!
 //! 1. [`config`]: the cell (scene) file and the workpiece files: strict parsing and validation.
 //! 2. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
+//! 3. [`physics`]: the rapier world: trays, piles of parts, the arm's bodies, the suction gripper.
+//!
+//! 4. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
 //!
 //! Later stages (physics world, sensor, grasp selection, planning, trajectory, execution, cycle,
 //! recording, report) are added as their issues land; see README.md.
@@ -14,4 +17,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod physics;
+pub mod report;
+pub mod rng;
 pub mod robot;

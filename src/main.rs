@@ -44,6 +44,27 @@ enum Command {
         #[arg(long, global = true)]
         json: bool,
     },
+    /// Build and settle a random pile of one workpiece type in the pick tray.
+    Pile {
+        /// Workpiece: A ... F (embedded) or a path to a workpiece file.
+        #[arg(long)]
+        workpiece: String,
+        /// Parts to drop (default: the workpiece's pile_count).
+        #[arg(long)]
+        count: Option<usize>,
+        /// Run seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Scene file (default: the embedded default cell).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Folder the run folder is written into.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Benchmarks: our code beside a baseline doing the same work.
     Bench {
         #[command(subcommand)]
@@ -131,6 +152,9 @@ fn main() -> ExitCode {
             if let Some(c) = e.downcast_ref::<ConfigError>() {
                 eprintln!("{c}");
                 ExitCode::from(2)
+            } else if let Some(i) = e.downcast_ref::<binpick::physics::ShapeError>() {
+                eprintln!("{i}");
+                ExitCode::from(2)
             } else if let Some(i) = e.downcast_ref::<InputError>() {
                 eprintln!("error: {i}");
                 ExitCode::from(2)
@@ -145,11 +169,7 @@ fn main() -> ExitCode {
 fn run(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Check { files, scene } => check(&files, scene.as_deref()),
-        Command::Robot {
-            command,
-            scene,
-            json,
-        } => {
+        Command::Robot { command, scene, json } => {
             let loaded = LoadedScene::load(scene.as_deref())?;
             let robot = RobotModel::from_scene(&loaded)?;
             match command {
@@ -171,6 +191,14 @@ fn run(cli: Cli) -> Result<()> {
                 RobotCommand::Torque(args) => robot_torque(&loaded, &robot, &args, json),
             }
         }
+        Command::Pile {
+            workpiece,
+            count,
+            seed,
+            scene,
+            out,
+            json,
+        } => pile(&workpiece, count, seed, scene.as_deref(), &out, json),
         Command::Bench {
             command: BenchCommand::Robot { runs, calls, json },
         } => {
@@ -256,8 +284,7 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
             let text = std::fs::read_to_string(path)
                 .map_err(|e| ConfigError::one(&label, "", format!("cannot read file: {e}")))?;
             let base = LoadedScene::embedded_default()?;
-            let robot =
-                RobotModel::from_urdf(&label, &text, &base.scene.robot, &base.scene.gripper)?;
+            let robot = RobotModel::from_urdf(&label, &text, &base.scene.robot, &base.scene.gripper)?;
             Ok(format!(
                 "URDF: robot {:?}, {} joints, {:.2} kg moving",
                 robot.name,
@@ -270,8 +297,7 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 .map_err(|e| ConfigError::one(&label, "", format!("cannot read file: {e}")))?;
             let table: toml::Table = binpick::config::parse_toml(&label, &text)?;
             if table.contains_key("robot") {
-                let scene =
-                    LoadedScene::from_text(&label, Source::File(path.to_path_buf()), &text)?;
+                let scene = LoadedScene::from_text(&label, Source::File(path.to_path_buf()), &text)?;
                 let robot = RobotModel::from_scene(&scene)?;
                 robot.check_scene_reach(&label, &scene.scene)?;
                 Ok(format!(
@@ -279,15 +305,11 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                     scene.scene.name, robot.name
                 ))
             } else {
-                let wp =
-                    LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
+                let wp = LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
                 }
-                Ok(format!(
-                    "workpiece {:?}: {}",
-                    wp.workpiece.name, wp.workpiece.kind
-                ))
+                Ok(format!("workpiece {:?}: {}", wp.workpiece.name, wp.workpiece.kind))
             }
         }
         _ => Err(ConfigError::one(
@@ -348,10 +370,7 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
         g.tool_length_m,
         g.cup_diameter_m * 1000.0
     );
-    println!(
-        "moving mass {:.3} kg (links 1-6, without hand)",
-        robot.moving_mass_kg()
-    );
+    println!("moving mass {:.3} kg (links 1-6, without hand)", robot.moving_mass_kg());
     println!();
     println!("links    mass_kg  com_m (link frame)             shapes");
     for l in &robot.links {
@@ -367,9 +386,7 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
         );
     }
     println!();
-    println!(
-        "joint     lower_deg upper_deg  vmax_deg_s  amax_deg_s2  torque_nm  armature  coulomb_nm  viscous_nm_s"
-    );
+    println!("joint     lower_deg upper_deg  vmax_deg_s  amax_deg_s2  torque_nm  armature  coulomb_nm  viscous_nm_s");
     for j in &robot.joints {
         println!(
             "{:<9} {:9.1} {:9.1} {:11.1} {:12.0} {:10.1} {:9.3} {:11.2} {:13.2}",
@@ -445,9 +462,7 @@ fn robot_ik(
     let sols = if all {
         robot.ik_flange_all(&base_from_flange)
     } else {
-        robot
-            .ik_flange_nearest(&base_from_flange, seed)
-            .map(|s| vec![s])
+        robot.ik_flange_nearest(&base_from_flange, seed).map(|s| vec![s])
     }
     .map_err(|e| {
         InputError(format!(
@@ -467,16 +482,9 @@ fn robot_ik(
         );
         return Ok(());
     }
-    println!(
-        "{} solution(s) for the {frame} at {}:",
-        sols.len(),
-        pose_text(&target)
-    );
+    println!("{} solution(s) for the {frame} at {}:", sols.len(), pose_text(&target));
     for s in &sols {
-        let q: Vec<String> =
-            s.q.iter()
-                .map(|v| format!("{:9.3}", v.to_degrees()))
-                .collect();
+        let q: Vec<String> = s.q.iter().map(|v| format!("{:9.3}", v.to_degrees())).collect();
         println!(
             "  q_deg [{}]  ({}, elbow {}, J5 {})",
             q.join(" "),
@@ -488,12 +496,7 @@ fn robot_ik(
     Ok(())
 }
 
-fn robot_torque(
-    loaded: &LoadedScene,
-    robot: &RobotModel,
-    a: &TorqueArgs,
-    json: bool,
-) -> Result<()> {
+fn robot_torque(loaded: &LoadedScene, robot: &RobotModel, a: &TorqueArgs, json: bool) -> Result<()> {
     let q = joints_from_deg("--deg", &a.deg)?;
     let qd = a
         .vel_deg
@@ -543,11 +546,7 @@ fn robot_torque(
     );
     println!("joint     torque_nm  gravity_nm  limit_nm  |tau|/limit");
     for i in 0..6 {
-        let flag = if tau[i].abs() > limit[i] {
-            "  OVER LIMIT"
-        } else {
-            ""
-        };
+        let flag = if tau[i].abs() > limit[i] { "  OVER LIMIT" } else { "" };
         println!(
             "{:<9} {:9.3} {:11.3} {:9.1} {:11.3}{flag}",
             robot.joints[i].name,
@@ -560,13 +559,7 @@ fn robot_torque(
     Ok(())
 }
 
-fn bench_robot(
-    loaded: &LoadedScene,
-    robot: &RobotModel,
-    runs: usize,
-    calls: usize,
-    json: bool,
-) -> Result<()> {
+fn bench_robot(loaded: &LoadedScene, robot: &RobotModel, runs: usize, calls: usize, json: bool) -> Result<()> {
     if runs == 0 || calls == 0 {
         return Err(InputError("--runs and --calls must be > 0".into()).into());
     }
@@ -591,5 +584,68 @@ fn bench_robot(
             t.name, t.median_ns, t.min_ns, t.max_ns, target, t.note
         );
     }
+    Ok(())
+}
+
+/// Loads a scene and a workpiece and checks that they go together.
+fn load_cell(scene: Option<&Path>, workpiece: &str) -> Result<(LoadedScene, LoadedWorkpiece, RobotModel)> {
+    let loaded = LoadedScene::load(scene)?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    robot.check_scene_reach(&loaded.label, &loaded.scene)?;
+    let wp = LoadedWorkpiece::resolve(workpiece)?;
+    wp.workpiece.check_fits_scene(&wp.label, &loaded.scene)?;
+    Ok((loaded, wp, robot))
+}
+
+fn pile(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>, out: &Path, json: bool) -> Result<()> {
+    let (loaded, wp, robot) = load_cell(scene, workpiece)?;
+    let count = count.unwrap_or(wp.workpiece.pile_count as usize);
+    if count == 0 || count > 1000 {
+        return Err(InputError(format!("--count must be within [1, 1000], got {count}")).into());
+    }
+    let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    let mut world = binpick::physics::World::new(&loaded.scene, &robot, shape);
+    let report = world
+        .build_pile(&binpick::physics::pile::PileOptions::new(count, seed))
+        .context("building the pile")?;
+    let name = format!("pile-{}-seed{seed}", wp.workpiece.name);
+    let run = binpick::report::RunDir::create(out, &name)?;
+    run.write_inputs(&loaded, Some(&wp))?;
+    let file = json!({
+        "binpick_version": env!("CARGO_PKG_VERSION"), "workpiece": wp.workpiece.name, "seed": seed, "count": count,
+        "physics_dt_s": loaded.scene.sim.physics_dt_s, "report": &report,
+    });
+    run.write_json("pile.json", &file)?;
+    let dest = run.finish()?;
+    if json {
+        let mut v = file;
+        v["wall_s"] = json!(report.wall_s);
+        v["run_dir"] = json!(dest.display().to_string());
+        v["report"].as_object_mut().map(|o| o.remove("poses"));
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "pile of {count} x {} ({}), seed {seed}",
+        wp.workpiece.name, wp.workpiece.kind
+    );
+    println!("  in tray          {} / {}", report.in_tray, report.spawned);
+    println!(
+        "  pile height      {:.1} mm above the tray floor",
+        report.pile_height_m * 1e3
+    );
+    println!(
+        "  settle time      {:.3} s simulated, {:.3} s wall ({} waves){}",
+        report.settle_sim_s,
+        report.wall_s,
+        report.waves,
+        if report.settled { "" } else { "  NOT SETTLED" }
+    );
+    println!(
+        "  max penetration  {:.3} mm ({})",
+        report.max_penetration_m * 1e3,
+        report.max_penetration_between
+    );
+    println!("  wrote            {}", dest.join("pile.json").display());
     Ok(())
 }

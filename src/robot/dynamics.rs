@@ -186,12 +186,7 @@ impl DynamicsModel {
     /// Joint torques for positions, velocities and accelerations: the full model
     /// (gravity, armature, friction).
     #[inline]
-    pub fn inverse_dynamics(
-        &self,
-        q: &JointVector,
-        qd: &JointVector,
-        qdd: &JointVector,
-    ) -> JointVector {
+    pub fn inverse_dynamics(&self, q: &JointVector, qd: &JointVector, qdd: &JointVector) -> JointVector {
         self.inverse_dynamics_terms(q, qd, qdd, Terms::ALL)
     }
 
@@ -273,8 +268,7 @@ impl DynamicsModel {
         let mut composite: [Matrix6<f64>; DOF] = std::array::from_fn(|i| {
             let mut s = Matrix6::zeros();
             let hx = skew(&self.first_moment[i]);
-            s.fixed_view_mut::<3, 3>(0, 0)
-                .copy_from(&self.inertia_origin[i]);
+            s.fixed_view_mut::<3, 3>(0, 0).copy_from(&self.inertia_origin[i]);
             s.fixed_view_mut::<3, 3>(0, 3).copy_from(&hx);
             s.fixed_view_mut::<3, 3>(3, 0).copy_from(&hx.transpose());
             s.fixed_view_mut::<3, 3>(3, 3)
@@ -326,12 +320,7 @@ impl DynamicsModel {
 
     /// Joint accelerations under motor torques `tau` (full model): M qdd = tau - bias.
     /// `None` if the mass matrix is not positive definite (never for a valid model).
-    pub fn forward_dynamics(
-        &self,
-        q: &JointVector,
-        qd: &JointVector,
-        tau: &JointVector,
-    ) -> Option<JointVector> {
+    pub fn forward_dynamics(&self, q: &JointVector, qd: &JointVector, tau: &JointVector) -> Option<JointVector> {
         let bias = self.inverse_dynamics(q, qd, &JointVector::zeros());
         let m = self.mass_matrix(q);
         m.cholesky().map(|c| c.solve(&(tau - bias)))
@@ -423,12 +412,7 @@ mod tests {
     fn mass_matrix_is_symmetric_positive_definite_and_matches_rnea() {
         let r = default_robot();
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
-        let payload = Payload::from_gripper(
-            &crate::config::LoadedScene::embedded_default()
-                .unwrap()
-                .scene
-                .gripper,
-        );
+        let payload = Payload::from_gripper(&crate::config::LoadedScene::embedded_default().unwrap().scene.gripper);
         for dynamics in [r.dynamics(&Payload::none()), r.dynamics(&payload)] {
             for _ in 0..200 {
                 let q = random_q(&r, &mut rng);
@@ -438,13 +422,8 @@ mod tests {
                 assert!(eig.min() > 0.0, "not positive definite: {eig:?}");
                 let qdd = JointVector::from_fn(|_, _| rng.random_range(-20.0..20.0));
                 let z = JointVector::zeros();
-                let lhs =
-                    dynamics.inverse_dynamics(&q, &z, &qdd) - dynamics.inverse_dynamics(&q, &z, &z);
-                assert!(
-                    (lhs - m * qdd).amax() < 1e-9,
-                    "RNEA vs CRBA: {lhs:?} vs {:?}",
-                    m * qdd
-                );
+                let lhs = dynamics.inverse_dynamics(&q, &z, &qdd) - dynamics.inverse_dynamics(&q, &z, &z);
+                assert!((lhs - m * qdd).amax() < 1e-9, "RNEA vs CRBA: {lhs:?} vs {:?}", m * qdd);
             }
         }
     }
@@ -461,9 +440,7 @@ mod tests {
         let state = |t: f64| {
             let q = JointVector::from_fn(|i, _| q0[i] + amp[i] * (freq[i] * t + phase[i]).sin());
             let qd = JointVector::from_fn(|i, _| amp[i] * freq[i] * (freq[i] * t + phase[i]).cos());
-            let qdd = JointVector::from_fn(|i, _| {
-                -amp[i] * freq[i] * freq[i] * (freq[i] * t + phase[i]).sin()
-            });
+            let qdd = JointVector::from_fn(|i, _| -amp[i] * freq[i] * freq[i] * (freq[i] * t + phase[i]).sin());
             (q, qd, qdd)
         };
         let energy = |t: f64| {
@@ -512,11 +489,7 @@ mod tests {
         let b = Payload::point(0.02, Vector3::new(0.0, 0.0, 0.125));
         let c = a.combined(&b);
         assert!((c.mass_kg - 0.62).abs() < 1e-12);
-        assert!(
-            (c.inertia_about_flange() - (a.inertia_about_flange() + b.inertia_about_flange()))
-                .amax()
-                < 1e-12
-        );
+        assert!((c.inertia_about_flange() - (a.inertia_about_flange() + b.inertia_about_flange())).amax() < 1e-12);
         assert!(
             c.combined(&Payload::none()) == c
                 || (c.combined(&Payload::none()).com_flange_m - c.com_flange_m).norm() < 1e-15

@@ -41,9 +41,7 @@ pub enum IkError {
         max_m: f64,
     },
     /// The wrist centre lies on the J1 axis: J1 is not determined.
-    #[error(
-        "target at the shoulder singularity: the wrist centre lies on the J1 axis, J1 is not determined"
-    )]
+    #[error("target at the shoulder singularity: the wrist centre lies on the J1 axis, J1 is not determined")]
     ShoulderSingular,
     /// J5 = 0 in every arm solution: only J4 + J6 is determined.
     #[error("target at the wrist singularity: J5 = 0, only J4 + J6 is determined")]
@@ -138,12 +136,7 @@ impl IkGeometry {
                 "joint 6 origin must lie on the J4 axis (spherical wrist)",
             ),
         ];
-        problems.extend(
-            checks
-                .iter()
-                .filter(|(ok, _)| !ok)
-                .map(|(_, m)| m.to_string()),
-        );
+        problems.extend(checks.iter().filter(|(ok, _)| !ok).map(|(_, m)| m.to_string()));
         if !problems.is_empty() {
             return Err(format!(
                 "kinematic structure not supported by the closed-form inverse kinematics: {}",
@@ -225,11 +218,7 @@ impl RobotModel {
                 continue;
             }
             let delta = ratio.clamp(-1.0, 1.0).acos();
-            let elbows: &[f64] = if delta == 0.0 {
-                &[0.0]
-            } else {
-                &[delta, -delta]
-            };
+            let elbows: &[f64] = if delta == 0.0 { &[0.0] } else { &[delta, -delta] };
             for (e, d) in elbows.iter().enumerate() {
                 any_arm = true;
                 let q3 = wrap(phi + d);
@@ -239,17 +228,7 @@ impl RobotModel {
                 // R_base_link3 = Rz(q1) Ry(q2 + q3); wrist R36 = R03^T R = Rz(q4) Ry(q5) Rz(q6).
                 let (s1, c1) = q1.sin_cos();
                 let (s23, c23) = (q2 + q3).sin_cos();
-                let r03 = Matrix3::new(
-                    c1 * c23,
-                    -s1,
-                    c1 * s23,
-                    s1 * c23,
-                    c1,
-                    s1 * s23,
-                    -s23,
-                    0.0,
-                    c23,
-                );
+                let r03 = Matrix3::new(c1 * c23, -s1, c1 * s23, s1 * c23, c1, s1 * s23, -s23, 0.0, c23);
                 let m = r03.transpose() * target_rot;
                 let s5 = m[(0, 2)].hypot(m[(1, 2)]);
                 if s5 < WRIST_SINGULAR_EPS {
@@ -357,10 +336,7 @@ impl RobotModel {
     }
 
     /// Every in-limit solution for a flange pose in the base frame.
-    pub fn ik_flange_all(
-        &self,
-        base_from_flange: &Isometry3<f64>,
-    ) -> Result<Vec<IkSolution>, IkError> {
+    pub fn ik_flange_all(&self, base_from_flange: &Isometry3<f64>) -> Result<Vec<IkSolution>, IkError> {
         let mut out = Vec::with_capacity(16);
         self.for_each_solution(base_from_flange, |s| out.push(s))?;
         Ok(out)
@@ -398,19 +374,12 @@ impl RobotModel {
     }
 
     /// Every in-limit solution that puts the tool at `world_from_tool`.
-    pub fn ik_tool_all(
-        &self,
-        world_from_tool: &Isometry3<f64>,
-    ) -> Result<Vec<IkSolution>, IkError> {
+    pub fn ik_tool_all(&self, world_from_tool: &Isometry3<f64>) -> Result<Vec<IkSolution>, IkError> {
         self.ik_flange_all(&self.base_from_flange_for_tool(world_from_tool))
     }
 
     /// The in-limit solution nearest `seed` that puts the tool at `world_from_tool`.
-    pub fn ik_tool_nearest(
-        &self,
-        world_from_tool: &Isometry3<f64>,
-        seed: &JointVector,
-    ) -> Result<IkSolution, IkError> {
+    pub fn ik_tool_nearest(&self, world_from_tool: &Isometry3<f64>, seed: &JointVector) -> Result<IkSolution, IkError> {
         self.ik_flange_nearest(&self.base_from_flange_for_tool(world_from_tool), seed)
     }
 }
@@ -450,11 +419,7 @@ mod tests {
             assert!(sols.len() <= 8 * 3 * 3 * 2, "too many solutions");
             total_solutions += sols.len();
             for s in &sols {
-                assert!(
-                    r.within_limits(&s.q, 0.0),
-                    "solution out of limits: {:?}",
-                    s.q
-                );
+                assert!(r.within_limits(&s.q, 0.0), "solution out of limits: {:?}", s.q);
                 let (dp, dr) = pose_error(&r.base_from_flange(&s.q), &target);
                 worst = (worst.0.max(dp), worst.1.max(dr));
                 assert!(
@@ -464,21 +429,14 @@ mod tests {
                 );
             }
             let found = sols.iter().any(|s| (s.q - q).amax() < 1e-6);
-            assert!(
-                found,
-                "sample {n}: original {q:?} not among {} solutions",
-                sols.len()
-            );
+            assert!(found, "sample {n}: original {q:?} not among {} solutions", sols.len());
         }
         assert!(skipped_singular < 5);
         assert!(
             total_solutions > 10_000 * 4,
             "suspiciously few solutions: {total_solutions}"
         );
-        eprintln!(
-            "IK round trip: worst {:.2e} m, {:.2e} rad",
-            worst.0, worst.1
-        );
+        eprintln!("IK round trip: worst {:.2e} m, {:.2e} rad", worst.0, worst.1);
     }
 
     #[test]
@@ -513,25 +471,17 @@ mod tests {
     fn unreachable_and_singular_targets_are_typed_errors() {
         let r = default_robot();
         let far = Isometry3::translation(1.5, 0.0, 0.3);
-        assert!(matches!(
-            r.ik_flange_all(&far),
-            Err(IkError::Unreachable { .. })
-        ));
+        assert!(matches!(r.ik_flange_all(&far), Err(IkError::Unreachable { .. })));
         // Wrist centre on the J1 axis: flange straight above the base pointing up.
         let above = Isometry3::translation(0.0, 0.0, 0.9);
-        assert_eq!(
-            r.ik_flange_all(&above).unwrap_err(),
-            IkError::ShoulderSingular
-        );
+        assert_eq!(r.ik_flange_all(&above).unwrap_err(), IkError::ShoulderSingular);
         // J5 = 0 with the arm fully stretched: the one arm solution is wrist-singular (the
         // reach-over-the-back branch is out of reach), so the target is singular.
         let g = r.ik_geometry;
-        let stretched_q3 =
-            g.forearm_m[1].atan2(g.forearm_m[0]) - g.upper_arm_m[1].atan2(g.upper_arm_m[0]);
+        let stretched_q3 = g.forearm_m[1].atan2(g.forearm_m[0]) - g.upper_arm_m[1].atan2(g.upper_arm_m[0]);
         let stretched = JointVector::new(0.2, 0.1, stretched_q3, 0.0, 0.0, 0.0);
         assert_eq!(
-            r.ik_flange_all(&r.base_from_flange(&stretched))
-                .unwrap_err(),
+            r.ik_flange_all(&r.base_from_flange(&stretched)).unwrap_err(),
             IkError::WristSingular
         );
         // READY has J5 = 0 on its own branch: that branch is skipped, never returned with

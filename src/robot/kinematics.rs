@@ -199,14 +199,8 @@ mod tests {
                 let dv = (tp.translation.vector - tm.translation.vector) / (2.0 * h);
                 let dr = (tp.rotation * tm.rotation.inverse()).scaled_axis() / (2.0 * h);
                 let col = jac.column(i);
-                assert!(
-                    (dv - col.fixed_rows::<3>(0)).norm() < 1e-6,
-                    "linear column {i}"
-                );
-                assert!(
-                    (dr - col.fixed_rows::<3>(3)).norm() < 1e-6,
-                    "angular column {i}"
-                );
+                assert!((dv - col.fixed_rows::<3>(0)).norm() < 1e-6, "linear column {i}");
+                assert!((dr - col.fixed_rows::<3>(3)).norm() < 1e-6, "angular column {i}");
             }
         }
     }

@@ -179,13 +179,9 @@ impl RobotModel {
         let mut c = Checker::new(label);
 
         // Walk from the flange link up to the root through the joints' child links.
-        let by_child: BTreeMap<&str, &urdf_rs::Joint> = urdf
-            .joints
-            .iter()
-            .map(|j| (j.child.link.as_str(), j))
-            .collect();
-        let links_by_name: BTreeMap<&str, &urdf_rs::Link> =
-            urdf.links.iter().map(|l| (l.name.as_str(), l)).collect();
+        let by_child: BTreeMap<&str, &urdf_rs::Joint> =
+            urdf.joints.iter().map(|j| (j.child.link.as_str(), j)).collect();
+        let links_by_name: BTreeMap<&str, &urdf_rs::Link> = urdf.links.iter().map(|l| (l.name.as_str(), l)).collect();
         if !links_by_name.contains_key(robot.flange_link.as_str()) {
             return Err(ConfigError::one(
                 label,
@@ -215,9 +211,7 @@ impl RobotModel {
         if chain.len() != DOF {
             let names: Vec<&str> = chain.iter().map(|j| j.name.as_str()).collect();
             let hint = if root_is_a_child_nowhere > 1 {
-                format!(
-                    "; link {root:?} is the child of no joint, so a joint between it and its parent is missing"
-                )
+                format!("; link {root:?} is the child of no joint, so a joint between it and its parent is missing")
             } else {
                 String::new()
             };
@@ -250,10 +244,7 @@ impl RobotModel {
             ]) {
                 c.fail(
                     &format!("{key}.origin"),
-                    format!(
-                        "must be finite, got xyz {:?} rpy {:?}",
-                        j.origin.xyz.0, j.origin.rpy.0
-                    ),
+                    format!("must be finite, got xyz {:?} rpy {:?}", j.origin.xyz.0, j.origin.rpy.0),
                 );
             }
             let axis = vec3(&j.axis.xyz);
@@ -271,18 +262,12 @@ impl RobotModel {
             if !all_finite(&[l.lower, l.upper]) {
                 c.fail(
                     &format!("{key}.limit"),
-                    format!(
-                        "lower and upper must be finite, got {} and {}",
-                        l.lower, l.upper
-                    ),
+                    format!("lower and upper must be finite, got {} and {}", l.lower, l.upper),
                 );
             } else if l.lower >= l.upper {
                 c.fail(
                     &format!("{key}.limit"),
-                    format!(
-                        "is inverted or empty: lower {} must be < upper {}",
-                        l.lower, l.upper
-                    ),
+                    format!("is inverted or empty: lower {} must be < upper {}", l.lower, l.upper),
                 );
             }
             if !(l.velocity.is_finite() && l.velocity > 0.0) {
@@ -326,16 +311,11 @@ impl RobotModel {
             let inn = &l.inertial;
             let m = inn.mass.value;
             let it = &inn.inertia;
-            let inertia = Matrix3::new(
-                it.ixx, it.ixy, it.ixz, it.ixy, it.iyy, it.iyz, it.ixz, it.iyz, it.izz,
-            );
+            let inertia = Matrix3::new(it.ixx, it.ixy, it.ixz, it.ixy, it.iyy, it.iyz, it.ixz, it.iyz, it.izz);
             if i > 0 && !(m.is_finite() && m > 0.0) {
                 c.fail(&format!("{key}.mass"), format!("must be > 0, got {m}"));
             }
-            if !all_finite(inertia.as_slice())
-                || !all_finite(&inn.origin.xyz.0)
-                || !all_finite(&inn.origin.rpy.0)
-            {
+            if !all_finite(inertia.as_slice()) || !all_finite(&inn.origin.xyz.0) || !all_finite(&inn.origin.rpy.0) {
                 c.fail(&key, "must be finite");
             } else if i > 0 && inertia.cholesky().is_none() {
                 c.fail(
@@ -358,23 +338,22 @@ impl RobotModel {
                         radius_m: *radius,
                         half_length_m: length / 2.0,
                     }),
-                    urdf_rs::Geometry::Sphere { radius } => {
-                        Some(Primitive::Sphere { radius_m: *radius })
-                    }
+                    urdf_rs::Geometry::Sphere { radius } => Some(Primitive::Sphere { radius_m: *radius }),
                     urdf_rs::Geometry::Capsule { radius, length } => Some(Primitive::Capsule {
                         radius_m: *radius,
                         half_length_m: length / 2.0,
                     }),
                     urdf_rs::Geometry::Mesh { filename, .. } => {
-                        c.fail(&skey, format!("mesh geometry is not supported for the arm's collision model, got {filename:?}"));
+                        c.fail(
+                            &skey,
+                            format!("mesh geometry is not supported for the arm's collision model, got {filename:?}"),
+                        );
                         None
                     }
                 };
                 if let Some(p) = prim {
                     let dims: Vec<f64> = match &p {
-                        Primitive::Box { half_extents_m } => {
-                            half_extents_m.iter().copied().collect()
-                        }
+                        Primitive::Box { half_extents_m } => half_extents_m.iter().copied().collect(),
                         Primitive::Cylinder {
                             radius_m,
                             half_length_m,
@@ -408,8 +387,7 @@ impl RobotModel {
         }
         c.finish()?;
 
-        let ik_geometry =
-            ik::IkGeometry::from_joints(&joints).map_err(|m| ConfigError::one(label, "", m))?;
+        let ik_geometry = ik::IkGeometry::from_joints(&joints).map_err(|m| ConfigError::one(label, "", m))?;
         let world_from_base = robot.world_from_base();
         let gravity_world = Vector3::new(0.0, 0.0, -GRAVITY_M_S2);
         Ok(RobotModel {
@@ -497,21 +475,14 @@ impl RobotModel {
 
     /// Checks that the arm reaches, with the tool pointing down, every corner of both trays' inner
     /// floors (1 cm in from the walls), their centres, and the points 5 cm above their rims.
-    pub fn check_scene_reach(
-        &self,
-        label: &str,
-        scene: &crate::config::Scene,
-    ) -> Result<(), ConfigError> {
+    pub fn check_scene_reach(&self, label: &str, scene: &crate::config::Scene) -> Result<(), ConfigError> {
         let mut c = Checker::new(label);
         for (key, tray) in [
             ("pick_tray", &scene.pick_tray),
             ("place_tray.tray", &scene.place_tray.tray),
         ] {
             let world_from_tray = tray.world_from_tray();
-            let (hx, hy) = (
-                tray.inner_size_m[0] / 2.0 - 0.01,
-                tray.inner_size_m[1] / 2.0 - 0.01,
-            );
+            let (hx, hy) = (tray.inner_size_m[0] / 2.0 - 0.01, tray.inner_size_m[1] / 2.0 - 0.01);
             let mut points = vec![(0.0, 0.0, 0.002), (0.0, 0.0, tray.wall_height_m + 0.05)];
             for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
                 points.push((sx * hx.max(0.0), sy * hy.max(0.0), 0.002));
@@ -547,8 +518,6 @@ pub(crate) mod test_support {
 
     /// Uniformly random in-limit configuration from a simple deterministic generator.
     pub fn random_q(robot: &RobotModel, rng: &mut impl rand::RngExt) -> JointVector {
-        JointVector::from_fn(|i, _| {
-            rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad)
-        })
+        JointVector::from_fn(|i, _| rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad))
     }
 }

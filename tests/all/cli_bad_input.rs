@@ -9,11 +9,7 @@ fn rejects(ws: &Workspace, file: &str, expected: &[&str]) -> String {
     let before = ws.listing();
     let out = binpick_in(ws.dir.path(), &["check", file]);
     let err = stderr(&out);
-    assert_eq!(
-        out.status.code(),
-        Some(2),
-        "exit code for {file}; stderr:\n{err}"
-    );
+    assert_eq!(out.status.code(), Some(2), "exit code for {file}; stderr:\n{err}");
     assert!(!err.contains("panicked"), "panic for {file}: {err}");
     for e in expected {
         assert!(err.contains(e), "stderr for {file} lacks {e:?}:\n{err}");
@@ -25,12 +21,7 @@ fn rejects(ws: &Workspace, file: &str, expected: &[&str]) -> String {
 #[test]
 fn malformed_toml() {
     let ws = Workspace::new();
-    ws.edit(
-        "workpieces/B.toml",
-        "workpieces/bad.toml",
-        "name = \"B\"",
-        "name = \"B",
-    );
+    ws.edit("workpieces/B.toml", "workpieces/bad.toml", "name = \"B\"", "name = \"B");
     rejects(
         &ws,
         "workpieces/bad.toml",
@@ -114,10 +105,7 @@ fn several_problems_one_line_each() {
     let err = rejects(
         &ws,
         "workpieces/bad.toml",
-        &[
-            "mass_kg must be > 0, got -1",
-            "friction must be within [0, 2], got 7",
-        ],
+        &["mass_kg must be > 0, got -1", "friction must be within [0, 2], got 7"],
     );
     assert_eq!(err.lines().count(), 2, "{err}");
 }
@@ -193,11 +181,7 @@ fn urdf_lacking_a_joint() {
         "urdf = \"viper_s650.urdf\"",
         "urdf = \"no_j4.urdf\"",
     );
-    rejects(
-        &ws,
-        "scenes/bad.toml",
-        &["no_j4.urdf:", "chain of 6 revolute joints"],
-    );
+    rejects(&ws, "scenes/bad.toml", &["no_j4.urdf:", "chain of 6 revolute joints"]);
 }
 
 #[test]
@@ -223,9 +207,7 @@ fn joint_limits_inverted() {
     rejects(
         &ws,
         "scenes/inverted.urdf",
-        &[
-            "scenes/inverted.urdf: joint[joint_3].limit is inverted or empty: lower 4.468043 must be < upper -0.506145",
-        ],
+        &["scenes/inverted.urdf: joint[joint_3].limit is inverted or empty: lower 4.468043 must be < upper -0.506145"],
     );
 }
 
@@ -313,18 +295,7 @@ fn bad_robot_arguments_exit_2() {
     let ws = Workspace::new();
     for (args, expect) in [
         (
-            &[
-                "robot",
-                "ik",
-                "--xyz",
-                "2",
-                "0",
-                "0",
-                "--rpy-deg",
-                "180",
-                "0",
-                "0",
-            ][..],
+            &["robot", "ik", "--xyz", "2", "0", "0", "--rpy-deg", "180", "0", "0"][..],
             "target out of reach",
         ),
         (
@@ -357,10 +328,7 @@ fn bad_robot_arguments_exit_2() {
         let out = binpick_in(ws.dir.path(), args);
         let err = stderr(&out);
         assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
-        assert!(
-            err.contains(expect),
-            "{args:?}: stderr lacks {expect:?}: {err}"
-        );
+        assert!(err.contains(expect), "{args:?}: stderr lacks {expect:?}: {err}");
         assert!(!err.contains("panicked"));
         assert_eq!(ws.listing(), before);
     }

@@ -25,18 +25,8 @@ fn shipped_files_are_valid() {
         "workpieces/E.toml",
         "workpieces/F.toml",
     ]);
-    assert!(
-        out.status.success(),
-        "{}",
-        String::from_utf8_lossy(&out.stderr)
-    );
-    assert_eq!(
-        stdout(&out)
-            .lines()
-            .filter(|l| l.starts_with("ok: "))
-            .count(),
-        8
-    );
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    assert_eq!(stdout(&out).lines().filter(|l| l.starts_with("ok: ")).count(), 8);
 }
 
 #[test]
@@ -51,9 +41,7 @@ fn info_lists_six_joints_and_28_kg() {
 
 #[test]
 fn fk_ready_pose_from_the_command_line() {
-    let v = json(&[
-        "robot", "fk", "--deg", "0", "-90", "180", "0", "0", "0", "--json",
-    ]);
+    let v = json(&["robot", "fk", "--deg", "0", "-90", "180", "0", "0", "0", "--json"]);
     let xyz: Vec<f64> = v["world_from_flange"]["xyz_m"]
         .as_array()
         .unwrap()

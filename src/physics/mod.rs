@@ -1,0 +1,870 @@
+//! Physics world: the cell in rapier, with the piled parts, the arm and the suction gripper.
+//!
+//! Job: build the table, trays and obstacles from the cell file as fixed colliders; put the arm's
+//! links in as kinematic bodies that follow the joint state every step (so a moving arm pushes
+//! parts and hides them from the sensor); drop piles of parts ([`pile`]); hold and release parts
+//! with the suction gripper ([`suction`]); and watch the world's health every step.
+//!
+//! Units: SI (m, s, kg); rapier runs in f32 with `length_unit` tuned for centimetre parts.
+//! Frames: the rapier frame is the world frame of the cell file (z up). Conversions between our
+//! f64 isometries and rapier's f32 poses are [`to_pose`] and [`to_isometry`]; rapier lengths are
+//! millimetres ([`SIM_UNITS_PER_M`]), everything outside this module is in metres.
+//!
+//! Solver tuning for 5-150 mm parts of a few grams (see README, "Physics"): rapier runs in
+//! millimetres; length unit 1 cm (allowed penetration 0.05 mm, prediction distance 0.2 mm);
+//! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; CCD on every part;
+//! the cell file's timestep.
+
+pub mod overlap;
+pub mod pile;
+pub mod shapes;
+pub mod suction;
+
+use nalgebra::{Isometry3, Vector3};
+use rapier3d::math::{Pose, Vector};
+use rapier3d::prelude::*;
+
+use crate::config::{Scene, TrayConfig};
+use crate::robot::{DOF, JointVector, Primitive as LinkPrimitive, RobotModel};
+pub use shapes::{PartShape, ShapeError};
+pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
+
+/// rapier units per metre: the physics runs in millimetres. parry reuses a pair's contact points
+/// while they drift less than a hard-coded 1e-3 units (`ContactManifold::try_update_contacts`);
+/// in metres that is 1 mm, enough for centimetre parts to sink into each other unseen along an
+/// edge. In millimetres it is 1 um.
+pub const SIM_UNITS_PER_M: f64 = 1000.0;
+
+/// A length [m] in rapier units.
+#[inline]
+pub fn sim(v: f64) -> f32 {
+    (v * SIM_UNITS_PER_M) as f32
+}
+
+/// Our f64 isometry [m] as a rapier pose [rapier units].
+pub fn to_pose(iso: &Isometry3<f64>) -> Pose {
+    let mut p: Pose = iso.cast::<f32>().into();
+    p.translation = sim_point(&iso.translation.vector);
+    p
+}
+
+/// A rapier pose [rapier units] as our f64 isometry [m].
+pub fn to_isometry(p: &Pose) -> Isometry3<f64> {
+    let i: Isometry3<f32> = (*p).into();
+    let mut i = i.cast::<f64>();
+    i.translation.vector = point_from_sim(p.translation);
+    i
+}
+
+/// A position or velocity [m, m/s] in rapier units.
+pub fn sim_point(v: &Vector3<f64>) -> Vector {
+    Vector::new(sim(v.x), sim(v.y), sim(v.z))
+}
+
+/// A position or velocity in rapier units as metres [m, m/s].
+pub fn point_from_sim(v: Vector) -> Vector3<f64> {
+    Vector3::new(v.x as f64, v.y as f64, v.z as f64) / SIM_UNITS_PER_M
+}
+
+/// A direction (unscaled) as a rapier vector.
+pub fn sim_dir(v: &Vector3<f64>) -> Vector {
+    Vector::new(v.x as f32, v.y as f32, v.z as f32)
+}
+
+/// A rapier direction (unscaled) as an f64 vector.
+pub fn dir_from_sim(v: Vector) -> Vector3<f64> {
+    Vector3::new(v.x as f64, v.y as f64, v.z as f64)
+}
+
+/// Collision groups.
+const ENV: Group = Group::GROUP_1;
+const ARM: Group = Group::GROUP_2;
+const PARTS: Group = Group::GROUP_3;
+
+/// What a collider belongs to (stored in its `user_data`).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Tag {
+    /// A fixed environment object, index into [`World::env_names`].
+    Env(u32),
+    /// An arm link (0 = base ... 6 = flange).
+    Link(u8),
+    /// The gripper's body.
+    Tool,
+    /// The suction cup.
+    Cup,
+    /// A part, index into [`World::parts`].
+    Part(u32),
+}
+
+impl Tag {
+    fn encode(self) -> u128 {
+        let (kind, idx) = match self {
+            Tag::Env(i) => (1u128, i as u128),
+            Tag::Link(i) => (2, i as u128),
+            Tag::Tool => (3, 0),
+            Tag::Cup => (4, 0),
+            Tag::Part(i) => (5, i as u128),
+        };
+        (kind << 64) | idx
+    }
+
+    /// Decodes a collider's `user_data`.
+    pub fn decode(data: u128) -> Option<Tag> {
+        let idx = (data & u64::MAX as u128) as u32;
+        Some(match data >> 64 {
+            1 => Tag::Env(idx),
+            2 => Tag::Link(idx as u8),
+            3 => Tag::Tool,
+            4 => Tag::Cup,
+            5 => Tag::Part(idx),
+            _ => return None,
+        })
+    }
+
+    /// Whether this is part of the robot (links, tool, cup).
+    pub fn is_robot(self) -> bool {
+        matches!(self, Tag::Link(_) | Tag::Tool | Tag::Cup)
+    }
+}
+
+/// Where a part is in its life.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum PartState {
+    /// In the pick tray (or falling into it).
+    Free,
+    /// On the suction cup.
+    Held,
+    /// Released over the place tray.
+    Placed,
+}
+
+/// One part in the world.
+#[derive(Debug, Clone)]
+pub struct PartBody {
+    /// Its rigid body.
+    pub body: RigidBodyHandle,
+    /// Its collider.
+    pub collider: ColliderHandle,
+    /// Where it is in its life.
+    pub state: PartState,
+}
+
+/// A failure of the simulation's health: the run stops with it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum HealthError {
+    /// A body's pose or velocity became NaN or infinite.
+    #[error("t = {time_s:.4} s: {body} has a non-finite {what}")]
+    NonFinite {
+        /// Simulation time [s].
+        time_s: f64,
+        /// Which body.
+        body: String,
+        /// Pose or velocity.
+        what: &'static str,
+    },
+    /// A part left the tray it should be in.
+    #[error("t = {time_s:.4} s: {body} left the {volume} volume, now at ({x:.4}, {y:.4}, {z:.4}) m")]
+    LeftVolume {
+        /// Simulation time [s].
+        time_s: f64,
+        /// Which part.
+        body: String,
+        /// Which tray's volume.
+        volume: &'static str,
+        /// Position [m].
+        x: f64,
+        /// Position [m].
+        y: f64,
+        /// Position [m].
+        z: f64,
+    },
+    /// Two bodies overlap far more than the solver allows.
+    #[error("t = {time_s:.4} s: deep penetration {depth_mm:.2} mm between {a} and {b}")]
+    DeepPenetration {
+        /// Simulation time [s].
+        time_s: f64,
+        /// First body.
+        a: String,
+        /// Second body.
+        b: String,
+        /// Overlap [mm].
+        depth_mm: f64,
+    },
+    /// The arm, its tool or the held part ran into the table, a tray or an obstacle.
+    #[error("t = {time_s:.4} s: collision: {robot} penetrates {obstacle} by {depth_mm:.2} mm")]
+    ArmCollision {
+        /// Simulation time [s].
+        time_s: f64,
+        /// Which link, the tool or the held part.
+        robot: String,
+        /// What it hit.
+        obstacle: String,
+        /// Overlap [mm].
+        depth_mm: f64,
+    },
+}
+
+/// Limits of the health monitor.
+#[derive(Debug, Clone, Copy)]
+pub struct HealthLimits {
+    /// Part-part or part-environment overlap that counts as a failure [m].
+    pub deep_penetration_m: f64,
+    /// Arm-environment overlap that counts as a collision [m].
+    pub arm_collision_m: f64,
+}
+
+impl Default for HealthLimits {
+    fn default() -> Self {
+        HealthLimits {
+            deep_penetration_m: 0.002,
+            arm_collision_m: 0.0002,
+        }
+    }
+}
+
+/// A tray's volume in the world: its inner footprint, from just below the floor up to 1 m.
+#[derive(Debug, Clone, Copy)]
+pub struct TrayVolume {
+    /// `world_from_tray`.
+    pub world_from_tray: Isometry3<f64>,
+    /// Half the inner size plus the wall thickness [m].
+    pub half_xy_m: [f64; 2],
+    /// Wall height above the inner floor [m].
+    pub wall_height_m: f64,
+}
+
+impl TrayVolume {
+    fn new(t: &TrayConfig) -> Self {
+        TrayVolume {
+            world_from_tray: t.world_from_tray(),
+            half_xy_m: [
+                t.inner_size_m[0] / 2.0 + t.wall_thickness_m,
+                t.inner_size_m[1] / 2.0 + t.wall_thickness_m,
+            ],
+            wall_height_m: t.wall_height_m,
+        }
+    }
+
+    /// Whether a world point is in the tray's column (footprint incl. walls, floor - 2 mm to 1 m).
+    pub fn contains(&self, p: &Vector3<f64>) -> bool {
+        let l = self.world_from_tray.inverse_transform_point(&(*p).into());
+        l.x.abs() <= self.half_xy_m[0] && l.y.abs() <= self.half_xy_m[1] && l.z >= -0.002 && l.z <= 1.0
+    }
+
+    /// Whether a world point is inside the tray's inner walls, below the rim.
+    pub fn inside_inner(&self, p: &Vector3<f64>, wall_thickness_m: f64) -> bool {
+        let l = self.world_from_tray.inverse_transform_point(&(*p).into());
+        l.x.abs() <= self.half_xy_m[0] - wall_thickness_m
+            && l.y.abs() <= self.half_xy_m[1] - wall_thickness_m
+            && l.z >= -0.001
+            && l.z <= self.wall_height_m
+    }
+}
+
+/// The simulated cell.
+pub struct World {
+    /// rapier's integration parameters (tuned; see the module header).
+    pub params: IntegrationParameters,
+    gravity: Vector,
+    pipeline: PhysicsPipeline,
+    islands: IslandManager,
+    broad_phase: BroadPhaseBvh,
+    narrow_phase: NarrowPhase,
+    /// All rigid bodies.
+    pub bodies: RigidBodySet,
+    /// All colliders.
+    pub colliders: ColliderSet,
+    impulse_joints: ImpulseJointSet,
+    multibody_joints: MultibodyJointSet,
+    soft_bodies: SoftBodySet,
+    ccd_solver: CCDSolver,
+    /// Simulation time [s].
+    pub time_s: f64,
+    /// Steps taken.
+    pub steps: u64,
+    /// The arm.
+    pub robot: RobotModel,
+    /// Joint positions the arm bodies are at after the last step [rad].
+    q: JointVector,
+    /// Joint positions the arm reaches at the end of the next step [rad].
+    q_target: JointVector,
+    link_bodies: Vec<RigidBodyHandle>,
+    /// The parts, in insertion order.
+    pub parts: Vec<PartBody>,
+    /// The shape every part of this world has.
+    pub part_shape: PartShape,
+    /// Names of the environment objects, indexed by [`Tag::Env`].
+    pub env_names: Vec<String>,
+    /// The pick tray's volume.
+    pub pick_tray: TrayVolume,
+    /// The place tray's volume.
+    pub place_tray: TrayVolume,
+    /// The suction gripper.
+    pub gripper: SuctionGripper,
+    /// Health limits.
+    pub health: HealthLimits,
+    /// Pick tray wall thickness [m].
+    pick_wall_m: f64,
+    /// Tool positions after the last steps, newest last, for the tool's acceleration.
+    tool_history: [Vector3<f64>; 3],
+    /// Both trays' floors and walls for the independent overlap check.
+    tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
+}
+
+fn arm_collider(shape: SharedShape, pose: Pose, tag: Tag, with_fixed: bool) -> Collider {
+    let types = if with_fixed {
+        ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED
+    } else {
+        ActiveCollisionTypes::default()
+    };
+    ColliderBuilder::new(shape)
+        .position(pose)
+        .collision_groups(InteractionGroups::new(ARM, ENV | PARTS, InteractionTestMode::And))
+        .active_collision_types(types)
+        .friction(0.5)
+        .user_data(tag.encode())
+        .build()
+}
+
+impl World {
+    /// Builds the cell: table, trays, obstacles, the arm at its home configuration and the gripper.
+    /// Parts are added by [`World::add_part`] or [`World::build_pile`].
+    pub fn new(scene: &Scene, robot: &RobotModel, part_shape: PartShape) -> Self {
+        let dt = scene.sim.physics_dt_s as f32;
+        let params = IntegrationParameters {
+            dt,
+            min_ccd_dt: dt / 100.0,
+            length_unit: sim(0.01),
+            num_solver_iterations: 8,
+            // Stiff contacts: a few grams resting on each other sink well under 0.3 mm (measured
+            // by the independent overlap check over many piles; rapier's defaults are 30 and 60 Hz).
+            contact_softness: SpringCoefficients::new(200.0, 10.0),
+            static_contact_softness: SpringCoefficients::new(400.0, 10.0),
+            ..IntegrationParameters::default()
+        };
+        let mut w = World {
+            params,
+            gravity: Vector::new(0.0, 0.0, -sim(crate::robot::GRAVITY_M_S2)),
+            pipeline: PhysicsPipeline::new(),
+            islands: IslandManager::new(),
+            broad_phase: BroadPhaseBvh::new(),
+            narrow_phase: NarrowPhase::new(),
+            bodies: RigidBodySet::new(),
+            colliders: ColliderSet::new(),
+            impulse_joints: ImpulseJointSet::new(),
+            multibody_joints: MultibodyJointSet::new(),
+            soft_bodies: SoftBodySet::new(),
+            ccd_solver: CCDSolver::new(),
+            time_s: 0.0,
+            steps: 0,
+            robot: robot.clone(),
+            q: JointVector::from(scene.robot.home_rad()),
+            q_target: JointVector::from(scene.robot.home_rad()),
+            link_bodies: Vec::new(),
+            parts: Vec::new(),
+            part_shape,
+            env_names: Vec::new(),
+            pick_tray: TrayVolume::new(&scene.pick_tray),
+            place_tray: TrayVolume::new(&scene.place_tray.tray),
+            gripper: SuctionGripper::new(&scene.gripper),
+            health: HealthLimits::default(),
+            pick_wall_m: scene.pick_tray.wall_thickness_m,
+            tool_history: [Vector3::zeros(); 3],
+            tray_pieces: overlap::tray_pieces(&scene.pick_tray)
+                .into_iter()
+                .chain(overlap::tray_pieces(&scene.place_tray.tray))
+                .collect(),
+        };
+        // Table.
+        let t = &scene.table;
+        w.add_env_box(
+            "table",
+            Isometry3::translation(t.center_xy_m[0], t.center_xy_m[1], t.top_z_m - t.thickness_m / 2.0),
+            Vector3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, t.thickness_m / 2.0),
+        );
+        w.add_tray("pick tray", &scene.pick_tray);
+        w.add_tray("place tray", &scene.place_tray.tray);
+        for o in &scene.obstacles {
+            let pose = Isometry3::from_parts(
+                nalgebra::Translation3::new(o.center_m[0], o.center_m[1], o.center_m[2]),
+                nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, o.yaw_deg.to_radians()),
+            );
+            w.add_env_box(&format!("obstacle {:?}", o.name), pose, Vector3::from(o.size_m) / 2.0);
+        }
+        w.add_arm(scene);
+        w.tool_history = [w.tool_position(); 3];
+        // One zero-length step so that queries see the world as built.
+        w.refresh_queries();
+        w
+    }
+
+    fn add_env_box(&mut self, name: &str, world_from_box: Isometry3<f64>, half: Vector3<f64>) {
+        let idx = self.env_names.len() as u32;
+        self.env_names.push(name.to_string());
+        let c = ColliderBuilder::cuboid(sim(half.x), sim(half.y), sim(half.z))
+            .position(to_pose(&world_from_box))
+            .collision_groups(InteractionGroups::new(ENV, Group::ALL, InteractionTestMode::And))
+            .friction(0.5)
+            .user_data(Tag::Env(idx).encode());
+        self.colliders.insert(c);
+    }
+
+    fn add_tray(&mut self, name: &str, t: &TrayConfig) {
+        let world_from_tray = t.world_from_tray();
+        let [lx, ly] = t.inner_size_m;
+        let (w, h, f) = (t.wall_thickness_m, t.wall_height_m, t.floor_thickness_m);
+        let at = |x: f64, y: f64, z: f64| world_from_tray * Isometry3::translation(x, y, z);
+        self.add_env_box(
+            &format!("{name} floor"),
+            at(0.0, 0.0, -f / 2.0),
+            Vector3::new(lx / 2.0 + w, ly / 2.0 + w, f / 2.0),
+        );
+        let zc = (h - f) / 2.0;
+        let hz = (h + f) / 2.0;
+        for (label, x, y, hx, hy) in [
+            ("+x", lx / 2.0 + w / 2.0, 0.0, w / 2.0, ly / 2.0 + w),
+            ("-x", -lx / 2.0 - w / 2.0, 0.0, w / 2.0, ly / 2.0 + w),
+            ("+y", 0.0, ly / 2.0 + w / 2.0, lx / 2.0, w / 2.0),
+            ("-y", 0.0, -ly / 2.0 - w / 2.0, lx / 2.0, w / 2.0),
+        ] {
+            self.add_env_box(&format!("{name} wall {label}"), at(x, y, zc), Vector3::new(hx, hy, hz));
+        }
+    }
+
+    fn add_arm(&mut self, scene: &Scene) {
+        let frames = self.robot.world_from_links(&self.q);
+        for (i, link) in self.robot.links.iter().enumerate() {
+            let builder = if i == 0 {
+                RigidBodyBuilder::fixed()
+            } else {
+                RigidBodyBuilder::kinematic_position_based()
+            };
+            let body = self.bodies.insert(builder.pose(to_pose(&frames[i])));
+            for s in &link.shapes {
+                let (shape, local) = match s.primitive {
+                    LinkPrimitive::Box { half_extents_m: h } => (
+                        SharedShape::cuboid(h.x as f32, h.y as f32, h.z as f32),
+                        Isometry3::identity(),
+                    ),
+                    // rapier's cylinders and capsules run along +y; the URDF's along +z.
+                    LinkPrimitive::Cylinder {
+                        radius_m,
+                        half_length_m,
+                    } => (
+                        SharedShape::cylinder(sim(half_length_m), sim(radius_m)),
+                        Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2),
+                    ),
+                    LinkPrimitive::Sphere { radius_m } => (SharedShape::ball(sim(radius_m)), Isometry3::identity()),
+                    LinkPrimitive::Capsule {
+                        radius_m,
+                        half_length_m,
+                    } => (
+                        SharedShape::capsule_z(sim(half_length_m), sim(radius_m)),
+                        Isometry3::identity(),
+                    ),
+                };
+                // The base stands on the table: its contact there is not a collision.
+                let c = arm_collider(shape, to_pose(&(s.link_from_shape * local)), Tag::Link(i as u8), i > 0);
+                self.colliders.insert_with_parent(c, body, &mut self.bodies);
+            }
+            self.link_bodies.push(body);
+        }
+        // The suction tool on the flange: a body cylinder, then the cup ending at the tool frame.
+        let g = &scene.gripper;
+        let cup_len = (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0);
+        let body_len = g.tool_length_m - cup_len;
+        let flange = self.link_bodies[DOF];
+        let along_z = |z: f64| {
+            Isometry3::translation(0.0, 0.0, z) * Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2)
+        };
+        let tool = arm_collider(
+            SharedShape::cylinder(sim(body_len / 2.0), sim(g.body_diameter_m / 2.0)),
+            to_pose(&along_z(body_len / 2.0)),
+            Tag::Tool,
+            true,
+        );
+        self.colliders.insert_with_parent(tool, flange, &mut self.bodies);
+        let cup = arm_collider(
+            SharedShape::cylinder(sim(cup_len / 2.0), sim(g.cup_diameter_m / 2.0)),
+            to_pose(&along_z(g.tool_length_m - cup_len / 2.0)),
+            Tag::Cup,
+            true,
+        );
+        self.colliders.insert_with_parent(cup, flange, &mut self.bodies);
+    }
+
+    /// Runs collision detection without advancing time, so scene queries see the current state.
+    pub fn refresh_queries(&mut self) {
+        let dt = self.params.dt;
+        self.params.dt = 0.0;
+        self.pipeline_step();
+        self.params.dt = dt;
+    }
+
+    fn pipeline_step(&mut self) {
+        self.pipeline.step(
+            self.gravity,
+            &self.params,
+            &mut self.islands,
+            &mut self.broad_phase,
+            &mut self.narrow_phase,
+            &mut self.bodies,
+            &mut self.colliders,
+            &mut self.impulse_joints,
+            &mut self.multibody_joints,
+            &mut self.soft_bodies,
+            &mut self.ccd_solver,
+            &(),
+            &(),
+        );
+    }
+
+    /// Physics timestep [s].
+    pub fn dt_s(&self) -> f64 {
+        self.params.dt as f64
+    }
+
+    /// Joint positions of the arm now [rad].
+    pub fn joints(&self) -> JointVector {
+        self.q
+    }
+
+    /// Puts the arm at `q` immediately (a teleport, no sweep); for setting up scenes.
+    pub fn place_arm(&mut self, q: &JointVector) {
+        self.q = *q;
+        self.q_target = *q;
+        let frames = self.robot.world_from_links(q);
+        for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
+            self.bodies[*h].set_position(to_pose(&frames[i]), true);
+        }
+        self.tool_history = [self.tool_position(); 3];
+        self.refresh_queries();
+    }
+
+    /// Sets the joint positions the arm reaches at the end of the next step [rad]. The link
+    /// bodies sweep there during the step, pushing what they meet.
+    pub fn set_joint_target(&mut self, q: &JointVector) {
+        self.q_target = *q;
+    }
+
+    /// `world_from_tool` at the joint positions after the last step.
+    pub fn world_from_tool(&self) -> Isometry3<f64> {
+        self.robot.world_from_tool(&self.q)
+    }
+
+    fn tool_position(&self) -> Vector3<f64> {
+        self.world_from_tool().translation.vector
+    }
+
+    /// The tool's acceleration over the last two steps, finite differences [m/s^2].
+    pub fn tool_acceleration(&self) -> Vector3<f64> {
+        let dt = self.dt_s();
+        let [a, b, c] = self.tool_history;
+        (c - 2.0 * b + a) / (dt * dt)
+    }
+
+    /// Advances the world by one step: arm bodies sweep to the joint target, the gripper's timers
+    /// run, the solver steps, and the health monitor checks every body.
+    pub fn step(&mut self) -> Result<(), HealthError> {
+        let frames = self.robot.world_from_links(&self.q_target);
+        for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
+            self.bodies[*h].set_next_kinematic_position(to_pose(&frames[i]));
+        }
+        let world_from_tool_next = frames[DOF] * self.robot.flange_from_tool;
+        self.update_gripper(&world_from_tool_next);
+        self.pipeline_step();
+        self.time_s += self.dt_s();
+        self.steps += 1;
+        self.q = self.q_target;
+        self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
+        self.check_health()
+    }
+
+    /// Steps for `duration_s` of simulation time (rounded up to whole steps).
+    pub fn run_for(&mut self, duration_s: f64) -> Result<(), HealthError> {
+        let n = (duration_s / self.dt_s() - 1e-9).ceil().max(0.0) as usize;
+        for _ in 0..n {
+            self.step()?;
+        }
+        Ok(())
+    }
+
+    /// Adds a part at `world_from_part`, dynamic and awake.
+    pub fn add_part(&mut self, world_from_part: &Isometry3<f64>) -> usize {
+        let idx = self.parts.len();
+        let body = self.bodies.insert(
+            RigidBodyBuilder::dynamic()
+                .pose(to_pose(world_from_part))
+                .ccd_enabled(true)
+                .user_data(Tag::Part(idx as u32).encode()),
+        );
+        let s = &self.part_shape;
+        let collider = self.colliders.insert_with_parent(
+            ColliderBuilder::new(s.shape.clone())
+                .mass(s.mass_kg as f32)
+                .friction(s.friction as f32)
+                .restitution(s.restitution as f32)
+                .collision_groups(InteractionGroups::new(PARTS, Group::ALL, InteractionTestMode::And))
+                .user_data(Tag::Part(idx as u32).encode()),
+            body,
+            &mut self.bodies,
+        );
+        {
+            let act = self.bodies[body].activation_mut();
+            act.time_until_sleep = 0.2;
+        }
+        self.parts.push(PartBody {
+            body,
+            collider,
+            state: PartState::Free,
+        });
+        idx
+    }
+
+    /// `world_from_part` of part `i`.
+    pub fn part_pose(&self, i: usize) -> Isometry3<f64> {
+        to_isometry(self.bodies[self.parts[i].body].position())
+    }
+
+    /// Linear and angular speed of part `i` [m/s, rad/s].
+    pub fn part_speed(&self, i: usize) -> (f64, f64) {
+        let b = &self.bodies[self.parts[i].body];
+        (b.linvel().length() as f64 / SIM_UNITS_PER_M, b.angvel().length() as f64)
+    }
+
+    /// Whether every free part is asleep or slower than the given speeds.
+    pub fn parts_at_rest(&self, lin_m_s: f64, ang_rad_s: f64) -> bool {
+        self.parts.iter().all(|p| {
+            let b = &self.bodies[p.body];
+            p.state == PartState::Held
+                || b.is_sleeping()
+                || ((b.linvel().length() as f64) < lin_m_s * SIM_UNITS_PER_M
+                    && (b.angvel().length() as f64) < ang_rad_s)
+        })
+    }
+
+    /// A readable name for what a collider belongs to.
+    pub fn describe(&self, tag: Option<Tag>) -> String {
+        match tag {
+            Some(Tag::Env(i)) => self
+                .env_names
+                .get(i as usize)
+                .cloned()
+                .unwrap_or_else(|| "a tray".to_string()),
+            Some(Tag::Link(i)) => self
+                .robot
+                .links
+                .get(i as usize)
+                .map_or(format!("link {i}"), |l| l.name.clone()),
+            Some(Tag::Tool) => "tool".to_string(),
+            Some(Tag::Cup) => "suction cup".to_string(),
+            Some(Tag::Part(i)) => {
+                let held = self.parts.get(i as usize).is_some_and(|p| p.state == PartState::Held);
+                format!("part {i}{}", if held { " (held)" } else { "" })
+            }
+            None => "unknown body".to_string(),
+        }
+    }
+
+    /// The tag of a collider.
+    pub fn tag_of(&self, c: ColliderHandle) -> Option<Tag> {
+        self.colliders.get(c).and_then(|c| Tag::decode(c.user_data))
+    }
+
+    /// Casts a ray into the world; returns the first hit's tag, distance along `dir` (unit) and
+    /// surface normal. `skip` decides which colliders the ray passes through.
+    pub fn cast_ray(
+        &self,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        max_m: f64,
+        skip: &dyn Fn(Tag) -> bool,
+    ) -> Option<(Tag, f64, Vector3<f64>)> {
+        let pred = |_h: ColliderHandle, c: &Collider| Tag::decode(c.user_data).is_some_and(|t| !skip(t));
+        let qp = self.broad_phase.as_query_pipeline(
+            self.narrow_phase.query_dispatcher(),
+            &self.bodies,
+            &self.colliders,
+            QueryFilter::default().predicate(&pred),
+        );
+        let ray = Ray::new(sim_point(origin), sim_dir(dir));
+        qp.cast_ray_and_get_normal(&ray, sim(max_m), true).and_then(|(h, hit)| {
+            let tag = self.tag_of(h)?;
+            Some((
+                tag,
+                hit.time_of_impact as f64 / SIM_UNITS_PER_M,
+                dir_from_sim(hit.normal),
+            ))
+        })
+    }
+
+    /// Deepest overlap between two parts, or a part and a tray [m], with the bodies involved.
+    /// Computed independently of the solver: exact separating-axis depths between the workpiece's
+    /// convex pieces ([`overlap`]); for mesh workpieces, parry's contact query on the colliders.
+    pub fn max_penetration_m(&self) -> (f64, Option<(Tag, Tag)>) {
+        let Some(pieces) = &self.part_shape.pieces else {
+            return self.max_penetration_parry();
+        };
+        let poses: Vec<Isometry3<f64>> = (0..self.parts.len()).map(|i| self.part_pose(i)).collect();
+        let (d, i, j) = overlap::max_depth(&poses, pieces, self.part_shape.bounding_radius_m, &self.tray_pieces);
+        if d <= 0.0 {
+            return (0.0, None);
+        }
+        let b = if j == usize::MAX {
+            Tag::Env(u32::MAX)
+        } else {
+            Tag::Part(j as u32)
+        };
+        (d, Some((Tag::Part(i as u32), b)))
+    }
+
+    fn max_penetration_parry(&self) -> (f64, Option<(Tag, Tag)>) {
+        let mut worst = (0.0, None);
+        for pair in self.narrow_phase.contact_pairs() {
+            let (Some(c1), Some(c2)) = (self.colliders.get(pair.collider1), self.colliders.get(pair.collider2)) else {
+                continue;
+            };
+            let (t1, t2) = (Tag::decode(c1.user_data), Tag::decode(c2.user_data));
+            if t1.is_some_and(Tag::is_robot) || t2.is_some_and(Tag::is_robot) {
+                continue;
+            }
+            // parry's `contact` can report a depth for shapes that are apart; ask first whether they meet.
+            let (p1, s1, p2, s2) = (c1.position(), c1.shape(), c2.position(), c2.shape());
+            if !rapier3d::parry::query::intersection_test(p1, s1, p2, s2).is_ok_and(|r| r.intersecting) {
+                continue;
+            }
+            if let Ok(Some(c)) = rapier3d::parry::query::contact(p1, s1, p2, s2, 0.0) {
+                let depth = -(c.dist as f64) / SIM_UNITS_PER_M;
+                if depth > worst.0 {
+                    worst = (depth, t1.zip(t2));
+                }
+            }
+        }
+        worst
+    }
+
+    /// Exact overlap depth of two colliders now [m]: separating axes on the workpiece's convex
+    /// pieces against a part or a box, else parry's contact query.
+    pub fn exact_depth_m(&self, a: ColliderHandle, b: ColliderHandle) -> f64 {
+        let piece_sets = |h: ColliderHandle| -> Option<(Isometry3<f64>, Vec<overlap::Polytope>)> {
+            let c = self.colliders.get(h)?;
+            match Tag::decode(c.user_data)? {
+                Tag::Part(i) => Some((self.part_pose(i as usize), self.part_shape.pieces.clone()?)),
+                _ => {
+                    let he = c.shape().as_cuboid()?.half_extents;
+                    Some((
+                        to_isometry(c.position()),
+                        vec![overlap::Polytope::cuboid(Vector3::zeros(), point_from_sim(he))],
+                    ))
+                }
+            }
+        };
+        if let (Some((pa, ka)), Some((pb, kb))) = (piece_sets(a), piece_sets(b)) {
+            return ka
+                .iter()
+                .flat_map(|x| kb.iter().map(move |y| (x, y)))
+                .map(|(x, y)| overlap::depth(&pa, x, &pb, y))
+                .fold(0.0, f64::max);
+        }
+        let (Some(c1), Some(c2)) = (self.colliders.get(a), self.colliders.get(b)) else {
+            return 0.0;
+        };
+        let (p1, s1, p2, s2) = (c1.position(), c1.shape(), c2.position(), c2.shape());
+        if !rapier3d::parry::query::intersection_test(p1, s1, p2, s2).is_ok_and(|r| r.intersecting) {
+            return 0.0;
+        }
+        match rapier3d::parry::query::contact(p1, s1, p2, s2, 0.0) {
+            Ok(Some(c)) => (-(c.dist as f64) / SIM_UNITS_PER_M).max(0.0),
+            _ => 0.0,
+        }
+    }
+
+    fn check_health(&self) -> Result<(), HealthError> {
+        let t = self.time_s;
+        for (i, p) in self.parts.iter().enumerate() {
+            let b = &self.bodies[p.body];
+            let pos = b.position();
+            let name = || self.describe(Some(Tag::Part(i as u32)));
+            if !(pos.translation.is_finite() && pos.rotation.is_finite()) {
+                return Err(HealthError::NonFinite {
+                    time_s: t,
+                    body: name(),
+                    what: "pose",
+                });
+            }
+            if !(b.linvel().is_finite() && b.angvel().is_finite()) {
+                return Err(HealthError::NonFinite {
+                    time_s: t,
+                    body: name(),
+                    what: "velocity",
+                });
+            }
+            let c = point_from_sim(pos.translation);
+            let (ok, volume) = match p.state {
+                PartState::Free => (self.pick_tray.contains(&c), "pick tray"),
+                PartState::Placed => (self.place_tray.contains(&c), "place tray"),
+                PartState::Held => (true, ""),
+            };
+            if !ok {
+                return Err(HealthError::LeftVolume {
+                    time_s: t,
+                    body: name(),
+                    volume,
+                    x: c.x,
+                    y: c.y,
+                    z: c.z,
+                });
+            }
+        }
+        for pair in self.narrow_phase.contact_pairs() {
+            if !pair.has_any_active_contact() {
+                continue;
+            }
+            let (t1, t2) = (self.tag_of(pair.collider1), self.tag_of(pair.collider2));
+            let deepest = pair
+                .manifolds()
+                .iter()
+                .flat_map(|m| m.points.iter())
+                .map(|p| -(p.dist as f64) / SIM_UNITS_PER_M)
+                .fold(0.0, f64::max);
+            let held = |tag: Option<Tag>| matches!(tag, Some(Tag::Part(i)) if self.parts.get(i as usize).is_some_and(|p| p.state == PartState::Held));
+            let robotish = |tag: Option<Tag>| tag.is_some_and(Tag::is_robot) || held(tag);
+            let env = |tag: Option<Tag>| matches!(tag, Some(Tag::Env(_)));
+            if (robotish(t1) && env(t2)) || (robotish(t2) && env(t1)) {
+                if deepest > self.health.arm_collision_m {
+                    let (r, o) = if robotish(t1) { (t1, t2) } else { (t2, t1) };
+                    return Err(HealthError::ArmCollision {
+                        time_s: t,
+                        robot: self.describe(r),
+                        obstacle: self.describe(o),
+                        depth_mm: deepest * 1e3,
+                    });
+                }
+            } else if !robotish(t1) && !robotish(t2) && deepest > self.health.deep_penetration_m {
+                // The manifold is from the start of the step: confirm with the exact depth now.
+                let exact = self.exact_depth_m(pair.collider1, pair.collider2);
+                if exact > self.health.deep_penetration_m {
+                    return Err(HealthError::DeepPenetration {
+                        time_s: t,
+                        a: self.describe(t1),
+                        b: self.describe(t2),
+                        depth_mm: exact * 1e3,
+                    });
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Indices of the free parts whose centre lies inside the pick tray's inner walls.
+    pub fn parts_in_pick_tray(&self) -> Vec<usize> {
+        (0..self.parts.len())
+            .filter(|&i| {
+                self.parts[i].state == PartState::Free
+                    && self
+                        .pick_tray
+                        .inside_inner(&self.part_pose(i).translation.vector, self.pick_wall_m)
+            })
+            .collect()
+    }
+}

@@ -1,0 +1,262 @@
+//! Random piles: N parts dropped in waves from seeded random poses above the pick tray, simulated
+//! until they settle.
+//!
+//! Job: drop waves of up to 12 parts just above the pile so far, over the central 70 % of the
+//! tray floor (so they heap as poured parts do); orientations uniformly random (parts more than
+//! three times longer than wide, like the 150 mm connector strip, pour lying: yaw and roll uniform,
+//! long axis within 30 deg of level, as strips slide out of a box), positions uniformly
+//! random where the part's rotated box fits inside the walls and clears the wave's other parts
+//! (else a layer higher). Between waves the world runs until the wave has slowed down; at the end
+//! until every part is asleep or slower than 2 mm/s and 0.05 rad/s for 0.1 s.
+//!
+//! Randomness: the `pile` stream of the run seed. Units: m, s. Frames: world.
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
+use rand::RngExt;
+use serde::Serialize;
+
+use super::{HealthError, World};
+
+/// How to build a pile.
+#[derive(Debug, Clone, Copy)]
+pub struct PileOptions {
+    /// Parts to drop.
+    pub count: usize,
+    /// Run seed (the `pile` stream is drawn from it).
+    pub seed: u64,
+    /// Give up settling after this much simulated time [s].
+    pub max_settle_s: f64,
+    /// The pour runs at the cell's timestep divided by this: falling parts reach 2 m/s, several
+    /// millimetres per cell step, more than rapier's contact prediction sees coming.
+    pub substeps: u32,
+}
+
+impl PileOptions {
+    /// `count` parts with seed `seed`, settling for at most 10 s, 4 substeps.
+    pub fn new(count: usize, seed: u64) -> Self {
+        PileOptions {
+            count,
+            seed,
+            max_settle_s: 10.0,
+            substeps: 4,
+        }
+    }
+}
+
+/// A settled part's pose.
+#[derive(Debug, Clone, Serialize, PartialEq)]
+pub struct PartPose {
+    /// Index of the part in the world.
+    pub part: usize,
+    /// Position in the world [m].
+    pub xyz_m: [f64; 3],
+    /// Orientation as a unit quaternion (w, x, y, z).
+    pub quat_wxyz: [f64; 4],
+}
+
+/// What came of building a pile.
+#[derive(Debug, Clone, Serialize)]
+pub struct PileReport {
+    /// Parts dropped.
+    pub spawned: usize,
+    /// Parts whose centre rests inside the tray's walls.
+    pub in_tray: usize,
+    /// Highest point of the pile above the tray floor [m].
+    pub pile_height_m: f64,
+    /// Simulated time from the first drop to settled [s].
+    pub settle_sim_s: f64,
+    /// Whether every part came to rest within `max_settle_s`.
+    pub settled: bool,
+    /// Deepest part-part or part-tray overlap after settling, exact (independent check) [m].
+    pub max_penetration_m: f64,
+    /// Between which bodies the deepest overlap is.
+    pub max_penetration_between: String,
+    /// Waves dropped.
+    pub waves: usize,
+    /// Settled poses, in part order.
+    pub poses: Vec<PartPose>,
+    /// Wall-clock time to build and settle [s] (not part of any result file).
+    #[serde(skip)]
+    pub wall_s: f64,
+}
+
+/// Uniformly random rotation (Shoemake).
+fn random_rotation(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
+    let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
+    let tau = std::f64::consts::TAU;
+    let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
+    UnitQuaternion::from_quaternion(Quaternion::new(
+        b * (tau * u3).cos(),
+        a * (tau * u2).sin(),
+        a * (tau * u2).cos(),
+        b * (tau * u3).sin(),
+    ))
+}
+
+impl World {
+    /// Highest point of any free part, or the tray floor [m].
+    fn pile_top_z(&self) -> f64 {
+        let floor = self.pick_tray.world_from_tray.translation.vector.z;
+        self.parts
+            .iter()
+            .map(|p| self.colliders[p.collider].compute_aabb().maxs.z as f64 / super::SIM_UNITS_PER_M)
+            .fold(floor, f64::max)
+    }
+
+    /// Drops `opts.count` parts into the pick tray in waves and lets them settle.
+    pub fn build_pile(&mut self, opts: &PileOptions) -> Result<PileReport, HealthError> {
+        let wall = Instant::now();
+        let cell_dt = self.params.dt;
+        self.params.dt = cell_dt / opts.substeps.max(1) as f32;
+        let mut rng = crate::rng::stream(opts.seed, "pile");
+        let tray = self.pick_tray.world_from_tray;
+        let floor_z = tray.translation.vector.z;
+        let inner = [
+            self.pick_tray.half_xy_m[0] - self.pick_wall_m,
+            self.pick_tray.half_xy_m[1] - self.pick_wall_m,
+        ];
+        let he = self.part_shape.half_extents_m;
+        // A part more than three times longer than its width is poured lying (see below).
+        let (long_i, long) = he.argmax();
+        let mut others = [he.x, he.y, he.z];
+        others[long_i] = 0.0;
+        let elongated = long > 3.0 * others.iter().cloned().fold(0.0, f64::max);
+        let long_axis = nalgebra::Unit::new_unchecked(Vector3::ith(long_i, 1.0));
+        let long_normal = nalgebra::Unit::new_unchecked(Vector3::ith((long_i + 1) % 3, 1.0));
+        // Parts are poured over the central `POUR_FRACTION` of the tray floor, so they heap.
+        const POUR_FRACTION: f64 = 0.7;
+        const WAVE: usize = 12;
+        let start_time = self.time_s;
+        let mut spawned = 0usize;
+        let mut waves = 0usize;
+        while spawned < opts.count {
+            waves += 1;
+            let mut layer_z = self.pile_top_z() - floor_z + 0.003;
+            let mut layer_top = layer_z;
+            // World-aligned boxes of this wave's parts, to keep them apart at spawn.
+            let mut boxes: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::new();
+            for _ in 0..WAVE.min(opts.count - spawned) {
+                let rot = if elongated {
+                    // Long parts pour lying down: yaw uniform, long axis within 30 deg of level.
+                    let yaw = rng.random_range(0.0..std::f64::consts::TAU);
+                    let tilt = rng.random_range(-std::f64::consts::FRAC_PI_6..std::f64::consts::FRAC_PI_6);
+                    let roll = rng.random_range(0.0..std::f64::consts::TAU);
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, yaw)
+                        * UnitQuaternion::from_axis_angle(&long_normal, tilt)
+                        * UnitQuaternion::from_axis_angle(&long_axis, roll)
+                } else {
+                    random_rotation(&mut rng)
+                };
+                let m = rot.to_rotation_matrix();
+                let hw = m.matrix().abs() * he;
+                let mut placed = None;
+                for attempt in 0..60 {
+                    if attempt > 0 && attempt % 20 == 0 {
+                        // This layer is full: start another above it.
+                        layer_z = layer_top + 0.002;
+                    }
+                    let span = |half_inner: f64, h: f64| ((half_inner - h) * POUR_FRACTION).max(0.0);
+                    let (sx, sy) = (span(inner[0], hw.x), span(inner[1], hw.y));
+                    let c = Vector3::new(
+                        if sx > 0.0 { rng.random_range(-sx..=sx) } else { 0.0 },
+                        if sy > 0.0 { rng.random_range(-sy..=sy) } else { 0.0 },
+                        layer_z + hw.z,
+                    );
+                    let clear = boxes
+                        .iter()
+                        .all(|(bc, bh)| (0..3).any(|k| (c[k] - bc[k]).abs() > hw[k] + bh[k] + 0.001));
+                    if clear {
+                        placed = Some(c);
+                        break;
+                    }
+                }
+                let c = placed.unwrap_or_else(|| Vector3::new(0.0, 0.0, layer_top + 0.002 + hw.z));
+                layer_top = layer_top.max(c.z + hw.z);
+                boxes.push((c, hw));
+                let pose = tray * Isometry3::from_parts(Translation3::from(c), rot);
+                self.add_part(&pose);
+                spawned += 1;
+            }
+            // Let the wave fall and slow down before the next one.
+            let wave_start = self.time_s;
+            loop {
+                self.step()?;
+                let t = self.time_s - wave_start;
+                if t >= 0.6 || (t >= 0.1 && self.parts_at_rest(0.05, 1.0)) {
+                    break;
+                }
+            }
+        }
+        // Settle.
+        let mut calm_since: Option<f64> = None;
+        let mut settled = false;
+        while self.time_s - start_time < opts.max_settle_s {
+            self.step()?;
+            if self.parts_at_rest(0.002, 0.05) {
+                let since = *calm_since.get_or_insert(self.time_s);
+                if self.time_s - since >= 0.1 {
+                    settled = true;
+                    break;
+                }
+            } else {
+                calm_since = None;
+            }
+        }
+        let in_tray = self.parts_in_pick_tray();
+        let pile_height_m = in_tray
+            .iter()
+            .map(|&i| {
+                self.colliders[self.parts[i].collider].compute_aabb().maxs.z as f64 / super::SIM_UNITS_PER_M - floor_z
+            })
+            .fold(0.0, f64::max);
+        let poses = (0..self.parts.len())
+            .map(|i| {
+                let p = self.part_pose(i);
+                let q = p.rotation.quaternion();
+                PartPose {
+                    part: i,
+                    xyz_m: p.translation.vector.into(),
+                    quat_wxyz: [q.w, q.i, q.j, q.k],
+                }
+            })
+            .collect();
+        self.params.dt = cell_dt;
+        let deepest = self.max_penetration_m();
+        Ok(PileReport {
+            spawned,
+            in_tray: in_tray.len(),
+            pile_height_m,
+            settle_sim_s: self.time_s - start_time,
+            settled,
+            max_penetration_m: deepest.0,
+            max_penetration_between: deepest.1.map_or_else(String::new, |(a, b)| {
+                format!("{} / {}", self.describe(Some(a)), self.describe(Some(b)))
+            }),
+            waves,
+            poses,
+            wall_s: wall.elapsed().as_secs_f64(),
+        })
+    }
+}
+
+/// The largest displacement of any part between two pose lists [m, rad].
+pub fn max_motion(a: &[PartPose], b: &[PartPose]) -> (f64, f64) {
+    a.iter().zip(b).fold((0.0f64, 0.0f64), |(dp, dr), (p, q)| {
+        let d = (Vector3::from(p.xyz_m) - Vector3::from(q.xyz_m)).norm();
+        let qa = UnitQuaternion::from_quaternion(Quaternion::new(
+            p.quat_wxyz[0],
+            p.quat_wxyz[1],
+            p.quat_wxyz[2],
+            p.quat_wxyz[3],
+        ));
+        let qb = UnitQuaternion::from_quaternion(Quaternion::new(
+            q.quat_wxyz[0],
+            q.quat_wxyz[1],
+            q.quat_wxyz[2],
+            q.quat_wxyz[3],
+        ));
+        (dp.max(d), dr.max(qa.angle_to(&qb)))
+    })
+}

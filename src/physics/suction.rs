@@ -1,0 +1,451 @@
+//! The suction gripper: seal check, vacuum build-up, rigid hold, slip, release.
+//!
+//! Job: when the vacuum is switched on, decide from the world's geometry whether the cup seals on
+//! a part: the cup lip must sit on one flat face of one part that is large enough for the cup,
+//! touching it, with the tool axis within the allowed tilt of the face normal. The decision is
+//! made when the vacuum has built up (`vacuum_build_up_s` later). A sealed part then moves rigidly
+//! with the tool until the vacuum is switched off and `release_s` has passed, or until it slips.
+//!
+//! Model (simplified, stated in the README): the seal is probed with rays along the tool axis at
+//! the cup centre and 16 points of the lip circle. Holding force = vacuum x cup area. A part slips
+//! when the force the cup must exert, m |a_tool - g|, amplified for peeling by (1 + 4 e / d)
+//! (e: centre-of-mass offset from the cup axis, d: cup diameter), exceeds the holding force.
+//!
+//! Units: m, s, N, Pa. Frames: `world_from_tool` (z axis out of the cup), `tool_from_part`.
+
+use nalgebra::{Isometry3, Matrix3, Vector3};
+use rapier3d::prelude::{ActiveCollisionTypes, RigidBodyType};
+
+use super::{PartState, Tag, World, sim_point, to_pose};
+use crate::config::GripperConfig;
+use crate::robot::Payload;
+
+/// Lip points probed around the cup.
+const LIP_RAYS: usize = 16;
+/// Probe rays start this far behind the lip, inside the cup [m].
+const PROBE_BACK_M: f64 = 0.01;
+/// A lip point whose surface normal differs from the centre's by more than this is on another face [rad].
+const SAME_FACE_RAD: f64 = 0.087;
+/// The cup must touch: the face may be at most this far beyond the lip [m].
+const TOUCH_GAP_M: f64 = 0.0008;
+
+/// Why a grasp failed.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum GraspFailure {
+    /// Nothing but the tray (or nothing at all) under the cup.
+    #[error("no part under the cup (the cup points at {0})")]
+    NoPart(String),
+    /// The cup does not touch the face.
+    #[error("cup does not touch the part: face {gap_mm:.2} mm beyond the lip")]
+    NotTouching {
+        /// Gap [mm].
+        gap_mm: f64,
+    },
+    /// The tool axis is tilted too far from the face normal.
+    #[error("approach tilted {tilt_deg:.1} deg from the face normal, the cup seals up to {max_deg:.1} deg")]
+    Tilted {
+        /// Tilt [deg].
+        tilt_deg: f64,
+        /// Allowed [deg].
+        max_deg: f64,
+    },
+    /// The face under the cup is narrower than the cup.
+    #[error("face {width_mm:.1} mm wide is smaller than the {cup_mm:.1} mm cup")]
+    FaceTooSmall {
+        /// Narrowest width of the face through the cup centre [mm].
+        width_mm: f64,
+        /// Cup diameter [mm].
+        cup_mm: f64,
+    },
+    /// The face is large enough but the cup overhangs its edge.
+    #[error("cup on an edge: {outside} of {LIP_RAYS} lip points off the face")]
+    OnEdge {
+        /// Lip points not on the face.
+        outside: usize,
+    },
+    /// Something else lies on the face's rim under the cup lip.
+    #[error("cup lip blocked by {0}")]
+    Obstructed(String),
+    /// The vacuum was switched off before it built up.
+    #[error("vacuum switched off before it built up")]
+    Aborted,
+}
+
+/// A cup sealed on a part.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Seal {
+    /// The part.
+    pub part: usize,
+    /// Tilt of the tool axis from the face normal [rad].
+    pub tilt_rad: f64,
+    /// Distance of the part's centre of mass from the cup axis [m].
+    pub com_offset_m: f64,
+}
+
+/// What the gripper did, with the simulation time.
+#[derive(Debug, Clone, PartialEq)]
+pub enum GripperEvent {
+    /// The vacuum built up on a sealed part: it now moves with the tool.
+    Grasped {
+        /// Time [s].
+        time_s: f64,
+        /// The seal.
+        seal: Seal,
+    },
+    /// The vacuum did not build up.
+    GraspFailed {
+        /// Time [s].
+        time_s: f64,
+        /// Why.
+        reason: GraspFailure,
+    },
+    /// A held part tore off the cup.
+    Slipped {
+        /// Time [s].
+        time_s: f64,
+        /// The part.
+        part: usize,
+        /// Force the cup had to exert, peel-amplified [N].
+        required_n: f64,
+        /// Force the vacuum holds [N].
+        holding_n: f64,
+    },
+    /// The part came off the cup after the vacuum was switched off.
+    Released {
+        /// Time [s].
+        time_s: f64,
+        /// The part.
+        part: usize,
+    },
+}
+
+/// The gripper's state.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GripperState {
+    /// Vacuum off, nothing held.
+    Idle,
+    /// Vacuum on since `since_s`, not yet built up.
+    BuildingUp {
+        /// When the valve opened [s].
+        since_s: f64,
+    },
+    /// Holding a part rigidly.
+    Holding {
+        /// The seal.
+        seal: Seal,
+        /// Where the part sits on the tool.
+        tool_from_part: Isometry3<f64>,
+    },
+    /// Vacuum off since `since_s`, the part still on the cup.
+    Releasing {
+        /// When the valve closed [s].
+        since_s: f64,
+        /// The seal.
+        seal: Seal,
+        /// Where the part sits on the tool.
+        tool_from_part: Isometry3<f64>,
+    },
+}
+
+/// The suction gripper: configuration, state and the events it produced.
+#[derive(Debug, Clone)]
+pub struct SuctionGripper {
+    /// Cup lip radius [m].
+    pub cup_radius_m: f64,
+    /// Largest tilt that seals [rad].
+    pub max_tilt_rad: f64,
+    /// Flatness the lip tolerates [m].
+    pub flatness_m: f64,
+    /// Holding force of a full seal [N].
+    pub holding_n: f64,
+    /// Vacuum build-up time [s].
+    pub build_up_s: f64,
+    /// Release time [s].
+    pub release_s: f64,
+    /// Current state.
+    pub state: GripperState,
+    /// Events not yet taken by the caller.
+    pub events: Vec<GripperEvent>,
+}
+
+impl SuctionGripper {
+    /// A gripper from the cell file.
+    pub fn new(g: &GripperConfig) -> Self {
+        let r = g.cup_diameter_m / 2.0;
+        SuctionGripper {
+            cup_radius_m: r,
+            max_tilt_rad: g.max_tilt_deg.to_radians(),
+            flatness_m: g.cup_flatness_tolerance_m,
+            holding_n: g.vacuum_kpa * 1e3 * std::f64::consts::PI * r * r,
+            build_up_s: g.vacuum_build_up_s,
+            release_s: g.release_s,
+            state: GripperState::Idle,
+            events: Vec::new(),
+        }
+    }
+
+    /// Takes the events produced so far.
+    pub fn take_events(&mut self) -> Vec<GripperEvent> {
+        std::mem::take(&mut self.events)
+    }
+}
+
+fn orthonormal(n: &Vector3<f64>) -> (Vector3<f64>, Vector3<f64>) {
+    let helper = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+    let u = n.cross(&helper).normalize();
+    (u, n.cross(&u))
+}
+
+impl World {
+    fn skip_robot_and_held(&self) -> impl Fn(Tag) -> bool + '_ {
+        move |t: Tag| match t {
+            Tag::Link(_) | Tag::Tool | Tag::Cup => true,
+            Tag::Part(i) => self.parts.get(i as usize).is_some_and(|p| p.state == PartState::Held),
+            Tag::Env(_) => false,
+        }
+    }
+
+    /// Whether the cup at `world_from_tool` would seal, and on what. Uses the world's true
+    /// geometry: this is the physical cup, not the grasp planner's estimate.
+    pub fn check_seal(&self, world_from_tool: &Isometry3<f64>) -> Result<Seal, GraspFailure> {
+        let g = &self.gripper;
+        let axis = world_from_tool.rotation * Vector3::z();
+        let centre = world_from_tool.translation.vector;
+        let skip = self.skip_robot_and_held();
+        let reach = PROBE_BACK_M + 0.02;
+        let hit = self.cast_ray(&(centre - axis * PROBE_BACK_M), &axis, reach, &skip);
+        let (tag, toi, normal) = match hit {
+            Some(h) => h,
+            None => return Err(GraspFailure::NoPart("nothing within 2 cm".into())),
+        };
+        let Tag::Part(part) = tag else {
+            return Err(GraspFailure::NoPart(self.describe(Some(tag))));
+        };
+        let part = part as usize;
+        let gap = toi - PROBE_BACK_M;
+        if gap > TOUCH_GAP_M {
+            return Err(GraspFailure::NotTouching { gap_mm: gap * 1e3 });
+        }
+        let tilt = normal.dot(&-axis).clamp(-1.0, 1.0).acos();
+        if tilt > g.max_tilt_rad {
+            return Err(GraspFailure::Tilted {
+                tilt_deg: tilt.to_degrees(),
+                max_deg: g.max_tilt_rad.to_degrees(),
+            });
+        }
+        let face_point = centre - axis * PROBE_BACK_M + axis * toi;
+        let on_face = |p: &Vector3<f64>, dir: &Vector3<f64>| -> Result<(), Option<Tag>> {
+            match self.cast_ray(&(p - dir * PROBE_BACK_M), dir, reach, &skip) {
+                Some((t, d, n)) => {
+                    let q = p - dir * PROBE_BACK_M + dir * d;
+                    let same = t == Tag::Part(part as u32)
+                        && n.dot(&normal).clamp(-1.0, 1.0).acos() < SAME_FACE_RAD
+                        && (q - face_point).dot(&normal).abs() <= g.flatness_m.max(1e-5);
+                    if same { Ok(()) } else { Err(Some(t)) }
+                }
+                None => Err(None),
+            }
+        };
+        let (u, v) = orthonormal(&axis);
+        let mut outside = 0;
+        let mut blocker = None;
+        for k in 0..LIP_RAYS {
+            let ang = k as f64 * std::f64::consts::TAU / LIP_RAYS as f64;
+            let lip = centre + (u * ang.cos() + v * ang.sin()) * g.cup_radius_m;
+            if let Err(t) = on_face(&lip, &axis) {
+                outside += 1;
+                if let Some(t @ (Tag::Part(_) | Tag::Env(_))) = t
+                    && t != Tag::Part(part as u32)
+                {
+                    blocker.get_or_insert(t);
+                }
+            }
+        }
+        if outside > 0 {
+            // Is the face wide enough for the cup at all? Measure it through the cup centre.
+            let (fu, fv) = orthonormal(&normal);
+            let step = 0.00025;
+            let extent = |dir: Vector3<f64>| -> f64 {
+                let mut d = 0.0;
+                while d < 4.0 * g.cup_radius_m + 0.01 {
+                    if on_face(&(face_point + dir * (d + step)), &-normal).is_err() {
+                        break;
+                    }
+                    d += step;
+                }
+                d
+            };
+            let width = (0..4)
+                .map(|k| {
+                    let a = k as f64 * std::f64::consts::FRAC_PI_4;
+                    let dir = fu * a.cos() + fv * a.sin();
+                    extent(dir) + extent(-dir)
+                })
+                .fold(f64::INFINITY, f64::min);
+            if width < 2.0 * g.cup_radius_m {
+                return Err(GraspFailure::FaceTooSmall {
+                    width_mm: width * 1e3,
+                    cup_mm: 2e3 * g.cup_radius_m,
+                });
+            }
+            if let Some(b) = blocker
+                && b != Tag::Part(part as u32)
+                && matches!(b, Tag::Part(_))
+            {
+                return Err(GraspFailure::Obstructed(self.describe(Some(b))));
+            }
+            return Err(GraspFailure::OnEdge { outside });
+        }
+        let com = self.part_pose(part) * nalgebra::Point3::from(self.part_shape.com_m);
+        let rel = com.coords - centre;
+        let com_offset = (rel - axis * rel.dot(&axis)).norm();
+        Ok(Seal {
+            part,
+            tilt_rad: tilt,
+            com_offset_m: com_offset,
+        })
+    }
+
+    /// Opens the vacuum valve: the seal is decided when the vacuum has built up.
+    pub fn vacuum_on(&mut self) {
+        if self.gripper.state == GripperState::Idle {
+            self.gripper.state = GripperState::BuildingUp { since_s: self.time_s };
+        }
+    }
+
+    /// Closes the vacuum valve: a held part comes off after `release_s`.
+    pub fn vacuum_off(&mut self) {
+        match self.gripper.state {
+            GripperState::BuildingUp { .. } => {
+                self.gripper.state = GripperState::Idle;
+                self.gripper.events.push(GripperEvent::GraspFailed {
+                    time_s: self.time_s,
+                    reason: GraspFailure::Aborted,
+                });
+            }
+            GripperState::Holding { seal, tool_from_part } => {
+                self.gripper.state = GripperState::Releasing {
+                    since_s: self.time_s,
+                    seal,
+                    tool_from_part,
+                };
+            }
+            _ => {}
+        }
+    }
+
+    /// The part on the cup, if any.
+    pub fn held_part(&self) -> Option<usize> {
+        match self.gripper.state {
+            GripperState::Holding { seal, .. } | GripperState::Releasing { seal, .. } => Some(seal.part),
+            _ => None,
+        }
+    }
+
+    /// The held part as a payload on the flange (for the robot's dynamics).
+    pub fn held_payload(&self) -> Option<Payload> {
+        let (GripperState::Holding { tool_from_part, .. } | GripperState::Releasing { tool_from_part, .. }) =
+            self.gripper.state
+        else {
+            return None;
+        };
+        let flange_from_part = self.robot.flange_from_tool * tool_from_part;
+        let s = &self.part_shape;
+        let r = flange_from_part.rotation.to_rotation_matrix();
+        let inertia: Matrix3<f64> = r.matrix() * s.inertia_com_kg_m2 * r.matrix().transpose();
+        Some(Payload {
+            mass_kg: s.mass_kg,
+            com_flange_m: (flange_from_part * nalgebra::Point3::from(s.com_m)).coords,
+            inertia_com_kg_m2: inertia,
+        })
+    }
+
+    fn attach(&mut self, seal: Seal) -> Isometry3<f64> {
+        let p = &mut self.parts[seal.part];
+        p.state = PartState::Held;
+        let (body, collider) = (p.body, p.collider);
+        self.bodies[body].set_body_type(RigidBodyType::KinematicPositionBased, true);
+        self.colliders[collider]
+            .set_active_collision_types(ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED);
+        self.world_from_tool().inverse() * self.part_pose(seal.part)
+    }
+
+    fn detach(&mut self, part: usize) {
+        let dt = self.dt_s();
+        let [_, b, c] = self.tool_history;
+        let vel = (c - b) / dt;
+        let centre = self.part_pose(part).translation.vector;
+        let p = &mut self.parts[part];
+        let (body, collider) = (p.body, p.collider);
+        p.state = if self.place_tray.contains(&centre) {
+            PartState::Placed
+        } else {
+            PartState::Free
+        };
+        self.colliders[collider].set_active_collision_types(ActiveCollisionTypes::default());
+        let b = &mut self.bodies[body];
+        b.set_body_type(RigidBodyType::Dynamic, true);
+        b.set_linvel(sim_point(&vel), true);
+        b.set_angvel(rapier3d::math::Vector::ZERO, true);
+    }
+
+    /// Runs the gripper's timers and moves the held part with the tool; called by `step` before
+    /// the solver, with the tool pose at the end of the step.
+    pub(super) fn update_gripper(&mut self, world_from_tool_next: &Isometry3<f64>) {
+        let now = self.time_s;
+        match self.gripper.state {
+            GripperState::Idle => {}
+            GripperState::BuildingUp { since_s } => {
+                if now + 1e-9 >= since_s + self.gripper.build_up_s {
+                    match self.check_seal(&self.world_from_tool()) {
+                        Ok(seal) => {
+                            let tool_from_part = self.attach(seal);
+                            self.gripper.state = GripperState::Holding { seal, tool_from_part };
+                            self.gripper.events.push(GripperEvent::Grasped { time_s: now, seal });
+                        }
+                        Err(reason) => {
+                            self.gripper.state = GripperState::Idle;
+                            self.gripper
+                                .events
+                                .push(GripperEvent::GraspFailed { time_s: now, reason });
+                        }
+                    }
+                }
+            }
+            GripperState::Holding { seal, .. } => {
+                let m = self.part_shape.mass_kg;
+                let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
+                let force = m * (self.tool_acceleration() - g).norm();
+                let required = force * (1.0 + 4.0 * seal.com_offset_m / (2.0 * self.gripper.cup_radius_m));
+                if required > self.gripper.holding_n {
+                    self.detach(seal.part);
+                    self.gripper.state = GripperState::Idle;
+                    self.gripper.events.push(GripperEvent::Slipped {
+                        time_s: now,
+                        part: seal.part,
+                        required_n: required,
+                        holding_n: self.gripper.holding_n,
+                    });
+                }
+            }
+            GripperState::Releasing { since_s, seal, .. } => {
+                if now + 1e-9 >= since_s + self.gripper.release_s {
+                    self.detach(seal.part);
+                    self.gripper.state = GripperState::Idle;
+                    self.gripper.events.push(GripperEvent::Released {
+                        time_s: now,
+                        part: seal.part,
+                    });
+                }
+            }
+        }
+        if let GripperState::Holding { seal, tool_from_part }
+        | GripperState::Releasing {
+            seal, tool_from_part, ..
+        } = self.gripper.state
+        {
+            let body = self.parts[seal.part].body;
+            self.bodies[body].set_next_kinematic_position(to_pose(&(world_from_tool_next * tool_from_part)));
+        }
+    }
+}
