@@ -567,6 +567,26 @@ impl PlaceTrayConfig {
     }
 }
 
+impl Scene {
+    /// Where each placed part should end up: `world_from_part` per slot, the part lying on its
+    /// -z face on the place tray floor, turned by the slot's yaw plus the part's `place_yaw_deg`.
+    pub fn world_from_slots(&self, w: &Workpiece) -> Vec<Isometry3<f64>> {
+        let world_from_tray = self.place_tray.tray.world_from_tray();
+        let place_yaw = deg(w.grasp.place_yaw_deg);
+        self.place_tray
+            .slots_in_tray([w.size_m[0], w.size_m[1]])
+            .into_iter()
+            .map(|(x, y, yaw)| {
+                world_from_tray
+                    * Isometry3::from_parts(
+                        Translation3::new(x, y, w.size_m[2] / 2.0),
+                        UnitQuaternion::from_euler_angles(0.0, 0.0, yaw + place_yaw),
+                    )
+            })
+            .collect()
+    }
+}
+
 fn check_tray(c: &mut Checker, key: &str, t: &TrayConfig) {
     c.finite_all(&format!("{key}.center_m"), &t.center_m);
     c.finite(&format!("{key}.yaw_deg"), t.yaw_deg);

@@ -125,6 +125,16 @@ struct TorqueArgs {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Physics: pile build-and-settle wall time per workpiece, and the step time of 100 resting
+    /// parts with the arm moving, beside rapier's default solver settings.
+    Physics {
+        /// Runs to take the median over.
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Robot model: IK, FK, inverse and forward dynamics per call, beside baselines.
     Robot {
         /// Runs to take the median over.
@@ -199,6 +209,9 @@ fn run(cli: Cli) -> Result<()> {
             out,
             json,
         } => pile(&workpiece, count, seed, scene.as_deref(), &out, json),
+        Command::Bench {
+            command: BenchCommand::Physics { runs, json },
+        } => bench_physics(runs, json),
         Command::Bench {
             command: BenchCommand::Robot { runs, calls, json },
         } => {
@@ -647,5 +660,45 @@ fn pile(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>, 
         report.max_penetration_between
     );
     println!("  wrote            {}", dest.join("pile.json").display());
+    Ok(())
+}
+
+fn bench_physics(runs: usize, json: bool) -> Result<()> {
+    let loaded = LoadedScene::embedded_default()?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    let workpieces = LoadedWorkpiece::all_embedded()?;
+    let b = binpick::bench::physics_bench(&loaded, &robot, &workpieces, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&b)?);
+        return Ok(());
+    }
+    println!(
+        "physics, one core, {runs} runs per pile (seeds 1..{runs}); target: settle <= {:.1} s wall per pile",
+        b.targets.0
+    );
+    println!(
+        "workpiece  parts  wall_s median (min..max)  sim_s  max_pen_mm  settled | rapier defaults: wall_s  max_pen_mm"
+    );
+    for p in &b.piles {
+        let peer = match &p.rapier_defaults {
+            Ok((wall, pen)) => format!("{wall:.3}  {:.3}", pen * 1e3),
+            Err(e) => format!("stopped: {e}"),
+        };
+        println!(
+            "{:<10} {:>5}  {:.3} ({:.3}..{:.3})       {:>5.2}  {:>10.3}  {:<7} | {peer}",
+            p.workpiece,
+            p.count,
+            p.median_wall_s,
+            p.min_max_wall_s.0,
+            p.min_max_wall_s.1,
+            p.settle_sim_s,
+            p.max_penetration_m * 1e3,
+            p.settled
+        );
+    }
+    println!(
+        "step with {} resting parts of {} and the arm moving: {:.4} ms median ({:.4}..{:.4}), target <= {:.1} ms",
+        b.step_pile.0, b.step_pile.1, b.step_ms_median, b.step_ms_min_max.0, b.step_ms_min_max.1, b.targets.1
+    );
     Ok(())
 }

@@ -28,19 +28,15 @@ pub struct PileOptions {
     pub seed: u64,
     /// Give up settling after this much simulated time [s].
     pub max_settle_s: f64,
-    /// The pour runs at the cell's timestep divided by this: falling parts reach 2 m/s, several
-    /// millimetres per cell step, more than rapier's contact prediction sees coming.
-    pub substeps: u32,
 }
 
 impl PileOptions {
-    /// `count` parts with seed `seed`, settling for at most 10 s, 4 substeps.
+    /// `count` parts with seed `seed`, settling for at most 10 s.
     pub fn new(count: usize, seed: u64) -> Self {
         PileOptions {
             count,
             seed,
             max_settle_s: 10.0,
-            substeps: 4,
         }
     }
 }
@@ -108,8 +104,7 @@ impl World {
     /// Drops `opts.count` parts into the pick tray in waves and lets them settle.
     pub fn build_pile(&mut self, opts: &PileOptions) -> Result<PileReport, HealthError> {
         let wall = Instant::now();
-        let cell_dt = self.params.dt;
-        self.params.dt = cell_dt / opts.substeps.max(1) as f32;
+
         let mut rng = crate::rng::stream(opts.seed, "pile");
         let tray = self.pick_tray.world_from_tray;
         let floor_z = tray.translation.vector.z;
@@ -222,7 +217,6 @@ impl World {
                 }
             })
             .collect();
-        self.params.dt = cell_dt;
         let deepest = self.max_penetration_m();
         Ok(PileReport {
             spawned,

@@ -223,15 +223,16 @@ impl World {
         };
         let part = part as usize;
         let gap = toi - PROBE_BACK_M;
-        if gap > TOUCH_GAP_M {
-            return Err(GraspFailure::NotTouching { gap_mm: gap * 1e3 });
-        }
+        // A tilted cup touches with one side of its lip only: report the tilt, the real cause.
         let tilt = normal.dot(&-axis).clamp(-1.0, 1.0).acos();
         if tilt > g.max_tilt_rad {
             return Err(GraspFailure::Tilted {
                 tilt_deg: tilt.to_degrees(),
                 max_deg: g.max_tilt_rad.to_degrees(),
             });
+        }
+        if gap > TOUCH_GAP_M {
+            return Err(GraspFailure::NotTouching { gap_mm: gap * 1e3 });
         }
         let face_point = centre - axis * PROBE_BACK_M + axis * toi;
         let on_face = |p: &Vector3<f64>, dir: &Vector3<f64>| -> Result<(), Option<Tag>> {

@@ -1,0 +1,340 @@
+//! The physics twin: piles of all six workpieces, rest, tunnelling, the suction gripper, the arm
+//! pushing parts, and the health monitor. Penetration is measured by the independent overlap check.
+
+use binpick::config::{LoadedScene, LoadedWorkpiece};
+use binpick::physics::pile::{PileOptions, max_motion};
+use binpick::physics::suction::{GraspFailure, GripperEvent};
+use binpick::physics::{HealthError, PartShape, World};
+use binpick::robot::{RobotModel, tool_down_pose};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+const WORKPIECES: [&str; 6] = ["A", "B", "C", "D", "E", "F"];
+
+fn world(workpiece: &str) -> (World, LoadedScene, LoadedWorkpiece) {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve(workpiece).unwrap();
+    let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+    (World::new(&scene.scene, &robot, shape), scene, wp)
+}
+
+fn floor_z(w: &World) -> f64 {
+    w.pick_tray.world_from_tray.translation.vector.z
+}
+
+#[test]
+fn piles_of_every_workpiece_settle_in_the_tray_within_0_3_mm_and_repeat_bit_for_bit() {
+    for name in WORKPIECES {
+        let (mut w1, _, wp) = world(name);
+        let opts = PileOptions::new(wp.workpiece.pile_count as usize, 11);
+        let r1 = w1.build_pile(&opts).unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(r1.settled, "{name}: pile did not settle");
+        assert_eq!(r1.in_tray, r1.spawned, "{name}: parts outside the tray");
+        assert!(
+            r1.max_penetration_m <= 0.0003,
+            "{name}: penetration {:.3} mm",
+            r1.max_penetration_m * 1e3
+        );
+        for p in &r1.poses {
+            assert!(
+                p.xyz_m.iter().chain(&p.quat_wxyz).all(|v| v.is_finite()),
+                "{name}: NaN pose"
+            );
+            assert!(
+                p.xyz_m[2] > floor_z(&w1),
+                "{name}: part {} below the tray floor",
+                p.part
+            );
+        }
+        // Same seed, a fresh world: bit-identical poses.
+        let (mut w2, _, _) = world(name);
+        let r2 = w2.build_pile(&opts).unwrap();
+        assert_eq!(r1.poses, r2.poses, "{name}: same seed, different pile");
+        assert_eq!(r1.settle_sim_s.to_bits(), r2.settle_sim_s.to_bits());
+        // Another seed, another pile.
+        let (mut w3, _, _) = world(name);
+        let r3 = w3.build_pile(&PileOptions::new(opts.count, 12)).unwrap();
+        assert_ne!(r1.poses, r3.poses, "{name}: seed has no effect");
+    }
+}
+
+#[test]
+fn settled_piles_do_not_jitter() {
+    for name in ["C", "D", "F"] {
+        let (mut w, _, wp) = world(name);
+        let before = w
+            .build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, 5))
+            .unwrap()
+            .poses;
+        // Wake everything and watch one more second.
+        let bodies: Vec<_> = w.parts.iter().map(|p| p.body).collect();
+        for b in bodies {
+            w.bodies[b].wake_up(true);
+        }
+        w.run_for(1.0).unwrap();
+        let after: Vec<_> = (0..w.parts.len())
+            .map(|i| {
+                let p = w.part_pose(i);
+                let q = p.rotation.quaternion();
+                binpick::physics::pile::PartPose {
+                    part: i,
+                    xyz_m: p.translation.vector.into(),
+                    quat_wxyz: [q.w, q.i, q.j, q.k],
+                }
+            })
+            .collect();
+        let (dp, dr) = max_motion(&before, &after);
+        assert!(
+            dp < 1e-4 && dr < 0.01,
+            "{name}: parts crept {:.3} mm / {:.4} rad at rest",
+            dp * 1e3,
+            dr
+        );
+        assert!(w.max_penetration_m().0 <= 0.0003);
+    }
+}
+
+#[test]
+fn thin_parts_do_not_tunnel_through_the_tray_floor() {
+    for name in ["C", "F"] {
+        for (height, tilt) in [(0.3, 0.0), (0.3, 1.2), (0.5, 0.05)] {
+            let (mut w, _, wp) = world(name);
+            let c = w.pick_tray.world_from_tray.translation.vector;
+            let pose = Isometry3::new(Vector3::new(c.x, c.y, c.z + height), Vector3::new(tilt, 0.3, 0.0));
+            w.add_part(&pose);
+            w.run_for(1.0).unwrap_or_else(|e| panic!("{name} from {height} m: {e}"));
+            let z = w.part_pose(0).translation.z;
+            let thinnest = wp.workpiece.size_m.iter().cloned().fold(f64::INFINITY, f64::min);
+            assert!(
+                z > c.z + thinnest / 2.0 - 3e-4,
+                "{name} from {height} m tilted {tilt}: centre at {z}, floor at {}",
+                c.z
+            );
+            assert!(w.max_penetration_m().0 <= 0.0003);
+        }
+    }
+}
+
+/// A single part lying on the pick tray floor at `xy` (tray frame), settled; returns its top face centre.
+fn lone_part(w: &mut World, size_z: f64, xy: (f64, f64), rot: UnitQuaternion<f64>) -> Vector3<f64> {
+    let tray = w.pick_tray.world_from_tray;
+    let pose = tray * Isometry3::from_parts(Translation3::new(xy.0, xy.1, size_z / 2.0 + 0.0005), rot);
+    w.add_part(&pose);
+    w.run_for(0.5).unwrap();
+    let p = w.part_pose(w.parts.len() - 1);
+    p.translation.vector + p.rotation * Vector3::new(0.0, 0.0, size_z / 2.0)
+}
+
+/// Lowers the tool onto `tool` from 4 cm above, switches the vacuum on and waits for it to build
+/// up; returns what the gripper reported (the grasp, or its failure, and anything after it).
+fn grasp_events(w: &mut World, tool: Isometry3<f64>) -> Vec<GripperEvent> {
+    let above = Isometry3::from_parts(
+        Translation3::from(tool.translation.vector + Vector3::z() * 0.04),
+        tool.rotation,
+    );
+    w.place_tool(&above).unwrap();
+    w.move_tool_line(&tool, 0.3).unwrap();
+    w.vacuum_on();
+    w.run_for(w.gripper.build_up_s + 0.01).unwrap();
+    w.gripper.take_events()
+}
+
+fn grasp_at(w: &mut World, tool: Isometry3<f64>) -> GripperEvent {
+    let events = grasp_events(w, tool);
+    assert_eq!(events.len(), 1, "{events:?}");
+    events[0].clone()
+}
+
+#[test]
+fn suction_seals_on_a_flat_top_face_lifts_and_places_within_tolerance() {
+    let (mut w, scene, wp) = world("B");
+    let top = lone_part(&mut w, 0.020, (0.0, 0.0), UnitQuaternion::identity());
+    let ev = grasp_at(&mut w, tool_down_pose(top, 0.0));
+    assert!(matches!(ev, GripperEvent::Grasped { .. }), "{ev:?}");
+    assert_eq!(w.held_part(), Some(0));
+    let payload = w.held_payload().unwrap();
+    assert!((payload.mass_kg - wp.workpiece.mass_kg).abs() < 1e-12);
+    // Lift 10 cm and swing toward the place tray: the part keeps its place on the tool.
+    let tool_from_part = w.world_from_tool().inverse() * w.part_pose(0);
+    let lifted = tool_down_pose(top + Vector3::z() * 0.10, 0.0);
+    w.move_tool_line(&lifted, 0.5).unwrap();
+    let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
+    // The part was grasped square to the tool: turn the tool to the slot's heading.
+    let slot_x = slot.rotation * Vector3::x();
+    let heading = slot_x.y.atan2(slot_x.x);
+    let over_slot = tool_down_pose(slot.translation.vector + Vector3::z() * 0.12, heading);
+    // Swing over in joint space (a straight tool line would pass near the base).
+    let q_over = w.robot.ik_tool_nearest(&over_slot, &w.joints()).unwrap().q;
+    w.move_joints(&q_over, 1.2).unwrap();
+    let drift = w.world_from_tool().inverse() * w.part_pose(0) * tool_from_part.inverse();
+    assert!(
+        drift.translation.vector.norm() < 1e-4 && drift.rotation.angle() < 1e-3,
+        "part moved on the cup: {drift}"
+    );
+    // Lower until the part is 1 mm above the slot floor, release, and let it land.
+    let release = tool_down_pose(slot.translation.vector + Vector3::z() * (0.010 + 0.001), heading);
+    w.move_tool_line(&release, 0.5).unwrap();
+    w.vacuum_off();
+    w.run_for(w.gripper.release_s + 0.01).unwrap();
+    assert!(matches!(
+        w.gripper.take_events()[..],
+        [GripperEvent::Released { part: 0, .. }]
+    ));
+    w.move_tool_line(&over_slot, 0.3).unwrap();
+    w.run_for(0.5).unwrap();
+    let (dp, dyaw) = w.placement_error(0, &slot, wp.workpiece.grasp.yaw_symmetry_deg.to_radians());
+    assert!(
+        dp < 0.0015 && dyaw < 2f64.to_radians(),
+        "placed {:.2} mm / {:.2} deg off",
+        dp * 1e3,
+        dyaw.to_degrees()
+    );
+}
+
+#[test]
+fn suction_fails_on_an_edge_on_a_small_face_and_when_tilted() {
+    // Cup centred on the edge of B's 30 mm top face.
+    let (mut w, _, _) = world("B");
+    let top = lone_part(&mut w, 0.020, (0.0, 0.0), UnitQuaternion::identity());
+    let edge = top + Vector3::new(0.015, 0.0, 0.0);
+    let ev = grasp_at(&mut w, tool_down_pose(edge, 0.0));
+    assert!(
+        matches!(
+            ev,
+            GripperEvent::GraspFailed {
+                reason: GraspFailure::OnEdge { .. },
+                ..
+            }
+        ),
+        "{ev:?}"
+    );
+    // E standing on end: its top face is 10 x 5 mm, narrower than the 6 mm cup.
+    let (mut w, _, _) = world("E");
+    let top = lone_part(&mut w, 0.010, (0.0, 0.0), UnitQuaternion::identity());
+    let ev = grasp_at(&mut w, tool_down_pose(top, 0.0));
+    match ev {
+        GripperEvent::GraspFailed {
+            reason: GraspFailure::FaceTooSmall { width_mm, .. },
+            ..
+        } => {
+            assert!((width_mm - 5.0).abs() < 0.6, "measured face width {width_mm}")
+        }
+        other => panic!("{other:?}"),
+    }
+    // Tilted 30 deg from the face normal (the cup tolerates 20).
+    let (mut w, _, _) = world("B");
+    let top = lone_part(&mut w, 0.020, (0.0, 0.0), UnitQuaternion::identity());
+    let tilted = tool_down_pose(top, 0.0) * Isometry3::rotation(Vector3::x() * 30f64.to_radians());
+    let tilted = Isometry3::from_parts(
+        Translation3::from(top - (tilted.rotation * Vector3::z()) * 0.0003),
+        tilted.rotation,
+    );
+    let ev = grasp_at(&mut w, tilted);
+    match ev {
+        GripperEvent::GraspFailed {
+            reason: GraspFailure::Tilted { tilt_deg, .. },
+            ..
+        } => {
+            assert!((tilt_deg - 30.0).abs() < 2.0, "{tilt_deg}")
+        }
+        other => panic!("{other:?}"),
+    }
+    // Nothing there.
+    let (mut w, _, _) = world("B");
+    let floor = w.pick_tray.world_from_tray.translation.vector;
+    let ev = grasp_at(&mut w, tool_down_pose(floor, 0.0));
+    assert!(
+        matches!(
+            ev,
+            GripperEvent::GraspFailed {
+                reason: GraspFailure::NoPart(_),
+                ..
+            }
+        ),
+        "{ev:?}"
+    );
+}
+
+#[test]
+fn an_off_centre_grasp_on_a_heavy_part_slips_with_the_reason() {
+    let (mut w, _, _) = world("B");
+    let top = lone_part(&mut w, 0.020, (0.0, 0.0), UnitQuaternion::identity());
+    let off = top + Vector3::new(0.010, 0.0, 0.0);
+    // The seal forms (the lip is on the face) but the peel moment of the 30 g part, 10 mm off the
+    // cup axis, exceeds what the 6 mm cup holds: it tears off when lifted, or already at rest.
+    let mut events = grasp_events(&mut w, tool_down_pose(off, 0.0));
+    assert!(matches!(events[0], GripperEvent::Grasped { .. }), "{events:?}");
+    if events.len() == 1 {
+        w.move_tool_line(&tool_down_pose(off + Vector3::z() * 0.05, 0.0), 0.3)
+            .unwrap();
+        events.extend(w.gripper.take_events());
+    }
+    let slipped = events.iter().find_map(|e| match e {
+        GripperEvent::Slipped {
+            required_n, holding_n, ..
+        } => Some((*required_n, *holding_n)),
+        _ => None,
+    });
+    let (required, holding) = slipped.unwrap_or_else(|| panic!("no slip: {events:?}"));
+    assert!(required > holding);
+    assert_eq!(w.held_part(), None);
+}
+
+#[test]
+fn the_moving_arm_pushes_a_part_it_sweeps_through() {
+    let (mut w, _, _) = world("F");
+    let top = lone_part(&mut w, 0.005, (0.0, 0.0), UnitQuaternion::identity());
+    let start = w.part_pose(0).translation.vector;
+    // Sweep the cup through the part 2 mm above the floor, 60 mm along x.
+    let low = top - Vector3::z() * 0.003;
+    w.place_tool(&tool_down_pose(low - Vector3::x() * 0.03, 0.0)).unwrap();
+    w.move_tool_line(&tool_down_pose(low + Vector3::x() * 0.03, 0.0), 0.6)
+        .unwrap();
+    w.run_for(0.3).unwrap();
+    let moved = (w.part_pose(0).translation.vector - start).norm();
+    assert!(moved > 0.005, "the part moved only {:.2} mm", moved * 1e3);
+}
+
+#[test]
+fn the_arm_entering_a_tray_wall_is_reported() {
+    let (mut w, _, _) = world("F");
+    let tray = w.pick_tray.world_from_tray;
+    let half = w.pick_tray.half_xy_m;
+    // Above the middle of the +x wall, then down into it.
+    let wall_top = tray * nalgebra::Point3::new(half[0] - 0.004, 0.0, w.pick_tray.wall_height_m);
+    w.place_tool(&tool_down_pose(wall_top.coords + Vector3::z() * 0.03, 0.0))
+        .unwrap();
+    let err = w
+        .move_tool_line(&tool_down_pose(wall_top.coords - Vector3::z() * 0.01, 0.0), 0.5)
+        .unwrap_err();
+    match err {
+        binpick::physics::script::ScriptError::Health(HealthError::ArmCollision { robot, obstacle, .. }) => {
+            assert!(robot.contains("cup") || robot.contains("tool"), "{robot}");
+            assert!(obstacle.contains("pick tray wall +x"), "{obstacle}");
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
+#[test]
+fn the_health_monitor_stops_on_a_stray_part_and_on_nan() {
+    let (mut w, _, _) = world("F");
+    // A part on the table, outside both trays.
+    w.add_part(&Isometry3::translation(-0.3, -0.3, 0.01));
+    match w.step().unwrap_err() {
+        HealthError::LeftVolume { body, volume, .. } => {
+            assert_eq!(body, "part 0");
+            assert_eq!(volume, "pick tray");
+        }
+        other => panic!("{other:?}"),
+    }
+    let (mut w, _, _) = world("F");
+    lone_part(&mut w, 0.005, (0.0, 0.0), UnitQuaternion::identity());
+    let b = w.parts[0].body;
+    let mut pose = *w.bodies[b].position();
+    pose.translation.x = f32::NAN;
+    w.bodies[b].set_position(pose, true);
+    let e = w.step().unwrap_err();
+    assert!(matches!(e, HealthError::NonFinite { .. }), "{e:?}");
+    assert!(e.to_string().contains("part 0 has a non-finite"), "{e}");
+}
