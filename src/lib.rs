@@ -7,7 +7,9 @@
 //! 2. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
 //! 3. [`physics`]: the rapier world: trays, piles of parts, the arm's bodies, the suction gripper.
 //!
-//! 4. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
+//! 4. [`sensor`]: the fixed overhead 3D sensor: ray-cast depth capture, exposure timing, recognition.
+//! 5. [`grasp`]: the grasp selector: suction grasps from detections and the point cloud, ranked.
+//! 6. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
 //!
 //! Later stages (physics world, sensor, grasp selection, planning, trajectory, execution, cycle,
 //! recording, report) are added as their issues land; see README.md.
@@ -17,7 +19,9 @@
 
 pub mod bench;
 pub mod config;
+pub mod grasp;
 pub mod physics;
 pub mod report;
 pub mod rng;
 pub mod robot;
+pub mod sensor;

@@ -65,6 +65,27 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// Build a pile, take a depth capture, recognise the parts and select a grasp.
+    Sense {
+        /// Workpiece: A ... F (embedded) or a path to a workpiece file.
+        #[arg(long)]
+        workpiece: String,
+        /// Parts to drop (default: the workpiece's pile_count).
+        #[arg(long)]
+        count: Option<usize>,
+        /// Run seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Scene file (default: the embedded default cell).
+        #[arg(long)]
+        scene: Option<PathBuf>,
+        /// Folder the run folder is written into.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Benchmarks: our code beside a baseline doing the same work.
     Bench {
         #[command(subcommand)]
@@ -125,6 +146,16 @@ struct TorqueArgs {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Sensing: depth capture (all cores, and one thread as the peer) and grasp selection per
+    /// workpiece at its default pile.
+    Sensor {
+        /// Timed repetitions after one warm-up.
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Physics: pile build-and-settle wall time per workpiece, and the step time of 100 resting
     /// parts with the arm moving, beside rapier's default solver settings.
     Physics {
@@ -201,6 +232,14 @@ fn run(cli: Cli) -> Result<()> {
                 RobotCommand::Torque(args) => robot_torque(&loaded, &robot, &args, json),
             }
         }
+        Command::Sense {
+            workpiece,
+            count,
+            seed,
+            scene,
+            out,
+            json,
+        } => sense(&workpiece, count, seed, scene.as_deref(), &out, json),
         Command::Pile {
             workpiece,
             count,
@@ -212,6 +251,9 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench {
             command: BenchCommand::Physics { runs, json },
         } => bench_physics(runs, json),
+        Command::Bench {
+            command: BenchCommand::Sensor { runs, json },
+        } => bench_sensor(runs, json),
         Command::Bench {
             command: BenchCommand::Robot { runs, calls, json },
         } => {
@@ -700,5 +742,157 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
         "step with {} resting parts of {} and the arm moving: {:.4} ms median ({:.4}..{:.4}), target <= {:.1} ms",
         b.step_pile.0, b.step_pile.1, b.step_ms_median, b.step_ms_min_max.0, b.step_ms_min_max.1, b.targets.1
     );
+    Ok(())
+}
+
+fn sense(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>, out: &Path, json: bool) -> Result<()> {
+    use binpick::sensor::{HeightMap, Sensor};
+    let (loaded, wp, robot) = load_cell(scene, workpiece)?;
+    let count = count.unwrap_or(wp.workpiece.pile_count as usize);
+    if count == 0 || count > 1000 {
+        return Err(InputError(format!("--count must be within [1, 1000], got {count}")).into());
+    }
+    let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    let mut world = binpick::physics::World::new(&loaded.scene, &robot, shape);
+    world
+        .build_pile(&binpick::physics::pile::PileOptions::new(count, seed))
+        .context("building the pile")?;
+    let mut sensor = Sensor::new(&loaded.scene.sensor, &world, seed).context("the sensor's pose is degenerate")?;
+    let t0 = std::time::Instant::now();
+    let mut job = sensor
+        .trigger(&world)
+        .map_err(|p| anyhow::anyhow!("capture refused: {p:?}"))?;
+    let capture_ms = t0.elapsed().as_secs_f64() * 1e3;
+    while world.time_s + 1e-9 < job.ready_s {
+        world.step().context("waiting for the recognition result")?;
+        sensor.watch(&mut job, &world);
+    }
+    let detections = sensor
+        .result(&job, &world)
+        .ok_or_else(|| anyhow::anyhow!("capture spoiled: {:?}", job.spoiled))?;
+    let report = binpick::sensor::evaluate(&world, &detections);
+    let t1 = std::time::Instant::now();
+    let hm = HeightMap::from_capture(&job.capture, &world, 0.002);
+    let selector = binpick::grasp::GraspSelector::new(&loaded.scene, &robot, &wp.workpiece);
+    let slots = loaded.scene.world_from_slots(&wp.workpiece);
+    let plan = selector.select(&detections, &hm, &slots[0], &world.joints());
+    let grasp_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let name = format!("sense-{}-seed{seed}", wp.workpiece.name);
+    let run = binpick::report::RunDir::create(out, &name)?;
+    run.write_inputs(&loaded, Some(&wp))?;
+    job.capture
+        .write_depth_png(&run.path("depth.png"))
+        .context("writing depth.png")?;
+    job.capture
+        .write_ply(&run.path("cloud.ply"))
+        .context("writing cloud.ply")?;
+    let file = json!({
+        "binpick_version": env!("CARGO_PKG_VERSION"), "workpiece": wp.workpiece.name, "seed": seed, "count": count,
+        "capture": {"trigger_s": job.capture.trigger_s, "ready_s": job.ready_s, "width_px": job.capture.width,
+                    "height_px": job.capture.height, "valid_px": job.capture.valid_count()},
+        "recognition": &report, "detections": &detections,
+        "grasp": {"chosen": plan.best(), "ranked": plan.ranked.len(), "rejected": plan.rejected_counts()},
+    });
+    run.write_json("sense.json", &file)?;
+    let dest = run.finish()?;
+    if json {
+        let mut v = file;
+        v["timing_ms"] = json!({"capture": capture_ms, "grasp": grasp_ms});
+        v["run_dir"] = json!(dest.display().to_string());
+        v.as_object_mut().map(|o| o.remove("detections"));
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "pile of {count} x {} , seed {seed}: capture at t = {:.3} s, result at {:.3} s",
+        wp.workpiece.name, job.capture.trigger_s, job.ready_s
+    );
+    println!(
+        "  capture          {} x {} px, {} returns, {:.1} ms wall",
+        job.capture.width,
+        job.capture.height,
+        job.capture.valid_count(),
+        capture_ms
+    );
+    println!(
+        "  recognition      {} detected of {} in the tray; top layer {} / {} detected (recall {:.1} %)",
+        report.detected,
+        report.parts,
+        report.top_layer_detected,
+        report.top_layer,
+        report.top_layer_recall * 100.0
+    );
+    println!(
+        "  pose error       position mean {:.2} / max {:.2} mm, rotation mean {:.2} / max {:.2} deg",
+        report.position_error_m.0 * 1e3,
+        report.position_error_m.1 * 1e3,
+        report.rotation_error_rad.0.to_degrees(),
+        report.rotation_error_rad.1.to_degrees()
+    );
+    match plan.best() {
+        Some(g) => {
+            let p = g.world_from_tool.translation.vector;
+            println!(
+                "  chosen grasp     detection {} face {}: tool at ({:.4}, {:.4}, {:.4}) m, score {:.3} (exposure {:.2}, clearance {:.1} mm, success {:.2}, place motion {:.3} s)",
+                g.detection,
+                g.face,
+                p.x,
+                p.y,
+                p.z,
+                g.score.total,
+                g.score.exposure,
+                g.score.clearance_m * 1e3,
+                g.score.success,
+                g.score.motion_s
+            );
+        }
+        None => println!("  chosen grasp     none: nothing graspable"),
+    }
+    let counts: Vec<String> = plan.rejected_counts().iter().map(|(k, v)| format!("{k} {v}")).collect();
+    println!(
+        "  candidates       {} feasible; rejected: {}",
+        plan.ranked.len(),
+        if counts.is_empty() {
+            "none".into()
+        } else {
+            counts.join(", ")
+        }
+    );
+    println!("  grasp selection  {grasp_ms:.2} ms wall (height map, candidates, IK, ranking)");
+    println!("  wrote            {}", dest.display());
+    Ok(())
+}
+
+fn bench_sensor(runs: usize, json: bool) -> Result<()> {
+    let loaded = LoadedScene::embedded_default()?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    let workpieces = LoadedWorkpiece::all_embedded()?;
+    let b = binpick::bench::sense_bench(&loaded, &robot, &workpieces, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&b)?);
+        return Ok(());
+    }
+    let s = &loaded.scene.sensor;
+    println!(
+        "sensing, {} x {} px, {} threads, median of {runs} after a warm-up; targets: capture <= {:.0} ms, grasp selection <= {:.0} ms",
+        s.resolution_px[0], s.resolution_px[1], b.threads, b.targets_ms.0, b.targets_ms.1
+    );
+    println!("workpiece  parts  capture_ms (min..max)   1-thread_ms  grasp_ms (min..max)   recall  feasible");
+    for r in &b.rows {
+        println!(
+            "{:<10} {:>5}  {:>6.2} ({:.2}..{:.2})  {:>11.2}  {:>5.2} ({:.2}..{:.2})  {:>6.1}%  {:>8}",
+            r.workpiece,
+            r.parts,
+            r.capture_ms.0,
+            r.capture_ms.1,
+            r.capture_ms.2,
+            r.capture_one_thread_ms,
+            r.grasp_ms.0,
+            r.grasp_ms.1,
+            r.grasp_ms.2,
+            r.top_layer_recall * 100.0,
+            r.feasible
+        );
+    }
     Ok(())
 }

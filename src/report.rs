@@ -66,6 +66,11 @@ impl RunDir {
         &self.dest
     }
 
+    /// Path of a file in the (staged) run folder, for writers that open files themselves.
+    pub fn path(&self, file: &str) -> PathBuf {
+        self.staging.join(file)
+    }
+
     /// Writes a file into the run folder.
     pub fn write(&self, file: &str, bytes: impl AsRef<[u8]>) -> Result<(), RunDirError> {
         let p = self.staging.join(file);

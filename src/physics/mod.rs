@@ -82,6 +82,20 @@ pub const MAX_SUBSTEP_MOTION_M: f64 = 0.0005;
 /// Most substeps one physics step is divided into.
 pub const MAX_SUBSTEPS: usize = 8;
 
+/// The arm's collision shapes for standalone queries: `(link index, link_from_shape [m], shape
+/// in rapier units)`, the tool and cup on link 6. Place with `to_pose(world_from_link * link_from_shape)`.
+pub fn arm_query_shapes(w: &World) -> Vec<(usize, Isometry3<f64>, SharedShape)> {
+    let mut out = Vec::new();
+    for (i, h) in w.link_bodies.iter().enumerate() {
+        for c in w.bodies[*h].colliders() {
+            let col = &w.colliders[*c];
+            let local = col.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY);
+            out.push((i, to_isometry(&local), col.shared_shape().clone()));
+        }
+    }
+    out
+}
+
 /// Collision groups.
 const ENV: Group = Group::GROUP_1;
 const ARM: Group = Group::GROUP_2;
@@ -102,6 +116,14 @@ pub enum Tag {
     Part(u32),
 }
 
+/// `user_data` flag of a part's ray-query twin collider (see [`PartBody::view_collider`]).
+const VIEW_FLAG: u128 = 1 << 100;
+
+/// Scene-query predicate: rays see a part through its view twin, not its physics collider.
+fn ray_visible(_: ColliderHandle, c: &Collider) -> bool {
+    !(matches!(Tag::decode(c.user_data), Some(Tag::Part(_))) && c.user_data & VIEW_FLAG == 0)
+}
+
 impl Tag {
     fn encode(self) -> u128 {
         let (kind, idx) = match self {
@@ -117,7 +139,7 @@ impl Tag {
     /// Decodes a collider's `user_data`.
     pub fn decode(data: u128) -> Option<Tag> {
         let idx = (data & u64::MAX as u128) as u32;
-        Some(match data >> 64 {
+        Some(match (data >> 64) & 0xff {
             1 => Tag::Env(idx),
             2 => Tag::Link(idx as u8),
             3 => Tag::Tool,
@@ -149,8 +171,11 @@ pub enum PartState {
 pub struct PartBody {
     /// Its rigid body.
     pub body: RigidBodyHandle,
-    /// Its collider.
+    /// Its collider (physics: convex polyhedra).
     pub collider: ColliderHandle,
+    /// Its twin for rays (sensor pixels, suction probes): the same geometry with boxes as
+    /// cuboids, a massless sensor that takes part in no contact.
+    pub view_collider: ColliderHandle,
     /// Where it is in its life.
     pub state: PartState,
 }
@@ -507,8 +532,11 @@ impl World {
 
     /// Runs collision detection without advancing time, so scene queries see the current state.
     pub fn refresh_queries(&mut self) {
+        // A physics step of 1 ns: collision detection runs and the bounding-volume tree is
+        // rebuilt; nothing moves measurably, and simulation time is not advanced. (A zero-length
+        // step would divide kinematic displacements by dt = 0 and poison the tree with NaNs.)
         let dt = self.params.dt;
-        self.params.dt = 0.0;
+        self.params.dt = 1e-9;
         self.pipeline_step();
         self.params.dt = dt;
     }
@@ -547,7 +575,10 @@ impl World {
         self.q_target = *q;
         let frames = self.robot.world_from_links(q);
         for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
-            self.bodies[*h].set_position(to_pose(&frames[i]), true);
+            let pose = to_pose(&frames[i]);
+            let b = &mut self.bodies[*h];
+            b.set_position(pose, true);
+            b.set_next_kinematic_position(pose);
         }
         self.tool_history = [self.tool_position(); 3];
         self.refresh_queries();
@@ -656,6 +687,19 @@ impl World {
             body,
             &mut self.bodies,
         );
+        let view_collider = self.colliders.insert_with_parent(
+            ColliderBuilder::new(s.view_shape.clone())
+                .density(0.0)
+                .sensor(true)
+                .collision_groups(InteractionGroups::new(
+                    Group::GROUP_5,
+                    Group::NONE,
+                    InteractionTestMode::And,
+                ))
+                .user_data(Tag::Part(idx as u32).encode() | VIEW_FLAG),
+            body,
+            &mut self.bodies,
+        );
         {
             let act = self.bodies[body].activation_mut();
             act.time_until_sleep = 0.2;
@@ -663,6 +707,7 @@ impl World {
         self.parts.push(PartBody {
             body,
             collider,
+            view_collider,
             state: PartState::Free,
         });
         idx
@@ -718,6 +763,36 @@ impl World {
         self.colliders.get(c).and_then(|c| Tag::decode(c.user_data))
     }
 
+    /// A scene-query pipeline over every collider, for casting many rays (the sensor's pixels).
+    pub fn query_pipeline(&self) -> QueryPipeline<'_> {
+        self.broad_phase.as_query_pipeline(
+            self.narrow_phase.query_dispatcher(),
+            &self.bodies,
+            &self.colliders,
+            QueryFilter::default().predicate(&ray_visible),
+        )
+    }
+
+    /// Casts a ray with a pipeline from [`World::query_pipeline`]: first hit's tag, distance along
+    /// the unit `dir` [m] and surface normal.
+    pub fn cast_ray_with(
+        &self,
+        qp: &QueryPipeline<'_>,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        max_m: f64,
+    ) -> Option<(Tag, f64, Vector3<f64>)> {
+        let ray = Ray::new(sim_point(origin), sim_dir(dir));
+        qp.cast_ray_and_get_normal(&ray, sim(max_m), true).and_then(|(h, hit)| {
+            let tag = self.tag_of(h)?;
+            Some((
+                tag,
+                hit.time_of_impact as f64 / SIM_UNITS_PER_M,
+                dir_from_sim(hit.normal),
+            ))
+        })
+    }
+
     /// Casts a ray into the world; returns the first hit's tag, distance along `dir` (unit) and
     /// surface normal. `skip` decides which colliders the ray passes through.
     pub fn cast_ray(
@@ -727,7 +802,8 @@ impl World {
         max_m: f64,
         skip: &dyn Fn(Tag) -> bool,
     ) -> Option<(Tag, f64, Vector3<f64>)> {
-        let pred = |_h: ColliderHandle, c: &Collider| Tag::decode(c.user_data).is_some_and(|t| !skip(t));
+        let pred =
+            |h: ColliderHandle, c: &Collider| ray_visible(h, c) && Tag::decode(c.user_data).is_some_and(|t| !skip(t));
         let qp = self.broad_phase.as_query_pipeline(
             self.narrow_phase.query_dispatcher(),
             &self.bodies,

@@ -34,8 +34,12 @@ pub enum ShapeError {
 /// A workpiece's collision shape and mass properties, built once and shared by every part.
 #[derive(Clone)]
 pub struct PartShape {
-    /// The collider shape in the part frame, in rapier units ([`super::SIM_UNITS_PER_M`]).
+    /// The collider shape in the part frame, in rapier units ([`super::SIM_UNITS_PER_M`]):
+    /// convex polyhedra, whose contacts rest parts stably.
     pub shape: SharedShape,
+    /// The same geometry for rays (sensor, suction probes): boxes as cuboids, whose ray test is
+    /// analytic and twice as fast as a polyhedron's.
+    pub view_shape: SharedShape,
     /// The primitives of the body (not the leads), for face look-ups: `(part_from_primitive, shape)`.
     pub body_primitives: Vec<(Pose, SharedShape)>,
     /// Mass [kg].
@@ -144,20 +148,30 @@ impl PartShape {
     /// Builds the shape of a workpiece. Mesh paths resolve against the workpiece file's folder.
     pub fn build(workpiece: &Workpiece, source: &Source) -> Result<Self, ShapeError> {
         let he = Vector3::from(workpiece.size_m) / 2.0;
-        let (shape, body_primitives) = match workpiece.shape.kind {
+        let cuboid = |c: Vector3<f64>, he: Vector3<f64>| {
+            (
+                Pose::from_translation(super::sim_point(&c)),
+                SharedShape::cuboid(super::sim(he.x), super::sim(he.y), super::sim(he.z)),
+            )
+        };
+        let (shape, view_shape, body_primitives) = match workpiece.shape.kind {
             ShapeKind::Box => {
                 let s = polytope_shape(&super::overlap::Polytope::cuboid(Vector3::zeros(), he), &workpiece.name)?;
-                (s.clone(), vec![(Pose::IDENTITY, s)])
+                (s.clone(), cuboid(Vector3::zeros(), he).1, vec![(Pose::IDENTITY, s)])
             }
             ShapeKind::Compound => {
                 let mut all = Vec::new();
+                let mut view = Vec::new();
                 let mut body = Vec::new();
                 for p in &workpiece.shape.parts {
                     let (pose, s) = match p.primitive {
                         Primitive::Box => {
-                            let s = p.size_m.unwrap_or([0.0; 3]);
-                            let c = p.center_m;
-                            let piece = super::overlap::Polytope::cuboid(Vector3::from(c), Vector3::from(s) / 2.0);
+                            let (c, h) = (
+                                Vector3::from(p.center_m),
+                                Vector3::from(p.size_m.unwrap_or([0.0; 3])) / 2.0,
+                            );
+                            view.push(cuboid(c, h));
+                            let piece = super::overlap::Polytope::cuboid(c, h);
                             (Pose::IDENTITY, polytope_shape(&piece, &workpiece.name)?)
                         }
                         // A 16-sided prism: polyhedral contacts rest stably where rapier's round
@@ -169,7 +183,9 @@ impl PartShape {
                                 p.length_m.unwrap_or(0.0) / 2.0,
                                 p.axis.unwrap_or(Axis::Z),
                             );
-                            (Pose::IDENTITY, polytope_shape(&prism, &workpiece.name)?)
+                            let hull = polytope_shape(&prism, &workpiece.name)?;
+                            view.push((Pose::IDENTITY, hull.clone()));
+                            (Pose::IDENTITY, hull)
                         }
                     };
                     if p.role == PartRole::Body {
@@ -177,7 +193,7 @@ impl PartShape {
                     }
                     all.push((pose, s));
                 }
-                (SharedShape::compound(all), body)
+                (SharedShape::compound(all), SharedShape::compound(view), body)
             }
             ShapeKind::Mesh => {
                 let file = workpiece.shape.mesh_file.clone().unwrap_or_default();
@@ -212,7 +228,11 @@ impl PartShape {
                 }
                 let sim_verts: Vec<Vector> = verts.iter().map(|v| *v * super::sim(1.0)).collect();
                 let decomposed = SharedShape::convex_decomposition(&sim_verts, &tris);
-                (decomposed.clone(), vec![(Pose::IDENTITY, decomposed)])
+                (
+                    decomposed.clone(),
+                    decomposed.clone(),
+                    vec![(Pose::IDENTITY, decomposed)],
+                )
             }
         };
         // Mass properties: the shape's, at the density that gives the workpiece's mass.
@@ -235,6 +255,7 @@ impl PartShape {
         let corner = aabb.mins.abs().max(aabb.maxs.abs());
         Ok(PartShape {
             shape,
+            view_shape,
             body_primitives,
             mass_kg: workpiece.mass_kg,
             com_m: super::point_from_sim(mp.local_com),

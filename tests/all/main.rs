@@ -4,4 +4,5 @@ mod cli_bad_input;
 mod cli_pile;
 mod cli_robot;
 mod physics;
+mod sensing;
 mod support;

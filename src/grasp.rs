@@ -1,0 +1,550 @@
+//! The grasp selector: suction grasps from what the sensor saw, filtered and ranked.
+//!
+//! Job: from the recognised parts (noisy poses) and the point cloud's height map, propose suction
+//! points on body faces large enough for the cup whose normal is within the cup's tilt of
+//! vertical; drop those the tool would not clear (height map), whose straight approach or retreat
+//! would meet the tray walls (cell geometry), or that the arm cannot reach within its limits along
+//! the whole straight descent; pick the tool yaw that makes the place motion quickest; rank by
+//! exposure, clearance, expected grasp success and expected motion time. Nothing here reads the
+//! world's ground truth.
+//!
+//! Units: m, rad, s. Frames: `world_from_part` (detected), `world_from_tool` (z out of the cup,
+//! into the face), the pick tray frame for the height map and the walls.
+
+use std::collections::BTreeMap;
+
+use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
+use serde::Serialize;
+
+use crate::config::{Axis, PartRole, Primitive, Scene, ShapeKind, Workpiece};
+use crate::robot::{JointVector, RobotModel};
+use crate::sensor::{Detection, HeightMap};
+
+/// A flat face of a workpiece's body, in the part frame.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Face {
+    /// Centre [m].
+    pub center: Vector3<f64>,
+    /// Outward normal (unit).
+    pub normal: Vector3<f64>,
+    /// Direction of the face's first extent (unit, in the face).
+    pub along: Vector3<f64>,
+    /// Extents along `along` and across it [m]; equal for a disc (its diameter).
+    pub extent_m: [f64; 2],
+    /// A round face (cylinder cap).
+    pub disc: bool,
+}
+
+fn axis_vec(a: Axis) -> Vector3<f64> {
+    match a {
+        Axis::X => Vector3::x(),
+        Axis::Y => Vector3::y(),
+        Axis::Z => Vector3::z(),
+    }
+}
+
+/// The flat faces of a workpiece's body (box faces, cylinder caps). Mesh workpieces have none
+/// here: their faces are not known analytically (a stated gap).
+pub fn body_faces(w: &Workpiece) -> Vec<Face> {
+    /// A body primitive: a box (centre, half extents) or a cylinder (centre, radius, half length, axis).
+    enum Piece {
+        Box(Vector3<f64>, Vector3<f64>),
+        Cylinder(Vector3<f64>, f64, f64, Axis),
+    }
+    let pieces: Vec<Piece> = match w.shape.kind {
+        ShapeKind::Box => vec![Piece::Box(Vector3::zeros(), Vector3::from(w.size_m) / 2.0)],
+        ShapeKind::Compound => w
+            .shape
+            .parts
+            .iter()
+            .filter(|p| p.role == PartRole::Body)
+            .map(|p| {
+                let c = Vector3::from(p.center_m);
+                match p.primitive {
+                    Primitive::Box => Piece::Box(c, Vector3::from(p.size_m.unwrap_or([0.0; 3])) / 2.0),
+                    Primitive::Cylinder => Piece::Cylinder(
+                        c,
+                        p.radius_m.unwrap_or(0.0),
+                        p.length_m.unwrap_or(0.0) / 2.0,
+                        p.axis.unwrap_or(Axis::Z),
+                    ),
+                }
+            })
+            .collect(),
+        ShapeKind::Mesh => Vec::new(),
+    };
+    let mut faces = Vec::new();
+    for piece in pieces {
+        match piece {
+            Piece::Box(c, he) => {
+                for a in 0..3 {
+                    let (b, d) = ((a + 1) % 3, (a + 2) % 3);
+                    for s in [-1.0, 1.0] {
+                        faces.push(Face {
+                            center: c + Vector3::ith(a, s * he[a]),
+                            normal: Vector3::ith(a, s),
+                            along: Vector3::ith(b, 1.0),
+                            extent_m: [2.0 * he[b], 2.0 * he[d]],
+                            disc: false,
+                        });
+                    }
+                }
+            }
+            Piece::Cylinder(c, r, h, axis) => {
+                let a = axis_vec(axis);
+                let along = if axis == Axis::X { Vector3::y() } else { Vector3::x() };
+                for s in [-1.0, 1.0] {
+                    faces.push(Face {
+                        center: c + a * (s * h),
+                        normal: a * s,
+                        along,
+                        extent_m: [2.0 * r, 2.0 * r],
+                        disc: true,
+                    });
+                }
+            }
+        }
+    }
+    faces
+}
+
+/// Why a candidate was dropped.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum Rejection {
+    /// The face's normal is tilted beyond what the cup seals.
+    FaceTilted,
+    /// The face is smaller than the cup plus margins.
+    FaceTooSmall,
+    /// Points of the cloud rise into the cup's or tool's path around the grasp point.
+    Crowded,
+    /// The straight approach or retreat would meet a tray wall.
+    TrayWall,
+    /// No joint solution within limits along the straight descent, or at the place pose.
+    Unreachable,
+}
+
+impl Rejection {
+    /// Short name for tables.
+    pub fn name(&self) -> &'static str {
+        match self {
+            Rejection::FaceTilted => "face tilted",
+            Rejection::FaceTooSmall => "face too small",
+            Rejection::Crowded => "crowded",
+            Rejection::TrayWall => "tray wall",
+            Rejection::Unreachable => "unreachable",
+        }
+    }
+}
+
+/// A feasible grasp with the motion it implies.
+#[derive(Debug, Clone, Serialize)]
+pub struct GraspCandidate {
+    /// Index of the detection.
+    pub detection: usize,
+    /// Which body face (index into [`body_faces`]).
+    pub face: usize,
+    /// The tool at the grasp: cup lip on the face.
+    #[serde(serialize_with = "crate::sensor::ser_pose")]
+    pub world_from_tool: Isometry3<f64>,
+    /// The tool above the grasp, where the straight descent starts and the retreat ends.
+    #[serde(serialize_with = "crate::sensor::ser_pose")]
+    pub world_from_tool_approach: Isometry3<f64>,
+    /// The tool when the part touches down in its slot.
+    #[serde(serialize_with = "crate::sensor::ser_pose")]
+    pub world_from_tool_place: Isometry3<f64>,
+    /// Joint positions at the approach pose [rad].
+    pub q_approach: [f64; 6],
+    /// Joint positions at the grasp [rad].
+    pub q_grasp: [f64; 6],
+    /// Joint positions at the place pose [rad].
+    pub q_place: [f64; 6],
+    /// Score components and total (higher is better).
+    pub score: Score,
+}
+
+/// How a candidate was ranked.
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct Score {
+    /// Face height in the pile (0 floor, 1 top of the pile) and how much of the part was visible.
+    pub exposure: f64,
+    /// Free radius around the grasp point in the cloud [m] (capped at 20 mm).
+    pub clearance_m: f64,
+    /// Expected grasp success (tilt, face margin, centre-of-mass offset, pose certainty), 0..1.
+    pub success: f64,
+    /// Estimated time of the place motion at full speed [s].
+    pub motion_s: f64,
+    /// exposure + clearance/20 mm + 2 success - motion time.
+    pub total: f64,
+}
+
+/// The selector's answer.
+#[derive(Debug, Clone, Serialize)]
+pub struct GraspPlan {
+    /// Feasible grasps, best first.
+    pub ranked: Vec<GraspCandidate>,
+    /// Dropped candidates: (detection, face, reason).
+    pub rejected: Vec<(usize, usize, Rejection)>,
+}
+
+impl GraspPlan {
+    /// The chosen grasp.
+    pub fn best(&self) -> Option<&GraspCandidate> {
+        self.ranked.first()
+    }
+
+    /// Rejections counted by reason.
+    pub fn rejected_counts(&self) -> BTreeMap<&'static str, usize> {
+        let mut m = BTreeMap::new();
+        for (_, _, r) in &self.rejected {
+            *m.entry(r.name()).or_insert(0) += 1;
+        }
+        m
+    }
+}
+
+/// The selector's fixed inputs: the cell, the arm, the workpiece.
+#[derive(Debug, Clone)]
+pub struct GraspSelector {
+    robot: RobotModel,
+    faces: Vec<Face>,
+    cup_radius_m: f64,
+    face_margin_m: f64,
+    max_tilt_rad: f64,
+    tool_radius_m: f64,
+    cup_length_m: f64,
+    tray: Isometry3<f64>,
+    tray_inner_half_m: [f64; 2],
+    rim_height_m: f64,
+    /// Height of the approach pose above the tray rim [m].
+    pub approach_above_rim_m: f64,
+    size_m: [f64; 3],
+    yaw_symmetry_rad: f64,
+    /// Cloud points within this of the face plane belong to it (noise) [m].
+    pub height_tolerance_m: f64,
+}
+
+/// Trapezoidal single-joint move time at top speed and acceleration [s].
+fn joint_move_s(d: f64, v: f64, a: f64) -> f64 {
+    let d = d.abs();
+    if d * a <= v * v {
+        2.0 * (d / a).sqrt()
+    } else {
+        d / v + v / a
+    }
+}
+
+impl GraspSelector {
+    /// The selector for `workpiece` in `scene` with `robot`.
+    pub fn new(scene: &Scene, robot: &RobotModel, workpiece: &Workpiece) -> Self {
+        let g = &scene.gripper;
+        let t = &scene.pick_tray;
+        GraspSelector {
+            robot: robot.clone(),
+            faces: body_faces(workpiece),
+            cup_radius_m: g.cup_diameter_m / 2.0,
+            face_margin_m: workpiece.grasp.face_margin_m,
+            max_tilt_rad: g.max_tilt_deg.to_radians(),
+            tool_radius_m: g.body_diameter_m / 2.0,
+            cup_length_m: (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0),
+            tray: t.world_from_tray(),
+            tray_inner_half_m: [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0],
+            rim_height_m: t.wall_height_m,
+            approach_above_rim_m: 0.05,
+            size_m: workpiece.size_m,
+            yaw_symmetry_rad: workpiece.grasp.yaw_symmetry_deg.to_radians(),
+            height_tolerance_m: 0.0015,
+        }
+    }
+
+    /// The faces the selector proposes grasps on.
+    pub fn faces(&self) -> &[Face] {
+        &self.faces
+    }
+
+    /// Estimated time of a joint move at top speed and half the specification acceleration [s].
+    pub fn motion_time_s(&self, a: &JointVector, b: &JointVector) -> f64 {
+        (0..6)
+            .map(|i| {
+                let j = &self.robot.joints[i];
+                joint_move_s(b[i] - a[i], j.max_vel_rad_s, 0.5 * j.max_accel_rad_s2)
+            })
+            .fold(0.0, f64::max)
+    }
+
+    /// Proposes, filters and ranks grasps on `detections`, to be placed at `world_from_slot`
+    /// (the part's upright pose in its slot), starting from joints `q_now`.
+    pub fn select(
+        &self,
+        detections: &[Detection],
+        height_map: &HeightMap,
+        world_from_slot: &Isometry3<f64>,
+        q_now: &JointVector,
+    ) -> GraspPlan {
+        let mut plan = GraspPlan {
+            ranked: Vec::new(),
+            rejected: Vec::new(),
+        };
+        let tray_from_world = self.tray.inverse();
+        let floor_z = self.tray.translation.vector.z;
+        let pile_top = height_map
+            .height_m
+            .iter()
+            .cloned()
+            .filter(|h| h.is_finite())
+            .fold(0.0, f64::max)
+            .max(1e-3);
+        let need = 2.0 * (self.cup_radius_m + self.face_margin_m);
+        for (di, det) in detections.iter().enumerate() {
+            for (fi, face) in self.faces.iter().enumerate() {
+                let n = det.world_from_part.rotation * face.normal;
+                let tilt = n.z.clamp(-1.0, 1.0).acos();
+                if tilt > self.max_tilt_rad {
+                    // Faces pointing sideways or down are not candidates at all; only count the
+                    // ones that face up, within 60 deg, but too steeply for the cup.
+                    if tilt < std::f64::consts::FRAC_PI_3 {
+                        plan.rejected.push((di, fi, Rejection::FaceTilted));
+                    }
+                    continue;
+                }
+                if face.extent_m[0].min(face.extent_m[1]) < need {
+                    plan.rejected.push((di, fi, Rejection::FaceTooSmall));
+                    continue;
+                }
+                let mut point = det.world_from_part * Point3::from(face.center);
+                let mut local = tray_from_world * point;
+                // The cup touches the highest surface the sensor measured under it: correct the
+                // recognised face height by it (within 5 mm; farther means another surface).
+                let measured = height_map.max_within(local.x, local.y, self.cup_radius_m);
+                if measured.is_finite() && (measured - local.z).abs() < 0.005 {
+                    point.z += measured - local.z;
+                    local.z = measured;
+                }
+                let face_h = local.z;
+                // Clearance from the cloud: nothing higher than the face (plus noise) under the
+                // cup, nothing higher than the cup's top under the tool body.
+                let cup_clear = height_map.max_within(local.x, local.y, self.cup_radius_m + 0.001);
+                let body_clear = height_map.max_within(local.x, local.y, self.tool_radius_m + 0.002);
+                if cup_clear > face_h + self.height_tolerance_m
+                    || body_clear > face_h + self.cup_length_m - self.height_tolerance_m
+                {
+                    plan.rejected.push((di, fi, Rejection::Crowded));
+                    continue;
+                }
+                let clearance = self.clearance_radius(height_map, local.x, local.y, face_h);
+                // Tray walls: the tool's axis from the face up past the rim, at each height its
+                // radius (cup near the lip, body above) inside the inner walls.
+                if !self.clear_of_walls(&point.coords, &(-n)) {
+                    plan.rejected.push((di, fi, Rejection::TrayWall));
+                    continue;
+                }
+                match self.best_yaw(det, face, &point.coords, &n, world_from_slot, q_now) {
+                    Some(mut c) => {
+                        c.detection = di;
+                        c.face = fi;
+                        let com = det.world_from_part.translation.vector;
+                        let lateral = {
+                            let r = com - point.coords;
+                            (r - n * r.dot(&n)).norm()
+                        };
+                        let margin = ((face.extent_m[0].min(face.extent_m[1]) - need) / need).clamp(0.0, 1.0);
+                        let success = tilt.cos()
+                            * (0.5 + 0.5 * margin)
+                            * (1.0 / (1.0 + 20.0 * lateral))
+                            * (0.5 + 0.5 * det.visible_fraction);
+                        let exposure =
+                            ((point.z - floor_z) / pile_top).clamp(0.0, 1.0) * 0.5 + 0.5 * det.visible_fraction;
+                        let motion = self.motion_time_s(&JointVector::from(c.q_grasp), &JointVector::from(c.q_place));
+                        let cl = clearance.min(0.02);
+                        c.score = Score {
+                            exposure,
+                            clearance_m: cl,
+                            success,
+                            motion_s: motion,
+                            total: exposure + cl / 0.02 + 2.0 * success - motion,
+                        };
+                        plan.ranked.push(c);
+                    }
+                    None => plan.rejected.push((di, fi, Rejection::Unreachable)),
+                }
+            }
+        }
+        plan.ranked.sort_by(|a, b| {
+            b.score
+                .total
+                .total_cmp(&a.score.total)
+                .then(a.detection.cmp(&b.detection))
+        });
+        plan
+    }
+
+    /// Free radius around (x, y) in the tray frame: distance to the nearest cell higher than the
+    /// face (plus tolerance), up to 20 mm [m].
+    fn clearance_radius(&self, hm: &HeightMap, x: f64, y: f64, face_h: f64) -> f64 {
+        let mut r = self.cup_radius_m + 0.001;
+        while r < 0.02 {
+            let h = hm.max_within(x, y, r);
+            if h > face_h + self.height_tolerance_m {
+                return r;
+            }
+            r += hm.cell_m;
+        }
+        0.02
+    }
+
+    fn clear_of_walls(&self, point: &Vector3<f64>, axis: &Vector3<f64>) -> bool {
+        let tray_from_world = self.tray.inverse();
+        let p = tray_from_world * Point3::from(*point);
+        let a = tray_from_world.rotation * axis;
+        // Walk up the tool axis (against `a`) from the lip to 1 cm above the rim.
+        let mut s = 0.0;
+        while s < 0.25 {
+            let q = p.coords - a * s;
+            if q.z > self.rim_height_m + 0.01 {
+                return true;
+            }
+            let radius = if s < self.cup_length_m {
+                self.cup_radius_m
+            } else {
+                self.tool_radius_m
+            };
+            if q.x.abs() + radius > self.tray_inner_half_m[0] || q.y.abs() + radius > self.tray_inner_half_m[1] {
+                return false;
+            }
+            s += 0.002;
+        }
+        true
+    }
+
+    /// For the four tool yaws about the face normal, the reachable one with the quickest place
+    /// motion (ties: the first). The descent is checked for a continuous joint path.
+    fn best_yaw(
+        &self,
+        det: &Detection,
+        face: &Face,
+        point: &Vector3<f64>,
+        n: &Vector3<f64>,
+        world_from_slot: &Isometry3<f64>,
+        q_now: &JointVector,
+    ) -> Option<GraspCandidate> {
+        let z_tool = -n;
+        let along_world = det.world_from_part.rotation * face.along;
+        let x0 = (along_world - z_tool * along_world.dot(&z_tool)).try_normalize(1e-9)?;
+        // The part in its slot: the grasped face up, turned to the slot's yaw.
+        let face_up = UnitQuaternion::rotation_between(&face.normal, &Vector3::z())
+            .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+        let height_along_normal = {
+            let k = face.normal.iamax();
+            self.size_m[k]
+        };
+        let slot_rot = world_from_slot.rotation * face_up;
+        let floor_z = world_from_slot.translation.z - self.size_m[2] / 2.0;
+        let part_center_in_slot = Vector3::new(
+            world_from_slot.translation.x,
+            world_from_slot.translation.y,
+            floor_z + height_along_normal / 2.0 + 0.0005,
+        );
+        let mut best: Option<(f64, GraspCandidate)> = None;
+        for k in 0..4 {
+            let yaw = k as f64 * std::f64::consts::FRAC_PI_2;
+            let x = UnitQuaternion::from_axis_angle(&Unit::new_normalize(z_tool), yaw) * x0;
+            let y = z_tool.cross(&x);
+            let rot = UnitQuaternion::from_matrix(&nalgebra::Matrix3::from_columns(&[x, y, z_tool]));
+            let grasp = Isometry3::from_parts(Translation3::from(*point), rot);
+            let rise = (self.tray.translation.z + self.rim_height_m + self.approach_above_rim_m - point.z).max(0.02)
+                / z_tool.z.abs().max(0.3);
+            let approach = Isometry3::from_parts(Translation3::from(point - z_tool * rise), rot);
+            let qa = self.robot.ik_tool_nearest(&approach, q_now).ok()?.q;
+            // The straight descent: a continuous joint path in 6 steps.
+            let mut q = qa;
+            let mut ok = true;
+            for s in 1..=6 {
+                let pose = approach.lerp_slerp(&grasp, s as f64 / 6.0);
+                match self.robot.ik_tool_nearest(&pose, &q) {
+                    Ok(sol) if (sol.q - q).amax() < 0.3 => q = sol.q,
+                    _ => {
+                        ok = false;
+                        break;
+                    }
+                }
+            }
+            if !ok {
+                continue;
+            }
+            let qg = q;
+            // Where the tool is when the part sits in its slot.
+            let part_from_tool = det.world_from_part.inverse() * grasp;
+            let part_in_slot = Isometry3::from_parts(Translation3::from(part_center_in_slot), slot_rot);
+            // The part keeps its pose relative to the tool; its yaw in the slot may differ by
+            // any multiple of its symmetry: pick the tool pose among those nearest in J6.
+            let mut place_best: Option<(f64, Isometry3<f64>, JointVector)> = None;
+            let sym = if self.yaw_symmetry_rad > 0.0 {
+                self.yaw_symmetry_rad
+            } else {
+                std::f64::consts::FRAC_PI_2
+            };
+            let turns = (std::f64::consts::TAU / sym).round().max(1.0) as usize;
+            for t in 0..turns {
+                let spin = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), t as f64 * sym);
+                let placed = Isometry3::from_parts(part_in_slot.translation, spin * part_in_slot.rotation);
+                let tool = placed * part_from_tool;
+                if let Ok(sol) = self.robot.ik_tool_nearest(&tool, &qg) {
+                    let time = self.motion_time_s(&qg, &sol.q);
+                    if place_best.as_ref().is_none_or(|(bt, _, _)| time < *bt) {
+                        place_best = Some((time, tool, sol.q));
+                    }
+                }
+            }
+            let (time, tool_place, qp) = place_best?;
+            if best.as_ref().is_none_or(|(bt, _)| time < *bt) {
+                best = Some((
+                    time,
+                    GraspCandidate {
+                        detection: 0,
+                        face: 0,
+                        world_from_tool: grasp,
+                        world_from_tool_approach: approach,
+                        world_from_tool_place: tool_place,
+                        q_approach: qa.into(),
+                        q_grasp: qg.into(),
+                        q_place: qp.into(),
+                        score: Score {
+                            exposure: 0.0,
+                            clearance_m: 0.0,
+                            success: 0.0,
+                            motion_s: time,
+                            total: 0.0,
+                        },
+                    },
+                ));
+            }
+        }
+        best.map(|(_, c)| c)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::LoadedWorkpiece;
+
+    #[test]
+    fn faces_of_a_box_and_of_a_capacitor() {
+        let b = LoadedWorkpiece::resolve("B").unwrap().workpiece;
+        let f = body_faces(&b);
+        assert_eq!(f.len(), 6);
+        assert!(
+            f.iter()
+                .any(|f| f.normal == Vector3::z() && (f.center.z - 0.01).abs() < 1e-12 && f.extent_m == [0.03, 0.03])
+        );
+        let d = LoadedWorkpiece::resolve("D").unwrap().workpiece;
+        let caps = body_faces(&d);
+        assert_eq!(caps.len(), 2, "a can has two flat caps; its leads carry none");
+        assert!(caps.iter().all(|c| c.disc && (c.extent_m[0] - 0.01).abs() < 1e-12));
+    }
+
+    #[test]
+    fn trapezoid_times() {
+        assert!((joint_move_s(1.0, 1.0, 1.0) - 2.0).abs() < 1e-12);
+        assert!((joint_move_s(0.25, 1.0, 1.0) - 1.0).abs() < 1e-12);
+    }
+}
