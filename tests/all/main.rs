@@ -3,6 +3,7 @@
 mod cli_bad_input;
 mod cli_pile;
 mod cli_robot;
+mod cli_sense;
 mod physics;
 mod sensing;
 mod support;

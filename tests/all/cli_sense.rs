@@ -1,0 +1,80 @@
+//! `binpick sense`: the run folder's depth image, point cloud and report.
+
+use crate::support::{Workspace, binpick_in, stderr, stdout};
+
+#[test]
+fn sense_writes_depth_png_cloud_ply_and_a_report() {
+    let ws = Workspace::new();
+    let out = ws.path("out");
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "sense",
+            "--workpiece",
+            "B",
+            "--seed",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert!(v["recognition"]["top_layer_recall"].as_f64().unwrap() >= 0.9);
+    assert!(v["grasp"]["chosen"].is_object(), "no grasp chosen: {v}");
+    let dir = out.join("sense-B-seed2");
+    // 16-bit PNG in millimetres: the tray floor is about 1000 mm from the camera.
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(dir.join("depth.png")).unwrap(),
+    ));
+    let mut reader = decoder.read_info().unwrap();
+    let info = reader.info().clone();
+    assert_eq!(
+        (info.width, info.height, info.bit_depth),
+        (320, 256, png::BitDepth::Sixteen)
+    );
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut buf).unwrap();
+    let centre = (128 * 320 + 160) * 2;
+    let mm = u16::from_be_bytes([buf[centre], buf[centre + 1]]);
+    assert!((950..=1001).contains(&mm), "depth at the image centre {mm} mm");
+    // PLY header and size agree.
+    let ply = std::fs::read(dir.join("cloud.ply")).unwrap();
+    let header_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
+    let header = String::from_utf8_lossy(&ply[..header_end]);
+    let n: usize = header
+        .lines()
+        .find_map(|l| l.strip_prefix("element vertex "))
+        .unwrap()
+        .parse()
+        .unwrap();
+    assert_eq!(ply.len() - header_end, n * 12);
+    assert_eq!(n as u64, v["capture"]["valid_px"].as_u64().unwrap());
+    assert!(dir.join("sense.json").is_file() && dir.join("scene.toml").is_file());
+}
+
+#[test]
+fn sense_rejects_bad_input_before_writing() {
+    let ws = Workspace::new();
+    let out = ws.path("out");
+    ws.edit(
+        "workpieces/E.toml",
+        "workpieces/tiny.toml",
+        "size_m = [0.010, 0.005, 0.010]",
+        "size_m = [0.004, 0.005, 0.004]",
+    );
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "sense",
+            "--workpiece",
+            "workpieces/tiny.toml",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("no face the suction cup fits on"));
+    assert!(!out.exists());
+}
