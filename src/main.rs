@@ -758,18 +758,28 @@ fn sense(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>,
         .build_pile(&binpick::physics::pile::PileOptions::new(count, seed))
         .context("building the pile")?;
     let mut sensor = Sensor::new(&loaded.scene.sensor, &world, seed).context("the sensor's pose is degenerate")?;
-    let t0 = std::time::Instant::now();
-    let mut job = sensor
-        .trigger(&world)
-        .map_err(|p| anyhow::anyhow!("capture refused: {p:?}"))?;
-    let capture_ms = t0.elapsed().as_secs_f64() * 1e3;
-    while world.time_s + 1e-9 < job.ready_s {
-        world.step().context("waiting for the recognition result")?;
-        sensor.watch(&mut job, &world);
-    }
-    let detections = sensor
-        .result(&job, &world)
-        .ok_or_else(|| anyhow::anyhow!("capture spoiled: {:?}", job.spoiled))?;
+    // Trigger; a spoiled exposure is repeated (up to five times) once the scene is still again.
+    let mut capture_ms;
+    let mut spoiled = Vec::new();
+    let (job, detections) = loop {
+        let t0 = std::time::Instant::now();
+        let mut job = sensor
+            .trigger(&world)
+            .map_err(|p| anyhow::anyhow!("capture refused: {p:?}"))?;
+        capture_ms = t0.elapsed().as_secs_f64() * 1e3;
+        while world.time_s + 1e-9 < job.ready_s && job.spoiled.is_none() {
+            world.step().context("waiting for the recognition result")?;
+            sensor.watch(&mut job, &world);
+        }
+        match sensor.result(&job, &world) {
+            Some(d) => break (job, d),
+            None if spoiled.len() < 5 => {
+                spoiled.push(job.spoiled.clone());
+                world.run_for(0.2).context("waiting for the scene to settle")?;
+            }
+            None => anyhow::bail!("six captures in a row were spoiled: {spoiled:?}"),
+        }
+    };
     let report = binpick::sensor::evaluate(&world, &detections);
     let t1 = std::time::Instant::now();
     let hm = HeightMap::from_capture(&job.capture, &world, 0.002);
@@ -789,7 +799,7 @@ fn sense(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>,
     let file = json!({
         "binpick_version": env!("CARGO_PKG_VERSION"), "workpiece": wp.workpiece.name, "seed": seed, "count": count,
         "capture": {"trigger_s": job.capture.trigger_s, "ready_s": job.ready_s, "width_px": job.capture.width,
-                    "height_px": job.capture.height, "valid_px": job.capture.valid_count()},
+                    "height_px": job.capture.height, "valid_px": job.capture.valid_count(), "spoiled_before": &spoiled},
         "recognition": &report, "detections": &detections,
         "grasp": {"chosen": plan.best(), "ranked": plan.ranked.len(), "rejected": plan.rejected_counts()},
     });
@@ -808,11 +818,12 @@ fn sense(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>,
         wp.workpiece.name, job.capture.trigger_s, job.ready_s
     );
     println!(
-        "  capture          {} x {} px, {} returns, {:.1} ms wall",
+        "  capture          {} x {} px, {} returns, {:.1} ms wall; {} spoiled exposure(s) repeated",
         job.capture.width,
         job.capture.height,
         job.capture.valid_count(),
-        capture_ms
+        capture_ms,
+        spoiled.len()
     );
     println!(
         "  recognition      {} detected of {} in the tray; top layer {} / {} detected (recall {:.1} %)",

@@ -280,8 +280,8 @@ pub enum CaptureProblem {
     ArmEnteredDuringExposure(String),
     /// A part moved during exposure.
     SceneMoving {
-        /// Fastest part speed [m/s].
-        speed_m_s: f64,
+        /// How far the part that moved most has moved since the trigger [m].
+        moved_m: f64,
     },
 }
 
@@ -296,10 +296,14 @@ pub struct CaptureJob {
     pub ready_s: f64,
     /// Set if the exposure was spoiled.
     pub spoiled: Option<CaptureProblem>,
+    /// Part positions at the trigger, to tell whether the scene stays still [m].
+    positions_at_trigger: Vec<Vector3<f64>>,
 }
 
-/// Parts moving faster than this spoil an exposure [m/s].
-pub const STILL_SPEED_M_S: f64 = 0.005;
+/// A part moving more than this during the exposure spoils it [m]: a third of a pixel at the
+/// tray floor. Motion, not velocity: a part resting on a flat face can keep a small solver
+/// velocity that moves nothing.
+pub const STILL_MOTION_M: f64 = 0.0005;
 
 /// The sensor: camera, frustum, timing, noise and recognition settings.
 #[derive(Clone)]
@@ -356,6 +360,9 @@ impl Sensor {
             ready_s: world.time_s + self.latency_s,
             capture,
             spoiled: None,
+            positions_at_trigger: (0..world.parts.len())
+                .map(|i| world.part_pose(i).translation.vector)
+                .collect(),
         })
     }
 
@@ -368,11 +375,14 @@ impl Sensor {
         let problem = if let Some(link) = self.frustum.arm_inside(world) {
             Some(CaptureProblem::ArmEnteredDuringExposure(link))
         } else {
-            let fastest = (0..world.parts.len())
-                .filter(|&i| world.parts[i].state == PartState::Free)
-                .map(|i| world.part_speed(i).0)
+            let moved = job
+                .positions_at_trigger
+                .iter()
+                .enumerate()
+                .filter(|(i, _)| world.parts[*i].state == PartState::Free)
+                .map(|(i, p)| (world.part_pose(i).translation.vector - p).norm())
                 .fold(0.0, f64::max);
-            (fastest > STILL_SPEED_M_S).then_some(CaptureProblem::SceneMoving { speed_m_s: fastest })
+            (moved > STILL_MOTION_M).then_some(CaptureProblem::SceneMoving { moved_m: moved })
         };
         if problem.is_some() {
             self.spoiled += 1;
