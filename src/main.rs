@@ -45,47 +45,9 @@ enum Command {
         json: bool,
     },
     /// Build and settle a random pile of one workpiece type in the pick tray.
-    Pile {
-        /// Workpiece: A ... F (embedded) or a path to a workpiece file.
-        #[arg(long)]
-        workpiece: String,
-        /// Parts to drop (default: the workpiece's pile_count).
-        #[arg(long)]
-        count: Option<usize>,
-        /// Run seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Scene file (default: the embedded default cell).
-        #[arg(long)]
-        scene: Option<PathBuf>,
-        /// Folder the run folder is written into.
-        #[arg(long, default_value = "runs")]
-        out: PathBuf,
-        /// Machine-readable JSON output.
-        #[arg(long)]
-        json: bool,
-    },
+    Pile(PileArgs),
     /// Build a pile, take a depth capture, recognise the parts and select a grasp.
-    Sense {
-        /// Workpiece: A ... F (embedded) or a path to a workpiece file.
-        #[arg(long)]
-        workpiece: String,
-        /// Parts to drop (default: the workpiece's pile_count).
-        #[arg(long)]
-        count: Option<usize>,
-        /// Run seed.
-        #[arg(long, default_value_t = 1)]
-        seed: u64,
-        /// Scene file (default: the embedded default cell).
-        #[arg(long)]
-        scene: Option<PathBuf>,
-        /// Folder the run folder is written into.
-        #[arg(long, default_value = "runs")]
-        out: PathBuf,
-        /// Machine-readable JSON output.
-        #[arg(long)]
-        json: bool,
-    },
+    Sense(PileArgs),
     /// Benchmarks: our code beside a baseline doing the same work.
     Bench {
         #[command(subcommand)]
@@ -123,6 +85,29 @@ enum RobotCommand {
     },
     /// Joint torques by inverse dynamics (gravity, inertia, Coriolis, armature, friction).
     Torque(TorqueArgs),
+}
+
+/// A pile of one workpiece in a cell, and where its run folder goes.
+#[derive(Args)]
+struct PileArgs {
+    /// Workpiece: A ... F (embedded) or a path to a workpiece file.
+    #[arg(long)]
+    workpiece: String,
+    /// Parts to drop (default: the workpiece's pile_count).
+    #[arg(long)]
+    count: Option<usize>,
+    /// Run seed.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Scene file (default: the embedded default cell).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Folder the run folder is written into.
+    #[arg(long, default_value = "runs")]
+    out: PathBuf,
+    /// Machine-readable JSON output.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Args)]
@@ -232,22 +217,8 @@ fn run(cli: Cli) -> Result<()> {
                 RobotCommand::Torque(args) => robot_torque(&loaded, &robot, &args, json),
             }
         }
-        Command::Sense {
-            workpiece,
-            count,
-            seed,
-            scene,
-            out,
-            json,
-        } => sense(&workpiece, count, seed, scene.as_deref(), &out, json),
-        Command::Pile {
-            workpiece,
-            count,
-            seed,
-            scene,
-            out,
-            json,
-        } => pile(&workpiece, count, seed, scene.as_deref(), &out, json),
+        Command::Sense(a) => sense(&a),
+        Command::Pile(a) => pile(&a),
         Command::Bench {
             command: BenchCommand::Physics { runs, json },
         } => bench_physics(runs, json),
@@ -652,17 +623,47 @@ fn load_cell(scene: Option<&Path>, workpiece: &str) -> Result<(LoadedScene, Load
     Ok((loaded, wp, robot))
 }
 
-fn pile(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>, out: &Path, json: bool) -> Result<()> {
-    let (loaded, wp, robot) = load_cell(scene, workpiece)?;
-    let count = count.unwrap_or(wp.workpiece.pile_count as usize);
+/// A cell with a settled pile, as `pile` and `sense` start from.
+struct PiledCell {
+    loaded: LoadedScene,
+    wp: LoadedWorkpiece,
+    robot: RobotModel,
+    world: binpick::physics::World,
+    report: binpick::physics::pile::PileReport,
+    count: usize,
+}
+
+/// Loads and checks the cell and workpiece, builds the world and settles the pile.
+fn piled_cell(a: &PileArgs) -> Result<PiledCell> {
+    let (loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
+    let count = a.count.unwrap_or(wp.workpiece.pile_count as usize);
     if count == 0 || count > 1000 {
         return Err(InputError(format!("--count must be within [1, 1000], got {count}")).into());
     }
     let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
     let mut world = binpick::physics::World::new(&loaded.scene, &robot, shape);
     let report = world
-        .build_pile(&binpick::physics::pile::PileOptions::new(count, seed))
+        .build_pile(&binpick::physics::pile::PileOptions::new(count, a.seed))
         .context("building the pile")?;
+    Ok(PiledCell {
+        loaded,
+        wp,
+        robot,
+        world,
+        report,
+        count,
+    })
+}
+
+fn pile(a: &PileArgs) -> Result<()> {
+    let PiledCell {
+        loaded,
+        wp,
+        report,
+        count,
+        ..
+    } = piled_cell(a)?;
+    let (seed, out, json) = (a.seed, &a.out, a.json);
     let name = format!("pile-{}-seed{seed}", wp.workpiece.name);
     let run = binpick::report::RunDir::create(out, &name)?;
     run.write_inputs(&loaded, Some(&wp))?;
@@ -745,18 +746,17 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
     Ok(())
 }
 
-fn sense(workpiece: &str, count: Option<usize>, seed: u64, scene: Option<&Path>, out: &Path, json: bool) -> Result<()> {
+fn sense(a: &PileArgs) -> Result<()> {
     use binpick::sensor::{HeightMap, Sensor};
-    let (loaded, wp, robot) = load_cell(scene, workpiece)?;
-    let count = count.unwrap_or(wp.workpiece.pile_count as usize);
-    if count == 0 || count > 1000 {
-        return Err(InputError(format!("--count must be within [1, 1000], got {count}")).into());
-    }
-    let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
-    let mut world = binpick::physics::World::new(&loaded.scene, &robot, shape);
-    world
-        .build_pile(&binpick::physics::pile::PileOptions::new(count, seed))
-        .context("building the pile")?;
+    let PiledCell {
+        loaded,
+        wp,
+        robot,
+        mut world,
+        count,
+        ..
+    } = piled_cell(a)?;
+    let (seed, out, json) = (a.seed, &a.out, a.json);
     let mut sensor = Sensor::new(&loaded.scene.sensor, &world, seed).context("the sensor's pose is degenerate")?;
     // Trigger; a spoiled exposure is repeated (up to five times) once the scene is still again.
     let mut capture_ms;

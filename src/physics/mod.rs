@@ -810,15 +810,7 @@ impl World {
             &self.colliders,
             QueryFilter::default().predicate(&pred),
         );
-        let ray = Ray::new(sim_point(origin), sim_dir(dir));
-        qp.cast_ray_and_get_normal(&ray, sim(max_m), true).and_then(|(h, hit)| {
-            let tag = self.tag_of(h)?;
-            Some((
-                tag,
-                hit.time_of_impact as f64 / SIM_UNITS_PER_M,
-                dir_from_sim(hit.normal),
-            ))
-        })
+        self.cast_ray_with(&qp, origin, dir, max_m)
     }
 
     /// Deepest overlap between two parts, or a part and a tray [m], with the bodies involved.
