@@ -439,3 +439,282 @@ pub fn sense_bench(
         targets_ms: (20.0, 5.0),
     })
 }
+
+/// One planning benchmark case: an environment and a start and goal.
+#[derive(Debug, Clone)]
+pub struct PlannerCase {
+    /// Name.
+    pub name: String,
+    /// Collision model (robot spheres and environment).
+    pub model: crate::planning::CollisionModel,
+    /// Start configuration.
+    pub start: JointVector,
+    /// Goal configuration.
+    pub goal: JointVector,
+}
+
+fn table_only(scene: &crate::config::Scene) -> crate::planning::Environment {
+    let mut env = crate::planning::Environment::from_scene(scene);
+    env.boxes.truncate(1);
+    env
+}
+
+fn bx(name: &str, c: [f64; 3], size: [f64; 3]) -> crate::planning::EnvBox {
+    crate::planning::EnvBox {
+        name: name.into(),
+        world_from_box: nalgebra::Isometry3::translation(c[0], c[1], c[2]),
+        half_m: nalgebra::Vector3::from(size) / 2.0,
+    }
+}
+
+/// An open container: floor and four walls around (x, y), inner size `inner`, wall height `h`.
+fn container(name: &str, x: f64, y: f64, inner: f64, h: f64) -> Vec<crate::planning::EnvBox> {
+    let t = 0.01;
+    let o = inner / 2.0 + t / 2.0;
+    vec![
+        bx(
+            &format!("{name} floor"),
+            [x, y, t / 2.0],
+            [inner + 2.0 * t, inner + 2.0 * t, t],
+        ),
+        bx(&format!("{name} wall +x"), [x + o, y, h / 2.0], [t, inner + 2.0 * t, h]),
+        bx(&format!("{name} wall -x"), [x - o, y, h / 2.0], [t, inner + 2.0 * t, h]),
+        bx(&format!("{name} wall +y"), [x, y + o, h / 2.0], [inner, t, h]),
+        bx(&format!("{name} wall -y"), [x, y - o, h / 2.0], [inner, t, h]),
+    ]
+}
+
+/// The reference system's three planning cases (its Fig. 5), rebuilt from the text: obstacles
+/// between start and goal that block the motion of J1 (a wall between two work points), of J2
+/// (a bar the arm must pass over to reach beyond it), and of J3 (the hand inside one container
+/// going into another).
+pub fn fig5_cases(scene: &crate::config::Scene, robot: &RobotModel) -> Result<Vec<PlannerCase>, String> {
+    use crate::planning::{CollisionModel, RobotSpheres};
+    use crate::robot::tool_down_pose;
+    let spheres = RobotSpheres::new(robot, scene, None);
+    let home = JointVector::from(scene.robot.home_rad());
+    let ik = |p: [f64; 3]| -> Result<JointVector, String> {
+        robot
+            .ik_tool_nearest(&tool_down_pose(nalgebra::Vector3::from(p), 0.0), &home)
+            .map(|s| s.q)
+            .map_err(|e| format!("case pose {p:?}: {e}"))
+    };
+    let mut cases = Vec::new();
+    let mut env = table_only(scene);
+    env.boxes.push(bx("wall", [0.52, 0.0, 0.20], [0.24, 0.03, 0.40]));
+    cases.push(PlannerCase {
+        name: "J1 blocked: wall between two work points".into(),
+        model: CollisionModel::new(robot, spheres.clone(), env),
+        start: ik([0.45, 0.28, 0.06])?,
+        goal: ik([0.45, -0.28, 0.06])?,
+    });
+    let mut env = table_only(scene);
+    env.boxes.push(bx("bar", [0.45, 0.0, 0.25], [0.04, 0.70, 0.04]));
+    cases.push(PlannerCase {
+        name: "J2 blocked: reach over a bar".into(),
+        model: CollisionModel::new(robot, spheres.clone(), env),
+        start: ik([0.32, 0.0, 0.06])?,
+        goal: ik([0.60, 0.0, 0.06])?,
+    });
+    let mut env = table_only(scene);
+    env.boxes.extend(container("container 1", 0.40, 0.26, 0.12, 0.12));
+    env.boxes.extend(container("container 2", 0.40, -0.26, 0.12, 0.12));
+    cases.push(PlannerCase {
+        name: "J3 blocked: out of one container into another".into(),
+        model: CollisionModel::new(robot, spheres, env),
+        start: ik([0.40, 0.26, 0.03])?,
+        goal: ik([0.40, -0.26, 0.03])?,
+    });
+    Ok(cases)
+}
+
+/// Statistics of one planner on one set of queries.
+#[derive(Debug, Clone, Serialize)]
+pub struct PlannerRow {
+    /// Case or set name.
+    pub case: String,
+    /// Algorithm.
+    pub algorithm: crate::planning::Algorithm,
+    /// Queries run.
+    pub trials: usize,
+    /// Fraction solved.
+    pub success: f64,
+    /// Mean, p95 and max planning time of the solved queries [ms].
+    pub time_ms: (f64, f64, f64),
+    /// Mean samples per plan.
+    pub samples_mean: f64,
+    /// Mean time per clearance (collision) check [us].
+    pub us_per_check: f64,
+    /// Mean time per sample [ms] (0 where no sample was needed).
+    pub ms_per_sample: f64,
+    /// Failures by reason.
+    pub failures: Vec<String>,
+}
+
+fn planner_row(
+    case: &str,
+    algorithm: crate::planning::Algorithm,
+    results: &[Result<crate::planning::Plan, crate::planning::PlanError>],
+) -> PlannerRow {
+    let ok: Vec<&crate::planning::Plan> = results.iter().filter_map(|r| r.as_ref().ok()).collect();
+    let mut times: Vec<f64> = ok.iter().map(|p| p.time_s * 1e3).collect();
+    times.sort_by(f64::total_cmp);
+    let n = times.len().max(1) as f64;
+    let mean = times.iter().sum::<f64>() / n;
+    let p95 = times
+        .get(((times.len() as f64 * 0.95).ceil() as usize).saturating_sub(1))
+        .copied()
+        .unwrap_or(0.0);
+    let max = times.last().copied().unwrap_or(0.0);
+    let checks: usize = ok.iter().map(|p| p.stats.clearance_checks).sum();
+    let samples: usize = ok.iter().map(|p| p.stats.samples).sum();
+    let total_ms: f64 = times.iter().sum();
+    PlannerRow {
+        case: case.into(),
+        algorithm,
+        trials: results.len(),
+        success: ok.len() as f64 / results.len().max(1) as f64,
+        time_ms: (mean, p95, max),
+        samples_mean: samples as f64 / n,
+        us_per_check: if checks > 0 {
+            total_ms * 1e3 / checks as f64
+        } else {
+            0.0
+        },
+        ms_per_sample: if samples > 0 { total_ms / samples as f64 } else { 0.0 },
+        failures: results
+            .iter()
+            .filter_map(|r| r.as_ref().err().map(|e| e.to_string()))
+            .take(3)
+            .collect(),
+    }
+}
+
+/// Runs the three Fig. 5 cases for `trials` seeds each with ours and the baselines (baselines
+/// get `baseline_trials`), and the bin-picking query set.
+pub fn planner_bench(
+    scene: &crate::config::LoadedScene,
+    robot: &RobotModel,
+    workpieces: &[crate::config::LoadedWorkpiece],
+    trials: usize,
+    baseline_trials: usize,
+    seed: u64,
+) -> Result<Vec<PlannerRow>, Box<dyn std::error::Error + Send + Sync>> {
+    use crate::planning::{Algorithm, PlanOptions};
+    let mut rows = Vec::new();
+    for case in fig5_cases(&scene.scene, robot)? {
+        for (alg, n) in [
+            (Algorithm::Ours, trials),
+            (Algorithm::RrtConnect, baseline_trials),
+            (Algorithm::Rrt, baseline_trials),
+        ] {
+            let opts = PlanOptions {
+                algorithm: alg,
+                ..PlanOptions::default()
+            };
+            let results: Vec<_> = (0..n)
+                .map(|t| {
+                    let mut rng = crate::rng::stream(seed + t as u64, "planner");
+                    case.model.plan(&case.start, &case.goal, &opts, &mut rng)
+                })
+                .collect();
+            rows.push(planner_row(&case.name, alg, &results));
+        }
+    }
+    let queries = binpicking_queries(scene, robot, workpieces, 200)?;
+    for (alg, n) in [
+        (Algorithm::Ours, queries.len()),
+        (Algorithm::RrtConnect, baseline_trials.min(queries.len())),
+    ] {
+        let opts = PlanOptions {
+            algorithm: alg,
+            ..PlanOptions::default()
+        };
+        let results: Vec<_> = queries
+            .iter()
+            .take(n)
+            .enumerate()
+            .map(|(k, q)| {
+                let mut rng = crate::rng::stream(seed + k as u64, "planner");
+                q.model.plan(&q.start, &q.goal, &opts, &mut rng)
+            })
+            .collect();
+        rows.push(planner_row(
+            "bin picking: place <-> pre-grasp over piles of A..F",
+            alg,
+            &results,
+        ));
+    }
+    Ok(rows)
+}
+
+/// Bin-picking queries: from the pose above the place slot to the pre-grasp pose of the best
+/// grasps on settled piles of each workpiece (environment: the cell and the pile as seen), and
+/// back with the part held; up to `n` in all.
+pub fn binpicking_queries(
+    scene: &crate::config::LoadedScene,
+    robot: &RobotModel,
+    workpieces: &[crate::config::LoadedWorkpiece],
+    n: usize,
+) -> Result<Vec<PlannerCase>, Box<dyn std::error::Error + Send + Sync>> {
+    use crate::physics::{PartShape, World, pile::PileOptions};
+    use crate::planning::{CollisionModel, Environment, PileColumns, RobotSpheres};
+    use crate::sensor::{HeightMap, Sensor};
+    let mut out = Vec::new();
+    let per_pile = 6;
+    let mut seed = 1;
+    while out.len() < n && seed < 50 {
+        for wp in workpieces {
+            let shape = PartShape::build(&wp.workpiece, &wp.source)?;
+            let mut w = World::new(&scene.scene, robot, shape.clone());
+            w.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed))?;
+            let sensor = Sensor::new(&scene.scene.sensor, &w, seed).ok_or("degenerate sensor")?;
+            let c = crate::sensor::capture(&w, &sensor.camera, seed, 0);
+            let det = sensor.recognize(&w, &c);
+            let hm = HeightMap::from_capture(&c, &w, 0.002);
+            let slots = scene.scene.world_from_slots(&wp.workpiece);
+            let plan = crate::grasp::GraspSelector::new(&scene.scene, robot, &wp.workpiece).select(
+                &det,
+                &hm,
+                &slots[0],
+                &w.joints(),
+            );
+            let empty = RobotSpheres::new(robot, &scene.scene, None);
+            for g in plan.ranked.iter().take(per_pile / 2) {
+                let tool_from_part = g.world_from_tool.inverse() * det[g.detection].world_from_part;
+                let held = RobotSpheres::new(robot, &scene.scene, Some((tool_from_part, shape.half_extents_m)));
+                let local = w.pick_tray.world_from_tray.inverse()
+                    * nalgebra::Point3::from(g.world_from_tool.translation.vector);
+                let pile = PileColumns::new(&hm, 5, Some((local.x, local.y, 0.02)));
+                let mut env = Environment::from_scene(&scene.scene);
+                env.pile = Some(pile);
+                let q_place = JointVector::from(g.q_place);
+                let above_place = nalgebra::Isometry3::from_parts(
+                    nalgebra::Translation3::from(
+                        g.world_from_tool_place.translation.vector + nalgebra::Vector3::z() * 0.05,
+                    ),
+                    g.world_from_tool_place.rotation,
+                );
+                let Ok(pre_place) = robot.ik_tool_nearest(&above_place, &q_place) else {
+                    continue;
+                };
+                let q_approach = JointVector::from(g.q_approach);
+                out.push(PlannerCase {
+                    name: format!("{} seed {seed}: place -> pre-grasp", wp.workpiece.name),
+                    model: CollisionModel::new(robot, empty.clone(), env.clone()),
+                    start: pre_place.q,
+                    goal: q_approach,
+                });
+                out.push(PlannerCase {
+                    name: format!("{} seed {seed}: pre-grasp -> place, holding", wp.workpiece.name),
+                    model: CollisionModel::new(robot, held, env),
+                    start: q_approach,
+                    goal: pre_place.q,
+                });
+            }
+        }
+        seed += 1;
+    }
+    out.truncate(n);
+    Ok(out)
+}

@@ -131,6 +131,22 @@ struct TorqueArgs {
 
 #[derive(Subcommand)]
 enum BenchCommand {
+    /// Planner: the reference system's three cases and a bin-picking query set, ours beside
+    /// plain RRT and RRT-Connect.
+    Planner {
+        /// Trials per case for ours.
+        #[arg(long, default_value_t = 100)]
+        trials: usize,
+        /// Trials per case for each baseline (they take up to seconds each).
+        #[arg(long, default_value_t = 10)]
+        baseline_trials: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Sensing: depth capture (all cores, and one thread as the peer) and grasp selection per
     /// workpiece at its default pile.
     Sensor {
@@ -222,6 +238,15 @@ fn run(cli: Cli) -> Result<()> {
         Command::Bench {
             command: BenchCommand::Physics { runs, json },
         } => bench_physics(runs, json),
+        Command::Bench {
+            command:
+                BenchCommand::Planner {
+                    trials,
+                    baseline_trials,
+                    seed,
+                    json,
+                },
+        } => bench_planner(trials, baseline_trials, seed, json),
         Command::Bench {
             command: BenchCommand::Sensor { runs, json },
         } => bench_sensor(runs, json),
@@ -904,6 +929,44 @@ fn bench_sensor(runs: usize, json: bool) -> Result<()> {
             r.top_layer_recall * 100.0,
             r.feasible
         );
+    }
+    Ok(())
+}
+
+fn bench_planner(trials: usize, baseline_trials: usize, seed: u64, json: bool) -> Result<()> {
+    let loaded = LoadedScene::embedded_default()?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    let workpieces = LoadedWorkpiece::all_embedded()?;
+    let rows = binpick::bench::planner_bench(&loaded, &robot, &workpieces, trials, baseline_trials, seed)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "planner, one core; reference (i5-4310U): developed 28.9 ms mean / 90.4 ms max, 100 %; RRT-Connect 761 / 1629 ms, 99 %; RRT 826 / 2086 ms, 97 %"
+    );
+    println!(
+        "{:<52} {:<11} {:>6} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9}",
+        "case", "algorithm", "trials", "success", "mean_ms", "p95_ms", "max_ms", "samples", "us/check", "ms/sample"
+    );
+    for r in &rows {
+        println!(
+            "{:<52} {:<11} {:>6} {:>7.0}% {:>9.3} {:>9.3} {:>9.3} {:>9.1} {:>8.2} {:>9.4}",
+            r.case,
+            format!("{:?}", r.algorithm),
+            r.trials,
+            r.success * 100.0,
+            r.time_ms.0,
+            r.time_ms.1,
+            r.time_ms.2,
+            r.samples_mean,
+            r.us_per_check,
+            r.ms_per_sample
+        );
+        for f in &r.failures {
+            println!("    failure: {f}");
+        }
     }
     Ok(())
 }

@@ -5,5 +5,6 @@ mod cli_pile;
 mod cli_robot;
 mod cli_sense;
 mod physics;
+mod planning;
 mod sensing;
 mod support;

@@ -1,0 +1,848 @@
+//! Collision model and path planner for the Pick and Place motions.
+//!
+//! Job: plan joint-space paths whose every edge is *certified* collision-free, fast.
+//!
+//! Collision model: every link's primitives (and the hand, and a held part) are covered by
+//! spheres that contain them, so a clearance computed on the spheres is a lower bound on the true
+//! clearance; each link also has one bounding sphere for early rejection. The environment is
+//! boxes (table, trays, obstacles) plus the pile as the sensor saw it: columns of a height map,
+//! never ground truth, with the part to be grasped cut out around the grasp point. Non-adjacent
+//! links are checked against each other.
+//!
+//! Edge certification (conservative advancement, as in the collision-detection seed): with
+//! clearance d at a configuration and an upper bound R_i on how far any robot point moves per
+//! radian of joint i, the edge is safe for every parameter step dt with sum_i R_i |dq_i| dt < d.
+//! Endpoints are checked first, then midpoints in bisection order, each certifying the interval
+//! its clearance allows: coarse far from obstacles, fine near them.
+//!
+//! Planner: the direct connection first; then, if an end sits in a confined place (a container,
+//! under a bar), a workspace-guided escape: the tool moved along straight Cartesian lines out of
+//! the trap until it has room, which removes the narrow passage the joint-space search would
+//! have to find; then RRT-Connect between the free ends; then shortcutting. Baselines in the same
+//! code: plain RRT (5 % goal bias) and plain RRT-Connect with fixed-step discrete edge checks.
+//!
+//! Units: m, rad, s. Frames: world.
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::RngExt;
+use rand_chacha::ChaCha8Rng;
+use serde::Serialize;
+
+use crate::config::Scene;
+use crate::robot::{DOF, JointVector, Primitive, RobotModel};
+use crate::sensor::HeightMap;
+
+/// A sphere [m].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Sphere {
+    /// Centre in its frame.
+    pub center: Vector3<f64>,
+    /// Radius.
+    pub radius: f64,
+}
+
+/// Spheres covering a box of half extents `he` centred at the origin: along its longest axis.
+fn cover_box(he: &Vector3<f64>) -> Vec<Sphere> {
+    let a = he.iamax();
+    let cross = Vector3::from_fn(|i, _| if i == a { 0.0 } else { he[i] }).norm();
+    let n = ((he[a] / cross.max(1e-4)).ceil() as usize).clamp(1, 16);
+    let half = he[a] / n as f64;
+    (0..n)
+        .map(|k| Sphere {
+            center: Vector3::ith(a, -he[a] + (2 * k + 1) as f64 * half),
+            radius: (cross * cross + half * half).sqrt(),
+        })
+        .collect()
+}
+
+/// Spheres covering a cylinder along z of radius `r` and half length `h`.
+fn cover_cylinder(r: f64, h: f64) -> Vec<Sphere> {
+    let n = ((h / r.max(1e-4)).ceil() as usize).clamp(1, 16);
+    let half = h / n as f64;
+    (0..n)
+        .map(|k| Sphere {
+            center: Vector3::z() * (-h + (2 * k + 1) as f64 * half),
+            radius: (r * r + half * half).sqrt(),
+        })
+        .collect()
+}
+
+/// The robot as spheres per link (link 6 carries the hand and any held part).
+#[derive(Debug, Clone)]
+pub struct RobotSpheres {
+    /// Spheres per link, in link frames.
+    pub links: Vec<Vec<Sphere>>,
+    /// One sphere per link enclosing all of its spheres.
+    pub bounds: Vec<Sphere>,
+    /// Upper bound on how far any robot point moves per radian of each joint [m/rad].
+    pub lever_m: [f64; DOF],
+}
+
+impl RobotSpheres {
+    /// Covers the robot's links, the hand of `scene`, and a held part (a box of half extents
+    /// `he` at `tool_from_part`), if any.
+    pub fn new(robot: &RobotModel, scene: &Scene, held: Option<(Isometry3<f64>, Vector3<f64>)>) -> Self {
+        let mut links: Vec<Vec<Sphere>> = Vec::new();
+        for link in &robot.links {
+            let mut v = Vec::new();
+            for s in &link.shapes {
+                let local = match s.primitive {
+                    Primitive::Box { half_extents_m } => cover_box(&half_extents_m),
+                    Primitive::Cylinder {
+                        radius_m,
+                        half_length_m,
+                    }
+                    | Primitive::Capsule {
+                        radius_m,
+                        half_length_m,
+                    } => cover_cylinder(radius_m, half_length_m),
+                    Primitive::Sphere { radius_m } => vec![Sphere {
+                        center: Vector3::zeros(),
+                        radius: radius_m,
+                    }],
+                };
+                v.extend(local.into_iter().map(|sp| Sphere {
+                    center: (s.link_from_shape * Point3::from(sp.center)).coords,
+                    radius: sp.radius,
+                }));
+            }
+            links.push(v);
+        }
+        // The hand: body cylinder from the flange, cup to the tool frame (as in the physics).
+        let g = &scene.gripper;
+        let cup_len = (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0);
+        let body_len = g.tool_length_m - cup_len;
+        let flange = links.len() - 1;
+        for (r, z0, z1) in [
+            (g.body_diameter_m / 2.0, 0.0, body_len),
+            (g.cup_diameter_m / 2.0, body_len, g.tool_length_m),
+        ] {
+            links[flange].extend(cover_cylinder(r, (z1 - z0) / 2.0).into_iter().map(|s| Sphere {
+                center: s.center + Vector3::z() * (z0 + z1) / 2.0,
+                radius: s.radius,
+            }));
+        }
+        if let Some((tool_from_part, he)) = held {
+            let flange_from_part = robot.flange_from_tool * tool_from_part;
+            links[flange].extend(cover_box(&he).into_iter().map(|s| Sphere {
+                center: (flange_from_part * Point3::from(s.center)).coords,
+                radius: s.radius,
+            }));
+        }
+        let bounds: Vec<Sphere> = links
+            .iter()
+            .map(|v| {
+                if v.is_empty() {
+                    return Sphere {
+                        center: Vector3::zeros(),
+                        radius: 0.0,
+                    };
+                }
+                let c = v.iter().map(|s| s.center).sum::<Vector3<f64>>() / v.len() as f64;
+                let r = v.iter().map(|s| (s.center - c).norm() + s.radius).fold(0.0, f64::max);
+                Sphere { center: c, radius: r }
+            })
+            .collect();
+        // Lever bound for joint i: the chain's origin offsets beyond it plus the farthest sphere
+        // point from its own link origin (triangle inequality, valid in every configuration).
+        let mut lever_m = [0.0; DOF];
+        for (i, lever) in lever_m.iter_mut().enumerate() {
+            let chain: f64 = robot.joints[(i + 1)..].iter().map(|j| j.origin_pos_m.norm()).sum();
+            let reach = links[(i + 1)..]
+                .iter()
+                .flatten()
+                .map(|s| s.center.norm() + s.radius)
+                .fold(0.0, f64::max);
+            *lever = chain + reach;
+        }
+        RobotSpheres { links, bounds, lever_m }
+    }
+}
+
+/// An oriented box obstacle.
+#[derive(Debug, Clone)]
+pub struct EnvBox {
+    /// What it is.
+    pub name: String,
+    /// `world_from_box`.
+    pub world_from_box: Isometry3<f64>,
+    /// Half extents [m].
+    pub half_m: Vector3<f64>,
+}
+
+/// Signed distance from a point to a box (negative inside) [m].
+fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
+    let l = b.world_from_box.inverse_transform_point(&Point3::from(*p_world)).coords;
+    let q = l.abs() - b.half_m;
+    let outside = q.sup(&Vector3::zeros()).norm();
+    outside + q.max().min(0.0)
+}
+
+/// The pile as the sensor saw it: height-map columns, with a disc around the grasp cut out.
+#[derive(Debug, Clone)]
+pub struct PileColumns {
+    /// The height map (heights above the tray floor), max-pooled to planning cells.
+    pub map: HeightMap,
+    /// Tray-frame disc (x, y, radius) whose columns are ignored (the part to be grasped) [m].
+    pub cut_out: Option<(f64, f64, f64)>,
+    /// Highest column above the tray floor [m].
+    pub max_height_m: f64,
+}
+
+impl PileColumns {
+    /// Columns from a capture's height map, max-pooled by `pool` cells per side (conservative).
+    pub fn new(map: &HeightMap, pool: usize, cut_out: Option<(f64, f64, f64)>) -> Self {
+        let pool = pool.max(1);
+        let (nx, ny) = (map.nx.div_ceil(pool), map.ny.div_ceil(pool));
+        let mut heights = vec![f64::NAN; nx * ny];
+        for j in 0..map.ny {
+            for i in 0..map.nx {
+                let h = map.height_m[j * map.nx + i];
+                let c = &mut heights[(j / pool) * nx + i / pool];
+                if h.is_finite() && (c.is_nan() || h > *c) {
+                    *c = h;
+                }
+            }
+        }
+        let max_height_m = heights.iter().cloned().filter(|h| h.is_finite()).fold(0.0, f64::max);
+        let map = HeightMap {
+            world_from_tray: map.world_from_tray,
+            cell_m: map.cell_m * pool as f64,
+            nx,
+            ny,
+            origin_xy_m: map.origin_xy_m,
+            height_m: heights,
+        };
+        PileColumns {
+            map,
+            cut_out,
+            max_height_m,
+        }
+    }
+}
+
+/// Everything the robot must not touch.
+#[derive(Debug, Clone)]
+pub struct Environment {
+    /// Boxes: table, trays, obstacles, case obstacles.
+    pub boxes: Vec<EnvBox>,
+    /// The pile, if any.
+    pub pile: Option<PileColumns>,
+}
+
+fn tray_boxes(name: &str, t: &crate::config::TrayConfig) -> Vec<EnvBox> {
+    crate::physics::overlap::tray_pieces(t)
+        .into_iter()
+        .enumerate()
+        .map(|(k, (world_from_tray, poly))| {
+            let lo = poly
+                .vertices
+                .iter()
+                .fold(Vector3::repeat(f64::MAX), |a, v| a.inf(&v.coords));
+            let hi = poly
+                .vertices
+                .iter()
+                .fold(Vector3::repeat(f64::MIN), |a, v| a.sup(&v.coords));
+            EnvBox {
+                name: format!("{name} {}", ["floor", "wall +x", "wall -x", "wall +y", "wall -y"][k]),
+                world_from_box: world_from_tray
+                    * Isometry3::translation((lo.x + hi.x) / 2.0, (lo.y + hi.y) / 2.0, (lo.z + hi.z) / 2.0),
+                half_m: (hi - lo) / 2.0,
+            }
+        })
+        .collect()
+}
+
+impl Environment {
+    /// The cell's fixed geometry: table, both trays, obstacles.
+    pub fn from_scene(scene: &Scene) -> Self {
+        let t = &scene.table;
+        let mut boxes = vec![EnvBox {
+            name: "table".into(),
+            world_from_box: Isometry3::translation(t.center_xy_m[0], t.center_xy_m[1], t.top_z_m - t.thickness_m / 2.0),
+            half_m: Vector3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, t.thickness_m / 2.0),
+        }];
+        boxes.extend(tray_boxes("pick tray", &scene.pick_tray));
+        boxes.extend(tray_boxes("place tray", &scene.place_tray.tray));
+        for o in &scene.obstacles {
+            boxes.push(EnvBox {
+                name: o.name.clone(),
+                world_from_box: Isometry3::from_parts(
+                    Translation3::new(o.center_m[0], o.center_m[1], o.center_m[2]),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, o.yaw_deg.to_radians()),
+                ),
+                half_m: Vector3::from(o.size_m) / 2.0,
+            });
+        }
+        Environment { boxes, pile: None }
+    }
+
+    /// Signed distance from a sphere to the environment, capped at `horizon` [m], and what is nearest.
+    fn sphere_distance(&self, c: &Vector3<f64>, r: f64, horizon: f64) -> (f64, usize) {
+        let mut best = (horizon, usize::MAX);
+        for (k, b) in self.boxes.iter().enumerate() {
+            let d = point_box_distance(c, b) - r;
+            if d < best.0 {
+                best = (d, k);
+            }
+        }
+        if let Some(p) = &self.pile {
+            let m = &p.map;
+            let l = m.world_from_tray.inverse_transform_point(&Point3::from(*c)).coords;
+            // Columns within reach of the sphere (plus the horizon) only.
+            let reach = r + best.0.max(0.0);
+            let i0 = (((l.x - reach - m.origin_xy_m[0]) / m.cell_m).floor().max(0.0)) as usize;
+            let j0 = (((l.y - reach - m.origin_xy_m[1]) / m.cell_m).floor().max(0.0)) as usize;
+            let i1 = (((l.x + reach - m.origin_xy_m[0]) / m.cell_m).floor()) as isize;
+            let j1 = (((l.y + reach - m.origin_xy_m[1]) / m.cell_m).floor()) as isize;
+            if i1 >= 0 && j1 >= 0 && l.z - r < p.max_height_m + best.0 {
+                for j in j0..=(j1 as usize).min(m.ny.saturating_sub(1)) {
+                    for i in i0..=(i1 as usize).min(m.nx.saturating_sub(1)) {
+                        let h = m.height_m[j * m.nx + i];
+                        if !h.is_finite() || h <= 0.001 {
+                            continue;
+                        }
+                        let cx = m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m;
+                        let cy = m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m;
+                        if let Some((gx, gy, gr)) = p.cut_out
+                            && (cx - gx).hypot(cy - gy) < gr
+                        {
+                            continue;
+                        }
+                        // Column box from the floor to h, in the tray frame.
+                        let q = Vector3::new(
+                            (l.x - cx).abs() - m.cell_m / 2.0,
+                            (l.y - cy).abs() - m.cell_m / 2.0,
+                            (l.z - h / 2.0).abs() - h / 2.0,
+                        );
+                        let d = q.sup(&Vector3::zeros()).norm() + q.max().min(0.0) - r;
+                        if d < best.0 {
+                            best = (d, usize::MAX - 1);
+                        }
+                    }
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Link pairs checked for self-collision (non-adjacent, and not the base with link 2 whose
+/// castings overlap at the shoulder by design).
+const SELF_PAIRS: [(usize, usize); 8] = [(0, 3), (0, 4), (0, 5), (0, 6), (1, 4), (1, 5), (1, 6), (2, 6)];
+
+/// Counters of one planning query.
+#[derive(Debug, Clone, Copy, Default, Serialize)]
+pub struct PlanStats {
+    /// Random samples drawn.
+    pub samples: usize,
+    /// Configurations whose clearance was computed.
+    pub clearance_checks: usize,
+    /// Edges certified or rejected.
+    pub edges: usize,
+}
+
+/// The planning scene: robot spheres plus environment, and the queries on them.
+#[derive(Debug, Clone)]
+pub struct CollisionModel {
+    /// The arm.
+    pub robot: RobotModel,
+    /// Its spheres.
+    pub spheres: RobotSpheres,
+    /// The environment.
+    pub env: Environment,
+    /// Required clearance [m]: configurations closer than this count as colliding.
+    pub margin_m: f64,
+    /// Distances beyond this are not resolved further [m].
+    pub horizon_m: f64,
+}
+
+impl CollisionModel {
+    /// A model with a 2 mm margin and a 10 cm horizon.
+    pub fn new(robot: &RobotModel, spheres: RobotSpheres, env: Environment) -> Self {
+        CollisionModel {
+            robot: robot.clone(),
+            spheres,
+            env,
+            margin_m: 0.002,
+            horizon_m: 0.10,
+        }
+    }
+
+    /// Lower bound on the robot's clearance at `q` (environment and self) [m], and what is nearest.
+    pub fn clearance(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, String) {
+        stats.clearance_checks += 1;
+        let frames = self.robot.link_frames(q);
+        let base = self.robot.world_from_base;
+        let mut best = (self.horizon_m, String::new());
+        let mut centers: Vec<Vec<Vector3<f64>>> = Vec::with_capacity(DOF + 1);
+        for (li, spheres) in self.spheres.links.iter().enumerate() {
+            let world_from_link = base * frames[li].to_isometry();
+            let pts: Vec<Vector3<f64>> = spheres
+                .iter()
+                .map(|s| (world_from_link * Point3::from(s.center)).coords)
+                .collect();
+            // The base stands on the table: it is not checked against the environment.
+            if li > 0 {
+                let b = &self.spheres.bounds[li];
+                let bc = (world_from_link * Point3::from(b.center)).coords;
+                let (db, _) = self.env.sphere_distance(&bc, b.radius, best.0);
+                if db < best.0 {
+                    for (p, s) in pts.iter().zip(spheres) {
+                        let (d, k) = self.env.sphere_distance(p, s.radius, best.0);
+                        if d < best.0 {
+                            let what = match k {
+                                usize::MAX => String::new(),
+                                k if k == usize::MAX - 1 => "the pile".into(),
+                                k => self.env.boxes[k].name.clone(),
+                            };
+                            best = (d, format!("{} and {what}", self.robot.links[li].name));
+                        }
+                    }
+                }
+            }
+            centers.push(pts);
+        }
+        for (a, b) in SELF_PAIRS {
+            for (pa, sa) in centers[a].iter().zip(&self.spheres.links[a]) {
+                for (pb, sb) in centers[b].iter().zip(&self.spheres.links[b]) {
+                    let d = (pa - pb).norm() - sa.radius - sb.radius;
+                    if d < best.0 {
+                        best = (
+                            d,
+                            format!("{} and {}", self.robot.links[a].name, self.robot.links[b].name),
+                        );
+                    }
+                }
+            }
+        }
+        best
+    }
+
+    /// Whether `q` is within limits and clear by the margin.
+    pub fn free(&self, q: &JointVector, stats: &mut PlanStats) -> bool {
+        self.robot.within_limits(q, 0.0) && self.clearance(q, stats).0 > self.margin_m
+    }
+
+    /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
+    /// every configuration on it is clear by the margin.
+    pub fn certify_edge(&self, a: &JointVector, b: &JointVector, stats: &mut PlanStats) -> bool {
+        stats.edges += 1;
+        let sweep: f64 = (0..DOF).map(|i| self.spheres.lever_m[i] * (b[i] - a[i]).abs()).sum();
+        let at = |t: f64| a + (b - a) * t;
+        let cover = |d: f64| {
+            if sweep <= 0.0 {
+                f64::INFINITY
+            } else {
+                (d - self.margin_m) / sweep
+            }
+        };
+        let d0 = self.clearance(a, stats).0;
+        let d1 = self.clearance(b, stats).0;
+        if d0 <= self.margin_m || d1 <= self.margin_m {
+            return false;
+        }
+        // Uncovered intervals, processed breadth-first: midpoints spread out over the edge.
+        let mut queue = std::collections::VecDeque::from([(cover(d0), 1.0 - cover(d1))]);
+        while let Some((lo, hi)) = queue.pop_front() {
+            if lo >= hi {
+                continue;
+            }
+            let mid = 0.5 * (lo + hi);
+            let d = self.clearance(&at(mid), stats).0;
+            // A certified step must make progress: below a micrometre of motion, call it a collision.
+            let c = cover(d);
+            if d <= self.margin_m || c * sweep < 1e-6 {
+                return false;
+            }
+            queue.push_back((lo, mid - c));
+            queue.push_back((mid + c, hi));
+        }
+        true
+    }
+
+    /// The baseline's edge check: configurations every `step_rad` (max-norm), not certified.
+    pub fn discrete_edge(&self, a: &JointVector, b: &JointVector, step_rad: f64, stats: &mut PlanStats) -> bool {
+        stats.edges += 1;
+        let n = ((b - a).amax() / step_rad).ceil().max(1.0) as usize;
+        (0..=n).all(|k| self.free(&(a + (b - a) * (k as f64 / n as f64)), stats))
+    }
+}
+
+/// Which planner.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum Algorithm {
+    /// Ours: direct, escape, RRT-Connect with certified edges, shortcutting.
+    Ours,
+    /// Plain RRT, 5 % goal bias, discrete edge checks.
+    Rrt,
+    /// Plain RRT-Connect, discrete edge checks.
+    RrtConnect,
+}
+
+/// Why planning failed.
+#[derive(Debug, Clone, PartialEq, Serialize, thiserror::Error)]
+pub enum PlanError {
+    /// The start configuration collides or is out of limits.
+    #[error("start in collision: {0}")]
+    StartInCollision(String),
+    /// The goal configuration collides or is out of limits.
+    #[error("goal in collision: {0}")]
+    GoalInCollision(String),
+    /// No path within the budget.
+    #[error("budget exhausted after {samples} samples, {elapsed_ms:.1} ms")]
+    BudgetExhausted {
+        /// Samples drawn.
+        samples: usize,
+        /// Time spent [ms].
+        elapsed_ms: f64,
+    },
+}
+
+/// A planned path.
+#[derive(Debug, Clone, Serialize)]
+pub struct Plan {
+    /// Joint waypoints, start to goal; every edge certified (ours) or checked (baselines).
+    pub waypoints: Vec<[f64; DOF]>,
+    /// How it was found.
+    pub how: &'static str,
+    /// Counters.
+    pub stats: PlanStats,
+    /// Wall time [s].
+    pub time_s: f64,
+}
+
+/// Planner options.
+#[derive(Debug, Clone, Copy)]
+pub struct PlanOptions {
+    /// The algorithm.
+    pub algorithm: Algorithm,
+    /// Wall-time budget [s].
+    pub budget_s: f64,
+    /// Sample budget.
+    pub max_samples: usize,
+    /// Tree extension step (max-norm) [rad].
+    pub step_rad: f64,
+    /// Discrete edge check interval for the baselines (max-norm) [rad].
+    pub check_step_rad: f64,
+}
+
+impl Default for PlanOptions {
+    fn default() -> Self {
+        PlanOptions {
+            algorithm: Algorithm::Ours,
+            budget_s: 10.0,
+            max_samples: 200_000,
+            step_rad: 0.35,
+            check_step_rad: 0.02,
+        }
+    }
+}
+
+struct Tree {
+    nodes: Vec<JointVector>,
+    parent: Vec<usize>,
+}
+
+impl Tree {
+    fn new(root: JointVector) -> Self {
+        Tree {
+            nodes: vec![root],
+            parent: vec![usize::MAX],
+        }
+    }
+    fn nearest(&self, q: &JointVector) -> usize {
+        let mut best = (f64::INFINITY, 0);
+        for (i, n) in self.nodes.iter().enumerate() {
+            let d = (n - q).norm_squared();
+            if d < best.0 {
+                best = (d, i);
+            }
+        }
+        best.1
+    }
+    fn add(&mut self, q: JointVector, parent: usize) -> usize {
+        self.nodes.push(q);
+        self.parent.push(parent);
+        self.nodes.len() - 1
+    }
+    fn path_to_root(&self, mut i: usize) -> Vec<JointVector> {
+        let mut out = Vec::new();
+        while i != usize::MAX {
+            out.push(self.nodes[i]);
+            i = self.parent[i];
+        }
+        out
+    }
+}
+
+fn steer(from: &JointVector, to: &JointVector, step: f64) -> JointVector {
+    let d = to - from;
+    let m = d.amax();
+    if m <= step { *to } else { from + d * (step / m) }
+}
+
+impl CollisionModel {
+    fn edge(&self, a: &JointVector, b: &JointVector, opts: &PlanOptions, stats: &mut PlanStats) -> bool {
+        match opts.algorithm {
+            Algorithm::Ours => self.certify_edge(a, b, stats),
+            _ => self.discrete_edge(a, b, opts.check_step_rad, stats),
+        }
+    }
+
+    fn random_q(&self, rng: &mut ChaCha8Rng) -> JointVector {
+        JointVector::from_fn(|i, _| rng.random_range(self.robot.joints[i].lower_rad..=self.robot.joints[i].upper_rad))
+    }
+
+    /// A workspace-guided escape from a confined configuration: the tool moved along a straight
+    /// Cartesian line (up first; sideways if up is blocked within 3 cm) in 1 cm steps, each step a
+    /// certified edge, up to 25 cm. Returns the configurations after `q` along the line.
+    fn escape(&self, q: &JointVector, stats: &mut PlanStats) -> Vec<JointVector> {
+        let start = self.robot.world_from_tool(q);
+        let mut best = Vec::new();
+        for dir in [Vector3::z(), Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y()] {
+            let mut path = Vec::new();
+            let mut cur = *q;
+            for k in 1..=25 {
+                let pose = Isometry3::from_parts(
+                    Translation3::from(start.translation.vector + dir * (0.01 * k as f64)),
+                    start.rotation,
+                );
+                let Ok(sol) = self.robot.ik_tool_nearest(&pose, &cur) else {
+                    break;
+                };
+                if (sol.q - cur).amax() > 0.3 || !self.certify_edge(&cur, &sol.q, stats) {
+                    break;
+                }
+                cur = sol.q;
+                path.push(cur);
+            }
+            if path.len() >= 3 {
+                return path;
+            }
+            if path.len() > best.len() {
+                best = path;
+            }
+        }
+        best
+    }
+
+    /// Plans a path from `start` to `goal`.
+    pub fn plan(
+        &self,
+        start: &JointVector,
+        goal: &JointVector,
+        opts: &PlanOptions,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<Plan, PlanError> {
+        let t0 = Instant::now();
+        let mut stats = PlanStats::default();
+        let (ds, ws) = self.clearance(start, &mut stats);
+        if !self.robot.within_limits(start, 1e-9) || ds <= self.margin_m {
+            return Err(PlanError::StartInCollision(format!(
+                "clearance {:.1} mm between {ws}",
+                ds * 1e3
+            )));
+        }
+        let (dg, wg) = self.clearance(goal, &mut stats);
+        if !self.robot.within_limits(goal, 1e-9) || dg <= self.margin_m {
+            return Err(PlanError::GoalInCollision(format!(
+                "clearance {:.1} mm between {wg}",
+                dg * 1e3
+            )));
+        }
+        let done = |path: Vec<JointVector>, how: &'static str, stats: PlanStats| Plan {
+            waypoints: path.iter().map(|q| (*q).into()).collect(),
+            how,
+            stats,
+            time_s: t0.elapsed().as_secs_f64(),
+        };
+        if self.edge(start, goal, opts, &mut stats) {
+            return Ok(done(vec![*start, *goal], "direct", stats));
+        }
+        // Ours: lift confined ends out along Cartesian lines, and try to join the lines directly
+        // at rising heights; else search between the line ends.
+        let (mut head, mut tail) = (vec![*start], vec![*goal]);
+        let mut how = "rrt-connect";
+        if opts.algorithm == Algorithm::Ours {
+            head.extend(self.escape(start, &mut stats));
+            tail.extend(self.escape(goal, &mut stats));
+            let top = head.len().max(tail.len()) - 1;
+            for k in (2..=top).step_by(3).chain(std::iter::once(top)) {
+                let (i, j) = (k.min(head.len() - 1), k.min(tail.len() - 1));
+                if self.edge(&head[i], &tail[j], opts, &mut stats) {
+                    let path: Vec<JointVector> = head[..=i].iter().chain(tail[..=j].iter().rev()).copied().collect();
+                    return Ok(done(self.shortcut(path, rng, &mut stats), "escape + direct", stats));
+                }
+            }
+            how = "escape + rrt-connect";
+        }
+        let (a, b) = (*head.last().expect("start"), *tail.last().expect("goal"));
+        let middle = match opts.algorithm {
+            Algorithm::Rrt => self.rrt(&a, &b, opts, rng, &mut stats, &t0),
+            _ => self.rrt_connect(&a, &b, opts, rng, &mut stats, &t0),
+        };
+        let Some(middle) = middle else {
+            return Err(PlanError::BudgetExhausted {
+                samples: stats.samples,
+                elapsed_ms: t0.elapsed().as_secs_f64() * 1e3,
+            });
+        };
+        let mut path = head;
+        path.extend(middle.into_iter().skip(1));
+        path.extend(tail.into_iter().rev().skip(1));
+        if opts.algorithm == Algorithm::Ours {
+            path = self.shortcut(path, rng, &mut stats);
+        }
+        Ok(done(path, how, stats))
+    }
+
+    fn out_of_budget(&self, opts: &PlanOptions, stats: &PlanStats, t0: &Instant) -> bool {
+        stats.samples >= opts.max_samples || t0.elapsed().as_secs_f64() > opts.budget_s
+    }
+
+    fn rrt(
+        &self,
+        a: &JointVector,
+        b: &JointVector,
+        opts: &PlanOptions,
+        rng: &mut ChaCha8Rng,
+        stats: &mut PlanStats,
+        t0: &Instant,
+    ) -> Option<Vec<JointVector>> {
+        let mut tree = Tree::new(*a);
+        while !self.out_of_budget(opts, stats, t0) {
+            stats.samples += 1;
+            let target = if rng.random::<f64>() < 0.05 {
+                *b
+            } else {
+                self.random_q(rng)
+            };
+            let near = tree.nearest(&target);
+            let new = steer(&tree.nodes[near], &target, opts.step_rad);
+            if !self.edge(&tree.nodes[near], &new, opts, stats) {
+                continue;
+            }
+            let id = tree.add(new, near);
+            if (new - b).amax() <= opts.step_rad && self.edge(&new, b, opts, stats) {
+                let mut p = tree.path_to_root(id);
+                p.reverse();
+                p.push(*b);
+                return Some(p);
+            }
+        }
+        None
+    }
+
+    fn rrt_connect(
+        &self,
+        a: &JointVector,
+        b: &JointVector,
+        opts: &PlanOptions,
+        rng: &mut ChaCha8Rng,
+        stats: &mut PlanStats,
+        t0: &Instant,
+    ) -> Option<Vec<JointVector>> {
+        let mut trees = [Tree::new(*a), Tree::new(*b)];
+        let mut k = 0usize;
+        while !self.out_of_budget(opts, stats, t0) {
+            stats.samples += 1;
+            let target = self.random_q(rng);
+            let (ta, tb) = if k.is_multiple_of(2) { (0, 1) } else { (1, 0) };
+            k += 1;
+            let near = trees[ta].nearest(&target);
+            let new = steer(&trees[ta].nodes[near], &target, opts.step_rad);
+            if !self.edge(&trees[ta].nodes[near], &new, opts, stats) {
+                continue;
+            }
+            let ia = trees[ta].add(new, near);
+            // Connect: grow the other tree toward `new` until it arrives or is blocked.
+            let mut ib = trees[tb].nearest(&new);
+            loop {
+                let from = trees[tb].nodes[ib];
+                let step = steer(&from, &new, opts.step_rad);
+                if !self.edge(&from, &step, opts, stats) {
+                    break;
+                }
+                ib = trees[tb].add(step, ib);
+                if (step - new).amax() < 1e-12 {
+                    let mut pa = trees[ta].path_to_root(ia);
+                    let pb = trees[tb].path_to_root(ib);
+                    pa.reverse();
+                    pa.extend(pb.into_iter().skip(1));
+                    if ta == 1 {
+                        pa.reverse();
+                    }
+                    return Some(pa);
+                }
+            }
+        }
+        None
+    }
+
+    /// Shortcuts: random pairs joined when the edge certifies, then a greedy farthest-reach pass.
+    fn shortcut(&self, mut path: Vec<JointVector>, rng: &mut ChaCha8Rng, stats: &mut PlanStats) -> Vec<JointVector> {
+        for _ in 0..20 {
+            if path.len() < 3 {
+                break;
+            }
+            let i = rng.random_range(0..path.len() - 2);
+            let j = rng.random_range(i + 2..path.len());
+            if self.certify_edge(&path[i], &path[j], stats) {
+                path.drain(i + 1..j);
+            }
+        }
+        let mut out = vec![path[0]];
+        let mut i = 0;
+        while i + 1 < path.len() {
+            let mut j = path.len() - 1;
+            while j > i + 1 && !self.certify_edge(&path[i], &path[j], stats) {
+                j -= 1;
+            }
+            out.push(path[j]);
+            i = j;
+        }
+        out
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn covering_spheres_contain_the_box_corners() {
+        let he = Vector3::new(0.135, 0.03, 0.05);
+        let s = cover_box(&he);
+        for sx in [-1.0, 1.0] {
+            for sy in [-1.0, 1.0] {
+                for sz in [-1.0, 1.0] {
+                    let p = Vector3::new(sx * he.x, sy * he.y, sz * he.z);
+                    assert!(
+                        s.iter().any(|sp| (p - sp.center).norm() <= sp.radius + 1e-12),
+                        "corner {p:?} uncovered"
+                    );
+                }
+            }
+        }
+        let c = cover_cylinder(0.015, 0.055);
+        for z in [-0.055, 0.055] {
+            let p = Vector3::new(0.015, 0.0, z);
+            assert!(c.iter().any(|sp| (p - sp.center).norm() <= sp.radius + 1e-12));
+        }
+    }
+
+    #[test]
+    fn point_box_distance_signs() {
+        let b = EnvBox {
+            name: "b".into(),
+            world_from_box: Isometry3::identity(),
+            half_m: Vector3::new(1.0, 1.0, 1.0),
+        };
+        assert!((point_box_distance(&Vector3::new(2.0, 0.0, 0.0), &b) - 1.0).abs() < 1e-12);
+        assert!((point_box_distance(&Vector3::new(0.5, 0.0, 0.0), &b) + 0.5).abs() < 1e-12);
+        assert!((point_box_distance(&Vector3::new(2.0, 2.0, 1.0), &b) - 2f64.sqrt()).abs() < 1e-12);
+    }
+}

@@ -1,0 +1,281 @@
+//! The planner: every returned path re-checked densely with exact geometry (parry primitives,
+//! independent of the planner's spheres), failure reporting, and certified edges spot-checked.
+
+use binpick::bench::{PlannerCase, binpicking_queries, fig5_cases};
+use binpick::config::{LoadedScene, LoadedWorkpiece};
+use binpick::planning::{Algorithm, CollisionModel, PlanError, PlanOptions, PlanStats};
+use binpick::robot::{JointVector, Primitive, RobotModel};
+use nalgebra::{Isometry3, Vector3};
+use rand::RngExt;
+use rapier3d::parry::query::intersection_test;
+use rapier3d::parry::shape::SharedShape;
+
+/// Exact geometry in metres: the URDF primitives and the hand per link, and the environment boxes.
+struct Exact {
+    links: Vec<Vec<(Isometry3<f64>, SharedShape)>>,
+    env: Vec<(Isometry3<f64>, SharedShape, String)>,
+}
+
+fn cyl_z(r: f64, h: f64) -> (Isometry3<f64>, SharedShape) {
+    (
+        Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2),
+        SharedShape::cylinder(h as f32, r as f32),
+    )
+}
+
+fn exact(model: &CollisionModel, scene: &LoadedScene) -> Exact {
+    let robot = &model.robot;
+    let mut links: Vec<Vec<(Isometry3<f64>, SharedShape)>> = robot
+        .links
+        .iter()
+        .map(|l| {
+            l.shapes
+                .iter()
+                .map(|s| match s.primitive {
+                    Primitive::Box { half_extents_m: h } => (
+                        s.link_from_shape,
+                        SharedShape::cuboid(h.x as f32, h.y as f32, h.z as f32),
+                    ),
+                    Primitive::Cylinder {
+                        radius_m,
+                        half_length_m,
+                    }
+                    | Primitive::Capsule {
+                        radius_m,
+                        half_length_m,
+                    } => {
+                        let (rot, shape) = cyl_z(radius_m, half_length_m);
+                        (s.link_from_shape * rot, shape)
+                    }
+                    Primitive::Sphere { radius_m } => (s.link_from_shape, SharedShape::ball(radius_m as f32)),
+                })
+                .collect()
+        })
+        .collect();
+    let g = &scene.scene.gripper;
+    let cup_len = (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0);
+    let body = g.tool_length_m - cup_len;
+    for (r, z0, z1) in [
+        (g.body_diameter_m / 2.0, 0.0, body),
+        (g.cup_diameter_m / 2.0, body, g.tool_length_m),
+    ] {
+        let (rot, shape) = cyl_z(r, (z1 - z0) / 2.0);
+        links[6].push((Isometry3::translation(0.0, 0.0, (z0 + z1) / 2.0) * rot, shape));
+    }
+    let mut env: Vec<(Isometry3<f64>, SharedShape, String)> = model
+        .env
+        .boxes
+        .iter()
+        .map(|b| {
+            (
+                b.world_from_box,
+                SharedShape::cuboid(b.half_m.x as f32, b.half_m.y as f32, b.half_m.z as f32),
+                b.name.clone(),
+            )
+        })
+        .collect();
+    if let Some(p) = &model.env.pile {
+        let m = &p.map;
+        for j in 0..m.ny {
+            for i in 0..m.nx {
+                let h = m.height_m[j * m.nx + i];
+                if !h.is_finite() || h <= 0.001 {
+                    continue;
+                }
+                let (cx, cy) = (
+                    m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m,
+                    m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m,
+                );
+                if let Some((gx, gy, gr)) = p.cut_out
+                    && (cx - gx).hypot(cy - gy) < gr
+                {
+                    continue;
+                }
+                let half = (m.cell_m / 2.0) as f32;
+                env.push((
+                    m.world_from_tray * Isometry3::translation(cx, cy, h / 2.0),
+                    SharedShape::cuboid(half, half, (h / 2.0) as f32),
+                    "pile".into(),
+                ));
+            }
+        }
+    }
+    Exact { links, env }
+}
+
+/// What collides at `q`, if anything (links 1-6 and the hand against the environment; the base
+/// stands on the table and is not checked against it).
+fn collides(ex: &Exact, robot: &RobotModel, q: &JointVector) -> Option<String> {
+    let frames = robot.world_from_links(q);
+    for (li, shapes) in ex.links.iter().enumerate().skip(1) {
+        for (local, shape) in shapes {
+            let pose: rapier3d::math::Pose = (frames[li] * local).cast::<f32>().into();
+            for (epose, eshape, name) in &ex.env {
+                let ep: rapier3d::math::Pose = epose.cast::<f32>().into();
+                if intersection_test(&pose, &**shape, &ep, &**eshape).is_ok_and(|r| r.intersecting) {
+                    return Some(format!("{} hits {name}", robot.links[li].name));
+                }
+            }
+        }
+    }
+    None
+}
+
+/// Dense re-check of a path: samples at most 0.5 deg per joint and 1 mm of tool travel apart.
+fn dense_check(ex: &Exact, robot: &RobotModel, path: &[[f64; 6]]) -> Result<usize, String> {
+    let mut samples = 0;
+    for w in path.windows(2) {
+        let (a, b) = (JointVector::from(w[0]), JointVector::from(w[1]));
+        let mut n = ((b - a).amax() / 0.5f64.to_radians()).ceil().max(1.0) as usize;
+        loop {
+            let tools: Vec<Vector3<f64>> = (0..=n)
+                .map(|k| {
+                    robot
+                        .world_from_tool(&(a + (b - a) * (k as f64 / n as f64)))
+                        .translation
+                        .vector
+                })
+                .collect();
+            if tools.windows(2).all(|t| (t[1] - t[0]).norm() <= 0.001) {
+                break;
+            }
+            n *= 2;
+        }
+        for k in 0..=n {
+            let q = a + (b - a) * (k as f64 / n as f64);
+            if let Some(hit) = collides(ex, robot, &q) {
+                return Err(format!(
+                    "{hit} at {:.3} of edge {:?} -> {:?}",
+                    k as f64 / n as f64,
+                    w[0],
+                    w[1]
+                ));
+            }
+            samples += 1;
+        }
+    }
+    Ok(samples)
+}
+
+fn setup() -> (LoadedScene, RobotModel) {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    (scene, robot)
+}
+
+fn plan_and_check(case: &PlannerCase, scene: &LoadedScene, robot: &RobotModel, alg: Algorithm, seed: u64) {
+    let ex = exact(&case.model, scene);
+    let opts = PlanOptions {
+        algorithm: alg,
+        ..PlanOptions::default()
+    };
+    let mut rng = binpick::rng::stream(seed, "planner");
+    let plan = case
+        .model
+        .plan(&case.start, &case.goal, &opts, &mut rng)
+        .unwrap_or_else(|e| panic!("{}: {e}", case.name));
+    assert_eq!(plan.waypoints.first().map(|q| JointVector::from(*q)), Some(case.start));
+    assert_eq!(plan.waypoints.last().map(|q| JointVector::from(*q)), Some(case.goal));
+    for q in &plan.waypoints {
+        assert!(
+            robot.within_limits(&JointVector::from(*q), 1e-9),
+            "{}: waypoint out of limits",
+            case.name
+        );
+    }
+    if let Err(e) = dense_check(&ex, robot, &plan.waypoints) {
+        panic!("{} ({alg:?}, seed {seed}, {}): {e}", case.name, plan.how);
+    }
+}
+
+#[test]
+fn paths_of_the_three_reference_cases_pass_a_dense_exact_check() {
+    let (scene, robot) = setup();
+    for case in fig5_cases(&scene.scene, &robot).unwrap() {
+        for seed in 1..=5 {
+            plan_and_check(&case, &scene, &robot, Algorithm::Ours, seed);
+        }
+        plan_and_check(&case, &scene, &robot, Algorithm::RrtConnect, 1);
+    }
+}
+
+#[test]
+fn bin_picking_paths_pass_a_dense_exact_check() {
+    let (scene, robot) = setup();
+    let wps: Vec<LoadedWorkpiece> = ["B", "D"]
+        .iter()
+        .map(|n| LoadedWorkpiece::resolve(n).unwrap())
+        .collect();
+    let queries = binpicking_queries(&scene, &robot, &wps, 12).unwrap();
+    assert_eq!(queries.len(), 12);
+    for (k, q) in queries.iter().enumerate() {
+        plan_and_check(q, &scene, &robot, Algorithm::Ours, k as u64);
+    }
+}
+
+#[test]
+fn certified_edges_are_collision_free_in_the_exact_check() {
+    let (scene, robot) = setup();
+    let mut rng = binpick::rng::stream(9, "edges");
+    let (mut certified, mut rejected, mut stats) = (0, 0, PlanStats::default());
+    for case in fig5_cases(&scene.scene, &robot).unwrap() {
+        let ex = exact(&case.model, &scene);
+        for _ in 0..60 {
+            // Random edges around the start, many of them grazing the obstacle.
+            let a = case.start + JointVector::from_fn(|_, _| rng.random_range(-0.4..0.4));
+            let b = a + JointVector::from_fn(|_, _| rng.random_range(-0.8..0.8));
+            if !(robot.within_limits(&a, 0.0) && robot.within_limits(&b, 0.0)) {
+                continue;
+            }
+            if case.model.certify_edge(&a, &b, &mut stats) {
+                certified += 1;
+                if let Err(e) = dense_check(&ex, &robot, &[a.into(), b.into()]) {
+                    panic!("{}: certified edge collides: {e}", case.name);
+                }
+            } else {
+                rejected += 1;
+            }
+        }
+    }
+    assert!(
+        certified > 20 && rejected > 20,
+        "too few edges of either kind to mean anything: {certified} certified, {rejected} rejected"
+    );
+}
+
+#[test]
+fn failures_are_reported_with_their_reason() {
+    let (scene, robot) = setup();
+    let cases = fig5_cases(&scene.scene, &robot).unwrap();
+    let case = &cases[2];
+    let mut rng = binpick::rng::stream(1, "planner");
+    // A start inside the container wall.
+    let in_wall = robot
+        .ik_tool_nearest(
+            &binpick::robot::tool_down_pose(Vector3::new(0.40 + 0.065, 0.26, 0.05), 0.0),
+            &case.start,
+        )
+        .unwrap()
+        .q;
+    match case.model.plan(&in_wall, &case.goal, &PlanOptions::default(), &mut rng) {
+        Err(PlanError::StartInCollision(why)) => assert!(why.contains("container 1"), "{why}"),
+        other => panic!("{other:?}"),
+    }
+    match case
+        .model
+        .plan(&case.start, &in_wall, &PlanOptions::default(), &mut rng)
+    {
+        Err(PlanError::GoalInCollision(_)) => {}
+        other => panic!("{other:?}"),
+    }
+    // Plain RRT on the container case with a tiny budget runs out and says so.
+    let opts = PlanOptions {
+        algorithm: Algorithm::Rrt,
+        budget_s: 0.05,
+        ..PlanOptions::default()
+    };
+    match case.model.plan(&case.start, &case.goal, &opts, &mut rng) {
+        Err(PlanError::BudgetExhausted { samples, .. }) => assert!(samples > 0),
+        other => panic!("{other:?}"),
+    }
+}
