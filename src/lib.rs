@@ -10,7 +10,8 @@
 //! 4. [`sensor`]: the fixed overhead 3D sensor: ray-cast depth capture, exposure timing, recognition.
 //! 5. [`grasp`]: the grasp selector: suction grasps from detections and the point cloud, ranked.
 //! 6. [`planning`]: collision model (robot spheres, cell boxes, pile columns), certified edges, planner.
-//! 7. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
+//! 7. [`trajectory`]: timed trajectories through via points, torques, the acceleration search.
+//! 8. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
 //!
 //! Later stages (physics world, sensor, grasp selection, planning, trajectory, execution, cycle,
 //! recording, report) are added as their issues land; see README.md.
@@ -27,3 +28,4 @@ pub mod report;
 pub mod rng;
 pub mod robot;
 pub mod sensor;
+pub mod trajectory;

@@ -8,3 +8,4 @@ mod physics;
 mod planning;
 mod sensing;
 mod support;
+mod trajectory;
