@@ -718,3 +718,144 @@ pub fn binpicking_queries(
     out.truncate(n);
     Ok(out)
 }
+
+/// One acceleration benchmark case: J1 turns 180 deg between two containers.
+#[derive(Debug, Clone, Serialize)]
+pub struct AccelRow {
+    /// Case (A->a ... E->e).
+    pub case: String,
+    /// Motion time with the controller's default parameters [s].
+    pub default_s: f64,
+    /// After the acceleration search (§4.2) [s].
+    pub accelerated_s: f64,
+    /// After path correction alternated with the search (§4.3) [s].
+    pub corrected_s: f64,
+    /// Time-optimal (TOPP-RA) along the final path [s].
+    pub optimal_s: f64,
+    /// 1 - corrected / default, for the median run.
+    pub improvement: f64,
+    /// Lowest and highest improvement over the runs (each plans with its own seed).
+    pub improvement_range: (f64, f64),
+    /// corrected / optimal - 1: how far the shipped accelerator is from the bound.
+    pub gap_to_optimal: f64,
+    /// Folds kept / tried by the path correction.
+    pub folds: (usize, usize),
+    /// Max over runs of planning + acceleration + correction wall time [ms].
+    pub compute_max_ms: f64,
+    /// Whether the final trajectory's blends stay clear (every 1 ms edge certified).
+    pub corridor_clear: bool,
+    /// Peak torque / limit per joint of the final motion.
+    pub peak_ratio: [f64; 6],
+    /// Energy (integral of squared torques) of the default and the final motion [N^2 m^2 s].
+    pub energy: (f64, f64),
+    /// The reference's Table 4: improvement and max compute time [ms].
+    pub reference: (f64, f64),
+}
+
+/// The reference system's five acceleration cases (its Fig. 11 / Table 4): the hand leaves one
+/// open container and enters another while J1 turns 180 deg, at five reaches and heights, with
+/// the default hand holding a 30 g part.
+pub fn accel_bench(
+    scene: &crate::config::LoadedScene,
+    robot: &RobotModel,
+    runs: usize,
+) -> Result<Vec<AccelRow>, Box<dyn std::error::Error + Send + Sync>> {
+    use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
+    use crate::trajectory::{Trajectory, correct_path, default_limits, torques};
+    let hand = Payload::from_gripper(&scene.scene.gripper);
+    let part = Payload::point(0.03, robot.flange_from_tool.translation.vector);
+    let dynamics = robot.dynamics(&hand.combined(&part));
+    let defaults = default_limits(robot, &hand, 5.0, 20_000);
+    let home = JointVector::from(scene.scene.robot.home_rad());
+    let reference = [(24.7, 95.1), (19.4, 97.1), (28.1, 96.5), (28.3, 85.3), (23.3, 90.0)];
+    let setups = [
+        ("A->a", 0.40, 0.00),
+        ("B->b", 0.50, 0.00),
+        ("C->c", 0.35, 0.10),
+        ("D->d", 0.45, 0.15),
+        ("E->e", 0.55, 0.05),
+    ];
+    let held = Some((
+        nalgebra::Isometry3::translation(0.0, 0.0, 0.01),
+        nalgebra::Vector3::new(0.015, 0.015, 0.01),
+    ));
+    let mut rows = Vec::new();
+    for (k, (name, reach, z)) in setups.iter().enumerate() {
+        let mut env = table_only(&scene.scene);
+        env.boxes.extend(
+            container("container", 0.0, *reach, 0.12, 0.10)
+                .into_iter()
+                .map(|mut b| {
+                    b.world_from_box.translation.vector.z += z;
+                    b
+                }),
+        );
+        env.boxes.extend(
+            container("container", 0.0, -*reach, 0.12, 0.10)
+                .into_iter()
+                .map(|mut b| {
+                    b.world_from_box.translation.vector.z += z;
+                    b
+                }),
+        );
+        let model = CollisionModel::new(robot, RobotSpheres::new(robot, &scene.scene, held), env);
+        let ik = |y: f64| {
+            robot
+                .ik_tool_nearest(
+                    &crate::robot::tool_down_pose(nalgebra::Vector3::new(0.0, y, z + 0.05), 0.0),
+                    &home,
+                )
+                .map(|s| s.q)
+                .map_err(|e| format!("{name}: {e}"))
+        };
+        let (start, goal) = (ik(*reach)?, ik(-*reach)?);
+        let mut worst_ms = 0.0f64;
+        let mut outcomes = Vec::new();
+        for r in 0..runs.max(1) {
+            let t0 = Instant::now();
+            let mut rng = crate::rng::stream(r as u64, "planner");
+            let plan = model
+                .plan(&start, &goal, &PlanOptions::default(), &mut rng)
+                .map_err(|e| format!("{name}: {e}"))?;
+            let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+            let (via, accelerated, _stops) =
+                crate::trajectory::accelerate_in_corridor(robot, &dynamics, &via, &model, 0.01);
+            let corrected = correct_path(robot, &dynamics, &via, &accelerated, Some(&model), 60f64.to_radians());
+            worst_ms = worst_ms.max(t0.elapsed().as_secs_f64() * 1e3);
+            let default_s = Trajectory::through(&via, &defaults).duration_s;
+            outcomes.push((
+                1.0 - corrected.accelerated.trajectory.duration_s / default_s,
+                via,
+                accelerated,
+                corrected,
+            ));
+        }
+        // Each run plans with another seed, so paths differ: report the median run.
+        outcomes.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let range = (outcomes[0].0, outcomes[outcomes.len() - 1].0);
+        let (_, via, accelerated, corrected) = outcomes.swap_remove(outcomes.len() / 2);
+        let slow = Trajectory::through(&via, &defaults);
+        let slow_torque = torques(&dynamics, robot, &slow.samples(0.001), 0.001);
+        let optimal =
+            crate::trajectory::optimal_duration(robot, &dynamics, &corrected.via, &corrected.accelerated.limits, 600)
+                .unwrap_or(f64::NAN);
+        let fast = corrected.accelerated.trajectory.duration_s;
+        rows.push(AccelRow {
+            case: name.to_string(),
+            default_s: slow.duration_s,
+            accelerated_s: accelerated.trajectory.duration_s,
+            corrected_s: fast,
+            optimal_s: optimal,
+            improvement: 1.0 - fast / slow.duration_s,
+            improvement_range: range,
+            gap_to_optimal: fast / optimal - 1.0,
+            folds: (corrected.folds, corrected.tried),
+            compute_max_ms: worst_ms,
+            corridor_clear: crate::trajectory::check_corridor(&model, &corrected.accelerated.trajectory, 0.01).is_ok(),
+            peak_ratio: corrected.accelerated.torques.peak_ratio,
+            energy: (slow_torque.energy, corrected.accelerated.torques.energy),
+            reference: reference[k],
+        });
+    }
+    Ok(rows)
+}

@@ -34,6 +34,8 @@ pub struct Trajectory {
     seg_time: Vec<f64>,
     /// Blend duration at each via point [s].
     blend: Vec<f64>,
+    /// When each via point is reached on the linear extension of its segments [s].
+    via_t: Vec<f64>,
     /// Total duration [s].
     pub duration_s: f64,
 }
@@ -96,28 +98,36 @@ impl Trajectory {
         // The first via point is reached on the linear extension half a blend after the start,
         // and the last half a blend before the end.
         let duration_s = seg_time.iter().sum::<f64>() + blend[0] / 2.0 + blend[n] / 2.0;
+        // When each via point is reached on the linear extension: half a blend, then segments.
+        let via_t: Vec<f64> = std::iter::once(0.0)
+            .chain(seg_time.iter().copied())
+            .scan(blend[0] / 2.0, |acc, dt| {
+                *acc += dt;
+                Some(*acc)
+            })
+            .collect();
         Trajectory {
             via: via.to_vec(),
             seg_vel,
             seg_time,
             blend,
+            via_t,
             duration_s,
         }
+    }
+
+    /// The via point whose blend is nearest time `t` (the one to stop at if its blend cuts a corner).
+    pub fn via_near(&self, t: f64) -> usize {
+        (0..self.via_t.len())
+            .min_by(|&a, &b| (self.via_t[a] - t).abs().total_cmp(&(self.via_t[b] - t).abs()))
+            .unwrap_or(0)
     }
 
     /// Position, velocity and acceleration at time `t` (clamped to the trajectory).
     pub fn sample(&self, t: f64) -> Sample {
         let t = t.clamp(0.0, self.duration_s);
         let n = self.seg_time.len();
-        // Time of via point j on the linear extension: blend[0]/2 + sum of segment times.
-        let mut via_t = Vec::with_capacity(n + 1);
-        let mut acc = self.blend[0] / 2.0;
-        for k in 0..=n {
-            via_t.push(acc);
-            if k < n {
-                acc += self.seg_time[k];
-            }
-        }
+        let via_t = &self.via_t;
         // Inside a blend around via j?
         for (j, &tv) in via_t.iter().enumerate() {
             let tb = self.blend[j];
@@ -247,9 +257,24 @@ pub fn optimise_accelerations(
     threshold: f64,
 ) -> Accelerated {
     let spec = robot.max_accel_rad_s2();
-    let mut lo = JointVector::zeros();
+    search_accelerations(robot, dynamics, via, dt_s, threshold, spec * 0.5, JointVector::zeros())
+}
+
+/// The bisection of [`optimise_accelerations`] from a given start and lower bracket (a warm
+/// start after a small change of the path).
+fn search_accelerations(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    dt_s: f64,
+    threshold: f64,
+    start: JointVector,
+    lower: JointVector,
+) -> Accelerated {
+    let spec = robot.max_accel_rad_s2();
+    let mut lo = lower;
     let mut hi = spec;
-    let mut scale = spec * 0.5;
+    let mut scale = start;
     let vel = robot.max_vel_rad_s();
     let mut best: Option<Accelerated> = None;
     for it in 1..=30 {
@@ -367,4 +392,514 @@ mod tests {
         let closest = s.iter().map(|x| (x.q - via[1]).amax()).fold(f64::INFINITY, f64::min);
         assert!(closest < 0.2, "{closest}");
     }
+}
+
+/// Anything that can be sampled in time like a trajectory.
+pub trait Motion {
+    /// Duration [s].
+    fn duration_s(&self) -> f64;
+    /// Position, velocity and acceleration at `t`.
+    fn at(&self, t: f64) -> Sample;
+    /// Samples every `dt_s`, end included.
+    fn sampled(&self, dt_s: f64) -> Vec<Sample> {
+        let n = (self.duration_s() / dt_s).ceil() as usize;
+        (0..=n)
+            .map(|k| self.at((k as f64 * dt_s).min(self.duration_s())))
+            .collect()
+    }
+}
+
+impl Motion for Trajectory {
+    fn duration_s(&self) -> f64 {
+        self.duration_s
+    }
+    fn at(&self, t: f64) -> Sample {
+        self.sample(t)
+    }
+}
+
+/// The geometric path of a trajectory parameterised by joint-space arc length: q(s), s in [0, 1],
+/// |q'(s)| constant (the path's length), so no stage of the retiming is singular.
+#[derive(Debug, Clone)]
+pub struct ArcPath {
+    path: Trajectory,
+    /// Trajectory times of a fine table and the arc-length fraction reached at each.
+    table_t: Vec<f64>,
+    table_s: Vec<f64>,
+    length: f64,
+}
+
+impl ArcPath {
+    /// Tabulates the arc length of `path` at 4000 instants.
+    pub fn new(path: &Trajectory) -> Self {
+        let n = 4000;
+        let mut table_t = Vec::with_capacity(n + 1);
+        let mut table_s = Vec::with_capacity(n + 1);
+        let mut acc = 0.0;
+        let mut prev = path.sample(0.0).q;
+        for k in 0..=n {
+            let t = path.duration_s * k as f64 / n as f64;
+            let q = path.sample(t).q;
+            acc += (q - prev).norm();
+            prev = q;
+            table_t.push(t);
+            table_s.push(acc);
+        }
+        let length = acc.max(1e-12);
+        table_s.iter_mut().for_each(|v| *v /= length);
+        ArcPath {
+            path: path.clone(),
+            table_t,
+            table_s,
+            length,
+        }
+    }
+
+    /// q, q' and q'' at arc-length fraction s.
+    pub fn at(&self, s: f64) -> (JointVector, JointVector, JointVector) {
+        let s = s.clamp(0.0, 1.0);
+        let k = self
+            .table_s
+            .partition_point(|&v| v < s)
+            .clamp(1, self.table_s.len() - 1);
+        let (s0, s1) = (self.table_s[k - 1], self.table_s[k]);
+        let w = if s1 > s0 { (s - s0) / (s1 - s0) } else { 0.0 };
+        let t = self.table_t[k - 1] + w * (self.table_t[k] - self.table_t[k - 1]);
+        let p = self.path.sample(t);
+        let speed = p.qd.norm();
+        if speed < 1e-9 {
+            // At rest (the ends): the path leaves along the first blend's acceleration, straight.
+            let dir = p.qdd.try_normalize(1e-12).unwrap_or_else(JointVector::zeros);
+            return (p.q, dir * self.length, JointVector::zeros());
+        }
+        let sdot = speed / self.length;
+        let sddot = p.qd.dot(&p.qdd) / (speed * self.length);
+        let qp = p.qd / sdot;
+        let qpp = (p.qdd - qp * sddot) / (sdot * sdot);
+        (p.q, qp, qpp)
+    }
+}
+
+/// A path retimed by TOPP-RA: the arc-length path of a trajectory and the time-optimal s(t)
+/// under speed, acceleration and torque limits.
+#[derive(Debug, Clone)]
+pub struct Retimed {
+    path: ArcPath,
+    /// Grid positions s_i.
+    s: Vec<f64>,
+    /// Squared path speeds x_i = (ds/dt)^2 at the grid points.
+    x: Vec<f64>,
+    /// Times at the grid points [s].
+    t: Vec<f64>,
+}
+
+impl Retimed {
+    fn geometry(&self, s: f64) -> (JointVector, JointVector, JointVector) {
+        self.path.at(s)
+    }
+
+    /// Squared path speeds at the grid (for inspection).
+    pub fn path_speeds(&self) -> &[f64] {
+        &self.x
+    }
+}
+
+impl Motion for Retimed {
+    fn duration_s(&self) -> f64 {
+        *self.t.last().unwrap_or(&0.0)
+    }
+    fn at(&self, t: f64) -> Sample {
+        let t = t.clamp(0.0, self.duration_s());
+        let i = match self.t.partition_point(|&ti| ti <= t) {
+            0 => 0,
+            k => (k - 1).min(self.s.len() - 2),
+        };
+        let ds = self.s[i + 1] - self.s[i];
+        let u = (self.x[i + 1] - self.x[i]) / (2.0 * ds);
+        let v0 = self.x[i].max(0.0).sqrt();
+        let tau = t - self.t[i];
+        let sdot = (v0 + u * tau).max(0.0);
+        let s = (self.s[i] + v0 * tau + 0.5 * u * tau * tau).clamp(self.s[i], self.s[i + 1]);
+        let (q, qp, qpp) = self.geometry(s);
+        Sample {
+            t,
+            q,
+            qd: qp * sdot,
+            qdd: qp * u + qpp * (sdot * sdot),
+        }
+    }
+}
+
+/// Shares of the limits TOPP-RA plans with. The constraints hold at the grid points only: the
+/// bound uses the full limits ([`Shares::BOUND`]); a motion to execute keeps a little back for
+/// the stages between grid points ([`Shares::EXECUTE`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Shares {
+    /// Of each torque limit.
+    pub torque: f64,
+    /// Of each specification acceleration.
+    pub accel: f64,
+    /// Of each speed limit.
+    pub speed: f64,
+}
+
+impl Shares {
+    /// The full limits: the time-optimal bound.
+    pub const BOUND: Shares = Shares {
+        torque: 1.0,
+        accel: 1.0,
+        speed: 1.0,
+    };
+    /// Margins that keep every 1 ms sample within the limits.
+    pub const EXECUTE: Shares = Shares {
+        torque: 0.98,
+        accel: 0.95,
+        speed: 0.999,
+    };
+}
+
+/// A 2-variable linear program max (or min) c . (u, x) over a u + b x <= r rows: vertex
+/// enumeration (every pair of constraint lines), exact for bounded feasible sets.
+fn lp2(rows: &[(f64, f64, f64)], cu: f64, cx: f64) -> Option<(f64, f64)> {
+    let mut best: Option<(f64, (f64, f64))> = None;
+    let feasible = |u: f64, x: f64| rows.iter().all(|(a, b, r)| a * u + b * x <= r + 1e-9 * (1.0 + r.abs()));
+    for i in 0..rows.len() {
+        for j in (i + 1)..rows.len() {
+            let (a1, b1, r1) = rows[i];
+            let (a2, b2, r2) = rows[j];
+            let det = a1 * b2 - a2 * b1;
+            if det.abs() < 1e-12 {
+                continue;
+            }
+            let u = (r1 * b2 - r2 * b1) / det;
+            let x = (a1 * r2 - a2 * r1) / det;
+            if feasible(u, x) {
+                let v = cu * u + cx * x;
+                if best.is_none_or(|(bv, _)| v > bv) {
+                    best = Some((v, (u, x)));
+                }
+            }
+        }
+    }
+    best.map(|(_, p)| p)
+}
+
+/// TOPP-RA: the time-optimal parameterisation of `path`'s geometry under the joint speed limits,
+/// the specification accelerations and the torque limits with `dynamics` (payload included), on
+/// `grid` stages. Each stage's constraints are linear in (u, x) = (s'', s'^2):
+/// tau = a u + b x + c, with a = M q', b = M q'' + C(q, q') q', c = gravity + Coulomb friction;
+/// viscous friction (linear in s', not in s'^2) is bounded by its value at the stage's top speed
+/// and taken from the torque margin, which keeps the result feasible (slightly conservative).
+/// Backward pass: controllable sets by two 2-variable LPs per stage; forward pass: greedy.
+/// Returns `None` if the path cannot be followed even slowly (a static overload).
+pub fn toppra(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    path: &Trajectory,
+    grid: usize,
+    shares: Shares,
+) -> Option<Retimed> {
+    use crate::robot::dynamics::Terms;
+    let n = grid.max(2);
+    let arc = ArcPath::new(path);
+    let s: Vec<f64> = (0..=n).map(|k| k as f64 / n as f64).collect();
+    let ds = 1.0 / n as f64;
+    let lim_tau = robot.torque_limit_nm();
+    let vmax = robot.max_vel_rad_s();
+    let amax = robot.max_accel_rad_s2();
+    let zero = JointVector::zeros();
+    let rigid = Terms {
+        gravity: false,
+        friction: false,
+        armature: true,
+    };
+    // Stage constraints as rows a u + b x <= r.
+    let stage: Vec<Vec<(f64, f64, f64)>> = s
+        .iter()
+        .map(|&si| {
+            let (q, qp, qpp) = arc.at(si);
+            let a = dynamics.inverse_dynamics_terms(&q, &zero, &qp, rigid);
+            let b = dynamics.inverse_dynamics_terms(&q, &qp, &qpp, rigid);
+            let g = dynamics.gravity_torques(&q);
+            let mut rows = Vec::with_capacity(4 * DOF + 2);
+            let mut xmax = f64::INFINITY;
+            for i in 0..DOF {
+                if qp[i].abs() > 1e-9 {
+                    xmax = xmax.min((shares.speed * vmax[i] / qp[i].abs()).powi(2));
+                }
+            }
+            let sdot_max = xmax.sqrt();
+            for i in 0..DOF {
+                let j = &robot.joints[i];
+                let coulomb = j.coulomb_nm * qp[i].signum() * if qp[i].abs() > 1e-9 { 1.0 } else { 0.0 };
+                let viscous = j.viscous_nm_s_per_rad * qp[i].abs() * if sdot_max.is_finite() { sdot_max } else { 0.0 };
+                let c = g[i] + coulomb;
+                // 2 % of the limit is kept back for what happens between grid points.
+                let cap = shares.torque * lim_tau[i] - viscous;
+                rows.push((a[i], b[i], cap - c));
+                rows.push((-a[i], -b[i], cap + c));
+                rows.push((qp[i], qpp[i], shares.accel * amax[i]));
+                rows.push((-qp[i], -qpp[i], shares.accel * amax[i]));
+            }
+            if xmax.is_finite() {
+                rows.push((0.0, 1.0, xmax));
+            }
+            rows.push((0.0, -1.0, 0.0));
+            rows
+        })
+        .collect();
+    // Each stage also honours the next grid point's constraints with x_{i+1} = x_i + 2 ds u
+    // (first-order interpolation): the path's curvature jumps where blends begin and end, and a
+    // stage straddling such a jump must satisfy both sides.
+    let stage: Vec<Vec<(f64, f64, f64)>> = (0..=n)
+        .map(|i| {
+            let mut rows = stage[i].clone();
+            if i < n {
+                rows.extend(stage[i + 1].iter().map(|&(a, b, r)| (a + 2.0 * ds * b, b, r)));
+            }
+            rows
+        })
+        .collect();
+    // Backward pass: controllable sets K_i = [lo, hi] of x.
+    let mut k = vec![(0.0f64, 0.0f64); n + 1];
+    for i in (0..n).rev() {
+        let mut rows = stage[i].clone();
+        // x + 2 ds u in K_{i+1}.
+        rows.push((2.0 * ds, 1.0, k[i + 1].1));
+        rows.push((-2.0 * ds, -1.0, -k[i + 1].0));
+        rows.push((0.0, 1.0, 1e6)); // keep the LP bounded
+        let hi = lp2(&rows, 0.0, 1.0)?.1;
+        let lo = lp2(&rows, 0.0, -1.0)?.1;
+        k[i] = (lo.max(0.0), hi);
+    }
+    if k[0].0 > 1e-12 {
+        return None;
+    }
+    // Forward pass: from rest, the largest u that keeps the next x controllable.
+    let mut x = vec![0.0; n + 1];
+    for i in 0..n {
+        let (mut ulo, mut uhi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for &(a, b, r) in stage[i]
+            .iter()
+            .chain([(2.0 * ds, 1.0, k[i + 1].1), (-2.0 * ds, -1.0, -k[i + 1].0)].iter())
+        {
+            let rr = r - b * x[i];
+            if a > 1e-15 {
+                uhi = uhi.min(rr / a);
+            } else if a < -1e-15 {
+                ulo = ulo.max(rr / a);
+            }
+        }
+        let u = if uhi >= ulo - 1e-9 { uhi } else { ulo };
+        x[i + 1] = (x[i] + 2.0 * ds * u).clamp(k[i + 1].0, k[i + 1].1);
+    }
+    let mut t = vec![0.0; n + 1];
+    for i in 0..n {
+        let v = x[i].max(0.0).sqrt() + x[i + 1].max(0.0).sqrt();
+        t[i + 1] = t[i] + if v > 0.0 { 2.0 * ds / v } else { f64::INFINITY };
+    }
+    if !t[n].is_finite() {
+        return None;
+    }
+    Some(Retimed { path: arc, s, x, t })
+}
+
+/// Outcome of the alternating path correction and acceleration search (the reference's §4.3).
+#[derive(Debug, Clone)]
+pub struct Corrected {
+    /// The via points after correction (the input's if no fold helped).
+    pub via: Vec<JointVector>,
+    /// The accelerated trajectory along them.
+    pub accelerated: Accelerated,
+    /// Folds kept.
+    pub folds: usize,
+    /// Folds tried.
+    pub tried: usize,
+}
+
+/// The reference system's §4.3, alternated with §4.2 until no gain, starting from `accelerated`
+/// (the §4.2 result on `via`): in each segment where J1
+/// needs the longest time and travels more than `min_j1_rad`, insert a via point at the middle
+/// with J2 and J3 moved down the gradient of J1's inertia M11 (folding the arm toward the body),
+/// by no more than they can travel out and back within J1's time for the segment; keep the fold
+/// only if the re-accelerated motion is faster and, with a collision model, its new edges certify.
+pub fn correct_path(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    accelerated: &Accelerated,
+    collision: Option<&crate::planning::CollisionModel>,
+    min_j1_rad: f64,
+) -> Corrected {
+    let mut current: Vec<JointVector> = via.to_vec();
+    let mut best = accelerated.clone();
+    let (mut folds, mut tried) = (0, 0);
+    // Folding lowers J1's inertia, which only pays when J1's acceleration is held down by its
+    // torque, not by its specification.
+    if best.limits.accel_rad_s2[0] >= 0.999 * robot.joints[0].max_accel_rad_s2 {
+        return Corrected {
+            via: current,
+            accelerated: best,
+            folds,
+            tried,
+        };
+    }
+    let vmax = robot.max_vel_rad_s();
+    let mut stats = crate::planning::PlanStats::default();
+    for _round in 0..4 {
+        let mut improved = false;
+        let mut k = 0;
+        while k + 1 < current.len() {
+            let (a, b) = (current[k], current[k + 1]);
+            let d = b - a;
+            let t1 = d[0].abs() / vmax[0];
+            let j1_limits = (1..DOF).all(|i| d[i].abs() / vmax[i] <= t1);
+            if !j1_limits || d[0].abs() < min_j1_rad {
+                k += 1;
+                continue;
+            }
+            tried += 1;
+            let mid = (a + b) / 2.0;
+            // Gradient of M11 in (q2, q3) by central differences.
+            let m11 = |q: &JointVector| dynamics.mass_matrix(q)[(0, 0)];
+            let h = 1e-4;
+            let grad: Vec<f64> = [1usize, 2]
+                .iter()
+                .map(|&i| {
+                    let (mut p, mut m) = (mid, mid);
+                    p[i] += h;
+                    m[i] -= h;
+                    (m11(&p) - m11(&m)) / (2.0 * h)
+                })
+                .collect();
+            let norm = grad[0].hypot(grad[1]);
+            if norm < 1e-9 {
+                k += 1;
+                continue;
+            }
+            // Out and back within half of J1's segment time each way, at 80 % of top speed.
+            let reach = [0.8 * vmax[1] * t1 / 2.0, 0.8 * vmax[2] * t1 / 2.0];
+            let step = (reach[0] / (grad[0].abs() / norm).max(1e-9)).min(reach[1] / (grad[1].abs() / norm).max(1e-9));
+            // The full fold, half and a quarter of it: the fastest that is safe and helps.
+            let mut kept: Option<(Vec<JointVector>, Accelerated)> = None;
+            for share in [1.0, 0.5, 0.25] {
+                let mut fold = mid;
+                fold[1] -= share * step * grad[0] / norm;
+                fold[2] -= share * step * grad[1] / norm;
+                if !robot.within_limits(&fold, 0.0) {
+                    continue;
+                }
+                let safe = collision
+                    .is_none_or(|m| m.certify_edge(&a, &fold, &mut stats) && m.certify_edge(&fold, &b, &mut stats));
+                if !safe {
+                    continue;
+                }
+                let mut candidate = current.clone();
+                candidate.insert(k + 1, fold);
+                let acc = optimise_accelerations(robot, dynamics, &candidate, 0.001, 0.05);
+                let to_beat = kept
+                    .as_ref()
+                    .map_or(best.trajectory.duration_s, |(_, k)| k.trajectory.duration_s);
+                let within_torque = acc.torques.peak_ratio.iter().all(|r| *r <= 1.0);
+                if within_torque && acc.trajectory.duration_s < to_beat - 1e-6 {
+                    kept = Some((candidate, acc));
+                }
+            }
+            if let Some((candidate, acc)) = kept {
+                current = candidate;
+                best = acc;
+                folds += 1;
+                improved = true;
+                k += 2;
+                continue;
+            }
+            k += 1;
+        }
+        if !improved {
+            break;
+        }
+    }
+    Corrected {
+        via: current,
+        accelerated: best,
+        folds,
+        tried,
+    }
+}
+
+/// Re-checks a timed motion against the collision model: every edge between consecutive samples
+/// `dt_s` apart must certify (the blends leave the planned, certified polyline, so the corridor
+/// they sweep is checked again). Returns the first time at which it does not.
+pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Motion, dt_s: f64) -> Result<(), f64> {
+    let mut stats = crate::planning::PlanStats::default();
+    let samples = motion.sampled(dt_s);
+    for w in samples.windows(2) {
+        if !model.certify_edge(&w[0].q, &w[1].q, &mut stats) {
+            return Err(w[0].t);
+        }
+    }
+    Ok(())
+}
+
+/// §4.2 with the blends kept inside the certified corridor: the accelerated trajectory's corridor
+/// is checked every `check_dt_s` (edges between samples certified; the chord of a blend between
+/// samples deviates from it by at most a dt^2 / 8: below 1 mrad at 10 ms, under half a
+/// millimetre of robot motion, inside the model's 2 mm margin); where it fails, the via point whose blend cuts the corner becomes a stop
+/// (duplicated: the arm passes exactly through it) and the search runs again.
+pub fn accelerate_in_corridor(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    model: &crate::planning::CollisionModel,
+    check_dt_s: f64,
+) -> (Vec<JointVector>, Accelerated, usize) {
+    let mut via = via.to_vec();
+    let mut stops = 0;
+    let mut acc = optimise_accelerations(robot, dynamics, &via, 0.001, 0.05);
+    loop {
+        if stops > 0 {
+            // A stop changes little: restart the bisection from the accelerations just found.
+            let prev = acc.limits.accel_rad_s2;
+            acc = search_accelerations(robot, dynamics, &via, 0.001, 0.05, prev, prev * 0.8);
+        }
+        match check_corridor(model, &acc.trajectory, check_dt_s) {
+            Ok(()) => return (via, acc, stops),
+            Err(t) if stops < via.len() => {
+                let j = acc.trajectory.via_near(t);
+                let dup = j.clamp(1, via.len() - 2);
+                if via[dup] == via[dup + 1] || via[dup] == via[dup - 1] {
+                    // Already a stop there: nothing more to take out of the blend.
+                    return (via, acc, stops);
+                }
+                via.insert(dup, via[dup]);
+                stops += 1;
+            }
+            Err(_) => return (via, acc, stops),
+        }
+    }
+}
+
+/// The time-optimal bound along a path that may stop at via points: the path is cut at every
+/// stop (a duplicated via point), each stop-free piece is retimed by TOPP-RA on the geometry
+/// `limits` blend it with, and the durations add up. `None` if a piece is infeasible.
+pub fn optimal_duration(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    limits: &MotionLimits,
+    grid: usize,
+) -> Option<f64> {
+    let mut total = 0.0;
+    let mut start = 0;
+    for k in 1..=via.len() {
+        if k == via.len() || via[k] == via[k - 1] {
+            let piece = &via[start..k];
+            if piece.len() >= 2 {
+                let path = Trajectory::through(piece, limits);
+                total += toppra(robot, dynamics, &path, grid, Shares::BOUND)?.duration_s();
+            }
+            start = k;
+        }
+    }
+    Some(total)
 }

@@ -6,18 +6,18 @@ use binpick::bench::fig5_cases;
 use binpick::config::LoadedScene;
 use binpick::planning::{Algorithm, PlanOptions};
 use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
-use binpick::trajectory::{Trajectory, default_limits, optimise_accelerations};
+use binpick::trajectory::{Motion, Shares, Trajectory, correct_path, default_limits, optimise_accelerations, toppra};
 
 /// Torques by Lagrange: d/dt(M q') - dT/dq + dV/dq + friction, with the time derivative and the
 /// partials taken by central differences of the energy functions (not the RNEA).
-fn lagrange_torques(d: &DynamicsModel, traj: &Trajectory, t: f64) -> JointVector {
+fn lagrange_torques(d: &DynamicsModel, traj: &impl Motion, t: f64) -> JointVector {
     let h = 1e-6;
     let p = |t: f64| {
-        let s = traj.sample(t);
+        let s = traj.at(t);
         d.mass_matrix(&s.q) * s.qd
     };
-    let s = traj.sample(t);
-    let (ta, tb) = ((t - h).max(0.0), (t + h).min(traj.duration_s));
+    let s = traj.at(t);
+    let (ta, tb) = ((t - h).max(0.0), (t + h).min(traj.duration_s()));
     let dpdt = (p(tb) - p(ta)) / (tb - ta);
     let e = 1e-6;
     JointVector::from_fn(|i, _| {
@@ -117,5 +117,147 @@ fn accelerated_motions_stay_within_torque_speed_and_position_limits_in_an_indepe
                 fast.torques.peak_ratio
             );
         }
+    }
+}
+
+/// Checks a motion at 1 kHz: limits of position, speed, acceleration, and torque by Lagrange.
+fn check_at_1khz(
+    name: &str,
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    m: &impl Motion,
+    accel_tolerance: f64,
+) -> [f64; DOF] {
+    let limit = robot.torque_limit_nm();
+    let n = (m.duration_s() / 0.001).ceil() as usize;
+    let mut worst = [0.0f64; DOF];
+    for j in 0..=n {
+        let t = (j as f64 * 0.001).min(m.duration_s());
+        let s = m.at(t);
+        assert!(robot.within_limits(&s.q, 1e-9), "{name}: position limit at t = {t}");
+        for i in 0..DOF {
+            assert!(
+                s.qd[i].abs() <= robot.joints[i].max_vel_rad_s * (1.0 + 1e-6) + 1e-9,
+                "{name}: speed J{} at {t}: {}",
+                i + 1,
+                s.qd[i]
+            );
+            assert!(
+                s.qdd[i].abs() <= robot.joints[i].max_accel_rad_s2 * accel_tolerance + 1e-9,
+                "{name}: acceleration J{} at {t}: {:.4} of the limit",
+                i + 1,
+                s.qdd[i].abs() / robot.joints[i].max_accel_rad_s2
+            );
+        }
+        let tau = lagrange_torques(dynamics, m, t);
+        for i in 0..DOF {
+            worst[i] = worst[i].max(tau[i].abs() / limit[i]);
+        }
+    }
+    for (i, w) in worst.iter().enumerate() {
+        assert!(*w <= 1.0, "{name}: J{} torque reaches {:.3} of its limit", i + 1, w);
+    }
+    worst
+}
+
+#[test]
+fn time_optimal_retiming_respects_every_limit_and_bounds_the_accelerator() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let hand = Payload::from_gripper(&scene.scene.gripper);
+    let dynamics = robot.dynamics(&hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector)));
+    for (k, case) in fig5_cases(&scene.scene, &robot).unwrap().iter().enumerate() {
+        let mut rng = binpick::rng::stream(k as u64, "planner");
+        let plan = case
+            .model
+            .plan(&case.start, &case.goal, &PlanOptions::default(), &mut rng)
+            .unwrap();
+        let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+        let fast = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+        let optimal = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::BOUND).expect("feasible");
+        let executable = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::EXECUTE).expect("feasible");
+        // Same path, same ends.
+        assert!((optimal.at(optimal.duration_s()).q - via[via.len() - 1]).amax() < 1e-9);
+        assert!((optimal.at(0.0).q - via[0]).amax() < 1e-9);
+        // The bound is a bound (up to its grid) and the accelerator is within 5 % of it.
+        assert!(
+            optimal.duration_s() <= fast.trajectory.duration_s * 1.005,
+            "{}: optimal {} vs {}",
+            case.name,
+            optimal.duration_s(),
+            fast.trajectory.duration_s
+        );
+        assert!(
+            fast.trajectory.duration_s <= optimal.duration_s() * 1.05,
+            "{}: accelerator {} more than 5 % above the bound {}",
+            case.name,
+            fast.trajectory.duration_s,
+            optimal.duration_s()
+        );
+        check_at_1khz(&case.name, &robot, &dynamics, &executable, 1.0);
+        assert!(executable.duration_s() <= optimal.duration_s() * 1.05);
+        binpick::trajectory::check_corridor(&case.model, &fast.trajectory, 0.001).unwrap_or_else(|t| {
+            panic!(
+                "{}: the blended path leaves the certified corridor at t = {t}",
+                case.name
+            )
+        });
+    }
+}
+
+#[test]
+fn path_correction_folds_the_arm_when_j1_is_torque_limited_and_stays_certified() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let hand = Payload::from_gripper(&scene.scene.gripper);
+    // A 3.5 kg part: J1's acceleration is held down by its torque, so folding J2/J3 pays.
+    let dynamics = robot.dynamics(&hand.combined(&Payload::point(3.5, robot.flange_from_tool.translation.vector)));
+    let mut cases = fig5_cases(&scene.scene, &robot).unwrap();
+    // The cell's table only: the arm swings free.
+    let mut model = cases.remove(0).model;
+    model.env.boxes.truncate(1);
+    let model = &model;
+    // The tool 25 cm above the table at 55 cm reach, on either side: J1 turns 180 deg.
+    let home = JointVector::from(scene.scene.robot.home_rad());
+    let at = |y: f64| {
+        robot
+            .ik_tool_nearest(
+                &binpick::robot::tool_down_pose(nalgebra::Vector3::new(0.0, y, 0.25), 0.0),
+                &home,
+            )
+            .unwrap()
+            .q
+    };
+    let (a, b) = (at(0.55), at(-0.55));
+    let via = vec![a, b];
+    let acc = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+    assert!(
+        acc.limits.accel_rad_s2[0] < 0.9 * robot.joints[0].max_accel_rad_s2,
+        "J1 should be torque-limited"
+    );
+    // Without a collision model the fold that lowers J1's inertia is kept and pays.
+    let free = correct_path(&robot, &dynamics, &via, &acc, None, 1.0);
+    assert!(free.folds >= 1, "no fold kept in free space ({} tried)", free.tried);
+    assert!(free.accelerated.trajectory.duration_s < acc.trajectory.duration_s);
+    let mid = free.via[1];
+    assert!(dynamics.mass_matrix(&mid)[(0, 0)] < dynamics.mass_matrix(&((a + b) / 2.0))[(0, 0)]);
+    check_at_1khz("folded", &robot, &dynamics, &free.accelerated.trajectory, 1.0);
+    // With the collision model, a fold is kept only if its edges certify: here the full fold
+    // brings the flange into link 1, so whatever is kept must certify, and nothing gets slower.
+    let mut stats = binpick::planning::PlanStats::default();
+    let full_fold_clear = free
+        .via
+        .windows(2)
+        .all(|w| model.certify_edge(&w[0], &w[1], &mut stats));
+    let c = correct_path(&robot, &dynamics, &via, &acc, Some(model), 1.0);
+    for w in c.via.windows(2) {
+        assert!(
+            model.certify_edge(&w[0], &w[1], &mut stats),
+            "a kept fold does not certify"
+        );
+    }
+    assert!(c.accelerated.trajectory.duration_s <= acc.trajectory.duration_s);
+    if !full_fold_clear {
+        assert_ne!(c.via, free.via, "the colliding fold was kept");
     }
 }
