@@ -996,22 +996,24 @@ fn bench_accel(runs: usize, json: bool) -> Result<()> {
         "motion accelerator, one core, hand + 30 g part; {runs} runs per case, each planning with its own seed: the median run shown, compute = max over the runs of planning + §4.2 in the corridor + §4.3"
     );
     println!(
-        "case   default_s  §4.2_s  §4.3_s  optimal_s  improvement  gap_to_opt  folds  compute_ms  corridor | reference: improvement  compute_ms | peak torque/limit J1..J6       energy default -> final"
+        "case   default_s  §4.2_s  §4.3_s  optimal_s  toppra_exec_s  improvement  gap_to_opt  folds  compute_max/median_ms  corridor | reference: improvement  compute_ms | peak torque/limit J1..J6       energy default -> final"
     );
     for r in &rows {
         let peaks: Vec<String> = r.peak_ratio.iter().map(|p| format!("{p:.2}")).collect();
         println!(
-            "{:<6} {:>9.3} {:>7.3} {:>7.3} {:>10.3} {:>11.1}% {:>10.1}% {:>3}/{:<2} {:>10.2}  {:<8} | {:>21.1}% {:>11.1} | {}  {:.0} -> {:.0}",
+            "{:<6} {:>9.3} {:>7.3} {:>7.3} {:>10.3} {:>14.3} {:>11.1}% {:>10.1}% {:>3}/{:<2} {:>10.2}/{:<5.2}  {:<8} | {:>21.1}% {:>11.1} | {}  {:.0} -> {:.0}",
             r.case,
             r.default_s,
             r.accelerated_s,
             r.corrected_s,
             r.optimal_s,
+            r.toppra_executable_s,
             r.improvement * 100.0,
             r.gap_to_optimal * 100.0,
             r.folds.0,
             r.folds.1,
             r.compute_max_ms,
+            r.compute_median_ms,
             if r.corridor_clear { "clear" } else { "BLOCKED" },
             r.reference.0,
             r.reference.1,

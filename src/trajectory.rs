@@ -23,7 +23,49 @@ pub struct MotionLimits {
     pub accel_rad_s2: JointVector,
 }
 
-/// A timed trajectory through via points with parabolic blends.
+/// How smooth the blends between segments are (the smoothing seed's polynomial blends).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+pub enum Continuity {
+    /// Velocity-continuous: parabolic blends (constant acceleration).
+    Velocity,
+    /// Acceleration-continuous: cubic velocity blend, acceleration zero at both ends.
+    Acceleration,
+    /// Jerk-continuous: quintic velocity blend, acceleration and jerk zero at both ends.
+    Jerk,
+}
+
+impl Continuity {
+    /// Peak of the normalised acceleration profile: the blend is this much longer than a
+    /// parabolic one for the same velocity change and peak acceleration.
+    pub fn peak_factor(self) -> f64 {
+        match self {
+            Continuity::Velocity => 1.0,
+            Continuity::Acceleration => 1.5,
+            Continuity::Jerk => 1.875,
+        }
+    }
+
+    /// At blend fraction sigma: the velocity shape s(sigma) from 0 to 1, its derivative, and its
+    /// integral from 0 (which is 1/2 at sigma = 1 for every order, so all blends end alike).
+    pub fn blend(self, sigma: f64) -> (f64, f64, f64) {
+        let x = sigma.clamp(0.0, 1.0);
+        match self {
+            Continuity::Velocity => (x, 1.0, 0.5 * x * x),
+            Continuity::Acceleration => (
+                x * x * (3.0 - 2.0 * x),
+                6.0 * x * (1.0 - x),
+                x * x * x * (1.0 - 0.5 * x),
+            ),
+            Continuity::Jerk => (
+                x * x * x * (10.0 + x * (-15.0 + 6.0 * x)),
+                30.0 * x * x * (1.0 - x) * (1.0 - x),
+                x * x * x * x * (2.5 + x * (-3.0 + x)),
+            ),
+        }
+    }
+}
+
+/// A timed trajectory through via points with polynomial blends.
 #[derive(Debug, Clone)]
 pub struct Trajectory {
     /// Via points, first and last included.
@@ -36,6 +78,8 @@ pub struct Trajectory {
     blend: Vec<f64>,
     /// When each via point is reached on the linear extension of its segments [s].
     via_t: Vec<f64>,
+    /// How smooth the blends are.
+    pub continuity: Continuity,
     /// Total duration [s].
     pub duration_s: f64,
 }
@@ -58,7 +102,15 @@ impl Trajectory {
     /// joint's (distance / speed); blends take the largest velocity change over acceleration
     /// among the joints; segments lengthen until the blends fit in them.
     pub fn through(via: &[JointVector], limits: &MotionLimits) -> Self {
+        Self::through_with(via, limits, Continuity::Velocity)
+    }
+
+    /// As [`Trajectory::through`], with blends of the given continuity. A smoother blend reaches
+    /// the same velocity change with a higher peak acceleration for its length, so it is made
+    /// longer by that factor (1, 1.5, 1.875) to keep every joint within its acceleration.
+    pub fn through_with(via: &[JointVector], limits: &MotionLimits, continuity: Continuity) -> Self {
         assert!(via.len() >= 2, "a trajectory needs two via points");
+        let peak = continuity.peak_factor();
         let n = via.len() - 1;
         let mut seg_time: Vec<f64> = (0..n)
             .map(|k| {
@@ -76,9 +128,10 @@ impl Trajectory {
             for (j, b) in blend.iter_mut().enumerate() {
                 let before = if j == 0 { JointVector::zeros() } else { seg_vel[j - 1] };
                 let after = if j == n { JointVector::zeros() } else { seg_vel[j] };
-                *b = (0..DOF)
-                    .map(|i| (after[i] - before[i]).abs() / limits.accel_rad_s2[i])
-                    .fold(0.0, f64::max);
+                *b = peak
+                    * (0..DOF)
+                        .map(|i| (after[i] - before[i]).abs() / limits.accel_rad_s2[i])
+                        .fold(0.0, f64::max);
             }
             let mut changed = false;
             for k in 0..n {
@@ -112,6 +165,7 @@ impl Trajectory {
             seg_time,
             blend,
             via_t,
+            continuity,
             duration_s,
         }
     }
@@ -138,15 +192,17 @@ impl Trajectory {
                     self.seg_vel[j - 1]
                 };
                 let after = if j == n { JointVector::zeros() } else { self.seg_vel[j] };
-                let a = (after - before) / tb;
+                let dv = after - before;
                 let tau = t - (tv - tb / 2.0);
+                let sigma = tau / tb;
+                let (shape, shape_rate, shape_integral) = self.continuity.blend(sigma);
                 // Entering the blend: on the incoming line at via_t - tb/2.
                 let p0 = self.via[j] - before * (tb / 2.0);
                 return Sample {
                     t,
-                    q: p0 + before * tau + a * (0.5 * tau * tau),
-                    qd: before + a * tau,
-                    qdd: a,
+                    q: p0 + before * tau + dv * (tb * shape_integral),
+                    qd: before + dv * shape,
+                    qdd: dv * (shape_rate / tb),
                 };
             }
         }
@@ -343,6 +399,45 @@ mod tests {
             vel_rad_s: JointVector::repeat(2.0),
             accel_rad_s2: JointVector::repeat(10.0),
         }
+    }
+
+    #[test]
+    fn smoother_blends_keep_limits_and_are_continuous_in_acceleration() {
+        let via = [
+            JointVector::zeros(),
+            JointVector::new(1.0, -0.5, 0.3, 0.0, 0.2, 0.0),
+            JointVector::new(1.5, 0.2, 0.8, 0.5, -0.3, 1.0),
+        ];
+        let lim = limits();
+        let mut durations = Vec::new();
+        for c in [Continuity::Velocity, Continuity::Acceleration, Continuity::Jerk] {
+            let t = Trajectory::through_with(&via, &lim, c);
+            durations.push(t.duration_s);
+            let s = t.samples(0.0005);
+            assert!((s.last().unwrap().q - via[2]).amax() < 1e-9, "{c:?} misses the end");
+            assert!(s[0].qd.amax() < 1e-12 && s.last().unwrap().qd.amax() < 1e-9);
+            let mut worst_jump = 0.0f64;
+            for w in s.windows(2) {
+                let dt = w[1].t - w[0].t;
+                assert!(
+                    (w[1].q - w[0].q - (w[0].qd + w[1].qd) * (dt / 2.0)).amax() < 1e-6,
+                    "{c:?} position/velocity"
+                );
+                worst_jump = worst_jump.max((w[1].qdd - w[0].qdd).amax());
+            }
+            for x in &s {
+                assert!(
+                    x.qdd.amax() <= lim.accel_rad_s2.amax() + 1e-9,
+                    "{c:?} exceeds the acceleration"
+                );
+            }
+            // Parabolic blends jump to full acceleration; smoother ones ramp over 0.5 ms samples.
+            match c {
+                Continuity::Velocity => assert!(worst_jump > 5.0),
+                _ => assert!(worst_jump < 1.0, "{c:?}: acceleration jumps by {worst_jump}"),
+            }
+        }
+        assert!(durations[0] < durations[1] && durations[1] < durations[2]);
     }
 
     #[test]
