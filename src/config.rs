@@ -469,6 +469,14 @@ pub struct SimConfig {
     pub physics_dt_s: f64,
     /// Joint servo period [s].
     pub control_dt_s: f64,
+    /// Closed-loop bandwidth of the joint servo's PD feedback [Hz].
+    pub servo_bandwidth_hz: f64,
+    /// Tracking error beyond which the controller trips a protective stop [deg].
+    pub tracking_tolerance_deg: f64,
+    /// Torque saturation lasting longer than this trips a protective stop [s].
+    pub saturation_trip_s: f64,
+    /// Time to reset after a protective stop before the cycle resumes [s].
+    pub protective_stop_reset_s: f64,
 }
 
 fn deg(v: f64) -> f64 {
@@ -755,6 +763,10 @@ impl Scene {
         c.non_negative("compute.motion_generation_s", self.compute.motion_generation_s);
         c.within("sim.physics_dt_s", self.sim.physics_dt_s, 1e-5, 0.02);
         c.within("sim.control_dt_s", self.sim.control_dt_s, 1e-5, 0.01);
+        c.within("sim.servo_bandwidth_hz", self.sim.servo_bandwidth_hz, 0.1, 200.0);
+        c.positive("sim.tracking_tolerance_deg", self.sim.tracking_tolerance_deg);
+        c.positive("sim.saturation_trip_s", self.sim.saturation_trip_s);
+        c.non_negative("sim.protective_stop_reset_s", self.sim.protective_stop_reset_s);
         if self.sim.control_dt_s.is_finite()
             && self.sim.physics_dt_s.is_finite()
             && self.sim.control_dt_s > self.sim.physics_dt_s

@@ -11,7 +11,8 @@
 //! 5. [`grasp`]: the grasp selector: suction grasps from detections and the point cloud, ranked.
 //! 6. [`planning`]: collision model (robot spheres, cell boxes, pile columns), certified edges, planner.
 //! 7. [`trajectory`]: timed trajectories through via points, torques, the acceleration search.
-//! 8. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
+//! 8. [`execution`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
+//! 9. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
 //!
 //! Later stages (physics world, sensor, grasp selection, planning, trajectory, execution, cycle,
 //! recording, report) are added as their issues land; see README.md.
@@ -21,6 +22,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod execution;
 pub mod grasp;
 pub mod physics;
 pub mod planning;

@@ -4,6 +4,7 @@ mod cli_bad_input;
 mod cli_pile;
 mod cli_robot;
 mod cli_sense;
+mod execution;
 mod physics;
 mod planning;
 mod sensing;
