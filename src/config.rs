@@ -1038,6 +1038,67 @@ impl ShapePart {
     }
 }
 
+/// A workpiece primitive resolved to its geometry, in the part frame [m].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Piece {
+    /// A box.
+    Box {
+        /// Centre.
+        center_m: Vector3<f64>,
+        /// Half extents.
+        half_m: Vector3<f64>,
+    },
+    /// A cylinder.
+    Cylinder {
+        /// Centre.
+        center_m: Vector3<f64>,
+        /// Radius.
+        radius_m: f64,
+        /// Half length along `axis`.
+        half_length_m: f64,
+        /// Axis.
+        axis: Axis,
+    },
+}
+
+impl Workpiece {
+    /// The shape's primitives with their roles: a box workpiece is one body box, a compound its
+    /// parts, a mesh none (its geometry lives in the mesh file). For validated workpieces.
+    pub fn pieces(&self) -> Vec<(PartRole, Piece)> {
+        match self.shape.kind {
+            ShapeKind::Box => vec![(
+                PartRole::Body,
+                Piece::Box {
+                    center_m: Vector3::zeros(),
+                    half_m: Vector3::from(self.size_m) / 2.0,
+                },
+            )],
+            ShapeKind::Compound => self
+                .shape
+                .parts
+                .iter()
+                .map(|p| {
+                    let center_m = Vector3::from(p.center_m);
+                    let piece = match p.primitive {
+                        Primitive::Box => Piece::Box {
+                            center_m,
+                            half_m: Vector3::from(p.size_m.unwrap_or([0.0; 3])) / 2.0,
+                        },
+                        Primitive::Cylinder => Piece::Cylinder {
+                            center_m,
+                            radius_m: p.radius_m.unwrap_or(0.0),
+                            half_length_m: p.length_m.unwrap_or(0.0) / 2.0,
+                            axis: p.axis.unwrap_or(Axis::Z),
+                        },
+                    };
+                    (p.role, piece)
+                })
+                .collect(),
+            ShapeKind::Mesh => Vec::new(),
+        }
+    }
+}
+
 /// Grasp hints for a workpiece.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]

@@ -16,7 +16,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
-use crate::config::{Axis, PartRole, Primitive, Scene, ShapeKind, Workpiece};
+use crate::config::{Axis, PartRole, Piece, Scene, Workpiece};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
 
@@ -46,37 +46,18 @@ fn axis_vec(a: Axis) -> Vector3<f64> {
 /// The flat faces of a workpiece's body (box faces, cylinder caps). Mesh workpieces have none
 /// here: their faces are not known analytically (a stated gap).
 pub fn body_faces(w: &Workpiece) -> Vec<Face> {
-    /// A body primitive: a box (centre, half extents) or a cylinder (centre, radius, half length, axis).
-    enum Piece {
-        Box(Vector3<f64>, Vector3<f64>),
-        Cylinder(Vector3<f64>, f64, f64, Axis),
-    }
-    let pieces: Vec<Piece> = match w.shape.kind {
-        ShapeKind::Box => vec![Piece::Box(Vector3::zeros(), Vector3::from(w.size_m) / 2.0)],
-        ShapeKind::Compound => w
-            .shape
-            .parts
-            .iter()
-            .filter(|p| p.role == PartRole::Body)
-            .map(|p| {
-                let c = Vector3::from(p.center_m);
-                match p.primitive {
-                    Primitive::Box => Piece::Box(c, Vector3::from(p.size_m.unwrap_or([0.0; 3])) / 2.0),
-                    Primitive::Cylinder => Piece::Cylinder(
-                        c,
-                        p.radius_m.unwrap_or(0.0),
-                        p.length_m.unwrap_or(0.0) / 2.0,
-                        p.axis.unwrap_or(Axis::Z),
-                    ),
-                }
-            })
-            .collect(),
-        ShapeKind::Mesh => Vec::new(),
-    };
+    let pieces = w
+        .pieces()
+        .into_iter()
+        .filter(|(role, _)| *role == PartRole::Body)
+        .map(|(_, p)| p);
     let mut faces = Vec::new();
     for piece in pieces {
         match piece {
-            Piece::Box(c, he) => {
+            Piece::Box {
+                center_m: c,
+                half_m: he,
+            } => {
                 for a in 0..3 {
                     let (b, d) = ((a + 1) % 3, (a + 2) % 3);
                     for s in [-1.0, 1.0] {
@@ -90,7 +71,12 @@ pub fn body_faces(w: &Workpiece) -> Vec<Face> {
                     }
                 }
             }
-            Piece::Cylinder(c, r, h, axis) => {
+            Piece::Cylinder {
+                center_m: c,
+                radius_m: r,
+                half_length_m: h,
+                axis,
+            } => {
                 let a = axis_vec(axis);
                 let along = if axis == Axis::X { Vector3::y() } else { Vector3::x() };
                 for s in [-1.0, 1.0] {

@@ -8,7 +8,7 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use crate::config::{Axis, Primitive, ShapeKind, TrayConfig, Workpiece};
+use crate::config::{Axis, Piece, ShapeKind, TrayConfig, Workpiece};
 
 /// Sides of the prisms that stand in for cylinders (the physics uses the same).
 pub const CYLINDER_SIDES: usize = 16;
@@ -25,6 +25,19 @@ pub struct Polytope {
 }
 
 impl Polytope {
+    /// A workpiece piece: a box exactly, a cylinder as the [`CYLINDER_SIDES`]-sided prism.
+    pub fn of(p: &Piece) -> Self {
+        match *p {
+            Piece::Box { center_m, half_m } => Polytope::cuboid(center_m, half_m),
+            Piece::Cylinder {
+                center_m,
+                radius_m,
+                half_length_m,
+                axis,
+            } => Polytope::prism(center_m, radius_m, half_length_m, axis),
+        }
+    }
+
     /// A box with half extents `he`, centred at `c`, axis-aligned.
     pub fn cuboid(c: Vector3<f64>, he: Vector3<f64>) -> Self {
         let mut vertices = Vec::with_capacity(8);
@@ -120,28 +133,10 @@ pub fn depth(pa: &Isometry3<f64>, a: &Polytope, pb: &Isometry3<f64>, b: &Polytop
 /// The convex pieces of a workpiece, in its part frame (box or compound; `None` for meshes,
 /// whose convex pieces exist only in the physics).
 pub fn workpiece_pieces(w: &Workpiece) -> Option<Vec<Polytope>> {
-    match w.shape.kind {
-        ShapeKind::Box => Some(vec![Polytope::cuboid(Vector3::zeros(), Vector3::from(w.size_m) / 2.0)]),
-        ShapeKind::Compound => Some(
-            w.shape
-                .parts
-                .iter()
-                .map(|p| {
-                    let c = Vector3::from(p.center_m);
-                    match p.primitive {
-                        Primitive::Box => Polytope::cuboid(c, Vector3::from(p.size_m.unwrap_or([0.0; 3])) / 2.0),
-                        Primitive::Cylinder => Polytope::prism(
-                            c,
-                            p.radius_m.unwrap_or(0.0),
-                            p.length_m.unwrap_or(0.0) / 2.0,
-                            p.axis.unwrap_or(Axis::Z),
-                        ),
-                    }
-                })
-                .collect(),
-        ),
-        ShapeKind::Mesh => None,
+    if w.shape.kind == ShapeKind::Mesh {
+        return None;
     }
+    Some(w.pieces().iter().map(|(_, p)| Polytope::of(p)).collect())
 }
 
 /// The tray's floor and walls as boxes in the world: `(world_from_box, box)`.

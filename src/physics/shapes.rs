@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 use rapier3d::math::{Pose, Vector};
 use rapier3d::prelude::SharedShape;
 
-use crate::config::{Axis, PartRole, Primitive, ShapeKind, Source, Workpiece};
+use crate::config::{PartRole, Piece, ShapeKind, Source, Workpiece};
 
 /// Why a workpiece shape could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -163,35 +163,19 @@ impl PartShape {
                 let mut all = Vec::new();
                 let mut view = Vec::new();
                 let mut body = Vec::new();
-                for p in &workpiece.shape.parts {
-                    let (pose, s) = match p.primitive {
-                        Primitive::Box => {
-                            let (c, h) = (
-                                Vector3::from(p.center_m),
-                                Vector3::from(p.size_m.unwrap_or([0.0; 3])) / 2.0,
-                            );
-                            view.push(cuboid(c, h));
-                            let piece = super::overlap::Polytope::cuboid(c, h);
-                            (Pose::IDENTITY, polytope_shape(&piece, &workpiece.name)?)
-                        }
-                        // A 16-sided prism: polyhedral contacts rest stably where rapier's round
-                        // cylinders roll and jitter; the overlap check uses the same prism.
-                        Primitive::Cylinder => {
-                            let prism = super::overlap::Polytope::prism(
-                                Vector3::from(p.center_m),
-                                p.radius_m.unwrap_or(0.0),
-                                p.length_m.unwrap_or(0.0) / 2.0,
-                                p.axis.unwrap_or(Axis::Z),
-                            );
-                            let hull = polytope_shape(&prism, &workpiece.name)?;
-                            view.push((Pose::IDENTITY, hull.clone()));
-                            (Pose::IDENTITY, hull)
-                        }
-                    };
-                    if p.role == PartRole::Body {
-                        body.push((pose, s.clone()));
+                for (role, piece) in workpiece.pieces() {
+                    // Physics: convex polyhedra (cylinders as 16-sided prisms: polyhedral contacts
+                    // rest stably where rapier's round cylinders roll and jitter; the overlap check
+                    // uses the same prisms). Rays: boxes as cuboids.
+                    let hull = polytope_shape(&super::overlap::Polytope::of(&piece), &workpiece.name)?;
+                    view.push(match piece {
+                        Piece::Box { center_m, half_m } => cuboid(center_m, half_m),
+                        Piece::Cylinder { .. } => (Pose::IDENTITY, hull.clone()),
+                    });
+                    if role == PartRole::Body {
+                        body.push((Pose::IDENTITY, hull.clone()));
                     }
-                    all.push((pose, s));
+                    all.push((Pose::IDENTITY, hull));
                 }
                 (SharedShape::compound(all), SharedShape::compound(view), body)
             }
