@@ -298,9 +298,10 @@ impl GraspSelector {
                 }
                 let mut point = det.world_from_part * Point3::from(face.center);
                 let mut local = tray_from_world * point;
-                // The cup touches the highest surface the sensor measured under it: correct the
-                // recognised face height by it (within 5 mm; farther means another surface).
-                let measured = height_map.max_within(local.x, local.y, self.cup_radius_m);
+                // Correct the recognised face height by the surface the sensor measured under the
+                // cup (the median of its cells: robust to depth noise), within 5 mm; farther
+                // means another surface.
+                let measured = height_map.median_within(local.x, local.y, self.cup_radius_m);
                 if measured.is_finite() && (measured - local.z).abs() < 0.005 {
                     point.z += measured - local.z;
                     local.z = measured;

@@ -22,6 +22,7 @@
 
 pub mod bench;
 pub mod config;
+pub mod cycle;
 pub mod execution;
 pub mod grasp;
 pub mod physics;

@@ -639,6 +639,36 @@ impl HeightMap {
             .then(|| j as usize * self.nx + i as usize)
     }
 
+    /// Median of the cell heights within `radius_m` of tray point (x, y) [m] (NaN if none): the
+    /// surface under a small disc, robust to the depth noise that the maximum picks up.
+    pub fn median_within(&self, x: f64, y: f64, radius_m: f64) -> f64 {
+        let mut v = Vec::new();
+        let r = (radius_m / self.cell_m).ceil() as isize + 1;
+        let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
+        let j0 = ((y - self.origin_xy_m[1]) / self.cell_m).floor() as isize;
+        for j in (j0 - r)..=(j0 + r) {
+            for i in (i0 - r)..=(i0 + r) {
+                if i < 0 || j < 0 || i as usize >= self.nx || j as usize >= self.ny {
+                    continue;
+                }
+                let cx = self.origin_xy_m[0] + (i as f64 + 0.5) * self.cell_m;
+                let cy = self.origin_xy_m[1] + (j as f64 + 0.5) * self.cell_m;
+                if (cx - x).hypot(cy - y) > radius_m {
+                    continue;
+                }
+                let h = self.height_m[j as usize * self.nx + i as usize];
+                if h.is_finite() {
+                    v.push(h);
+                }
+            }
+        }
+        if v.is_empty() {
+            return f64::NAN;
+        }
+        v.sort_by(f64::total_cmp);
+        v[v.len() / 2]
+    }
+
     /// Highest seen point above the tray floor within `radius_m` of tray point (x, y) [m]
     /// (NaN if nothing was seen there).
     pub fn max_within(&self, x: f64, y: f64, radius_m: f64) -> f64 {
