@@ -639,9 +639,11 @@ impl HeightMap {
             .then(|| j as usize * self.nx + i as usize)
     }
 
-    /// Median of the cell heights within `radius_m` of tray point (x, y) [m] (NaN if none): the
-    /// surface under a small disc, robust to the depth noise that the maximum picks up.
-    pub fn median_within(&self, x: f64, y: f64, radius_m: f64) -> f64 {
+    /// Upper quartile of the cell heights within `radius_m` of tray point (x, y) and within
+    /// `band_m` of `expected_m` [m] (NaN if none): the surface under a small disc near where it
+    /// should be, robust both to depth noise (which the maximum picks up) and to neighbouring
+    /// surfaces (which a plain median lets in).
+    pub fn surface_within(&self, x: f64, y: f64, radius_m: f64, expected_m: f64, band_m: f64) -> f64 {
         let mut v = Vec::new();
         let r = (radius_m / self.cell_m).ceil() as isize + 1;
         let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
@@ -657,7 +659,7 @@ impl HeightMap {
                     continue;
                 }
                 let h = self.height_m[j as usize * self.nx + i as usize];
-                if h.is_finite() {
+                if h.is_finite() && (h - expected_m).abs() <= band_m {
                     v.push(h);
                 }
             }
@@ -666,7 +668,7 @@ impl HeightMap {
             return f64::NAN;
         }
         v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
+        v[(v.len() * 3) / 4]
     }
 
     /// Highest seen point above the tray floor within `radius_m` of tray point (x, y) [m]
