@@ -639,31 +639,32 @@ impl HeightMap {
             .then(|| j as usize * self.nx + i as usize)
     }
 
+    /// Stored heights [m] (NaN where unseen) of the cells whose centres lie within `radius_m` of
+    /// tray point (x, y), in row-major order.
+    fn heights_within(&self, x: f64, y: f64, radius_m: f64) -> impl Iterator<Item = f64> + '_ {
+        let r = (radius_m / self.cell_m).ceil() as isize + 1;
+        let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
+        let j0 = ((y - self.origin_xy_m[1]) / self.cell_m).floor() as isize;
+        let (nx, ny) = (self.nx as isize, self.ny as isize);
+        ((j0 - r).max(0)..=(j0 + r).min(ny - 1))
+            .flat_map(move |j| ((i0 - r).max(0)..=(i0 + r).min(nx - 1)).map(move |i| (i, j)))
+            .filter(move |&(i, j)| {
+                let cx = self.origin_xy_m[0] + (i as f64 + 0.5) * self.cell_m;
+                let cy = self.origin_xy_m[1] + (j as f64 + 0.5) * self.cell_m;
+                (cx - x).hypot(cy - y) <= radius_m
+            })
+            .map(move |(i, j)| self.height_m[j as usize * self.nx + i as usize])
+    }
+
     /// Upper quartile of the cell heights within `radius_m` of tray point (x, y) and within
     /// `band_m` of `expected_m` [m] (NaN if none): the surface under a small disc near where it
     /// should be, robust both to depth noise (which the maximum picks up) and to neighbouring
     /// surfaces (which a plain median lets in).
     pub fn surface_within(&self, x: f64, y: f64, radius_m: f64, expected_m: f64, band_m: f64) -> f64 {
-        let mut v = Vec::new();
-        let r = (radius_m / self.cell_m).ceil() as isize + 1;
-        let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
-        let j0 = ((y - self.origin_xy_m[1]) / self.cell_m).floor() as isize;
-        for j in (j0 - r)..=(j0 + r) {
-            for i in (i0 - r)..=(i0 + r) {
-                if i < 0 || j < 0 || i as usize >= self.nx || j as usize >= self.ny {
-                    continue;
-                }
-                let cx = self.origin_xy_m[0] + (i as f64 + 0.5) * self.cell_m;
-                let cy = self.origin_xy_m[1] + (j as f64 + 0.5) * self.cell_m;
-                if (cx - x).hypot(cy - y) > radius_m {
-                    continue;
-                }
-                let h = self.height_m[j as usize * self.nx + i as usize];
-                if h.is_finite() && (h - expected_m).abs() <= band_m {
-                    v.push(h);
-                }
-            }
-        }
+        let mut v: Vec<f64> = self
+            .heights_within(x, y, radius_m)
+            .filter(|h| h.is_finite() && (h - expected_m).abs() <= band_m)
+            .collect();
         if v.is_empty() {
             return f64::NAN;
         }
@@ -672,28 +673,11 @@ impl HeightMap {
     }
 
     /// Highest seen point above the tray floor within `radius_m` of tray point (x, y) [m]
-    /// (NaN if nothing was seen there).
+    /// (NaN if nothing was seen there). Cells count when any part of them may lie in the disc
+    /// (centre within `radius_m` plus half a cell diagonal).
     pub fn max_within(&self, x: f64, y: f64, radius_m: f64) -> f64 {
-        let mut best = f64::NAN;
-        let r = (radius_m / self.cell_m).ceil() as isize + 1;
-        let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
-        let j0 = ((y - self.origin_xy_m[1]) / self.cell_m).floor() as isize;
-        for j in (j0 - r)..=(j0 + r) {
-            for i in (i0 - r)..=(i0 + r) {
-                if i < 0 || j < 0 || i as usize >= self.nx || j as usize >= self.ny {
-                    continue;
-                }
-                let cx = self.origin_xy_m[0] + (i as f64 + 0.5) * self.cell_m;
-                let cy = self.origin_xy_m[1] + (j as f64 + 0.5) * self.cell_m;
-                if (cx - x).hypot(cy - y) > radius_m + self.cell_m * 0.71 {
-                    continue;
-                }
-                let h = self.height_m[j as usize * self.nx + i as usize];
-                if !h.is_nan() && (best.is_nan() || h > best) {
-                    best = h;
-                }
-            }
-        }
-        best
+        self.heights_within(x, y, radius_m + self.cell_m * 0.71)
+            .filter(|h| !h.is_nan())
+            .fold(f64::NAN, |best, h| if best.is_nan() || h > best { h } else { best })
     }
 }
