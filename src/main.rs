@@ -778,10 +778,15 @@ fn pile(a: &PileArgs) -> Result<()> {
     Ok(())
 }
 
-fn bench_physics(runs: usize, json: bool) -> Result<()> {
+/// The embedded default cell, its robot and all six embedded workpieces: what the benchmarks run on.
+fn embedded_cell() -> Result<(LoadedScene, RobotModel, Vec<LoadedWorkpiece>)> {
     let loaded = LoadedScene::embedded_default()?;
     let robot = RobotModel::from_scene(&loaded)?;
-    let workpieces = LoadedWorkpiece::all_embedded()?;
+    Ok((loaded, robot, LoadedWorkpiece::all_embedded()?))
+}
+
+fn bench_physics(runs: usize, json: bool) -> Result<()> {
+    let (loaded, robot, workpieces) = embedded_cell()?;
     let b = binpick::bench::physics_bench(&loaded, &robot, &workpieces, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&b)?);
@@ -947,9 +952,7 @@ fn sense(a: &PileArgs) -> Result<()> {
 }
 
 fn bench_sensor(runs: usize, json: bool) -> Result<()> {
-    let loaded = LoadedScene::embedded_default()?;
-    let robot = RobotModel::from_scene(&loaded)?;
-    let workpieces = LoadedWorkpiece::all_embedded()?;
+    let (loaded, robot, workpieces) = embedded_cell()?;
     let b = binpick::bench::sense_bench(&loaded, &robot, &workpieces, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
     if json {
         println!("{}", serde_json::to_string_pretty(&b)?);
@@ -981,9 +984,7 @@ fn bench_sensor(runs: usize, json: bool) -> Result<()> {
 }
 
 fn bench_planner(trials: usize, baseline_trials: usize, seed: u64, json: bool) -> Result<()> {
-    let loaded = LoadedScene::embedded_default()?;
-    let robot = RobotModel::from_scene(&loaded)?;
-    let workpieces = LoadedWorkpiece::all_embedded()?;
+    let (loaded, robot, workpieces) = embedded_cell()?;
     let rows = binpick::bench::planner_bench(&loaded, &robot, &workpieces, trials, baseline_trials, seed)
         .map_err(|e| anyhow::anyhow!("{e}"))?;
     if json {
