@@ -2,10 +2,9 @@
 //! tolerance (also with a payload the controller does not know), and an overload trips a
 //! protective stop.
 
-use binpick::bench::fig5_cases;
+use crate::support::planned_fig5_paths;
 use binpick::config::LoadedScene;
 use binpick::execution::{Servo, Trip, execute};
-use binpick::planning::PlanOptions;
 use binpick::robot::{JointVector, Payload, RobotModel};
 use binpick::trajectory::{MotionLimits, Trajectory, optimise_accelerations};
 
@@ -17,13 +16,7 @@ fn optimised_motions_execute_within_tolerance_and_an_overload_trips_a_protective
     let hand = Payload::from_gripper(&scene.scene.gripper);
     let held = hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector));
     let limit = robot.torque_limit_nm();
-    for (k, case) in fig5_cases(&scene.scene, &robot).unwrap().iter().enumerate() {
-        let mut rng = binpick::rng::stream(k as u64, "planner");
-        let plan = case
-            .model
-            .plan(&case.start, &case.goal, &PlanOptions::default(), &mut rng)
-            .unwrap();
-        let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+    for (case, via) in planned_fig5_paths(&scene, &robot) {
         let plant = robot.dynamics(&held);
         let motion = optimise_accelerations(&robot, &plant, &via, 0.001, 0.05).trajectory;
         // The controller knows the part, and then does not.

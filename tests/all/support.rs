@@ -1,5 +1,9 @@
 //! Helpers: run the binary, make edited copies of the shipped files in a temporary folder.
 
+use binpick::bench::{PlannerCase, fig5_cases};
+use binpick::config::LoadedScene;
+use binpick::planning::PlanOptions;
+use binpick::robot::{JointVector, RobotModel};
 use std::path::{Path, PathBuf};
 use std::process::Output;
 
@@ -83,4 +87,23 @@ impl Workspace {
         v.sort();
         v
     }
+}
+
+/// The Fig. 5 planner cases, each with the via points our planner finds for it (planner stream
+/// seeded by the case's index): the paths the trajectory and execution tests run on.
+pub fn planned_fig5_paths(scene: &LoadedScene, robot: &RobotModel) -> Vec<(PlannerCase, Vec<JointVector>)> {
+    fig5_cases(&scene.scene, robot)
+        .unwrap()
+        .into_iter()
+        .enumerate()
+        .map(|(k, case)| {
+            let mut rng = binpick::rng::stream(k as u64, "planner");
+            let plan = case
+                .model
+                .plan(&case.start, &case.goal, &PlanOptions::default(), &mut rng)
+                .unwrap();
+            let via = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+            (case, via)
+        })
+        .collect()
 }

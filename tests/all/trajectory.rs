@@ -2,9 +2,9 @@
 //! independent code path (Lagrange's equations by finite differences of the kinetic and potential
 //! energy), and its position, speed and acceleration limits.
 
+use crate::support::planned_fig5_paths;
 use binpick::bench::fig5_cases;
 use binpick::config::LoadedScene;
-use binpick::planning::{Algorithm, PlanOptions};
 use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
 use binpick::trajectory::{Motion, Shares, Trajectory, correct_path, default_limits, optimise_accelerations, toppra};
 
@@ -38,21 +38,7 @@ fn accelerated_motions_stay_within_torque_speed_and_position_limits_in_an_indepe
     let hand = Payload::from_gripper(&scene.scene.gripper);
     let held = hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector));
     let limit = robot.torque_limit_nm();
-    for (k, case) in fig5_cases(&scene.scene, &robot).unwrap().iter().enumerate() {
-        let mut rng = binpick::rng::stream(k as u64, "planner");
-        let plan = case
-            .model
-            .plan(
-                &case.start,
-                &case.goal,
-                &PlanOptions {
-                    algorithm: Algorithm::Ours,
-                    ..PlanOptions::default()
-                },
-                &mut rng,
-            )
-            .unwrap();
-        let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+    for (case, via) in planned_fig5_paths(&scene, &robot) {
         for payload in [hand, held] {
             let dynamics = robot.dynamics(&payload);
             let fast = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
@@ -166,13 +152,7 @@ fn time_optimal_retiming_respects_every_limit_and_bounds_the_accelerator() {
     let robot = RobotModel::from_scene(&scene).unwrap();
     let hand = Payload::from_gripper(&scene.scene.gripper);
     let dynamics = robot.dynamics(&hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector)));
-    for (k, case) in fig5_cases(&scene.scene, &robot).unwrap().iter().enumerate() {
-        let mut rng = binpick::rng::stream(k as u64, "planner");
-        let plan = case
-            .model
-            .plan(&case.start, &case.goal, &PlanOptions::default(), &mut rng)
-            .unwrap();
-        let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+    for (case, via) in planned_fig5_paths(&scene, &robot) {
         let fast = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
         let optimal = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::BOUND).expect("feasible");
         let executable = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::EXECUTE).expect("feasible");
