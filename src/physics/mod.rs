@@ -164,6 +164,9 @@ pub enum PartState {
     Held,
     /// Released over the place tray.
     Placed,
+    /// Taken out of the cell (lost over a tray wall, or cleared with an exchanged tray): its body
+    /// is parked far below the table and disabled, so it neither collides nor is seen.
+    Removed,
 }
 
 /// One part in the world.
@@ -342,6 +345,8 @@ pub struct World {
     pick_wall_m: f64,
     /// Tool positions after the last steps, newest last, for the tool's acceleration.
     tool_history: [Vector3<f64>; 3],
+    /// The physics step [s] (`params.dt` holds the substep's while a step runs).
+    step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
     tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
 }
@@ -407,6 +412,7 @@ impl World {
             health: HealthLimits::default(),
             pick_wall_m: scene.pick_tray.wall_thickness_m,
             tool_history: [Vector3::zeros(); 3],
+            step_dt_s: f64::from(scene.sim.physics_dt_s as f32),
             tray_pieces: overlap::tray_pieces(&scene.pick_tray)
                 .into_iter()
                 .chain(overlap::tray_pieces(&scene.place_tray.tray))
@@ -559,9 +565,10 @@ impl World {
         );
     }
 
-    /// Physics timestep [s].
+    /// Physics timestep [s]: one [`World::step`], also while it runs in substeps (the
+    /// gripper's tool acceleration and release velocity are differences over whole steps).
     pub fn dt_s(&self) -> f64 {
-        self.params.dt as f64
+        self.step_dt_s
     }
 
     /// Joint positions of the arm now [rad].
@@ -647,7 +654,7 @@ impl World {
         let fastest = self
             .parts
             .iter()
-            .filter(|p| p.state != PartState::Held)
+            .filter(|p| matches!(p.state, PartState::Free | PartState::Placed))
             .map(|p| &self.bodies[p.body])
             .filter(|b| !b.is_sleeping())
             .map(|b| (b.linvel().length() as f64 / SIM_UNITS_PER_M + b.angvel().length() as f64 * r) * dt)
@@ -713,6 +720,29 @@ impl World {
         idx
     }
 
+    /// Takes part `i` out of the cell: parked 10 m below the table (one spot per part, so parked
+    /// parts never touch), disabled, state [`PartState::Removed`]. Indices of other parts stay.
+    pub fn remove_part(&mut self, i: usize) {
+        let Some(p) = self.parts.get_mut(i) else {
+            return;
+        };
+        p.state = PartState::Removed;
+        let parked = Isometry3::translation(i as f64 * 0.5, 0.0, -10.0);
+        let b = &mut self.bodies[p.body];
+        b.set_body_type(RigidBodyType::Fixed, false);
+        b.set_position(to_pose(&parked), false);
+        b.set_linvel(Vector::ZERO, false);
+        b.set_angvel(Vector::ZERO, false);
+        b.set_enabled(false);
+    }
+
+    /// Indices of the parts in a given state.
+    pub fn parts_in_state(&self, state: PartState) -> Vec<usize> {
+        (0..self.parts.len())
+            .filter(|&i| self.parts[i].state == state)
+            .collect()
+    }
+
     /// `world_from_part` of part `i`.
     pub fn part_pose(&self, i: usize) -> Isometry3<f64> {
         to_isometry(self.bodies[self.parts[i].body].position())
@@ -728,7 +758,7 @@ impl World {
     pub fn parts_at_rest(&self, lin_m_s: f64, ang_rad_s: f64) -> bool {
         self.parts.iter().all(|p| {
             let b = &self.bodies[p.body];
-            p.state == PartState::Held
+            matches!(p.state, PartState::Held | PartState::Removed)
                 || b.is_sleeping()
                 || ((b.linvel().length() as f64) < lin_m_s * SIM_UNITS_PER_M
                     && (b.angvel().length() as f64) < ang_rad_s)
@@ -918,7 +948,7 @@ impl World {
             let (ok, volume) = match p.state {
                 PartState::Free => (self.pick_tray.contains(&c), "pick tray"),
                 PartState::Placed => (self.place_tray.contains(&c), "place tray"),
-                PartState::Held => (true, ""),
+                PartState::Held | PartState::Removed => (true, ""),
             };
             if !ok {
                 return Err(HealthError::LeftVolume {

@@ -17,7 +17,7 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use rand::RngExt;
 use serde::Serialize;
 
-use super::{HealthError, World};
+use super::{HealthError, PartState, World};
 
 /// How to build a pile.
 #[derive(Debug, Clone, Copy)]
@@ -193,7 +193,11 @@ impl World {
         let mut settled = false;
         while self.time_s - start_time < opts.max_settle_s {
             self.step()?;
-            if self.parts.iter().all(|p| self.bodies[p.body].is_sleeping()) {
+            if self
+                .parts
+                .iter()
+                .all(|p| p.state == PartState::Removed || self.bodies[p.body].is_sleeping())
+            {
                 settled = true;
                 break;
             }
