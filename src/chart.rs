@@ -1,0 +1,382 @@
+//! Report stage: the cycle's time chart as SVG.
+//!
+//! Job: draw one lane per stage of the cell cycle (sensor, recognition, grasp selection, planning,
+//! pick, place, stall) with a box for every interval in which that stage is busy, plus vertical
+//! markers for events (a part released, a fault), over a window of simulation time, like the time
+//! chart of a bin-picking paper. All times are seconds of simulation time. The output is
+//! deterministic: the same input gives a byte-identical document (fixed decimals, no hash maps).
+
+use std::fmt::Write;
+
+/// A lane of the time chart, top to bottom in this order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
+pub enum Lane {
+    /// The 3D sensor captures a depth image.
+    Sensor,
+    /// Recognition finds parts in the capture.
+    Recognition,
+    /// The grasp selector ranks suction grasps.
+    Grasp,
+    /// The motion planner plans the next move.
+    Planning,
+    /// The arm moves to a part and picks it.
+    Pick,
+    /// The arm carries the part to the place tray and releases it.
+    Place,
+    /// The cell waits (nothing to pick, a protective stop, a retry).
+    Stall,
+}
+
+impl Lane {
+    /// Every lane, top to bottom.
+    pub const ALL: [Lane; 7] = [
+        Lane::Sensor,
+        Lane::Recognition,
+        Lane::Grasp,
+        Lane::Planning,
+        Lane::Pick,
+        Lane::Place,
+        Lane::Stall,
+    ];
+
+    /// Label shown at the left of the lane ("sensor", "recognition", "grasp selection", "planning",
+    /// "Pick", "Place", "stall").
+    pub fn label(self) -> &'static str {
+        match self {
+            Lane::Sensor => "sensor",
+            Lane::Recognition => "recognition",
+            Lane::Grasp => "grasp selection",
+            Lane::Planning => "planning",
+            Lane::Pick => "Pick",
+            Lane::Place => "Place",
+            Lane::Stall => "stall",
+        }
+    }
+
+    fn colour(self) -> &'static str {
+        match self {
+            Lane::Sensor => "#4e79a7",
+            Lane::Recognition => "#f28e2b",
+            Lane::Grasp => "#e15759",
+            Lane::Planning => "#76b7b2",
+            Lane::Pick => "#59a14f",
+            Lane::Place => "#edc948",
+            Lane::Stall => "#b07aa1",
+        }
+    }
+}
+
+/// A busy interval on one lane.
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Span {
+    /// The lane the box is drawn on.
+    pub lane: Lane,
+    /// Start of the interval (s).
+    pub start_s: f64,
+    /// End of the interval (s); a span with `end_s <= start_s` is not drawn.
+    pub end_s: f64,
+    /// Text drawn in the box (if it fits) and in its tooltip.
+    pub label: String,
+}
+
+/// A vertical marker across all lanes (e.g. a release of a part, a fault).
+#[derive(Debug, Clone, PartialEq, serde::Serialize)]
+pub struct Marker {
+    /// When the event happened (s).
+    pub t_s: f64,
+    /// Text drawn at the top of the marker.
+    pub label: String,
+}
+
+const WIDTH: f64 = 1200.0;
+const LABEL_W: f64 = 130.0;
+const RIGHT_PAD: f64 = 30.0;
+const TOP: f64 = 48.0;
+const LANE_H: f64 = 36.0;
+const AXIS_H: f64 = 44.0;
+const CHAR_W: f64 = 6.0;
+
+/// Renders the spans (and markers) whose time overlaps [t0_s, t1_s] as a standalone SVG document.
+///
+/// Spans are clipped to the window; spans with a non-finite time, with `end_s <= start_s` or with
+/// no overlap of positive length with the window are skipped, as are markers outside it. An empty
+/// or invalid window (`t1_s <= t0_s`, non-finite) becomes a 1 s window from `t0_s` (from 0 if
+/// `t0_s` is not finite). Never panics; the document ends with `</svg>` and a newline.
+pub fn time_chart_svg(title: &str, spans: &[Span], markers: &[Marker], t0_s: f64, t1_s: f64) -> String {
+    let (t0, t1) = if t0_s.is_finite() && t1_s.is_finite() && t1_s > t0_s && (t1_s - t0_s).is_finite() {
+        (t0_s, t1_s)
+    } else {
+        let t0 = if t0_s.is_finite() { t0_s } else { 0.0 };
+        if t0 + 1.0 > t0 { (t0, t0 + 1.0) } else { (0.0, 1.0) } // |t0| so large that t0 + 1 == t0
+    };
+    let plot_w = WIDTH - LABEL_W - RIGHT_PAD;
+    let right = LABEL_W + plot_w;
+    let x_of = |t: f64| LABEL_W + ((t - t0) / (t1 - t0)).clamp(0.0, 1.0) * plot_w;
+    let lanes_bottom = TOP + LANE_H * Lane::ALL.len() as f64;
+    let height = lanes_bottom + AXIS_H;
+    let mut s = String::new();
+    // Writing to a String cannot fail.
+    macro_rules! out {
+        ($($arg:tt)*) => {
+            let _ = writeln!(s, $($arg)*);
+        };
+    }
+    out!(
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" version=\"1.1\" width=\"{WIDTH:.0}\" height=\"{height:.0}\" \
+         viewBox=\"0 0 {WIDTH:.0} {height:.0}\" font-family=\"sans-serif\" font-size=\"12\">"
+    );
+    out!("<rect x=\"0\" y=\"0\" width=\"{WIDTH:.0}\" height=\"{height:.0}\" fill=\"#ffffff\"/>");
+    let title = escape(title);
+    out!("<text x=\"{LABEL_W:.1}\" y=\"22.0\" font-size=\"16\">{title}</text>");
+    for (i, lane) in Lane::ALL.iter().enumerate() {
+        let y = TOP + LANE_H * i as f64;
+        let fill = if i % 2 == 0 { "#f4f4f4" } else { "#ffffff" };
+        out!("<rect x=\"{LABEL_W:.1}\" y=\"{y:.1}\" width=\"{plot_w:.1}\" height=\"{LANE_H:.1}\" fill=\"{fill}\"/>");
+        let (lx, ly, label) = (LABEL_W - 8.0, y + LANE_H / 2.0 + 4.0, lane.label());
+        out!("<text x=\"{lx:.1}\" y=\"{ly:.1}\" text-anchor=\"end\">{label}</text>");
+    }
+    // Grid lines and the time axis.
+    let step = tick_step(t1 - t0);
+    let decimals = (-step.log10()).ceil().clamp(0.0, 6.0) as usize;
+    let k0 = (t0 / step - 1e-9).ceil();
+    let (tick_bottom, tick_label_y, caption_y) = (lanes_bottom + 5.0, lanes_bottom + 18.0, lanes_bottom + 36.0);
+    out!(
+        "<line x1=\"{LABEL_W:.1}\" y1=\"{lanes_bottom:.1}\" x2=\"{right:.1}\" y2=\"{lanes_bottom:.1}\" \
+         stroke=\"#999999\"/>"
+    );
+    for i in 0..=20 {
+        let t = (k0 + f64::from(i)) * step + 0.0; // + 0.0 turns -0.0 into 0.0
+        if t.is_nan() || t > t1 + step * 1e-9 {
+            break;
+        }
+        let x = x_of(t);
+        out!("<line x1=\"{x:.1}\" y1=\"{TOP:.1}\" x2=\"{x:.1}\" y2=\"{lanes_bottom:.1}\" stroke=\"#e0e0e0\"/>");
+        out!("<line x1=\"{x:.1}\" y1=\"{lanes_bottom:.1}\" x2=\"{x:.1}\" y2=\"{tick_bottom:.1}\" stroke=\"#999999\"/>");
+        out!("<text class=\"tick\" x=\"{x:.1}\" y=\"{tick_label_y:.1}\" text-anchor=\"middle\">{t:.decimals$}</text>");
+    }
+    out!("<text x=\"{right:.1}\" y=\"{caption_y:.1}\" text-anchor=\"end\">time (s)</text>");
+    // Spans, clipped to the window.
+    for span in spans {
+        let (a, b) = (span.start_s, span.end_s);
+        if !(a.is_finite() && b.is_finite()) || b <= a || b <= t0 || a >= t1 {
+            continue;
+        }
+        let lane_i = Lane::ALL.iter().position(|l| *l == span.lane).unwrap_or(0);
+        let (x, y, h) = (x_of(a), TOP + LANE_H * lane_i as f64 + 6.0, LANE_H - 12.0);
+        let w = (x_of(b) - x).max(1.0);
+        let (text, lane, colour, d) = (escape(&span.label), span.lane.label(), span.lane.colour(), b - a);
+        out!(
+            "<rect class=\"span\" x=\"{x:.1}\" y=\"{y:.1}\" width=\"{w:.1}\" height=\"{h:.1}\" fill=\"{colour}\" \
+             stroke=\"#333333\" stroke-width=\"0.5\">\
+             <title>{lane}: {text}, {a:.3} s to {b:.3} s ({d:.3} s)</title></rect>"
+        );
+        if !text.is_empty() && w >= span.label.chars().count() as f64 * CHAR_W + 6.0 {
+            let (tx, ty) = (x + w / 2.0, y + h / 2.0 + 4.0);
+            out!("<text x=\"{tx:.1}\" y=\"{ty:.1}\" text-anchor=\"middle\" font-size=\"11\">{text}</text>");
+        }
+    }
+    // Event markers.
+    let (line_top, marker_label_y) = (TOP - 4.0, TOP - 7.0);
+    for m in markers
+        .iter()
+        .filter(|m| m.t_s.is_finite() && m.t_s >= t0 && m.t_s <= t1)
+    {
+        let (x, label) = (x_of(m.t_s), escape(&m.label));
+        out!(
+            "<line class=\"marker\" x1=\"{x:.1}\" y1=\"{line_top:.1}\" x2=\"{x:.1}\" y2=\"{lanes_bottom:.1}\" \
+             stroke=\"#cc0000\" stroke-dasharray=\"4 3\"/>"
+        );
+        out!(
+            "<text x=\"{x:.1}\" y=\"{marker_label_y:.1}\" text-anchor=\"middle\" font-size=\"10\" \
+             fill=\"#cc0000\">{label}</text>"
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+/// The tick step of the time axis: the smallest 1, 2, 5 x 10^k step (0.1, 0.2, 0.5, 1, 2, 5, 10 s, ...)
+/// that gives at most 15 intervals over a window `width_s` long (so 6 to 15 intervals).
+fn tick_step(width_s: f64) -> f64 {
+    if !(width_s.is_finite() && width_s > 0.0) {
+        return 1.0;
+    }
+    let base = 10f64.powi((width_s / 15.0).log10().floor() as i32);
+    for m in [1.0, 2.0, 5.0, 10.0] {
+        let step = base * m;
+        if step > 0.0 && width_s / step <= 15.0 * (1.0 + 1e-9) {
+            return step;
+        }
+    }
+    width_s
+}
+
+/// Escapes the XML special characters `& < > " '`.
+fn escape(text: &str) -> String {
+    let mut out = String::with_capacity(text.len());
+    for c in text.chars() {
+        match c {
+            '&' => out.push_str("&amp;"),
+            '<' => out.push_str("&lt;"),
+            '>' => out.push_str("&gt;"),
+            '"' => out.push_str("&quot;"),
+            '\'' => out.push_str("&apos;"),
+            _ => out.push(c),
+        }
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn span(lane: Lane, start_s: f64, end_s: f64, label: &str) -> Span {
+        Span {
+            lane,
+            start_s,
+            end_s,
+            label: label.to_string(),
+        }
+    }
+
+    fn is_document(svg: &str) -> bool {
+        svg.starts_with("<svg xmlns=\"http://www.w3.org/2000/svg\"") && svg.ends_with("</svg>\n")
+    }
+
+    #[test]
+    fn one_span_rect_per_span_in_the_window() {
+        let spans = [
+            span(Lane::Sensor, 0.0, 0.4, "capture"),
+            span(Lane::Recognition, 0.4, 0.9, "recognise"),
+            span(Lane::Pick, 1.5, 3.0, "pick 1"), // straddles t1
+            span(Lane::Place, 3.5, 4.0, "outside"),
+            span(Lane::Sensor, -2.0, -1.0, "before"),
+            span(Lane::Sensor, -1.0, 0.0, "touching"),
+            span(Lane::Stall, 1.0, 0.5, "reversed"),
+            span(Lane::Stall, f64::NAN, 1.0, "nan"),
+            span(Lane::Grasp, 0.2, f64::INFINITY, "inf"),
+            span(Lane::Planning, 2.0, 2.0, "empty"),
+        ];
+        let svg = time_chart_svg("cycle", &spans, &[], 0.0, 2.0);
+        assert!(is_document(&svg));
+        assert_eq!(svg.matches("class=\"span\"").count(), 3);
+        assert!(
+            svg.contains(">capture</text>")
+                && !svg.contains("outside")
+                && !svg.contains("before")
+                && !svg.contains("touching")
+        );
+        assert_eq!(svg.matches("class=\"tick\"").count(), 11, "ticks at 0, 0.2, ..., 2.0");
+    }
+
+    #[test]
+    fn span_straddling_t0_starts_at_the_left_edge() {
+        let svg = time_chart_svg("clip", &[span(Lane::Planning, -1.0, 0.5, "plan")], &[], 0.0, 2.0);
+        let plot_w = WIDTH - LABEL_W - RIGHT_PAD;
+        assert!(svg.contains(&format!(
+            "class=\"span\" x=\"{LABEL_W:.1}\" y=\"{:.1}\" width=\"{:.1}\"",
+            TOP + 3.0 * LANE_H + 6.0,
+            plot_w / 4.0
+        )));
+        assert!(svg.contains("-1.000 s to 0.500 s (1.500 s)"));
+    }
+
+    #[test]
+    fn user_text_is_escaped() {
+        let markers = [Marker {
+            t_s: 1.0,
+            label: "fault <&>".into(),
+        }];
+        let svg = time_chart_svg(
+            "run \"a\" & 'b' <x>",
+            &[span(Lane::Stall, 0.0, 2.0, "<&>")],
+            &markers,
+            0.0,
+            2.0,
+        );
+        assert!(svg.contains("run &quot;a&quot; &amp; &apos;b&apos; &lt;x&gt;"));
+        assert!(svg.contains(">&lt;&amp;&gt;</text>") && svg.contains("fault &lt;&amp;&gt;"));
+        assert!(!svg.contains("<&") && !svg.contains("<x>") && !svg.contains("'b'"));
+        assert_eq!(svg.matches("class=\"marker\"").count(), 1);
+    }
+
+    #[test]
+    fn rendering_is_deterministic() {
+        let spans: Vec<Span> = (0..40)
+            .map(|i| span(Lane::ALL[i % 7], i as f64 * 0.3, i as f64 * 0.3 + 0.25, "s"))
+            .collect();
+        let markers = [Marker {
+            t_s: 2.0,
+            label: "release".into(),
+        }];
+        let a = time_chart_svg("det", &spans, &markers, 0.0, 12.0);
+        assert_eq!(a, time_chart_svg("det", &spans, &markers, 0.0, 12.0));
+        assert_eq!(a.matches("class=\"span\"").count(), 40);
+    }
+
+    #[test]
+    fn degenerate_windows_still_give_a_document() {
+        let spans = [
+            span(Lane::Sensor, 3.0, 3.5, "x"),
+            span(Lane::Pick, f64::NEG_INFINITY, 1.0, "y"),
+        ];
+        let (nan, inf) = (f64::NAN, f64::INFINITY);
+        for (t0, t1) in [
+            (1.0, 1.0),
+            (2.0, 1.0),
+            (nan, 5.0),
+            (inf, -inf),
+            (0.0, inf),
+            (-1e308, 1e308),
+            (0.0, 1e-300),
+        ] {
+            for s in [&spans[..], &[]] {
+                let svg = time_chart_svg(
+                    "",
+                    s,
+                    &[Marker {
+                        t_s: nan,
+                        label: "m".into(),
+                    }],
+                    t0,
+                    t1,
+                );
+                assert!(is_document(&svg), "{t0} {t1}");
+                assert!(!svg.contains("NaN") && !svg.contains("inf"), "{t0} {t1}");
+                assert_eq!(
+                    svg.matches("text-anchor=\"end\">").count(),
+                    8,
+                    "all 7 lanes and the axis caption"
+                );
+            }
+        }
+        let svg = time_chart_svg("", &spans, &[], 3.0, 3.0);
+        assert!(svg.contains(">3.0</text>") && svg.contains(">4.0</text>") && !svg.contains(">4.1</text>"));
+        assert_eq!(svg.matches("class=\"span\"").count(), 1);
+    }
+
+    #[test]
+    fn tick_step_is_a_nice_step() {
+        let close = |a: f64, b: f64| (a - b).abs() <= 1e-12 * b;
+        for (width, step) in [
+            (1.0, 0.1),
+            (1.6, 0.2),
+            (3.0, 0.2),
+            (6.0, 0.5),
+            (10.0, 1.0),
+            (12.0, 1.0),
+            (25.0, 2.0),
+        ] {
+            assert!(close(tick_step(width), step), "{width}: {}", tick_step(width));
+        }
+        assert!(close(tick_step(60.0), 5.0) && close(tick_step(120.0), 10.0) && close(tick_step(0.5), 0.05));
+        assert_eq!(tick_step(0.0), 1.0);
+        assert_eq!(tick_step(f64::NAN), 1.0);
+        for i in 1..2000 {
+            let width = i as f64 * 0.037;
+            let n = width / tick_step(width);
+            assert!((6.0..=15.0 + 1e-6).contains(&n), "{width}: {n} intervals");
+        }
+    }
+}
