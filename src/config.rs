@@ -257,6 +257,8 @@ pub struct Scene {
     pub obstacles: Vec<ObstacleConfig>,
     /// Compute budgets charged to the simulation clock in deterministic mode.
     pub compute: ComputeConfig,
+    /// What the cycle does when the pick tray runs empty, and how faults are handled.
+    pub cycle: CycleConfig,
     /// Simulation and control rates.
     pub sim: SimConfig,
 }
@@ -459,6 +461,31 @@ pub struct ComputeConfig {
     pub grasp_estimation_s: f64,
     /// Motion generation per motion, planning and acceleration [s] (reference: 0.100).
     pub motion_generation_s: f64,
+}
+
+/// What to do when nothing graspable is left in the pick tray.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum OnEmpty {
+    /// Exchange the pick tray for a full one (a new pile) and go on.
+    Refill,
+    /// End the run.
+    End,
+}
+
+/// Cycle policies.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CycleConfig {
+    /// Captures in a row with nothing graspable after which the tray counts as empty.
+    pub empty_after_captures: u32,
+    /// What to do then.
+    pub on_empty: OnEmpty,
+    /// Time to exchange the pick tray for a full one [s] (the arm waits).
+    pub refill_s: f64,
+    /// The place tray is exchanged for an empty one when its slots are used up, outside the
+    /// arm's cycle (a conveyor) [s of arm time: 0 when buffered].
+    pub place_tray_exchange_s: f64,
 }
 
 /// Simulation and control rates.
@@ -761,6 +788,11 @@ impl Scene {
         }
         c.non_negative("compute.grasp_estimation_s", self.compute.grasp_estimation_s);
         c.non_negative("compute.motion_generation_s", self.compute.motion_generation_s);
+        if self.cycle.empty_after_captures == 0 {
+            c.fail("cycle.empty_after_captures", "must be at least 1, got 0".to_string());
+        }
+        c.non_negative("cycle.refill_s", self.cycle.refill_s);
+        c.non_negative("cycle.place_tray_exchange_s", self.cycle.place_tray_exchange_s);
         c.within("sim.physics_dt_s", self.sim.physics_dt_s, 1e-5, 0.02);
         c.within("sim.control_dt_s", self.sim.control_dt_s, 1e-5, 0.01);
         c.within("sim.servo_bandwidth_hz", self.sim.servo_bandwidth_hz, 0.1, 200.0);

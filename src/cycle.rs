@@ -1,34 +1,66 @@
 //! The cell cycle: capture, recognise, select a grasp, plan and accelerate, Pick, Place, repeat.
 //!
-//! Job: run picks of one workpiece end to end in the simulated cell and time them. The arm is
-//! driven by the torque-limited servo ([`crate::execution`]) whose joint states move the arm's
-//! bodies in the physics world every physics step, so the arm pushes parts and hides them from the
-//! sensor. The next capture is triggered at the first physics step of the Place motion at which
-//! the arm has left the camera's view frustum; its recognition result arrives `latency_s` later.
-//! Grasp selection and motion generation start when the result is available and are charged to
-//! the simulation clock: fixed budgets from the cell file in deterministic mode, measured wall
-//! time otherwise. The arm waits only when the next motion is not ready: that wait is a stall.
+//! Job: run picks of one workpiece end to end in the simulated cell and time them, following the
+//! reference system's time chart (its Fig. 3). The arm is driven by the torque-limited servo
+//! ([`crate::execution`]) whose joint states move the arm's bodies in the physics world every
+//! physics step, so the arm pushes parts and hides them from the sensor.
 //!
-//! Takt of a pick = time between consecutive successful releases. Units: s, m, rad.
+//! One pick:
+//! 1. The capture is triggered at the first physics step of the previous Place at which the arm
+//!    has left the camera's view frustum (or, at the start and after a failure, as soon as the arm
+//!    is out of view). The recognition result arrives `latency_s` after the trigger. A capture
+//!    spoiled by motion in the scene is repeated when the sensor's exposure is over.
+//! 2. From the result: grasp selection, then the Pick motion (transfer to the approach pose,
+//!    straight descent, straight lift) is planned and accelerated; the Place motion (transfer to
+//!    above the slot, straight descent, straight retreat) is planned next, while the Pick runs.
+//!    Compute is charged to the simulation clock: fixed budgets from the cell file with
+//!    `deterministic`, the measured wall time of our own code otherwise.
+//! 3. Pick: transfer, descent, vacuum on and build-up, lift. Place: transfer, descent, release,
+//!    retreat. The arm waits only when the next motion is not ready: a stall, split into waiting
+//!    for the sensor (the recognition result) and waiting for compute.
+//! 4. Faults: a protective stop of the servo, a collision of the arm (or the held part) with the
+//!    cell or a part pressed into the tray (the physics world's health monitor), a part slipping
+//!    off the cup. Each ends the pick with its outcome; after a stop or a collision the arm waits
+//!    the reset time and retraces its path out. Parts pushed out of a tray are taken out of the
+//!    cell and counted as lost.
+//! 5. Nothing detected or nothing graspable: re-capture; after `empty_after_captures` in a row the
+//!    cell file's policy exchanges the pick tray for a full one (`refill_s`) or ends the run. A
+//!    full place tray is exchanged for an empty one (`place_tray_exchange_s`).
 //!
-//! Simplifications of this first slice (stated in the README): straight descents and lifts at
-//! 30 % of top speed; one grasp attempt per recognition result; a failed grasp re-captures.
+//! Held parts: the transfer, lift and descent motions with a part on the cup are slowed (a
+//! uniform time scaling) where the tool's acceleration would need more than 60 % of the cup's
+//! holding force (the gripper's slip model, with the centre-of-mass offset of the grasp).
+//!
+//! Takt of a pick = time between consecutive successful releases. The first pick of each pile
+//! (the start, and after a refill) follows the initial sensing and is left out of the takt
+//! statistics, as the reference system leaves out its first cycle. Units: s, m, rad.
 
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use serde::Serialize;
 
-use crate::config::{LoadedScene, LoadedWorkpiece};
-use crate::execution::{Servo, execute};
-use crate::grasp::GraspSelector;
+use crate::chart::{Lane, Marker, Span};
+use crate::config::{LoadedScene, LoadedWorkpiece, OnEmpty, Scene};
+use crate::execution::{Servo, Tick, execute};
+use crate::grasp::{GraspCandidate, GraspSelector};
 use crate::physics::pile::PileOptions;
 use crate::physics::suction::GripperEvent;
-use crate::physics::{PartShape, World};
+use crate::physics::{HealthError, PartShape, PartState, World};
 use crate::planning::{CollisionModel, Environment, PileColumns, PlanOptions, RobotSpheres};
-use crate::robot::{JointVector, Payload, RobotModel};
-use crate::sensor::{CaptureJob, HeightMap, Sensor};
-use crate::trajectory::{Motion, MotionLimits, Trajectory, accelerate_in_corridor};
+use crate::robot::{DOF, JointVector, Payload, RobotModel};
+use crate::sensor::{CaptureJob, Detection, HeightMap, Sensor};
+use crate::trajectory::{Motion, Trajectory, accelerate_in_corridor, limit_tool_force, optimise_accelerations};
+
+/// Fraction of the cup's holding force a held-part motion may use.
+pub const SUCTION_MARGIN: f64 = 0.6;
+/// Straight descents and lifts are split into this many segments for the inverse kinematics.
+const LINE_SEGMENTS: usize = 6;
+/// The part is released this far above its resting height in the slot [m] (the recognised pose
+/// is a little off; the part drops the rest).
+const RELEASE_ABOVE_M: f64 = 0.003;
+/// The Place transfer ends this far above the release pose [m].
+const PLACE_APPROACH_M: f64 = 0.03;
 
 /// Why a run stopped early.
 #[derive(Debug, thiserror::Error)]
@@ -36,9 +68,9 @@ pub enum CycleError {
     /// The workpiece's shape could not be built.
     #[error(transparent)]
     Shape(#[from] crate::physics::ShapeError),
-    /// The physics world failed its health check.
+    /// The physics world failed beyond recovery (a non-finite state).
     #[error("physics: {0}")]
-    Health(#[from] crate::physics::HealthError),
+    Health(#[from] HealthError),
     /// Something the cycle needs is missing (sensor pose, place slots).
     #[error("{0}")]
     Setup(String),
@@ -51,37 +83,161 @@ pub enum Outcome {
     Placed,
     /// The cup did not seal (reason).
     GraspFailed(String),
-    /// No graspable part in the recognition result.
-    NothingGraspable,
-    /// No path or trajectory for the motion (reason).
+    /// The recognition result held no part: re-capture.
+    NothingDetected,
+    /// Parts were detected but none was graspable (the selector's reasons).
+    NothingGraspable(String),
+    /// No path or trajectory for a motion (reason).
     NoMotion(String),
     /// The servo tripped a protective stop (reason).
     ProtectiveStop(String),
+    /// The arm, the tool or the held part collided, or pressed a part into the tray (what).
+    Collision(String),
     /// The part came off the cup on the way (reason).
     Dropped(String),
 }
 
-/// One pick.
+impl Outcome {
+    /// Whether the arm set out to pick (the success rate counts these).
+    pub fn is_attempt(&self) -> bool {
+        !matches!(self, Outcome::NothingDetected | Outcome::NothingGraspable(_))
+    }
+
+    /// A short name: `placed`, `grasp_failed`, ...
+    pub fn name(&self) -> &'static str {
+        match self {
+            Outcome::Placed => "placed",
+            Outcome::GraspFailed(_) => "grasp_failed",
+            Outcome::NothingDetected => "nothing_detected",
+            Outcome::NothingGraspable(_) => "nothing_graspable",
+            Outcome::NoMotion(_) => "no_motion",
+            Outcome::ProtectiveStop(_) => "protective_stop",
+            Outcome::Collision(_) => "collision",
+            Outcome::Dropped(_) => "dropped",
+        }
+    }
+
+    /// The reason, if the outcome has one.
+    pub fn detail(&self) -> &str {
+        match self {
+            Outcome::GraspFailed(s)
+            | Outcome::NothingGraspable(s)
+            | Outcome::NoMotion(s)
+            | Outcome::ProtectiveStop(s)
+            | Outcome::Collision(s)
+            | Outcome::Dropped(s) => s,
+            Outcome::Placed | Outcome::NothingDetected => "",
+        }
+    }
+}
+
+/// One pick (or one capture that found nothing to pick).
 #[derive(Debug, Clone, Serialize)]
 pub struct PickRecord {
     /// Index.
     pub index: usize,
     /// Outcome.
     pub outcome: Outcome,
+    /// When the capture this pick used was triggered [s].
+    pub capture_s: f64,
+    /// When its recognition result arrived [s].
+    pub ready_s: f64,
     /// When the part was released [s] (placed picks).
     pub release_s: Option<f64>,
     /// Time since the previous successful release [s].
     pub takt_s: Option<f64>,
-    /// Pick motion time (to the approach pose) [s].
-    pub pick_motion_s: f64,
-    /// Place motion time (approach pose to above the slot) [s].
-    pub place_motion_s: f64,
-    /// Time the arm waited for the next motion [s].
-    pub stall_s: f64,
-    /// Compute charged: grasp selection, planning and acceleration [s].
-    pub compute_s: f64,
-    /// Horizontal placement error [m] and yaw error [rad] (placed picks).
-    pub placement_error: Option<(f64, f64)>,
+    /// The first pick of a pile (start or refill): left out of the takt statistics.
+    pub first_of_pile: bool,
+    /// Pick: transfer, descent, vacuum build-up and lift [s].
+    pub pick_s: f64,
+    /// Place: transfer, descent, release and retreat [s].
+    pub place_s: f64,
+    /// The arm waited for the recognition result [s].
+    pub stall_sensor_s: f64,
+    /// The arm waited for grasp selection or motion generation [s].
+    pub stall_compute_s: f64,
+    /// Grasp selection, charged [s].
+    pub grasp_compute_s: f64,
+    /// Pick motion generation (planning, acceleration, the straight lines), charged [s].
+    pub pick_compute_s: f64,
+    /// Place motion generation, charged [s].
+    pub place_compute_s: f64,
+    /// Horizontal placement error [mm] (placed picks).
+    pub placement_error_mm: Option<f64>,
+    /// Yaw placement error [deg], modulo the part's symmetry (placed picks).
+    pub yaw_error_deg: Option<f64>,
+    /// Largest servo tracking error over the pick's motions [deg].
+    pub max_tracking_error_deg: f64,
+    /// Largest |applied torque| / torque limit over the pick's motions.
+    pub peak_torque_ratio: f64,
+    /// Time scaling of the held-part Place transfer for the cup's holding force (1: none).
+    pub suction_speed_factor: f64,
+}
+
+impl PickRecord {
+    fn new(index: usize, job: &CaptureJob, capture_s: f64) -> Self {
+        PickRecord {
+            index,
+            outcome: Outcome::Placed,
+            capture_s,
+            ready_s: job.ready_s,
+            release_s: None,
+            takt_s: None,
+            first_of_pile: false,
+            pick_s: 0.0,
+            place_s: 0.0,
+            stall_sensor_s: 0.0,
+            stall_compute_s: 0.0,
+            grasp_compute_s: 0.0,
+            pick_compute_s: 0.0,
+            place_compute_s: 0.0,
+            placement_error_mm: None,
+            yaw_error_deg: None,
+            max_tracking_error_deg: 0.0,
+            peak_torque_ratio: 0.0,
+            suction_speed_factor: 1.0,
+        }
+    }
+}
+
+/// Takt statistics [s] over the placed picks that follow another release in the same pile.
+#[derive(Debug, Clone, Copy, Serialize, PartialEq)]
+pub struct TaktStats {
+    /// How many takts.
+    pub count: usize,
+    /// Mean.
+    pub mean_s: f64,
+    /// 95th percentile (nearest rank).
+    pub p95_s: f64,
+    /// Minimum.
+    pub min_s: f64,
+    /// Maximum.
+    pub max_s: f64,
+}
+
+impl TaktStats {
+    /// From a list of takts (NaN statistics when empty).
+    pub fn of(values: &[f64]) -> Self {
+        let mut v = values.to_vec();
+        v.sort_by(f64::total_cmp);
+        let n = v.len();
+        if n == 0 {
+            return TaktStats {
+                count: 0,
+                mean_s: f64::NAN,
+                p95_s: f64::NAN,
+                min_s: f64::NAN,
+                max_s: f64::NAN,
+            };
+        }
+        TaktStats {
+            count: n,
+            mean_s: v.iter().sum::<f64>() / n as f64,
+            p95_s: v[((n as f64 * 0.95).ceil() as usize).saturating_sub(1)],
+            min_s: v[0],
+            max_s: v[n - 1],
+        }
+    }
 }
 
 /// A run's summary.
@@ -93,20 +249,48 @@ pub struct RunSummary {
     pub seed: u64,
     /// Deterministic mode.
     pub deterministic: bool,
-    /// Picks attempted.
-    pub picks: usize,
+    /// Picks the arm set out to make.
+    pub attempts: usize,
     /// Picks placed.
     pub placed: usize,
-    /// Mean, p95, min, max takt over the placed picks after the first [s].
-    pub takt_s: (f64, f64, f64, f64),
-    /// Captures triggered and spoiled.
-    pub captures: (u64, u64),
-    /// Total stall time [s].
-    pub stall_s: f64,
-    /// Simulated time [s].
-    pub sim_time_s: f64,
+    /// placed / attempts.
+    pub success_rate: f64,
+    /// Takt statistics.
+    pub takt: TaktStats,
     /// The reference system's takt for this workpiece [s], if it is one of A..F.
     pub reference_takt_s: Option<f64>,
+    /// Mean Pick and Place times over the placed picks [s].
+    pub mean_pick_s: f64,
+    /// Mean Place time over the placed picks [s].
+    pub mean_place_s: f64,
+    /// Mean compute charged per attempt: grasp selection, Pick and Place motion generation [s].
+    pub mean_compute_s: [f64; 3],
+    /// Stalls waiting for the sensor: count and total [s] (placed picks after the first of a pile).
+    pub sensor_stalls: (usize, f64),
+    /// Stalls waiting for compute: count and total [s].
+    pub compute_stalls: (usize, f64),
+    /// Protective stops.
+    pub protective_stops: usize,
+    /// Collisions.
+    pub collisions: usize,
+    /// Parts dropped from the cup.
+    pub drops: usize,
+    /// Parts lost out of the trays.
+    pub parts_lost: usize,
+    /// Captures triggered and spoiled.
+    pub captures: (u64, u64),
+    /// Pick-tray refills and place-tray exchanges.
+    pub refills: usize,
+    /// Place-tray exchanges.
+    pub place_tray_exchanges: usize,
+    /// Largest |applied torque| / limit over the run.
+    pub peak_torque_ratio: f64,
+    /// Largest servo tracking error over the run [deg].
+    pub max_tracking_error_deg: f64,
+    /// Why the run ended: `picks done`, `tray empty`, `too many empty captures`.
+    pub ended: String,
+    /// Simulated time [s].
+    pub sim_time_s: f64,
 }
 
 /// Options of a run.
@@ -118,24 +302,44 @@ pub struct RunOptions {
     pub seed: u64,
     /// Charge fixed compute budgets instead of measured wall time (byte-identical results).
     pub deterministic: bool,
+    /// Keep every servo tick in [`RunResult::trace`] (for checks and recordings).
+    pub keep_trace: bool,
 }
 
-struct Cell {
-    world: World,
-    robot: RobotModel,
-    sensor: Sensor,
-    selector: GraspSelector,
-    servo: Servo,
-    hand: Payload,
-    shape: PartShape,
-    slots: Vec<Isometry3<f64>>,
-    scene: crate::config::Scene,
-    job: Option<CaptureJob>,
-    /// When the arm has nothing to do until [s].
-    arm_free_s: f64,
+/// A cycle event, for logs and recordings.
+#[derive(Debug, Clone, Serialize)]
+pub struct CycleEvent {
+    /// Simulation time [s].
+    pub t_s: f64,
+    /// Pick index, if the event belongs to one.
+    pub pick: Option<usize>,
+    /// What: `capture`, `capture_spoiled`, `recognition_ready`, `grasp_chosen`, `planned`,
+    /// `pick_start`, `grasped`, `place_start`, `released`, `stall`, `fault`, `part_lost`,
+    /// `refill`, `place_tray_exchange`, `outcome`.
+    pub kind: &'static str,
+    /// Details.
+    pub detail: String,
 }
 
-fn reference_takt(name: &str) -> Option<f64> {
+/// Everything a run produced.
+#[derive(Debug, Clone)]
+pub struct RunResult {
+    /// Per pick.
+    pub records: Vec<PickRecord>,
+    /// Summary.
+    pub summary: RunSummary,
+    /// The time chart's spans.
+    pub spans: Vec<Span>,
+    /// The time chart's markers (releases, faults).
+    pub markers: Vec<Marker>,
+    /// Cycle events in time order.
+    pub events: Vec<CycleEvent>,
+    /// Servo ticks of every motion, in time order, if asked for (`t` is simulation time).
+    pub trace: Vec<Tick>,
+}
+
+/// The reference system's takt for workpieces A..F [s] (its Table 5).
+pub fn reference_takt(name: &str) -> Option<f64> {
     match name {
         "A" => Some(2.9),
         "B" => Some(2.7),
@@ -145,188 +349,334 @@ fn reference_takt(name: &str) -> Option<f64> {
     }
 }
 
-impl Cell {
-    /// Steps the world to `t` with the arm still, watching the capture.
+/// How a motion ended.
+enum Played {
+    /// Done.
+    Done,
+    /// Ended the pick.
+    Failed(Outcome),
+}
+
+/// The motions of one pick, generated from one recognition result.
+struct Prepared {
+    grasp: GraspCandidate,
+    slot: Isometry3<f64>,
+    pick_transfer: Result<Trajectory, String>,
+    descent: Trajectory,
+    /// Lift and Place motions, generated while the Pick runs.
+    lift: Trajectory,
+    place: Result<(Trajectory, Trajectory, Trajectory, f64), String>,
+    held: Payload,
+    /// The part the chosen detection is (for the event log only; nothing decides on it).
+    truth_part: usize,
+    charged: [f64; 3],
+}
+
+struct Cell<'a> {
+    world: World,
+    robot: &'a RobotModel,
+    scene: &'a Scene,
+    sensor: Sensor,
+    selector: GraspSelector,
+    servo: Servo,
+    hand: Payload,
+    shape: PartShape,
+    slots: Vec<Isometry3<f64>>,
+    next_slot: usize,
+    yaw_symmetry_rad: f64,
+    job: Option<CaptureJob>,
+    /// When the arm has nothing to do from [s].
+    arm_free_s: f64,
+    seed: u64,
+    pick: Option<usize>,
+    events: Vec<CycleEvent>,
+    spans: Vec<Span>,
+    markers: Vec<Marker>,
+    trace: Option<Vec<Tick>>,
+    parts_lost: usize,
+    peak_torque_ratio: f64,
+    max_error_rad: f64,
+}
+
+impl Cell<'_> {
+    fn event(&mut self, kind: &'static str, detail: String) {
+        self.events.push(CycleEvent {
+            t_s: self.world.time_s,
+            pick: self.pick,
+            kind,
+            detail,
+        });
+    }
+
+    fn span(&mut self, lane: Lane, start_s: f64, end_s: f64, label: impl Into<String>) {
+        if end_s > start_s {
+            self.spans.push(Span {
+                lane,
+                start_s,
+                end_s,
+                label: label.into(),
+            });
+        }
+    }
+
+    /// One physics step. Parts that left their tray are taken out of the cell (lost); a collision
+    /// of the arm or a part pressed into the tray is returned; a non-finite state ends the run.
+    fn step(&mut self) -> Result<Option<String>, CycleError> {
+        let result = self.world.step();
+        if let Some(job) = self.job.as_mut()
+            && let Some(problem) = self.sensor.watch(job, &self.world)
+        {
+            self.event("capture_spoiled", format!("{problem:?}"));
+        }
+        match result {
+            Ok(()) => Ok(None),
+            Err(HealthError::LeftVolume { body, volume, .. }) => {
+                for i in 0..self.world.parts.len() {
+                    let c = self.world.part_pose(i).translation.vector;
+                    let lost = match self.world.parts[i].state {
+                        PartState::Free => !self.world.pick_tray.contains(&c),
+                        PartState::Placed => !self.world.place_tray.contains(&c),
+                        PartState::Held | PartState::Removed => false,
+                    };
+                    if lost {
+                        self.world.remove_part(i);
+                        self.parts_lost += 1;
+                    }
+                }
+                self.event("part_lost", format!("{body} left the {volume}"));
+                Ok(None)
+            }
+            Err(e @ (HealthError::ArmCollision { .. } | HealthError::DeepPenetration { .. })) => {
+                Ok(Some(e.to_string()))
+            }
+            Err(e @ HealthError::NonFinite { .. }) => Err(e.into()),
+        }
+    }
+
+    /// Steps the world to `t` with the arm still. Contacts of a resting arm are not new faults.
     fn idle_until(&mut self, t: f64) -> Result<(), CycleError> {
         while self.world.time_s + 1e-9 < t {
-            self.world.step()?;
-            self.watch();
+            self.step()?;
         }
         Ok(())
     }
 
-    fn watch(&mut self) {
-        if let Some(job) = self.job.as_mut() {
-            self.sensor.watch(job, &self.world);
-        }
-    }
-
-    /// Triggers a capture if none is pending and the arm is out of view.
+    /// Triggers a capture if none is pending (or the pending one was spoiled and the sensor has
+    /// finished exposing it) and the arm is out of view.
     fn maybe_trigger(&mut self) {
-        if self.job.as_ref().is_some_and(|j| j.spoiled.is_none()) {
+        if let Some(j) = &self.job
+            && (j.spoiled.is_none() || self.world.time_s + 1e-9 < j.exposure_end_s)
+        {
             return;
         }
         if let Ok(job) = self.sensor.trigger(&self.world) {
+            self.event("capture", format!("capture {}", self.sensor.triggered - 1));
             self.job = Some(job);
         }
     }
 
     /// Plays a motion through the servo into the world; `trigger` polls for the next capture.
-    fn play(
-        &mut self,
-        motion: &impl Motion,
-        payload: &Payload,
-        trigger: bool,
-    ) -> Result<Result<f64, Outcome>, CycleError> {
+    fn play(&mut self, motion: &impl Motion, payload: &Payload, trigger: bool) -> Result<Played, CycleError> {
+        let jump = (motion.at(0.0).q - self.world.joints()).amax();
+        if jump > 1e-3 {
+            self.event("motion_start_mismatch", format!("{jump:.4} rad"));
+        }
         let dynamics = self.robot.dynamics(payload);
-        let run = execute(&self.robot, &dynamics, &dynamics, &self.servo, motion);
-        let per_step = (self.world.dt_s() / self.servo.dt_s).round().max(1.0) as usize;
+        let run = execute(self.robot, &dynamics, &dynamics, &self.servo, motion);
+        let limit = self.robot.torque_limit_nm();
         let t0 = self.world.time_s;
+        for t in &run.ticks {
+            for i in 0..DOF {
+                self.peak_torque_ratio = self.peak_torque_ratio.max(t.tau[i].abs() / limit[i]);
+            }
+        }
+        self.max_error_rad = run.max_error_rad.iter().fold(self.max_error_rad, |a, e| a.max(*e));
+        let per_step = (self.world.dt_s() / self.servo.dt_s).round().max(1.0) as usize;
+        let mut dropped = None;
         let mut k = per_step;
+        let mut done = 0;
         while k < run.ticks.len() + per_step {
-            let tick = &run.ticks[k.min(run.ticks.len() - 1)];
-            self.world.set_joint_target(&tick.q);
-            self.world.step()?;
-            self.watch();
+            let end = k.min(run.ticks.len() - 1);
+            self.world.set_joint_target(&run.ticks[end].q);
+            if let Some(trace) = self.trace.as_mut() {
+                trace.extend(run.ticks[done..=end].iter().map(|tk| Tick { t: t0 + tk.t, ..*tk }));
+            }
+            done = end + 1;
+            if let Some(what) = self.step()? {
+                let path: Vec<JointVector> = run.ticks[..=end].iter().map(|tk| tk.q).collect();
+                self.recover(&path, &format!("collision: {what}"))?;
+                return Ok(Played::Failed(Outcome::Collision(what)));
+            }
             if trigger {
                 self.maybe_trigger();
             }
             for ev in self.world.gripper.take_events() {
                 if let GripperEvent::Slipped {
-                    required_n, holding_n, ..
+                    required_n,
+                    holding_n,
+                    time_s,
+                    ..
                 } = ev
                 {
-                    return Ok(Err(Outcome::Dropped(format!(
-                        "slipped: {required_n:.2} N needed, {holding_n:.2} N held"
-                    ))));
+                    dropped.get_or_insert(format!(
+                        "slipped {:.3} s into the motion: {required_n:.2} N needed, {holding_n:.2} N held",
+                        time_s - t0
+                    ));
                 }
             }
             k += per_step;
         }
         if let Some((t, trip)) = run.trip {
-            return Ok(Err(Outcome::ProtectiveStop(format!(
-                "{trip:?} at {t:.3} s into the motion"
-            ))));
+            let what = format!("{trip:?} at {t:.3} s into the motion");
+            self.recover(&[], &format!("protective stop: {what}"))?;
+            return Ok(Played::Failed(Outcome::ProtectiveStop(what)));
         }
-        Ok(Ok(self.world.time_s - t0))
+        if let Some(why) = dropped {
+            return Ok(Played::Failed(Outcome::Dropped(why)));
+        }
+        Ok(Played::Done)
     }
 
-    /// A straight tool line from the current pose to `goal`, at 30 % of top speed.
-    fn line(&self, goal: &Isometry3<f64>) -> Option<Trajectory> {
-        let start = self.world.world_from_tool();
-        let mut q = self.world.joints();
+    /// After a fault: the vacuum goes off, the controller waits its reset time, then the arm
+    /// retraces `path` (the executed positions of the faulted motion) back to where it started.
+    fn recover(&mut self, path: &[JointVector], what: &str) -> Result<(), CycleError> {
+        let t = self.world.time_s;
+        self.event("fault", what.to_string());
+        self.markers.push(Marker {
+            t_s: t,
+            label: "fault".into(),
+        });
+        self.world.vacuum_off();
+        self.idle_until(t + self.scene.sim.protective_stop_reset_s)?;
+        let per_step = (self.world.dt_s() / self.servo.dt_s).round().max(1.0) as usize;
+        // Retrace at a third of the executed speed.
+        let slow: Vec<&JointVector> = path.iter().rev().step_by(per_step).collect();
+        for q in slow {
+            for _ in 0..3 {
+                self.world.set_joint_target(q);
+                self.step()?;
+            }
+        }
+        self.world.gripper.take_events();
+        self.span(Lane::Stall, t, self.world.time_s, "fault reset and retreat");
+        self.arm_free_s = self.world.time_s;
+        Ok(())
+    }
+
+    /// A recognition result to pick from: triggers a capture if none is pending (moving the arm
+    /// out of view first if needed) and waits for it. `None` if the arm cannot leave the view.
+    fn next_result(&mut self) -> Result<Option<(CaptureJob, f64, Option<Vec<Detection>>)>, CycleError> {
+        loop {
+            self.maybe_trigger();
+            if self.job.is_none() {
+                if !self.move_out_of_view()? {
+                    return Ok(None);
+                }
+                self.maybe_trigger();
+                if self.job.is_none() {
+                    return Ok(None);
+                }
+            }
+            let job = self.job.clone().expect("checked");
+            if job.spoiled.is_some() {
+                self.idle_until(job.exposure_end_s)?;
+                continue;
+            }
+            let capture_s = job.exposure_end_s - self.sensor.exposure_s;
+            self.idle_until(job.ready_s)?;
+            let job = self.job.take().expect("pending");
+            if job.spoiled.is_some() {
+                continue;
+            }
+            self.span(Lane::Sensor, capture_s, job.exposure_end_s, "exposure");
+            self.span(Lane::Recognition, job.exposure_end_s, job.ready_s, "recognition");
+            let detections = self.sensor.result(&job, &self.world);
+            self.event(
+                "recognition_ready",
+                format!("{} parts detected", detections.as_ref().map_or(0, Vec::len)),
+            );
+            return Ok(Some((job, capture_s, detections)));
+        }
+    }
+
+    /// Moves the arm home when it is in the camera's view and nothing is pending.
+    fn move_out_of_view(&mut self) -> Result<bool, CycleError> {
+        if self.sensor.frustum.arm_inside(&self.world).is_none() {
+            return Ok(true);
+        }
+        let home = JointVector::from(self.scene.robot.home_rad());
+        let free = CollisionModel::new(
+            self.robot,
+            RobotSpheres::new(self.robot, self.scene, None),
+            Environment::from_scene(self.scene),
+        );
+        let mut rng = crate::rng::stream(self.seed.wrapping_add(self.world.steps), "planner-home");
+        let Ok(p) = free.plan(&self.world.joints(), &home, &PlanOptions::default(), &mut rng) else {
+            return Ok(false);
+        };
+        let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+        let hand = self.hand;
+        let (_, acc, _) = accelerate_in_corridor(self.robot, &self.robot.dynamics(&hand), &via, &free, 0.01);
+        let t = self.world.time_s;
+        let played = self.play(&acc.trajectory, &hand, true)?;
+        self.span(Lane::Place, t, self.world.time_s, "out of view");
+        self.arm_free_s = self.world.time_s;
+        Ok(matches!(played, Played::Done))
+    }
+
+    /// Joint via points along the straight tool line from `from` (at `q_from`) to `to`.
+    fn line_via(&self, q_from: &JointVector, from: &Isometry3<f64>, to: &Isometry3<f64>) -> Option<Vec<JointVector>> {
+        let mut q = *q_from;
         let mut via = vec![q];
-        for s in 1..=6 {
-            let pose = start.lerp_slerp(goal, s as f64 / 6.0);
+        for s in 1..=LINE_SEGMENTS {
+            let pose = from.lerp_slerp(to, s as f64 / LINE_SEGMENTS as f64);
             q = self.robot.ik_tool_nearest(&pose, &q).ok()?.q;
             via.push(q);
         }
-        let limits = MotionLimits {
-            vel_rad_s: self.robot.max_vel_rad_s() * 0.3,
-            accel_rad_s2: self.robot.max_accel_rad_s2() * 0.3,
-        };
-        Some(Trajectory::through(&via, &limits))
+        Some(via)
     }
-}
 
-/// Runs `opts.picks` picks of `workpiece` in the cell of `scene`.
-pub fn run(
-    scene: &LoadedScene,
-    robot: &RobotModel,
-    workpiece: &LoadedWorkpiece,
-    opts: &RunOptions,
-) -> Result<(Vec<PickRecord>, RunSummary), CycleError> {
-    let shape = PartShape::build(&workpiece.workpiece, &workpiece.source)?;
-    let mut world = World::new(&scene.scene, robot, shape.clone());
-    world.build_pile(&PileOptions::new(workpiece.workpiece.pile_count as usize, opts.seed))?;
-    let sensor = Sensor::new(&scene.scene.sensor, &world, opts.seed)
-        .ok_or_else(|| CycleError::Setup("degenerate sensor pose".into()))?;
-    let slots = scene.scene.world_from_slots(&workpiece.workpiece);
-    if slots.is_empty() {
-        return Err(CycleError::Setup("no place slot for this workpiece".into()));
+    /// A straight tool line, torque-limited (§4.2 on its via points) and, with a part on the cup,
+    /// slowed to the cup's holding force.
+    fn line(
+        &self,
+        q_from: &JointVector,
+        from: &Isometry3<f64>,
+        to: &Isometry3<f64>,
+        payload: &Payload,
+        max_force: Option<f64>,
+    ) -> Option<Trajectory> {
+        let via = self.line_via(q_from, from, to)?;
+        let acc = optimise_accelerations(self.robot, &self.robot.dynamics(payload), &via, 0.001, 0.05);
+        Some(match max_force {
+            Some(f) => limit_tool_force(self.robot, &via, &acc.limits, f).0,
+            None => acc.trajectory,
+        })
     }
-    let mut cell = Cell {
-        arm_free_s: world.time_s,
-        world,
-        robot: robot.clone(),
-        sensor,
-        selector: GraspSelector::new(&scene.scene, robot, &workpiece.workpiece),
-        servo: Servo::from_config(&scene.scene.sim),
-        hand: Payload::from_gripper(&scene.scene.gripper),
-        shape,
-        slots,
-        scene: scene.scene.clone(),
-        job: None,
-    };
-    let budgets = (
-        scene.scene.compute.grasp_estimation_s,
-        scene.scene.compute.motion_generation_s,
-    );
-    let mut records: Vec<PickRecord> = Vec::new();
-    let mut last_release: Option<f64> = None;
-    let mut placed = 0usize;
-    cell.maybe_trigger();
-    for index in 0..opts.picks {
-        let mut rec = PickRecord {
-            index,
-            outcome: Outcome::Placed,
-            release_s: None,
-            takt_s: None,
-            pick_motion_s: 0.0,
-            place_motion_s: 0.0,
-            stall_s: 0.0,
-            compute_s: 0.0,
-            placement_error: None,
-        };
-        // The recognition result: re-trigger if none is pending (moving the arm home first if
-        // it is in view, after a failed pick), then wait for it.
-        cell.maybe_trigger();
-        if cell.job.is_none() {
-            let home = JointVector::from(cell.scene.robot.home_rad());
-            let free = CollisionModel::new(
-                robot,
-                RobotSpheres::new(robot, &cell.scene, None),
-                Environment::from_scene(&cell.scene),
-            );
-            let mut rng = crate::rng::stream(opts.seed + index as u64, "planner-home");
-            let hand = cell.hand;
-            if let Ok(p) = free.plan(&cell.world.joints(), &home, &PlanOptions::default(), &mut rng) {
-                let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-                let (_, acc, _) = accelerate_in_corridor(robot, &robot.dynamics(&hand), &via, &free, 0.01);
-                cell.play(&acc.trajectory, &hand, true)?.ok();
-            }
-            cell.arm_free_s = cell.world.time_s;
-            cell.maybe_trigger();
-        }
-        let Some(job) = cell.job.clone() else {
-            return Err(CycleError::Setup("the arm cannot leave the sensor's view".into()));
-        };
-        let ready = job.ready_s;
+
+    /// The largest tool specific force [m/s^2] the cup holds the part against with margin, for
+    /// a grasp whose cup axis passes `offset_m` from the part's centre of mass.
+    fn suction_limit(&self, offset_m: f64) -> f64 {
+        let g = &self.world.gripper;
+        SUCTION_MARGIN * g.holding_n / (self.shape.mass_kg * (1.0 + 4.0 * offset_m / (2.0 * g.cup_radius_m)))
+    }
+
+    /// Grasp selection and motion generation for one recognition result. Returns the motions
+    /// and the wall time of each stage, or why nothing can be picked.
+    fn prepare(&mut self, detections: &[Detection], job: &CaptureJob) -> Result<(Prepared, [f64; 3]), String> {
         let wall = Instant::now();
-        cell.idle_until(ready)?;
-        let detections = match cell.sensor.result(&job, &cell.world) {
-            Some(d) => d,
-            None => {
-                cell.job = None;
-                rec.outcome = Outcome::NothingGraspable;
-                records.push(rec);
-                continue;
-            }
-        };
-        cell.job = None;
-        // Grasp selection, then the Pick motion: planned and accelerated.
-        let hm = HeightMap::from_capture(&job.capture, &cell.world, 0.002);
-        let slot = cell.slots[placed % cell.slots.len()];
-        let q_now = cell.world.joints();
-        let plan = cell.selector.select(&detections, &hm, &slot, &q_now);
+        let hm = HeightMap::from_capture(&job.capture, &self.world, 0.002);
+        let slot = self.slots[self.next_slot % self.slots.len()];
+        let q_now = self.world.joints();
+        let plan = self.selector.select(detections, &hm, &slot, &q_now);
         // The best grasp whose approach pose is clear in the planner's (conservative) model.
         let mut chosen = None;
         for g in plan.ranked.iter().take(8) {
-            let local = cell.world.pick_tray.world_from_tray.inverse()
+            let local = self.world.pick_tray.world_from_tray.inverse()
                 * nalgebra::Point3::from(g.world_from_tool.translation.vector);
-            let mut env = Environment::from_scene(&cell.scene);
+            let mut env = Environment::from_scene(self.scene);
             env.pile = Some(PileColumns::new(&hm, 5, Some((local.x, local.y, 0.02))));
-            let model = CollisionModel::new(robot, RobotSpheres::new(robot, &cell.scene, None), env.clone());
+            let model = CollisionModel::new(self.robot, RobotSpheres::new(self.robot, self.scene, None), env.clone());
             if model.free(
                 &JointVector::from(g.q_approach),
                 &mut crate::planning::PlanStats::default(),
@@ -336,196 +686,484 @@ pub fn run(
             }
         }
         let Some((grasp, env, empty)) = chosen else {
-            rec.outcome = Outcome::NothingGraspable;
-            records.push(rec);
-            continue;
+            let reasons = plan
+                .rejected_counts()
+                .iter()
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            let why = if plan.ranked.is_empty() {
+                format!("no feasible grasp ({reasons})")
+            } else {
+                format!("no grasp with a clear approach among {}", plan.ranked.len().min(8))
+            };
+            return Err(why);
         };
-        let mut rng = crate::rng::stream(opts.seed + index as u64, "planner");
+        let grasp_s = wall.elapsed().as_secs_f64();
+        // Pick: transfer to the approach pose, straight descent.
+        let wall = Instant::now();
+        let mut rng = crate::rng::stream(self.seed.wrapping_add(self.world.steps), "planner");
         let q_approach = JointVector::from(grasp.q_approach);
-        let pick_path = empty.plan(&q_now, &q_approach, &PlanOptions::default(), &mut rng);
-        let compute_wall = wall.elapsed().as_secs_f64();
-        let compute = if opts.deterministic {
-            budgets.0 + budgets.1
-        } else {
-            compute_wall
-        };
-        rec.compute_s = compute;
-        let motion_ready = ready + compute;
-        rec.stall_s = (motion_ready - cell.arm_free_s).max(0.0);
-        cell.idle_until(motion_ready.max(cell.world.time_s))?;
-        let pick_path = match pick_path {
-            Ok(p) => p,
-            Err(e) => {
-                rec.outcome = Outcome::NoMotion(format!("pick: {e}"));
-                records.push(rec);
-                continue;
-            }
-        };
-        let via: Vec<JointVector> = pick_path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-        let dyn_hand = robot.dynamics(&cell.hand);
-        let (_, pick, _) = accelerate_in_corridor(robot, &dyn_hand, &via, &empty, 0.01);
-        let hand = cell.hand;
-        match cell.play(&pick.trajectory, &hand, false)? {
-            Ok(t) => rec.pick_motion_s = t,
-            Err(o) => {
-                rec.outcome = o;
-                records.push(rec);
-                continue;
-            }
-        }
-        // Descent to the measured surface, vacuum, lift.
-        let press = grasp.world_from_tool;
-        let Some(down) = cell.line(&press) else {
-            rec.outcome = Outcome::NoMotion("descent: no joint path along the line".into());
-            records.push(rec);
-            continue;
-        };
-        if let Err(o) = cell.play(&down, &hand, false)? {
-            rec.outcome = o;
-            records.push(rec);
-            continue;
-        }
-        cell.world.vacuum_on();
-        let t = cell.world.time_s + cell.world.gripper.build_up_s + cell.world.dt_s();
-        cell.idle_until(t)?;
-        let mut sealed = false;
-        for ev in cell.world.gripper.take_events() {
-            match ev {
-                GripperEvent::Grasped { .. } => sealed = true,
-                GripperEvent::GraspFailed { reason, .. } => rec.outcome = Outcome::GraspFailed(reason.to_string()),
-                GripperEvent::Slipped { required_n, .. } => {
-                    rec.outcome = Outcome::Dropped(format!("slipped at rest: {required_n:.2} N"))
-                }
-                GripperEvent::Released { .. } => {}
-            }
-        }
-        let held = cell.world.held_payload().map(|p| hand.combined(&p));
-        let up = cell.line(&grasp.world_from_tool_approach);
-        if !sealed || held.is_none() {
-            cell.world.vacuum_off();
-            if let Some(up) = up {
-                cell.play(&up, &hand, false)?.ok();
-            }
-            cell.arm_free_s = cell.world.time_s;
-            if rec.outcome == Outcome::Placed {
-                rec.outcome = Outcome::GraspFailed("no seal".into());
-            }
-            records.push(rec);
-            continue;
-        }
-        let held = held.expect("checked");
-        let Some(up) = up else {
-            rec.outcome = Outcome::NoMotion("lift: no joint path along the line".into());
-            records.push(rec);
-            continue;
-        };
-        if let Err(o) = cell.play(&up, &held, false)? {
-            rec.outcome = o;
-            records.push(rec);
-            continue;
-        }
-        // The Place motion, planned with the part on the cup; the next capture is triggered the
-        // moment the arm has left the view frustum.
-        let tool_from_part = grasp.world_from_tool.inverse() * detections[grasp.detection].world_from_part;
-        let holding = CollisionModel::new(
-            robot,
-            RobotSpheres::new(robot, &cell.scene, Some((tool_from_part, cell.shape.half_extents_m))),
-            env,
+        let hand = self.hand;
+        let dyn_hand = self.robot.dynamics(&hand);
+        let pick_transfer = empty
+            .plan(&q_now, &q_approach, &PlanOptions::default(), &mut rng)
+            .map(|p| {
+                let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+                accelerate_in_corridor(self.robot, &dyn_hand, &via, &empty, 0.01)
+                    .1
+                    .trajectory
+            })
+            .map_err(|e| format!("pick transfer: {e}"));
+        let descent = self.line(
+            &q_approach,
+            &grasp.world_from_tool_approach,
+            &grasp.world_from_tool,
+            &hand,
+            None,
+        );
+        let pick_s = wall.elapsed().as_secs_f64();
+        // Place: with the part on the cup, its centre of mass where the recognition put it.
+        let wall = Instant::now();
+        let world_from_part = detections[grasp.detection].world_from_part;
+        let tool_from_part = grasp.world_from_tool.inverse() * world_from_part;
+        let offset = tool_from_part.translation.vector.xy().norm();
+        let max_force = self.suction_limit(offset);
+        let held = hand.combined(&Payload::point(
+            self.shape.mass_kg,
+            self.robot.flange_from_tool * tool_from_part.translation.vector,
+        ));
+        // The lift starts where the descent ends (the same line, IK-chained from the approach).
+        let q_grasp = descent
+            .as_ref()
+            .map_or(JointVector::from(grasp.q_grasp), |d| d.sample(d.duration_s).q);
+        let lift = self.line(
+            &q_grasp,
+            &grasp.world_from_tool,
+            &grasp.world_from_tool_approach,
+            &held,
+            Some(max_force),
         );
         let above_place = Isometry3::from_parts(
-            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * 0.03),
+            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * PLACE_APPROACH_M),
             grasp.world_from_tool_place.rotation,
         );
-        let q_above = match robot.ik_tool_nearest(&above_place, &JointVector::from(grasp.q_place)) {
-            Ok(s) => s.q,
-            Err(e) => {
-                rec.outcome = Outcome::NoMotion(format!("place pose: {e}"));
-                records.push(rec);
-                continue;
-            }
-        };
-        let place_path = match holding.plan(&cell.world.joints(), &q_above, &PlanOptions::default(), &mut rng) {
-            Ok(p) => p,
-            Err(e) => {
-                rec.outcome = Outcome::NoMotion(format!("place: {e}"));
-                records.push(rec);
-                continue;
-            }
-        };
-        let via: Vec<JointVector> = place_path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-        let dyn_held = robot.dynamics(&held);
-        let (_, place, _) = accelerate_in_corridor(robot, &dyn_held, &via, &holding, 0.01);
-        match cell.play(&place.trajectory, &held, true)? {
-            Ok(t) => rec.place_motion_s = t,
-            Err(o) => {
-                rec.outcome = o;
-                records.push(rec);
-                continue;
-            }
-        }
-        // Down into the slot, release 3 mm above the floor (the recognised pose is a little off;
-        // the part drops the rest), back up.
         let release_pose = Isometry3::from_parts(
-            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * 0.003),
+            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * RELEASE_ABOVE_M),
             grasp.world_from_tool_place.rotation,
         );
-        let Some(down) = cell.line(&release_pose) else {
-            rec.outcome = Outcome::NoMotion("place descent".into());
-            records.push(rec);
-            continue;
+        let holding = CollisionModel::new(
+            self.robot,
+            RobotSpheres::new(
+                self.robot,
+                self.scene,
+                Some((tool_from_part, self.shape.half_extents_m)),
+            ),
+            env,
+        );
+        let dyn_held = self.robot.dynamics(&held);
+        let place = (|| {
+            let q_above = self
+                .robot
+                .ik_tool_nearest(&above_place, &JointVector::from(grasp.q_place))
+                .map_err(|e| format!("place pose: {e}"))?
+                .q;
+            let q_lifted = lift.as_ref().map_or(q_approach, |l| l.sample(l.duration_s).q);
+            let path = holding
+                .plan(&q_lifted, &q_above, &PlanOptions::default(), &mut rng)
+                .map_err(|e| format!("place transfer: {e}"))?;
+            let via: Vec<JointVector> = path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+            let (via, acc, _) = accelerate_in_corridor(self.robot, &dyn_held, &via, &holding, 0.01);
+            let (transfer, k) = limit_tool_force(self.robot, &via, &acc.limits, max_force);
+            let down = self
+                .line(&q_above, &above_place, &release_pose, &held, Some(max_force))
+                .ok_or("place descent: no joint path along the line")?;
+            let q_release = down.sample(down.duration_s).q;
+            let up = self
+                .line(&q_release, &release_pose, &above_place, &hand, None)
+                .ok_or("place retreat: no joint path along the line")?;
+            Ok::<_, String>((transfer, down, up, k))
+        })();
+        let place_s = wall.elapsed().as_secs_f64();
+        let (Some(descent), Some(lift)) = (descent, lift) else {
+            return Err("no joint path along the straight descent".into());
         };
-        if let Err(o) = cell.play(&down, &held, true)? {
-            rec.outcome = o;
-            records.push(rec);
-            continue;
+        let truth_part = detections[grasp.detection].truth_part;
+        Ok((
+            Prepared {
+                grasp,
+                slot,
+                pick_transfer,
+                descent,
+                lift,
+                place,
+                held,
+                truth_part,
+                charged: [0.0; 3],
+            },
+            [grasp_s, pick_s, place_s],
+        ))
+    }
+
+    /// Takes the parts left in the pick tray out and pours a new pile.
+    fn refill(&mut self, fill: u64, count: usize) -> Result<(), CycleError> {
+        for i in self.world.parts_in_state(PartState::Free) {
+            self.world.remove_part(i);
         }
-        let part = cell.world.held_part();
-        cell.world.vacuum_off();
-        let t = cell.world.time_s + cell.world.gripper.release_s + cell.world.dt_s();
-        cell.idle_until(t)?;
-        cell.world.gripper.take_events();
-        let release = cell.world.time_s;
-        if let Some(up) = cell.line(&above_place) {
-            cell.play(&up, &hand, true)?.ok();
+        let t = self.world.time_s;
+        self.event("refill", format!("pile {fill}"));
+        self.idle_until(t + self.scene.cycle.refill_s)?;
+        let seed = self.seed.wrapping_add(fill.wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        self.world.build_pile(&PileOptions::new(count, seed))?;
+        self.span(Lane::Stall, t, self.world.time_s, "pick tray refill");
+        self.arm_free_s = self.world.time_s;
+        Ok(())
+    }
+}
+
+/// Runs `opts.picks` picks of `workpiece` in the cell of `scene`.
+pub fn run(
+    scene: &LoadedScene,
+    robot: &RobotModel,
+    workpiece: &LoadedWorkpiece,
+    opts: &RunOptions,
+) -> Result<RunResult, CycleError> {
+    let wp = &workpiece.workpiece;
+    let shape = PartShape::build(wp, &workpiece.source)?;
+    let mut world = World::new(&scene.scene, robot, shape.clone());
+    let pile_count = wp.pile_count as usize;
+    world.build_pile(&PileOptions::new(pile_count, opts.seed))?;
+    let sensor = Sensor::new(&scene.scene.sensor, &world, opts.seed)
+        .ok_or_else(|| CycleError::Setup("degenerate sensor pose".into()))?;
+    let slots = scene.scene.world_from_slots(wp);
+    if slots.is_empty() {
+        return Err(CycleError::Setup("no place slot for this workpiece".into()));
+    }
+    let mut cell = Cell {
+        arm_free_s: world.time_s,
+        world,
+        robot,
+        scene: &scene.scene,
+        sensor,
+        selector: GraspSelector::new(&scene.scene, robot, wp),
+        servo: Servo::from_config(&scene.scene.sim),
+        hand: Payload::from_gripper(&scene.scene.gripper),
+        shape,
+        slots,
+        next_slot: 0,
+        yaw_symmetry_rad: wp.grasp.yaw_symmetry_deg.to_radians(),
+        job: None,
+        seed: opts.seed,
+        pick: None,
+        events: Vec::new(),
+        spans: Vec::new(),
+        markers: Vec::new(),
+        trace: opts.keep_trace.then(Vec::new),
+        parts_lost: 0,
+        peak_torque_ratio: 0.0,
+        max_error_rad: 0.0,
+    };
+    let budgets = [
+        scene.scene.compute.grasp_estimation_s,
+        scene.scene.compute.motion_generation_s,
+        scene.scene.compute.motion_generation_s,
+    ];
+    let policy = &scene.scene.cycle;
+    let mut records: Vec<PickRecord> = Vec::new();
+    let mut last_release: Option<f64> = None;
+    let mut first_of_pile = true;
+    let mut attempts = 0usize;
+    let mut empty_in_row = 0u32;
+    let mut fills = 1u64;
+    let mut refills = 0usize;
+    let mut exchanges = 0usize;
+    let mut ended = "picks done".to_string();
+    while attempts < opts.picks {
+        let index = records.len();
+        cell.pick = Some(index);
+        if index > 20 * opts.picks + 20 {
+            ended = "too many empty captures".into();
+            break;
         }
-        cell.arm_free_s = cell.world.time_s;
-        if let Some(i) = part {
-            rec.placement_error = Some(cell.world.placement_error(
-                i,
-                &slot,
-                workpiece.workpiece.grasp.yaw_symmetry_deg.to_radians(),
-            ));
+        let Some((job, capture_s, detections)) = cell.next_result()? else {
+            return Err(CycleError::Setup("the arm cannot leave the sensor's view".into()));
+        };
+        let mut rec = PickRecord::new(index, &job, capture_s);
+        let prepared = match detections.as_deref() {
+            None | Some([]) => Err(None),
+            Some(dets) => cell.prepare(dets, &job).map_err(Some),
+        };
+        let (mut prep, wall) = match prepared {
+            Ok(p) => p,
+            Err(why) => {
+                rec.outcome = why.map_or(Outcome::NothingDetected, Outcome::NothingGraspable);
+                cell.event("outcome", format!("{}: {}", rec.outcome.name(), rec.outcome.detail()));
+                records.push(rec);
+                empty_in_row += 1;
+                if empty_in_row >= policy.empty_after_captures {
+                    empty_in_row = 0;
+                    match policy.on_empty {
+                        OnEmpty::End => {
+                            ended = "tray empty".into();
+                            break;
+                        }
+                        OnEmpty::Refill => {
+                            cell.refill(fills, pile_count)?;
+                            fills += 1;
+                            refills += 1;
+                            first_of_pile = true;
+                        }
+                    }
+                }
+                continue;
+            }
+        };
+        empty_in_row = 0;
+        attempts += 1;
+        prep.charged = if opts.deterministic { budgets } else { wall };
+        [rec.grasp_compute_s, rec.pick_compute_s, rec.place_compute_s] = prep.charged;
+        let ready = job.ready_s;
+        let grasp_done = ready + prep.charged[0];
+        let pick_ready = grasp_done + prep.charged[1];
+        let place_ready = pick_ready + prep.charged[2];
+        cell.span(Lane::Grasp, ready, grasp_done, "grasp selection");
+        cell.span(Lane::Planning, grasp_done, pick_ready, "Pick motion");
+        cell.span(Lane::Planning, pick_ready, place_ready, "Place motion");
+        cell.events.push(CycleEvent {
+            t_s: grasp_done,
+            pick: Some(index),
+            kind: "grasp_chosen",
+            detail: format!(
+                "detection {} face {} score {:.3}",
+                prep.grasp.detection, prep.grasp.face, prep.grasp.score.total
+            ),
+        });
+        // Stall before the Pick: waiting for the sensor, then for compute.
+        let free = cell.arm_free_s;
+        rec.stall_sensor_s = (ready.min(pick_ready) - free).max(0.0);
+        rec.stall_compute_s = (pick_ready - free.max(ready)).max(0.0);
+        if rec.stall_sensor_s > 0.0 {
+            cell.span(Lane::Stall, free, ready, "waiting for the sensor");
         }
-        rec.release_s = Some(release);
-        rec.takt_s = last_release.map(|r| release - r);
-        last_release = Some(release);
-        placed += 1;
+        if rec.stall_compute_s > 0.0 {
+            cell.span(Lane::Stall, free.max(ready), pick_ready, "waiting for compute");
+        }
+        cell.idle_until(pick_ready.max(cell.world.time_s))?;
+        let outcome = pick_and_place(&mut cell, &mut prep, &mut rec, place_ready)?;
+        rec.outcome = outcome;
+        cell.event("outcome", format!("{}: {}", rec.outcome.name(), rec.outcome.detail()));
+        if rec.outcome == Outcome::Placed {
+            let release = rec.release_s.expect("placed picks have a release");
+            rec.takt_s = last_release.map(|r| release - r);
+            rec.first_of_pile = first_of_pile;
+            first_of_pile = false;
+            last_release = Some(release);
+            cell.next_slot += 1;
+            if cell.next_slot >= cell.slots.len() {
+                cell.next_slot = 0;
+                for i in cell.world.parts_in_state(PartState::Placed) {
+                    cell.world.remove_part(i);
+                }
+                exchanges += 1;
+                cell.event("place_tray_exchange", String::new());
+                let t = cell.world.time_s + policy.place_tray_exchange_s;
+                cell.idle_until(t)?;
+                cell.arm_free_s = cell.arm_free_s.max(cell.world.time_s);
+            }
+        }
+        rec.max_tracking_error_deg = cell.max_error_rad.to_degrees();
+        rec.peak_torque_ratio = cell.peak_torque_ratio;
         records.push(rec);
     }
-    let mut takts: Vec<f64> = records.iter().filter_map(|r| r.takt_s).collect();
-    takts.sort_by(f64::total_cmp);
-    let n = takts.len();
-    let takt = if n == 0 {
-        (f64::NAN, f64::NAN, f64::NAN, f64::NAN)
-    } else {
-        (
-            takts.iter().sum::<f64>() / n as f64,
-            takts[((n as f64 * 0.95).ceil() as usize).saturating_sub(1)],
-            takts[0],
-            takts[n - 1],
-        )
+    let summary = summarise(&cell, &records, opts, wp.name.clone(), refills, exchanges, ended);
+    Ok(RunResult {
+        records,
+        summary,
+        spans: cell.spans,
+        markers: cell.markers,
+        events: cell.events,
+        trace: cell.trace.unwrap_or_default(),
+    })
+}
+
+/// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat).
+fn pick_and_place(
+    cell: &mut Cell<'_>,
+    prep: &mut Prepared,
+    rec: &mut PickRecord,
+    place_ready: f64,
+) -> Result<Outcome, CycleError> {
+    let hand = cell.hand;
+    let t_pick = cell.world.time_s;
+    cell.event("pick_start", String::new());
+    let pick_transfer = match &prep.pick_transfer {
+        Ok(t) => t.clone(),
+        Err(e) => return Ok(Outcome::NoMotion(e.clone())),
     };
-    let summary = RunSummary {
-        workpiece: workpiece.workpiece.name.clone(),
+    cell.max_error_rad = 0.0;
+    cell.peak_torque_ratio = 0.0;
+    let pick_done = |cell: &mut Cell<'_>, rec: &mut PickRecord| {
+        rec.pick_s = cell.world.time_s - t_pick;
+        cell.span(Lane::Pick, t_pick, cell.world.time_s, "Pick");
+        cell.arm_free_s = cell.world.time_s;
+    };
+    for m in [&pick_transfer, &prep.descent] {
+        if let Played::Failed(o) = cell.play(m, &hand, false)? {
+            pick_done(cell, rec);
+            return Ok(o);
+        }
+    }
+    cell.world.vacuum_on();
+    let t = cell.world.time_s + cell.world.gripper.build_up_s + cell.world.dt_s();
+    cell.idle_until(t)?;
+    let mut failure = None;
+    for ev in cell.world.gripper.take_events() {
+        match ev {
+            GripperEvent::Grasped { seal, .. } => {
+                let truth = prep.truth_part;
+                cell.event(
+                    "grasped",
+                    format!(
+                        "part {} (aimed at part {truth}), cup axis {:.1} mm from its centre of mass, tilt {:.1} deg",
+                        seal.part,
+                        seal.com_offset_m * 1e3,
+                        seal.tilt_rad.to_degrees()
+                    ),
+                );
+            }
+            GripperEvent::GraspFailed { reason, .. } => failure = Some(Outcome::GraspFailed(reason.to_string())),
+            GripperEvent::Slipped { required_n, .. } => {
+                failure = Some(Outcome::Dropped(format!("slipped at rest: {required_n:.2} N")))
+            }
+            GripperEvent::Released { .. } => {}
+        }
+    }
+    if cell.world.held_part().is_none() {
+        cell.world.vacuum_off();
+        let lift = prep.lift.clone();
+        cell.play(&lift, &hand, false)?;
+        pick_done(cell, rec);
+        return Ok(failure.unwrap_or_else(|| Outcome::GraspFailed("no seal".into())));
+    }
+    let held = prep.held;
+    let lift = prep.lift.clone();
+    if let Played::Failed(o) = cell.play(&lift, &held, true)? {
+        pick_done(cell, rec);
+        return Ok(o);
+    }
+    pick_done(cell, rec);
+    // Place: the motions were generated while the Pick ran; wait if they are not ready yet.
+    if place_ready > cell.world.time_s {
+        let t = cell.world.time_s;
+        rec.stall_compute_s += place_ready - t;
+        cell.span(Lane::Stall, t, place_ready, "waiting for compute");
+        cell.idle_until(place_ready)?;
+    }
+    let (transfer, down, up, k) = match &prep.place {
+        Ok(p) => p.clone(),
+        Err(e) => return Ok(Outcome::NoMotion(e.clone())),
+    };
+    rec.suction_speed_factor = k;
+    let t_place = cell.world.time_s;
+    cell.event("place_start", String::new());
+    let place_done = |cell: &mut Cell<'_>, rec: &mut PickRecord| {
+        rec.place_s = cell.world.time_s - t_place;
+        cell.span(Lane::Place, t_place, cell.world.time_s, "Place");
+        cell.arm_free_s = cell.world.time_s;
+    };
+    for m in [&transfer, &down] {
+        if let Played::Failed(o) = cell.play(m, &held, true)? {
+            place_done(cell, rec);
+            return Ok(o);
+        }
+    }
+    let part = cell.world.held_part();
+    cell.world.vacuum_off();
+    let t = cell.world.time_s + cell.world.gripper.release_s + cell.world.dt_s();
+    cell.idle_until(t)?;
+    cell.world.gripper.take_events();
+    let release = cell.world.time_s;
+    cell.event("released", String::new());
+    cell.markers.push(Marker {
+        t_s: release,
+        label: format!("release {}", rec.index),
+    });
+    if let Played::Failed(o) = cell.play(&up, &hand, true)? {
+        place_done(cell, rec);
+        return Ok(o);
+    }
+    place_done(cell, rec);
+    if let Some(i) = part {
+        let (d, yaw) = cell.world.placement_error(i, &prep.slot, cell.yaw_symmetry_rad);
+        rec.placement_error_mm = Some(d * 1e3);
+        rec.yaw_error_deg = Some(yaw.to_degrees());
+    }
+    rec.release_s = Some(release);
+    Ok(Outcome::Placed)
+}
+
+fn summarise(
+    cell: &Cell<'_>,
+    records: &[PickRecord],
+    opts: &RunOptions,
+    workpiece: String,
+    refills: usize,
+    place_tray_exchanges: usize,
+    ended: String,
+) -> RunSummary {
+    let attempts: Vec<&PickRecord> = records.iter().filter(|r| r.outcome.is_attempt()).collect();
+    let placed: Vec<&PickRecord> = attempts
+        .iter()
+        .copied()
+        .filter(|r| r.outcome == Outcome::Placed)
+        .collect();
+    let takts: Vec<f64> = placed
+        .iter()
+        .filter(|r| !r.first_of_pile)
+        .filter_map(|r| r.takt_s)
+        .collect();
+    let mean = |v: &mut dyn Iterator<Item = f64>| {
+        let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
+        if n == 0 { f64::NAN } else { s / n as f64 }
+    };
+    let in_takt = || placed.iter().filter(|r| !r.first_of_pile);
+    let stalls = |f: fn(&PickRecord) -> f64| {
+        let v: Vec<f64> = in_takt().map(|r| f(r)).filter(|s| *s > 1e-9).collect();
+        (v.len(), v.iter().sum())
+    };
+    let count = |name: &str| attempts.iter().filter(|r| r.outcome.name() == name).count();
+    RunSummary {
+        reference_takt_s: reference_takt(&workpiece),
+        workpiece,
         seed: opts.seed,
         deterministic: opts.deterministic,
-        picks: records.len(),
-        placed,
-        takt_s: takt,
+        attempts: attempts.len(),
+        placed: placed.len(),
+        success_rate: if attempts.is_empty() {
+            f64::NAN
+        } else {
+            placed.len() as f64 / attempts.len() as f64
+        },
+        takt: TaktStats::of(&takts),
+        mean_pick_s: mean(&mut placed.iter().map(|r| r.pick_s)),
+        mean_place_s: mean(&mut placed.iter().map(|r| r.place_s)),
+        mean_compute_s: [
+            mean(&mut attempts.iter().map(|r| r.grasp_compute_s)),
+            mean(&mut attempts.iter().map(|r| r.pick_compute_s)),
+            mean(&mut attempts.iter().map(|r| r.place_compute_s)),
+        ],
+        sensor_stalls: stalls(|r| r.stall_sensor_s),
+        compute_stalls: stalls(|r| r.stall_compute_s),
+        protective_stops: count("protective_stop"),
+        collisions: count("collision"),
+        drops: count("dropped"),
+        parts_lost: cell.parts_lost,
         captures: (cell.sensor.triggered, cell.sensor.spoiled),
-        stall_s: records.iter().map(|r| r.stall_s).sum(),
+        refills,
+        place_tray_exchanges,
+        peak_torque_ratio: records.iter().map(|r| r.peak_torque_ratio).fold(0.0, f64::max),
+        max_tracking_error_deg: records.iter().map(|r| r.max_tracking_error_deg).fold(0.0, f64::max),
+        ended,
         sim_time_s: cell.world.time_s,
-        reference_takt_s: reference_takt(&workpiece.workpiece.name),
-    };
-    Ok((records, summary))
+    }
 }

@@ -12,15 +12,19 @@
 //! 6. [`planning`]: collision model (robot spheres, cell boxes, pile columns), certified edges, planner.
 //! 7. [`trajectory`]: timed trajectories through via points, torques, the acceleration search.
 //! 8. [`execution`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
-//! 9. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results.
+//! 9. [`cycle`]: the cell cycle end to end: pipelined sensing and compute, Pick, Place, faults,
+//!    refills, takt time.
+//! 10. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results;
+//!     [`chart`]: the cycle's time chart (SVG); [`batch`]: takt-time tables over many runs.
 //!
-//! Later stages (physics world, sensor, grasp selection, planning, trajectory, execution, cycle,
-//! recording, report) are added as their issues land; see README.md.
+//! The recording stage (Rerun, MCAP) is added as its issue lands; see README.md.
 //!
 //! Units are SI inside the crate (m, rad, s, kg, N m); degrees appear only at the file and
 //! command-line boundary. Frame names read `target_from_source` (e.g. `world_from_tool`).
 
+pub mod batch;
 pub mod bench;
+pub mod chart;
 pub mod config;
 pub mod cycle;
 pub mod execution;

@@ -73,11 +73,58 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// The takt-time table: cell runs of several workpieces and seeds in parallel, one row per
+    /// workpiece (the reference system's Table 5, from the simulation).
+    Batch(BatchArgs),
+    /// Joins the results of a batch's shards (`batch --shard K/N`) into the one table.
+    Merge {
+        /// The shards' folders (each holding a takt.json).
+        #[arg(required = true)]
+        dirs: Vec<PathBuf>,
+        /// Folder the merged batch folder is written into.
+        #[arg(long, default_value = "runs")]
+        out: PathBuf,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
     /// Benchmarks: our code beside a baseline doing the same work.
     Bench {
         #[command(subcommand)]
         command: BenchCommand,
     },
+}
+
+/// Arguments of `binpick batch`.
+#[derive(Args)]
+struct BatchArgs {
+    /// Workpieces, comma-separated: A ... F (embedded) or paths to workpiece files.
+    #[arg(long, default_value = "A,B,C,D,E,F")]
+    workpieces: String,
+    /// Picks per run (the first of each run follows the initial sensing and has no takt).
+    #[arg(long, default_value_t = 21)]
+    picks: usize,
+    /// Seeds: 1-3, or 1,2,5.
+    #[arg(long, default_value = "1")]
+    seeds: String,
+    /// Runs in parallel (default: the machine's cores).
+    #[arg(long)]
+    jobs: Option<usize>,
+    /// Run only the K-th of N disjoint slices of the batch (1-based), e.g. 2/4.
+    #[arg(long)]
+    shard: Option<String>,
+    /// Charge the cell file's fixed compute budgets instead of measured wall time.
+    #[arg(long)]
+    deterministic: bool,
+    /// Scene file (default: the embedded default cell).
+    #[arg(long)]
+    scene: Option<PathBuf>,
+    /// Folder the batch folder is written into.
+    #[arg(long, default_value = "runs")]
+    out: PathBuf,
+    /// Machine-readable JSON output.
+    #[arg(long)]
+    json: bool,
 }
 
 #[derive(Subcommand)]
@@ -279,6 +326,8 @@ fn run(cli: Cli) -> Result<()> {
             json,
         } => run_cell(&workpiece, picks, seed, deterministic, scene.as_deref(), &out, json),
         Command::Pile(a) => pile(&a),
+        Command::Batch(a) => batch(&a),
+        Command::Merge { dirs, out, json } => merge(&dirs, &out, json),
         Command::Bench {
             command: BenchCommand::Physics { runs, json },
         } => bench_physics(runs, json),
@@ -1072,6 +1121,8 @@ fn bench_accel(runs: usize, json: bool) -> Result<()> {
     Ok(())
 }
 
+/// `binpick run`: one cell run; prints the per-pick table and the summary, writes the run folder.
+#[allow(clippy::too_many_arguments)]
 fn run_cell(
     workpiece: &str,
     picks: usize,
@@ -1081,13 +1132,13 @@ fn run_cell(
     out: &Path,
     json: bool,
 ) -> Result<()> {
-    use binpick::cycle::{Outcome, RunOptions};
+    use binpick::cycle::RunOptions;
     if picks == 0 || picks > 10_000 {
         return Err(InputError(format!("--picks must be within [1, 10000], got {picks}")).into());
     }
     let (loaded, wp, robot) = load_cell(scene, workpiece)?;
     let wall = std::time::Instant::now();
-    let (records, summary) = binpick::cycle::run(
+    let result = binpick::cycle::run(
         &loaded,
         &robot,
         &wp,
@@ -1095,6 +1146,7 @@ fn run_cell(
             picks,
             seed,
             deterministic,
+            keep_trace: false,
         },
     )
     .map_err(|e| anyhow::anyhow!("cell run failed: {e}"))?;
@@ -1106,69 +1158,238 @@ fn run_cell(
     );
     let run = binpick::report::RunDir::create(out, &name)?;
     run.write_inputs(&loaded, Some(&wp))?;
-    let mut csv = String::from(
-        "pick,outcome,release_s,takt_s,pick_motion_s,place_motion_s,stall_s,compute_s,placement_error_mm,yaw_error_deg\n",
-    );
-    let opt = |v: Option<f64>, k: f64| v.map_or(String::new(), |x| format!("{:.6}", x * k));
-    for r in &records {
-        let outcome = match &r.outcome {
-            Outcome::Placed => "placed".to_string(),
-            other => format!("{other:?}").replace(',', ";").replace('"', "'"),
-        };
-        csv += &format!(
-            "{},{},{},{},{:.6},{:.6},{:.6},{:.6},{},{}\n",
-            r.index,
-            outcome,
-            opt(r.release_s, 1.0),
-            opt(r.takt_s, 1.0),
-            r.pick_motion_s,
-            r.place_motion_s,
-            r.stall_s,
-            r.compute_s,
-            opt(r.placement_error.map(|e| e.0), 1e3),
-            opt(r.placement_error.map(|e| e.1), 180.0 / std::f64::consts::PI)
-        );
+    run.write("picks.csv", binpick::report::picks_csv(&result.records))?;
+    run.write_json("summary.json", &result.summary)?;
+    run.write_json("events.json", &result.events)?;
+    let title = format!("binpick run: workpiece {}, seed {seed}", wp.workpiece.name);
+    let (whole, steady) = binpick::report::time_charts(&result, &title);
+    run.write("timechart.svg", whole)?;
+    if let Some(steady) = steady {
+        run.write("timechart-steady.svg", steady)?;
     }
-    run.write("picks.csv", csv)?;
-    run.write_json("summary.json", &summary)?;
     let dest = run.finish()?;
+    let s = &result.summary;
     if json {
         println!(
             "{}",
             serde_json::to_string_pretty(
-                &json!({"summary": summary, "wall_s": wall_s, "run_dir": dest.display().to_string()})
+                &json!({"summary": s, "wall_s": wall_s, "run_dir": dest.display().to_string()})
             )?
         );
         return Ok(());
     }
-    println!("pick  outcome                              takt_s  pick_s  place_s  stall_s");
-    for r in &records {
-        let outcome = match &r.outcome {
-            Outcome::Placed => "placed".to_string(),
-            other => format!("{other:?}"),
-        };
-        let takt = r.takt_s.map_or("-".to_string(), |t| format!("{t:.3}"));
-        println!(
-            "{:>4}  {:<36.36} {:>6}  {:>6.3}  {:>7.3}  {:>7.3}",
-            r.index, outcome, takt, r.pick_motion_s, r.place_motion_s, r.stall_s
-        );
-    }
+    print!("{}", binpick::report::picks_table(&result.records));
     println!(
-        "{} of {} placed; takt mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} (reference {}); captures {} ({} spoiled); {:.1} s simulated in {:.2} s wall",
-        summary.placed,
-        summary.picks,
-        summary.takt_s.0,
-        summary.takt_s.1,
-        summary.takt_s.2,
-        summary.takt_s.3,
-        summary
-            .reference_takt_s
-            .map_or("-".to_string(), |t| format!("{t:.1} s")),
-        summary.captures.0,
-        summary.captures.1,
-        summary.sim_time_s,
-        wall_s
+        "{} of {} placed ({:.1} %); takt mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} picks (reference {}); \
+         Pick {:.3} s, Place {:.3} s; waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
+         stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), refills {}; \
+         {:.1} s simulated in {:.2} s wall ({:.0}x real time)",
+        s.placed,
+        s.attempts,
+        100.0 * s.success_rate,
+        s.takt.mean_s,
+        s.takt.p95_s,
+        s.takt.min_s,
+        s.takt.max_s,
+        s.takt.count,
+        s.reference_takt_s.map_or("-".to_string(), |t| format!("{t:.1} s")),
+        s.mean_pick_s,
+        s.mean_place_s,
+        s.sensor_stalls.0,
+        s.sensor_stalls.1,
+        s.compute_stalls.0,
+        s.compute_stalls.1,
+        s.protective_stops,
+        s.collisions,
+        s.drops,
+        s.parts_lost,
+        s.captures.0,
+        s.captures.1,
+        s.refills,
+        s.sim_time_s,
+        wall_s,
+        s.sim_time_s / wall_s
     );
     println!("wrote {}", dest.display());
     Ok(())
+}
+
+/// `binpick batch`: every (workpiece, seed) run of the batch (or of one shard), in parallel.
+fn batch(a: &BatchArgs) -> Result<()> {
+    use binpick::batch::{BatchFile, BatchSpec, RunEntry, parse_seeds, parse_shard, shard};
+    use binpick::cycle::RunOptions;
+    if a.picks == 0 || a.picks > 10_000 {
+        return Err(InputError(format!("--picks must be within [1, 10000], got {}", a.picks)).into());
+    }
+    let seeds = parse_seeds(&a.seeds).map_err(|e| InputError(e.to_string()))?;
+    let (k, n) = match &a.shard {
+        Some(t) => parse_shard(t).map_err(|e| InputError(e.to_string()))?,
+        None => (1, 1),
+    };
+    let jobs = match a.jobs {
+        Some(0) => return Err(InputError("--jobs must be at least 1, got 0".into()).into()),
+        Some(j) => j,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    // Every input is loaded and checked before anything runs or is written.
+    let loaded = LoadedScene::load(a.scene.as_deref())?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    robot.check_scene_reach(&loaded.label, &loaded.scene)?;
+    let mut workpieces: Vec<LoadedWorkpiece> = Vec::new();
+    for name in a.workpieces.split(',').map(str::trim) {
+        if name.is_empty() {
+            return Err(InputError(format!("--workpieces: empty name in {:?}", a.workpieces)).into());
+        }
+        let wp = LoadedWorkpiece::resolve(name)?;
+        wp.workpiece.check_fits_scene(&wp.label, &loaded.scene)?;
+        if workpieces.iter().any(|w| w.workpiece.name == wp.workpiece.name) {
+            return Err(InputError(format!("--workpieces: {} appears twice", wp.workpiece.name)).into());
+        }
+        workpieces.push(wp);
+    }
+    let spec = BatchSpec {
+        workpieces: workpieces.iter().map(|w| w.workpiece.name.clone()).collect(),
+        seeds,
+        picks: a.picks,
+        deterministic: a.deterministic,
+    };
+    let mine = shard(&spec.jobs(), k, n);
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(jobs)
+        .build()
+        .context("starting the worker threads")?;
+    let bar = indicatif::ProgressBar::new(mine.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}")
+            .expect("static template")
+            .progress_chars("=> "),
+    );
+    let wall = std::time::Instant::now();
+    let results: Vec<Result<RunEntry, String>> = pool.install(|| {
+        use rayon::prelude::*;
+        mine.par_iter()
+            .map(|(w, seed)| {
+                let wp = workpieces
+                    .iter()
+                    .find(|x| &x.workpiece.name == w)
+                    .expect("from the spec");
+                let t = std::time::Instant::now();
+                let r = binpick::cycle::run(
+                    &loaded,
+                    &robot,
+                    wp,
+                    &RunOptions {
+                        picks: spec.picks,
+                        seed: *seed,
+                        deterministic: spec.deterministic,
+                        keep_trace: false,
+                    },
+                )
+                .map(|r| RunEntry::from_run(&r, t.elapsed().as_secs_f64()))
+                .map_err(|e| format!("workpiece {w} seed {seed}: {e}"));
+                bar.inc(1);
+                r
+            })
+            .collect()
+    });
+    bar.finish_and_clear();
+    let wall_s = wall.elapsed().as_secs_f64();
+    let mut runs = Vec::new();
+    for r in results {
+        runs.push(r.map_err(|e| anyhow::anyhow!("cell run failed: {e}"))?);
+    }
+    let name = if n > 1 {
+        format!("{}-shard{k}of{n}", spec.name())
+    } else {
+        spec.name()
+    };
+    let file = BatchFile {
+        version: env!("CARGO_PKG_VERSION").into(),
+        spec,
+        shard: (k, n),
+        runs,
+    };
+    let dir = binpick::report::RunDir::create(&a.out, &name)?;
+    dir.write_inputs(&loaded, None)?;
+    for wp in &workpieces {
+        dir.write_workpiece(wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
+    }
+    write_batch(dir, &file, wall_s, jobs, a.json)
+}
+
+/// Writes takt.json, takt.csv and takt.md of a batch (or a merge) and prints the table.
+fn write_batch(
+    dir: binpick::report::RunDir,
+    file: &binpick::batch::BatchFile,
+    wall_s: f64,
+    jobs: usize,
+    json: bool,
+) -> Result<()> {
+    let rows = binpick::batch::table(&file.spec.workpieces, &file.runs);
+    let md = binpick::batch::markdown(&rows);
+    let sim_s: f64 = file.runs.iter().map(|r| r.sim_time_s).sum();
+    let run_wall_s: f64 = file.runs.iter().map(|r| r.wall_s).sum();
+    dir.write_json("takt.json", &json!({"batch": file, "table": rows}))?;
+    dir.write("takt.csv", binpick::batch::csv(&rows))?;
+    dir.write("takt.md", &md)?;
+    let dest = dir.finish()?;
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&json!({"table": rows, "wall_s": wall_s, "dir": dest.display().to_string()}))?
+        );
+        return Ok(());
+    }
+    let (k, n) = file.shard;
+    println!(
+        "{} runs of {} picks{}{}, seeds {:?}\n",
+        file.runs.len(),
+        file.spec.picks,
+        if file.spec.deterministic {
+            ", deterministic compute budgets"
+        } else {
+            ", measured compute"
+        },
+        if n > 1 {
+            format!(", shard {k} of {n}")
+        } else {
+            String::new()
+        },
+        file.spec.seeds
+    );
+    print!("{md}");
+    println!(
+        "\ntakt over the placed picks after the first of each pile; {sim_s:.1} s simulated in {run_wall_s:.1} s of run time \
+         ({:.0}x real time per core), {wall_s:.1} s wall on {jobs} threads",
+        sim_s / run_wall_s.max(1e-9)
+    );
+    println!("wrote {}", dest.display());
+    Ok(())
+}
+
+/// `binpick merge`: the shards of one batch into its table.
+fn merge(dirs: &[PathBuf], out: &Path, json: bool) -> Result<()> {
+    let mut files = Vec::new();
+    for d in dirs {
+        let path = d.join("takt.json");
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| InputError(format!("{}: cannot read: {e}", path.display())))?;
+        let v: serde_json::Value = serde_json::from_str(&text)
+            .map_err(|e| InputError(format!("{}: not a batch result: {e}", path.display())))?;
+        let f: binpick::batch::BatchFile = serde_json::from_value(v["batch"].clone())
+            .map_err(|e| InputError(format!("{}: not a batch result: {e}", path.display())))?;
+        files.push((path.display().to_string(), f));
+    }
+    let merged = binpick::batch::merge(&files).map_err(|e| InputError(e.to_string()))?;
+    let dir = binpick::report::RunDir::create(out, &merged.spec.name())?;
+    // The shards' resolved inputs are the same; the first one's go with the merge.
+    for entry in std::fs::read_dir(&dirs[0]).with_context(|| dirs[0].display().to_string())? {
+        let entry = entry?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        if !name.starts_with("takt.") && entry.file_type()?.is_file() {
+            dir.write(&name, std::fs::read(entry.path())?)?;
+        }
+    }
+    let wall_s = merged.runs.iter().map(|r| r.wall_s).sum();
+    write_batch(dir, &merged, wall_s, 1, json)
 }

@@ -998,3 +998,54 @@ pub fn optimal_duration(
     }
     Some(total)
 }
+
+/// The largest specific force the tool exerts on what it holds along `motion`: max |a - g| of
+/// the tool centre point, from the forward kinematics sampled every `dt_s` (second differences)
+/// [m/s^2]. At rest it is g.
+pub fn peak_tool_specific_force(robot: &RobotModel, motion: &impl Motion, dt_s: f64) -> f64 {
+    let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
+    let p: Vec<nalgebra::Vector3<f64>> = motion
+        .sampled(dt_s)
+        .iter()
+        .map(|s| robot.world_from_tool(&s.q).translation.vector)
+        .collect();
+    p.windows(3)
+        .map(|w| ((w[2] - 2.0 * w[1] + w[0]) / (dt_s * dt_s) - g).norm())
+        .fold(crate::robot::GRAVITY_M_S2, f64::max)
+}
+
+/// Slows a trajectory through `via` under `limits` uniformly in time (speeds x k, accelerations
+/// x k^2, which scales the profile's time by 1/k exactly) until the tool's peak specific force
+/// is at most `max_specific_force_m_s2`: a suction cup holds its part only up to a force. Returns
+/// the trajectory and k (1 when no slowing was needed). Bisection on k to 2 %.
+pub fn limit_tool_force(
+    robot: &RobotModel,
+    via: &[JointVector],
+    limits: &MotionLimits,
+    max_specific_force_m_s2: f64,
+) -> (Trajectory, f64) {
+    const DT_S: f64 = 0.004;
+    let at = |k: f64| {
+        Trajectory::through(
+            via,
+            &MotionLimits {
+                vel_rad_s: limits.vel_rad_s * k,
+                accel_rad_s2: limits.accel_rad_s2 * (k * k),
+            },
+        )
+    };
+    let full = at(1.0);
+    if peak_tool_specific_force(robot, &full, DT_S) <= max_specific_force_m_s2 {
+        return (full, 1.0);
+    }
+    let (mut lo, mut hi) = (0.05, 1.0);
+    while hi - lo > 0.02 {
+        let mid = 0.5 * (lo + hi);
+        if peak_tool_specific_force(robot, &at(mid), DT_S) <= max_specific_force_m_s2 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (at(lo), lo)
+}

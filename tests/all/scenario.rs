@@ -28,10 +28,10 @@ fn deterministic_runs_place_parts_and_repeat_byte_for_byte() {
             let summary: serde_json::Value =
                 serde_json::from_slice(&std::fs::read(run.join("summary.json")).unwrap()).unwrap();
             assert!(summary["placed"].as_u64().unwrap() >= 4, "{w}: {summary}");
-            let takt = summary["takt_s"][0].as_f64().unwrap();
+            let takt = summary["takt"]["mean_s"].as_f64().unwrap();
             assert!(takt < 3.5, "{w}: takt {takt} s");
             let csv = std::fs::read_to_string(run.join("picks.csv")).unwrap();
-            assert!(!csv.contains("ProtectiveStop"), "{w}: {csv}");
+            assert!(!csv.contains("protective_stop"), "{w}: {csv}");
             assert!(run.join("scene.toml").is_file());
             files.push((std::fs::read(run.join("summary.json")).unwrap(), csv));
         }
