@@ -486,6 +486,16 @@ pub struct CycleConfig {
     /// The place tray is exchanged for an empty one when its slots are used up, outside the
     /// arm's cycle (a conveyor) [s of arm time: 0 when buffered].
     pub place_tray_exchange_s: f64,
+    /// Height of the Pick's approach pose (where the straight descent starts) above the pick
+    /// tray's rim [m].
+    pub approach_above_rim_m: f64,
+    /// Top tool speed of the straight descents, lifts and retreats [m/s].
+    pub line_speed_m_s: f64,
+    /// Tool acceleration of the straight lines before the torque and suction checks [m/s^2].
+    pub line_accel_m_s2: f64,
+    /// The vacuum is switched on this long before the descent ends, so it builds up while the
+    /// cup closes the last millimetres [s] (0: at contact).
+    pub vacuum_lead_s: f64,
 }
 
 /// Simulation and control rates.
@@ -793,6 +803,19 @@ impl Scene {
         }
         c.non_negative("cycle.refill_s", self.cycle.refill_s);
         c.non_negative("cycle.place_tray_exchange_s", self.cycle.place_tray_exchange_s);
+        c.non_negative("cycle.approach_above_rim_m", self.cycle.approach_above_rim_m);
+        c.positive("cycle.line_speed_m_s", self.cycle.line_speed_m_s);
+        c.positive("cycle.line_accel_m_s2", self.cycle.line_accel_m_s2);
+        c.non_negative("cycle.vacuum_lead_s", self.cycle.vacuum_lead_s);
+        if self.cycle.vacuum_lead_s > self.gripper.vacuum_build_up_s {
+            c.fail(
+                "cycle.vacuum_lead_s",
+                format!(
+                    "must not exceed gripper.vacuum_build_up_s ({} s), got {}",
+                    self.gripper.vacuum_build_up_s, self.cycle.vacuum_lead_s
+                ),
+            );
+        }
         c.within("sim.physics_dt_s", self.sim.physics_dt_s, 1e-5, 0.02);
         c.within("sim.control_dt_s", self.sim.control_dt_s, 1e-5, 0.01);
         c.within("sim.servo_bandwidth_hz", self.sim.servo_bandwidth_hz, 0.1, 200.0);

@@ -29,7 +29,8 @@
 //!
 //! Held parts: the transfer, lift and descent motions with a part on the cup are slowed (a
 //! uniform time scaling) where the tool's acceleration would need more than 60 % of the cup's
-//! holding force (the gripper's slip model, with the centre-of-mass offset of the grasp).
+//! holding force (the gripper's slip model, with the centre-of-mass offset of the grasp as
+//! recognised plus three standard deviations of the recognition's position noise).
 //!
 //! Takt of a pick = time between consecutive successful releases. The first pick of each pile
 //! (the start, and after a refill) follows the initial sensing and is left out of the takt
@@ -42,7 +43,7 @@ use serde::Serialize;
 
 use crate::chart::{Lane, Marker, Span};
 use crate::config::{LoadedScene, LoadedWorkpiece, OnEmpty, Scene};
-use crate::execution::{Servo, Tick, execute};
+use crate::execution::{Servo, Tick, execute_from};
 use crate::grasp::{GraspCandidate, GraspSelector};
 use crate::physics::pile::PileOptions;
 use crate::physics::suction::GripperEvent;
@@ -50,12 +51,12 @@ use crate::physics::{HealthError, PartShape, PartState, World};
 use crate::planning::{CollisionModel, Environment, PileColumns, PlanOptions, RobotSpheres};
 use crate::robot::{DOF, JointVector, Payload, RobotModel};
 use crate::sensor::{CaptureJob, Detection, HeightMap, Sensor};
-use crate::trajectory::{Motion, Trajectory, accelerate_in_corridor, limit_tool_force, optimise_accelerations};
+use crate::trajectory::{
+    LineLimits, LineMotion, Motion, Trajectory, accelerate_in_corridor, limit_tool_force, straight_line,
+};
 
 /// Fraction of the cup's holding force a held-part motion may use.
 pub const SUCTION_MARGIN: f64 = 0.6;
-/// Straight descents and lifts are split into this many segments for the inverse kinematics.
-const LINE_SEGMENTS: usize = 6;
 /// The part is released this far above its resting height in the slot [m] (the recognised pose
 /// is a little off; the part drops the rest).
 const RELEASE_ABOVE_M: f64 = 0.003;
@@ -362,10 +363,10 @@ struct Prepared {
     grasp: GraspCandidate,
     slot: Isometry3<f64>,
     pick_transfer: Result<Trajectory, String>,
-    descent: Trajectory,
+    descent: LineMotion,
     /// Lift and Place motions, generated while the Pick runs.
-    lift: Trajectory,
-    place: Result<(Trajectory, Trajectory, Trajectory, f64), String>,
+    lift: LineMotion,
+    place: Result<(Trajectory, LineMotion, LineMotion, f64), String>,
     held: Payload,
     /// The part the chosen detection is (for the event log only; nothing decides on it).
     truth_part: usize,
@@ -387,6 +388,8 @@ struct Cell<'a> {
     job: Option<CaptureJob>,
     /// When the arm has nothing to do from [s].
     arm_free_s: f64,
+    /// The arm's actual joint positions and velocities after its last motion [rad, rad/s].
+    arm_state: (JointVector, JointVector),
     seed: u64,
     pick: Option<usize>,
     events: Vec<CycleEvent>,
@@ -477,12 +480,34 @@ impl Cell<'_> {
 
     /// Plays a motion through the servo into the world; `trigger` polls for the next capture.
     fn play(&mut self, motion: &impl Motion, payload: &Payload, trigger: bool) -> Result<Played, CycleError> {
+        self.play_with(motion, payload, trigger, None, true)
+    }
+
+    /// As [`Cell::play`], switching the vacuum on `vacuum_at_s` into the motion; with `settle`
+    /// false the next motion takes over at this one's end without waiting to be in position.
+    fn play_with(
+        &mut self,
+        motion: &impl Motion,
+        payload: &Payload,
+        trigger: bool,
+        vacuum_at_s: Option<f64>,
+        settle: bool,
+    ) -> Result<Played, CycleError> {
         let jump = (motion.at(0.0).q - self.world.joints()).amax();
         if jump > 1e-3 {
             self.event("motion_start_mismatch", format!("{jump:.4} rad"));
         }
         let dynamics = self.robot.dynamics(payload);
-        let run = execute(self.robot, &dynamics, &dynamics, &self.servo, motion);
+        let run = execute_from(
+            self.robot,
+            &dynamics,
+            &dynamics,
+            &self.servo,
+            motion,
+            self.arm_state,
+            settle,
+        );
+        self.arm_state = run.end_state;
         let limit = self.robot.torque_limit_nm();
         let t0 = self.world.time_s;
         for t in &run.ticks {
@@ -498,6 +523,9 @@ impl Cell<'_> {
         while k < run.ticks.len() + per_step {
             let end = k.min(run.ticks.len() - 1);
             self.world.set_joint_target(&run.ticks[end].q);
+            if vacuum_at_s.is_some_and(|t| run.ticks[end].t + 1e-9 >= t) {
+                self.world.vacuum_on();
+            }
             if let Some(trace) = self.trace.as_mut() {
                 trace.extend(run.ticks[done..=end].iter().map(|tk| Tick { t: t0 + tk.t, ..*tk }));
             }
@@ -548,18 +576,59 @@ impl Cell<'_> {
         });
         self.world.vacuum_off();
         self.idle_until(t + self.scene.sim.protective_stop_reset_s)?;
+        self.arm_state = (self.world.joints(), JointVector::zeros());
+        let tool = self.world.world_from_tool();
+        let tray = &self.world.pick_tray;
+        let above_z = tray.world_from_tray.translation.z + self.scene.pick_tray.wall_height_m + 0.1;
+        let local = tray.world_from_tray.inverse() * nalgebra::Point3::from(tool.translation.vector);
+        let over_pick_tray = local.x.abs() < tray.half_xy_m[0] && local.y.abs() < tray.half_xy_m[1];
+        let hand = self.hand;
+        if over_pick_tray && tool.translation.z < above_z {
+            // In the tray: straight up, slowly, out of whatever it touches.
+            let up = Isometry3::from_parts(
+                Translation3::new(tool.translation.x, tool.translation.y, above_z),
+                tool.rotation,
+            );
+            let limits = LineLimits {
+                speed_m_s: 0.1,
+                accel_m_s2: 1.0,
+            };
+            if let Some(line) = straight_line(
+                self.robot,
+                &self.robot.dynamics(&hand),
+                &self.arm_state.0,
+                &tool,
+                &up,
+                &limits,
+                None,
+            ) {
+                self.retrace(
+                    &line.sampled(self.servo.dt_s).iter().map(|s| s.q).collect::<Vec<_>>(),
+                    1,
+                )?;
+            }
+        } else {
+            // Elsewhere: back along the faulted motion, at a third of its speed.
+            let back: Vec<JointVector> = path.iter().rev().copied().collect();
+            self.retrace(&back, 3)?;
+        }
+        self.arm_state = (self.world.joints(), JointVector::zeros());
+        self.world.gripper.take_events();
+        self.span(Lane::Stall, t, self.world.time_s, "fault reset and retreat");
+        self.arm_free_s = self.world.time_s;
+        Ok(())
+    }
+
+    /// Moves the arm's bodies through servo-rate positions `path`, `slow` times slower, without
+    /// treating contacts as new faults (the arm is getting out of one).
+    fn retrace(&mut self, path: &[JointVector], slow: usize) -> Result<(), CycleError> {
         let per_step = (self.world.dt_s() / self.servo.dt_s).round().max(1.0) as usize;
-        // Retrace at a third of the executed speed.
-        let slow: Vec<&JointVector> = path.iter().rev().step_by(per_step).collect();
-        for q in slow {
-            for _ in 0..3 {
+        for q in path.iter().step_by(per_step) {
+            for _ in 0..slow {
                 self.world.set_joint_target(q);
                 self.step()?;
             }
         }
-        self.world.gripper.take_events();
-        self.span(Lane::Stall, t, self.world.time_s, "fault reset and retreat");
-        self.arm_free_s = self.world.time_s;
         Ok(())
     }
 
@@ -611,33 +680,37 @@ impl Cell<'_> {
             Environment::from_scene(self.scene),
         );
         let mut rng = crate::rng::stream(self.seed.wrapping_add(self.world.steps), "planner-home");
-        let Ok(p) = free.plan(&self.world.joints(), &home, &PlanOptions::default(), &mut rng) else {
+        let t = self.world.time_s;
+        let mut plan = free.plan(&self.world.joints(), &home, &PlanOptions::default(), &mut rng);
+        if plan.is_err() {
+            // Down in the tray (after a fault): straight up above the rim first.
+            let tool = self.world.world_from_tool();
+            let rim_z = self.world.pick_tray.world_from_tray.translation.z + self.scene.pick_tray.wall_height_m + 0.1;
+            let up = Isometry3::from_parts(
+                Translation3::new(tool.translation.x, tool.translation.y, tool.translation.z.max(rim_z)),
+                tool.rotation,
+            );
+            let hand = self.hand;
+            if let Some(line) = self.line(&self.world.joints(), &tool, &up, &hand, None) {
+                self.play(&line, &hand, true)?;
+            }
+            plan = free.plan(&self.world.joints(), &home, &PlanOptions::default(), &mut rng);
+        }
+        let Ok(p) = plan else {
+            self.event("fault", "no path out of the sensor's view".into());
             return Ok(false);
         };
         let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
         let hand = self.hand;
         let (_, acc, _) = accelerate_in_corridor(self.robot, &self.robot.dynamics(&hand), &via, &free, 0.01);
-        let t = self.world.time_s;
         let played = self.play(&acc.trajectory, &hand, true)?;
         self.span(Lane::Place, t, self.world.time_s, "out of view");
         self.arm_free_s = self.world.time_s;
         Ok(matches!(played, Played::Done))
     }
 
-    /// Joint via points along the straight tool line from `from` (at `q_from`) to `to`.
-    fn line_via(&self, q_from: &JointVector, from: &Isometry3<f64>, to: &Isometry3<f64>) -> Option<Vec<JointVector>> {
-        let mut q = *q_from;
-        let mut via = vec![q];
-        for s in 1..=LINE_SEGMENTS {
-            let pose = from.lerp_slerp(to, s as f64 / LINE_SEGMENTS as f64);
-            q = self.robot.ik_tool_nearest(&pose, &q).ok()?.q;
-            via.push(q);
-        }
-        Some(via)
-    }
-
-    /// A straight tool line, torque-limited (§4.2 on its via points) and, with a part on the cup,
-    /// slowed to the cup's holding force.
+    /// A straight tool line at the cell's line speed and acceleration, torque-limited and, with a
+    /// part on the cup, limited to the cup's holding force.
     fn line(
         &self,
         q_from: &JointVector,
@@ -645,13 +718,20 @@ impl Cell<'_> {
         to: &Isometry3<f64>,
         payload: &Payload,
         max_force: Option<f64>,
-    ) -> Option<Trajectory> {
-        let via = self.line_via(q_from, from, to)?;
-        let acc = optimise_accelerations(self.robot, &self.robot.dynamics(payload), &via, 0.001, 0.05);
-        Some(match max_force {
-            Some(f) => limit_tool_force(self.robot, &via, &acc.limits, f).0,
-            None => acc.trajectory,
-        })
+    ) -> Option<LineMotion> {
+        let limits = LineLimits {
+            speed_m_s: self.scene.cycle.line_speed_m_s,
+            accel_m_s2: self.scene.cycle.line_accel_m_s2,
+        };
+        straight_line(
+            self.robot,
+            &self.robot.dynamics(payload),
+            q_from,
+            from,
+            to,
+            &limits,
+            max_force,
+        )
     }
 
     /// The largest tool specific force [m/s^2] the cup holds the part against with margin, for
@@ -727,7 +807,8 @@ impl Cell<'_> {
         let wall = Instant::now();
         let world_from_part = detections[grasp.detection].world_from_part;
         let tool_from_part = grasp.world_from_tool.inverse() * world_from_part;
-        let offset = tool_from_part.translation.vector.xy().norm();
+        // The recognised pose is off by up to three standard deviations of its noise.
+        let offset = tool_from_part.translation.vector.xy().norm() + 3.0 * self.sensor.pose_noise_m;
         let max_force = self.suction_limit(offset);
         let held = hand.combined(&Payload::point(
             self.shape.mass_kg,
@@ -736,7 +817,7 @@ impl Cell<'_> {
         // The lift starts where the descent ends (the same line, IK-chained from the approach).
         let q_grasp = descent
             .as_ref()
-            .map_or(JointVector::from(grasp.q_grasp), |d| d.sample(d.duration_s).q);
+            .map_or(JointVector::from(grasp.q_grasp), LineMotion::end_q);
         let lift = self.line(
             &q_grasp,
             &grasp.world_from_tool,
@@ -768,7 +849,7 @@ impl Cell<'_> {
                 .ik_tool_nearest(&above_place, &JointVector::from(grasp.q_place))
                 .map_err(|e| format!("place pose: {e}"))?
                 .q;
-            let q_lifted = lift.as_ref().map_or(q_approach, |l| l.sample(l.duration_s).q);
+            let q_lifted = lift.as_ref().map_or(q_approach, LineMotion::end_q);
             let path = holding
                 .plan(&q_lifted, &q_above, &PlanOptions::default(), &mut rng)
                 .map_err(|e| format!("place transfer: {e}"))?;
@@ -778,7 +859,7 @@ impl Cell<'_> {
             let down = self
                 .line(&q_above, &above_place, &release_pose, &held, Some(max_force))
                 .ok_or("place descent: no joint path along the line")?;
-            let q_release = down.sample(down.duration_s).q;
+            let q_release = down.end_q();
             let up = self
                 .line(&q_release, &release_pose, &above_place, &hand, None)
                 .ok_or("place retreat: no joint path along the line")?;
@@ -841,6 +922,7 @@ pub fn run(
     }
     let mut cell = Cell {
         arm_free_s: world.time_s,
+        arm_state: (world.joints(), JointVector::zeros()),
         world,
         robot,
         scene: &scene.scene,
@@ -886,7 +968,8 @@ pub fn run(
             break;
         }
         let Some((job, capture_s, detections)) = cell.next_result()? else {
-            return Err(CycleError::Setup("the arm cannot leave the sensor's view".into()));
+            ended = "the arm found no path out of the sensor's view".into();
+            break;
         };
         let mut rec = PickRecord::new(index, &job, capture_s);
         let prepared = match detections.as_deref() {
@@ -1007,14 +1090,21 @@ fn pick_and_place(
         cell.span(Lane::Pick, t_pick, cell.world.time_s, "Pick");
         cell.arm_free_s = cell.world.time_s;
     };
-    for m in [&pick_transfer, &prep.descent] {
-        if let Played::Failed(o) = cell.play(m, &hand, false)? {
-            pick_done(cell, rec);
-            return Ok(o);
-        }
+    if let Played::Failed(o) = cell.play_with(&pick_transfer, &hand, false, None, false)? {
+        pick_done(cell, rec);
+        return Ok(o);
+    }
+    // The vacuum valve opens `vacuum_lead_s` before the cup reaches the face.
+    let lead = cell.scene.cycle.vacuum_lead_s;
+    let descent = prep.descent.clone();
+    let vacuum_at = (descent.duration_s() - lead).max(0.0);
+    let t_descent = cell.world.time_s;
+    if let Played::Failed(o) = cell.play_with(&descent, &hand, false, Some(vacuum_at), true)? {
+        pick_done(cell, rec);
+        return Ok(o);
     }
     cell.world.vacuum_on();
-    let t = cell.world.time_s + cell.world.gripper.build_up_s + cell.world.dt_s();
+    let t = (t_descent + vacuum_at).min(cell.world.time_s) + cell.world.gripper.build_up_s + cell.world.dt_s();
     cell.idle_until(t)?;
     let mut failure = None;
     for ev in cell.world.gripper.take_events() {
@@ -1047,7 +1137,7 @@ fn pick_and_place(
     }
     let held = prep.held;
     let lift = prep.lift.clone();
-    if let Played::Failed(o) = cell.play(&lift, &held, true)? {
+    if let Played::Failed(o) = cell.play_with(&lift, &held, true, None, false)? {
         pick_done(cell, rec);
         return Ok(o);
     }
@@ -1058,6 +1148,7 @@ fn pick_and_place(
         rec.stall_compute_s += place_ready - t;
         cell.span(Lane::Stall, t, place_ready, "waiting for compute");
         cell.idle_until(place_ready)?;
+        cell.arm_state.1 = JointVector::zeros();
     }
     let (transfer, down, up, k) = match &prep.place {
         Ok(p) => p.clone(),
@@ -1071,11 +1162,13 @@ fn pick_and_place(
         cell.span(Lane::Place, t_place, cell.world.time_s, "Place");
         cell.arm_free_s = cell.world.time_s;
     };
-    for m in [&transfer, &down] {
-        if let Played::Failed(o) = cell.play(m, &held, true)? {
-            place_done(cell, rec);
-            return Ok(o);
-        }
+    if let Played::Failed(o) = cell.play_with(&transfer, &held, true, None, false)? {
+        place_done(cell, rec);
+        return Ok(o);
+    }
+    if let Played::Failed(o) = cell.play(&down, &held, true)? {
+        place_done(cell, rec);
+        return Ok(o);
     }
     let part = cell.world.held_part();
     cell.world.vacuum_off();

@@ -93,10 +93,12 @@ pub struct Execution {
     pub saturated_ticks: usize,
     /// The protective stop, if one tripped, and when [s].
     pub trip: Option<(f64, Trip)>,
+    /// Positions and velocities after the last tick [rad, rad/s] (at rest after a trip).
+    pub end_state: (JointVector, JointVector),
 }
 
 /// Runs `motion` on the arm from its start state: `model` is the controller's dynamics (the
-/// payload it believes), `plant` the true one.
+/// payload it believes), `plant` the true one. Holds the end until the arm is in position.
 pub fn execute(
     robot: &RobotModel,
     model: &DynamicsModel,
@@ -104,12 +106,28 @@ pub fn execute(
     servo: &Servo,
     motion: &impl Motion,
 ) -> Execution {
-    let limit = robot.torque_limit_nm();
     let start = motion.at(0.0);
-    let (mut q, mut qd) = (start.q, start.qd);
+    execute_from(robot, model, plant, servo, motion, (start.q, start.qd), true)
+}
+
+/// As [`execute`], from the arm's actual state `(q, qd)` (the servo absorbs a residual error
+/// from the previous motion). With `settle` false the servo hands over at the motion's end
+/// without waiting to be in position: the next motion continues from where the arm is (a
+/// continuous-path junction, as between a transfer and the straight descent after it).
+pub fn execute_from(
+    robot: &RobotModel,
+    model: &DynamicsModel,
+    plant: &DynamicsModel,
+    servo: &Servo,
+    motion: &impl Motion,
+    state: (JointVector, JointVector),
+    settle: bool,
+) -> Execution {
+    let limit = robot.torque_limit_nm();
+    let (mut q, mut qd) = state;
     let n = (motion.duration_s() / servo.dt_s).ceil() as usize;
     // After the motion, hold its end until every joint is in position (or give up after 0.3 s).
-    let hold = (0.3 / servo.dt_s).ceil() as usize;
+    let hold = if settle { (0.3 / servo.dt_s).ceil() as usize } else { 0 };
     let mut ticks = Vec::with_capacity(n + hold + 1);
     let mut max_error = [0.0f64; DOF];
     let mut saturated_for = [0.0f64; DOF];
@@ -174,9 +192,10 @@ pub fn execute(
                 max_error_rad: max_error,
                 saturated_ticks,
                 trip: Some((t, trip)),
+                end_state: (q, JointVector::zeros()),
             };
         }
-        if k >= n && e.amax() < IN_POSITION_RAD && (d.qd - qd).amax() < IN_POSITION_RAD {
+        if k >= n && (!settle || (e.amax() < IN_POSITION_RAD && (d.qd - qd).amax() < IN_POSITION_RAD)) {
             break;
         }
         let qdd = plant.forward_dynamics(&q, &qd, &tau).unwrap_or_else(JointVector::zeros);
@@ -188,5 +207,6 @@ pub fn execute(
         max_error_rad: max_error,
         saturated_ticks,
         trip: None,
+        end_state: (q, qd),
     }
 }

@@ -235,7 +235,7 @@ impl GraspSelector {
             tray: t.world_from_tray(),
             tray_inner_half_m: [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0],
             rim_height_m: t.wall_height_m,
-            approach_above_rim_m: 0.05,
+            approach_above_rim_m: scene.cycle.approach_above_rim_m,
             size_m: workpiece.size_m,
             yaw_symmetry_rad: workpiece.grasp.yaw_symmetry_deg.to_radians(),
             height_tolerance_m: 0.0015,
@@ -324,7 +324,16 @@ impl GraspSelector {
                     plan.rejected.push((di, fi, Rejection::TrayWall));
                     continue;
                 }
-                match self.best_yaw(det, face, &point.coords, &n, world_from_slot, q_now) {
+                // The approach pose also lifts the part clear of the pile around it: its bottom
+                // 5 mm above the highest surface within its length plus 10 mm.
+                let reach = self.size_m.iter().cloned().fold(0.0, f64::max);
+                let around = height_map.max_within(local.x, local.y, reach + 0.01);
+                let clear_z = if around.is_finite() {
+                    self.tray.translation.vector.z + around + reach + 0.005
+                } else {
+                    f64::NEG_INFINITY
+                };
+                match self.best_yaw(det, face, &point.coords, &n, world_from_slot, q_now, clear_z) {
                     Some(mut c) => {
                         c.detection = di;
                         c.face = fi;
@@ -412,6 +421,7 @@ impl GraspSelector {
         n: &Vector3<f64>,
         world_from_slot: &Isometry3<f64>,
         q_now: &JointVector,
+        clear_z: f64,
     ) -> Option<GraspCandidate> {
         let z_tool = -n;
         let along_world = det.world_from_part.rotation * face.along;
@@ -437,8 +447,8 @@ impl GraspSelector {
             let y = z_tool.cross(&x);
             let rot = UnitQuaternion::from_matrix(&nalgebra::Matrix3::from_columns(&[x, y, z_tool]));
             let grasp = Isometry3::from_parts(Translation3::from(*point), rot);
-            let rise = (self.tray.translation.z + self.rim_height_m + self.approach_above_rim_m - point.z).max(0.02)
-                / z_tool.z.abs().max(0.3);
+            let top_z = (self.tray.translation.z + self.rim_height_m + self.approach_above_rim_m).max(clear_z);
+            let rise = (top_z - point.z).max(0.02) / z_tool.z.abs().max(0.3);
             let approach = Isometry3::from_parts(Translation3::from(point - z_tool * rise), rot);
             let qa = self.robot.ik_tool_nearest(&approach, q_now).ok()?.q;
             // The straight descent: a continuous joint path in 6 steps.
