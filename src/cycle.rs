@@ -749,13 +749,15 @@ impl Cell<'_> {
         let slot = self.slots[self.next_slot % self.slots.len()];
         let q_now = self.world.joints();
         let plan = self.selector.select(detections, &hm, &slot, &q_now);
+        let inner = self.scene.pick_tray.inner_size_m;
+        let pile = hm.inner_only([inner[0] / 2.0, inner[1] / 2.0]);
         // The best grasp whose approach pose is clear in the planner's (conservative) model.
         let mut chosen = None;
         for g in plan.ranked.iter().take(8) {
             let local = self.world.pick_tray.world_from_tray.inverse()
                 * nalgebra::Point3::from(g.world_from_tool.translation.vector);
             let mut env = Environment::from_scene(self.scene);
-            env.pile = Some(PileColumns::new(&hm, 5, Some((local.x, local.y, 0.02))));
+            env.pile = Some(PileColumns::new(&pile, 5, Some((local.x, local.y, 0.02))));
             let model = CollisionModel::new(self.robot, RobotSpheres::new(self.robot, self.scene, None), env.clone());
             if model.free(
                 &JointVector::from(g.q_approach),

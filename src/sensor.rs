@@ -104,6 +104,8 @@ pub struct Capture {
     pub id: u64,
     /// Simulation time of the trigger [s].
     pub trigger_s: f64,
+    /// The camera's optical centre in the world [m].
+    pub camera_position_m: Vector3<f64>,
     /// Image width [px].
     pub width: usize,
     /// Image height [px].
@@ -213,6 +215,7 @@ pub fn capture(world: &World, camera: &Camera, seed: u64, id: u64) -> Capture {
     let mut c = Capture {
         id,
         trigger_s: world.time_s,
+        camera_position_m: origin,
         width: w,
         height: h,
         depth_m: Vec::with_capacity(w * h),
@@ -602,7 +605,10 @@ pub struct HeightMap {
 }
 
 impl HeightMap {
-    /// Bins the capture's points over the tray (walls included) into `cell_m` cells.
+    /// Bins the capture's points over the tray (walls included) into `cell_m` cells. Only points
+    /// inside the view frustum over the tray count (their ray meets the floor plane within the
+    /// tray): a point above the tray's footprint but outside the frustum (the arm passing by
+    /// high up near the rim) is seen through the air beside the tray, not over it.
     pub fn from_capture(c: &Capture, world: &World, cell_m: f64) -> Self {
         let t = &world.pick_tray;
         let [hx, hy] = t.half_xy_m;
@@ -622,6 +628,14 @@ impl HeightMap {
                 continue;
             }
             let l = tray_from_world * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let apex = tray_from_world * Point3::from(c.camera_position_m);
+            if apex.z - l.z > 1e-6 {
+                let f = apex.z / (apex.z - l.z);
+                let floor = apex + (l - apex) * f;
+                if floor.x.abs() > hx || floor.y.abs() > hy {
+                    continue;
+                }
+            }
             if let Some(k) = hm.index(l.x, l.y) {
                 let h = &mut hm.height_m[k];
                 if h.is_nan() || l.z > *h {
@@ -630,6 +644,23 @@ impl HeightMap {
             }
         }
         hm
+    }
+
+    /// The map with every cell whose centre lies outside the tray's inner walls (`inner_half_m`,
+    /// tray frame) cleared: what the sensor saw over the walls (the arm passing by outside the
+    /// frustum, the walls themselves) is not pile; the walls are in the planner's cell model.
+    pub fn inner_only(&self, inner_half_m: [f64; 2]) -> HeightMap {
+        let mut m = self.clone();
+        for j in 0..m.ny {
+            for i in 0..m.nx {
+                let x = m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m;
+                let y = m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m;
+                if x.abs() > inner_half_m[0] || y.abs() > inner_half_m[1] {
+                    m.height_m[j * m.nx + i] = f64::NAN;
+                }
+            }
+        }
+        m
     }
 
     fn index(&self, x: f64, y: f64) -> Option<usize> {
