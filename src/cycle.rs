@@ -288,7 +288,8 @@ pub struct RunSummary {
     pub peak_torque_ratio: f64,
     /// Largest servo tracking error over the run [deg].
     pub max_tracking_error_deg: f64,
-    /// Why the run ended: `picks done`, `tray empty`, `too many empty captures`.
+    /// Why the run ended: `picks done`, `tray empty` (policy `end`), `nothing graspable in a
+    /// full tray` (a refill found nothing to pick either), `too many empty captures`.
     pub ended: String,
     /// Simulated time [s].
     pub sim_time_s: f64,
@@ -350,6 +351,10 @@ pub fn reference_takt(name: &str) -> Option<f64> {
     }
 }
 
+/// A recognition result: the capture job, when it was triggered [s], and the detections (`None`
+/// if the result was not available).
+type Recognised = (CaptureJob, f64, Option<Vec<Detection>>);
+
 /// How a motion ended.
 enum Played {
     /// Done.
@@ -388,6 +393,8 @@ struct Cell<'a> {
     job: Option<CaptureJob>,
     /// When the arm has nothing to do from [s].
     arm_free_s: f64,
+    /// Gripper events seen while a motion played (a seal decided before the descent settled).
+    gripper_events: Vec<GripperEvent>,
     /// The arm's actual joint positions and velocities after its last motion [rad, rad/s].
     arm_state: (JointVector, JointVector),
     seed: u64,
@@ -539,6 +546,9 @@ impl Cell<'_> {
                 self.maybe_trigger();
             }
             for ev in self.world.gripper.take_events() {
+                if !matches!(ev, GripperEvent::Slipped { .. }) {
+                    self.gripper_events.push(ev.clone());
+                }
                 if let GripperEvent::Slipped {
                     required_n,
                     holding_n,
@@ -614,6 +624,7 @@ impl Cell<'_> {
         }
         self.arm_state = (self.world.joints(), JointVector::zeros());
         self.world.gripper.take_events();
+        self.gripper_events.clear();
         self.span(Lane::Stall, t, self.world.time_s, "fault reset and retreat");
         self.arm_free_s = self.world.time_s;
         Ok(())
@@ -634,7 +645,7 @@ impl Cell<'_> {
 
     /// A recognition result to pick from: triggers a capture if none is pending (moving the arm
     /// out of view first if needed) and waits for it. `None` if the arm cannot leave the view.
-    fn next_result(&mut self) -> Result<Option<(CaptureJob, f64, Option<Vec<Detection>>)>, CycleError> {
+    fn next_result(&mut self) -> Result<Option<Recognised>, CycleError> {
         loop {
             self.maybe_trigger();
             if self.job.is_none() {
@@ -652,6 +663,11 @@ impl Cell<'_> {
                 continue;
             }
             let capture_s = job.exposure_end_s - self.sensor.exposure_s;
+            // A spoiled exposure is known when it ends: expose again right away.
+            self.idle_until(job.exposure_end_s)?;
+            if self.job.as_ref().is_some_and(|j| j.spoiled.is_some()) {
+                continue;
+            }
             self.idle_until(job.ready_s)?;
             let job = self.job.take().expect("pending");
             if job.spoiled.is_some() {
@@ -662,7 +678,11 @@ impl Cell<'_> {
             let detections = self.sensor.result(&job, &self.world);
             self.event(
                 "recognition_ready",
-                format!("{} parts detected", detections.as_ref().map_or(0, Vec::len)),
+                format!(
+                    "{} parts detected, {} blurred by motion during the exposure",
+                    detections.as_ref().map_or(0, Vec::len),
+                    job.blurred()
+                ),
             );
             return Ok(Some((job, capture_s, detections)));
         }
@@ -925,6 +945,7 @@ pub fn run(
     let mut cell = Cell {
         arm_free_s: world.time_s,
         arm_state: (world.joints(), JointVector::zeros()),
+        gripper_events: Vec::new(),
         world,
         robot,
         scene: &scene.scene,
@@ -959,6 +980,7 @@ pub fn run(
     let mut attempts = 0usize;
     let mut empty_in_row = 0u32;
     let mut fills = 1u64;
+    let mut attempts_since_fill = 0usize;
     let mut refills = 0usize;
     let mut exchanges = 0usize;
     let mut ended = "picks done".to_string();
@@ -992,7 +1014,12 @@ pub fn run(
                             ended = "tray empty".into();
                             break;
                         }
+                        OnEmpty::Refill if attempts_since_fill == 0 && fills > 1 => {
+                            ended = "nothing graspable in a full tray".into();
+                            break;
+                        }
                         OnEmpty::Refill => {
+                            attempts_since_fill = 0;
                             cell.refill(fills, pile_count)?;
                             fills += 1;
                             refills += 1;
@@ -1005,6 +1032,7 @@ pub fn run(
         };
         empty_in_row = 0;
         attempts += 1;
+        attempts_since_fill += 1;
         prep.charged = if opts.deterministic { budgets } else { wall };
         [rec.grasp_compute_s, rec.pick_compute_s, rec.place_compute_s] = prep.charged;
         let ready = job.ready_s;
@@ -1087,6 +1115,7 @@ fn pick_and_place(
     };
     cell.max_error_rad = 0.0;
     cell.peak_torque_ratio = 0.0;
+    cell.gripper_events.clear();
     let pick_done = |cell: &mut Cell<'_>, rec: &mut PickRecord| {
         rec.pick_s = cell.world.time_s - t_pick;
         cell.span(Lane::Pick, t_pick, cell.world.time_s, "Pick");
@@ -1109,7 +1138,9 @@ fn pick_and_place(
     let t = (t_descent + vacuum_at).min(cell.world.time_s) + cell.world.gripper.build_up_s + cell.world.dt_s();
     cell.idle_until(t)?;
     let mut failure = None;
-    for ev in cell.world.gripper.take_events() {
+    let mut events = std::mem::take(&mut cell.gripper_events);
+    events.extend(cell.world.gripper.take_events());
+    for ev in events {
         match ev {
             GripperEvent::Grasped { seal, .. } => {
                 let truth = prep.truth_part;
@@ -1177,6 +1208,7 @@ fn pick_and_place(
     let t = cell.world.time_s + cell.world.gripper.release_s + cell.world.dt_s();
     cell.idle_until(t)?;
     cell.world.gripper.take_events();
+    cell.gripper_events.clear();
     let release = cell.world.time_s;
     cell.event("released", String::new());
     cell.markers.push(Marker {

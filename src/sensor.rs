@@ -4,8 +4,9 @@
 //! physics world (arm links, held part, parts, trays), so the arm and the parts really hide what
 //! lies beneath them; add depth noise growing with range squared and drop returns at grazing
 //! angles and at random. A capture needs an exposure window in which the arm stays out of the view
-//! frustum over the pick tray and the parts stay still; the recognition result is ready
-//! `latency_s` after the trigger. Recognition (simplified, stated in the README): a part counts as
+//! frustum over the pick tray (else it is spoiled and repeated); a part that moves more than
+//! [`STILL_MOTION_M`] during the exposure is blurred and not recognised (the others are). The
+//! recognition result is ready `latency_s` after the trigger. Recognition (simplified, stated in the README): a part counts as
 //! detected when at least `detect_min_visible_fraction` of the pixels it would cover, unoccluded,
 //! show it in the capture; its pose then comes with Gaussian noise. The ground-truth body per
 //! pixel is used only for that visibility count, never to reveal a hidden part.
@@ -281,11 +282,6 @@ pub enum CaptureProblem {
     ArmInView(String),
     /// The arm entered the view frustum during exposure.
     ArmEnteredDuringExposure(String),
-    /// A part moved during exposure.
-    SceneMoving {
-        /// How far the part that moved most has moved since the trigger [m].
-        moved_m: f64,
-    },
 }
 
 /// A capture in progress: exposing, then processing, then ready (or spoiled).
@@ -301,9 +297,18 @@ pub struct CaptureJob {
     pub spoiled: Option<CaptureProblem>,
     /// Part positions at the trigger, to tell whether the scene stays still [m].
     positions_at_trigger: Vec<Vector3<f64>>,
+    /// How far each part moved during the exposure [m].
+    moved_m: Vec<f64>,
 }
 
-/// A part moving more than this during the exposure spoils it [m]: a third of a pixel at the
+impl CaptureJob {
+    /// Parts that moved more than [`STILL_MOTION_M`] during the exposure: blurred, not recognised.
+    pub fn blurred(&self) -> usize {
+        self.moved_m.iter().filter(|m| **m > STILL_MOTION_M).count()
+    }
+}
+
+/// A part moving more than this during the exposure is blurred [m]: a third of a pixel at the
 /// tray floor. Motion, not velocity: a part resting on a flat face can keep a small solver
 /// velocity that moves nothing.
 pub const STILL_MOTION_M: f64 = 0.0005;
@@ -366,27 +371,26 @@ impl Sensor {
             positions_at_trigger: (0..world.parts.len())
                 .map(|i| world.part_pose(i).translation.vector)
                 .collect(),
+            moved_m: vec![0.0; world.parts.len()],
         })
     }
 
-    /// Watches an exposing job after a world step: spoils it if the arm entered the frustum or a
-    /// part moved before the exposure ended. Returns the problem the first time it happens.
+    /// Watches an exposing job after a world step: spoils it if the arm entered the frustum, and
+    /// notes how far each free part has moved. Returns the problem the first time it happens.
     pub fn watch(&mut self, job: &mut CaptureJob, world: &World) -> Option<CaptureProblem> {
         if job.spoiled.is_some() || world.time_s > job.exposure_end_s + 1e-9 {
             return None;
         }
-        let problem = if let Some(link) = self.frustum.arm_inside(world) {
-            Some(CaptureProblem::ArmEnteredDuringExposure(link))
-        } else {
-            let moved = job
-                .positions_at_trigger
-                .iter()
-                .enumerate()
-                .filter(|(i, _)| world.parts[*i].state == PartState::Free)
-                .map(|(i, p)| (world.part_pose(i).translation.vector - p).norm())
-                .fold(0.0, f64::max);
-            (moved > STILL_MOTION_M).then_some(CaptureProblem::SceneMoving { moved_m: moved })
-        };
+        for (i, p) in job.positions_at_trigger.iter().enumerate() {
+            if world.parts[i].state == PartState::Free {
+                let d = (world.part_pose(i).translation.vector - p).norm();
+                job.moved_m[i] = job.moved_m[i].max(d);
+            }
+        }
+        let problem = self
+            .frustum
+            .arm_inside(world)
+            .map(CaptureProblem::ArmEnteredDuringExposure);
         if problem.is_some() {
             self.spoiled += 1;
             job.spoiled = problem.clone();
@@ -394,9 +398,14 @@ impl Sensor {
         problem
     }
 
-    /// The recognition result of a job, once `ready_s` has come and if it was not spoiled.
+    /// The recognition result of a job, once `ready_s` has come and if it was not spoiled: the
+    /// recognised parts less those blurred by moving during the exposure.
     pub fn result(&self, job: &CaptureJob, world: &World) -> Option<Vec<Detection>> {
-        (job.spoiled.is_none() && world.time_s + 1e-9 >= job.ready_s).then(|| self.recognize(world, &job.capture))
+        (job.spoiled.is_none() && world.time_s + 1e-9 >= job.ready_s).then(|| {
+            let mut d = self.recognize(world, &job.capture);
+            d.retain(|d| job.moved_m.get(d.truth_part).is_none_or(|m| *m <= STILL_MOTION_M));
+            d
+        })
     }
 
     /// Recognition on a capture: detected parts with noisy poses (see the module header).

@@ -333,3 +333,59 @@ fn bad_robot_arguments_exit_2() {
         assert_eq!(ws.listing(), before);
     }
 }
+
+/// `binpick run` and `binpick batch` on a bad cell or workpiece: the same clear error before the
+/// run starts, exit 2, and no output folder left behind.
+#[test]
+fn runs_and_batches_refuse_bad_cells_before_starting() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/far.toml",
+        "center_m = [0.40, -0.22, 0.006]",
+        "center_m = [1.10, -0.22, 0.006]",
+    );
+    ws.edit(
+        "workpieces/C.toml",
+        "workpieces/long.toml",
+        "size_m = [0.150, 0.010, 0.005]",
+        "size_m = [0.450, 0.010, 0.005]",
+    );
+    ws.edit(
+        "workpieces/E.toml",
+        "workpieces/tiny.toml",
+        "size_m = [0.010, 0.005, 0.010]",
+        "size_m = [0.004, 0.005, 0.004]",
+    );
+    let cases: [(&[&str], &str); 5] = [
+        (
+            &["run", "--workpiece", "A", "--scene", "scenes/far.toml"],
+            "scenes/far.toml: place_tray.tray is out of the arm's reach",
+        ),
+        (
+            &["run", "--workpiece", "workpieces/long.toml"],
+            "workpieces/long.toml: size_m is larger than the pick tray",
+        ),
+        (
+            &["run", "--workpiece", "workpieces/tiny.toml"],
+            "workpieces/tiny.toml: size_m has no face the suction cup fits on",
+        ),
+        (
+            &["batch", "--workpieces", "A,workpieces/tiny.toml"],
+            "workpieces/tiny.toml: size_m has no face the suction cup fits on",
+        ),
+        (&["batch", "--seeds", "3-1"], "--seeds: expected e.g. 1-3"),
+    ];
+    for (args, expected) in cases {
+        let before = ws.listing();
+        let mut all = args.to_vec();
+        all.extend_from_slice(&["--out", "out"]);
+        let out = binpick_in(ws.dir.path(), &all);
+        let err = stderr(&out);
+        assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+        assert!(!err.contains("panicked"), "{args:?}: {err}");
+        assert!(err.contains(expected), "{args:?}: stderr lacks {expected:?}:\n{err}");
+        assert_eq!(ws.listing(), before, "{args:?} wrote files");
+        assert!(!ws.path("out").exists(), "{args:?} left an output folder");
+    }
+}
