@@ -43,55 +43,108 @@ fn axis_vec(a: Axis) -> Vector3<f64> {
     }
 }
 
-/// The flat faces of a workpiece's body (box faces, cylinder caps). Mesh workpieces have none
-/// here: their faces are not known analytically (a stated gap).
+/// How far a piece reaches along unit direction `n` from the part origin [m].
+fn support(piece: &Piece, n: &Vector3<f64>) -> f64 {
+    match piece {
+        Piece::Box { center_m, half_m } => {
+            center_m.dot(n) + half_m.iter().zip(n.iter()).map(|(h, v)| h * v.abs()).sum::<f64>()
+        }
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            half_length_m,
+            axis,
+        } => {
+            let a = axis_vec(*axis).dot(n).abs();
+            center_m.dot(n) + half_length_m * a + radius_m * (1.0 - a * a).max(0.0).sqrt()
+        }
+    }
+}
+
+/// The centre of a piece in the part frame [m].
+fn piece_center(piece: &Piece) -> Vector3<f64> {
+    match piece {
+        Piece::Box { center_m, .. } | Piece::Cylinder { center_m, .. } => *center_m,
+    }
+}
+
+/// The flat faces of a workpiece's body (box faces, cylinder caps) on which nothing else of the
+/// part stands out: a capacitor's leads rule out the face they leave from, a can on a base rules
+/// out the base's face under it and the can's end on the base. Mesh workpieces have none here:
+/// their faces are not known analytically (a stated gap).
 pub fn body_faces(w: &Workpiece) -> Vec<Face> {
-    let pieces = w
-        .pieces()
-        .into_iter()
-        .filter(|(role, _)| *role == PartRole::Body)
-        .map(|(_, p)| p);
+    let pieces: Vec<(PartRole, Piece)> = w.pieces();
     let mut faces = Vec::new();
-    for piece in pieces {
-        match piece {
-            Piece::Box {
-                center_m: c,
-                half_m: he,
-            } => {
-                for a in 0..3 {
-                    let (b, d) = ((a + 1) % 3, (a + 2) % 3);
-                    for s in [-1.0, 1.0] {
-                        faces.push(Face {
-                            center: c + Vector3::ith(a, s * he[a]),
-                            normal: Vector3::ith(a, s),
-                            along: Vector3::ith(b, 1.0),
-                            extent_m: [2.0 * he[b], 2.0 * he[d]],
-                            disc: false,
-                        });
-                    }
-                }
-            }
-            Piece::Cylinder {
-                center_m: c,
-                radius_m: r,
-                half_length_m: h,
-                axis,
-            } => {
-                let a = axis_vec(axis);
-                let along = if axis == Axis::X { Vector3::y() } else { Vector3::x() };
-                for s in [-1.0, 1.0] {
-                    faces.push(Face {
-                        center: c + a * (s * h),
-                        normal: a * s,
-                        along,
-                        extent_m: [2.0 * r, 2.0 * r],
-                        disc: true,
-                    });
-                }
+    for (k, (role, piece)) in pieces.iter().enumerate() {
+        if *role != PartRole::Body {
+            continue;
+        }
+        for f in piece_faces(piece) {
+            let blocked = pieces.iter().enumerate().any(|(j, (_, other))| {
+                let beyond = support(other, &f.normal) - f.center.dot(&f.normal) > 1e-4;
+                let offset = piece_center(other) - f.center;
+                let in_plane = (offset - f.normal * offset.dot(&f.normal)).norm();
+                j != k && beyond && in_plane <= 0.5 * f.extent_m[0].max(f.extent_m[1])
+            });
+            if !blocked {
+                faces.push(f);
             }
         }
     }
     faces
+}
+
+/// The flat faces of one piece.
+fn piece_faces(piece: &Piece) -> Vec<Face> {
+    let mut faces = Vec::new();
+    match *piece {
+        Piece::Box {
+            center_m: c,
+            half_m: he,
+        } => {
+            for a in 0..3 {
+                let (b, d) = ((a + 1) % 3, (a + 2) % 3);
+                for s in [-1.0, 1.0] {
+                    faces.push(Face {
+                        center: c + Vector3::ith(a, s * he[a]),
+                        normal: Vector3::ith(a, s),
+                        along: Vector3::ith(b, 1.0),
+                        extent_m: [2.0 * he[b], 2.0 * he[d]],
+                        disc: false,
+                    });
+                }
+            }
+        }
+        Piece::Cylinder {
+            center_m: c,
+            radius_m: r,
+            half_length_m: h,
+            axis,
+        } => {
+            let a = axis_vec(axis);
+            let along = if axis == Axis::X { Vector3::y() } else { Vector3::x() };
+            for s in [-1.0, 1.0] {
+                faces.push(Face {
+                    center: c + a * (s * h),
+                    normal: a * s,
+                    along,
+                    extent_m: [2.0 * r, 2.0 * r],
+                    disc: true,
+                });
+            }
+        }
+    }
+    faces
+}
+
+/// Where on a detected part's face the cup would go, in the world.
+struct FacePoint {
+    /// The grasp point on the face [m].
+    point: Vector3<f64>,
+    /// The face's outward normal.
+    normal: Vector3<f64>,
+    /// Height the approach pose must lift the part's bottom to, clear of the pile [m].
+    clear_z: f64,
 }
 
 /// Why a candidate was dropped.
@@ -333,7 +386,12 @@ impl GraspSelector {
                 } else {
                     f64::NEG_INFINITY
                 };
-                match self.best_yaw(det, face, &point.coords, &n, world_from_slot, q_now, clear_z) {
+                let at = FacePoint {
+                    point: point.coords,
+                    normal: n,
+                    clear_z,
+                };
+                match self.best_yaw(det, face, &at, world_from_slot, q_now) {
                     Some(mut c) => {
                         c.detection = di;
                         c.face = fi;
@@ -417,13 +475,12 @@ impl GraspSelector {
         &self,
         det: &Detection,
         face: &Face,
-        point: &Vector3<f64>,
-        n: &Vector3<f64>,
+        at: &FacePoint,
         world_from_slot: &Isometry3<f64>,
         q_now: &JointVector,
-        clear_z: f64,
     ) -> Option<GraspCandidate> {
-        let z_tool = -n;
+        let (point, clear_z) = (&at.point, at.clear_z);
+        let z_tool = -at.normal;
         let along_world = det.world_from_part.rotation * face.along;
         let x0 = (along_world - z_tool * along_world.dot(&z_tool)).try_normalize(1e-9)?;
         // The part in its slot: the grasped face up, turned to the slot's yaw.
@@ -525,7 +582,7 @@ mod tests {
     use crate::config::LoadedWorkpiece;
 
     #[test]
-    fn faces_of_a_box_and_of_a_capacitor() {
+    fn faces_of_a_box_and_of_capacitors() {
         let b = LoadedWorkpiece::resolve("B").unwrap().workpiece;
         let f = body_faces(&b);
         assert_eq!(f.len(), 6);
@@ -533,10 +590,26 @@ mod tests {
             f.iter()
                 .any(|f| f.normal == Vector3::z() && (f.center.z - 0.01).abs() < 1e-12 && f.extent_m == [0.03, 0.03])
         );
-        let d = LoadedWorkpiece::resolve("D").unwrap().workpiece;
-        let caps = body_faces(&d);
-        assert_eq!(caps.len(), 2, "a can has two flat caps; its leads carry none");
-        assert!(caps.iter().all(|c| c.disc && (c.extent_m[0] - 0.01).abs() < 1e-12));
+        let radial = LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/capacitor-radial.toml"))
+            .unwrap()
+            .workpiece;
+        let caps = body_faces(&radial);
+        assert_eq!(
+            caps.len(),
+            1,
+            "a can has two flat caps; its leads rule out the one they leave"
+        );
+        assert!(caps[0].disc && caps[0].normal == Vector3::z() && (caps[0].extent_m[0] - 0.01).abs() < 1e-12);
+        // D: the can's top, the base's bottom and its four thin sides; not the faces in between.
+        let d = body_faces(&LoadedWorkpiece::resolve("D").unwrap().workpiece);
+        assert_eq!(d.len(), 6, "{d:?}");
+        assert!(d.iter().any(|f| f.disc && f.normal == Vector3::z()));
+        assert!(
+            d.iter()
+                .any(|f| !f.disc && f.normal == -Vector3::z() && (f.extent_m[0] - 0.0098).abs() < 1e-12)
+        );
+        assert!(!d.iter().any(|f| f.disc && f.normal == -Vector3::z()));
+        assert!(!d.iter().any(|f| !f.disc && f.normal == Vector3::z()));
     }
 
     #[test]
