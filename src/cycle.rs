@@ -60,6 +60,8 @@ pub const SUCTION_MARGIN: f64 = 0.6;
 /// The part is released this far above its resting height in the slot [m] (the recognised pose
 /// is a little off; the part drops the rest).
 const RELEASE_ABOVE_M: f64 = 0.003;
+/// A grasp within this distance of a spot where one failed in the same pile is not tried [m].
+const FAILED_SPOT_RADIUS_M: f64 = 0.004;
 /// The Place transfer ends this far above the release pose [m].
 const PLACE_APPROACH_M: f64 = 0.03;
 
@@ -260,6 +262,9 @@ pub struct RunSummary {
     pub takt: TaktStats,
     /// The reference system's takt for this workpiece [s], if it is one of A..F.
     pub reference_takt_s: Option<f64>,
+    /// End-to-end takt: time from the first to the last release over the releases in between
+    /// [s], refills, re-captures and failed picks included (NaN below two releases).
+    pub effective_takt_s: f64,
     /// Mean Pick and Place times over the placed picks [s].
     pub mean_pick_s: f64,
     /// Mean Place time over the placed picks [s].
@@ -393,6 +398,8 @@ struct Cell<'a> {
     job: Option<CaptureJob>,
     /// When the arm has nothing to do from [s].
     arm_free_s: f64,
+    /// Grasp points where a pick failed at the part, in this pile [m, world].
+    failed_spots: Vec<Vector3<f64>>,
     /// Gripper events seen while a motion played (a seal decided before the descent settled).
     gripper_events: Vec<GripperEvent>,
     /// The arm's actual joint positions and velocities after its last motion [rad, rad/s].
@@ -587,6 +594,7 @@ impl Cell<'_> {
         self.world.vacuum_off();
         self.idle_until(t + self.scene.sim.protective_stop_reset_s)?;
         self.arm_state = (self.world.joints(), JointVector::zeros());
+        self.clear_deep_penetrations();
         let tool = self.world.world_from_tool();
         let tray = &self.world.pick_tray;
         let above_z = tray.world_from_tray.translation.z + self.scene.pick_tray.wall_height_m + 0.1;
@@ -628,6 +636,31 @@ impl Cell<'_> {
         self.span(Lane::Stall, t, self.world.time_s, "fault reset and retreat");
         self.arm_free_s = self.world.time_s;
         Ok(())
+    }
+
+    /// After a fault: parts the arm pressed into the tray or into each other (deeper than the
+    /// health monitor allows) are damaged goods: taken out of the cell and counted as lost.
+    fn clear_deep_penetrations(&mut self) {
+        for _ in 0..8 {
+            let (depth, pair) = self.world.max_penetration_m();
+            let Some((a, b)) = pair.filter(|_| depth > self.world.health.deep_penetration_m) else {
+                return;
+            };
+            let mut removed = false;
+            for tag in [a, b] {
+                if let crate::physics::Tag::Part(i) = tag
+                    && self.world.parts[i as usize].state != PartState::Held
+                {
+                    self.world.remove_part(i as usize);
+                    self.parts_lost += 1;
+                    self.event("part_lost", format!("part {i} pressed {:.2} mm deep", depth * 1e3));
+                    removed = true;
+                }
+            }
+            if !removed {
+                return;
+            }
+        }
     }
 
     /// Moves the arm's bodies through servo-rate positions `path`, `slow` times slower, without
@@ -676,14 +709,16 @@ impl Cell<'_> {
             self.span(Lane::Sensor, capture_s, job.exposure_end_s, "exposure");
             self.span(Lane::Recognition, job.exposure_end_s, job.ready_s, "recognition");
             let detections = self.sensor.result(&job, &self.world);
-            self.event(
-                "recognition_ready",
-                format!(
+            self.events.push(CycleEvent {
+                t_s: job.ready_s,
+                pick: self.pick,
+                kind: "recognition_ready",
+                detail: format!(
                     "{} parts detected, {} blurred by motion during the exposure",
                     detections.as_ref().map_or(0, Vec::len),
                     job.blurred()
                 ),
-            );
+            });
             return Ok(Some((job, capture_s, detections)));
         }
     }
@@ -773,7 +808,13 @@ impl Cell<'_> {
         let pile = hm.inner_only([inner[0] / 2.0, inner[1] / 2.0]);
         // The best grasp whose approach pose is clear in the planner's (conservative) model.
         let mut chosen = None;
-        for g in plan.ranked.iter().take(8) {
+        // Not where a grasp has just failed: the same spot would fail the same way.
+        let tried = |g: &&GraspCandidate| {
+            self.failed_spots
+                .iter()
+                .any(|p| (p - g.world_from_tool.translation.vector).norm() < FAILED_SPOT_RADIUS_M)
+        };
+        for g in plan.ranked.iter().filter(|g| !tried(g)).take(8) {
             let local = self.world.pick_tray.world_from_tray.inverse()
                 * nalgebra::Point3::from(g.world_from_tool.translation.vector);
             let mut env = Environment::from_scene(self.scene);
@@ -916,6 +957,7 @@ impl Cell<'_> {
         let t = self.world.time_s;
         self.event("refill", format!("pile {fill}"));
         self.idle_until(t + self.scene.cycle.refill_s)?;
+        self.failed_spots.clear();
         let seed = self.seed.wrapping_add(fill.wrapping_mul(0x9E37_79B9_7F4A_7C15));
         self.world.build_pile(&PileOptions::new(count, seed))?;
         self.span(Lane::Stall, t, self.world.time_s, "pick tray refill");
@@ -946,6 +988,7 @@ pub fn run(
         arm_free_s: world.time_s,
         arm_state: (world.joints(), JointVector::zeros()),
         gripper_events: Vec::new(),
+        failed_spots: Vec::new(),
         world,
         robot,
         scene: &scene.scene,
@@ -1063,6 +1106,18 @@ pub fn run(
         }
         cell.idle_until(pick_ready.max(cell.world.time_s))?;
         let outcome = pick_and_place(&mut cell, &mut prep, &mut rec, place_ready)?;
+        if matches!(
+            outcome,
+            Outcome::GraspFailed(_) | Outcome::Collision(_) | Outcome::ProtectiveStop(_)
+        ) && rec.place_s == 0.0
+        {
+            cell.failed_spots.push(prep.grasp.world_from_tool.translation.vector);
+        }
+        if rec.place_s > 0.0 && matches!(outcome, Outcome::Collision(_) | Outcome::ProtectiveStop(_)) {
+            // Something is in the slot (a part that bounced there): the next part goes to the next.
+            cell.event("slot_skipped", format!("slot {}", cell.next_slot % cell.slots.len()));
+            cell.next_slot += 1;
+        }
         rec.outcome = outcome;
         cell.event("outcome", format!("{}: {}", rec.outcome.name(), rec.outcome.detail()));
         if rec.outcome == Outcome::Placed {
@@ -1072,22 +1127,25 @@ pub fn run(
             first_of_pile = false;
             last_release = Some(release);
             cell.next_slot += 1;
-            if cell.next_slot >= cell.slots.len() {
-                cell.next_slot = 0;
-                for i in cell.world.parts_in_state(PartState::Placed) {
-                    cell.world.remove_part(i);
-                }
-                exchanges += 1;
-                cell.event("place_tray_exchange", String::new());
-                let t = cell.world.time_s + policy.place_tray_exchange_s;
-                cell.idle_until(t)?;
-                cell.arm_free_s = cell.arm_free_s.max(cell.world.time_s);
+        }
+        if cell.next_slot >= cell.slots.len() {
+            cell.next_slot = 0;
+            for i in cell.world.parts_in_state(PartState::Placed) {
+                cell.world.remove_part(i);
             }
+            exchanges += 1;
+            cell.event("place_tray_exchange", String::new());
+            let t = cell.world.time_s + policy.place_tray_exchange_s;
+            cell.idle_until(t)?;
+            cell.arm_free_s = cell.arm_free_s.max(cell.world.time_s);
         }
         rec.max_tracking_error_deg = cell.max_error_rad.to_degrees();
         rec.peak_torque_ratio = cell.peak_torque_ratio;
         records.push(rec);
     }
+    // Events were logged as the simulation reached them; a few carry an earlier time (compute
+    // that ran while the arm was busy): order them by time, stably.
+    cell.events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
     let summary = summarise(&cell, &records, opts, wp.name.clone(), refills, exchanges, ended);
     Ok(RunResult {
         records,
@@ -1272,6 +1330,13 @@ fn summarise(
             placed.len() as f64 / attempts.len() as f64
         },
         takt: TaktStats::of(&takts),
+        effective_takt_s: {
+            let r: Vec<f64> = placed.iter().filter_map(|p| p.release_s).collect();
+            match (r.first(), r.last()) {
+                (Some(a), Some(b)) if r.len() > 1 => (b - a) / (r.len() - 1) as f64,
+                _ => f64::NAN,
+            }
+        },
         mean_pick_s: mean(&mut placed.iter().map(|r| r.pick_s)),
         mean_place_s: mean(&mut placed.iter().map(|r| r.place_s)),
         mean_compute_s: [

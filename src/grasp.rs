@@ -281,7 +281,9 @@ impl GraspSelector {
             robot: robot.clone(),
             faces: body_faces(workpiece),
             cup_radius_m: g.cup_diameter_m / 2.0,
-            face_margin_m: workpiece.grasp.face_margin_m,
+            // The recognised pose is off by up to two standard deviations of its noise: the cup
+            // must stay on the face that much farther from its edges.
+            face_margin_m: workpiece.grasp.face_margin_m + 2.0 * scene.sensor.pose_noise_m,
             max_tilt_rad: g.max_tilt_deg.to_radians(),
             tool_radius_m: g.body_diameter_m / 2.0,
             cup_length_m: (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0),
@@ -505,8 +507,10 @@ impl GraspSelector {
             let rot = UnitQuaternion::from_matrix(&nalgebra::Matrix3::from_columns(&[x, y, z_tool]));
             let grasp = Isometry3::from_parts(Translation3::from(*point), rot);
             let top_z = (self.tray.translation.z + self.rim_height_m + self.approach_above_rim_m).max(clear_z);
-            let rise = (top_z - point.z).max(0.02) / z_tool.z.abs().max(0.3);
-            let approach = Isometry3::from_parts(Translation3::from(point - z_tool * rise), rot);
+            // Straight down onto the face and straight up with the part, whatever the face's tilt:
+            // a part lying against a wall slides up along it, not into it.
+            let rise = (top_z - point.z).max(0.02);
+            let approach = Isometry3::from_parts(Translation3::from(point + Vector3::z() * rise), rot);
             let qa = self.robot.ik_tool_nearest(&approach, q_now).ok()?.q;
             // The straight descent: a continuous joint path in 6 steps.
             let mut q = qa;

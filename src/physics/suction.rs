@@ -35,7 +35,7 @@ pub enum GraspFailure {
     /// Nothing but the tray (or nothing at all) under the cup.
     #[error("no part under the cup (the cup points at {0})")]
     NoPart(String),
-    /// The cup does not touch the face.
+    /// The cup does not touch the face (its nearest lip point is too far from it).
     #[error("cup does not touch the part: face {gap_mm:.2} mm beyond the lip")]
     NotTouching {
         /// Gap [mm].
@@ -231,8 +231,10 @@ impl World {
                 max_deg: g.max_tilt_rad.to_degrees(),
             });
         }
-        if gap > TOUCH_GAP_M {
-            return Err(GraspFailure::NotTouching { gap_mm: gap * 1e3 });
+        // On a tilted face the lip's nearest point is closer than the centre by r tan(tilt).
+        let lip_gap = gap - g.cup_radius_m * tilt.tan();
+        if lip_gap > TOUCH_GAP_M {
+            return Err(GraspFailure::NotTouching { gap_mm: lip_gap * 1e3 });
         }
         let face_point = centre - axis * PROBE_BACK_M + axis * toi;
         let on_face = |p: &Vector3<f64>, dir: &Vector3<f64>| -> Result<(), Option<Tag>> {
