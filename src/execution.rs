@@ -150,7 +150,8 @@ pub fn execute_from(
         let ed = d.qd - qd;
         let command = d.qdd + ed * servo.kd + e * servo.kp;
         let h = model.inverse_dynamics(&q, &qd, &JointVector::zeros());
-        let mut tau = model.mass_matrix(&q) * command + h;
+        let m = model.mass_matrix(&q);
+        let mut tau = m * command + h;
         let mut any = false;
         for i in 0..DOF {
             if tau[i].abs() > limit[i] {
@@ -198,7 +199,13 @@ pub fn execute_from(
         if k >= n && (!settle || (e.amax() < IN_POSITION_RAD && (d.qd - qd).amax() < IN_POSITION_RAD)) {
             break;
         }
-        let qdd = plant.forward_dynamics(&q, &qd, &tau).unwrap_or_else(JointVector::zeros);
+        // The plant's M and bias are the controller's when they are the same model: solve with them.
+        let qdd = if std::ptr::eq(model, plant) {
+            m.cholesky().map(|c| c.solve(&(tau - h)))
+        } else {
+            plant.forward_dynamics(&q, &qd, &tau)
+        }
+        .unwrap_or_else(JointVector::zeros);
         qd += qdd * servo.dt_s;
         q += qd * servo.dt_s;
     }

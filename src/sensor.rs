@@ -173,10 +173,72 @@ const DRAWS_PER_PIXEL: u128 = 4;
 
 /// Casts one ray per pixel into the world, in parallel over rows, with the noise model.
 pub fn capture(world: &World, camera: &Camera, seed: u64, id: u64) -> Capture {
+    capture_over(world, camera, seed, id, None)
+}
+
+/// What each pixel's ray meets among the fixed colliders (table, trays, obstacles): computed once,
+/// so a capture casts its rays only against what moves, no farther than this.
+#[derive(Debug, Clone)]
+pub struct Background {
+    hits: Vec<Option<(Tag, f64, Vector3<f64>)>>,
+}
+
+impl Background {
+    /// Casts every pixel of `camera` against the fixed colliders of `world`.
+    pub fn new(world: &World, camera: &Camera) -> Self {
+        let origin = camera.world_from_camera.translation.vector;
+        let qp = world.query_pipeline_fixed();
+        let hits = (0..camera.height)
+            .flat_map(|v| (0..camera.width).map(move |u| (u, v)))
+            .map(|(u, v)| world.cast_ray_with(&qp, &origin, &camera.pixel_dir(u, v), camera.max_range_m))
+            .collect();
+        Background { hits }
+    }
+}
+
+/// As [`capture`], with the fixed colliders' hits known (`background`): identical images, rays
+/// cast only against the parts and the arm, stopping at the background.
+pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, background: Option<&Background>) -> Capture {
     let (w, h) = (camera.width, camera.height);
     let origin = camera.world_from_camera.translation.vector;
     let optical = camera.world_from_camera.rotation * Vector3::z();
     let stream = crate::rng::stream(seed, "sensor");
+    // Pixels whose rays may meet something that moves: the image boxes of the moving colliders'
+    // bounding boxes, a pixel wider each side (all of them if a box reaches behind the camera).
+    let mask: Option<Vec<bool>> = background.map(|_| {
+        let mut mask = vec![false; w * h];
+        for (lo, hi) in world.moving_view_boxes() {
+            let mut box_px = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+            let mut behind = false;
+            for k in 0..8 {
+                let p = Point3::new(
+                    if k & 1 == 0 { lo.x } else { hi.x },
+                    if k & 2 == 0 { lo.y } else { hi.y },
+                    if k & 4 == 0 { lo.z } else { hi.z },
+                );
+                match camera.project(&p) {
+                    Some((x, y, _)) => {
+                        box_px = (box_px.0.min(x), box_px.1.min(y), box_px.2.max(x), box_px.3.max(y));
+                    }
+                    None => behind = true,
+                }
+            }
+            if behind {
+                mask.iter_mut().for_each(|m| *m = true);
+                break;
+            }
+            let clamp = |x: f64, n: usize| x.clamp(0.0, (n - 1) as f64) as usize;
+            if box_px.2 < -1.0 || box_px.3 < -1.0 || box_px.0 > w as f64 + 1.0 || box_px.1 > h as f64 + 1.0 {
+                continue;
+            }
+            let (u0, v0) = (clamp(box_px.0.floor() - 1.0, w), clamp(box_px.1.floor() - 1.0, h));
+            let (u1, v1) = (clamp(box_px.2.floor() + 1.0, w), clamp(box_px.3.floor() + 1.0, h));
+            for v in v0..=v1 {
+                mask[v * w + u0..=v * w + u1].iter_mut().for_each(|m| *m = true);
+            }
+        }
+        mask
+    });
     /// One image row: depths, points, what each ray hit.
     type Row = (Vec<f32>, Vec<[f32; 3]>, Vec<Option<Tag>>);
     let rows: Vec<Row> = (0..h)
@@ -188,12 +250,24 @@ pub fn capture(world: &World, camera: &Camera, seed: u64, id: u64) -> Capture {
             let mut depth = vec![0f32; w];
             let mut pts = vec![[f32::NAN; 3]; w];
             let mut truth = vec![None; w];
-            let qp = world.query_pipeline();
+            let qp = match background {
+                Some(_) => world.query_pipeline_moving(),
+                None => world.query_pipeline(),
+            };
             for u in 0..w {
                 let dir = camera.pixel_dir(u, v);
                 let (noise, drop_draw) = (gaussian(&mut rng), rng.random::<f64>());
                 let _ = rng.random::<u64>();
-                let Some((tag, range, normal)) = world.cast_ray_with(&qp, &origin, &dir, camera.max_range_m) else {
+                let hit = match (background, &mask) {
+                    (Some(bg), Some(mask)) if !mask[v * w + u] => bg.hits[v * w + u],
+                    (Some(bg), _) => {
+                        let behind = bg.hits[v * w + u];
+                        let reach = behind.map_or(camera.max_range_m, |b| b.1);
+                        world.cast_ray_with(&qp, &origin, &dir, reach).or(behind)
+                    }
+                    (None, _) => world.cast_ray_with(&qp, &origin, &dir, camera.max_range_m),
+                };
+                let Some((tag, range, normal)) = hit else {
                     continue;
                 };
                 let z = range * dir.dot(&optical);
@@ -320,6 +394,8 @@ pub struct Sensor {
     pub camera: Camera,
     /// The frustum over the pick tray.
     pub frustum: ViewFrustum,
+    /// What every pixel sees of the fixed cell (shared by the clones).
+    background: std::sync::Arc<Background>,
     /// Trigger to recognition result [s].
     pub latency_s: f64,
     /// Exposure window [s].
@@ -344,6 +420,7 @@ impl Sensor {
         let camera = Camera::from_config(cfg)?;
         Some(Sensor {
             frustum: ViewFrustum::over_pick_tray(world, &camera),
+            background: std::sync::Arc::new(Background::new(world, &camera)),
             camera,
             latency_s: cfg.latency_s,
             exposure_s: cfg.exposure_s,
@@ -361,7 +438,7 @@ impl Sensor {
         if let Some(link) = self.frustum.arm_inside(world) {
             return Err(CaptureProblem::ArmInView(link));
         }
-        let capture = capture(world, &self.camera, self.seed, self.triggered);
+        let capture = capture_over(world, &self.camera, self.seed, self.triggered, Some(&self.background));
         self.triggered += 1;
         Ok(CaptureJob {
             exposure_end_s: world.time_s + self.exposure_s,

@@ -803,6 +803,46 @@ impl World {
         )
     }
 
+    /// A scene-query pipeline over the fixed colliders only (table, trays, obstacles): what the
+    /// sensor sees behind everything that moves.
+    pub fn query_pipeline_fixed(&self) -> QueryPipeline<'_> {
+        self.broad_phase.as_query_pipeline(
+            self.narrow_phase.query_dispatcher(),
+            &self.bodies,
+            &self.colliders,
+            QueryFilter::only_fixed().predicate(&ray_visible),
+        )
+    }
+
+    /// World-frame bounding boxes (min, max corners) [m] of every collider the sensor can see that
+    /// is not fixed: parts, arm links, tool, cup, held part. A pixel whose ray misses all of them
+    /// sees the fixed cell.
+    pub fn moving_view_boxes(&self) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+        self.colliders
+            .iter()
+            .filter(|(h, c)| {
+                ray_visible(*h, c)
+                    && c.is_enabled()
+                    && c.parent()
+                        .is_some_and(|b| self.bodies.get(b).is_some_and(|b| !b.is_fixed()))
+            })
+            .map(|(_, c)| {
+                let a = c.compute_aabb();
+                (point_from_sim(a.mins), point_from_sim(a.maxs))
+            })
+            .collect()
+    }
+
+    /// A scene-query pipeline over everything that moves (parts, arm, tool, held part).
+    pub fn query_pipeline_moving(&self) -> QueryPipeline<'_> {
+        self.broad_phase.as_query_pipeline(
+            self.narrow_phase.query_dispatcher(),
+            &self.bodies,
+            &self.colliders,
+            QueryFilter::exclude_fixed().predicate(&ray_visible),
+        )
+    }
+
     /// Casts a ray with a pipeline from [`World::query_pipeline`]: first hit's tag, distance along
     /// the unit `dir` [m] and surface normal.
     pub fn cast_ray_with(

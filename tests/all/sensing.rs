@@ -202,3 +202,28 @@ fn every_workpiece_top_layer_recall_at_least_90_percent_and_chosen_grasps_are_re
         }
     }
 }
+
+/// The sensor's fast capture (the fixed cell's hits cached, rays cast only where something that
+/// moves can be) gives the same image as casting every ray into the whole world: with the arm
+/// away, with it over the pile, and with a part held in view.
+#[test]
+fn cached_background_captures_equal_full_ray_casts() {
+    for (name, seed) in [("E", 3), ("C", 2)] {
+        let (mut w, scene, _, _) = cell(name, seed);
+        let sensor = Sensor::new(&scene.scene.sensor, &w, seed).unwrap();
+        let bg = binpick::sensor::Background::new(&w, &sensor.camera);
+        for pose in 0..2 {
+            if pose == 1 {
+                park_over_tray(&mut w);
+            }
+            let full = binpick::sensor::capture(&w, &sensor.camera, seed, pose);
+            let fast = binpick::sensor::capture_over(&w, &sensor.camera, seed, pose, Some(&bg));
+            assert_eq!(full.depth_m, fast.depth_m, "{name} pose {pose}: depth differs");
+            let bits = |c: &binpick::sensor::Capture| -> Vec<[u32; 3]> {
+                c.points_world.iter().map(|p| p.map(f32::to_bits)).collect()
+            };
+            assert_eq!(bits(&full), bits(&fast), "{name} pose {pose}: points differ");
+            assert!(full.valid_count() > 10_000);
+        }
+    }
+}
