@@ -177,13 +177,7 @@ impl RunEntry {
                 .filter(|p| !p.first_of_pile)
                 .filter_map(|p| p.takt_s)
                 .collect(),
-            release_span: {
-                let r: Vec<f64> = placed.iter().filter_map(|p| p.release_s).collect();
-                match (r.first(), r.last()) {
-                    (Some(a), Some(b)) if r.len() > 1 => (b - a, r.len() - 1),
-                    _ => (0.0, 0),
-                }
-            },
+            release_span: crate::cycle::release_span(&r.records),
             pick_s: placed.iter().map(|p| p.pick_s).collect(),
             place_s: placed.iter().map(|p| p.place_s).collect(),
             compute_sum_s: [

@@ -1287,6 +1287,16 @@ fn pick_and_place(
     Ok(Outcome::Placed)
 }
 
+/// Time from the first to the last release [s] and the releases after the first: their ratio is
+/// the end-to-end takt. (0, 0) below two releases.
+pub fn release_span(records: &[PickRecord]) -> (f64, usize) {
+    let r: Vec<f64> = records.iter().filter_map(|p| p.release_s).collect();
+    match (r.first(), r.last()) {
+        (Some(a), Some(b)) if r.len() > 1 => (b - a, r.len() - 1),
+        _ => (0.0, 0),
+    }
+}
+
 fn summarise(
     cell: &Cell<'_>,
     records: &[PickRecord],
@@ -1330,12 +1340,9 @@ fn summarise(
             placed.len() as f64 / attempts.len() as f64
         },
         takt: TaktStats::of(&takts),
-        effective_takt_s: {
-            let r: Vec<f64> = placed.iter().filter_map(|p| p.release_s).collect();
-            match (r.first(), r.last()) {
-                (Some(a), Some(b)) if r.len() > 1 => (b - a) / (r.len() - 1) as f64,
-                _ => f64::NAN,
-            }
+        effective_takt_s: match release_span(records) {
+            (_, 0) => f64::NAN,
+            (t, n) => t / n as f64,
         },
         mean_pick_s: mean(&mut placed.iter().map(|r| r.pick_s)),
         mean_place_s: mean(&mut placed.iter().map(|r| r.place_s)),
