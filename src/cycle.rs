@@ -1106,6 +1106,16 @@ pub fn run(
         }
         cell.idle_until(pick_ready.max(cell.world.time_s))?;
         let outcome = pick_and_place(&mut cell, &mut prep, &mut rec, place_ready)?;
+        if outcome != Outcome::Placed && cell.world.held_part().is_some() {
+            // A pick that ended with the part still on the cup (no Place motion): let it go where
+            // the arm is, over the pick tray, before anything else moves.
+            cell.world.vacuum_off();
+            let t = cell.world.time_s + cell.world.gripper.release_s + cell.world.dt_s();
+            cell.idle_until(t)?;
+            cell.world.gripper.take_events();
+            cell.event("part_let_go", "the part stays in the pick tray".into());
+            cell.arm_free_s = cell.arm_free_s.max(cell.world.time_s);
+        }
         if matches!(
             outcome,
             Outcome::GraspFailed(_) | Outcome::Collision(_) | Outcome::ProtectiveStop(_)
