@@ -28,7 +28,7 @@
 //!    full place tray is exchanged for an empty one (`place_tray_exchange_s`).
 //!
 //! Held parts: the transfer, lift and descent motions with a part on the cup are slowed (a
-//! uniform time scaling) where the tool's acceleration would need more than 60 % of the cup's
+//! uniform time scaling) where the tool's acceleration would need more than 75 % of the cup's
 //! holding force (the gripper's slip model, with the centre-of-mass offset of the grasp as
 //! recognised plus three standard deviations of the recognition's position noise).
 //!
@@ -56,7 +56,7 @@ use crate::trajectory::{
 };
 
 /// Fraction of the cup's holding force a held-part motion may use.
-pub const SUCTION_MARGIN: f64 = 0.6;
+pub const SUCTION_MARGIN: f64 = 0.75;
 /// The part is released this far above its resting height in the slot [m] (the recognised pose
 /// is a little off; the part drops the rest).
 const RELEASE_ABOVE_M: f64 = 0.003;

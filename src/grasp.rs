@@ -380,11 +380,13 @@ impl GraspSelector {
                     continue;
                 }
                 // The approach pose also lifts the part clear of the pile around it: its bottom
-                // 5 mm above the highest surface within its length plus 10 mm.
-                let reach = self.size_m.iter().cloned().fold(0.0, f64::max);
-                let around = height_map.max_within(local.x, local.y, reach + 0.01);
+                // (its height along the face normal below the face) 15 mm above the highest surface
+                // within half its length plus 10 mm.
+                let half_length = 0.5 * self.size_m.iter().cloned().fold(0.0, f64::max);
+                let hang = self.size_m[face.normal.iamax()];
+                let around = height_map.max_within(local.x, local.y, half_length + 0.01);
                 let clear_z = if around.is_finite() {
-                    self.tray.translation.vector.z + around + reach + 0.005
+                    self.tray.translation.vector.z + around + hang + 0.015
                 } else {
                     f64::NEG_INFINITY
                 };
