@@ -354,7 +354,7 @@ impl GraspSelector {
                 let mut point = det.world_from_part * Point3::from(face.center);
                 let mut local = tray_from_world * point;
                 // Correct the recognised face height by the surface the sensor measured under the
-                // cup: the upper quartile of its cells within 3 mm of the recognised height (robust
+                // cup: the median of its cells within 3 mm of the recognised height (robust
                 // to depth noise and to neighbouring surfaces).
                 let measured = height_map.surface_within(local.x, local.y, self.cup_radius_m, local.z, 0.003);
                 if measured.is_finite() {
