@@ -1105,7 +1105,7 @@ pub fn run(
             cell.span(Lane::Stall, free.max(ready), pick_ready, "waiting for compute");
         }
         cell.idle_until(pick_ready.max(cell.world.time_s))?;
-        let outcome = pick_and_place(&mut cell, &mut prep, &mut rec, place_ready)?;
+        let outcome = pick_and_place(&mut cell, &prep, &mut rec, place_ready)?;
         if outcome != Outcome::Placed && cell.world.held_part().is_some() {
             // A pick that ended with the part still on the cup (no Place motion): let it go where
             // the arm is, over the pick tray, before anything else moves.
@@ -1170,7 +1170,7 @@ pub fn run(
 /// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat).
 fn pick_and_place(
     cell: &mut Cell<'_>,
-    prep: &mut Prepared,
+    prep: &Prepared,
     rec: &mut PickRecord,
     place_ready: f64,
 ) -> Result<Outcome, CycleError> {
@@ -1178,7 +1178,7 @@ fn pick_and_place(
     let t_pick = cell.world.time_s;
     cell.event("pick_start", String::new());
     let pick_transfer = match &prep.pick_transfer {
-        Ok(t) => t.clone(),
+        Ok(t) => t,
         Err(e) => return Ok(Outcome::NoMotion(e.clone())),
     };
     cell.max_error_rad = 0.0;
@@ -1189,16 +1189,16 @@ fn pick_and_place(
         cell.span(Lane::Pick, t_pick, cell.world.time_s, "Pick");
         cell.arm_free_s = cell.world.time_s;
     };
-    if let Played::Failed(o) = cell.play_with(&pick_transfer, &hand, false, None, false)? {
+    if let Played::Failed(o) = cell.play_with(pick_transfer, &hand, false, None, false)? {
         pick_done(cell, rec);
         return Ok(o);
     }
     // The vacuum valve opens `vacuum_lead_s` before the cup reaches the face.
     let lead = cell.scene.cycle.vacuum_lead_s;
-    let descent = prep.descent.clone();
+    let descent = &prep.descent;
     let vacuum_at = (descent.duration_s() - lead).max(0.0);
     let t_descent = cell.world.time_s;
-    if let Played::Failed(o) = cell.play_with(&descent, &hand, false, Some(vacuum_at), true)? {
+    if let Played::Failed(o) = cell.play_with(descent, &hand, false, Some(vacuum_at), true)? {
         pick_done(cell, rec);
         return Ok(o);
     }
@@ -1231,14 +1231,12 @@ fn pick_and_place(
     }
     if cell.world.held_part().is_none() {
         cell.world.vacuum_off();
-        let lift = prep.lift.clone();
-        cell.play(&lift, &hand, false)?;
+        cell.play(&prep.lift, &hand, false)?;
         pick_done(cell, rec);
         return Ok(failure.unwrap_or_else(|| Outcome::GraspFailed("no seal".into())));
     }
     let held = prep.held;
-    let lift = prep.lift.clone();
-    if let Played::Failed(o) = cell.play_with(&lift, &held, true, None, false)? {
+    if let Played::Failed(o) = cell.play_with(&prep.lift, &held, true, None, false)? {
         pick_done(cell, rec);
         return Ok(o);
     }
@@ -1252,10 +1250,10 @@ fn pick_and_place(
         cell.arm_state.1 = JointVector::zeros();
     }
     let (transfer, down, up, k) = match &prep.place {
-        Ok(p) => p.clone(),
+        Ok(p) => p,
         Err(e) => return Ok(Outcome::NoMotion(e.clone())),
     };
-    rec.suction_speed_factor = k;
+    rec.suction_speed_factor = *k;
     let t_place = cell.world.time_s;
     cell.event("place_start", String::new());
     let place_done = |cell: &mut Cell<'_>, rec: &mut PickRecord| {
@@ -1263,11 +1261,11 @@ fn pick_and_place(
         cell.span(Lane::Place, t_place, cell.world.time_s, "Place");
         cell.arm_free_s = cell.world.time_s;
     };
-    if let Played::Failed(o) = cell.play_with(&transfer, &held, true, None, false)? {
+    if let Played::Failed(o) = cell.play_with(transfer, &held, true, None, false)? {
         place_done(cell, rec);
         return Ok(o);
     }
-    if let Played::Failed(o) = cell.play(&down, &held, true)? {
+    if let Played::Failed(o) = cell.play(down, &held, true)? {
         place_done(cell, rec);
         return Ok(o);
     }
@@ -1283,7 +1281,7 @@ fn pick_and_place(
         t_s: release,
         label: format!("release {}", rec.index),
     });
-    if let Played::Failed(o) = cell.play(&up, &hand, true)? {
+    if let Played::Failed(o) = cell.play(up, &hand, true)? {
         place_done(cell, rec);
         return Ok(o);
     }
