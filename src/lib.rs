@@ -14,10 +14,9 @@
 //! 8. [`execution`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
 //! 9. [`cycle`]: the cell cycle end to end: pipelined sensing and compute, Pick, Place, faults,
 //!    refills, takt time.
-//! 10. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results;
+//! 10. [`record`]: the run written to MCAP for Foxglove (Rerun to come; see README.md).
+//! 11. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results;
 //!     [`chart`]: the cycle's time chart (SVG); [`batch`]: takt-time tables over many runs.
-//!
-//! The recording stage (Rerun, MCAP) is added as its issue lands; see README.md.
 //!
 //! Units are SI inside the crate (m, rad, s, kg, N m); degrees appear only at the file and
 //! command-line boundary. Frame names read `target_from_source` (e.g. `world_from_tool`).
@@ -31,6 +30,7 @@ pub mod execution;
 pub mod grasp;
 pub mod physics;
 pub mod planning;
+pub mod record;
 pub mod report;
 pub mod rng;
 pub mod robot;

@@ -69,6 +69,9 @@ enum Command {
         /// Folder the run folder is written into.
         #[arg(long, default_value = "runs")]
         out: PathBuf,
+        /// Do not write the MCAP recording (`run.mcap`).
+        #[arg(long)]
+        no_mcap: bool,
         /// Machine-readable JSON output.
         #[arg(long)]
         json: bool,
@@ -323,8 +326,18 @@ fn run(cli: Cli) -> Result<()> {
             deterministic,
             scene,
             out,
+            no_mcap,
             json,
-        } => run_cell(&workpiece, picks, seed, deterministic, scene.as_deref(), &out, json),
+        } => run_cell(
+            &workpiece,
+            picks,
+            seed,
+            deterministic,
+            scene.as_deref(),
+            &out,
+            !no_mcap,
+            json,
+        ),
         Command::Pile(a) => pile(&a),
         Command::Batch(a) => batch(&a),
         Command::Merge { dirs, out, json } => merge(&dirs, &out, json),
@@ -1130,6 +1143,7 @@ fn run_cell(
     deterministic: bool,
     scene: Option<&Path>,
     out: &Path,
+    mcap: bool,
     json: bool,
 ) -> Result<()> {
     use binpick::cycle::RunOptions;
@@ -1146,7 +1160,7 @@ fn run_cell(
             picks,
             seed,
             deterministic,
-            keep_trace: false,
+            keep_trace: mcap,
         },
     )
     .map_err(|e| anyhow::anyhow!("cell run failed: {e}"))?;
@@ -1166,6 +1180,18 @@ fn run_cell(
     run.write("timechart.svg", whole)?;
     if let Some(steady) = steady {
         run.write("timechart-steady.svg", steady)?;
+    }
+    if mcap {
+        let path = run.path("run.mcap");
+        let file = std::fs::File::create(&path).with_context(|| path.display().to_string())?;
+        let info = binpick::record::RunInfo {
+            scene: loaded.label.clone(),
+            workpiece: wp.workpiece.name.clone(),
+            seed,
+            deterministic,
+        };
+        binpick::record::write_mcap(std::io::BufWriter::new(file), &result, &robot, &info)
+            .with_context(|| format!("writing {}", path.display()))?;
     }
     let dest = run.finish()?;
     let s = &result.summary;

@@ -7,6 +7,7 @@ mod cli_sense;
 mod execution;
 mod physics;
 mod planning;
+mod recording;
 mod scenario;
 mod sensing;
 mod support;

@@ -1,0 +1,86 @@
+//! Recordings: `binpick run` writes `run.mcap`; read back with the mcap crate's reader and
+//! compared with what the run did (its events, its placed picks, its metadata).
+
+use crate::support::{Workspace, binpick_in, stderr};
+
+#[test]
+fn run_mcap_holds_what_the_run_did() {
+    let ws = Workspace::new();
+    let out = ws.path("out");
+    let args = [
+        "run",
+        "--workpiece",
+        "E",
+        "--picks",
+        "3",
+        "--deterministic",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    let o = binpick_in(ws.dir.path(), &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let dir = out.join("run-E-seed1-det");
+    let bytes = std::fs::read(dir.join("run.mcap")).unwrap();
+    let events: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(dir.join("events.json")).unwrap()).unwrap();
+    let csv = std::fs::read_to_string(dir.join("picks.csv")).unwrap();
+    // Placed picks with a takt: the takt column (7th) is set.
+    let takts = csv
+        .lines()
+        .skip(1)
+        .filter(|l| !l.split(',').nth(6).unwrap().is_empty())
+        .count();
+
+    let summary = mcap::read::Summary::read(&bytes).unwrap().expect("a summary section");
+    let mut schemas: Vec<String> = summary.schemas.values().map(|s| s.name.clone()).collect();
+    schemas.sort();
+    assert_eq!(
+        schemas,
+        [
+            "binpick.CycleEvent",
+            "binpick.JointState",
+            "binpick.Takt",
+            "foxglove.FrameTransforms",
+            "foxglove.Log"
+        ]
+    );
+    assert!(summary.schemas.values().all(|s| s.encoding == "jsonschema"));
+    assert!(summary.channels.values().all(|c| c.message_encoding == "json"));
+    assert!(!summary.chunk_indexes.is_empty(), "chunked");
+    assert!(summary.chunk_indexes.iter().all(|c| c.compression == "zstd"));
+    let meta = mcap::read::metadata(&bytes, &summary.metadata_indexes[0]).unwrap();
+    assert_eq!(meta.name, "binpick");
+    assert_eq!(meta.metadata["seed"], "1");
+    assert_eq!(meta.metadata["workpiece"], "E");
+    assert_eq!(meta.metadata["deterministic"], "true");
+
+    let mut count = std::collections::BTreeMap::<String, usize>::new();
+    let mut last = 0u64;
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        assert!(m.log_time >= last, "log times go back on {}", m.channel.topic);
+        last = m.log_time;
+        *count.entry(m.channel.topic.clone()).or_default() += 1;
+        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if m.channel.topic == "/robot/joint_states" {
+            let tau = v["torque_nm"].as_array().unwrap();
+            let limit = v["torque_limit_nm"].as_array().unwrap();
+            assert_eq!(tau.len(), 6);
+            for (t, l) in tau.iter().zip(limit) {
+                assert!(t.as_f64().unwrap().abs() <= l.as_f64().unwrap() + 1e-9);
+            }
+        }
+    }
+    assert_eq!(count["/cycle/events"], events.len());
+    assert_eq!(count["/log"], events.len());
+    assert_eq!(count.get("/cycle/takt").copied().unwrap_or(0), takts);
+    assert!(takts >= 1);
+    assert!(count["/robot/joint_states"] > 100 && count["/tf"] > 50, "{count:?}");
+
+    // --no-mcap: no recording.
+    let mut args = args.to_vec();
+    args.push("--no-mcap");
+    let o = binpick_in(ws.dir.path(), &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(!dir.join("run.mcap").exists());
+}
