@@ -311,6 +311,31 @@ pub struct RunOptions {
     pub deterministic: bool,
     /// Keep every servo tick in [`RunResult::trace`] (for checks and recordings).
     pub keep_trace: bool,
+    /// Keep the parts' poses every [`SCENE_FRAME_S`] and each capture's depth image (recordings).
+    pub keep_scene: bool,
+}
+
+/// Period of the part-pose snapshots kept for recordings [s].
+pub const SCENE_FRAME_S: f64 = 0.1;
+
+/// Every part's state and pose at one time, for recordings.
+#[derive(Debug, Clone)]
+pub struct SceneFrame {
+    /// Simulation time [s].
+    pub t_s: f64,
+    /// Per part: state and `world_from_part`.
+    pub parts: Vec<(PartState, Isometry3<f64>)>,
+}
+
+/// A capture's depth image, for recordings.
+#[derive(Debug, Clone)]
+pub struct CaptureImage {
+    /// Trigger time [s].
+    pub t_s: f64,
+    /// Image width and height [px].
+    pub size_px: (usize, usize),
+    /// Depth per pixel [mm], 0 where there is no return.
+    pub depth_mm: Vec<u16>,
 }
 
 /// A cycle event, for logs and recordings.
@@ -343,6 +368,12 @@ pub struct RunResult {
     pub events: Vec<CycleEvent>,
     /// Servo ticks of every motion, in time order, if asked for (`t` is simulation time).
     pub trace: Vec<Tick>,
+    /// Part poses over time, if asked for.
+    pub scene_frames: Vec<SceneFrame>,
+    /// Depth images of the captures, if asked for.
+    pub captures: Vec<CaptureImage>,
+    /// The parts' bounding box [m].
+    pub part_size_m: [f64; 3],
 }
 
 /// The reference system's takt for workpieces A..F [s] (its Table 5).
@@ -410,6 +441,8 @@ struct Cell<'a> {
     spans: Vec<Span>,
     markers: Vec<Marker>,
     trace: Option<Vec<Tick>>,
+    scene_frames: Option<Vec<SceneFrame>>,
+    captures: Option<Vec<CaptureImage>>,
     parts_lost: usize,
     peak_torque_ratio: f64,
     max_error_rad: f64,
@@ -440,6 +473,18 @@ impl Cell<'_> {
     /// of the arm or a part pressed into the tray is returned; a non-finite state ends the run.
     fn step(&mut self) -> Result<Option<String>, CycleError> {
         let result = self.world.step();
+        if let Some(frames) = self.scene_frames.as_mut()
+            && frames
+                .last()
+                .is_none_or(|f| self.world.time_s + 1e-9 >= f.t_s + SCENE_FRAME_S)
+        {
+            frames.push(SceneFrame {
+                t_s: self.world.time_s,
+                parts: (0..self.world.parts.len())
+                    .map(|i| (self.world.parts[i].state, self.world.part_pose(i)))
+                    .collect(),
+            });
+        }
         if let Some(job) = self.job.as_mut()
             && let Some(problem) = self.sensor.watch(job, &self.world)
         {
@@ -488,6 +533,18 @@ impl Cell<'_> {
         }
         if let Ok(job) = self.sensor.trigger(&self.world) {
             self.event("capture", format!("capture {}", self.sensor.triggered - 1));
+            if let Some(images) = self.captures.as_mut() {
+                images.push(CaptureImage {
+                    t_s: self.world.time_s,
+                    size_px: (job.capture.width, job.capture.height),
+                    depth_mm: job
+                        .capture
+                        .depth_m
+                        .iter()
+                        .map(|d| (d * 1000.0).round() as u16)
+                        .collect(),
+                });
+            }
             self.job = Some(job);
         }
     }
@@ -1007,6 +1064,8 @@ pub fn run(
         spans: Vec::new(),
         markers: Vec::new(),
         trace: opts.keep_trace.then(Vec::new),
+        scene_frames: opts.keep_scene.then(Vec::new),
+        captures: opts.keep_scene.then(Vec::new),
         parts_lost: 0,
         peak_torque_ratio: 0.0,
         max_error_rad: 0.0,
@@ -1164,6 +1223,9 @@ pub fn run(
         markers: cell.markers,
         events: cell.events,
         trace: cell.trace.unwrap_or_default(),
+        scene_frames: cell.scene_frames.unwrap_or_default(),
+        captures: cell.captures.unwrap_or_default(),
+        part_size_m: wp.size_m,
     })
 }
 

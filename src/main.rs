@@ -1161,6 +1161,7 @@ fn run_cell(
             seed,
             deterministic,
             keep_trace: mcap,
+            keep_scene: mcap,
         },
     )
     .map_err(|e| anyhow::anyhow!("cell run failed: {e}"))?;
@@ -1309,6 +1310,7 @@ fn batch(a: &BatchArgs) -> Result<()> {
                         seed: *seed,
                         deterministic: spec.deterministic,
                         keep_trace: false,
+                        keep_scene: false,
                     },
                 )
                 .map(|r| RunEntry::from_run(&r, t.elapsed().as_secs_f64()))

@@ -1,15 +1,17 @@
 //! Record stage: a run written to MCAP for Foxglove (first slice of the recording issue).
 //!
-//! Job: from a finished run ([`RunResult`] with its servo trace), write `run.mcap`: the cycle's
-//! events as Foxglove `foxglove.Log` messages and as structured `binpick.CycleEvent` messages, the
-//! joint states (positions, velocities, applied torques beside each joint's torque limit,
-//! tracking errors) at 100 Hz, the arm's link frames as `foxglove.FrameTransforms` at 50 Hz, and
+//! Job: from a finished run ([`RunResult`] with its servo trace and scene), write `run.mcap`: the
+//! cycle's events as Foxglove `foxglove.Log` messages and as structured `binpick.CycleEvent`
+//! messages, the joint states (positions, velocities, applied torques beside each joint's torque
+//! limit, tracking errors) at 100 Hz, the arm's link frames as `foxglove.FrameTransforms` at
+//! 50 Hz, all parts as one `foxglove.SceneUpdate` entity (a cube per part, coloured by state) at
+//! 10 Hz, each capture's depth image as `foxglove.RawImage` (16UC1, mm) at its trigger time, and
 //! the takt of every placed pick. Messages are JSON with JSON Schemas; log time is simulation
 //! time (ns); chunks are zstd-compressed; the file's metadata names the scene, workpiece, seed,
 //! mode and binpick version. The writer is finished explicitly and its error reported.
 //!
-//! Not yet recorded (the rest of the recording issue): parts' poses, captures (depth image,
-//! point cloud), detections and grasp candidates, planned paths, and the Rerun file.
+//! Not yet recorded (the rest of the recording issue): point clouds, camera calibration,
+//! detections and grasp candidates, planned paths, the arm's geometry, and the Rerun file.
 //!
 //! Units: s (ns as log time), rad, rad/s, N m, m. Frames: `world`, and one frame per link named
 //! after it (`world` -> link transforms, from forward kinematics of the executed positions).
@@ -78,6 +80,26 @@ const JOINT_SCHEMA: &str = r#"{"title":"binpick.JointState","type":"object","pro
 "torque_limit_nm":{"type":"array","items":{"type":"number"}},
 "tracking_error_rad":{"type":"array","items":{"type":"number"}}}}"#;
 
+const SCENE_SCHEMA: &str = r#"{"title":"foxglove.SceneUpdate","type":"object","properties":{
+"deletions":{"type":"array","items":{"type":"object"}},
+"entities":{"type":"array","items":{"type":"object","properties":{
+"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
+"frame_id":{"type":"string"},"id":{"type":"string"},
+"lifetime":{"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}},
+"frame_locked":{"type":"boolean"},
+"cubes":{"type":"array","items":{"type":"object","properties":{
+"pose":{"type":"object","properties":{
+"position":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
+"orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}},
+"size":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
+"color":{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}}}}}}}}}}"#;
+
+const IMAGE_SCHEMA: &str = r#"{"title":"foxglove.RawImage","type":"object","properties":{
+"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
+"frame_id":{"type":"string"},"width":{"type":"integer","minimum":0},"height":{"type":"integer","minimum":0},
+"encoding":{"type":"string"},"step":{"type":"integer","minimum":0},
+"data":{"type":"string","contentEncoding":"base64"}}}"#;
+
 const TAKT_SCHEMA: &str = r#"{"title":"binpick.Takt","type":"object","properties":{
 "t_s":{"type":"number","description":"release time [s]"},"pick":{"type":"integer"},
 "takt_s":{"type":"number"},"first_of_pile":{"type":"boolean"}}}"#;
@@ -116,6 +138,8 @@ pub fn write_mcap<W: Write + Seek>(
     let joints = channel("binpick.JointState", "/robot/joint_states", JOINT_SCHEMA)?;
     let tf = channel("foxglove.FrameTransforms", "/tf", TRANSFORMS_SCHEMA)?;
     let takt = channel("binpick.Takt", "/cycle/takt", TAKT_SCHEMA)?;
+    let parts = channel("foxglove.SceneUpdate", "/parts", SCENE_SCHEMA)?;
+    let depth = channel("foxglove.RawImage", "/camera/depth", IMAGE_SCHEMA)?;
     // Messages go in log-time order, one channel after another would not: merge them.
     let mut messages: Vec<(u64, u16, Vec<u8>)> = Vec::new();
     for e in &result.events {
@@ -191,6 +215,59 @@ pub fn write_mcap<W: Write + Seek>(
             ));
         }
     }
+    // All parts as one entity: a cube per part (its bounding box), coloured by state.
+    let size = result.part_size_m;
+    for f in &result.scene_frames {
+        let cubes: Vec<serde_json::Value> = f
+            .parts
+            .iter()
+            .filter(|(state, _)| *state != crate::physics::PartState::Removed)
+            .map(|(state, p)| {
+                let q = p.rotation.quaternion();
+                let (r, g, b) = match state {
+                    crate::physics::PartState::Held => (1.0, 0.6, 0.0),
+                    crate::physics::PartState::Placed => (0.2, 0.7, 0.3),
+                    _ => (0.3, 0.5, 0.9),
+                };
+                json!({
+                    "pose": {
+                        "position": {"x": p.translation.x, "y": p.translation.y, "z": p.translation.z},
+                        "orientation": {"x": q.i, "y": q.j, "z": q.k, "w": q.w},
+                    },
+                    "size": {"x": size[0], "y": size[1], "z": size[2]},
+                    "color": {"r": r, "g": g, "b": b, "a": 1.0},
+                })
+            })
+            .collect();
+        messages.push((
+            nanos(f.t_s),
+            parts,
+            serde_json::to_vec(&json!({
+                "deletions": [],
+                "entities": [{
+                    "timestamp": stamp(f.t_s), "frame_id": "world", "id": "parts",
+                    "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": false, "metadata": [],
+                    "arrows": [], "cubes": cubes, "spheres": [], "cylinders": [], "lines": [],
+                    "triangles": [], "texts": [], "models": [],
+                }],
+            }))?,
+        ));
+    }
+    // Each capture's depth image at its trigger time (millimetres, 16-bit).
+    for c in &result.captures {
+        use base64::Engine;
+        let bytes: Vec<u8> = c.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect();
+        messages.push((
+            nanos(c.t_s),
+            depth,
+            serde_json::to_vec(&json!({
+                "timestamp": stamp(c.t_s), "frame_id": "camera",
+                "width": c.size_px.0, "height": c.size_px.1, "encoding": "16UC1",
+                "step": 2 * c.size_px.0,
+                "data": base64::engine::general_purpose::STANDARD.encode(bytes),
+            }))?,
+        ));
+    }
     messages.sort_by_key(|m| m.0);
     let mut counts = TopicCounts::new();
     let topics = [
@@ -199,6 +276,8 @@ pub fn write_mcap<W: Write + Seek>(
         (joints, "/robot/joint_states"),
         (tf, "/tf"),
         (takt, "/cycle/takt"),
+        (parts, "/parts"),
+        (depth, "/camera/depth"),
     ];
     let mut sequence = [0u32; 8];
     for (time, ch, data) in &messages {

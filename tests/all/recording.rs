@@ -41,7 +41,9 @@ fn run_mcap_holds_what_the_run_did() {
             "binpick.JointState",
             "binpick.Takt",
             "foxglove.FrameTransforms",
-            "foxglove.Log"
+            "foxglove.Log",
+            "foxglove.RawImage",
+            "foxglove.SceneUpdate"
         ]
     );
     assert!(summary.schemas.values().all(|s| s.encoding == "jsonschema"));
@@ -56,12 +58,27 @@ fn run_mcap_holds_what_the_run_did() {
 
     let mut count = std::collections::BTreeMap::<String, usize>::new();
     let mut last = 0u64;
+    let mut parts_span = (u64::MAX, 0u64);
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         assert!(m.log_time >= last, "log times go back on {}", m.channel.topic);
         last = m.log_time;
         *count.entry(m.channel.topic.clone()).or_default() += 1;
         let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        if m.channel.topic == "/camera/depth" {
+            use base64::Engine;
+            let data = base64::engine::general_purpose::STANDARD
+                .decode(v["data"].as_str().unwrap())
+                .unwrap();
+            let (w, h) = (v["width"].as_u64().unwrap(), v["height"].as_u64().unwrap());
+            assert_eq!(data.len() as u64, 2 * w * h);
+            assert_eq!(v["encoding"], "16UC1");
+        }
+        if m.channel.topic == "/parts" {
+            parts_span = (parts_span.0.min(m.log_time), parts_span.1.max(m.log_time));
+            assert_eq!(v["entities"].as_array().unwrap().len(), 1, "all parts as one entity");
+            assert!(!v["entities"][0]["cubes"].as_array().unwrap().is_empty());
+        }
         if m.channel.topic == "/robot/joint_states" {
             let tau = v["torque_nm"].as_array().unwrap();
             let limit = v["torque_limit_nm"].as_array().unwrap();
@@ -76,6 +93,22 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(count.get("/cycle/takt").copied().unwrap_or(0), takts);
     assert!(takts >= 1);
     assert!(count["/robot/joint_states"] > 100 && count["/tf"] > 50, "{count:?}");
+    // One depth image per capture triggered; the parts every 0.1 s of simulated time.
+    let run_summary: serde_json::Value =
+        serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(
+        count["/camera/depth"] as u64,
+        run_summary["captures"][0].as_u64().unwrap()
+    );
+    // Part frames every 0.1 s of simulated time, from the first cycle step to the end.
+    let (first, last) = parts_span;
+    let span_s = (last - first) as f64 * 1e-9;
+    let frames = count["/parts"] as f64;
+    assert!(
+        (frames - (span_s / 0.1 + 1.0)).abs() <= 2.0,
+        "{frames} part frames over {span_s} s"
+    );
+    assert!(last as f64 * 1e-9 <= run_summary["sim_time_s"].as_f64().unwrap() + 1e-6);
 
     // --no-mcap: no recording.
     let mut args = args.to_vec();

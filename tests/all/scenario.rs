@@ -88,6 +88,7 @@ fn run(workpiece: &str, picks: usize, keep_trace: bool) -> (RunResult, RobotMode
             seed: 1,
             deterministic: true,
             keep_trace,
+            keep_scene: false,
         },
     )
     .unwrap();
