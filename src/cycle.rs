@@ -294,7 +294,8 @@ pub struct RunSummary {
     /// Largest servo tracking error over the run [deg].
     pub max_tracking_error_deg: f64,
     /// Why the run ended: `picks done`, `tray empty` (policy `end`), `nothing graspable in a
-    /// full tray` (a refill found nothing to pick either), `too many empty captures`.
+    /// full tray` (a refill found nothing to pick either), `too many empty captures`,
+    /// `interrupted` (Ctrl-C).
     pub ended: String,
     /// Simulated time [s].
     pub sim_time_s: f64,
@@ -313,6 +314,9 @@ pub struct RunOptions {
     pub keep_trace: bool,
     /// Keep the parts' poses every [`SCENE_FRAME_S`] and each capture's depth image (recordings).
     pub keep_scene: bool,
+    /// Set (by a Ctrl-C handler) to end the run after the pick under way: the results so far are
+    /// returned and the summary says `interrupted`.
+    pub stop: Option<&'static std::sync::atomic::AtomicBool>,
 }
 
 /// Period of the part-pose snapshots kept for recordings [s].
@@ -1087,6 +1091,10 @@ pub fn run(
     let mut exchanges = 0usize;
     let mut ended = "picks done".to_string();
     while attempts < opts.picks {
+        if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
+            ended = "interrupted".into();
+            break;
+        }
         let index = records.len();
         cell.pick = Some(index);
         if index > 20 * opts.picks + 20 {

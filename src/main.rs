@@ -271,6 +271,11 @@ enum BenchCommand {
 #[error("{0}")]
 struct InputError(String);
 
+/// The run was interrupted by Ctrl-C; its results so far were written (exit 130).
+#[derive(Debug, thiserror::Error)]
+#[error("interrupted: the results so far are in {0}")]
+struct Interrupted(String);
+
 fn main() -> ExitCode {
     let cli = Cli::parse();
     match run(cli) {
@@ -285,6 +290,9 @@ fn main() -> ExitCode {
             } else if let Some(i) = e.downcast_ref::<InputError>() {
                 eprintln!("error: {i}");
                 ExitCode::from(2)
+            } else if let Some(i) = e.downcast_ref::<Interrupted>() {
+                eprintln!("{i}");
+                ExitCode::from(130)
             } else {
                 eprintln!("error: {e:#}");
                 ExitCode::from(1)
@@ -1162,6 +1170,7 @@ fn run_cell(
             deterministic,
             keep_trace: mcap,
             keep_scene: mcap,
+            stop: Some(stop_on_ctrl_c()),
         },
     )
     .map_err(|e| anyhow::anyhow!("cell run failed: {e}"))?;
@@ -1196,6 +1205,12 @@ fn run_cell(
     }
     let dest = run.finish()?;
     let s = &result.summary;
+    let done = || -> Result<()> {
+        match s.ended.as_str() {
+            "interrupted" => Err(Interrupted(dest.display().to_string()).into()),
+            _ => Ok(()),
+        }
+    };
     if json {
         println!(
             "{}",
@@ -1203,7 +1218,7 @@ fn run_cell(
                 &json!({"summary": s, "wall_s": wall_s, "run_dir": dest.display().to_string()})
             )?
         );
-        return Ok(());
+        return done();
     }
     print!("{}", binpick::report::picks_table(&result.records));
     println!(
@@ -1238,7 +1253,7 @@ fn run_cell(
         s.sim_time_s / wall_s
     );
     println!("wrote {}", dest.display());
-    Ok(())
+    done()
 }
 
 /// `binpick batch`: every (workpiece, seed) run of the batch (or of one shard), in parallel.
@@ -1311,6 +1326,7 @@ fn batch(a: &BatchArgs) -> Result<()> {
                         deterministic: spec.deterministic,
                         keep_trace: false,
                         keep_scene: false,
+                        stop: Some(stop_on_ctrl_c()),
                     },
                 )
                 .map(|r| RunEntry::from_run(&r, t.elapsed().as_secs_f64()))
@@ -1361,12 +1377,19 @@ fn write_batch(
     dir.write("takt.csv", binpick::batch::csv(&rows))?;
     dir.write("takt.md", &md)?;
     let dest = dir.finish()?;
+    let done = || -> Result<()> {
+        if file.runs.iter().any(|r| r.ended == "interrupted") {
+            Err(Interrupted(dest.display().to_string()).into())
+        } else {
+            Ok(())
+        }
+    };
     if json {
         println!(
             "{}",
             serde_json::to_string_pretty(&json!({"table": rows, "wall_s": wall_s, "dir": dest.display().to_string()}))?
         );
-        return Ok(());
+        return done();
     }
     let (k, n) = file.shard;
     println!(
@@ -1392,7 +1415,7 @@ fn write_batch(
         sim_s / run_wall_s.max(1e-9)
     );
     println!("wrote {}", dest.display());
-    Ok(())
+    done()
 }
 
 /// `binpick merge`: the shards of one batch into its table.
@@ -1420,4 +1443,25 @@ fn merge(dirs: &[PathBuf], out: &Path, json: bool) -> Result<()> {
     }
     let wall_s = merged.runs.iter().map(|r| r.wall_s).sum();
     write_batch(dir, &merged, wall_s, 1, json)
+}
+
+/// Set when Ctrl-C was pressed: runs end after the pick under way and write what they have.
+static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
+
+/// Installs the Ctrl-C handler (once) and returns the flag it sets. A second Ctrl-C, while the
+/// first is being honoured, exits at once with 130.
+fn stop_on_ctrl_c() -> &'static std::sync::atomic::AtomicBool {
+    static INSTALLED: std::sync::Once = std::sync::Once::new();
+    INSTALLED.call_once(|| {
+        let installed = ctrlc::set_handler(|| {
+            if STOP.swap(true, std::sync::atomic::Ordering::Relaxed) {
+                std::process::exit(130);
+            }
+            eprintln!("interrupted: finishing the pick under way and writing the results");
+        });
+        if let Err(e) = installed {
+            eprintln!("warning: Ctrl-C will stop the process without writing results: {e}");
+        }
+    });
+    &STOP
 }

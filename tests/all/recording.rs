@@ -117,3 +117,40 @@ fn run_mcap_holds_what_the_run_did() {
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(!dir.join("run.mcap").exists());
 }
+
+/// Ctrl-C during a run: the pick under way finishes, every file is written and readable, the
+/// summary says `interrupted`, and the exit code is 130.
+#[cfg(unix)]
+#[test]
+fn ctrl_c_finishes_the_files_and_says_interrupted() {
+    let ws = Workspace::new();
+    let out = ws.path("out");
+    let child = std::process::Command::new(env!("CARGO_BIN_EXE_binpick"))
+        .args(["run", "--workpiece", "F", "--picks", "500", "--deterministic", "--out"])
+        .arg(&out)
+        .current_dir(ws.dir.path())
+        .stdout(std::process::Stdio::null())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .unwrap();
+    std::thread::sleep(std::time::Duration::from_millis(1500));
+    let killed = std::process::Command::new("kill")
+        .args(["-INT", &child.id().to_string()])
+        .status()
+        .unwrap();
+    assert!(killed.success());
+    let o = child.wait_with_output().unwrap();
+    let err = String::from_utf8_lossy(&o.stderr);
+    assert_eq!(o.status.code(), Some(130), "{err}");
+    assert!(err.contains("interrupted"), "{err}");
+    let dir = out.join("run-F-seed1-det");
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["ended"], "interrupted");
+    assert!(summary["attempts"].as_u64().unwrap() < 500);
+    let bytes = std::fs::read(dir.join("run.mcap")).unwrap();
+    let summary = mcap::read::Summary::read(&bytes)
+        .unwrap()
+        .expect("finished: a summary section");
+    assert_eq!(summary.channels.len(), 7);
+    assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
+}

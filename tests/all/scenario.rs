@@ -89,6 +89,7 @@ fn run(workpiece: &str, picks: usize, keep_trace: bool) -> (RunResult, RobotMode
             deterministic: true,
             keep_trace,
             keep_scene: false,
+            stop: None,
         },
     )
     .unwrap();
