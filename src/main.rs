@@ -119,6 +119,9 @@ struct BatchArgs {
     /// Charge the cell file's fixed compute budgets instead of measured wall time.
     #[arg(long)]
     deterministic: bool,
+    /// Record every run: `run-<workpiece>-seed<seed>.mcap` in the batch folder.
+    #[arg(long)]
+    record: bool,
     /// Scene file (default: the embedded default cell).
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -1306,6 +1309,12 @@ fn batch(a: &BatchArgs) -> Result<()> {
             .expect("static template")
             .progress_chars("=> "),
     );
+    let name = if n > 1 {
+        format!("{}-shard{k}of{n}", spec.name())
+    } else {
+        spec.name()
+    };
+    let dir = binpick::report::RunDir::create(&a.out, &name)?;
     let wall = std::time::Instant::now();
     let results: Vec<Result<RunEntry, String>> = pool.install(|| {
         use rayon::prelude::*;
@@ -1324,13 +1333,29 @@ fn batch(a: &BatchArgs) -> Result<()> {
                         picks: spec.picks,
                         seed: *seed,
                         deterministic: spec.deterministic,
-                        keep_trace: false,
-                        keep_scene: false,
+                        keep_trace: a.record,
+                        keep_scene: a.record,
                         stop: Some(stop_on_ctrl_c()),
                     },
                 )
-                .map(|r| RunEntry::from_run(&r, t.elapsed().as_secs_f64()))
-                .map_err(|e| format!("workpiece {w} seed {seed}: {e}"));
+                .map_err(|e| format!("workpiece {w} seed {seed}: {e}"))
+                .and_then(|r| {
+                    let entry = RunEntry::from_run(&r, t.elapsed().as_secs_f64());
+                    if a.record {
+                        let path = dir.path(&format!("run-{w}-seed{seed}.mcap"));
+                        let info = binpick::record::RunInfo {
+                            scene: loaded.label.clone(),
+                            workpiece: w.clone(),
+                            seed: *seed,
+                            deterministic: spec.deterministic,
+                        };
+                        std::fs::File::create(&path)
+                            .map_err(binpick::record::RecordError::from)
+                            .and_then(|f| binpick::record::write_mcap(std::io::BufWriter::new(f), &r, &robot, &info))
+                            .map_err(|e| format!("{}: {e}", path.display()))?;
+                    }
+                    Ok(entry)
+                });
                 bar.inc(1);
                 r
             })
@@ -1342,18 +1367,12 @@ fn batch(a: &BatchArgs) -> Result<()> {
     for r in results {
         runs.push(r.map_err(|e| anyhow::anyhow!("cell run failed: {e}"))?);
     }
-    let name = if n > 1 {
-        format!("{}-shard{k}of{n}", spec.name())
-    } else {
-        spec.name()
-    };
     let file = BatchFile {
         version: env!("CARGO_PKG_VERSION").into(),
         spec,
         shard: (k, n),
         runs,
     };
-    let dir = binpick::report::RunDir::create(&a.out, &name)?;
     dir.write_inputs(&loaded, None)?;
     for wp in &workpieces {
         dir.write_workpiece(wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
