@@ -242,8 +242,14 @@ fn shards_merge_into_the_whole_batch() {
         let r = binpick_in(ws.dir.path(), &args);
         assert!(r.status.success(), "{args:?}: {}", stderr(&r));
     };
-    batch(&["--jobs", "2"]);
+    // The whole batch recorded, the shards not: recording must not change the table.
+    batch(&["--jobs", "2", "--record"]);
     let whole_dir = out.join("batch-AE-seeds1-2-picks2-det");
+    for (w, s) in [("A", 1), ("A", 2), ("E", 1), ("E", 2)] {
+        let f = whole_dir.join(format!("run-{w}-seed{s}.mcap"));
+        let bytes = std::fs::read(&f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
+        assert!(mcap::read::Summary::read(&bytes).unwrap().is_some());
+    }
     let whole = std::fs::read_to_string(whole_dir.join("takt.csv")).unwrap();
     std::fs::rename(&whole_dir, out.join("whole")).unwrap();
     batch(&["--shard", "1/2", "--jobs", "1"]);
