@@ -331,6 +331,19 @@ pub struct SceneFrame {
     pub parts: Vec<(PartState, Isometry3<f64>)>,
 }
 
+/// One motion's tool-tip path: as planned and as executed, for recordings.
+#[derive(Debug, Clone)]
+pub struct ToolPath {
+    /// Start of the motion [s].
+    pub t_s: f64,
+    /// Duration as planned [s].
+    pub duration_s: f64,
+    /// Planned tool-tip positions every 10 ms [m, world].
+    pub planned_m: Vec<Vector3<f64>>,
+    /// Executed tool-tip positions every 10 ms of servo time [m, world].
+    pub executed_m: Vec<Vector3<f64>>,
+}
+
 /// A capture's depth image, for recordings.
 #[derive(Debug, Clone)]
 pub struct CaptureImage {
@@ -376,6 +389,8 @@ pub struct RunResult {
     pub scene_frames: Vec<SceneFrame>,
     /// Depth images of the captures, if asked for.
     pub captures: Vec<CaptureImage>,
+    /// Every motion's planned and executed tool path, if asked for.
+    pub tool_paths: Vec<ToolPath>,
     /// The parts' bounding box [m].
     pub part_size_m: [f64; 3],
 }
@@ -447,6 +462,7 @@ struct Cell<'a> {
     trace: Option<Vec<Tick>>,
     scene_frames: Option<Vec<SceneFrame>>,
     captures: Option<Vec<CaptureImage>>,
+    tool_paths: Option<Vec<ToolPath>>,
     parts_lost: usize,
     peak_torque_ratio: f64,
     max_error_rad: f64,
@@ -583,6 +599,15 @@ impl Cell<'_> {
             settle,
         );
         self.arm_state = run.end_state;
+        if let Some(paths) = self.tool_paths.as_mut() {
+            let tip = |q: &JointVector| self.robot.world_from_tool(q).translation.vector;
+            paths.push(ToolPath {
+                t_s: self.world.time_s,
+                duration_s: motion.duration_s(),
+                planned_m: motion.sampled(0.01).iter().map(|s| tip(&s.q)).collect(),
+                executed_m: run.ticks.iter().step_by(10).map(|t| tip(&t.q)).collect(),
+            });
+        }
         let limit = self.robot.torque_limit_nm();
         let t0 = self.world.time_s;
         for t in &run.ticks {
@@ -1070,6 +1095,7 @@ pub fn run(
         trace: opts.keep_trace.then(Vec::new),
         scene_frames: opts.keep_scene.then(Vec::new),
         captures: opts.keep_scene.then(Vec::new),
+        tool_paths: opts.keep_scene.then(Vec::new),
         parts_lost: 0,
         peak_torque_ratio: 0.0,
         max_error_rad: 0.0,
@@ -1233,6 +1259,7 @@ pub fn run(
         trace: cell.trace.unwrap_or_default(),
         scene_frames: cell.scene_frames.unwrap_or_default(),
         captures: cell.captures.unwrap_or_default(),
+        tool_paths: cell.tool_paths.unwrap_or_default(),
         part_size_m: wp.size_m,
     })
 }

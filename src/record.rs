@@ -5,13 +5,14 @@
 //! messages, the joint states (positions, velocities, applied torques beside each joint's torque
 //! limit, tracking errors) at 100 Hz, the arm's link frames as `foxglove.FrameTransforms` at
 //! 50 Hz, all parts as one `foxglove.SceneUpdate` entity (a cube per part, coloured by state) at
-//! 10 Hz, each capture's depth image as `foxglove.RawImage` (16UC1, mm) at its trigger time, and
-//! the takt of every placed pick. Messages are JSON with JSON Schemas; log time is simulation
+//! 10 Hz, each capture's depth image as `foxglove.RawImage` (16UC1, mm) at its trigger time,
+//! every motion's tool path as planned and as executed (`foxglove.SceneUpdate` lines), and the
+//! takt of every placed pick. Messages are JSON with JSON Schemas; log time is simulation
 //! time (ns); chunks are zstd-compressed; the file's metadata names the scene, workpiece, seed,
 //! mode and binpick version. The writer is finished explicitly and its error reported.
 //!
 //! Not yet recorded (the rest of the recording issue): point clouds, camera calibration,
-//! detections and grasp candidates, planned paths, the arm's geometry, and the Rerun file.
+//! detections and grasp candidates, the arm's geometry, and the Rerun file.
 //!
 //! Units: s (ns as log time), rad, rad/s, N m, m. Frames: `world`, and one frame per link named
 //! after it (`world` -> link transforms, from forward kinematics of the executed positions).
@@ -92,6 +93,11 @@ const SCENE_SCHEMA: &str = r#"{"title":"foxglove.SceneUpdate","type":"object","p
 "position":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
 "orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}},
 "size":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
+"color":{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}}}}},
+"lines":{"type":"array","items":{"type":"object","properties":{
+"type":{"type":"integer","description":"0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
+"thickness":{"type":"number"},"scale_invariant":{"type":"boolean"},
+"points":{"type":"array","items":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}},
 "color":{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}}}}}}}}}}"#;
 
 const IMAGE_SCHEMA: &str = r#"{"title":"foxglove.RawImage","type":"object","properties":{
@@ -140,6 +146,7 @@ pub fn write_mcap<W: Write + Seek>(
     let takt = channel("binpick.Takt", "/cycle/takt", TAKT_SCHEMA)?;
     let parts = channel("foxglove.SceneUpdate", "/parts", SCENE_SCHEMA)?;
     let depth = channel("foxglove.RawImage", "/camera/depth", IMAGE_SCHEMA)?;
+    let paths = channel("foxglove.SceneUpdate", "/paths", SCENE_SCHEMA)?;
     // Messages go in log-time order, one channel after another would not: merge them.
     let mut messages: Vec<(u64, u16, Vec<u8>)> = Vec::new();
     for e in &result.events {
@@ -253,6 +260,34 @@ pub fn write_mcap<W: Write + Seek>(
             }))?,
         ));
     }
+    // Each motion's tool path, planned (blue) and executed (orange), shown for the motion's
+    // duration plus a second.
+    let line = |pts: &[nalgebra::Vector3<f64>], (r, g, b): (f64, f64, f64)| {
+        json!({
+            "type": 0, "thickness": 2.0, "scale_invariant": true,
+            "pose": {"position": {"x": 0.0, "y": 0.0, "z": 0.0}, "orientation": {"x": 0.0, "y": 0.0, "z": 0.0, "w": 1.0}},
+            "points": pts.iter().map(|p| json!({"x": p.x, "y": p.y, "z": p.z})).collect::<Vec<_>>(),
+            "color": {"r": r, "g": g, "b": b, "a": 1.0}, "colors": [], "indices": [],
+        })
+    };
+    for (k, p) in result.tool_paths.iter().enumerate() {
+        let life = nanos(p.duration_s + 1.0);
+        messages.push((
+            nanos(p.t_s),
+            paths,
+            serde_json::to_vec(&json!({
+                "deletions": [],
+                "entities": [{
+                    "timestamp": stamp(p.t_s), "frame_id": "world", "id": format!("motion {k}"),
+                    "lifetime": {"sec": life / 1_000_000_000, "nsec": life % 1_000_000_000},
+                    "frame_locked": false, "metadata": [],
+                    "arrows": [], "cubes": [], "spheres": [], "cylinders": [],
+                    "lines": [line(&p.planned_m, (0.2, 0.4, 1.0)), line(&p.executed_m, (1.0, 0.5, 0.0))],
+                    "triangles": [], "texts": [], "models": [],
+                }],
+            }))?,
+        ));
+    }
     // Each capture's depth image at its trigger time (millimetres, 16-bit).
     for c in &result.captures {
         use base64::Engine;
@@ -278,10 +313,11 @@ pub fn write_mcap<W: Write + Seek>(
         (takt, "/cycle/takt"),
         (parts, "/parts"),
         (depth, "/camera/depth"),
+        (paths, "/paths"),
     ];
-    let mut sequence = [0u32; 8];
+    let mut sequence = BTreeMap::<u16, u32>::new();
     for (time, ch, data) in &messages {
-        let seq = &mut sequence[*ch as usize % 8];
+        let seq = sequence.entry(*ch).or_default();
         *seq += 1;
         w.write_to_known_channel(
             &mcap::records::MessageHeader {

@@ -93,6 +93,8 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(count.get("/cycle/takt").copied().unwrap_or(0), takts);
     assert!(takts >= 1);
     assert!(count["/robot/joint_states"] > 100 && count["/tf"] > 50, "{count:?}");
+    // Each pick plays at least its transfer, descent and lift: a path each, planned and executed.
+    assert!(count["/paths"] >= 3 * takts, "{count:?}");
     // One depth image per capture triggered; the parts every 0.1 s of simulated time.
     let run_summary: serde_json::Value =
         serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
@@ -151,6 +153,6 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let summary = mcap::read::Summary::read(&bytes)
         .unwrap()
         .expect("finished: a summary section");
-    assert_eq!(summary.channels.len(), 7);
+    assert_eq!(summary.channels.len(), 8);
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
 }
