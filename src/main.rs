@@ -1196,14 +1196,13 @@ fn run_cell(
     }
     if mcap {
         let path = run.path("run.mcap");
-        let file = std::fs::File::create(&path).with_context(|| path.display().to_string())?;
         let info = binpick::record::RunInfo {
             scene: loaded.label.clone(),
             workpiece: wp.workpiece.name.clone(),
             seed,
             deterministic,
         };
-        binpick::record::write_mcap(std::io::BufWriter::new(file), &result, &robot, &info)
+        binpick::record::write_mcap_file(&path, &result, &robot, &info)
             .with_context(|| format!("writing {}", path.display()))?;
     }
     let dest = run.finish()?;
@@ -1349,9 +1348,7 @@ fn batch(a: &BatchArgs) -> Result<()> {
                             seed: *seed,
                             deterministic: spec.deterministic,
                         };
-                        std::fs::File::create(&path)
-                            .map_err(binpick::record::RecordError::from)
-                            .and_then(|f| binpick::record::write_mcap(std::io::BufWriter::new(f), &r, &robot, &info))
+                        binpick::record::write_mcap_file(&path, &r, &robot, &info)
                             .map_err(|e| format!("{}: {e}", path.display()))?;
                     }
                     Ok(entry)

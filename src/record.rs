@@ -119,8 +119,40 @@ fn stamp(t_s: f64) -> serde_json::Value {
     json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000})
 }
 
+/// A `foxglove.SceneUpdate` with one entity in the world frame made of `cubes` and `lines`,
+/// shown from `t_s` for `lifetime_ns` (0: until replaced).
+fn scene_update(
+    t_s: f64,
+    id: &str,
+    lifetime_ns: u64,
+    cubes: Vec<serde_json::Value>,
+    lines: Vec<serde_json::Value>,
+) -> serde_json::Value {
+    json!({
+        "deletions": [],
+        "entities": [{
+            "timestamp": stamp(t_s), "frame_id": "world", "id": id,
+            "lifetime": {"sec": lifetime_ns / 1_000_000_000, "nsec": lifetime_ns % 1_000_000_000},
+            "frame_locked": false, "metadata": [],
+            "arrows": [], "cubes": cubes, "spheres": [], "cylinders": [], "lines": lines,
+            "triangles": [], "texts": [], "models": [],
+        }],
+    })
+}
+
 /// Counts of what a recording holds, per topic, for checks.
 pub type TopicCounts = BTreeMap<String, u64>;
+
+/// Writes the recording of `result` to a new file at `path` (see [`write_mcap`]).
+pub fn write_mcap_file(
+    path: &std::path::Path,
+    result: &RunResult,
+    robot: &RobotModel,
+    info: &RunInfo,
+) -> Result<TopicCounts, RecordError> {
+    let file = std::fs::File::create(path)?;
+    write_mcap(std::io::BufWriter::new(file), result, robot, info)
+}
 
 /// Writes the recording of `result` (which must have been run with `keep_trace`) to `out`.
 /// Returns the message count per topic.
@@ -249,15 +281,7 @@ pub fn write_mcap<W: Write + Seek>(
         messages.push((
             nanos(f.t_s),
             parts,
-            serde_json::to_vec(&json!({
-                "deletions": [],
-                "entities": [{
-                    "timestamp": stamp(f.t_s), "frame_id": "world", "id": "parts",
-                    "lifetime": {"sec": 0, "nsec": 0}, "frame_locked": false, "metadata": [],
-                    "arrows": [], "cubes": cubes, "spheres": [], "cylinders": [], "lines": [],
-                    "triangles": [], "texts": [], "models": [],
-                }],
-            }))?,
+            serde_json::to_vec(&scene_update(f.t_s, "parts", 0, cubes, Vec::new()))?,
         ));
     }
     // Each motion's tool path, planned (blue) and executed (orange), shown for the motion's
@@ -275,17 +299,16 @@ pub fn write_mcap<W: Write + Seek>(
         messages.push((
             nanos(p.t_s),
             paths,
-            serde_json::to_vec(&json!({
-                "deletions": [],
-                "entities": [{
-                    "timestamp": stamp(p.t_s), "frame_id": "world", "id": format!("motion {k}"),
-                    "lifetime": {"sec": life / 1_000_000_000, "nsec": life % 1_000_000_000},
-                    "frame_locked": false, "metadata": [],
-                    "arrows": [], "cubes": [], "spheres": [], "cylinders": [],
-                    "lines": [line(&p.planned_m, (0.2, 0.4, 1.0)), line(&p.executed_m, (1.0, 0.5, 0.0))],
-                    "triangles": [], "texts": [], "models": [],
-                }],
-            }))?,
+            serde_json::to_vec(&scene_update(
+                p.t_s,
+                &format!("motion {k}"),
+                life,
+                Vec::new(),
+                vec![
+                    line(&p.planned_m, (0.2, 0.4, 1.0)),
+                    line(&p.executed_m, (1.0, 0.5, 0.0)),
+                ],
+            ))?,
         ));
     }
     // Each capture's depth image at its trigger time (millimetres, 16-bit).
