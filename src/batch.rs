@@ -172,11 +172,7 @@ impl RunEntry {
             seed: s.seed,
             attempts: s.attempts,
             placed: s.placed,
-            takts_s: placed
-                .iter()
-                .filter(|p| !p.first_of_pile)
-                .filter_map(|p| p.takt_s)
-                .collect(),
+            takts_s: crate::cycle::takts_in_stats(&r.records),
             release_span: crate::cycle::release_span(&r.records),
             pick_s: placed.iter().map(|p| p.pick_s).collect(),
             place_s: placed.iter().map(|p| p.place_s).collect(),

@@ -1392,6 +1392,15 @@ fn pick_and_place(
     Ok(Outcome::Placed)
 }
 
+/// The takts the statistics are over [s]: placed picks after the first of their pile.
+pub fn takts_in_stats(records: &[PickRecord]) -> Vec<f64> {
+    records
+        .iter()
+        .filter(|r| r.outcome == Outcome::Placed && !r.first_of_pile)
+        .filter_map(|r| r.takt_s)
+        .collect()
+}
+
 /// Time from the first to the last release [s] and the releases after the first: their ratio is
 /// the end-to-end takt. (0, 0) below two releases.
 pub fn release_span(records: &[PickRecord]) -> (f64, usize) {
@@ -1417,11 +1426,7 @@ fn summarise(
         .copied()
         .filter(|r| r.outcome == Outcome::Placed)
         .collect();
-    let takts: Vec<f64> = placed
-        .iter()
-        .filter(|r| !r.first_of_pile)
-        .filter_map(|r| r.takt_s)
-        .collect();
+    let takts = takts_in_stats(records);
     let mean = |v: &mut dyn Iterator<Item = f64>| {
         let (s, n) = v.fold((0.0, 0usize), |(s, n), x| (s + x, n + 1));
         if n == 0 { f64::NAN } else { s / n as f64 }

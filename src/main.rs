@@ -1145,6 +1145,14 @@ fn bench_accel(runs: usize, json: bool) -> Result<()> {
     Ok(())
 }
 
+/// `--picks` of `run` and `batch`: 1 to 10,000.
+fn check_picks(picks: usize) -> Result<()> {
+    if picks == 0 || picks > 10_000 {
+        return Err(InputError(format!("--picks must be within [1, 10000], got {picks}")).into());
+    }
+    Ok(())
+}
+
 /// `binpick run`: one cell run; prints the per-pick table and the summary, writes the run folder.
 #[allow(clippy::too_many_arguments)]
 fn run_cell(
@@ -1158,9 +1166,7 @@ fn run_cell(
     json: bool,
 ) -> Result<()> {
     use binpick::cycle::RunOptions;
-    if picks == 0 || picks > 10_000 {
-        return Err(InputError(format!("--picks must be within [1, 10000], got {picks}")).into());
-    }
+    check_picks(picks)?;
     let (loaded, wp, robot) = load_cell(scene, workpiece)?;
     let wall = std::time::Instant::now();
     let result = binpick::cycle::run(
@@ -1262,9 +1268,7 @@ fn run_cell(
 fn batch(a: &BatchArgs) -> Result<()> {
     use binpick::batch::{BatchFile, BatchSpec, RunEntry, parse_seeds, parse_shard, shard};
     use binpick::cycle::RunOptions;
-    if a.picks == 0 || a.picks > 10_000 {
-        return Err(InputError(format!("--picks must be within [1, 10000], got {}", a.picks)).into());
-    }
+    check_picks(a.picks)?;
     let seeds = parse_seeds(&a.seeds).map_err(|e| InputError(e.to_string()))?;
     let (k, n) = match &a.shard {
         Some(t) => parse_shard(t).map_err(|e| InputError(e.to_string()))?,
