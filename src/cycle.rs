@@ -322,14 +322,7 @@ pub struct RunOptions {
 /// Period of the part-pose snapshots kept for recordings [s].
 pub const SCENE_FRAME_S: f64 = 0.1;
 
-/// Every part's state and pose at one time, for recordings.
-#[derive(Debug, Clone)]
-pub struct SceneFrame {
-    /// Simulation time [s].
-    pub t_s: f64,
-    /// Per part: state and `world_from_part`.
-    pub parts: Vec<(PartState, Isometry3<f64>)>,
-}
+pub use crate::physics::SceneFrame;
 
 /// One motion's tool-tip path: as planned and as executed, for recordings.
 #[derive(Debug, Clone)]
@@ -353,7 +346,36 @@ pub struct CaptureImage {
     pub size_px: (usize, usize),
     /// Depth per pixel [mm], 0 where there is no return.
     pub depth_mm: Vec<u16>,
+    /// The capture's point cloud for recordings: the world points [m] of every
+    /// [`CLOUD_EVERY_PX`]-th pixel in each direction that has a return, row-major. (The depth
+    /// image keeps every pixel.)
+    pub points_world_m: Vec<[f32; 3]>,
 }
+
+/// Recorded point clouds keep every this many pixels in each image direction (a quarter of the
+/// points: 0.4 MB instead of 1 MB per capture).
+pub const CLOUD_EVERY_PX: usize = 2;
+
+/// A recognition result as the grasp selector saw it, for recordings.
+#[derive(Debug, Clone)]
+pub struct RecognitionRecord {
+    /// When the result arrived [s].
+    pub t_s: f64,
+    /// Pick the result was for.
+    pub pick: Option<usize>,
+    /// Recognised parts: estimated `world_from_part` and the visible fraction.
+    pub detections: Vec<(Isometry3<f64>, f64)>,
+    /// The best feasible grasps, best first (at most [`RECORDED_CANDIDATES`]): the tool at the
+    /// grasp and the score.
+    pub candidates: Vec<(Isometry3<f64>, f64)>,
+    /// Which candidate was chosen (the best one not at a failed spot with a clear approach).
+    pub chosen: Option<usize>,
+    /// Why nothing was chosen, if so.
+    pub reason: Option<String>,
+}
+
+/// Most grasp candidates a [`RecognitionRecord`] keeps.
+pub const RECORDED_CANDIDATES: usize = 20;
 
 /// A cycle event, for logs and recordings.
 #[derive(Debug, Clone, Serialize)]
@@ -391,6 +413,10 @@ pub struct RunResult {
     pub captures: Vec<CaptureImage>,
     /// Every motion's planned and executed tool path, if asked for.
     pub tool_paths: Vec<ToolPath>,
+    /// Every recognition result with the grasp candidates, if asked for.
+    pub recognitions: Vec<RecognitionRecord>,
+    /// The depth camera (pose and intrinsics).
+    pub camera: crate::sensor::Camera,
     /// The parts' bounding box [m].
     pub part_size_m: [f64; 3],
 }
@@ -460,8 +486,8 @@ struct Cell<'a> {
     spans: Vec<Span>,
     markers: Vec<Marker>,
     trace: Option<Vec<Tick>>,
-    scene_frames: Option<Vec<SceneFrame>>,
     captures: Option<Vec<CaptureImage>>,
+    recognitions: Option<Vec<RecognitionRecord>>,
     tool_paths: Option<Vec<ToolPath>>,
     parts_lost: usize,
     peak_torque_ratio: f64,
@@ -493,18 +519,6 @@ impl Cell<'_> {
     /// of the arm or a part pressed into the tray is returned; a non-finite state ends the run.
     fn step(&mut self) -> Result<Option<String>, CycleError> {
         let result = self.world.step();
-        if let Some(frames) = self.scene_frames.as_mut()
-            && frames
-                .last()
-                .is_none_or(|f| self.world.time_s + 1e-9 >= f.t_s + SCENE_FRAME_S)
-        {
-            frames.push(SceneFrame {
-                t_s: self.world.time_s,
-                parts: (0..self.world.parts.len())
-                    .map(|i| (self.world.parts[i].state, self.world.part_pose(i)))
-                    .collect(),
-            });
-        }
         if let Some(job) = self.job.as_mut()
             && let Some(problem) = self.sensor.watch(job, &self.world)
         {
@@ -562,6 +576,17 @@ impl Cell<'_> {
                         .depth_m
                         .iter()
                         .map(|d| (d * 1000.0).round() as u16)
+                        .collect(),
+                    points_world_m: job
+                        .capture
+                        .points_world
+                        .iter()
+                        .enumerate()
+                        .filter(|(k, p)| {
+                            let (u, v) = (k % job.capture.width, k / job.capture.width);
+                            u % CLOUD_EVERY_PX == 0 && v % CLOUD_EVERY_PX == 0 && p[0].is_finite()
+                        })
+                        .map(|(_, p)| *p)
                         .collect(),
                 });
             }
@@ -914,19 +939,45 @@ impl Cell<'_> {
                 break;
             }
         }
-        let Some((grasp, env, empty)) = chosen else {
+        let why = chosen.is_none().then(|| {
             let reasons = plan
                 .rejected_counts()
                 .iter()
                 .map(|(k, v)| format!("{k} {v}"))
                 .collect::<Vec<_>>()
                 .join(", ");
-            let why = if plan.ranked.is_empty() {
+            if plan.ranked.is_empty() {
                 format!("no feasible grasp ({reasons})")
             } else {
                 format!("no grasp with a clear approach among {}", plan.ranked.len().min(8))
-            };
-            return Err(why);
+            }
+        });
+        if let Some(records) = self.recognitions.as_mut() {
+            let chosen_at = chosen.as_ref().and_then(|(c, _, _)| {
+                plan.ranked
+                    .iter()
+                    .take(RECORDED_CANDIDATES)
+                    .position(|g| g.world_from_tool == c.world_from_tool)
+            });
+            records.push(RecognitionRecord {
+                t_s: job.ready_s,
+                pick: self.pick,
+                detections: detections
+                    .iter()
+                    .map(|d| (d.world_from_part, d.visible_fraction))
+                    .collect(),
+                candidates: plan
+                    .ranked
+                    .iter()
+                    .take(RECORDED_CANDIDATES)
+                    .map(|g| (g.world_from_tool, g.score.total))
+                    .collect(),
+                chosen: chosen_at,
+                reason: why.clone(),
+            });
+        }
+        let Some((grasp, env, empty)) = chosen else {
+            return Err(why.unwrap_or_default());
         };
         let grasp_s = wall.elapsed().as_secs_f64();
         // Pick: transfer to the approach pose, straight descent.
@@ -1062,6 +1113,9 @@ pub fn run(
     let wp = &workpiece.workpiece;
     let shape = PartShape::build(wp, &workpiece.source)?;
     let mut world = World::new(&scene.scene, robot, shape.clone());
+    if opts.keep_scene {
+        world.record_parts_every(SCENE_FRAME_S);
+    }
     let pile_count = wp.pile_count as usize;
     world.build_pile(&PileOptions::new(pile_count, opts.seed))?;
     let sensor = Sensor::new(&scene.scene.sensor, &world, opts.seed)
@@ -1093,8 +1147,8 @@ pub fn run(
         spans: Vec::new(),
         markers: Vec::new(),
         trace: opts.keep_trace.then(Vec::new),
-        scene_frames: opts.keep_scene.then(Vec::new),
         captures: opts.keep_scene.then(Vec::new),
+        recognitions: opts.keep_scene.then(Vec::new),
         tool_paths: opts.keep_scene.then(Vec::new),
         parts_lost: 0,
         peak_torque_ratio: 0.0,
@@ -1133,7 +1187,19 @@ pub fn run(
         };
         let mut rec = PickRecord::new(index, &job, capture_s);
         let prepared = match detections.as_deref() {
-            None | Some([]) => Err(None),
+            None | Some([]) => {
+                if let Some(records) = cell.recognitions.as_mut() {
+                    records.push(RecognitionRecord {
+                        t_s: job.ready_s,
+                        pick: Some(index),
+                        detections: Vec::new(),
+                        candidates: Vec::new(),
+                        chosen: None,
+                        reason: Some("nothing detected".into()),
+                    });
+                }
+                Err(None)
+            }
             Some(dets) => cell.prepare(dets, &job).map_err(Some),
         };
         let (mut prep, wall) = match prepared {
@@ -1257,9 +1323,11 @@ pub fn run(
         markers: cell.markers,
         events: cell.events,
         trace: cell.trace.unwrap_or_default(),
-        scene_frames: cell.scene_frames.unwrap_or_default(),
+        scene_frames: cell.world.take_part_frames(),
         captures: cell.captures.unwrap_or_default(),
         tool_paths: cell.tool_paths.unwrap_or_default(),
+        recognitions: cell.recognitions.unwrap_or_default(),
+        camera: cell.sensor.camera.clone(),
         part_size_m: wp.size_m,
     })
 }

@@ -69,9 +69,8 @@ enum Command {
         /// Folder the run folder is written into.
         #[arg(long, default_value = "runs")]
         out: PathBuf,
-        /// Do not write the MCAP recording (`run.mcap`).
-        #[arg(long)]
-        no_mcap: bool,
+        #[command(flatten)]
+        skip: SkipFormats,
         /// Machine-readable JSON output.
         #[arg(long)]
         json: bool,
@@ -98,6 +97,27 @@ enum Command {
     },
 }
 
+/// Recording formats a user can skip (`run` records both by default, `batch --record` too).
+#[derive(Args, Clone, Copy)]
+struct SkipFormats {
+    /// Do not write the Rerun recording (`.rrd`).
+    #[arg(long)]
+    no_rrd: bool,
+    /// Do not write the MCAP recording (`.mcap`).
+    #[arg(long)]
+    no_mcap: bool,
+}
+
+impl SkipFormats {
+    /// The formats to write when recording.
+    fn formats(self, record: bool) -> binpick::record::Formats {
+        binpick::record::Formats {
+            rrd: record && !self.no_rrd,
+            mcap: record && !self.no_mcap,
+        }
+    }
+}
+
 /// Arguments of `binpick batch`.
 #[derive(Args)]
 struct BatchArgs {
@@ -119,9 +139,11 @@ struct BatchArgs {
     /// Charge the cell file's fixed compute budgets instead of measured wall time.
     #[arg(long)]
     deterministic: bool,
-    /// Record every run: `run-<workpiece>-seed<seed>.mcap` in the batch folder.
+    /// Record every run: `run-<workpiece>-seed<seed>.rrd` and `.mcap` in the batch folder.
     #[arg(long)]
     record: bool,
+    #[command(flatten)]
+    skip: SkipFormats,
     /// Scene file (default: the embedded default cell).
     #[arg(long)]
     scene: Option<PathBuf>,
@@ -337,7 +359,7 @@ fn run(cli: Cli) -> Result<()> {
             deterministic,
             scene,
             out,
-            no_mcap,
+            skip,
             json,
         } => run_cell(
             &workpiece,
@@ -346,7 +368,7 @@ fn run(cli: Cli) -> Result<()> {
             deterministic,
             scene.as_deref(),
             &out,
-            !no_mcap,
+            skip.formats(true),
             json,
         ),
         Command::Pile(a) => pile(&a),
@@ -1162,7 +1184,7 @@ fn run_cell(
     deterministic: bool,
     scene: Option<&Path>,
     out: &Path,
-    mcap: bool,
+    formats: binpick::record::Formats,
     json: bool,
 ) -> Result<()> {
     use binpick::cycle::RunOptions;
@@ -1177,8 +1199,8 @@ fn run_cell(
             picks,
             seed,
             deterministic,
-            keep_trace: mcap,
-            keep_scene: mcap,
+            keep_trace: formats.any(),
+            keep_scene: formats.any(),
             stop: Some(stop_on_ctrl_c()),
         },
     )
@@ -1200,17 +1222,15 @@ fn run_cell(
     if let Some(steady) = steady {
         run.write("timechart-steady.svg", steady)?;
     }
-    if mcap {
-        let path = run.path("run.mcap");
-        let info = binpick::record::RunInfo {
-            scene: loaded.label.clone(),
-            workpiece: wp.workpiece.name.clone(),
-            seed,
-            deterministic,
-        };
-        binpick::record::write_mcap_file(&path, &result, &robot, &info)
-            .with_context(|| format!("writing {}", path.display()))?;
-    }
+    let info = binpick::record::RunInfo {
+        scene: loaded.label.clone(),
+        workpiece: wp.workpiece.name.clone(),
+        seed,
+        deterministic,
+        picks,
+    };
+    binpick::record::write_recordings(run.staging_dir(), "run", formats, &result, &robot, &loaded.scene, &info)
+        .map_err(|(path, e)| anyhow::anyhow!("writing {}: {e}", path.display()))?;
     let dest = run.finish()?;
     let s = &result.summary;
     let done = || -> Result<()> {
@@ -1269,6 +1289,7 @@ fn batch(a: &BatchArgs) -> Result<()> {
     use binpick::batch::{BatchFile, BatchSpec, RunEntry, parse_seeds, parse_shard, shard};
     use binpick::cycle::RunOptions;
     check_picks(a.picks)?;
+    let formats = a.skip.formats(a.record);
     let seeds = parse_seeds(&a.seeds).map_err(|e| InputError(e.to_string()))?;
     let (k, n) = match &a.shard {
         Some(t) => parse_shard(t).map_err(|e| InputError(e.to_string()))?,
@@ -1336,25 +1357,31 @@ fn batch(a: &BatchArgs) -> Result<()> {
                         picks: spec.picks,
                         seed: *seed,
                         deterministic: spec.deterministic,
-                        keep_trace: a.record,
-                        keep_scene: a.record,
+                        keep_trace: formats.any(),
+                        keep_scene: formats.any(),
                         stop: Some(stop_on_ctrl_c()),
                     },
                 )
                 .map_err(|e| format!("workpiece {w} seed {seed}: {e}"))
                 .and_then(|r| {
                     let entry = RunEntry::from_run(&r, t.elapsed().as_secs_f64());
-                    if a.record {
-                        let path = dir.path(&format!("run-{w}-seed{seed}.mcap"));
-                        let info = binpick::record::RunInfo {
-                            scene: loaded.label.clone(),
-                            workpiece: w.clone(),
-                            seed: *seed,
-                            deterministic: spec.deterministic,
-                        };
-                        binpick::record::write_mcap_file(&path, &r, &robot, &info)
-                            .map_err(|e| format!("{}: {e}", path.display()))?;
-                    }
+                    let info = binpick::record::RunInfo {
+                        scene: loaded.label.clone(),
+                        workpiece: w.clone(),
+                        seed: *seed,
+                        deterministic: spec.deterministic,
+                        picks: spec.picks,
+                    };
+                    binpick::record::write_recordings(
+                        dir.staging_dir(),
+                        &format!("run-{w}-seed{seed}"),
+                        formats,
+                        &r,
+                        &robot,
+                        &loaded.scene,
+                        &info,
+                    )
+                    .map_err(|(path, e)| format!("{}: {e}", path.display()))?;
                     Ok(entry)
                 });
                 bar.inc(1);

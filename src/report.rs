@@ -71,6 +71,11 @@ impl RunDir {
         self.staging.join(file)
     }
 
+    /// The folder files are written into until [`RunDir::finish`] moves it into place.
+    pub fn staging_dir(&self) -> &Path {
+        &self.staging
+    }
+
     /// Writes a file into the run folder.
     pub fn write(&self, file: &str, bytes: impl AsRef<[u8]>) -> Result<(), RunDirError> {
         let p = self.staging.join(file);

@@ -349,6 +349,17 @@ pub struct World {
     step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
     tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
+    /// Part-pose snapshots for recordings, and their period [s] (see [`World::record_parts_every`]).
+    part_frames: Option<(f64, Vec<SceneFrame>)>,
+}
+
+/// Every part's state and pose at one time, for recordings.
+#[derive(Debug, Clone)]
+pub struct SceneFrame {
+    /// Simulation time [s].
+    pub t_s: f64,
+    /// Per part, in insertion order: state and `world_from_part`.
+    pub parts: Vec<(PartState, Isometry3<f64>)>,
 }
 
 fn arm_collider(shape: SharedShape, pose: Pose, tag: Tag, with_fixed: bool) -> Collider {
@@ -417,6 +428,7 @@ impl World {
                 .into_iter()
                 .chain(overlap::tray_pieces(&scene.place_tray.tray))
                 .collect(),
+            part_frames: None,
         };
         // Table.
         let t = &scene.table;
@@ -641,7 +653,41 @@ impl World {
         self.steps += 1;
         self.substeps += n as u64;
         self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
+        self.snapshot_parts();
         self.check_health()
+    }
+
+    /// From now on, every step that is at least `period_s` after the last snapshot records every
+    /// part's state and pose (pile pours and refills included); [`World::take_part_frames`] hands
+    /// them over.
+    pub fn record_parts_every(&mut self, period_s: f64) {
+        self.part_frames = Some((period_s, Vec::new()));
+    }
+
+    /// The part snapshots recorded so far (empty unless [`World::record_parts_every`] was called).
+    pub fn take_part_frames(&mut self) -> Vec<SceneFrame> {
+        self.part_frames
+            .as_mut()
+            .map(|(_, f)| std::mem::take(f))
+            .unwrap_or_default()
+    }
+
+    fn snapshot_parts(&mut self) {
+        let Some((period_s, frames)) = self.part_frames.as_ref() else {
+            return;
+        };
+        if frames.last().is_some_and(|f| self.time_s + 1e-9 < f.t_s + period_s) {
+            return;
+        }
+        let frame = SceneFrame {
+            t_s: self.time_s,
+            parts: (0..self.parts.len())
+                .map(|i| (self.parts[i].state, self.part_pose(i)))
+                .collect(),
+        };
+        if let Some((_, frames)) = self.part_frames.as_mut() {
+            frames.push(frame);
+        }
     }
 
     /// How many substeps the next step needs so that no awake part moves more than

@@ -1,7 +1,52 @@
-//! Recordings: `binpick run` writes `run.mcap`; read back with the mcap crate's reader and
-//! compared with what the run did (its events, its placed picks, its metadata).
+//! Recordings: `binpick run` writes `run.rrd` and `run.mcap`; each is read back with its format's
+//! own reader (the rerun decoder, the mcap crate's reader) and compared with what the run did
+//! (its events, captures, recognition results, placed picks, properties) and with each other.
+
+use std::collections::BTreeMap;
 
 use crate::support::{Workspace, binpick_in, stderr};
+
+/// What an .rrd holds, read with rerun's own decoder: rows per entity path (static rows counted
+/// apart), the timelines of the temporal chunks, the property names, the application id.
+#[derive(Debug, Default)]
+struct RrdContents {
+    rows: BTreeMap<String, usize>,
+    static_rows: BTreeMap<String, usize>,
+    timelines: std::collections::BTreeSet<String>,
+    properties: std::collections::BTreeSet<String>,
+    stores: usize,
+}
+
+fn read_rrd(path: &std::path::Path) -> RrdContents {
+    use rerun::external::re_log_encoding::DecoderApp;
+    use rerun::external::re_log_types::LogMsg;
+    let file = std::io::BufReader::new(std::fs::File::open(path).unwrap());
+    let mut c = RrdContents::default();
+    for msg in DecoderApp::decode_eager(file).expect("an rrd stream") {
+        match msg.expect("every message decodes") {
+            LogMsg::SetStoreInfo(info) => {
+                assert_eq!(info.info.application_id().as_str(), "binpick");
+                c.stores += 1;
+            }
+            LogMsg::ArrowMsg(_, arrow) => {
+                let chunk = rerun::log::Chunk::from_arrow_msg(&arrow).expect("a chunk");
+                let entity = chunk.entity_path().to_string();
+                if entity.starts_with("/__properties") {
+                    c.properties
+                        .extend(chunk.components_identifiers().map(|i| i.to_string()));
+                }
+                if chunk.is_static() {
+                    *c.static_rows.entry(entity).or_default() += chunk.num_rows();
+                } else {
+                    c.timelines.extend(chunk.timelines().keys().map(|t| t.to_string()));
+                    *c.rows.entry(entity).or_default() += chunk.num_rows();
+                }
+            }
+            LogMsg::BlueprintActivationCommand(_) => {}
+        }
+    }
+    c
+}
 
 #[test]
 fn run_mcap_holds_what_the_run_did() {
@@ -39,11 +84,35 @@ fn run_mcap_holds_what_the_run_did() {
         [
             "binpick.CycleEvent",
             "binpick.JointState",
+            "binpick.Properties",
             "binpick.Takt",
+            "foxglove.CameraCalibration",
             "foxglove.FrameTransforms",
             "foxglove.Log",
+            "foxglove.PointCloud",
             "foxglove.RawImage",
             "foxglove.SceneUpdate"
+        ]
+    );
+    let mut topics: Vec<&str> = summary.channels.values().map(|c| c.topic.as_str()).collect();
+    topics.sort();
+    assert_eq!(
+        topics,
+        [
+            "/camera/calibration",
+            "/camera/depth",
+            "/camera/points",
+            "/cell",
+            "/cycle/events",
+            "/cycle/properties",
+            "/cycle/takt",
+            "/log",
+            "/parts",
+            "/paths",
+            "/recognition",
+            "/robot/geometry",
+            "/robot/joint_states",
+            "/tf"
         ]
     );
     assert!(summary.schemas.values().all(|s| s.encoding == "jsonschema"));
@@ -56,7 +125,8 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(meta.metadata["workpiece"], "E");
     assert_eq!(meta.metadata["deterministic"], "true");
 
-    let mut count = std::collections::BTreeMap::<String, usize>::new();
+    let mut count = BTreeMap::<String, usize>::new();
+    let mut chosen = 0;
     let mut last = 0u64;
     let mut parts_span = (u64::MAX, 0u64);
     for m in mcap::MessageStream::new(&bytes).unwrap() {
@@ -73,6 +143,34 @@ fn run_mcap_holds_what_the_run_did() {
             let (w, h) = (v["width"].as_u64().unwrap(), v["height"].as_u64().unwrap());
             assert_eq!(data.len() as u64, 2 * w * h);
             assert_eq!(v["encoding"], "16UC1");
+        }
+        if m.channel.topic == "/camera/points" {
+            use base64::Engine;
+            let data = base64::engine::general_purpose::STANDARD
+                .decode(v["data"].as_str().unwrap())
+                .unwrap();
+            assert_eq!(v["point_stride"], 12);
+            assert!(!data.is_empty() && data.len().is_multiple_of(12));
+            // Points lie in the cell: above the table, below the camera.
+            for p in data.chunks(12) {
+                let z = f32::from_le_bytes(p[8..12].try_into().unwrap());
+                assert!((-0.01..1.1).contains(&z), "point at z {z}");
+            }
+        }
+        if m.channel.topic == "/recognition" {
+            let entities = v["entities"].as_array().unwrap();
+            assert_eq!(entities.len(), 2, "detections and candidates");
+            chosen += entities[1]["texts"].as_array().unwrap().len();
+        }
+        if m.channel.topic == "/robot/geometry" {
+            for e in v["entities"].as_array().unwrap() {
+                assert_eq!(e["frame_locked"], true);
+                let shapes = ["cubes", "cylinders", "spheres"]
+                    .iter()
+                    .map(|k| e[k].as_array().unwrap().len())
+                    .sum::<usize>();
+                assert!(shapes > 0, "{e}");
+            }
         }
         if m.channel.topic == "/parts" {
             parts_span = (parts_span.0.min(m.log_time), parts_span.1.max(m.log_time));
@@ -112,12 +210,71 @@ fn run_mcap_holds_what_the_run_did() {
     );
     assert!(last as f64 * 1e-9 <= run_summary["sim_time_s"].as_f64().unwrap() + 1e-6);
 
-    // --no-mcap: no recording.
-    let mut args = args.to_vec();
-    args.push("--no-mcap");
-    let o = binpick_in(ws.dir.path(), &args);
-    assert!(o.status.success(), "{}", stderr(&o));
-    assert!(!dir.join("run.mcap").exists());
+    let captures = run_summary["captures"][0].as_u64().unwrap() as usize;
+    assert_eq!(count["/camera/points"], captures);
+    assert_eq!(count["/camera/calibration"], captures);
+    let ready = events.iter().filter(|e| e["kind"] == "recognition_ready").count();
+    assert_eq!(count["/recognition"], ready, "a recognition message per result");
+    let grasps = events.iter().filter(|e| e["kind"] == "grasp_chosen").count();
+    assert_eq!(chosen, grasps, "the chosen candidate is marked once per chosen grasp");
+    assert_eq!(count["/cell"], 1);
+    assert_eq!(count["/robot/geometry"], 1);
+
+    // The Rerun file, read with rerun's decoder: the same run.
+    let rrd = read_rrd(&dir.join("run.rrd"));
+    assert_eq!(rrd.stores, 1, "{rrd:?}");
+    let rows = |e: &str| rrd.rows.get(e).copied().unwrap_or(0);
+    assert_eq!(
+        rrd.timelines,
+        ["sim_time", "step"].iter().map(|s| s.to_string()).collect(),
+        "simulation time only, no wall clock"
+    );
+    for p in ["seed", "workpiece", "scene", "deterministic", "binpick_version"] {
+        assert!(
+            rrd.properties.iter().any(|c| c.ends_with(p)),
+            "property {p}: {:?}",
+            rrd.properties
+        );
+    }
+    assert_eq!(rows("/events"), events.len());
+    assert_eq!(rows("/cycle/takt"), takts);
+    assert_eq!(rows("/world/camera/depth"), captures);
+    assert_eq!(rows("/world/cloud"), captures);
+    assert_eq!(rows("/world/recognition/detections"), ready);
+    assert_eq!(rows("/world/recognition/candidates"), ready);
+    assert_eq!(
+        rows("/world/parts"),
+        count["/parts"],
+        "parts at the same times in both files"
+    );
+    assert_eq!(rows("/world/paths/planned"), count["/paths"]);
+    assert_eq!(rows("/joints/position"), count["/robot/joint_states"]);
+    for j in 1..=6 {
+        assert_eq!(rows(&format!("/joints/torque/J{j}")), count["/robot/joint_states"]);
+        assert_eq!(rows(&format!("/world/arm/link_{j}")), count["/tf"]);
+    }
+    for e in ["/world/cell", "/world/camera", "/world/arm/link_3/geometry/0"] {
+        assert!(rrd.static_rows.get(e).copied().unwrap_or(0) >= 1, "{e} static: {rrd:?}");
+    }
+
+    // --no-rrd and --no-mcap each skip one file; both skip both.
+    for (skip, rrd_kept, mcap_kept) in [
+        (&["--no-rrd"][..], false, true),
+        (&["--no-mcap"][..], true, false),
+        (&["--no-rrd", "--no-mcap"][..], false, false),
+    ] {
+        let mut a = args.to_vec();
+        a.extend_from_slice(skip);
+        let o = binpick_in(ws.dir.path(), &a);
+        assert!(o.status.success(), "{}", stderr(&o));
+        assert_eq!(dir.join("run.rrd").exists(), rrd_kept, "{skip:?}");
+        assert_eq!(dir.join("run.mcap").exists(), mcap_kept, "{skip:?}");
+        assert!(
+            std::fs::read_dir(&dir)
+                .unwrap()
+                .all(|f| !f.unwrap().path().to_string_lossy().ends_with(".partial"))
+        );
+    }
 }
 
 /// Ctrl-C during a run: the pick under way finishes, every file is written and readable, the
@@ -153,6 +310,9 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let summary = mcap::read::Summary::read(&bytes)
         .unwrap()
         .expect("finished: a summary section");
-    assert_eq!(summary.channels.len(), 8);
+    assert_eq!(summary.channels.len(), 14);
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
+    let rrd = read_rrd(&dir.join("run.rrd"));
+    assert_eq!(rrd.stores, 1);
+    assert!(rrd.rows.get("/events").copied().unwrap_or(0) > 0, "{rrd:?}");
 }

@@ -249,6 +249,8 @@ fn shards_merge_into_the_whole_batch() {
         let f = whole_dir.join(format!("run-{w}-seed{s}.mcap"));
         let bytes = std::fs::read(&f).unwrap_or_else(|e| panic!("{}: {e}", f.display()));
         assert!(mcap::read::Summary::read(&bytes).unwrap().is_some());
+        let rrd = whole_dir.join(format!("run-{w}-seed{s}.rrd"));
+        assert!(std::fs::metadata(&rrd).is_ok_and(|m| m.len() > 0), "{}", rrd.display());
     }
     let whole = std::fs::read_to_string(whole_dir.join("takt.csv")).unwrap();
     std::fs::rename(&whole_dir, out.join("whole")).unwrap();

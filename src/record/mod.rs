@@ -1,0 +1,165 @@
+//! Record stage: a finished run written to files a user opens days later, offline, to see why a
+//! pick was slow or failed.
+//!
+//! Job: from a [`RunResult`] (run with `keep_trace` and `keep_scene`), write
+//! - `run.rrd` for the Rerun viewer ([`rrd`]), and
+//! - `run.mcap` for Foxglove ([`mcap`]),
+//!
+//! with the same content: the cell (table, trays, obstacles, the sensor's frustum), the arm (its
+//! collision primitives once, its link frames over time), all parts as one batched entity (bounding
+//! boxes coloured by state: in the pick tray, held, placed) from the first pile pour on, each
+//! capture (camera intrinsics and pose, depth image, point cloud) at its trigger time, each
+//! recognition result (detections, ranked grasp candidates with the chosen one marked) when it
+//! arrived, every motion's tool path as planned and as executed, the joint positions, velocities
+//! and torques beside each joint's torque limit, the cycle's events as log entries and the takt of
+//! every placed pick.
+//!
+//! Time: simulation time only (no wall clock): Rerun timelines `sim_time` (s) and `step` (physics
+//! steps since the start), MCAP log time in ns of simulation time. Decimation: joint states
+//! 100 Hz, link frames 50 Hz, parts 10 Hz (the servo runs at 1 kHz); captures at their own times.
+//!
+//! Units: s, rad, rad/s, N m, m (depth images in mm). Frames: `world` (the cell's frame, z up);
+//! the camera's optical frame (x right, y down, z forward); one frame per link, named after it.
+
+pub mod mcap;
+pub mod rrd;
+
+use std::path::{Path, PathBuf};
+
+use crate::config::Scene;
+use crate::cycle::{CycleEvent, RunResult};
+use crate::physics::PartState;
+use crate::robot::RobotModel;
+
+pub use self::mcap::{TopicCounts, write_mcap, write_mcap_file};
+pub use self::rrd::{EntityCounts, write_rrd_file};
+
+/// Why a recording could not be written.
+#[derive(Debug, thiserror::Error)]
+pub enum RecordError {
+    /// The MCAP writer failed.
+    #[error("mcap: {0}")]
+    Mcap(#[from] ::mcap::McapError),
+    /// A message could not be serialised.
+    #[error("json: {0}")]
+    Json(#[from] serde_json::Error),
+    /// The Rerun SDK refused a stream, a log call or a flush.
+    #[error("rerun: {0}")]
+    Rerun(String),
+    /// Writing the file failed.
+    #[error("{0}")]
+    Io(#[from] std::io::Error),
+}
+
+/// What the recording's metadata (MCAP) and recording properties (Rerun) say about the run.
+#[derive(Debug, Clone)]
+pub struct RunInfo {
+    /// Scene label (file or `embedded default`).
+    pub scene: String,
+    /// Workpiece name.
+    pub workpiece: String,
+    /// Seed.
+    pub seed: u64,
+    /// Deterministic compute budgets.
+    pub deterministic: bool,
+    /// Picks asked for.
+    pub picks: usize,
+}
+
+impl RunInfo {
+    /// The properties as (key, value) text pairs, in a fixed order.
+    pub fn properties(&self) -> Vec<(&'static str, String)> {
+        vec![
+            ("scene", self.scene.clone()),
+            ("workpiece", self.workpiece.clone()),
+            ("seed", self.seed.to_string()),
+            ("deterministic", self.deterministic.to_string()),
+            ("picks", self.picks.to_string()),
+            ("binpick_version", env!("CARGO_PKG_VERSION").to_string()),
+        ]
+    }
+}
+
+/// Which files to write.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct Formats {
+    /// `<stem>.rrd` (Rerun).
+    pub rrd: bool,
+    /// `<stem>.mcap` (Foxglove).
+    pub mcap: bool,
+}
+
+impl Formats {
+    /// Whether anything is recorded (and so the run must keep its trace and scene).
+    pub fn any(&self) -> bool {
+        self.rrd || self.mcap
+    }
+}
+
+/// Writes the asked-for recordings of `result` as `<dir>/<stem>.rrd` and `<dir>/<stem>.mcap`.
+/// Returns the paths written.
+pub fn write_recordings(
+    dir: &Path,
+    stem: &str,
+    formats: Formats,
+    result: &RunResult,
+    robot: &RobotModel,
+    scene: &Scene,
+    info: &RunInfo,
+) -> Result<Vec<PathBuf>, (PathBuf, RecordError)> {
+    let mut written = Vec::new();
+    if formats.rrd {
+        let path = dir.join(format!("{stem}.rrd"));
+        write_rrd_file(&path, result, robot, scene, info).map_err(|e| (path.clone(), e))?;
+        written.push(path);
+    }
+    if formats.mcap {
+        let path = dir.join(format!("{stem}.mcap"));
+        write_mcap_file(&path, result, robot, scene, info).map_err(|e| (path.clone(), e))?;
+        written.push(path);
+    }
+    Ok(written)
+}
+
+/// Colour of a part in a state (RGB, 0..1): blue in the pick tray, orange on the cup, green placed.
+pub(crate) fn part_rgb(state: PartState) -> [f32; 3] {
+    match state {
+        PartState::Held => [1.0, 0.6, 0.0],
+        PartState::Placed => [0.2, 0.7, 0.3],
+        _ => [0.3, 0.5, 0.9],
+    }
+}
+
+/// Severity of a cycle event: 2 info, 3 warning (faults, lost parts, picks that were not placed).
+pub(crate) fn event_level(e: &CycleEvent) -> u8 {
+    match e.kind {
+        "fault" | "part_lost" => 3,
+        "outcome" if !e.detail.starts_with("placed") => 3,
+        _ => 2,
+    }
+}
+
+/// A cycle event as one log line.
+pub(crate) fn event_text(e: &CycleEvent) -> String {
+    let pick = e.pick.map_or("cell".to_string(), |p| format!("pick {p}"));
+    if e.detail.is_empty() {
+        format!("[{pick}] {}", e.kind)
+    } else {
+        format!("[{pick}] {}: {}", e.kind, e.detail)
+    }
+}
+
+/// The tip of a grasp-candidate arrow: this far above the grasp point, pointing down to it [m].
+pub(crate) const CANDIDATE_ARROW_M: f64 = 0.03;
+
+/// The camera frustum's corner rays out to `range_m`, in the world frame: apex, then the four
+/// far corners (top-left, top-right, bottom-right, bottom-left in the image) [m].
+pub(crate) fn frustum_corners(c: &crate::sensor::Camera, range_m: f64) -> [nalgebra::Vector3<f64>; 5] {
+    let apex = c.world_from_camera.translation.vector;
+    let corner = |u: f64, v: f64| {
+        let d = nalgebra::Vector3::new((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0);
+        apex + c.world_from_camera.rotation * (d * range_m)
+    };
+    let (w, h) = (c.width as f64, c.height as f64);
+    [apex, corner(0.0, 0.0), corner(w, 0.0), corner(w, h), corner(0.0, h)]
+}

@@ -1,0 +1,440 @@
+//! Record stage, Rerun: a finished run written to `run.rrd` through the rerun SDK's file sink.
+//!
+//! Entities (all in `world`, z up; see the module [`super`] for what is recorded and why):
+//! - `world/cell`: table, trays and obstacles as boxes (static);
+//! - `world/camera`: the camera's pose and pinhole intrinsics (static; the viewer draws its
+//!   frustum), `world/camera/depth` each depth image (mm) at its trigger time;
+//! - `world/cloud`: each capture's point cloud (world frame) at its trigger time;
+//! - `world/arm/<link>`: each link's `world_from_link` over time (50 Hz), its collision primitives
+//!   (static) under `world/arm/<link>/geometry`;
+//! - `world/parts`: all parts as one batch of boxes (10 Hz), coloured by state;
+//! - `world/recognition/detections` and `world/recognition/candidates` (arrows down to the grasp
+//!   points, best first, the chosen one green and labelled) when each result arrived;
+//! - `world/paths/planned`, `world/paths/executed`: each motion's tool path at its start;
+//! - `joints/position`, `joints/velocity` (six series each, 100 Hz), `joints/torque/J<i>` (the
+//!   applied torque beside +/- the joint's limit);
+//! - `events`: the cycle's events as text log entries (faults and failed picks as warnings);
+//! - `cycle/takt`: the takt of every placed pick, at its release.
+//!
+//! Timelines: `sim_time` (duration, s) and `step` (physics steps); the SDK's wall-clock
+//! `log_time` is switched off. Units: m, rad, rad/s, N m, s; depth in mm (`meter` = 1000).
+
+use std::collections::BTreeMap;
+use std::path::Path;
+
+use nalgebra::{Isometry3, Vector3};
+use rerun::{RecordingStream, TimeColumn};
+
+use super::{CANDIDATE_ARROW_M, RecordError, RunInfo, event_level, event_text, part_rgb};
+use crate::config::Scene;
+use crate::cycle::RunResult;
+use crate::physics::PartState;
+use crate::robot::{DOF, Primitive, RobotModel};
+
+/// Rows written per entity path, for checks (static rows included).
+pub type EntityCounts = BTreeMap<String, u64>;
+
+/// Joint series are written every this many servo ticks (1 kHz servo: 100 Hz).
+const JOINT_SERIES_EVERY: usize = 10;
+/// Link frames are written every this many servo ticks (50 Hz).
+const TRANSFORMS_EVERY: usize = 20;
+
+fn rr(e: impl std::fmt::Display) -> RecordError {
+    RecordError::Rerun(e.to_string())
+}
+
+fn v3(v: &Vector3<f64>) -> [f32; 3] {
+    [v.x as f32, v.y as f32, v.z as f32]
+}
+
+fn quat(p: &Isometry3<f64>) -> rerun::Quaternion {
+    let q = p.rotation.quaternion();
+    rerun::Quaternion::from_xyzw([q.i as f32, q.j as f32, q.k as f32, q.w as f32])
+}
+
+fn rgb(c: [f32; 3]) -> rerun::Color {
+    rerun::Color::from_rgb((c[0] * 255.0) as u8, (c[1] * 255.0) as u8, (c[2] * 255.0) as u8)
+}
+
+/// The stream with its two timelines set to simulation time `t_s`, and the row counts.
+struct Rec {
+    stream: RecordingStream,
+    step_s: f64,
+    counts: EntityCounts,
+}
+
+impl Rec {
+    fn step(&self, t_s: f64) -> i64 {
+        (t_s / self.step_s).round() as i64
+    }
+
+    fn at(&self, t_s: f64) {
+        self.stream.set_duration_secs("sim_time", t_s);
+        self.stream.set_time_sequence("step", self.step(t_s));
+    }
+
+    fn log(&mut self, t_s: f64, path: &str, what: &impl rerun::AsComponents) -> Result<(), RecordError> {
+        self.at(t_s);
+        self.stream.log(path, what).map_err(rr)?;
+        *self.counts.entry(path.to_string()).or_default() += 1;
+        Ok(())
+    }
+
+    fn log_static(&mut self, path: &str, what: &impl rerun::AsComponents) -> Result<(), RecordError> {
+        self.stream.log_static(path, what).map_err(rr)?;
+        *self.counts.entry(path.to_string()).or_default() += 1;
+        Ok(())
+    }
+
+    /// Sends rows at `times_s` in one columnar call.
+    fn columns(
+        &mut self,
+        path: &str,
+        times_s: &[f64],
+        columns: impl IntoIterator<Item = rerun::SerializedComponentColumn>,
+    ) -> Result<(), RecordError> {
+        let steps: Vec<i64> = times_s.iter().map(|t| self.step(*t)).collect();
+        self.stream
+            .send_columns(
+                path,
+                [
+                    TimeColumn::new_duration_secs("sim_time", times_s.iter().copied()),
+                    TimeColumn::new_sequence("step", steps),
+                ],
+                columns,
+            )
+            .map_err(rr)?;
+        *self.counts.entry(path.to_string()).or_default() += times_s.len() as u64;
+        Ok(())
+    }
+}
+
+/// Writes the Rerun recording of `result` (run with `keep_trace` and `keep_scene`) to `path`:
+/// first to `<path>.partial`, flushed and finalised, then renamed, so that a failed write never
+/// leaves a truncated `run.rrd`. Returns the rows written per entity path.
+pub fn write_rrd_file(
+    path: &Path,
+    result: &RunResult,
+    robot: &RobotModel,
+    scene: &Scene,
+    info: &RunInfo,
+) -> Result<EntityCounts, RecordError> {
+    let partial = path.with_extension("rrd.partial");
+    let stream = rerun::RecordingStreamBuilder::new("binpick")
+        .enabled(true)
+        .recording_name(format!("binpick {} seed {}", info.workpiece, info.seed))
+        .save(&partial)
+        .map_err(rr)?;
+    stream.set_log_time_enabled(false);
+    stream.set_log_tick_enabled(false);
+    let mut rec = Rec {
+        stream,
+        step_s: scene.sim.physics_dt_s,
+        counts: EntityCounts::new(),
+    };
+    let outcome = log_run(&mut rec, result, robot, scene, info);
+    // Flush whatever was logged and report a failed write; then hand the file sink over to a
+    // buffer, which drops it: its writer thread finishes the file (footer and manifest).
+    let flushed = rec.stream.flush_blocking().map_err(rr);
+    rec.stream.disconnect();
+    drop(rec.stream);
+    outcome.and(flushed).inspect_err(|_| {
+        let _ = std::fs::remove_file(&partial);
+    })?;
+    std::fs::rename(&partial, path)?;
+    Ok(rec.counts)
+}
+
+fn log_run(
+    rec: &mut Rec,
+    result: &RunResult,
+    robot: &RobotModel,
+    scene: &Scene,
+    info: &RunInfo,
+) -> Result<(), RecordError> {
+    let mut props = rerun::AnyValues::default();
+    for (k, v) in info.properties() {
+        props = props.with_component::<rerun::components::Text>(k, [v]);
+    }
+    rec.stream.send_property("binpick", &props).map_err(rr)?;
+    rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+    log_cell(rec, result, robot, scene)?;
+    log_arm(rec, result, robot)?;
+    log_parts(rec, result)?;
+    log_sensing(rec, result)?;
+    log_paths(rec, result)?;
+    log_events(rec, result)?;
+    Ok(())
+}
+
+/// Table, trays, obstacles and the camera (static).
+fn log_cell(rec: &mut Rec, result: &RunResult, _robot: &RobotModel, scene: &Scene) -> Result<(), RecordError> {
+    let env = crate::planning::Environment::from_scene(scene);
+    let boxes = rerun::Boxes3D::from_centers_and_half_sizes(
+        env.boxes.iter().map(|b| v3(&b.world_from_box.translation.vector)),
+        env.boxes.iter().map(|b| v3(&b.half_m)),
+    )
+    .with_quaternions(env.boxes.iter().map(|b| quat(&b.world_from_box)))
+    .with_labels(env.boxes.iter().map(|b| b.name.clone()))
+    .with_show_labels(false)
+    .with_colors(
+        env.boxes
+            .iter()
+            .map(|_| rerun::Color::from_unmultiplied_rgba(150, 150, 150, 255)),
+    )
+    .with_fill_mode(rerun::FillMode::Solid);
+    rec.log_static("world/cell", &boxes)?;
+    let c = &result.camera;
+    let p = &c.world_from_camera;
+    rec.log_static(
+        "world/camera",
+        &rerun::Transform3D::from_translation_rotation(v3(&p.translation.vector), quat(p)),
+    )?;
+    let range_m = (Vector3::from(scene.pick_tray.center_m) - p.translation.vector).norm();
+    rec.log_static(
+        "world/camera",
+        &rerun::Pinhole::from_focal_length_and_resolution(
+            [c.fx as f32, c.fy as f32],
+            [c.width as f32, c.height as f32],
+        )
+        .with_principal_point([c.cx as f32, c.cy as f32])
+        .with_camera_xyz(rerun::components::ViewCoordinates::RDF)
+        .with_image_plane_distance(range_m as f32),
+    )?;
+    Ok(())
+}
+
+/// The arm: each link's primitives once (static, in the link's frame), the link frames over time.
+fn log_arm(rec: &mut Rec, result: &RunResult, robot: &RobotModel) -> Result<(), RecordError> {
+    let link_path = |i: usize| {
+        format!(
+            "world/arm/{}",
+            robot
+                .links
+                .get(i)
+                .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
+        )
+    };
+    for (i, link) in robot.links.iter().enumerate().take(DOF + 1) {
+        let path = format!("{}/geometry", link_path(i));
+        let colour = rerun::Color::from_rgb(230, 200, 60);
+        for (k, s) in link.shapes.iter().enumerate() {
+            let at = v3(&s.link_from_shape.translation.vector);
+            let q = quat(&s.link_from_shape);
+            let shape_path = format!("{path}/{k}");
+            match &s.primitive {
+                Primitive::Box { half_extents_m } => rec.log_static(
+                    &shape_path,
+                    &rerun::Boxes3D::from_centers_and_half_sizes([at], [v3(half_extents_m)])
+                        .with_quaternions([q])
+                        .with_colors([colour])
+                        .with_fill_mode(rerun::FillMode::Solid),
+                )?,
+                Primitive::Cylinder {
+                    radius_m,
+                    half_length_m,
+                } => rec.log_static(
+                    &shape_path,
+                    &rerun::Cylinders3D::from_lengths_and_radii([2.0 * *half_length_m as f32], [*radius_m as f32])
+                        .with_centers([at])
+                        .with_quaternions([q])
+                        .with_colors([colour])
+                        .with_fill_mode(rerun::FillMode::Solid),
+                )?,
+                Primitive::Sphere { radius_m } => rec.log_static(
+                    &shape_path,
+                    &rerun::Ellipsoids3D::from_centers_and_radii([at], [*radius_m as f32])
+                        .with_colors([colour])
+                        .with_fill_mode(rerun::FillMode::Solid),
+                )?,
+                Primitive::Capsule {
+                    radius_m,
+                    half_length_m,
+                } => {
+                    // Rerun's capsules run along +z from their origin: start at the lower end.
+                    let start = s.link_from_shape * nalgebra::Point3::new(0.0, 0.0, -half_length_m);
+                    rec.log_static(
+                        &shape_path,
+                        &rerun::Capsules3D::from_lengths_and_radii([2.0 * *half_length_m as f32], [*radius_m as f32])
+                            .with_translations([v3(&start.coords)])
+                            .with_quaternions([q])
+                            .with_colors([colour])
+                            .with_fill_mode(rerun::FillMode::Solid),
+                    )?
+                }
+            }
+        }
+    }
+    // Link frames at 50 Hz, one columnar call per link.
+    let ticks: Vec<&crate::execution::Tick> = result.trace.iter().step_by(TRANSFORMS_EVERY).collect();
+    let times: Vec<f64> = ticks.iter().map(|t| t.t).collect();
+    let frames: Vec<Vec<Isometry3<f64>>> = ticks.iter().map(|t| robot.world_from_links(&t.q)).collect();
+    for i in 0..=DOF.min(robot.links.len().saturating_sub(1)) {
+        let columns = rerun::Transform3D::update_fields()
+            .with_many_translation(frames.iter().map(|f| v3(&f[i].translation.vector)))
+            .with_many_quaternion(frames.iter().map(|f| quat(&f[i])))
+            .columns_of_unit_batches()
+            .map_err(rr)?;
+        rec.columns(&link_path(i), &times, columns)?;
+    }
+    // Joint series at 100 Hz: positions and velocities (six series each), torque beside its limit.
+    let ticks: Vec<&crate::execution::Tick> = result.trace.iter().step_by(JOINT_SERIES_EVERY).collect();
+    let times: Vec<f64> = ticks.iter().map(|t| t.t).collect();
+    let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
+    rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;
+    rec.log_static("joints/velocity", &rerun::SeriesLines::new().with_names(names))?;
+    let position = ticks.iter().flat_map(|t| t.q.iter().copied().collect::<Vec<_>>());
+    rec.columns(
+        "joints/position",
+        &times,
+        rerun::Scalars::new(position)
+            .columns(std::iter::repeat_n(DOF, times.len()))
+            .map_err(rr)?,
+    )?;
+    let velocity = ticks.iter().flat_map(|t| t.qd.iter().copied().collect::<Vec<_>>());
+    rec.columns(
+        "joints/velocity",
+        &times,
+        rerun::Scalars::new(velocity)
+            .columns(std::iter::repeat_n(DOF, times.len()))
+            .map_err(rr)?,
+    )?;
+    let limit = robot.torque_limit_nm();
+    for j in 0..DOF {
+        let path = format!("joints/torque/J{}", j + 1);
+        rec.log_static(
+            &path,
+            &rerun::SeriesLines::new()
+                .with_names(["torque [N m]", "+limit", "-limit"])
+                .with_colors([
+                    rerun::Color::from_rgb(30, 120, 230),
+                    rerun::Color::from_rgb(220, 40, 40),
+                    rerun::Color::from_rgb(220, 40, 40),
+                ]),
+        )?;
+        let values = ticks.iter().flat_map(|t| [t.tau[j], limit[j], -limit[j]]);
+        rec.columns(
+            &path,
+            &times,
+            rerun::Scalars::new(values)
+                .columns(std::iter::repeat_n(3, times.len()))
+                .map_err(rr)?,
+        )?;
+    }
+    Ok(())
+}
+
+/// All parts as one batch of boxes per frame (taken-out parts left out), coloured by state.
+fn log_parts(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+    let half = Vector3::from(result.part_size_m) / 2.0;
+    for f in &result.scene_frames {
+        let parts: Vec<&(PartState, Isometry3<f64>)> =
+            f.parts.iter().filter(|(s, _)| *s != PartState::Removed).collect();
+        rec.log(
+            f.t_s,
+            "world/parts",
+            &rerun::Boxes3D::from_centers_and_half_sizes(
+                parts.iter().map(|(_, p)| v3(&p.translation.vector)),
+                parts.iter().map(|_| v3(&half)),
+            )
+            .with_quaternions(parts.iter().map(|(_, p)| quat(p)))
+            .with_colors(parts.iter().map(|(s, _)| rgb(part_rgb(*s))))
+            .with_fill_mode(rerun::FillMode::Solid),
+        )?;
+    }
+    Ok(())
+}
+
+/// Depth images and point clouds at their trigger times; detections and grasp candidates when the
+/// recognition result arrived.
+fn log_sensing(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+    for c in &result.captures {
+        let bytes: Vec<u8> = c.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect();
+        rec.log(
+            c.t_s,
+            "world/camera/depth",
+            &rerun::DepthImage::from_gray16(bytes, [c.size_px.0 as u32, c.size_px.1 as u32]).with_meter(1000.0),
+        )?;
+        rec.log(
+            c.t_s,
+            "world/cloud",
+            &rerun::Points3D::new(c.points_world_m.iter().copied()).with_radii([0.0006]),
+        )?;
+    }
+    let half = Vector3::from(result.part_size_m) / 2.0;
+    for r in &result.recognitions {
+        rec.log(
+            r.t_s,
+            "world/recognition/detections",
+            &rerun::Boxes3D::from_centers_and_half_sizes(
+                r.detections.iter().map(|(p, _)| v3(&p.translation.vector)),
+                r.detections.iter().map(|_| v3(&half)),
+            )
+            .with_quaternions(r.detections.iter().map(|(p, _)| quat(p)))
+            .with_labels(r.detections.iter().map(|(_, v)| format!("{:.0} % visible", 100.0 * v)))
+            .with_show_labels(false)
+            .with_colors(r.detections.iter().map(|_| rerun::Color::from_rgb(0, 200, 255))),
+        )?;
+        let chosen = |k: usize| r.chosen == Some(k);
+        rec.log(
+            r.t_s,
+            "world/recognition/candidates",
+            &rerun::Arrows3D::from_vectors(r.candidates.iter().map(|_| [0.0, 0.0, -CANDIDATE_ARROW_M as f32]))
+                .with_origins(
+                    r.candidates
+                        .iter()
+                        .map(|(p, _)| v3(&(p.translation.vector + Vector3::z() * CANDIDATE_ARROW_M))),
+                )
+                .with_colors((0..r.candidates.len()).map(|k| {
+                    if chosen(k) {
+                        rerun::Color::from_rgb(0, 220, 0)
+                    } else {
+                        rerun::Color::from_rgb(240, 200, 0)
+                    }
+                }))
+                .with_labels(
+                    r.candidates.iter().enumerate().map(|(k, (_, score))| {
+                        format!("#{} {score:.2}{}", k + 1, if chosen(k) { " chosen" } else { "" })
+                    }),
+                ),
+        )?;
+    }
+    Ok(())
+}
+
+/// Each motion's tool path, planned and executed, at the motion's start.
+fn log_paths(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+    for p in &result.tool_paths {
+        let strip = |pts: &[Vector3<f64>]| pts.iter().map(v3).collect::<Vec<_>>();
+        rec.log(
+            p.t_s,
+            "world/paths/planned",
+            &rerun::LineStrips3D::new([strip(&p.planned_m)]).with_colors([rerun::Color::from_rgb(50, 100, 255)]),
+        )?;
+        rec.log(
+            p.t_s,
+            "world/paths/executed",
+            &rerun::LineStrips3D::new([strip(&p.executed_m)]).with_colors([rerun::Color::from_rgb(255, 130, 0)]),
+        )?;
+    }
+    Ok(())
+}
+
+/// The cycle's events as log entries, and the takt of every placed pick at its release.
+fn log_events(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+    for e in &result.events {
+        let level = if event_level(e) >= 3 {
+            rerun::TextLogLevel::WARN
+        } else {
+            rerun::TextLogLevel::INFO
+        };
+        rec.log(e.t_s, "events", &rerun::TextLog::new(event_text(e)).with_level(level))?;
+    }
+    rec.log_static("cycle/takt", &rerun::SeriesPoints::new().with_names(["takt [s]"]))?;
+    for r in &result.records {
+        if let (Some(release), Some(t)) = (r.release_s, r.takt_s) {
+            rec.log(release, "cycle/takt", &rerun::Scalars::single(t))?;
+        }
+    }
+    Ok(())
+}
