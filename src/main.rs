@@ -48,7 +48,8 @@ enum Command {
     Pile(PileArgs),
     /// Build a pile, take a depth capture, recognise the parts and select a grasp.
     Sense(PileArgs),
-    /// One cell run: picks of one workpiece end to end, timed (first slice of the cell cycle).
+    /// One cell run: picks of one workpiece end to end, timed; results, time charts and the run's
+    /// recordings (`run.rrd` for Rerun, `run.mcap` for Foxglove) in the run folder.
     Run {
         /// Workpiece: A ... F (embedded) or a path to a workpiece file.
         #[arg(long)]

@@ -96,8 +96,8 @@ impl Formats {
     }
 }
 
-/// Writes the asked-for recordings of `result` as `<dir>/<stem>.rrd` and `<dir>/<stem>.mcap`.
-/// Returns the paths written.
+/// Writes the asked-for recordings of `result` as `<dir>/<stem>.rrd` and `<dir>/<stem>.mcap`, the
+/// two files on two threads. Returns the paths written, or the first file that failed and why.
 pub fn write_recordings(
     dir: &Path,
     stem: &str,
@@ -107,16 +107,29 @@ pub fn write_recordings(
     scene: &Scene,
     info: &RunInfo,
 ) -> Result<Vec<PathBuf>, (PathBuf, RecordError)> {
+    let rrd_path = dir.join(format!("{stem}.rrd"));
+    let mcap_path = dir.join(format!("{stem}.mcap"));
+    let (rrd, mcap) = std::thread::scope(|s| {
+        let rrd = s.spawn(|| {
+            formats
+                .rrd
+                .then(|| write_rrd_file(&rrd_path, result, robot, scene, info).map(|_| ()))
+        });
+        let mcap = formats
+            .mcap
+            .then(|| write_mcap_file(&mcap_path, result, robot, scene, info).map(|_| ()));
+        let rrd = rrd
+            .join()
+            .unwrap_or_else(|_| Some(Err(RecordError::Rerun("the writer thread panicked".into()))));
+        (rrd, mcap)
+    });
     let mut written = Vec::new();
-    if formats.rrd {
-        let path = dir.join(format!("{stem}.rrd"));
-        write_rrd_file(&path, result, robot, scene, info).map_err(|e| (path.clone(), e))?;
-        written.push(path);
-    }
-    if formats.mcap {
-        let path = dir.join(format!("{stem}.mcap"));
-        write_mcap_file(&path, result, robot, scene, info).map_err(|e| (path.clone(), e))?;
-        written.push(path);
+    for (path, outcome) in [(rrd_path, rrd), (mcap_path, mcap)] {
+        match outcome {
+            Some(Ok(())) => written.push(path),
+            Some(Err(e)) => return Err((path, e)),
+            None => {}
+        }
     }
     Ok(written)
 }

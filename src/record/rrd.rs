@@ -138,11 +138,37 @@ pub fn write_rrd_file(
     let flushed = rec.stream.flush_blocking().map_err(rr);
     rec.stream.disconnect();
     drop(rec.stream);
-    outcome.and(flushed).inspect_err(|_| {
-        let _ = std::fs::remove_file(&partial);
-    })?;
+    // The writer thread's own errors are not returned by the SDK: check that the file ends with
+    // the stream footer the finalised file must end with.
+    outcome
+        .and(flushed)
+        .and_then(|()| check_footer(&partial))
+        .inspect_err(|_| {
+            let _ = std::fs::remove_file(&partial);
+        })?;
     std::fs::rename(&partial, path)?;
     Ok(rec.counts)
+}
+
+/// Reads the stream footer at the end of a finished .rrd file.
+fn check_footer(path: &Path) -> Result<(), RecordError> {
+    use rerun::external::re_log_encoding::{Decodable, StreamFooter};
+    use std::io::{Read, Seek, SeekFrom};
+    let size = StreamFooter::ENCODED_SIZE_BYTES;
+    let mut f = std::fs::File::open(path)?;
+    let len = f.metadata()?.len();
+    if len < size as u64 {
+        return Err(RecordError::Rerun(format!(
+            "{} is {len} bytes: not finalised",
+            path.display()
+        )));
+    }
+    f.seek(SeekFrom::End(-(size as i64)))?;
+    let mut tail = vec![0; size];
+    f.read_exact(&mut tail)?;
+    StreamFooter::from_rrd_bytes(&tail)
+        .map(|_| ())
+        .map_err(|e| RecordError::Rerun(format!("{}: not finalised: {e}", path.display())))
 }
 
 fn log_run(

@@ -200,8 +200,12 @@ fn run_mcap_holds_what_the_run_did() {
         count["/camera/depth"] as u64,
         run_summary["captures"][0].as_u64().unwrap()
     );
-    // Part frames every 0.1 s of simulated time, from the first cycle step to the end.
+    // Part frames every 0.1 s of simulated time, from the first pile pour's first step to the end.
     let (first, last) = parts_span;
+    assert!(
+        first <= 10_000_000,
+        "parts recorded from the pour on: first frame at {first} ns"
+    );
     let span_s = (last - first) as f64 * 1e-9;
     let frames = count["/parts"] as f64;
     assert!(
