@@ -29,15 +29,13 @@ use std::io::{Seek, Write};
 
 use serde_json::json;
 
-use super::{CANDIDATE_ARROW_M, RecordError, RunInfo, event_level, event_text, frustum_corners, part_rgb};
+use super::{
+    CANDIDATE_ARROW_M, JOINT_STATE_EVERY, RecordError, RunInfo, arm_samples, event_level, event_text, frustum_corners,
+    part_rgb,
+};
 use crate::config::Scene;
 use crate::cycle::RunResult;
 use crate::robot::{DOF, RobotModel};
-
-/// Joint states are written every this many servo ticks (1 kHz servo: 100 Hz).
-const JOINT_STATE_EVERY: usize = 10;
-/// Link frames are written every this many servo ticks (50 Hz).
-const TRANSFORMS_EVERY: usize = 20;
 
 const LOG_SCHEMA: &str = r#"{"title":"foxglove.Log","type":"object","properties":{
 "timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
@@ -403,32 +401,30 @@ fn arm_messages(m: &mut Messages, result: &RunResult, robot: &RobotModel) -> Res
             "rotation": {"x": q.i, "y": q.j, "z": q.k, "w": q.w},
         })
     };
-    for (k, t) in result.trace.iter().enumerate() {
-        if k % JOINT_STATE_EVERY == 0 {
-            m.push(
-                t.t,
-                "/robot/joint_states",
-                &json!({
-                    "t_s": t.t,
-                    "position_rad": t.q.as_slice(),
-                    "velocity_rad_s": t.qd.as_slice(),
-                    "torque_nm": t.tau.as_slice(),
-                    "torque_limit_nm": limit.as_slice(),
-                    "tracking_error_rad": t.error.as_slice(),
-                }),
-            )?;
-        }
-        if k % TRANSFORMS_EVERY == 0 {
-            let frames = robot.world_from_links(&t.q);
-            let mut transforms: Vec<serde_json::Value> = frames
-                .iter()
-                .enumerate()
-                .take(DOF + 1)
-                .map(|(i, f)| transform(t.t, &name(i), f))
-                .collect();
-            transforms.push(transform(t.t, "camera", &result.camera.world_from_camera));
-            m.push(t.t, "/tf", &json!({ "transforms": transforms }))?;
-        }
+    for t in result.trace.iter().step_by(JOINT_STATE_EVERY) {
+        m.push(
+            t.t,
+            "/robot/joint_states",
+            &json!({
+                "t_s": t.t,
+                "position_rad": t.q.as_slice(),
+                "velocity_rad_s": t.qd.as_slice(),
+                "torque_nm": t.tau.as_slice(),
+                "torque_limit_nm": limit.as_slice(),
+                "tracking_error_rad": t.error.as_slice(),
+            }),
+        )?;
+    }
+    for (t_s, q) in arm_samples(result) {
+        let frames = robot.world_from_links(&q);
+        let mut transforms: Vec<serde_json::Value> = frames
+            .iter()
+            .enumerate()
+            .take(DOF + 1)
+            .map(|(i, f)| transform(t_s, &name(i), f))
+            .collect();
+        transforms.push(transform(t_s, "camera", &result.camera.world_from_camera));
+        m.push(t_s, "/tf", &json!({ "transforms": transforms }))?;
     }
     Ok(())
 }

@@ -134,6 +134,23 @@ pub fn write_recordings(
     Ok(written)
 }
 
+/// Joint states and series are recorded every this many servo ticks (1 kHz servo: 100 Hz).
+pub(crate) const JOINT_STATE_EVERY: usize = 10;
+/// Link frames are recorded every this many servo ticks (50 Hz).
+pub(crate) const TRANSFORMS_EVERY: usize = 20;
+
+/// The arm's joint positions at which its link frames are recorded: from time 0 (the arm at its
+/// start pose while the first pile is poured: the trace begins with the first motion), then
+/// every [`TRANSFORMS_EVERY`] servo ticks. Between motions the arm stands still, so the last
+/// frames hold. (simulation time [s], joint positions [rad])
+pub(crate) fn arm_samples(result: &RunResult) -> Vec<(f64, crate::robot::JointVector)> {
+    let start = result.trace.first().filter(|t| t.t > 0.0).map(|t| (0.0, t.q));
+    start
+        .into_iter()
+        .chain(result.trace.iter().step_by(TRANSFORMS_EVERY).map(|t| (t.t, t.q)))
+        .collect()
+}
+
 /// Colour of a part in a state (RGB, 0..1): blue in the pick tray, orange on the cup, green placed.
 pub(crate) fn part_rgb(state: PartState) -> [f32; 3] {
     match state {

@@ -25,7 +25,9 @@ use std::path::Path;
 use nalgebra::{Isometry3, Vector3};
 use rerun::{RecordingStream, TimeColumn};
 
-use super::{CANDIDATE_ARROW_M, RecordError, RunInfo, event_level, event_text, part_rgb};
+use super::{
+    CANDIDATE_ARROW_M, JOINT_STATE_EVERY, RecordError, RunInfo, arm_samples, event_level, event_text, part_rgb,
+};
 use crate::config::Scene;
 use crate::cycle::RunResult;
 use crate::physics::PartState;
@@ -33,11 +35,6 @@ use crate::robot::{DOF, Primitive, RobotModel};
 
 /// Rows written per entity path, for checks (static rows included).
 pub type EntityCounts = BTreeMap<String, u64>;
-
-/// Joint series are written every this many servo ticks (1 kHz servo: 100 Hz).
-const JOINT_SERIES_EVERY: usize = 10;
-/// Link frames are written every this many servo ticks (50 Hz).
-const TRANSFORMS_EVERY: usize = 20;
 
 fn rr(e: impl std::fmt::Display) -> RecordError {
     RecordError::Rerun(e.to_string())
@@ -292,9 +289,9 @@ fn log_arm(rec: &mut Rec, result: &RunResult, robot: &RobotModel) -> Result<(), 
         }
     }
     // Link frames at 50 Hz, one columnar call per link.
-    let ticks: Vec<&crate::execution::Tick> = result.trace.iter().step_by(TRANSFORMS_EVERY).collect();
-    let times: Vec<f64> = ticks.iter().map(|t| t.t).collect();
-    let frames: Vec<Vec<Isometry3<f64>>> = ticks.iter().map(|t| robot.world_from_links(&t.q)).collect();
+    let samples = arm_samples(result);
+    let times: Vec<f64> = samples.iter().map(|(t, _)| *t).collect();
+    let frames: Vec<Vec<Isometry3<f64>>> = samples.iter().map(|(_, q)| robot.world_from_links(q)).collect();
     for i in 0..=DOF.min(robot.links.len().saturating_sub(1)) {
         let columns = rerun::Transform3D::update_fields()
             .with_many_translation(frames.iter().map(|f| v3(&f[i].translation.vector)))
@@ -304,7 +301,7 @@ fn log_arm(rec: &mut Rec, result: &RunResult, robot: &RobotModel) -> Result<(), 
         rec.columns(&link_path(i), &times, columns)?;
     }
     // Joint series at 100 Hz: positions and velocities (six series each), torque beside its limit.
-    let ticks: Vec<&crate::execution::Tick> = result.trace.iter().step_by(JOINT_SERIES_EVERY).collect();
+    let ticks: Vec<&crate::execution::Tick> = result.trace.iter().step_by(JOINT_STATE_EVERY).collect();
     let times: Vec<f64> = ticks.iter().map(|t| t.t).collect();
     let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
     rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;

@@ -320,3 +320,58 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     assert_eq!(rrd.stores, 1);
     assert!(rrd.rows.get("/events").copied().unwrap_or(0) > 0, "{rrd:?}");
 }
+
+/// A recording that cannot be written is an error naming the cause, and leaves no file behind
+/// (neither the final name nor the `.partial` one).
+#[test]
+fn a_failed_write_is_reported_and_leaves_nothing() {
+    use binpick::config::{LoadedScene, LoadedWorkpiece};
+    use binpick::cycle::RunOptions;
+    use binpick::record::{Formats, RunInfo, write_recordings};
+    use binpick::robot::RobotModel;
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("E").unwrap();
+    let r = binpick::cycle::run(
+        &scene,
+        &robot,
+        &wp,
+        &RunOptions {
+            picks: 1,
+            seed: 1,
+            deterministic: true,
+            keep_trace: true,
+            keep_scene: true,
+            stop: None,
+        },
+    )
+    .unwrap();
+    let info = RunInfo {
+        scene: scene.label.clone(),
+        workpiece: "E".into(),
+        seed: 1,
+        deterministic: true,
+        picks: 1,
+    };
+    let ws = Workspace::new();
+    let formats = Formats { rrd: true, mcap: true };
+    // A folder that does not exist: both writers fail before writing anything.
+    let missing = ws.path("missing");
+    let (path, e) = write_recordings(&missing, "run", formats, &r, &robot, &scene.scene, &info).unwrap_err();
+    assert!(path.starts_with(&missing), "{}", path.display());
+    assert!(!e.to_string().is_empty());
+    assert!(!missing.exists());
+    // The folder exists: both files are written, nothing partial stays.
+    let dir = ws.path("ok");
+    std::fs::create_dir_all(&dir).unwrap();
+    let written = write_recordings(&dir, "run", formats, &r, &robot, &scene.scene, &info).unwrap();
+    assert_eq!(written, [dir.join("run.rrd"), dir.join("run.mcap")]);
+    let mut names: Vec<String> = std::fs::read_dir(&dir)
+        .unwrap()
+        .map(|f| f.unwrap().file_name().to_string_lossy().into_owned())
+        .collect();
+    names.sort();
+    assert_eq!(names, ["run.mcap", "run.rrd"]);
+    let rrd = read_rrd(&dir.join("run.rrd"));
+    assert_eq!(rrd.rows.get("/world/camera/depth").copied(), Some(r.captures.len()));
+}
