@@ -15,6 +15,8 @@ struct RrdContents {
     timelines: std::collections::BTreeSet<String>,
     properties: std::collections::BTreeSet<String>,
     stores: usize,
+    /// Per joint (1-based): the rows of `joints/torque/J<i>` as [torque, +limit, -limit].
+    torques: BTreeMap<usize, Vec<Vec<f64>>>,
 }
 
 fn read_rrd(path: &std::path::Path) -> RrdContents {
@@ -34,6 +36,14 @@ fn read_rrd(path: &std::path::Path) -> RrdContents {
                 if entity.starts_with("/__properties") {
                     c.properties
                         .extend(chunk.components_identifiers().map(|i| i.to_string()));
+                }
+                if let Some(j) = entity.strip_prefix("/joints/torque/J")
+                    && !chunk.is_static()
+                {
+                    let rows = c.torques.entry(j.parse().unwrap()).or_default();
+                    for values in chunk.iter_slices::<f64>("Scalars:scalars".into()) {
+                        rows.push(values.to_vec());
+                    }
                 }
                 if chunk.is_static() {
                     *c.static_rows.entry(entity).or_default() += chunk.num_rows();
@@ -127,6 +137,7 @@ fn run_mcap_holds_what_the_run_did() {
 
     let mut count = BTreeMap::<String, usize>::new();
     let mut chosen = 0;
+    let mut mcap_torques: Vec<Vec<f64>> = Vec::new();
     let mut last = 0u64;
     let mut parts_span = (u64::MAX, 0u64);
     for m in mcap::MessageStream::new(&bytes).unwrap() {
@@ -180,6 +191,7 @@ fn run_mcap_holds_what_the_run_did() {
         if m.channel.topic == "/robot/joint_states" {
             let tau = v["torque_nm"].as_array().unwrap();
             let limit = v["torque_limit_nm"].as_array().unwrap();
+            mcap_torques.push(tau.iter().map(|t| t.as_f64().unwrap()).collect());
             assert_eq!(tau.len(), 6);
             for (t, l) in tau.iter().zip(limit) {
                 assert!(t.as_f64().unwrap().abs() <= l.as_f64().unwrap() + 1e-9);
@@ -256,6 +268,29 @@ fn run_mcap_holds_what_the_run_did() {
     for j in 1..=6 {
         assert_eq!(rows(&format!("/joints/torque/J{j}")), count["/robot/joint_states"]);
         assert_eq!(rows(&format!("/world/arm/link_{j}")), count["/tf"]);
+    }
+    // The torque series hold the same torques as the MCAP's joint states, within the limits.
+    let scene = binpick::config::LoadedScene::embedded_default().unwrap();
+    let limit = binpick::robot::RobotModel::from_scene(&scene)
+        .unwrap()
+        .torque_limit_nm();
+    for j in 1..=6 {
+        let rows = &rrd.torques[&j];
+        assert_eq!(rows.len(), mcap_torques.len());
+        for (row, mcap) in rows.iter().zip(&mcap_torques) {
+            assert_eq!(row.len(), 3);
+            assert!(
+                (row[0] - mcap[j - 1]).abs() <= 1e-9,
+                "J{j}: {} against {}",
+                row[0],
+                mcap[j - 1]
+            );
+            assert!(
+                row[1] == limit[j - 1] && row[2] == -limit[j - 1],
+                "J{j} limit lines {row:?}"
+            );
+            assert!(row[0].abs() <= limit[j - 1] + 1e-9);
+        }
     }
     for e in ["/world/cell", "/world/camera", "/world/arm/link_3/geometry/0"] {
         assert!(rrd.static_rows.get(e).copied().unwrap_or(0) >= 1, "{e} static: {rrd:?}");
