@@ -83,6 +83,14 @@ impl Rec {
         Ok(())
     }
 
+    /// Sends `values`, `per_row` scalars (series) a row, at `times_s` in one columnar call.
+    fn series(&mut self, path: &str, times_s: &[f64], values: Vec<f64>, per_row: usize) -> Result<(), RecordError> {
+        let columns = rerun::Scalars::new(values)
+            .columns(std::iter::repeat_n(per_row, times_s.len()))
+            .map_err(rr)?;
+        self.columns(path, times_s, columns)
+    }
+
     /// Sends rows at `times_s` in one columnar call.
     fn columns(
         &mut self,
@@ -306,22 +314,16 @@ fn log_arm(rec: &mut Rec, result: &RunResult, robot: &RobotModel) -> Result<(), 
     let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
     rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;
     rec.log_static("joints/velocity", &rerun::SeriesLines::new().with_names(names))?;
-    let position = ticks.iter().flat_map(|t| t.q.iter().copied().collect::<Vec<_>>());
-    rec.columns(
-        "joints/position",
-        &times,
-        rerun::Scalars::new(position)
-            .columns(std::iter::repeat_n(DOF, times.len()))
-            .map_err(rr)?,
-    )?;
-    let velocity = ticks.iter().flat_map(|t| t.qd.iter().copied().collect::<Vec<_>>());
-    rec.columns(
-        "joints/velocity",
-        &times,
-        rerun::Scalars::new(velocity)
-            .columns(std::iter::repeat_n(DOF, times.len()))
-            .map_err(rr)?,
-    )?;
+    let position: Vec<f64> = ticks
+        .iter()
+        .flat_map(|t| t.q.iter().copied().collect::<Vec<_>>())
+        .collect();
+    rec.series("joints/position", &times, position, DOF)?;
+    let velocity: Vec<f64> = ticks
+        .iter()
+        .flat_map(|t| t.qd.iter().copied().collect::<Vec<_>>())
+        .collect();
+    rec.series("joints/velocity", &times, velocity, DOF)?;
     let limit = robot.torque_limit_nm();
     for j in 0..DOF {
         let path = format!("joints/torque/J{}", j + 1);
@@ -335,14 +337,8 @@ fn log_arm(rec: &mut Rec, result: &RunResult, robot: &RobotModel) -> Result<(), 
                     rerun::Color::from_rgb(220, 40, 40),
                 ]),
         )?;
-        let values = ticks.iter().flat_map(|t| [t.tau[j], limit[j], -limit[j]]);
-        rec.columns(
-            &path,
-            &times,
-            rerun::Scalars::new(values)
-                .columns(std::iter::repeat_n(3, times.len()))
-                .map_err(rr)?,
-        )?;
+        let values: Vec<f64> = ticks.iter().flat_map(|t| [t.tau[j], limit[j], -limit[j]]).collect();
+        rec.series(&path, &times, values, 3)?;
     }
     Ok(())
 }
