@@ -1257,6 +1257,52 @@ pub fn run(
         let free = cell.arm_free_s;
         rec.stall_sensor_s = (ready.min(pick_ready) - free).max(0.0);
         rec.stall_compute_s = (pick_ready - free.max(ready)).max(0.0);
+        let pick_planned = match &prep.pick_transfer {
+            Ok(t) => format!(
+                "Pick motion: transfer {:.3} s + descent {:.3} s ({:.1} ms compute)",
+                t.duration_s(),
+                prep.descent.duration_s(),
+                1e3 * prep.charged[1]
+            ),
+            Err(e) => format!("Pick motion: {e}"),
+        };
+        let place_planned = match &prep.place {
+            Ok((t, descent, retreat, _)) => format!(
+                "Place motion: lift {:.3} s + transfer {:.3} s + descent {:.3} s + retreat {:.3} s ({:.1} ms compute)",
+                prep.lift.duration_s(),
+                t.duration_s(),
+                descent.duration_s(),
+                retreat.duration_s(),
+                1e3 * prep.charged[2]
+            ),
+            Err(e) => format!("Place motion: {e}"),
+        };
+        let mut stages = vec![
+            (pick_ready, "planned", pick_planned),
+            (place_ready, "planned", place_planned),
+        ];
+        if rec.stall_sensor_s > 0.0 {
+            stages.push((
+                free,
+                "stall",
+                format!("waiting for the sensor {:.3} s", rec.stall_sensor_s),
+            ));
+        }
+        if rec.stall_compute_s > 0.0 {
+            stages.push((
+                free.max(ready),
+                "stall",
+                format!("waiting for compute {:.3} s", rec.stall_compute_s),
+            ));
+        }
+        for (t_s, kind, detail) in stages {
+            cell.events.push(CycleEvent {
+                t_s,
+                pick: Some(index),
+                kind,
+                detail,
+            });
+        }
         if rec.stall_sensor_s > 0.0 {
             cell.span(Lane::Stall, free, ready, "waiting for the sensor");
         }

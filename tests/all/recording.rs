@@ -198,6 +198,20 @@ fn run_mcap_holds_what_the_run_did() {
             }
         }
     }
+    // Every stage of the cycle is a log entry.
+    for kind in [
+        "capture",
+        "recognition_ready",
+        "grasp_chosen",
+        "planned",
+        "stall",
+        "pick_start",
+        "place_start",
+        "released",
+        "outcome",
+    ] {
+        assert!(events.iter().any(|e| e["kind"] == kind), "no {kind} event");
+    }
     assert_eq!(count["/cycle/events"], events.len());
     assert_eq!(count["/log"], events.len());
     assert_eq!(count.get("/cycle/takt").copied().unwrap_or(0), takts);
