@@ -271,7 +271,7 @@ pub fn write_mcap<W: Write + Seek>(
     info: &RunInfo,
 ) -> Result<TopicCounts, RecordError> {
     let mut m = Messages(Vec::new());
-    cell_messages(&mut m, result, robot, scene)?;
+    cell_messages(&mut m, result, scene)?;
     arm_messages(&mut m, result, robot)?;
     part_messages(&mut m, result)?;
     sensing_messages(&mut m, result)?;
@@ -318,7 +318,7 @@ pub fn write_mcap<W: Write + Seek>(
 }
 
 /// `/cell`: table, trays and obstacles as grey cubes, the camera's frustum out to the pick tray.
-fn cell_messages(m: &mut Messages, result: &RunResult, _robot: &RobotModel, scene: &Scene) -> Result<(), RecordError> {
+fn cell_messages(m: &mut Messages, result: &RunResult, scene: &Scene) -> Result<(), RecordError> {
     let env = crate::planning::Environment::from_scene(scene);
     let mut cell = Entity::new("cell");
     for b in &env.boxes {

@@ -189,7 +189,7 @@ fn log_run(
     }
     rec.stream.send_property("binpick", &props).map_err(rr)?;
     rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-    log_cell(rec, result, robot, scene)?;
+    log_cell(rec, result, scene)?;
     log_arm(rec, result, robot)?;
     log_parts(rec, result)?;
     log_sensing(rec, result)?;
@@ -199,7 +199,7 @@ fn log_run(
 }
 
 /// Table, trays, obstacles and the camera (static).
-fn log_cell(rec: &mut Rec, result: &RunResult, _robot: &RobotModel, scene: &Scene) -> Result<(), RecordError> {
+fn log_cell(rec: &mut Rec, result: &RunResult, scene: &Scene) -> Result<(), RecordError> {
     let env = crate::planning::Environment::from_scene(scene);
     let boxes = rerun::Boxes3D::from_centers_and_half_sizes(
         env.boxes.iter().map(|b| v3(&b.world_from_box.translation.vector)),
