@@ -361,8 +361,6 @@ pub const CLOUD_EVERY_PX: usize = 2;
 pub struct RecognitionRecord {
     /// When the result arrived [s].
     pub t_s: f64,
-    /// Pick the result was for.
-    pub pick: Option<usize>,
     /// Recognised parts: estimated `world_from_part` and the visible fraction.
     pub detections: Vec<(Isometry3<f64>, f64)>,
     /// The best feasible grasps, best first (at most [`RECORDED_CANDIDATES`]): the tool at the
@@ -370,8 +368,6 @@ pub struct RecognitionRecord {
     pub candidates: Vec<(Isometry3<f64>, f64)>,
     /// Which candidate was chosen (the best one not at a failed spot with a clear approach).
     pub chosen: Option<usize>,
-    /// Why nothing was chosen, if so.
-    pub reason: Option<String>,
 }
 
 /// Most grasp candidates a [`RecognitionRecord`] keeps.
@@ -501,6 +497,30 @@ impl Cell<'_> {
             pick: self.pick,
             kind,
             detail,
+        });
+    }
+
+    /// Keeps a recognition result for recordings (if asked for): the detections, the best ranked
+    /// candidates and which of them is `chosen` (the tool pose at the chosen grasp).
+    fn note_recognition(
+        &mut self,
+        t_s: f64,
+        detections: &[Detection],
+        ranked: &[GraspCandidate],
+        chosen: Option<&Isometry3<f64>>,
+    ) {
+        let Some(records) = self.recognitions.as_mut() else {
+            return;
+        };
+        let ranked = &ranked[..ranked.len().min(RECORDED_CANDIDATES)];
+        records.push(RecognitionRecord {
+            t_s,
+            detections: detections
+                .iter()
+                .map(|d| (d.world_from_part, d.visible_fraction))
+                .collect(),
+            candidates: ranked.iter().map(|g| (g.world_from_tool, g.score.total)).collect(),
+            chosen: chosen.and_then(|c| ranked.iter().position(|g| g.world_from_tool == *c)),
         });
     }
 
@@ -939,45 +959,25 @@ impl Cell<'_> {
                 break;
             }
         }
-        let why = chosen.is_none().then(|| {
+        self.note_recognition(
+            job.ready_s,
+            detections,
+            &plan.ranked,
+            chosen.as_ref().map(|(g, _, _)| &g.world_from_tool),
+        );
+        let Some((grasp, env, empty)) = chosen else {
             let reasons = plan
                 .rejected_counts()
                 .iter()
                 .map(|(k, v)| format!("{k} {v}"))
                 .collect::<Vec<_>>()
                 .join(", ");
-            if plan.ranked.is_empty() {
+            let why = if plan.ranked.is_empty() {
                 format!("no feasible grasp ({reasons})")
             } else {
                 format!("no grasp with a clear approach among {}", plan.ranked.len().min(8))
-            }
-        });
-        if let Some(records) = self.recognitions.as_mut() {
-            let chosen_at = chosen.as_ref().and_then(|(c, _, _)| {
-                plan.ranked
-                    .iter()
-                    .take(RECORDED_CANDIDATES)
-                    .position(|g| g.world_from_tool == c.world_from_tool)
-            });
-            records.push(RecognitionRecord {
-                t_s: job.ready_s,
-                pick: self.pick,
-                detections: detections
-                    .iter()
-                    .map(|d| (d.world_from_part, d.visible_fraction))
-                    .collect(),
-                candidates: plan
-                    .ranked
-                    .iter()
-                    .take(RECORDED_CANDIDATES)
-                    .map(|g| (g.world_from_tool, g.score.total))
-                    .collect(),
-                chosen: chosen_at,
-                reason: why.clone(),
-            });
-        }
-        let Some((grasp, env, empty)) = chosen else {
-            return Err(why.unwrap_or_default());
+            };
+            return Err(why);
         };
         let grasp_s = wall.elapsed().as_secs_f64();
         // Pick: transfer to the approach pose, straight descent.
@@ -1188,16 +1188,7 @@ pub fn run(
         let mut rec = PickRecord::new(index, &job, capture_s);
         let prepared = match detections.as_deref() {
             None | Some([]) => {
-                if let Some(records) = cell.recognitions.as_mut() {
-                    records.push(RecognitionRecord {
-                        t_s: job.ready_s,
-                        pick: Some(index),
-                        detections: Vec::new(),
-                        candidates: Vec::new(),
-                        chosen: None,
-                        reason: Some("nothing detected".into()),
-                    });
-                }
+                cell.note_recognition(job.ready_s, &[], &[], None);
                 Err(None)
             }
             Some(dets) => cell.prepare(dets, &job).map_err(Some),
@@ -1282,18 +1273,14 @@ pub fn run(
             (place_ready, "planned", place_planned),
         ];
         if rec.stall_sensor_s > 0.0 {
-            stages.push((
-                free,
-                "stall",
-                format!("waiting for the sensor {:.3} s", rec.stall_sensor_s),
-            ));
+            cell.span(Lane::Stall, free, ready, "waiting for the sensor");
+            let detail = format!("waiting for the sensor {:.3} s", rec.stall_sensor_s);
+            stages.push((free, "stall", detail));
         }
         if rec.stall_compute_s > 0.0 {
-            stages.push((
-                free.max(ready),
-                "stall",
-                format!("waiting for compute {:.3} s", rec.stall_compute_s),
-            ));
+            cell.span(Lane::Stall, free.max(ready), pick_ready, "waiting for compute");
+            let detail = format!("waiting for compute {:.3} s", rec.stall_compute_s);
+            stages.push((free.max(ready), "stall", detail));
         }
         for (t_s, kind, detail) in stages {
             cell.events.push(CycleEvent {
@@ -1302,12 +1289,6 @@ pub fn run(
                 kind,
                 detail,
             });
-        }
-        if rec.stall_sensor_s > 0.0 {
-            cell.span(Lane::Stall, free, ready, "waiting for the sensor");
-        }
-        if rec.stall_compute_s > 0.0 {
-            cell.span(Lane::Stall, free.max(ready), pick_ready, "waiting for compute");
         }
         cell.idle_until(pick_ready.max(cell.world.time_s))?;
         let outcome = pick_and_place(&mut cell, &prep, &mut rec, place_ready)?;
