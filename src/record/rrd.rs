@@ -126,6 +126,7 @@ pub fn write_rrd_file(
 ) -> Result<EntityCounts, RecordError> {
     let partial = path.with_extension("rrd.partial");
     let stream = rerun::RecordingStreamBuilder::new("binpick")
+        .with_blueprint(layout())
         .enabled(true)
         .recording_name(format!("binpick {} seed {}", info.workpiece, info.seed))
         .save(&partial)
@@ -153,6 +154,42 @@ pub fn write_rrd_file(
         })?;
     std::fs::rename(&partial, path)?;
     Ok(rec.counts)
+}
+
+/// The layout the viewer opens with: the cell in 3D beside the
+/// camera's depth image and the event log, the joint series in tabs; the `sim_time` timeline.
+fn layout() -> rerun::blueprint::Blueprint {
+    use rerun::blueprint::{
+        Blueprint, ContainerLike, Horizontal, Spatial2DView, Spatial3DView, Tabs, TextLogView, TimePanel,
+        TimeSeriesView, Vertical,
+    };
+    let mut series: Vec<ContainerLike> = (1..=DOF)
+        .map(|j| {
+            TimeSeriesView::new(format!("torque J{j} [N m]"))
+                .with_origin(format!("/joints/torque/J{j}"))
+                .into()
+        })
+        .collect();
+    series.push(
+        TimeSeriesView::new("joint positions [rad]")
+            .with_origin("/joints/position")
+            .into(),
+    );
+    series.push(
+        TimeSeriesView::new("joint velocities [rad/s]")
+            .with_origin("/joints/velocity")
+            .into(),
+    );
+    series.push(TimeSeriesView::new("takt [s]").with_origin("/cycle/takt").into());
+    let cell = Spatial3DView::new("cell").with_origin("/world");
+    let sensing = Vertical::new([
+        Spatial2DView::new("depth camera").with_origin("/world/camera").into(),
+        TextLogView::new("events").with_origin("/events").into(),
+    ]);
+    Blueprint::new(
+        Horizontal::new([cell.into(), sensing.into(), Tabs::new(series).into()]).with_column_shares([3.0, 2.0, 2.0]),
+    )
+    .with_time_panel(TimePanel::new().with_timeline("sim_time"))
 }
 
 /// Reads the stream footer at the end of a finished .rrd file.

@@ -14,7 +14,12 @@ struct RrdContents {
     static_rows: BTreeMap<String, usize>,
     timelines: std::collections::BTreeSet<String>,
     properties: std::collections::BTreeSet<String>,
+    /// Distinct recording stores (the run) and blueprint stores (the viewer layout).
     stores: usize,
+    blueprints: usize,
+    store_ids: std::collections::BTreeSet<String>,
+    /// Rows of the layout's views.
+    blueprint_views: usize,
     /// Per joint (1-based): the rows of `joints/torque/J<i>` as [torque, +limit, -limit].
     torques: BTreeMap<usize, Vec<Vec<f64>>>,
 }
@@ -28,11 +33,23 @@ fn read_rrd(path: &std::path::Path) -> RrdContents {
         match msg.expect("every message decodes") {
             LogMsg::SetStoreInfo(info) => {
                 assert_eq!(info.info.application_id().as_str(), "binpick");
-                c.stores += 1;
+                if c.store_ids.insert(format!("{:?}", info.info.store_id)) {
+                    if info.info.store_id.is_blueprint() {
+                        c.blueprints += 1;
+                    } else {
+                        c.stores += 1;
+                    }
+                }
             }
-            LogMsg::ArrowMsg(_, arrow) => {
+            LogMsg::ArrowMsg(store, arrow) => {
                 let chunk = rerun::log::Chunk::from_arrow_msg(&arrow).expect("a chunk");
                 let entity = chunk.entity_path().to_string();
+                if store.is_blueprint() {
+                    if entity.starts_with("/view/") && !entity.ends_with("ViewContents") {
+                        c.blueprint_views += chunk.num_rows();
+                    }
+                    continue;
+                }
                 if entity.starts_with("/__properties") {
                     c.properties
                         .extend(chunk.components_identifiers().map(|i| i.to_string()));
@@ -252,7 +269,10 @@ fn run_mcap_holds_what_the_run_did() {
 
     // The Rerun file, read with rerun's decoder: the same run.
     let rrd = read_rrd(&dir.join("run.rrd"));
-    assert_eq!(rrd.stores, 1, "{rrd:?}");
+    assert_eq!(rrd.stores, 1, "one recording");
+    assert_eq!(rrd.blueprints, 1, "one viewer layout");
+    // The layout: the cell, the depth camera, the events, six torques, positions, velocities, takt.
+    assert_eq!(rrd.blueprint_views, 12);
     let rows = |e: &str| rrd.rows.get(e).copied().unwrap_or(0);
     assert_eq!(
         rrd.timelines,
@@ -307,7 +327,11 @@ fn run_mcap_holds_what_the_run_did() {
         }
     }
     for e in ["/world/cell", "/world/camera", "/world/arm/link_3/geometry/0"] {
-        assert!(rrd.static_rows.get(e).copied().unwrap_or(0) >= 1, "{e} static: {rrd:?}");
+        assert!(
+            rrd.static_rows.get(e).copied().unwrap_or(0) >= 1,
+            "{e} static: {:?}",
+            rrd.static_rows
+        );
     }
 
     // --no-rrd and --no-mcap each skip one file; both skip both.
@@ -367,7 +391,11 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1);
-    assert!(rrd.rows.get("/events").copied().unwrap_or(0) > 0, "{rrd:?}");
+    assert!(
+        rrd.rows.get("/events").copied().unwrap_or(0) > 0,
+        "{:?}",
+        rrd.rows.keys()
+    );
 }
 
 /// A recording that cannot be written is an error naming the cause, and leaves no file behind
