@@ -203,9 +203,6 @@ fn scene_update(t_s: f64, entities: Vec<Entity>) -> serde_json::Value {
     })
 }
 
-/// Counts of what a recording holds, per topic, for checks.
-pub type TopicCounts = BTreeMap<String, u64>;
-
 /// Writes the recording of `result` to a new file at `path` (see [`write_mcap`]): first to
 /// `<path>.partial`, then renamed once finished, so a failed write never leaves a truncated file.
 pub fn write_mcap_file(
@@ -214,14 +211,14 @@ pub fn write_mcap_file(
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
-) -> Result<TopicCounts, RecordError> {
+) -> Result<(), RecordError> {
     let partial = path.with_extension("mcap.partial");
     let file = std::fs::File::create(&partial)?;
-    let counts = write_mcap(std::io::BufWriter::new(file), result, robot, scene, info).inspect_err(|_| {
+    write_mcap(std::io::BufWriter::new(file), result, robot, scene, info).inspect_err(|_| {
         let _ = std::fs::remove_file(&partial);
     })?;
     std::fs::rename(&partial, path)?;
-    Ok(counts)
+    Ok(())
 }
 
 /// The topics, in the order their channels are declared: (topic, schema name, JSON Schema).
@@ -262,14 +259,14 @@ impl Messages {
 }
 
 /// Writes the recording of `result` (which must have been run with `keep_trace` and
-/// `keep_scene`) to `out`. Returns the message count per topic.
+/// `keep_scene`) to `out`.
 pub fn write_mcap<W: Write + Seek>(
     out: W,
     result: &RunResult,
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
-) -> Result<TopicCounts, RecordError> {
+) -> Result<(), RecordError> {
     let mut m = Messages(Vec::new());
     cell_messages(&mut m, result, scene)?;
     arm_messages(&mut m, result, robot)?;
@@ -292,7 +289,6 @@ pub fn write_mcap<W: Write + Seek>(
     }
     // Messages go in log-time order (stable: same-time messages keep their order).
     m.0.sort_by_key(|(t, _, _)| *t);
-    let mut counts = TopicCounts::new();
     let mut sequence = vec![0u32; TOPICS.len()];
     for (time, k, data) in &m.0 {
         sequence[*k] += 1;
@@ -305,7 +301,6 @@ pub fn write_mcap<W: Write + Seek>(
             },
             data,
         )?;
-        *counts.entry(TOPICS[*k].0.to_string()).or_default() += 1;
     }
     w.write_metadata(&mcap::records::Metadata {
         name: "binpick".into(),
@@ -314,7 +309,7 @@ pub fn write_mcap<W: Write + Seek>(
     w.finish()?;
     // Flush what the writer buffered and report it: a full disk shows up here.
     w.into_inner().flush()?;
-    Ok(counts)
+    Ok(())
 }
 
 /// `/cell`: table, trays and obstacles as grey cubes, the camera's frustum out to the pick tray.

@@ -31,8 +31,8 @@ use crate::cycle::{CycleEvent, RunResult};
 use crate::physics::PartState;
 use crate::robot::RobotModel;
 
-pub use self::mcap::{TopicCounts, write_mcap, write_mcap_file};
-pub use self::rrd::{EntityCounts, write_rrd_file};
+pub use self::mcap::{write_mcap, write_mcap_file};
+pub use self::rrd::write_rrd_file;
 
 /// Why a recording could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -113,11 +113,11 @@ pub fn write_recordings(
         let rrd = s.spawn(|| {
             formats
                 .rrd
-                .then(|| write_rrd_file(&rrd_path, result, robot, scene, info).map(|_| ()))
+                .then(|| write_rrd_file(&rrd_path, result, robot, scene, info))
         });
         let mcap = formats
             .mcap
-            .then(|| write_mcap_file(&mcap_path, result, robot, scene, info).map(|_| ()));
+            .then(|| write_mcap_file(&mcap_path, result, robot, scene, info));
         let rrd = rrd
             .join()
             .unwrap_or_else(|_| Some(Err(RecordError::Rerun("the writer thread panicked".into()))));

@@ -19,7 +19,6 @@
 //! Timelines: `sim_time` (duration, s) and `step` (physics steps); the SDK's wall-clock
 //! `log_time` is switched off. Units: m, rad, rad/s, N m, s; depth in mm (`meter` = 1000).
 
-use std::collections::BTreeMap;
 use std::path::Path;
 
 use nalgebra::{Isometry3, Vector3};
@@ -32,9 +31,6 @@ use crate::config::Scene;
 use crate::cycle::RunResult;
 use crate::physics::PartState;
 use crate::robot::{DOF, Primitive, RobotModel};
-
-/// Rows written per entity path, for checks (static rows included).
-pub type EntityCounts = BTreeMap<String, u64>;
 
 fn rr(e: impl std::fmt::Display) -> RecordError {
     RecordError::Rerun(e.to_string())
@@ -53,11 +49,10 @@ fn rgb(c: [f32; 3]) -> rerun::Color {
     rerun::Color::from_rgb((c[0] * 255.0) as u8, (c[1] * 255.0) as u8, (c[2] * 255.0) as u8)
 }
 
-/// The stream with its two timelines set to simulation time `t_s`, and the row counts.
+/// The stream, and the physics step that turns simulation time into the `step` timeline.
 struct Rec {
     stream: RecordingStream,
     step_s: f64,
-    counts: EntityCounts,
 }
 
 impl Rec {
@@ -72,15 +67,11 @@ impl Rec {
 
     fn log(&mut self, t_s: f64, path: &str, what: &impl rerun::AsComponents) -> Result<(), RecordError> {
         self.at(t_s);
-        self.stream.log(path, what).map_err(rr)?;
-        *self.counts.entry(path.to_string()).or_default() += 1;
-        Ok(())
+        self.stream.log(path, what).map_err(rr)
     }
 
     fn log_static(&mut self, path: &str, what: &impl rerun::AsComponents) -> Result<(), RecordError> {
-        self.stream.log_static(path, what).map_err(rr)?;
-        *self.counts.entry(path.to_string()).or_default() += 1;
-        Ok(())
+        self.stream.log_static(path, what).map_err(rr)
     }
 
     /// Sends `values`, `per_row` scalars (series) a row, at `times_s` in one columnar call.
@@ -108,22 +99,20 @@ impl Rec {
                 ],
                 columns,
             )
-            .map_err(rr)?;
-        *self.counts.entry(path.to_string()).or_default() += times_s.len() as u64;
-        Ok(())
+            .map_err(rr)
     }
 }
 
 /// Writes the Rerun recording of `result` (run with `keep_trace` and `keep_scene`) to `path`:
 /// first to `<path>.partial`, flushed and finalised, then renamed, so that a failed write never
-/// leaves a truncated `run.rrd`. Returns the rows written per entity path.
+/// leaves a truncated `run.rrd`.
 pub fn write_rrd_file(
     path: &Path,
     result: &RunResult,
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
-) -> Result<EntityCounts, RecordError> {
+) -> Result<(), RecordError> {
     let partial = path.with_extension("rrd.partial");
     let stream = rerun::RecordingStreamBuilder::new("binpick")
         .with_blueprint(layout())
@@ -136,7 +125,6 @@ pub fn write_rrd_file(
     let mut rec = Rec {
         stream,
         step_s: scene.sim.physics_dt_s,
-        counts: EntityCounts::new(),
     };
     let outcome = log_run(&mut rec, result, robot, scene, info);
     // Flush whatever was logged and report a failed write; then hand the file sink over to a
@@ -153,7 +141,7 @@ pub fn write_rrd_file(
             let _ = std::fs::remove_file(&partial);
         })?;
     std::fs::rename(&partial, path)?;
-    Ok(rec.counts)
+    Ok(())
 }
 
 /// The layout the viewer opens with: the cell in 3D beside the
