@@ -45,7 +45,7 @@ pub fn time_per_call(
     for i in 0..calls.min(1000) {
         f(i);
     }
-    let mut per_call: Vec<f64> = (0..runs.max(1))
+    let per_call: Vec<f64> = (0..runs.max(1))
         .map(|_| {
             let t0 = Instant::now();
             for i in 0..calls {
@@ -54,12 +54,12 @@ pub fn time_per_call(
             t0.elapsed().as_nanos() as f64 / calls as f64
         })
         .collect();
-    per_call.sort_by(f64::total_cmp);
+    let (median_ns, min_ns, max_ns) = crate::stats::median_min_max(&per_call);
     Timing {
         name: name.to_string(),
-        median_ns: per_call[per_call.len() / 2],
-        min_ns: per_call[0],
-        max_ns: per_call[per_call.len() - 1],
+        median_ns,
+        min_ns,
+        max_ns,
         calls_per_run: calls,
         runs: runs.max(1),
         target_ns,
@@ -257,9 +257,8 @@ pub struct PhysicsBench {
     pub targets: (f64, f64),
 }
 
-fn median(mut v: Vec<f64>) -> (f64, f64, f64) {
-    v.sort_by(f64::total_cmp);
-    (v[v.len() / 2], v[0], v[v.len() - 1])
+fn median(v: Vec<f64>) -> (f64, f64, f64) {
+    crate::stats::median_min_max(&v)
 }
 
 /// Runs the physics benchmark on one core.
@@ -389,7 +388,7 @@ pub fn sense_bench(
     runs: usize,
 ) -> Result<SenseBench, Box<dyn std::error::Error + Send + Sync>> {
     use crate::physics::{PartShape, World, pile::PileOptions};
-    use crate::sensor::{HeightMap, Sensor, capture};
+    use crate::sensor::{Sensor, capture};
     let runs = runs.max(1);
     let mut rows = Vec::new();
     let one = rayon::ThreadPoolBuilder::new().num_threads(1).build()?;
@@ -419,9 +418,18 @@ pub fn sense_bench(
         let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
         let q = w.joints();
         let mut feasible = 0;
+        let ctx = crate::pipeline::GraspContext {
+            scene: &scene.scene,
+            robot,
+            selector: &selector,
+            pick_tray: &w.pick_tray,
+        };
+        // The cycle's own sense-and-grasp: height map, candidates, IK, ranking, clear approach.
         let grasp = time_ms(&mut || {
-            let hm = HeightMap::from_capture(&c, &w, 0.002);
-            feasible = selector.select(&detections, &hm, &slot, &q).ranked.len();
+            feasible = crate::pipeline::sense_and_grasp(&ctx, &c, &detections, &slot, &q, &[])
+                .plan
+                .ranked
+                .len();
         });
         rows.push(SenseTiming {
             workpiece: wp.workpiece.name.clone(),
@@ -440,93 +448,7 @@ pub fn sense_bench(
     })
 }
 
-/// One planning benchmark case: an environment and a start and goal.
-#[derive(Debug, Clone)]
-pub struct PlannerCase {
-    /// Name.
-    pub name: String,
-    /// Collision model (robot spheres and environment).
-    pub model: crate::planning::CollisionModel,
-    /// Start configuration.
-    pub start: JointVector,
-    /// Goal configuration.
-    pub goal: JointVector,
-}
-
-fn table_only(scene: &crate::config::Scene) -> crate::planning::Environment {
-    let mut env = crate::planning::Environment::from_scene(scene);
-    env.boxes.truncate(1);
-    env
-}
-
-fn bx(name: &str, c: [f64; 3], size: [f64; 3]) -> crate::planning::EnvBox {
-    crate::planning::EnvBox {
-        name: name.into(),
-        world_from_box: nalgebra::Isometry3::translation(c[0], c[1], c[2]),
-        half_m: nalgebra::Vector3::from(size) / 2.0,
-    }
-}
-
-/// An open container: floor and four walls around (x, y), inner size `inner`, wall height `h`.
-fn container(name: &str, x: f64, y: f64, inner: f64, h: f64) -> Vec<crate::planning::EnvBox> {
-    let t = 0.01;
-    let o = inner / 2.0 + t / 2.0;
-    vec![
-        bx(
-            &format!("{name} floor"),
-            [x, y, t / 2.0],
-            [inner + 2.0 * t, inner + 2.0 * t, t],
-        ),
-        bx(&format!("{name} wall +x"), [x + o, y, h / 2.0], [t, inner + 2.0 * t, h]),
-        bx(&format!("{name} wall -x"), [x - o, y, h / 2.0], [t, inner + 2.0 * t, h]),
-        bx(&format!("{name} wall +y"), [x, y + o, h / 2.0], [inner, t, h]),
-        bx(&format!("{name} wall -y"), [x, y - o, h / 2.0], [inner, t, h]),
-    ]
-}
-
-/// The reference system's three planning cases (its Fig. 5), rebuilt from the text: obstacles
-/// between start and goal that block the motion of J1 (a wall between two work points), of J2
-/// (a bar the arm must pass over to reach beyond it), and of J3 (the hand inside one container
-/// going into another).
-pub fn fig5_cases(scene: &crate::config::Scene, robot: &RobotModel) -> Result<Vec<PlannerCase>, String> {
-    use crate::planning::{CollisionModel, RobotSpheres};
-    use crate::robot::tool_down_pose;
-    let spheres = RobotSpheres::new(robot, scene, None);
-    let home = JointVector::from(scene.robot.home_rad());
-    let ik = |p: [f64; 3]| -> Result<JointVector, String> {
-        robot
-            .ik_tool_nearest(&tool_down_pose(nalgebra::Vector3::from(p), 0.0), &home)
-            .map(|s| s.q)
-            .map_err(|e| format!("case pose {p:?}: {e}"))
-    };
-    let mut cases = Vec::new();
-    let mut env = table_only(scene);
-    env.boxes.push(bx("wall", [0.52, 0.0, 0.20], [0.24, 0.03, 0.40]));
-    cases.push(PlannerCase {
-        name: "J1 blocked: wall between two work points".into(),
-        model: CollisionModel::new(robot, spheres.clone(), env),
-        start: ik([0.45, 0.28, 0.06])?,
-        goal: ik([0.45, -0.28, 0.06])?,
-    });
-    let mut env = table_only(scene);
-    env.boxes.push(bx("bar", [0.45, 0.0, 0.25], [0.04, 0.70, 0.04]));
-    cases.push(PlannerCase {
-        name: "J2 blocked: reach over a bar".into(),
-        model: CollisionModel::new(robot, spheres.clone(), env),
-        start: ik([0.32, 0.0, 0.06])?,
-        goal: ik([0.60, 0.0, 0.06])?,
-    });
-    let mut env = table_only(scene);
-    env.boxes.extend(container("container 1", 0.40, 0.26, 0.12, 0.12));
-    env.boxes.extend(container("container 2", 0.40, -0.26, 0.12, 0.12));
-    cases.push(PlannerCase {
-        name: "J3 blocked: out of one container into another".into(),
-        model: CollisionModel::new(robot, spheres, env),
-        start: ik([0.40, 0.26, 0.03])?,
-        goal: ik([0.40, -0.26, 0.03])?,
-    });
-    Ok(cases)
-}
+pub use crate::reference::{PlannerCase, fig5_cases};
 
 /// Statistics of one planner on one set of queries.
 #[derive(Debug, Clone, Serialize)]
@@ -557,18 +479,14 @@ fn planner_row(
     results: &[Result<crate::planning::Plan, crate::planning::PlanError>],
 ) -> PlannerRow {
     let ok: Vec<&crate::planning::Plan> = results.iter().filter_map(|r| r.as_ref().ok()).collect();
-    let mut times: Vec<f64> = ok.iter().map(|p| p.time_s * 1e3).collect();
-    times.sort_by(f64::total_cmp);
-    let n = times.len().max(1) as f64;
-    let mean = times.iter().sum::<f64>() / n;
-    let p95 = times
-        .get(((times.len() as f64 * 0.95).ceil() as usize).saturating_sub(1))
-        .copied()
-        .unwrap_or(0.0);
-    let max = times.last().copied().unwrap_or(0.0);
+    let times = crate::stats::Summary::of(&ok.iter().map(|p| p.time_s * 1e3).collect::<Vec<_>>());
+    let n = times.count.max(1) as f64;
+    // Nothing solved: zeros, as the table has always shown.
+    let or0 = |v: f64| if v.is_nan() { 0.0 } else { v };
+    let (mean, p95, max) = (or0(times.mean_s), or0(times.p95_s), or0(times.max_s));
     let checks: usize = ok.iter().map(|p| p.stats.clearance_checks).sum();
     let samples: usize = ok.iter().map(|p| p.stats.samples).sum();
-    let total_ms: f64 = times.iter().sum();
+    let total_ms: f64 = ok.iter().map(|p| p.time_s * 1e3).sum();
     PlannerRow {
         case: case.into(),
         algorithm,
@@ -614,7 +532,7 @@ pub fn planner_bench(
             };
             let results: Vec<_> = (0..n)
                 .map(|t| {
-                    let mut rng = crate::rng::stream(seed + t as u64, "planner");
+                    let mut rng = crate::rng::stream(seed.wrapping_add(t as u64), "planner");
                     case.model.plan(&case.start, &case.goal, &opts, &mut rng)
                 })
                 .collect();
@@ -635,7 +553,7 @@ pub fn planner_bench(
             .take(n)
             .enumerate()
             .map(|(k, q)| {
-                let mut rng = crate::rng::stream(seed + k as u64, "planner");
+                let mut rng = crate::rng::stream(seed.wrapping_add(k as u64), "planner");
                 q.model.plan(&q.start, &q.goal, &opts, &mut rng)
             })
             .collect();
@@ -658,8 +576,9 @@ pub fn binpicking_queries(
     n: usize,
 ) -> Result<Vec<PlannerCase>, Box<dyn std::error::Error + Send + Sync>> {
     use crate::physics::{PartShape, World, pile::PileOptions};
-    use crate::planning::{CollisionModel, Environment, PileColumns, RobotSpheres};
-    use crate::sensor::{HeightMap, Sensor};
+    use crate::pipeline::{GraspContext, pile_map, planning_environment, sense_and_grasp};
+    use crate::planning::{CollisionModel, RobotSpheres};
+    use crate::sensor::Sensor;
     let mut out = Vec::new();
     let per_pile = 6;
     let mut seed = 1;
@@ -671,31 +590,24 @@ pub fn binpicking_queries(
             let sensor = Sensor::new(&scene.scene.sensor, &w, seed).ok_or("degenerate sensor")?;
             let c = crate::sensor::capture(&w, &sensor.camera, seed, 0);
             let det = sensor.recognize(&w, &c);
-            let hm = HeightMap::from_capture(&c, &w, 0.002);
             let slots = scene.scene.world_from_slots(&wp.workpiece);
-            let plan = crate::grasp::GraspSelector::new(&scene.scene, robot, &wp.workpiece).select(
-                &det,
-                &hm,
-                &slots[0],
-                &w.joints(),
-            );
+            let selector = crate::grasp::GraspSelector::new(&scene.scene, robot, &wp.workpiece);
+            let ctx = GraspContext {
+                scene: &scene.scene,
+                robot,
+                selector: &selector,
+                pick_tray: &w.pick_tray,
+            };
+            // The cycle's own grasp ranking and planning scenes; the poses of its motions.
+            let choice = sense_and_grasp(&ctx, &c, &det, &slots[0], &w.joints(), &[]);
+            let pile = pile_map(&scene.scene, &choice.height_map);
             let empty = RobotSpheres::new(robot, &scene.scene, None);
-            for g in plan.ranked.iter().take(per_pile / 2) {
+            for g in choice.plan.ranked.iter().take(per_pile / 2) {
                 let tool_from_part = g.world_from_tool.inverse() * det[g.detection].world_from_part;
                 let held = RobotSpheres::new(robot, &scene.scene, Some((tool_from_part, shape.half_extents_m)));
-                let local = w.pick_tray.world_from_tray.inverse()
-                    * nalgebra::Point3::from(g.world_from_tool.translation.vector);
-                let pile = PileColumns::new(&hm, 5, Some((local.x, local.y, 0.02)));
-                let mut env = Environment::from_scene(&scene.scene);
-                env.pile = Some(pile);
+                let env = planning_environment(&scene.scene, &pile, g);
                 let q_place = JointVector::from(g.q_place);
-                let above_place = nalgebra::Isometry3::from_parts(
-                    nalgebra::Translation3::from(
-                        g.world_from_tool_place.translation.vector + nalgebra::Vector3::z() * 0.05,
-                    ),
-                    g.world_from_tool_place.rotation,
-                );
-                let Ok(pre_place) = robot.ik_tool_nearest(&above_place, &q_place) else {
+                let Ok(pre_place) = robot.ik_tool_nearest(&crate::cycle::above_place(g), &q_place) else {
                     continue;
                 };
                 let q_approach = JointVector::from(g.q_approach);
@@ -764,55 +676,18 @@ pub fn accel_bench(
     robot: &RobotModel,
     runs: usize,
 ) -> Result<Vec<AccelRow>, Box<dyn std::error::Error + Send + Sync>> {
-    use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
+    use crate::planning::PlanOptions;
     use crate::trajectory::{Trajectory, correct_path, default_limits, torques};
     let hand = Payload::from_gripper(&scene.scene.gripper);
-    let part = Payload::point(0.03, robot.flange_from_tool.translation.vector);
+    let part = Payload::point(
+        crate::reference::ACCEL_PART_KG,
+        robot.flange_from_tool.translation.vector,
+    );
     let dynamics = robot.dynamics(&hand.combined(&part));
     let defaults = default_limits(robot, &hand, 5.0, 20_000);
-    let home = JointVector::from(scene.scene.robot.home_rad());
-    let reference = [(24.7, 95.1), (19.4, 97.1), (28.1, 96.5), (28.3, 85.3), (23.3, 90.0)];
-    let setups = [
-        ("A->a", 0.40, 0.00),
-        ("B->b", 0.50, 0.00),
-        ("C->c", 0.35, 0.10),
-        ("D->d", 0.45, 0.15),
-        ("E->e", 0.55, 0.05),
-    ];
-    let held = Some((
-        nalgebra::Isometry3::translation(0.0, 0.0, 0.01),
-        nalgebra::Vector3::new(0.015, 0.015, 0.01),
-    ));
     let mut rows = Vec::new();
-    for (k, (name, reach, z)) in setups.iter().enumerate() {
-        let mut env = table_only(&scene.scene);
-        env.boxes.extend(
-            container("container", 0.0, *reach, 0.12, 0.10)
-                .into_iter()
-                .map(|mut b| {
-                    b.world_from_box.translation.vector.z += z;
-                    b
-                }),
-        );
-        env.boxes.extend(
-            container("container", 0.0, -*reach, 0.12, 0.10)
-                .into_iter()
-                .map(|mut b| {
-                    b.world_from_box.translation.vector.z += z;
-                    b
-                }),
-        );
-        let model = CollisionModel::new(robot, RobotSpheres::new(robot, &scene.scene, held), env);
-        let ik = |y: f64| {
-            robot
-                .ik_tool_nearest(
-                    &crate::robot::tool_down_pose(nalgebra::Vector3::new(0.0, y, z + 0.05), 0.0),
-                    &home,
-                )
-                .map(|s| s.q)
-                .map_err(|e| format!("{name}: {e}"))
-        };
-        let (start, goal) = (ik(*reach)?, ik(-*reach)?);
+    for case in crate::reference::accel_cases(&scene.scene, robot)? {
+        let (name, model, start, goal) = (case.name, &case.model, case.start, case.goal);
         let mut worst_ms = 0.0f64;
         let mut all_ms = Vec::new();
         let mut outcomes = Vec::new();
@@ -824,8 +699,8 @@ pub fn accel_bench(
                 .map_err(|e| format!("{name}: {e}"))?;
             let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
             let (via, accelerated, _stops) =
-                crate::trajectory::accelerate_in_corridor(robot, &dynamics, &via, &model, 0.01);
-            let corrected = correct_path(robot, &dynamics, &via, &accelerated, Some(&model), 60f64.to_radians());
+                crate::trajectory::accelerate_in_corridor(robot, &dynamics, &via, model, 0.01);
+            let corrected = correct_path(robot, &dynamics, &via, &accelerated, Some(model), 60f64.to_radians());
             worst_ms = worst_ms.max(t0.elapsed().as_secs_f64() * 1e3);
             all_ms.push(t0.elapsed().as_secs_f64() * 1e3);
             let default_s = Trajectory::through(&via, &defaults).duration_s;
@@ -873,10 +748,10 @@ pub fn accel_bench(
             folds: (corrected.folds, corrected.tried),
             compute_max_ms: worst_ms,
             compute_median_ms: median(all_ms).0,
-            corridor_clear: crate::trajectory::check_corridor(&model, &corrected.accelerated.trajectory, 0.01).is_ok(),
+            corridor_clear: crate::trajectory::check_corridor(model, &corrected.accelerated.trajectory, 0.01).is_ok(),
             peak_ratio: corrected.accelerated.torques.peak_ratio,
             energy: (slow_torque.energy, corrected.accelerated.torques.energy),
-            reference: reference[k],
+            reference: (case.table4_improvement_pct, case.table4_compute_ms),
         });
     }
     Ok(rows)

@@ -8,61 +8,42 @@
 
 use std::fmt::Write;
 
-/// A lane of the time chart, top to bottom in this order.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, serde::Serialize)]
-pub enum Lane {
-    /// The 3D sensor captures a depth image.
-    Sensor,
-    /// Recognition finds parts in the capture.
-    Recognition,
-    /// The grasp selector ranks suction grasps.
-    Grasp,
-    /// The motion planner plans the next move.
-    Planning,
-    /// The arm moves to a part and picks it.
-    Pick,
-    /// The arm carries the part to the place tray and releases it.
-    Place,
-    /// The cell waits (nothing to pick, a protective stop, a retry).
-    Stall,
+pub use crate::cycle::Stage as Lane;
+
+/// Every lane, top to bottom.
+pub const LANES: [Lane; 7] = [
+    Lane::Sensor,
+    Lane::Recognition,
+    Lane::Grasp,
+    Lane::Planning,
+    Lane::Pick,
+    Lane::Place,
+    Lane::Stall,
+];
+
+/// Label shown at the left of a lane ("sensor", "recognition", "grasp selection", "planning",
+/// "Pick", "Place", "stall").
+pub fn lane_label(lane: Lane) -> &'static str {
+    match lane {
+        Lane::Sensor => "sensor",
+        Lane::Recognition => "recognition",
+        Lane::Grasp => "grasp selection",
+        Lane::Planning => "planning",
+        Lane::Pick => "Pick",
+        Lane::Place => "Place",
+        Lane::Stall => "stall",
+    }
 }
 
-impl Lane {
-    /// Every lane, top to bottom.
-    pub const ALL: [Lane; 7] = [
-        Lane::Sensor,
-        Lane::Recognition,
-        Lane::Grasp,
-        Lane::Planning,
-        Lane::Pick,
-        Lane::Place,
-        Lane::Stall,
-    ];
-
-    /// Label shown at the left of the lane ("sensor", "recognition", "grasp selection", "planning",
-    /// "Pick", "Place", "stall").
-    pub fn label(self) -> &'static str {
-        match self {
-            Lane::Sensor => "sensor",
-            Lane::Recognition => "recognition",
-            Lane::Grasp => "grasp selection",
-            Lane::Planning => "planning",
-            Lane::Pick => "Pick",
-            Lane::Place => "Place",
-            Lane::Stall => "stall",
-        }
-    }
-
-    fn colour(self) -> &'static str {
-        match self {
-            Lane::Sensor => "#4e79a7",
-            Lane::Recognition => "#f28e2b",
-            Lane::Grasp => "#e15759",
-            Lane::Planning => "#76b7b2",
-            Lane::Pick => "#59a14f",
-            Lane::Place => "#edc948",
-            Lane::Stall => "#b07aa1",
-        }
+fn lane_colour(lane: Lane) -> &'static str {
+    match lane {
+        Lane::Sensor => "#4e79a7",
+        Lane::Recognition => "#f28e2b",
+        Lane::Grasp => "#e15759",
+        Lane::Planning => "#76b7b2",
+        Lane::Pick => "#59a14f",
+        Lane::Place => "#edc948",
+        Lane::Stall => "#b07aa1",
     }
 }
 
@@ -86,6 +67,55 @@ pub struct Marker {
     pub t_s: f64,
     /// Text drawn at the top of the marker.
     pub label: String,
+}
+
+/// The observer that keeps a run's spans and markers for its time chart.
+#[derive(Debug, Clone, Default)]
+pub struct TimeChart {
+    /// Busy intervals, in the order the run reported them.
+    pub spans: Vec<Span>,
+    /// Markers (releases, faults).
+    pub markers: Vec<Marker>,
+}
+
+impl crate::cycle::Observer for TimeChart {
+    fn span(&mut self, stage: Lane, start_s: f64, end_s: f64, label: &str) {
+        self.spans.push(Span {
+            lane: stage,
+            start_s,
+            end_s,
+            label: label.to_string(),
+        });
+    }
+
+    fn marker(&mut self, t_s: f64, label: &str) {
+        self.markers.push(Marker {
+            t_s,
+            label: label.to_string(),
+        });
+    }
+}
+
+impl TimeChart {
+    /// The run's time chart over its whole length (`end_s` of simulation time), and a close-up
+    /// of three takts in the steady state (from the release before the middle one of
+    /// `releases_s`), as SVG documents.
+    pub fn svgs(&self, title: &str, end_s: f64, releases_s: &[f64]) -> (String, Option<String>) {
+        let whole = time_chart_svg(title, &self.spans, &self.markers, 0.0, end_s);
+        let steady = (releases_s.len() >= 5).then(|| {
+            let i = releases_s.len() / 2 - 1;
+            let t0 = releases_s[i] - 0.2;
+            let t1 = releases_s[(i + 3).min(releases_s.len() - 1)] + 0.2;
+            time_chart_svg(
+                &format!("{title}: three takts in the steady state"),
+                &self.spans,
+                &self.markers,
+                t0,
+                t1,
+            )
+        });
+        (whole, steady)
+    }
 }
 
 const WIDTH: f64 = 1200.0;
@@ -112,7 +142,7 @@ pub fn time_chart_svg(title: &str, spans: &[Span], markers: &[Marker], t0_s: f64
     let plot_w = WIDTH - LABEL_W - RIGHT_PAD;
     let right = LABEL_W + plot_w;
     let x_of = |t: f64| LABEL_W + ((t - t0) / (t1 - t0)).clamp(0.0, 1.0) * plot_w;
-    let lanes_bottom = TOP + LANE_H * Lane::ALL.len() as f64;
+    let lanes_bottom = TOP + LANE_H * LANES.len() as f64;
     let height = lanes_bottom + AXIS_H;
     let mut s = String::new();
     // Writing to a String cannot fail.
@@ -128,11 +158,11 @@ pub fn time_chart_svg(title: &str, spans: &[Span], markers: &[Marker], t0_s: f64
     out!("<rect x=\"0\" y=\"0\" width=\"{WIDTH:.0}\" height=\"{height:.0}\" fill=\"#ffffff\"/>");
     let title = escape(title);
     out!("<text x=\"{LABEL_W:.1}\" y=\"22.0\" font-size=\"16\">{title}</text>");
-    for (i, lane) in Lane::ALL.iter().enumerate() {
+    for (i, lane) in LANES.iter().enumerate() {
         let y = TOP + LANE_H * i as f64;
         let fill = if i % 2 == 0 { "#f4f4f4" } else { "#ffffff" };
         out!("<rect x=\"{LABEL_W:.1}\" y=\"{y:.1}\" width=\"{plot_w:.1}\" height=\"{LANE_H:.1}\" fill=\"{fill}\"/>");
-        let (lx, ly, label) = (LABEL_W - 8.0, y + LANE_H / 2.0 + 4.0, lane.label());
+        let (lx, ly, label) = (LABEL_W - 8.0, y + LANE_H / 2.0 + 4.0, lane_label(*lane));
         out!("<text x=\"{lx:.1}\" y=\"{ly:.1}\" text-anchor=\"end\">{label}</text>");
     }
     // Grid lines and the time axis.
@@ -161,10 +191,15 @@ pub fn time_chart_svg(title: &str, spans: &[Span], markers: &[Marker], t0_s: f64
         if !(a.is_finite() && b.is_finite()) || b <= a || b <= t0 || a >= t1 {
             continue;
         }
-        let lane_i = Lane::ALL.iter().position(|l| *l == span.lane).unwrap_or(0);
+        let lane_i = LANES.iter().position(|l| *l == span.lane).unwrap_or(0);
         let (x, y, h) = (x_of(a), TOP + LANE_H * lane_i as f64 + 6.0, LANE_H - 12.0);
         let w = (x_of(b) - x).max(1.0);
-        let (text, lane, colour, d) = (escape(&span.label), span.lane.label(), span.lane.colour(), b - a);
+        let (text, lane, colour, d) = (
+            escape(&span.label),
+            lane_label(span.lane),
+            lane_colour(span.lane),
+            b - a,
+        );
         out!(
             "<rect class=\"span\" x=\"{x:.1}\" y=\"{y:.1}\" width=\"{w:.1}\" height=\"{h:.1}\" fill=\"{colour}\" \
              stroke=\"#333333\" stroke-width=\"0.5\">\
@@ -304,7 +339,7 @@ mod tests {
     #[test]
     fn rendering_is_deterministic() {
         let spans: Vec<Span> = (0..40)
-            .map(|i| span(Lane::ALL[i % 7], i as f64 * 0.3, i as f64 * 0.3 + 0.25, "s"))
+            .map(|i| span(LANES[i % 7], i as f64 * 0.3, i as f64 * 0.3 + 0.25, "s"))
             .collect();
         let markers = [Marker {
             t_s: 2.0,

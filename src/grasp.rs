@@ -286,7 +286,7 @@ impl GraspSelector {
             face_margin_m: workpiece.grasp.face_margin_m + 2.0 * scene.sensor.pose_noise_m,
             max_tilt_rad: g.max_tilt_deg.to_radians(),
             tool_radius_m: g.body_diameter_m / 2.0,
-            cup_length_m: (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0),
+            cup_length_m: crate::geometry::HandGeometry::new(g).cup_length_m,
             tray: t.world_from_tray(),
             tray_inner_half_m: [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0],
             rim_height_m: t.wall_height_m,

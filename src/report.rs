@@ -3,9 +3,13 @@
 //! Job: stage every file of a run in a hidden folder beside its destination and move it into
 //! place only when the run has finished, so an error never leaves a half-written output; write
 //! the fully resolved inputs (scene, URDF, workpiece) next to the results, so a run folder is
-//! self-contained and can be re-run as it is.
+//! self-contained and can be re-run as it is; the per-pick table and CSV files ([`tables`]).
+
+mod tables;
 
 use std::path::{Path, PathBuf};
+
+pub use tables::{Fixed, picks_csv, picks_table, to_csv};
 
 use crate::config::{LoadedScene, LoadedWorkpiece, ShapeKind, Source};
 
@@ -158,97 +162,4 @@ impl Drop for RunDir {
             let _ = std::fs::remove_dir_all(&self.staging);
         }
     }
-}
-
-/// Formats an optional value with six decimals, empty when absent.
-fn opt6(v: Option<f64>) -> String {
-    v.map_or(String::new(), |x| format!("{x:.6}"))
-}
-
-/// `picks.csv`: one row per pick (and per capture that found nothing to pick), SI units in
-/// the column names; reasons have commas and quotes replaced so the file stays plain CSV.
-pub fn picks_csv(records: &[crate::cycle::PickRecord]) -> String {
-    let mut csv = String::from(
-        "pick,outcome,detail,capture_s,ready_s,release_s,takt_s,first_of_pile,pick_s,place_s,\
-         stall_sensor_s,stall_compute_s,grasp_compute_s,pick_compute_s,place_compute_s,\
-         placement_error_mm,yaw_error_deg,max_tracking_error_deg,peak_torque_ratio,suction_speed_factor\n",
-    );
-    for r in records {
-        let detail = r.outcome.detail().replace([',', '"', '\n'], " ");
-        csv += &format!(
-            "{},{},{},{:.6},{:.6},{},{},{},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{:.6},{},{},{:.6},{:.6},{:.4}\n",
-            r.index,
-            r.outcome.name(),
-            detail,
-            r.capture_s,
-            r.ready_s,
-            opt6(r.release_s),
-            opt6(r.takt_s),
-            r.first_of_pile,
-            r.pick_s,
-            r.place_s,
-            r.stall_sensor_s,
-            r.stall_compute_s,
-            r.grasp_compute_s,
-            r.pick_compute_s,
-            r.place_compute_s,
-            opt6(r.placement_error_mm),
-            opt6(r.yaw_error_deg),
-            r.max_tracking_error_deg,
-            r.peak_torque_ratio,
-            r.suction_speed_factor,
-        );
-    }
-    csv
-}
-
-/// The per-pick table printed by `binpick run`.
-pub fn picks_table(records: &[crate::cycle::PickRecord]) -> String {
-    let mut out = String::from(
-        "pick  outcome            takt_s  pick_s  place_s  wait_sensor_s  wait_compute_s  place_err_mm  detail\n",
-    );
-    for r in records {
-        let takt = r.takt_s.map_or("-".to_string(), |t| {
-            if r.first_of_pile {
-                format!("({t:.3})")
-            } else {
-                format!("{t:.3}")
-            }
-        });
-        let err = r.placement_error_mm.map_or("-".to_string(), |e| format!("{e:.2}"));
-        out += &format!(
-            "{:>4}  {:<17} {:>7}  {:>6.3}  {:>7.3}  {:>13.3}  {:>14.3}  {:>12}  {:.60}\n",
-            r.index,
-            r.outcome.name(),
-            takt,
-            r.pick_s,
-            r.place_s,
-            r.stall_sensor_s,
-            r.stall_compute_s,
-            err,
-            r.outcome.detail()
-        );
-    }
-    out
-}
-
-/// The run's time chart over its whole length, and a close-up of three takts in the steady
-/// state (from the release before the middle placed pick), as SVG documents.
-pub fn time_charts(result: &crate::cycle::RunResult, title: &str) -> (String, Option<String>) {
-    let end = result.summary.sim_time_s;
-    let whole = crate::chart::time_chart_svg(title, &result.spans, &result.markers, 0.0, end);
-    let releases: Vec<f64> = result.records.iter().filter_map(|r| r.release_s).collect();
-    let steady = (releases.len() >= 5).then(|| {
-        let i = releases.len() / 2 - 1;
-        let t0 = releases[i] - 0.2;
-        let t1 = releases[(i + 3).min(releases.len() - 1)] + 0.2;
-        crate::chart::time_chart_svg(
-            &format!("{title}: three takts in the steady state"),
-            &result.spans,
-            &result.markers,
-            t0,
-            t1,
-        )
-    });
-    (whole, steady)
 }

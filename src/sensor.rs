@@ -695,8 +695,7 @@ impl HeightMap {
     /// inside the view frustum over the tray count (their ray meets the floor plane within the
     /// tray): a point above the tray's footprint but outside the frustum (the arm passing by
     /// high up near the rim) is seen through the air beside the tray, not over it.
-    pub fn from_capture(c: &Capture, world: &World, cell_m: f64) -> Self {
-        let t = &world.pick_tray;
+    pub fn from_capture(c: &Capture, t: &crate::physics::TrayVolume, cell_m: f64) -> Self {
         let [hx, hy] = t.half_xy_m;
         let nx = ((2.0 * hx) / cell_m).ceil() as usize;
         let ny = ((2.0 * hy) / cell_m).ceil() as usize;

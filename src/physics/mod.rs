@@ -349,17 +349,6 @@ pub struct World {
     step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
     tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
-    /// Part-pose snapshots for recordings, and their period [s] (see [`World::record_parts_every`]).
-    part_frames: Option<(f64, Vec<SceneFrame>)>,
-}
-
-/// Every part's state and pose at one time, for recordings.
-#[derive(Debug, Clone)]
-pub struct SceneFrame {
-    /// Simulation time [s].
-    pub t_s: f64,
-    /// Per part, in insertion order: state and `world_from_part`.
-    pub parts: Vec<(PartState, Isometry3<f64>)>,
 }
 
 fn arm_collider(shape: SharedShape, pose: Pose, tag: Tag, with_fixed: bool) -> Collider {
@@ -428,23 +417,14 @@ impl World {
                 .into_iter()
                 .chain(overlap::tray_pieces(&scene.place_tray.tray))
                 .collect(),
-            part_frames: None,
         };
-        // Table.
-        let t = &scene.table;
-        w.add_env_box(
-            "table",
-            Isometry3::translation(t.center_xy_m[0], t.center_xy_m[1], t.top_z_m - t.thickness_m / 2.0),
-            Vector3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, t.thickness_m / 2.0),
-        );
-        w.add_tray("pick tray", &scene.pick_tray);
-        w.add_tray("place tray", &scene.place_tray.tray);
-        for o in &scene.obstacles {
-            let pose = Isometry3::from_parts(
-                nalgebra::Translation3::new(o.center_m[0], o.center_m[1], o.center_m[2]),
-                nalgebra::UnitQuaternion::from_euler_angles(0.0, 0.0, o.yaw_deg.to_radians()),
-            );
-            w.add_env_box(&format!("obstacle {:?}", o.name), pose, Vector3::from(o.size_m) / 2.0);
+        // The cell's fixed boxes: table, trays, obstacles (one geometry for physics and planning).
+        for (role, b) in crate::geometry::cell_boxes(scene) {
+            let name = match role {
+                crate::geometry::BoxRole::Obstacle => format!("obstacle {:?}", b.name),
+                _ => b.name.clone(),
+            };
+            w.add_env_box(&name, b.world_from_box(), b.half_m);
         }
         w.add_arm(scene);
         w.tool_history = [w.tool_position(); 3];
@@ -462,28 +442,6 @@ impl World {
             .friction(0.5)
             .user_data(Tag::Env(idx).encode());
         self.colliders.insert(c);
-    }
-
-    fn add_tray(&mut self, name: &str, t: &TrayConfig) {
-        let world_from_tray = t.world_from_tray();
-        let [lx, ly] = t.inner_size_m;
-        let (w, h, f) = (t.wall_thickness_m, t.wall_height_m, t.floor_thickness_m);
-        let at = |x: f64, y: f64, z: f64| world_from_tray * Isometry3::translation(x, y, z);
-        self.add_env_box(
-            &format!("{name} floor"),
-            at(0.0, 0.0, -f / 2.0),
-            Vector3::new(lx / 2.0 + w, ly / 2.0 + w, f / 2.0),
-        );
-        let zc = (h - f) / 2.0;
-        let hz = (h + f) / 2.0;
-        for (label, x, y, hx, hy) in [
-            ("+x", lx / 2.0 + w / 2.0, 0.0, w / 2.0, ly / 2.0 + w),
-            ("-x", -lx / 2.0 - w / 2.0, 0.0, w / 2.0, ly / 2.0 + w),
-            ("+y", 0.0, ly / 2.0 + w / 2.0, lx / 2.0, w / 2.0),
-            ("-y", 0.0, -ly / 2.0 - w / 2.0, lx / 2.0, w / 2.0),
-        ] {
-            self.add_env_box(&format!("{name} wall {label}"), at(x, y, zc), Vector3::new(hx, hy, hz));
-        }
     }
 
     fn add_arm(&mut self, scene: &Scene) {
@@ -525,23 +483,21 @@ impl World {
             self.link_bodies.push(body);
         }
         // The suction tool on the flange: a body cylinder, then the cup ending at the tool frame.
-        let g = &scene.gripper;
-        let cup_len = (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0);
-        let body_len = g.tool_length_m - cup_len;
+        let hand = crate::geometry::HandGeometry::new(&scene.gripper);
         let flange = self.link_bodies[DOF];
         let along_z = |z: f64| {
             Isometry3::translation(0.0, 0.0, z) * Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2)
         };
         let tool = arm_collider(
-            SharedShape::cylinder(sim(body_len / 2.0), sim(g.body_diameter_m / 2.0)),
-            to_pose(&along_z(body_len / 2.0)),
+            SharedShape::cylinder(sim(hand.body_length_m / 2.0), sim(hand.body_radius_m)),
+            to_pose(&along_z(hand.body_length_m / 2.0)),
             Tag::Tool,
             true,
         );
         self.colliders.insert_with_parent(tool, flange, &mut self.bodies);
         let cup = arm_collider(
-            SharedShape::cylinder(sim(cup_len / 2.0), sim(g.cup_diameter_m / 2.0)),
-            to_pose(&along_z(g.tool_length_m - cup_len / 2.0)),
+            SharedShape::cylinder(sim(hand.cup_length_m / 2.0), sim(hand.cup_radius_m)),
+            to_pose(&along_z(hand.tool_length_m - hand.cup_length_m / 2.0)),
             Tag::Cup,
             true,
         );
@@ -653,41 +609,7 @@ impl World {
         self.steps += 1;
         self.substeps += n as u64;
         self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
-        self.snapshot_parts();
         self.check_health()
-    }
-
-    /// From now on, every step that is at least `period_s` after the last snapshot records every
-    /// part's state and pose (pile pours and refills included); [`World::take_part_frames`] hands
-    /// them over.
-    pub fn record_parts_every(&mut self, period_s: f64) {
-        self.part_frames = Some((period_s, Vec::new()));
-    }
-
-    /// The part snapshots recorded so far (empty unless [`World::record_parts_every`] was called).
-    pub fn take_part_frames(&mut self) -> Vec<SceneFrame> {
-        self.part_frames
-            .as_mut()
-            .map(|(_, f)| std::mem::take(f))
-            .unwrap_or_default()
-    }
-
-    fn snapshot_parts(&mut self) {
-        let Some((period_s, frames)) = self.part_frames.as_ref() else {
-            return;
-        };
-        if frames.last().is_some_and(|f| self.time_s + 1e-9 < f.t_s + period_s) {
-            return;
-        }
-        let frame = SceneFrame {
-            t_s: self.time_s,
-            parts: (0..self.parts.len())
-                .map(|i| (self.parts[i].state, self.part_pose(i)))
-                .collect(),
-        };
-        if let Some((_, frames)) = self.part_frames.as_mut() {
-            frames.push(frame);
-        }
     }
 
     /// How many substeps the next step needs so that no awake part moves more than

@@ -139,38 +139,13 @@ pub fn workpiece_pieces(w: &Workpiece) -> Option<Vec<Polytope>> {
     Some(w.pieces().iter().map(|(_, p)| Polytope::of(p)).collect())
 }
 
-/// The tray's floor and walls as boxes in the world: `(world_from_box, box)`.
+/// The tray's floor and walls ([`crate::geometry::tray_boxes`]) as `(world_from_tray, box in the
+/// tray frame)`.
 pub fn tray_pieces(t: &TrayConfig) -> Vec<(Isometry3<f64>, Polytope)> {
-    let world_from_tray = t.world_from_tray();
-    let [lx, ly] = t.inner_size_m;
-    let (w, h, f) = (t.wall_thickness_m, t.wall_height_m, t.floor_thickness_m);
-    let zc = (h - f) / 2.0;
-    let hz = (h + f) / 2.0;
-    [
-        (
-            Vector3::new(0.0, 0.0, -f / 2.0),
-            Vector3::new(lx / 2.0 + w, ly / 2.0 + w, f / 2.0),
-        ),
-        (
-            Vector3::new(lx / 2.0 + w / 2.0, 0.0, zc),
-            Vector3::new(w / 2.0, ly / 2.0 + w, hz),
-        ),
-        (
-            Vector3::new(-lx / 2.0 - w / 2.0, 0.0, zc),
-            Vector3::new(w / 2.0, ly / 2.0 + w, hz),
-        ),
-        (
-            Vector3::new(0.0, ly / 2.0 + w / 2.0, zc),
-            Vector3::new(lx / 2.0, w / 2.0, hz),
-        ),
-        (
-            Vector3::new(0.0, -ly / 2.0 - w / 2.0, zc),
-            Vector3::new(lx / 2.0, w / 2.0, hz),
-        ),
-    ]
-    .into_iter()
-    .map(|(c, he)| (world_from_tray, Polytope::cuboid(c, he)))
-    .collect()
+    crate::geometry::tray_boxes("tray", t)
+        .into_iter()
+        .map(|b| (b.world_from_frame, Polytope::cuboid(b.center_m, b.half_m)))
+        .collect()
 }
 
 /// Deepest overlap among parts at `poses` and between parts and the tray pieces [m], with the

@@ -103,6 +103,16 @@ impl World {
 
     /// Drops `opts.count` parts into the pick tray in waves and lets them settle.
     pub fn build_pile(&mut self, opts: &PileOptions) -> Result<PileReport, HealthError> {
+        self.build_pile_observed(opts, &mut |_| {})
+    }
+
+    /// As [`World::build_pile`], calling `on_step` with the world after every physics step
+    /// (for recordings of the pour).
+    pub fn build_pile_observed(
+        &mut self,
+        opts: &PileOptions,
+        on_step: &mut dyn FnMut(&World),
+    ) -> Result<PileReport, HealthError> {
         let wall = Instant::now();
 
         let mut rng = crate::rng::stream(opts.seed, "pile");
@@ -178,6 +188,7 @@ impl World {
             let wave_start = self.time_s;
             loop {
                 self.step()?;
+                on_step(self);
                 let t = self.time_s - wave_start;
                 if t >= 0.6 || (t >= 0.1 && self.parts_at_rest(0.05, 1.0)) {
                     break;
@@ -193,6 +204,7 @@ impl World {
         let mut settled = false;
         while self.time_s - start_time < opts.max_settle_s {
             self.step()?;
+            on_step(self);
             if self
                 .parts
                 .iter()

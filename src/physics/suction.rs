@@ -158,6 +158,8 @@ pub struct SuctionGripper {
     pub flatness_m: f64,
     /// Holding force of a full seal [N].
     pub holding_n: f64,
+    /// The cup's force model.
+    pub model: crate::geometry::SuctionModel,
     /// Vacuum build-up time [s].
     pub build_up_s: f64,
     /// Release time [s].
@@ -171,12 +173,13 @@ pub struct SuctionGripper {
 impl SuctionGripper {
     /// A gripper from the cell file.
     pub fn new(g: &GripperConfig) -> Self {
-        let r = g.cup_diameter_m / 2.0;
+        let model = crate::geometry::SuctionModel::new(g);
         SuctionGripper {
-            cup_radius_m: r,
+            cup_radius_m: model.cup_radius_m,
             max_tilt_rad: g.max_tilt_deg.to_radians(),
             flatness_m: g.cup_flatness_tolerance_m,
-            holding_n: g.vacuum_kpa * 1e3 * std::f64::consts::PI * r * r,
+            holding_n: model.holding_n,
+            model,
             build_up_s: g.vacuum_build_up_s,
             release_s: g.release_s,
             state: GripperState::Idle,
@@ -416,10 +419,12 @@ impl World {
                 }
             }
             GripperState::Holding { seal, .. } => {
-                let m = self.part_shape.mass_kg;
                 let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
-                let force = m * (self.tool_acceleration() - g).norm();
-                let required = force * (1.0 + 4.0 * seal.com_offset_m / (2.0 * self.gripper.cup_radius_m));
+                let specific_force = (self.tool_acceleration() - g).norm();
+                let required =
+                    self.gripper
+                        .model
+                        .required_n(self.part_shape.mass_kg, specific_force, seal.com_offset_m);
                 if required > self.gripper.holding_n {
                     self.detach(seal.part);
                     self.gripper.state = GripperState::Idle;

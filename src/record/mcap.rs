@@ -29,12 +29,12 @@ use std::io::{Seek, Write};
 
 use serde_json::json;
 
+use super::Recording;
 use super::{
     CANDIDATE_ARROW_M, JOINT_STATE_EVERY, RecordError, RunInfo, arm_samples, event_level, event_text, frustum_corners,
     part_rgb,
 };
 use crate::config::Scene;
-use crate::cycle::RunResult;
 use crate::robot::{DOF, RobotModel};
 
 const LOG_SCHEMA: &str = r#"{"title":"foxglove.Log","type":"object","properties":{
@@ -207,7 +207,7 @@ fn scene_update(t_s: f64, entities: Vec<Entity>) -> serde_json::Value {
 /// `<path>.partial`, then renamed once finished, so a failed write never leaves a truncated file.
 pub fn write_mcap_file(
     path: &std::path::Path,
-    result: &RunResult,
+    result: &Recording,
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
@@ -258,11 +258,10 @@ impl Messages {
     }
 }
 
-/// Writes the recording of `result` (which must have been run with `keep_trace` and
-/// `keep_scene`) to `out`.
+/// Writes the recording `result` to `out`.
 pub fn write_mcap<W: Write + Seek>(
     out: W,
-    result: &RunResult,
+    result: &Recording,
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
@@ -313,12 +312,11 @@ pub fn write_mcap<W: Write + Seek>(
 }
 
 /// `/cell`: table, trays and obstacles as grey cubes, the camera's frustum out to the pick tray.
-fn cell_messages(m: &mut Messages, result: &RunResult, scene: &Scene) -> Result<(), RecordError> {
-    let env = crate::planning::Environment::from_scene(scene);
+fn cell_messages(m: &mut Messages, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
     let mut cell = Entity::new("cell");
-    for b in &env.boxes {
+    for (_, b) in crate::geometry::cell_boxes(scene) {
         cell.cubes.push(json!({
-            "pose": pose(&b.world_from_box), "size": xyz(&(2.0 * b.half_m)), "color": rgba([0.6, 0.6, 0.6], 1.0),
+            "pose": pose(&b.world_from_box()), "size": xyz(&(2.0 * b.half_m)), "color": rgba([0.6, 0.6, 0.6], 1.0),
         }));
     }
     let c = &result.camera;
@@ -334,7 +332,7 @@ fn cell_messages(m: &mut Messages, result: &RunResult, scene: &Scene) -> Result<
 
 /// `/robot/geometry` once (each link's primitives locked to its frame), `/tf` at 50 Hz and
 /// `/robot/joint_states` at 100 Hz.
-fn arm_messages(m: &mut Messages, result: &RunResult, robot: &RobotModel) -> Result<(), RecordError> {
+fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
     use crate::robot::Primitive;
     let name = |i: usize| {
         robot
@@ -425,7 +423,7 @@ fn arm_messages(m: &mut Messages, result: &RunResult, robot: &RobotModel) -> Res
 }
 
 /// `/parts`: all parts as one entity, a cube per part (its bounding box), coloured by state.
-fn part_messages(m: &mut Messages, result: &RunResult) -> Result<(), RecordError> {
+fn part_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
     let size = nalgebra::Vector3::from(result.part_size_m);
     for f in &result.scene_frames {
         let mut e = Entity::new("parts");
@@ -441,7 +439,7 @@ fn part_messages(m: &mut Messages, result: &RunResult) -> Result<(), RecordError
 }
 
 /// `/camera/*` at each trigger time; `/recognition` when each result arrived.
-fn sensing_messages(m: &mut Messages, result: &RunResult) -> Result<(), RecordError> {
+fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
     use base64::Engine;
     let b64 = |bytes: &[u8]| base64::engine::general_purpose::STANDARD.encode(bytes);
     let c = &result.camera;
@@ -527,7 +525,7 @@ fn sensing_messages(m: &mut Messages, result: &RunResult) -> Result<(), RecordEr
 
 /// `/paths`: each motion's tool path, planned (blue) and executed (orange), shown for the motion's
 /// duration plus a second.
-fn path_messages(m: &mut Messages, result: &RunResult) -> Result<(), RecordError> {
+fn path_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
     for (k, p) in result.tool_paths.iter().enumerate() {
         let mut e = Entity::new(format!("motion {k}"));
         e.lifetime_ns = nanos(p.duration_s + 1.0);
@@ -541,7 +539,7 @@ fn path_messages(m: &mut Messages, result: &RunResult) -> Result<(), RecordError
 }
 
 /// `/log` and `/cycle/events` for every cycle event; `/cycle/takt` at every placed pick's release.
-fn event_messages(m: &mut Messages, result: &RunResult) -> Result<(), RecordError> {
+fn event_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
     for e in &result.events {
         let name = e.pick.map_or("cell".to_string(), |p| format!("pick {p}"));
         m.push(

@@ -1,7 +1,7 @@
 //! Record stage: a finished run written to files a user opens days later, offline, to see why a
 //! pick was slow or failed.
 //!
-//! Job: from a [`RunResult`] (run with `keep_trace` and `keep_scene`), write
+//! Job: from a [`Recording`] (what a [`Recorder`] kept while it watched a run), write
 //! - `run.rrd` for the Rerun viewer ([`rrd`]), and
 //! - `run.mcap` for Foxglove ([`mcap`]),
 //!
@@ -21,16 +21,21 @@
 //! Units: s, rad, rad/s, N m, m (depth images in mm). Frames: `world` (the cell's frame, z up);
 //! the camera's optical frame (x right, y down, z forward); one frame per link, named after it.
 
+pub mod collect;
 pub mod mcap;
 pub mod rrd;
 
 use std::path::{Path, PathBuf};
 
 use crate::config::Scene;
-use crate::cycle::{CycleEvent, RunResult};
+use crate::cycle::CycleEvent;
 use crate::physics::PartState;
 use crate::robot::RobotModel;
 
+pub use self::collect::{
+    CLOUD_EVERY_PX, CaptureImage, RECORDED_CANDIDATES, RecognitionRecord, Recorder, Recording, SCENE_FRAME_S,
+    SceneFrame, ToolPath,
+};
 pub use self::mcap::{write_mcap, write_mcap_file};
 pub use self::rrd::write_rrd_file;
 
@@ -102,7 +107,7 @@ pub fn write_recordings(
     dir: &Path,
     stem: &str,
     formats: Formats,
-    result: &RunResult,
+    result: &Recording,
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
@@ -143,7 +148,7 @@ pub(crate) const TRANSFORMS_EVERY: usize = 20;
 /// start pose while the first pile is poured: the trace begins with the first motion), then
 /// every [`TRANSFORMS_EVERY`] servo ticks. Between motions the arm stands still, so the last
 /// frames hold. (simulation time [s], joint positions [rad])
-pub(crate) fn arm_samples(result: &RunResult) -> Vec<(f64, crate::robot::JointVector)> {
+pub(crate) fn arm_samples(result: &Recording) -> Vec<(f64, crate::robot::JointVector)> {
     let start = result.trace.first().filter(|t| t.t > 0.0).map(|t| (0.0, t.q));
     start
         .into_iter()
@@ -162,11 +167,7 @@ pub(crate) fn part_rgb(state: PartState) -> [f32; 3] {
 
 /// Severity of a cycle event: 2 info, 3 warning (faults, lost parts, picks that were not placed).
 pub(crate) fn event_level(e: &CycleEvent) -> u8 {
-    match e.kind {
-        "fault" | "part_lost" => 3,
-        "outcome" if !e.detail.starts_with("placed") => 3,
-        _ => 2,
-    }
+    if e.warning { 3 } else { 2 }
 }
 
 /// A cycle event as one log line.

@@ -24,11 +24,11 @@ use std::path::Path;
 use nalgebra::{Isometry3, Vector3};
 use rerun::{RecordingStream, TimeColumn};
 
+use super::Recording;
 use super::{
     CANDIDATE_ARROW_M, JOINT_STATE_EVERY, RecordError, RunInfo, arm_samples, event_level, event_text, part_rgb,
 };
 use crate::config::Scene;
-use crate::cycle::RunResult;
 use crate::physics::PartState;
 use crate::robot::{DOF, Primitive, RobotModel};
 
@@ -103,12 +103,12 @@ impl Rec {
     }
 }
 
-/// Writes the Rerun recording of `result` (run with `keep_trace` and `keep_scene`) to `path`:
+/// Writes the Rerun recording `result` to `path`:
 /// first to `<path>.partial`, flushed and finalised, then renamed, so that a failed write never
 /// leaves a truncated `run.rrd`.
 pub fn write_rrd_file(
     path: &Path,
-    result: &RunResult,
+    result: &Recording,
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
@@ -203,7 +203,7 @@ fn check_footer(path: &Path) -> Result<(), RecordError> {
 
 fn log_run(
     rec: &mut Rec,
-    result: &RunResult,
+    result: &Recording,
     robot: &RobotModel,
     scene: &Scene,
     info: &RunInfo,
@@ -224,18 +224,20 @@ fn log_run(
 }
 
 /// Table, trays, obstacles and the camera (static).
-fn log_cell(rec: &mut Rec, result: &RunResult, scene: &Scene) -> Result<(), RecordError> {
-    let env = crate::planning::Environment::from_scene(scene);
+fn log_cell(rec: &mut Rec, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
+    let cell: Vec<(Isometry3<f64>, Vector3<f64>, String)> = crate::geometry::cell_boxes(scene)
+        .into_iter()
+        .map(|(_, b)| (b.world_from_box(), b.half_m, b.name))
+        .collect();
     let boxes = rerun::Boxes3D::from_centers_and_half_sizes(
-        env.boxes.iter().map(|b| v3(&b.world_from_box.translation.vector)),
-        env.boxes.iter().map(|b| v3(&b.half_m)),
+        cell.iter().map(|b| v3(&b.0.translation.vector)),
+        cell.iter().map(|b| v3(&b.1)),
     )
-    .with_quaternions(env.boxes.iter().map(|b| quat(&b.world_from_box)))
-    .with_labels(env.boxes.iter().map(|b| b.name.clone()))
+    .with_quaternions(cell.iter().map(|b| quat(&b.0)))
+    .with_labels(cell.iter().map(|b| b.2.clone()))
     .with_show_labels(false)
     .with_colors(
-        env.boxes
-            .iter()
+        cell.iter()
             .map(|_| rerun::Color::from_unmultiplied_rgba(150, 150, 150, 255)),
     )
     .with_fill_mode(rerun::FillMode::Solid);
@@ -261,7 +263,7 @@ fn log_cell(rec: &mut Rec, result: &RunResult, scene: &Scene) -> Result<(), Reco
 }
 
 /// The arm: each link's primitives once (static, in the link's frame), the link frames over time.
-fn log_arm(rec: &mut Rec, result: &RunResult, robot: &RobotModel) -> Result<(), RecordError> {
+fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
     let link_path = |i: usize| {
         format!(
             "world/arm/{}",
@@ -369,7 +371,7 @@ fn log_arm(rec: &mut Rec, result: &RunResult, robot: &RobotModel) -> Result<(), 
 }
 
 /// All parts as one batch of boxes per frame (taken-out parts left out), coloured by state.
-fn log_parts(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+fn log_parts(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
     let half = Vector3::from(result.part_size_m) / 2.0;
     for f in &result.scene_frames {
         let parts: Vec<&(PartState, Isometry3<f64>)> =
@@ -391,7 +393,7 @@ fn log_parts(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
 
 /// Depth images and point clouds at their trigger times; detections and grasp candidates when the
 /// recognition result arrived.
-fn log_sensing(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+fn log_sensing(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
     for c in &result.captures {
         let bytes: Vec<u8> = c.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect();
         rec.log(
@@ -447,7 +449,7 @@ fn log_sensing(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
 }
 
 /// Each motion's tool path, planned and executed, at the motion's start.
-fn log_paths(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+fn log_paths(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
     for p in &result.tool_paths {
         let strip = |pts: &[Vector3<f64>]| pts.iter().map(v3).collect::<Vec<_>>();
         rec.log(
@@ -465,7 +467,7 @@ fn log_paths(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
 }
 
 /// The cycle's events as log entries, and the takt of every placed pick at its release.
-fn log_events(rec: &mut Rec, result: &RunResult) -> Result<(), RecordError> {
+fn log_events(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
     for e in &result.events {
         let level = if event_level(e) >= 3 {
             rerun::TextLogLevel::WARN

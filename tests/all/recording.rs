@@ -409,20 +409,16 @@ fn a_failed_write_is_reported_and_leaves_nothing() {
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("E").unwrap();
-    let r = binpick::cycle::run(
-        &scene,
-        &robot,
-        &wp,
-        &RunOptions {
-            picks: 1,
-            seed: 1,
-            deterministic: true,
-            keep_trace: true,
-            keep_scene: true,
-            stop: None,
-        },
-    )
-    .unwrap();
+    let camera = binpick::sensor::Camera::from_config(&scene.scene.sensor).unwrap();
+    let mut recorder = binpick::record::Recorder::new(&robot, camera, wp.workpiece.size_m);
+    let opts = RunOptions {
+        picks: 1,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+    };
+    let result = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
+    let r = recorder.finish(&result);
     let info = RunInfo {
         scene: scene.label.clone(),
         workpiece: "E".into(),

@@ -10,7 +10,9 @@ use crate::support::{Workspace, binpick_in, stderr};
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::cycle::{Outcome, RunOptions, RunResult};
 use binpick::execution::Tick;
+use binpick::record::{Recorder, Recording};
 use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
+use binpick::sensor::Camera;
 
 /// Torque the motion between two consecutive servo ticks needs: M(q) qdd + C(q, qd) qd + g(q)
 /// + friction, with C qd = dM/dt qd - 1/2 d(qd' M qd)/dq and g = dV/dq, by central differences.
@@ -75,31 +77,28 @@ fn recheck_torques(robot: &RobotModel, hand: &Payload, part_kg: f64, trace: &[Ti
     worst
 }
 
-fn run(workpiece: &str, picks: usize, keep_trace: bool) -> (RunResult, RobotModel, LoadedScene, LoadedWorkpiece) {
+/// A deterministic run of seed 1, recorded: its result and what the recorder kept.
+fn run(workpiece: &str, picks: usize) -> (RunResult, Recording, RobotModel, LoadedScene, LoadedWorkpiece) {
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve(workpiece).unwrap();
-    let r = binpick::cycle::run(
-        &scene,
-        &robot,
-        &wp,
-        &RunOptions {
-            picks,
-            seed: 1,
-            deterministic: true,
-            keep_trace,
-            keep_scene: false,
-            stop: None,
-        },
-    )
-    .unwrap();
-    (r, robot, scene, wp)
+    let camera = Camera::from_config(&scene.scene.sensor).unwrap();
+    let mut recorder = Recorder::new(&robot, camera, wp.workpiece.size_m);
+    let opts = RunOptions {
+        picks,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+    };
+    let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
+    let rec = recorder.finish(&r);
+    (r, rec, robot, scene, wp)
 }
 
 /// Five deterministic picks: at least four placed, no collision, no protective stop, torques
 /// within limits by the independent re-check, and the median takt below the reference system's.
 fn scenario(workpiece: &str) {
-    let (r, robot, scene, wp) = run(workpiece, 5, true);
+    let (r, rec, robot, scene, wp) = run(workpiece, 5);
     let s = &r.summary;
     let outcomes: Vec<String> = r
         .records
@@ -123,14 +122,14 @@ fn scenario(workpiece: &str) {
         &robot,
         &hand,
         wp.workpiece.mass_kg,
-        &r.trace,
+        &rec.trace,
         scene.scene.sim.control_dt_s,
     );
     assert!(
         worst <= 1.0,
         "{workpiece}: the executed motion needs {worst:.3} of a torque limit"
     );
-    let reference = binpick::cycle::reference_takt(workpiece).unwrap();
+    let reference = binpick::reference::reference_takt(workpiece).unwrap();
     let takts: Vec<f64> = r
         .records
         .iter()
@@ -153,8 +152,8 @@ fn scenario(workpiece: &str) {
         s.takt.mean_s
     );
     // The trace is in time order and the cycle's events are too.
-    assert!(r.trace.windows(2).all(|w| w[1].t >= w[0].t - 1e-9));
-    assert!(r.events.windows(2).all(|w| w[1].t_s >= w[0].t_s - 1e-9));
+    assert!(rec.trace.windows(2).all(|w| w[1].t >= w[0].t - 1e-9));
+    assert!(rec.events.windows(2).all(|w| w[1].t_s >= w[0].t_s - 1e-9));
 }
 
 #[test]

@@ -170,7 +170,7 @@ fn every_workpiece_top_layer_recall_at_least_90_percent_and_chosen_grasps_are_re
                 "{name} seed {seed}: recall {:.3} ({report:?})",
                 report.top_layer_recall
             );
-            let hm = HeightMap::from_capture(&job.capture, &w, 0.002);
+            let hm = HeightMap::from_capture(&job.capture, &w.pick_tray, 0.002);
             let selector = GraspSelector::new(&scene.scene, &robot, &wp.workpiece);
             let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
             let plan = selector.select(&detections, &hm, &slot, &w.joints());

@@ -1,0 +1,423 @@
+//! Report stage, the takt-time table: what a batch keeps of each run, the table over them,
+//! written as Markdown and CSV, and the merge of shards.
+//!
+//! Job: keep per run the values the table needs ([`RunEntry`]), so shards of a batch run on
+//! different machines merge into the same table as the whole batch would give; one row per
+//! workpiece over all its seeds: takt mean, p95, min and max over the placed picks after the
+//! first of each pile, success rate, waits, faults, mean Pick and Place times and compute per
+//! stage, with the reference system's takt beside it (its Table 5).
+//!
+//! Units: s (ms in the Markdown's compute columns), counts. Rows are in workpiece order as given.
+
+use serde::{Deserialize, Serialize};
+
+use super::{BatchError, BatchSpec};
+use crate::cycle::{Outcome, RunResult, TaktStats};
+use crate::report::{Fixed, to_csv};
+
+/// What the table keeps of one run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RunEntry {
+    /// Workpiece.
+    pub workpiece: String,
+    /// Seed.
+    pub seed: u64,
+    /// Picks attempted.
+    pub attempts: usize,
+    /// Picks placed.
+    pub placed: usize,
+    /// Takts in the statistics [s].
+    pub takts_s: Vec<f64>,
+    /// First to last release [s] and the releases in between (end-to-end takt = ratio).
+    pub release_span: (f64, usize),
+    /// Pick and Place times of the placed picks [s].
+    pub pick_s: Vec<f64>,
+    /// Place times of the placed picks [s].
+    pub place_s: Vec<f64>,
+    /// Compute charged per attempt, summed: grasp, Pick, Place [s].
+    pub compute_sum_s: [f64; 3],
+    /// Waits for the sensor in the takts: count and total [s].
+    pub sensor_waits: (usize, f64),
+    /// Waits for compute in the takts: count and total [s].
+    pub compute_waits: (usize, f64),
+    /// Protective stops, collisions, drops, grasp failures, parts lost.
+    pub faults: [usize; 5],
+    /// Refills of the pick tray.
+    pub refills: usize,
+    /// Largest |torque| / limit.
+    pub peak_torque_ratio: f64,
+    /// Simulated time [s].
+    pub sim_time_s: f64,
+    /// Wall time of the run [s]: a measurement, not a result, so a deterministic batch's
+    /// `takt.json` leaves it out (`None`) and repeats byte for byte.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_s: Option<f64>,
+    /// Why the run ended.
+    pub ended: String,
+}
+
+impl RunEntry {
+    /// From a finished run.
+    pub fn from_run(r: &RunResult, wall_s: Option<f64>) -> Self {
+        let s = &r.summary;
+        let placed: Vec<_> = r.records.iter().filter(|p| p.outcome == Outcome::Placed).collect();
+        let attempts: Vec<_> = r.records.iter().filter(|p| p.outcome.is_attempt()).collect();
+        let sum = |f: fn(&crate::cycle::PickRecord) -> f64| attempts.iter().map(|p| f(p)).sum::<f64>();
+        RunEntry {
+            workpiece: s.workpiece.clone(),
+            seed: s.seed,
+            attempts: s.attempts,
+            placed: s.placed,
+            takts_s: crate::cycle::takts_in_stats(&r.records),
+            release_span: crate::cycle::release_span(&r.records),
+            pick_s: placed.iter().map(|p| p.pick_s).collect(),
+            place_s: placed.iter().map(|p| p.place_s).collect(),
+            compute_sum_s: [
+                sum(|p| p.grasp_compute_s),
+                sum(|p| p.pick_compute_s),
+                sum(|p| p.place_compute_s),
+            ],
+            sensor_waits: s.sensor_stalls,
+            compute_waits: s.compute_stalls,
+            faults: [
+                s.protective_stops,
+                s.collisions,
+                s.drops,
+                attempts
+                    .iter()
+                    .filter(|p| matches!(p.outcome, Outcome::GraspFailed(_)))
+                    .count(),
+                s.parts_lost,
+            ],
+            refills: s.refills,
+            peak_torque_ratio: s.peak_torque_ratio,
+            sim_time_s: s.sim_time_s,
+            wall_s,
+            ended: s.ended.text().to_string(),
+        }
+    }
+}
+
+/// One row of the takt-time table.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub struct Row {
+    /// Workpiece.
+    pub workpiece: String,
+    /// Runs.
+    pub runs: usize,
+    /// Picks attempted.
+    pub attempts: usize,
+    /// Picks placed.
+    pub placed: usize,
+    /// placed / attempts.
+    pub success_rate: f64,
+    /// Takt statistics over all runs' takts.
+    pub takt: TaktStats,
+    /// The reference system's takt [s].
+    pub reference_takt_s: Option<f64>,
+    /// End-to-end takt over all runs: refills, re-captures and failures included [s].
+    pub effective_takt_s: f64,
+    /// Mean Pick time [s].
+    pub mean_pick_s: f64,
+    /// Mean Place time [s].
+    pub mean_place_s: f64,
+    /// Mean compute per attempt: grasp, Pick, Place [s].
+    pub mean_compute_s: [f64; 3],
+    /// Waits for the sensor: count, mean [s].
+    pub sensor_waits: (usize, f64),
+    /// Waits for compute: count, mean [s].
+    pub compute_waits: (usize, f64),
+    /// Protective stops.
+    pub protective_stops: usize,
+    /// Collisions.
+    pub collisions: usize,
+    /// Drops.
+    pub drops: usize,
+    /// Grasp failures.
+    pub grasp_failures: usize,
+    /// Parts lost.
+    pub parts_lost: usize,
+    /// Refills.
+    pub refills: usize,
+    /// Largest |torque| / limit.
+    pub peak_torque_ratio: f64,
+    /// Simulated time, all runs [s].
+    pub sim_time_s: f64,
+    /// Wall time, all runs [s] (`None` if a run's is not known).
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub wall_s: Option<f64>,
+}
+
+/// The table: one row per workpiece (in `order`), over every entry of that workpiece.
+pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
+    order
+        .iter()
+        .filter_map(|w| {
+            let es: Vec<&RunEntry> = entries.iter().filter(|e| &e.workpiece == w).collect();
+            if es.is_empty() {
+                return None;
+            }
+            let cat = |f: fn(&RunEntry) -> &Vec<f64>| es.iter().flat_map(|e| f(e).iter().copied()).collect::<Vec<_>>();
+            let attempts: usize = es.iter().map(|e| e.attempts).sum();
+            let placed: usize = es.iter().map(|e| e.placed).sum();
+            let waits = |f: fn(&RunEntry) -> (usize, f64)| {
+                let (n, t) = es.iter().map(|e| f(e)).fold((0, 0.0), |(n, t), (a, b)| (n + a, t + b));
+                (n, if n == 0 { 0.0 } else { t / n as f64 })
+            };
+            let fault = |i: usize| es.iter().map(|e| e.faults[i]).sum();
+            let compute = |i: usize| {
+                if attempts == 0 {
+                    f64::NAN
+                } else {
+                    es.iter().map(|e| e.compute_sum_s[i]).sum::<f64>() / attempts as f64
+                }
+            };
+            Some(Row {
+                workpiece: w.clone(),
+                runs: es.len(),
+                attempts,
+                placed,
+                success_rate: if attempts == 0 {
+                    f64::NAN
+                } else {
+                    placed as f64 / attempts as f64
+                },
+                takt: TaktStats::of(&cat(|e| &e.takts_s)),
+                reference_takt_s: crate::reference::reference_takt(w),
+                effective_takt_s: {
+                    let (t, n) = es
+                        .iter()
+                        .fold((0.0, 0), |(t, n), e| (t + e.release_span.0, n + e.release_span.1));
+                    if n == 0 { f64::NAN } else { t / n as f64 }
+                },
+                mean_pick_s: crate::stats::mean(&cat(|e| &e.pick_s)),
+                mean_place_s: crate::stats::mean(&cat(|e| &e.place_s)),
+                mean_compute_s: [compute(0), compute(1), compute(2)],
+                sensor_waits: waits(|e| e.sensor_waits),
+                compute_waits: waits(|e| e.compute_waits),
+                protective_stops: fault(0),
+                collisions: fault(1),
+                drops: fault(2),
+                grasp_failures: fault(3),
+                parts_lost: fault(4),
+                refills: es.iter().map(|e| e.refills).sum(),
+                peak_torque_ratio: es.iter().map(|e| e.peak_torque_ratio).fold(0.0, f64::max),
+                sim_time_s: es.iter().map(|e| e.sim_time_s).sum(),
+                wall_s: es.iter().map(|e| e.wall_s).sum(),
+            })
+        })
+        .collect()
+}
+
+fn num(v: f64, digits: usize) -> String {
+    if v.is_finite() {
+        format!("{v:.digits$}")
+    } else {
+        "-".into()
+    }
+}
+
+/// The table as Markdown.
+pub fn markdown(rows: &[Row]) -> String {
+    let mut md = String::from(
+        "| part | runs | placed | success | takt mean [s] | p95 | min | max | reference [s] | end-to-end [s] | Pick [s] | Place [s] \
+         | compute grasp/Pick/Place [ms] | sensor waits (mean s) | compute waits (mean s) | stops | collisions \
+         | drops | grasp fails | lost | refills |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+    );
+    for r in rows {
+        md += &format!(
+            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} | {} | {} |\n",
+            r.workpiece,
+            r.runs,
+            r.placed,
+            r.attempts,
+            num(100.0 * r.success_rate, 1),
+            num(r.takt.mean_s, 3),
+            num(r.takt.p95_s, 3),
+            num(r.takt.min_s, 3),
+            num(r.takt.max_s, 3),
+            r.reference_takt_s.map_or("-".into(), |t| num(t, 1)),
+            num(r.effective_takt_s, 3),
+            num(r.mean_pick_s, 3),
+            num(r.mean_place_s, 3),
+            num(r.mean_compute_s[0] * 1e3, 1),
+            num(r.mean_compute_s[1] * 1e3, 1),
+            num(r.mean_compute_s[2] * 1e3, 1),
+            r.sensor_waits.0,
+            num(r.sensor_waits.1, 3),
+            r.compute_waits.0,
+            num(r.compute_waits.1, 3),
+            r.protective_stops,
+            r.collisions,
+            r.drops,
+            r.grasp_failures,
+            r.parts_lost,
+            r.refills,
+        );
+    }
+    md
+}
+
+/// The columns of `takt.csv`.
+pub const TAKT_CSV_HEADER: [&str; 29] = [
+    "workpiece",
+    "runs",
+    "attempts",
+    "placed",
+    "success_rate",
+    "takt_mean_s",
+    "takt_p95_s",
+    "takt_min_s",
+    "takt_max_s",
+    "takt_count",
+    "reference_takt_s",
+    "effective_takt_s",
+    "mean_pick_s",
+    "mean_place_s",
+    "mean_grasp_compute_s",
+    "mean_pick_compute_s",
+    "mean_place_compute_s",
+    "sensor_waits",
+    "sensor_wait_mean_s",
+    "compute_waits",
+    "compute_wait_mean_s",
+    "protective_stops",
+    "collisions",
+    "drops",
+    "grasp_failures",
+    "parts_lost",
+    "refills",
+    "peak_torque_ratio",
+    "sim_time_s",
+];
+
+/// One row of `takt.csv`.
+#[derive(Serialize)]
+struct CsvRow<'a> {
+    workpiece: &'a str,
+    runs: usize,
+    attempts: usize,
+    placed: usize,
+    success_rate: Fixed<6>,
+    takt_mean_s: Fixed<6>,
+    takt_p95_s: Fixed<6>,
+    takt_min_s: Fixed<6>,
+    takt_max_s: Fixed<6>,
+    takt_count: usize,
+    reference_takt_s: Fixed<6>,
+    effective_takt_s: Fixed<6>,
+    mean_pick_s: Fixed<6>,
+    mean_place_s: Fixed<6>,
+    mean_grasp_compute_s: Fixed<6>,
+    mean_pick_compute_s: Fixed<6>,
+    mean_place_compute_s: Fixed<6>,
+    sensor_waits: usize,
+    sensor_wait_mean_s: Fixed<6>,
+    compute_waits: usize,
+    compute_wait_mean_s: Fixed<6>,
+    protective_stops: usize,
+    collisions: usize,
+    drops: usize,
+    grasp_failures: usize,
+    parts_lost: usize,
+    refills: usize,
+    peak_torque_ratio: Fixed<6>,
+    sim_time_s: Fixed<6>,
+}
+
+/// The table as CSV (`takt.csv`): workpiece names quoted where they need it.
+pub fn csv(rows: &[Row]) -> String {
+    to_csv(
+        &TAKT_CSV_HEADER,
+        rows.iter().map(|r| CsvRow {
+            workpiece: &r.workpiece,
+            runs: r.runs,
+            attempts: r.attempts,
+            placed: r.placed,
+            success_rate: Fixed::of(r.success_rate),
+            takt_mean_s: Fixed::of(r.takt.mean_s),
+            takt_p95_s: Fixed::of(r.takt.p95_s),
+            takt_min_s: Fixed::of(r.takt.min_s),
+            takt_max_s: Fixed::of(r.takt.max_s),
+            takt_count: r.takt.count,
+            reference_takt_s: Fixed(r.reference_takt_s),
+            effective_takt_s: Fixed::of(r.effective_takt_s),
+            mean_pick_s: Fixed::of(r.mean_pick_s),
+            mean_place_s: Fixed::of(r.mean_place_s),
+            mean_grasp_compute_s: Fixed::of(r.mean_compute_s[0]),
+            mean_pick_compute_s: Fixed::of(r.mean_compute_s[1]),
+            mean_place_compute_s: Fixed::of(r.mean_compute_s[2]),
+            sensor_waits: r.sensor_waits.0,
+            sensor_wait_mean_s: Fixed::of(r.sensor_waits.1),
+            compute_waits: r.compute_waits.0,
+            compute_wait_mean_s: Fixed::of(r.compute_waits.1),
+            protective_stops: r.protective_stops,
+            collisions: r.collisions,
+            drops: r.drops,
+            grasp_failures: r.grasp_failures,
+            parts_lost: r.parts_lost,
+            refills: r.refills,
+            peak_torque_ratio: Fixed::of(r.peak_torque_ratio),
+            sim_time_s: Fixed::of(r.sim_time_s),
+        }),
+    )
+}
+
+/// What `takt.json` holds: the batch, which shard, every run's entry, and the table.
+#[derive(Debug, Clone, Serialize, Deserialize)]
+pub struct BatchFile {
+    /// binpick version.
+    pub version: String,
+    /// The whole batch.
+    pub spec: BatchSpec,
+    /// This file's shard (K, N); (1, 1) for a whole batch or a merge.
+    pub shard: (usize, usize),
+    /// Runs.
+    pub runs: Vec<RunEntry>,
+}
+
+/// Joins the `takt.json` of every shard of one batch: the specs must agree, and together the
+/// shards must cover each run of the batch exactly once.
+pub fn merge(files: &[(String, BatchFile)]) -> Result<BatchFile, BatchError> {
+    let Some((first_path, first)) = files.first() else {
+        return Err(BatchError::Input("merge: no shard results given".into()));
+    };
+    let mut runs: Vec<RunEntry> = Vec::new();
+    for (path, f) in files {
+        if f.spec != first.spec {
+            return Err(BatchError::Input(format!(
+                "merge: {path} is from another batch than {first_path} ({} vs {})",
+                f.spec.name(),
+                first.spec.name()
+            )));
+        }
+        runs.extend(f.runs.iter().cloned());
+    }
+    let jobs = first.spec.jobs();
+    let mut ordered = Vec::with_capacity(jobs.len());
+    for (w, s) in &jobs {
+        let found: Vec<&RunEntry> = runs.iter().filter(|e| &e.workpiece == w && e.seed == *s).collect();
+        match found.len() {
+            1 => ordered.push(found[0].clone()),
+            0 => {
+                return Err(BatchError::Input(format!(
+                    "merge: run {w} seed {s} of {} is in none of the shards given",
+                    first.spec.name()
+                )));
+            }
+            _ => {
+                return Err(BatchError::Input(format!(
+                    "merge: run {w} seed {s} is in {} of the shards given",
+                    found.len()
+                )));
+            }
+        }
+    }
+    Ok(BatchFile {
+        version: first.version.clone(),
+        spec: first.spec.clone(),
+        shard: (1, 1),
+        runs: ordered,
+    })
+}

@@ -1,0 +1,291 @@
+//! `binpick bench ...`: the benchmarks, our code beside a baseline or peer doing the same work
+//! in the same run, on the embedded default cell; medians of several runs.
+
+use anyhow::{Context, Result};
+use clap::Subcommand;
+
+use super::InputError;
+use binpick::config::{LoadedScene, LoadedWorkpiece};
+use binpick::robot::{Payload, RobotModel};
+
+/// Runs a benchmark.
+pub fn run(command: BenchCommand) -> Result<()> {
+    match command {
+        BenchCommand::Physics { runs, json } => bench_physics(runs, json),
+        BenchCommand::Accel { runs, json } => bench_accel(runs, json),
+        BenchCommand::Planner {
+            trials,
+            baseline_trials,
+            seed,
+            json,
+        } => bench_planner(trials, baseline_trials, seed, json),
+        BenchCommand::Sensor { runs, json } => bench_sensor(runs, json),
+        BenchCommand::Robot { runs, calls, json } => {
+            let loaded = LoadedScene::embedded_default()?;
+            let robot = RobotModel::from_scene(&loaded)?;
+            bench_robot(&loaded, &robot, runs, calls, json)
+        }
+    }
+}
+
+/// `binpick bench ...`.
+#[derive(Subcommand)]
+pub enum BenchCommand {
+    /// Motion accelerator: the reference system's five cases (J1 turns 180 deg between two
+    /// containers): default parameters, acceleration search, path correction, time-optimal.
+    Accel {
+        /// Runs per case (compute time is the max over them).
+        #[arg(long, default_value_t = 20)]
+        runs: usize,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Planner: the reference system's three cases and a bin-picking query set, ours beside
+    /// plain RRT and RRT-Connect.
+    Planner {
+        /// Trials per case for ours.
+        #[arg(long, default_value_t = 100)]
+        trials: usize,
+        /// Trials per case for each baseline (they take up to seconds each).
+        #[arg(long, default_value_t = 10)]
+        baseline_trials: usize,
+        /// First seed.
+        #[arg(long, default_value_t = 1)]
+        seed: u64,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Sensing: depth capture (all cores, and one thread as the peer) and grasp selection per
+    /// workpiece at its default pile.
+    Sensor {
+        /// Timed repetitions after one warm-up.
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Physics: pile build-and-settle wall time per workpiece, and the step time of 100 resting
+    /// parts with the arm moving, beside rapier's default solver settings.
+    Physics {
+        /// Runs to take the median over.
+        #[arg(long, default_value_t = 5)]
+        runs: usize,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+    /// Robot model: IK, FK, inverse and forward dynamics per call, beside baselines.
+    Robot {
+        /// Runs to take the median over.
+        #[arg(long, default_value_t = 7)]
+        runs: usize,
+        /// Calls per run.
+        #[arg(long, default_value_t = 200_000)]
+        calls: usize,
+        /// Machine-readable JSON output.
+        #[arg(long)]
+        json: bool,
+    },
+}
+
+/// The embedded default cell, its robot and all six embedded workpieces: what the benchmarks run on.
+fn embedded_cell() -> Result<(LoadedScene, RobotModel, Vec<LoadedWorkpiece>)> {
+    let loaded = LoadedScene::embedded_default()?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    Ok((loaded, robot, LoadedWorkpiece::all_embedded()?))
+}
+
+fn bench_robot(loaded: &LoadedScene, robot: &RobotModel, runs: usize, calls: usize, json: bool) -> Result<()> {
+    if runs == 0 || calls == 0 {
+        return Err(InputError("--runs and --calls must be > 0".into()).into());
+    }
+    let payload = Payload::from_gripper(&loaded.scene.gripper);
+    let result = binpick::bench::robot_bench(robot, &payload, runs, calls);
+    if json {
+        println!(
+            "{}",
+            serde_json::to_string_pretty(&result).context("serialising the benchmark")?
+        );
+        return Ok(());
+    }
+    println!("robot model, one core, {runs} runs (median, min..max of the per-run mean per call)");
+    println!(
+        "{:<55} {:>10} {:>21} {:>9}  note",
+        "what", "median_ns", "min..max_ns", "target"
+    );
+    for t in &result.timings {
+        let target = t.target_ns.map_or(String::new(), |v| format!("<= {v:.0}"));
+        println!(
+            "{:<55} {:>10.1} {:>10.1}..{:<10.1} {:>9}  {}",
+            t.name, t.median_ns, t.min_ns, t.max_ns, target, t.note
+        );
+    }
+    Ok(())
+}
+
+fn bench_physics(runs: usize, json: bool) -> Result<()> {
+    let (loaded, robot, workpieces) = embedded_cell()?;
+    let b = binpick::bench::physics_bench(&loaded, &robot, &workpieces, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&b)?);
+        return Ok(());
+    }
+    println!(
+        "physics, one core, {runs} runs per pile (seeds 1..{runs}); target: settle <= {:.1} s wall per pile",
+        b.targets.0
+    );
+    println!(
+        "workpiece  parts  wall_s median (min..max)  sim_s  max_pen_mm  settled | rapier defaults: wall_s  max_pen_mm"
+    );
+    for p in &b.piles {
+        let peer = match &p.rapier_defaults {
+            Ok((wall, pen)) => format!("{wall:.3}  {:.3}", pen * 1e3),
+            Err(e) => format!("stopped: {e}"),
+        };
+        println!(
+            "{:<10} {:>5}  {:.3} ({:.3}..{:.3})       {:>5.2}  {:>10.3}  {:<7} | {peer}",
+            p.workpiece,
+            p.count,
+            p.median_wall_s,
+            p.min_max_wall_s.0,
+            p.min_max_wall_s.1,
+            p.settle_sim_s,
+            p.max_penetration_m * 1e3,
+            p.settled
+        );
+    }
+    println!(
+        "step with {} resting parts of {} and the arm moving: {:.4} ms median ({:.4}..{:.4}), target <= {:.1} ms",
+        b.step_pile.0, b.step_pile.1, b.step_ms_median, b.step_ms_min_max.0, b.step_ms_min_max.1, b.targets.1
+    );
+    Ok(())
+}
+
+fn bench_sensor(runs: usize, json: bool) -> Result<()> {
+    let (loaded, robot, workpieces) = embedded_cell()?;
+    let b = binpick::bench::sense_bench(&loaded, &robot, &workpieces, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&b)?);
+        return Ok(());
+    }
+    let s = &loaded.scene.sensor;
+    println!(
+        "sensing, {} x {} px, {} threads, median of {runs} after a warm-up; targets: capture <= {:.0} ms, grasp selection <= {:.0} ms",
+        s.resolution_px[0], s.resolution_px[1], b.threads, b.targets_ms.0, b.targets_ms.1
+    );
+    println!("workpiece  parts  capture_ms (min..max)   1-thread_ms  grasp_ms (min..max)   recall  feasible");
+    for r in &b.rows {
+        println!(
+            "{:<10} {:>5}  {:>6.2} ({:.2}..{:.2})  {:>11.2}  {:>5.2} ({:.2}..{:.2})  {:>6.1}%  {:>8}",
+            r.workpiece,
+            r.parts,
+            r.capture_ms.0,
+            r.capture_ms.1,
+            r.capture_ms.2,
+            r.capture_one_thread_ms,
+            r.grasp_ms.0,
+            r.grasp_ms.1,
+            r.grasp_ms.2,
+            r.top_layer_recall * 100.0,
+            r.feasible
+        );
+    }
+    Ok(())
+}
+
+fn bench_planner(trials: usize, baseline_trials: usize, seed: u64, json: bool) -> Result<()> {
+    let (loaded, robot, workpieces) = embedded_cell()?;
+    let rows = binpick::bench::planner_bench(&loaded, &robot, &workpieces, trials, baseline_trials, seed)
+        .map_err(|e| anyhow::anyhow!("{e}"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    let reference: Vec<String> = binpick::reference::TABLE2_PLANNING
+        .iter()
+        .map(|p| format!("{} {} / {} ms, {} %", p.name, p.mean_ms, p.max_ms, p.success_pct))
+        .collect();
+    println!(
+        "planner, one core; reference's Table 2 (its Fig. 5 cases, 100 trials, i5-4310U): {}",
+        reference.join("; ")
+    );
+    println!(
+        "{:<52} {:<11} {:>6} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9}",
+        "case", "algorithm", "trials", "success", "mean_ms", "p95_ms", "max_ms", "samples", "us/check", "ms/sample"
+    );
+    for r in &rows {
+        println!(
+            "{:<52} {:<11} {:>6} {:>7.0}% {:>9.3} {:>9.3} {:>9.3} {:>9.1} {:>8.2} {:>9.4}",
+            r.case,
+            format!("{:?}", r.algorithm),
+            r.trials,
+            r.success * 100.0,
+            r.time_ms.0,
+            r.time_ms.1,
+            r.time_ms.2,
+            r.samples_mean,
+            r.us_per_check,
+            r.ms_per_sample
+        );
+        for f in &r.failures {
+            println!("    failure: {f}");
+        }
+    }
+    Ok(())
+}
+
+fn bench_accel(runs: usize, json: bool) -> Result<()> {
+    let loaded = LoadedScene::embedded_default()?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    let rows = binpick::bench::accel_bench(&loaded, &robot, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
+    if json {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+        return Ok(());
+    }
+    println!(
+        "motion accelerator, one core, hand + 30 g part; {runs} runs per case, each planning with its own seed: the median run shown, compute = max over the runs of planning + §4.2 in the corridor + §4.3"
+    );
+    println!(
+        "case   default_s  §4.2_s  §4.3_s  optimal_s  toppra_exec_s  improvement  gap_to_opt  folds  compute_max/median_ms  corridor | reference: improvement  compute_ms | peak torque/limit J1..J6       energy default -> final"
+    );
+    for r in &rows {
+        let peaks: Vec<String> = r.peak_ratio.iter().map(|p| format!("{p:.2}")).collect();
+        println!(
+            "{:<6} {:>9.3} {:>7.3} {:>7.3} {:>10.3} {:>14.3} {:>11.1}% {:>10.1}% {:>3}/{:<2} {:>10.2}/{:<5.2}  {:<8} | {:>21.1}% {:>11.1} | {}  {:.0} -> {:.0}",
+            r.case,
+            r.default_s,
+            r.accelerated_s,
+            r.corrected_s,
+            r.optimal_s,
+            r.toppra_executable_s,
+            r.improvement * 100.0,
+            r.gap_to_optimal * 100.0,
+            r.folds.0,
+            r.folds.1,
+            r.compute_max_ms,
+            r.compute_median_ms,
+            if r.corridor_clear { "clear" } else { "BLOCKED" },
+            r.reference.0,
+            r.reference.1,
+            peaks.join(" "),
+            r.energy.0,
+            r.energy.1
+        );
+    }
+    let mean = rows.iter().map(|r| r.improvement).sum::<f64>() / rows.len().max(1) as f64;
+    let lo = rows.iter().map(|r| r.improvement_range.0).fold(f64::INFINITY, f64::min);
+    let hi = rows
+        .iter()
+        .map(|r| r.improvement_range.1)
+        .fold(f64::NEG_INFINITY, f64::max);
+    println!(
+        "mean improvement {:.1} % over the median runs (all runs {:.1}-{:.1} %); target >= 30 %, reference 19.4-28.3 %",
+        mean * 100.0,
+        lo * 100.0,
+        hi * 100.0
+    );
+    Ok(())
+}

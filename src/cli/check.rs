@@ -1,0 +1,74 @@
+//! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+
+use binpick::config::{ConfigError, LoadedScene, LoadedWorkpiece, Source};
+use binpick::robot::RobotModel;
+
+pub fn check(files: &[PathBuf], scene_path: Option<&Path>) -> Result<()> {
+    let mut problems = Vec::new();
+    let reference_scene = match LoadedScene::load(scene_path) {
+        Ok(s) => Some(s),
+        Err(e) => {
+            problems.extend(e.problems);
+            None
+        }
+    };
+    for f in files {
+        match check_one(f, reference_scene.as_ref()) {
+            Ok(what) => println!("ok: {} ({what})", f.display()),
+            Err(e) => problems.extend(e.problems),
+        }
+    }
+    if problems.is_empty() {
+        Ok(())
+    } else {
+        Err(ConfigError { problems }.into())
+    }
+}
+
+fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, ConfigError> {
+    let label = path.display().to_string();
+    let ext = path.extension().and_then(|e| e.to_str()).unwrap_or("");
+    match ext {
+        "urdf" => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ConfigError::one(&label, "", format!("cannot read file: {e}")))?;
+            let base = LoadedScene::embedded_default()?;
+            let robot = RobotModel::from_urdf(&label, &text, &base.scene.robot, &base.scene.gripper)?;
+            Ok(format!(
+                "URDF: robot {:?}, {} joints, {:.2} kg moving",
+                robot.name,
+                robot.joints.len(),
+                robot.moving_mass_kg()
+            ))
+        }
+        "toml" => {
+            let text = std::fs::read_to_string(path)
+                .map_err(|e| ConfigError::one(&label, "", format!("cannot read file: {e}")))?;
+            let table: toml::Table = binpick::config::parse_toml(&label, &text)?;
+            if table.contains_key("robot") {
+                let scene = LoadedScene::from_text(&label, Source::File(path.to_path_buf()), &text)?;
+                let robot = RobotModel::from_scene(&scene)?;
+                robot.check_scene_reach(&label, &scene.scene)?;
+                Ok(format!(
+                    "scene {:?}: robot {:?}, trays reachable, sensor sees the pick tray",
+                    scene.scene.name, robot.name
+                ))
+            } else {
+                let wp = LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
+                if let Some(s) = reference {
+                    wp.workpiece.check_fits_scene(&label, &s.scene)?;
+                }
+                Ok(format!("workpiece {:?}: {}", wp.workpiece.name, wp.workpiece.kind))
+            }
+        }
+        _ => Err(ConfigError::one(
+            &label,
+            "",
+            "is neither a .toml (scene or workpiece) nor a .urdf file",
+        )),
+    }
+}

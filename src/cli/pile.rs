@@ -1,0 +1,246 @@
+//! `binpick pile` and `binpick sense`: a settled pile of one workpiece; a capture of it, the
+//! recognition result and the grasp the cell would choose, through the cycle's own sensing and
+//! the library's sense-and-grasp pipeline.
+
+use std::path::PathBuf;
+
+use anyhow::{Context, Result};
+use clap::Args;
+use serde_json::json;
+
+use super::{InputError, load_cell};
+use binpick::config::{LoadedScene, LoadedWorkpiece};
+
+/// A pile of one workpiece in a cell, and where its run folder goes.
+#[derive(Args)]
+pub struct PileArgs {
+    /// Workpiece: A ... F (embedded) or a path to a workpiece file.
+    #[arg(long)]
+    pub workpiece: String,
+    /// Parts to drop (default: the workpiece's pile_count).
+    #[arg(long)]
+    pub count: Option<usize>,
+    /// Run seed.
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Scene file (default: the embedded default cell).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Folder the run folder is written into.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+    /// Machine-readable JSON output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// `--count`, or the workpiece's pile count: 1 to 1000.
+fn pile_count(a: &PileArgs, wp: &LoadedWorkpiece) -> Result<usize> {
+    let count = a.count.unwrap_or(wp.workpiece.pile_count as usize);
+    if count == 0 || count > 1000 {
+        return Err(InputError(format!("--count must be within [1, 1000], got {count}")).into());
+    }
+    Ok(count)
+}
+
+/// A cell with a settled pile.
+struct PiledCell {
+    loaded: LoadedScene,
+    wp: LoadedWorkpiece,
+    report: binpick::physics::pile::PileReport,
+    count: usize,
+}
+
+/// Loads and checks the cell and workpiece, builds the world and settles the pile.
+fn piled_cell(a: &PileArgs) -> Result<PiledCell> {
+    let (loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
+    let count = pile_count(a, &wp)?;
+    let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    let mut world = binpick::physics::World::new(&loaded.scene, &robot, shape);
+    let report = world
+        .build_pile(&binpick::physics::pile::PileOptions::new(count, a.seed))
+        .context("building the pile")?;
+    Ok(PiledCell {
+        loaded,
+        wp,
+        report,
+        count,
+    })
+}
+
+/// `binpick pile`: builds and settles a pile, writes `pile.json`.
+pub fn pile(a: &PileArgs) -> Result<()> {
+    let PiledCell {
+        loaded,
+        wp,
+        report,
+        count,
+        ..
+    } = piled_cell(a)?;
+    let (seed, out, json) = (a.seed, &a.out, a.json);
+    let name = format!("pile-{}-seed{seed}", wp.workpiece.name);
+    let run = binpick::report::RunDir::create(out, &name)?;
+    run.write_inputs(&loaded, Some(&wp))?;
+    let file = json!({
+        "binpick_version": env!("CARGO_PKG_VERSION"), "workpiece": wp.workpiece.name, "seed": seed, "count": count,
+        "physics_dt_s": loaded.scene.sim.physics_dt_s, "report": &report,
+    });
+    run.write_json("pile.json", &file)?;
+    let dest = run.finish()?;
+    if json {
+        let mut v = file;
+        v["wall_s"] = json!(report.wall_s);
+        v["run_dir"] = json!(dest.display().to_string());
+        v["report"].as_object_mut().map(|o| o.remove("poses"));
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "pile of {count} x {} ({}), seed {seed}",
+        wp.workpiece.name, wp.workpiece.kind
+    );
+    println!("  in tray          {} / {}", report.in_tray, report.spawned);
+    println!(
+        "  pile height      {:.1} mm above the tray floor",
+        report.pile_height_m * 1e3
+    );
+    println!(
+        "  settle time      {:.3} s simulated, {:.3} s wall ({} waves){}",
+        report.settle_sim_s,
+        report.wall_s,
+        report.waves,
+        if report.settled { "" } else { "  NOT SETTLED" }
+    );
+    println!(
+        "  max penetration  {:.3} mm ({})",
+        report.max_penetration_m * 1e3,
+        report.max_penetration_between
+    );
+    println!("  wrote            {}", dest.join("pile.json").display());
+    Ok(())
+}
+
+/// `binpick sense`: a pile, the cycle's first capture of it (the arm out of view, a spoiled
+/// exposure repeated), the recognition result scored against the world at that moment, and the
+/// grasp the cell would choose ([`binpick::pipeline::sense_and_grasp`]).
+pub fn sense(a: &PileArgs) -> Result<()> {
+    use binpick::cycle::{Cell, RunOptions};
+    use binpick::pipeline::{GraspContext, sense_and_grasp};
+    let (loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
+    let count = pile_count(a, &wp)?;
+    let (seed, out, json) = (a.seed, &a.out, a.json);
+    let opts = RunOptions {
+        picks: 1,
+        seed,
+        deterministic: true,
+        stop: None,
+    };
+    let mut cell = Cell::new(&loaded, &robot, &wp, opts).context("setting up the cell")?;
+    cell.pile_count = count;
+    let (state, sensed) = binpick::cycle::sense_once(&cell, &mut ()).context("sensing")?;
+    let sensed = sensed.context("the arm found no path out of the sensor's view")?;
+    let (job, detections) = (&sensed.job, sensed.detections.clone().unwrap_or_default());
+    let world = &state.world;
+    let report = binpick::sensor::evaluate(world, &detections);
+    let t1 = std::time::Instant::now();
+    let ctx = GraspContext {
+        scene: &loaded.scene,
+        robot: &robot,
+        selector: &cell.selector,
+        pick_tray: &world.pick_tray,
+    };
+    let choice = sense_and_grasp(&ctx, &job.capture, &detections, &cell.slots[0], &world.joints(), &[]);
+    let grasp_ms = t1.elapsed().as_secs_f64() * 1e3;
+    let chosen = choice.chosen.as_ref().map(|c| &c.grasp);
+    let name = format!("sense-{}-seed{seed}", wp.workpiece.name);
+    let run = binpick::report::RunDir::create(out, &name)?;
+    run.write_inputs(&loaded, Some(&wp))?;
+    job.capture
+        .write_depth_png(&run.path("depth.png"))
+        .context("writing depth.png")?;
+    job.capture
+        .write_ply(&run.path("cloud.ply"))
+        .context("writing cloud.ply")?;
+    let file = json!({
+        "binpick_version": env!("CARGO_PKG_VERSION"), "workpiece": wp.workpiece.name, "seed": seed, "count": count,
+        "capture": {"trigger_s": job.capture.trigger_s, "ready_s": job.ready_s, "width_px": job.capture.width,
+                    "height_px": job.capture.height, "valid_px": job.capture.valid_count(),
+                    "spoiled_before": state.sensor.spoiled},
+        "recognition": &report, "detections": &detections,
+        "grasp": {"chosen": chosen, "ranked": choice.plan.ranked.len(), "rejected": choice.plan.rejected_counts(),
+                  "why_none": chosen.is_none().then(|| choice.why_none())},
+    });
+    run.write_json("sense.json", &file)?;
+    let dest = run.finish()?;
+    if json {
+        let mut v = file;
+        v["timing_ms"] = json!({"grasp": grasp_ms});
+        v["run_dir"] = json!(dest.display().to_string());
+        v.as_object_mut().map(|o| o.remove("detections"));
+        println!("{}", serde_json::to_string_pretty(&v)?);
+        return Ok(());
+    }
+    println!(
+        "pile of {count} x {} , seed {seed}: capture at t = {:.3} s, result at {:.3} s",
+        wp.workpiece.name, job.capture.trigger_s, job.ready_s
+    );
+    println!(
+        "  capture          {} x {} px, {} returns; {} spoiled exposure(s) repeated",
+        job.capture.width,
+        job.capture.height,
+        job.capture.valid_count(),
+        state.sensor.spoiled
+    );
+    println!(
+        "  recognition      {} detected of {} in the tray; top layer {} / {} detected (recall {:.1} %)",
+        report.detected,
+        report.parts,
+        report.top_layer_detected,
+        report.top_layer,
+        report.top_layer_recall * 100.0
+    );
+    println!(
+        "  pose error       position mean {:.2} / max {:.2} mm, rotation mean {:.2} / max {:.2} deg",
+        report.position_error_m.0 * 1e3,
+        report.position_error_m.1 * 1e3,
+        report.rotation_error_rad.0.to_degrees(),
+        report.rotation_error_rad.1.to_degrees()
+    );
+    match chosen {
+        Some(g) => {
+            let p = g.world_from_tool.translation.vector;
+            println!(
+                "  chosen grasp     detection {} face {}: tool at ({:.4}, {:.4}, {:.4}) m, score {:.3} (exposure {:.2}, clearance {:.1} mm, success {:.2}, place motion {:.3} s)",
+                g.detection,
+                g.face,
+                p.x,
+                p.y,
+                p.z,
+                g.score.total,
+                g.score.exposure,
+                g.score.clearance_m * 1e3,
+                g.score.success,
+                g.score.motion_s
+            );
+        }
+        None => println!("  chosen grasp     none: {}", choice.why_none()),
+    }
+    let counts: Vec<String> = choice
+        .plan
+        .rejected_counts()
+        .iter()
+        .map(|(k, v)| format!("{k} {v}"))
+        .collect();
+    println!(
+        "  candidates       {} feasible; rejected: {}",
+        choice.plan.ranked.len(),
+        if counts.is_empty() {
+            "none".into()
+        } else {
+            counts.join(", ")
+        }
+    );
+    println!("  sense and grasp  {grasp_ms:.2} ms wall (height map, candidates, IK, ranking, clear approach)");
+    println!("  wrote            {}", dest.display());
+    Ok(())
+}

@@ -1,0 +1,511 @@
+//! What a cell run tells whoever watches it: typed events, pick outcomes, why a run ended, the
+//! stages of the time chart, and the one observer interface through which recordings, the
+//! time chart, the event log and progress displays see a run.
+//!
+//! Job: name every kind of thing that happens in the cycle once, as a value (not a string), with
+//! its log line (`kind()` and the `Display` detail) and its severity; and define [`Observer`],
+//! whose methods do nothing by default, so a run nobody watches keeps nothing.
+//!
+//! Units: s (simulation time), m, rad; detail texts print mm and deg. Frames: world.
+
+use std::fmt;
+
+use serde::{Serialize, Serializer};
+
+use crate::execution::Tick;
+use crate::grasp::GraspCandidate;
+use crate::physics::World;
+use crate::sensor::{Capture, CaptureProblem, Detection};
+use crate::trajectory::Motion;
+
+/// A stage of the cell cycle, as the time chart draws it (one lane each, top to bottom).
+#[derive(Debug, Clone, Copy, PartialEq, Eq, PartialOrd, Ord, Serialize)]
+pub enum Stage {
+    /// The 3D sensor exposes a depth image.
+    Sensor,
+    /// Recognition finds parts in the capture.
+    Recognition,
+    /// The grasp selector ranks suction grasps.
+    Grasp,
+    /// Motion generation: planning and acceleration of the next motion.
+    Planning,
+    /// The arm moves to a part and picks it.
+    Pick,
+    /// The arm carries the part to the place tray and releases it.
+    Place,
+    /// The cell waits (for the sensor, for compute, a fault reset, a refill).
+    Stall,
+}
+
+/// Why a pick went wrong or did not start.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum Outcome {
+    /// The part was released in its slot.
+    Placed,
+    /// The cup did not seal (reason).
+    GraspFailed(String),
+    /// The recognition result held no part: re-capture.
+    NothingDetected,
+    /// Parts were detected but none was graspable (the selector's reasons).
+    NothingGraspable(String),
+    /// No path or trajectory for a motion (reason).
+    NoMotion(String),
+    /// The servo tripped a protective stop (reason).
+    ProtectiveStop(String),
+    /// The arm, the tool or the held part collided, or pressed a part into the tray (what).
+    Collision(String),
+    /// The part came off the cup on the way (reason).
+    Dropped(String),
+}
+
+impl Outcome {
+    /// Whether the arm set out to pick (the success rate counts these).
+    pub fn is_attempt(&self) -> bool {
+        !matches!(self, Outcome::NothingDetected | Outcome::NothingGraspable(_))
+    }
+
+    /// A short name: `placed`, `grasp_failed`, ...
+    pub fn name(&self) -> &'static str {
+        match self {
+            Outcome::Placed => "placed",
+            Outcome::GraspFailed(_) => "grasp_failed",
+            Outcome::NothingDetected => "nothing_detected",
+            Outcome::NothingGraspable(_) => "nothing_graspable",
+            Outcome::NoMotion(_) => "no_motion",
+            Outcome::ProtectiveStop(_) => "protective_stop",
+            Outcome::Collision(_) => "collision",
+            Outcome::Dropped(_) => "dropped",
+        }
+    }
+
+    /// The reason, if the outcome has one.
+    pub fn detail(&self) -> &str {
+        match self {
+            Outcome::GraspFailed(s)
+            | Outcome::NothingGraspable(s)
+            | Outcome::NoMotion(s)
+            | Outcome::ProtectiveStop(s)
+            | Outcome::Collision(s)
+            | Outcome::Dropped(s) => s,
+            Outcome::Placed | Outcome::NothingDetected => "",
+        }
+    }
+}
+
+/// Why a run ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum EndReason {
+    /// The asked-for picks were attempted.
+    PicksDone,
+    /// The pick tray held nothing to pick and the cell file's policy is to end.
+    TrayEmpty,
+    /// A refilled tray held nothing graspable either.
+    NothingGraspableInFullTray,
+    /// Twenty times the asked-for picks passed without enough attempts (a safety stop).
+    TooManyEmptyCaptures,
+    /// The arm found no path out of the sensor's view.
+    NoPathOutOfView,
+    /// Ctrl-C: the run ended after the pick under way.
+    Interrupted,
+}
+
+impl EndReason {
+    /// The text summaries and tables show.
+    pub fn text(self) -> &'static str {
+        match self {
+            EndReason::PicksDone => "picks done",
+            EndReason::TrayEmpty => "tray empty",
+            EndReason::NothingGraspableInFullTray => "nothing graspable in a full tray",
+            EndReason::TooManyEmptyCaptures => "too many empty captures",
+            EndReason::NoPathOutOfView => "the arm found no path out of the sensor's view",
+            EndReason::Interrupted => "interrupted",
+        }
+    }
+}
+
+impl fmt::Display for EndReason {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        f.write_str(self.text())
+    }
+}
+
+impl Serialize for EndReason {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.serialize_str(self.text())
+    }
+}
+
+/// What a stall waited for.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum StallCause {
+    /// The recognition result.
+    Sensor,
+    /// Grasp selection or motion generation.
+    Compute,
+}
+
+/// A fault that stopped a motion.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Fault {
+    /// The arm, the tool or the held part collided, or pressed a part into the tray.
+    Collision(String),
+    /// The servo tripped a protective stop.
+    ProtectiveStop(String),
+    /// The arm could not leave the sensor's view.
+    NoPathOutOfView,
+}
+
+/// How a part was lost from the cell.
+#[derive(Debug, Clone, PartialEq)]
+pub enum PartLoss {
+    /// It left the tray it was in.
+    LeftTray {
+        /// The part, named by the physics world.
+        body: String,
+        /// Which tray.
+        tray: &'static str,
+    },
+    /// A fault pressed it deeper into the tray or a neighbour than the health monitor allows.
+    PressedDeep {
+        /// Part index.
+        part: usize,
+        /// Overlap [m].
+        depth_m: f64,
+    },
+}
+
+/// A generated motion of one pick, as the event log reports it.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Planned {
+    /// The Pick motion: transfer to the approach pose and straight descent [s], compute [s].
+    Pick {
+        /// Transfer duration [s].
+        transfer_s: f64,
+        /// Descent duration [s].
+        descent_s: f64,
+        /// Compute charged [s].
+        compute_s: f64,
+    },
+    /// The Place motion: lift, transfer, descent and retreat [s], compute [s].
+    Place {
+        /// Lift duration [s].
+        lift_s: f64,
+        /// Transfer duration [s].
+        transfer_s: f64,
+        /// Descent duration [s].
+        descent_s: f64,
+        /// Retreat duration [s].
+        retreat_s: f64,
+        /// Compute charged [s].
+        compute_s: f64,
+    },
+    /// The motion (`Pick` or `Place`) could not be generated, and why.
+    Failed {
+        /// Which motion.
+        motion: &'static str,
+        /// Why.
+        why: String,
+    },
+}
+
+/// Something that happened in the cell.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Event {
+    /// The sensor was triggered (capture number).
+    Capture(u64),
+    /// The exposure was spoiled.
+    CaptureSpoiled(CaptureProblem),
+    /// A recognition result arrived: parts detected, parts blurred by motion during the exposure.
+    RecognitionReady {
+        /// Parts detected.
+        detected: usize,
+        /// Parts left out because they moved during the exposure.
+        blurred: usize,
+    },
+    /// Grasp selection chose a grasp.
+    GraspChosen {
+        /// Detection index.
+        detection: usize,
+        /// Face index.
+        face: usize,
+        /// Score.
+        score: f64,
+    },
+    /// A motion was generated.
+    Planned(Planned),
+    /// The arm waited.
+    Stall {
+        /// For what.
+        cause: StallCause,
+        /// How long [s].
+        duration_s: f64,
+    },
+    /// The Pick motion started.
+    PickStart,
+    /// The cup sealed on a part.
+    Grasped {
+        /// The part the cup holds.
+        part: usize,
+        /// The part the chosen detection was (evaluation only).
+        aimed_at: usize,
+        /// Cup axis to the part's centre of mass [m].
+        com_offset_m: f64,
+        /// Tilt of the tool axis from the face normal [rad].
+        tilt_rad: f64,
+    },
+    /// The Place motion started.
+    PlaceStart,
+    /// The part came off the cup over its slot.
+    Released,
+    /// A fault stopped the arm.
+    Fault(Fault),
+    /// A part was taken out of the cell.
+    PartLost(PartLoss),
+    /// A pick that failed with the part on the cup let it go over the pick tray.
+    PartLetGo,
+    /// A slot was skipped (something lies in it).
+    SlotSkipped(usize),
+    /// The pick tray was exchanged for a full one (pile number).
+    Refill(u64),
+    /// The full place tray was exchanged for an empty one.
+    PlaceTrayExchange,
+    /// A pick ended.
+    Outcome(Outcome),
+    /// A motion did not start where the arm was (jump [rad]).
+    MotionStartMismatch(f64),
+}
+
+impl Event {
+    /// The event's kind, as the event log names it: `capture`, `capture_spoiled`,
+    /// `recognition_ready`, `grasp_chosen`, `planned`, `stall`, `pick_start`, `grasped`,
+    /// `place_start`, `released`, `fault`, `part_lost`, `part_let_go`, `slot_skipped`, `refill`,
+    /// `place_tray_exchange`, `outcome`, `motion_start_mismatch`.
+    pub fn kind(&self) -> &'static str {
+        match self {
+            Event::Capture(_) => "capture",
+            Event::CaptureSpoiled(_) => "capture_spoiled",
+            Event::RecognitionReady { .. } => "recognition_ready",
+            Event::GraspChosen { .. } => "grasp_chosen",
+            Event::Planned(_) => "planned",
+            Event::Stall { .. } => "stall",
+            Event::PickStart => "pick_start",
+            Event::Grasped { .. } => "grasped",
+            Event::PlaceStart => "place_start",
+            Event::Released => "released",
+            Event::Fault(_) => "fault",
+            Event::PartLost(_) => "part_lost",
+            Event::PartLetGo => "part_let_go",
+            Event::SlotSkipped(_) => "slot_skipped",
+            Event::Refill(_) => "refill",
+            Event::PlaceTrayExchange => "place_tray_exchange",
+            Event::Outcome(_) => "outcome",
+            Event::MotionStartMismatch(_) => "motion_start_mismatch",
+        }
+    }
+
+    /// Whether a log shows it as a warning: faults, lost parts, picks that were not placed.
+    pub fn is_warning(&self) -> bool {
+        match self {
+            Event::Fault(_) | Event::PartLost(_) => true,
+            Event::Outcome(o) => *o != Outcome::Placed,
+            _ => false,
+        }
+    }
+}
+
+/// The event's detail, as one line of the event log (empty for some kinds).
+impl fmt::Display for Event {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            Event::Capture(id) => write!(f, "capture {id}"),
+            Event::CaptureSpoiled(problem) => write!(f, "{problem:?}"),
+            Event::RecognitionReady { detected, blurred } => write!(
+                f,
+                "{detected} parts detected, {blurred} blurred by motion during the exposure"
+            ),
+            Event::GraspChosen { detection, face, score } => {
+                write!(f, "detection {detection} face {face} score {score:.3}")
+            }
+            Event::Planned(Planned::Pick {
+                transfer_s,
+                descent_s,
+                compute_s,
+            }) => write!(
+                f,
+                "Pick motion: transfer {transfer_s:.3} s + descent {descent_s:.3} s ({:.1} ms compute)",
+                1e3 * compute_s
+            ),
+            Event::Planned(Planned::Place {
+                lift_s,
+                transfer_s,
+                descent_s,
+                retreat_s,
+                compute_s,
+            }) => write!(
+                f,
+                "Place motion: lift {lift_s:.3} s + transfer {transfer_s:.3} s + descent {descent_s:.3} s + retreat {retreat_s:.3} s ({:.1} ms compute)",
+                1e3 * compute_s
+            ),
+            Event::Planned(Planned::Failed { motion, why }) => write!(f, "{motion} motion: {why}"),
+            Event::Stall { cause, duration_s } => match cause {
+                StallCause::Sensor => write!(f, "waiting for the sensor {duration_s:.3} s"),
+                StallCause::Compute => write!(f, "waiting for compute {duration_s:.3} s"),
+            },
+            Event::Grasped {
+                part,
+                aimed_at,
+                com_offset_m,
+                tilt_rad,
+            } => write!(
+                f,
+                "part {part} (aimed at part {aimed_at}), cup axis {:.1} mm from its centre of mass, tilt {:.1} deg",
+                com_offset_m * 1e3,
+                tilt_rad.to_degrees()
+            ),
+            Event::Fault(Fault::Collision(what)) => write!(f, "collision: {what}"),
+            Event::Fault(Fault::ProtectiveStop(what)) => write!(f, "protective stop: {what}"),
+            Event::Fault(Fault::NoPathOutOfView) => f.write_str("no path out of the sensor's view"),
+            Event::PartLost(PartLoss::LeftTray { body, tray }) => write!(f, "{body} left the {tray}"),
+            Event::PartLost(PartLoss::PressedDeep { part, depth_m }) => {
+                write!(f, "part {part} pressed {:.2} mm deep", depth_m * 1e3)
+            }
+            Event::PartLetGo => f.write_str("the part stays in the pick tray"),
+            Event::SlotSkipped(slot) => write!(f, "slot {slot}"),
+            Event::Refill(pile) => write!(f, "pile {pile}"),
+            Event::Outcome(o) => write!(f, "{}: {}", o.name(), o.detail()),
+            Event::MotionStartMismatch(jump_rad) => write!(f, "{jump_rad:.4} rad"),
+            Event::PickStart | Event::PlaceStart | Event::Released | Event::PlaceTrayExchange => Ok(()),
+        }
+    }
+}
+
+/// One entry of the event log (`events.json`, the recordings' log).
+#[derive(Debug, Clone, Serialize)]
+pub struct CycleEvent {
+    /// Simulation time [s].
+    pub t_s: f64,
+    /// Pick index, if the event belongs to one.
+    pub pick: Option<usize>,
+    /// What ([`Event::kind`]).
+    pub kind: &'static str,
+    /// Details ([`Event`]'s `Display`).
+    pub detail: String,
+    /// Shown as a warning ([`Event::is_warning`]).
+    #[serde(skip)]
+    pub warning: bool,
+}
+
+/// A capture, a recognition result and the grasps ranked on it, as the cycle used them.
+#[derive(Debug, Clone, Copy)]
+pub struct Recognised<'a> {
+    /// When the result arrived [s].
+    pub t_s: f64,
+    /// The recognised parts.
+    pub detections: &'a [Detection],
+    /// Feasible grasps, best first.
+    pub ranked: &'a [GraspCandidate],
+    /// Index into `ranked` of the grasp chosen, if any.
+    pub chosen: Option<usize>,
+}
+
+/// Watches a cell run. Every method does nothing by default: a run keeps nothing for a watcher
+/// that does not ask for it.
+pub trait Observer {
+    /// An event at simulation time `t_s`, of pick `pick` if it belongs to one.
+    fn event(&mut self, _t_s: f64, _pick: Option<usize>, _event: &Event) {}
+    /// A stage was busy from `start_s` to `end_s` (only called for positive lengths).
+    fn span(&mut self, _stage: Stage, _start_s: f64, _end_s: f64, _label: &str) {}
+    /// A moment to mark on the time chart (a release, a fault).
+    fn marker(&mut self, _t_s: f64, _label: &str) {}
+    /// The world after each physics step (pile pours and refills included).
+    fn stepped(&mut self, _world: &World) {}
+    /// The sensor took a capture (at its `trigger_s`).
+    fn captured(&mut self, _capture: &Capture) {}
+    /// A recognition result was used.
+    fn recognised(&mut self, _result: &Recognised<'_>) {}
+    /// A motion ran from simulation time `t0_s`: the motion as planned, every servo tick of its
+    /// execution (times from the motion's start) and how many of them the world played before
+    /// a fault stopped it (all of them otherwise).
+    fn executed(&mut self, _t0_s: f64, _planned: &dyn Motion, _ticks: &[Tick], _played: usize) {}
+}
+
+/// The observer that keeps nothing.
+impl Observer for () {}
+
+/// Several observers watching one run, called in order.
+pub struct Observers<'a>(pub Vec<&'a mut dyn Observer>);
+
+impl Observer for Observers<'_> {
+    fn event(&mut self, t_s: f64, pick: Option<usize>, event: &Event) {
+        self.0.iter_mut().for_each(|o| o.event(t_s, pick, event));
+    }
+    fn span(&mut self, stage: Stage, start_s: f64, end_s: f64, label: &str) {
+        self.0.iter_mut().for_each(|o| o.span(stage, start_s, end_s, label));
+    }
+    fn marker(&mut self, t_s: f64, label: &str) {
+        self.0.iter_mut().for_each(|o| o.marker(t_s, label));
+    }
+    fn stepped(&mut self, world: &World) {
+        self.0.iter_mut().for_each(|o| o.stepped(world));
+    }
+    fn captured(&mut self, capture: &Capture) {
+        self.0.iter_mut().for_each(|o| o.captured(capture));
+    }
+    fn recognised(&mut self, result: &Recognised<'_>) {
+        self.0.iter_mut().for_each(|o| o.recognised(result));
+    }
+    fn executed(&mut self, t0_s: f64, planned: &dyn Motion, ticks: &[Tick], played: usize) {
+        self.0.iter_mut().for_each(|o| o.executed(t0_s, planned, ticks, played));
+    }
+}
+
+/// The event log: every event as a [`CycleEvent`], in time order (stable) when taken.
+#[derive(Debug, Clone, Default)]
+pub struct EventLog {
+    events: Vec<CycleEvent>,
+}
+
+impl EventLog {
+    /// The events in time order. A few are logged after later ones (compute that ran while the
+    /// arm was busy carries the time it finished): a stable sort by time puts them in place.
+    pub fn into_sorted(mut self) -> Vec<CycleEvent> {
+        self.events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+        self.events
+    }
+}
+
+impl Observer for EventLog {
+    fn event(&mut self, t_s: f64, pick: Option<usize>, event: &Event) {
+        self.events.push(CycleEvent {
+            t_s,
+            pick,
+            kind: event.kind(),
+            detail: event.to_string(),
+            warning: event.is_warning(),
+        });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn events_read_as_the_log_always_has() {
+        let e = Event::Stall {
+            cause: StallCause::Sensor,
+            duration_s: 0.4159,
+        };
+        assert_eq!(
+            (e.kind(), e.to_string().as_str()),
+            ("stall", "waiting for the sensor 0.416 s")
+        );
+        let o = Event::Outcome(Outcome::NothingGraspable("no feasible grasp (crowded 3)".into()));
+        assert_eq!(o.to_string(), "nothing_graspable: no feasible grasp (crowded 3)");
+        assert!(o.is_warning());
+        assert!(!Event::Outcome(Outcome::Placed).is_warning());
+        assert_eq!(Event::Outcome(Outcome::Placed).to_string(), "placed: ");
+        assert_eq!(EndReason::Interrupted.to_string(), "interrupted");
+        assert_eq!(serde_json::to_string(&EndReason::PicksDone).unwrap(), "\"picks done\"");
+    }
+}

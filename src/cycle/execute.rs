@@ -1,0 +1,257 @@
+//! Cycle step 4, execution: motions played through the servo into the physics world, faults
+//! caught, and the way out of a fault.
+//!
+//! Job: run a motion through the torque-limited servo from the arm's actual state, move the
+//! arm's bodies to the servo's positions every physics step, poll for the next capture while
+//! the arm is out of view, and watch every step: parts that left their tray are taken out as
+//! lost; a collision of the arm or the held part, or a part pressed into the tray, stops the
+//! motion; the servo's protective stop and a part slipping off the cup end it. After a stop or
+//! a collision the vacuum goes off, the controller waits its reset time and the arm backs out
+//! (straight up out of the pick tray, else back along the faulted motion, slowly).
+//!
+//! Units: s, rad, m. Frames: joint space; world for the tool.
+
+use nalgebra::{Isometry3, Translation3};
+
+use super::events::{Event, Fault, Outcome, PartLoss, Stage};
+use super::{CycleError, Run};
+use crate::execution::execute_from;
+use crate::physics::suction::GripperEvent;
+use crate::physics::{HealthError, PartState};
+use crate::robot::{DOF, JointVector, Payload};
+use crate::trajectory::{LineLimits, Motion, straight_line};
+
+/// How a motion ended.
+pub(super) enum Played {
+    /// Done.
+    Done,
+    /// Ended the pick.
+    Failed(Outcome),
+}
+
+impl Run<'_, '_> {
+    /// One physics step. Parts that left their tray are taken out of the cell (lost); a collision
+    /// of the arm or a part pressed into the tray is returned; a non-finite state ends the run.
+    pub(super) fn step(&mut self) -> Result<Option<String>, CycleError> {
+        let result = self.st.world.step();
+        self.obs.stepped(&self.st.world);
+        if let Some(job) = self.st.pending.as_mut()
+            && let Some(problem) = self.st.sensor.watch(job, &self.st.world)
+        {
+            self.event(Event::CaptureSpoiled(problem));
+        }
+        match result {
+            Ok(()) => Ok(None),
+            Err(HealthError::LeftVolume { body, volume, .. }) => {
+                let world = &mut self.st.world;
+                for i in 0..world.parts.len() {
+                    let c = world.part_pose(i).translation.vector;
+                    let lost = match world.parts[i].state {
+                        PartState::Free => !world.pick_tray.contains(&c),
+                        PartState::Placed => !world.place_tray.contains(&c),
+                        PartState::Held | PartState::Removed => false,
+                    };
+                    if lost {
+                        world.remove_part(i);
+                        self.st.parts_lost += 1;
+                    }
+                }
+                self.event(Event::PartLost(PartLoss::LeftTray { body, tray: volume }));
+                Ok(None)
+            }
+            Err(e @ (HealthError::ArmCollision { .. } | HealthError::DeepPenetration { .. })) => {
+                Ok(Some(e.to_string()))
+            }
+            Err(e @ HealthError::NonFinite { .. }) => Err(e.into()),
+        }
+    }
+
+    /// Steps the world to `t` with the arm still. Contacts of a resting arm are not new faults.
+    pub(super) fn idle_until(&mut self, t: f64) -> Result<(), CycleError> {
+        while self.st.world.time_s + 1e-9 < t {
+            self.step()?;
+        }
+        Ok(())
+    }
+
+    /// Plays a motion through the servo into the world; `trigger` polls for the next capture.
+    pub(super) fn play(
+        &mut self,
+        motion: &impl Motion,
+        payload: &Payload,
+        trigger: bool,
+    ) -> Result<Played, CycleError> {
+        self.play_with(motion, payload, trigger, None, true)
+    }
+
+    /// As [`Run::play`], switching the vacuum on `vacuum_at_s` into the motion; with `settle`
+    /// false the next motion takes over at this one's end without waiting to be in position.
+    pub(super) fn play_with(
+        &mut self,
+        motion: &impl Motion,
+        payload: &Payload,
+        trigger: bool,
+        vacuum_at_s: Option<f64>,
+        settle: bool,
+    ) -> Result<Played, CycleError> {
+        let robot = self.cell.robot;
+        let jump = (motion.at(0.0).q - self.st.world.joints()).amax();
+        if jump > 1e-3 {
+            self.event(Event::MotionStartMismatch(jump));
+        }
+        let dynamics = robot.dynamics(payload);
+        let run = execute_from(
+            robot,
+            &dynamics,
+            &dynamics,
+            &self.cell.servo,
+            motion,
+            (self.st.arm.q, self.st.arm.qd),
+            settle,
+        );
+        (self.st.arm.q, self.st.arm.qd) = run.end_state;
+        let limit = robot.torque_limit_nm();
+        let t0 = self.st.world.time_s;
+        let arm = &mut self.st.arm;
+        for t in &run.ticks {
+            for i in 0..DOF {
+                arm.peak_torque_ratio = arm.peak_torque_ratio.max(t.tau[i].abs() / limit[i]);
+            }
+        }
+        arm.max_error_rad = run.max_error_rad.iter().fold(arm.max_error_rad, |a, e| a.max(*e));
+        let per_step = (self.st.world.dt_s() / self.cell.servo.dt_s).round().max(1.0) as usize;
+        let mut dropped = None;
+        let mut k = per_step;
+        let mut played = 0;
+        while k < run.ticks.len() + per_step {
+            let end = k.min(run.ticks.len() - 1);
+            self.st.world.set_joint_target(&run.ticks[end].q);
+            if vacuum_at_s.is_some_and(|t| run.ticks[end].t + 1e-9 >= t) {
+                self.st.world.vacuum_on();
+            }
+            played = end + 1;
+            if let Some(what) = self.step()? {
+                self.obs.executed(t0, motion, &run.ticks, played);
+                let path: Vec<JointVector> = run.ticks[..=end].iter().map(|tk| tk.q).collect();
+                self.recover(&path, Fault::Collision(what.clone()))?;
+                return Ok(Played::Failed(Outcome::Collision(what)));
+            }
+            if trigger {
+                self.maybe_trigger();
+            }
+            for ev in self.st.world.gripper.take_events() {
+                if let GripperEvent::Slipped {
+                    required_n,
+                    holding_n,
+                    time_s,
+                    ..
+                } = ev
+                {
+                    dropped.get_or_insert(format!(
+                        "slipped {:.3} s into the motion: {required_n:.2} N needed, {holding_n:.2} N held",
+                        time_s - t0
+                    ));
+                } else {
+                    self.st.gripper_events.push(ev);
+                }
+            }
+            k += per_step;
+        }
+        self.obs.executed(t0, motion, &run.ticks, played);
+        if let Some((t, trip)) = run.trip {
+            let what = format!("{trip:?} at {t:.3} s into the motion");
+            self.recover(&[], Fault::ProtectiveStop(what.clone()))?;
+            return Ok(Played::Failed(Outcome::ProtectiveStop(what)));
+        }
+        if let Some(why) = dropped {
+            return Ok(Played::Failed(Outcome::Dropped(why)));
+        }
+        Ok(Played::Done)
+    }
+
+    /// After a fault: the vacuum goes off, the controller waits its reset time, then the arm
+    /// retraces `path` (the executed positions of the faulted motion) back to where it started.
+    fn recover(&mut self, path: &[JointVector], fault: Fault) -> Result<(), CycleError> {
+        let t = self.st.world.time_s;
+        self.event(Event::Fault(fault));
+        self.obs.marker(t, "fault");
+        self.st.world.vacuum_off();
+        self.idle_until(t + self.cell.scene.sim.protective_stop_reset_s)?;
+        (self.st.arm.q, self.st.arm.qd) = (self.st.world.joints(), JointVector::zeros());
+        self.clear_deep_penetrations();
+        let robot = self.cell.robot;
+        let tool = self.st.world.world_from_tool();
+        let tray = &self.st.world.pick_tray;
+        let above_z = tray.world_from_tray.translation.z + self.cell.scene.pick_tray.wall_height_m + 0.1;
+        let local = tray.world_from_tray.inverse() * nalgebra::Point3::from(tool.translation.vector);
+        let over_pick_tray = local.x.abs() < tray.half_xy_m[0] && local.y.abs() < tray.half_xy_m[1];
+        let hand = self.cell.hand;
+        if over_pick_tray && tool.translation.z < above_z {
+            // In the tray: straight up, slowly, out of whatever it touches.
+            let up = Isometry3::from_parts(
+                Translation3::new(tool.translation.x, tool.translation.y, above_z),
+                tool.rotation,
+            );
+            let limits = LineLimits {
+                speed_m_s: 0.1,
+                accel_m_s2: 1.0,
+            };
+            if let Some(line) = straight_line(robot, &robot.dynamics(&hand), &self.st.arm.q, &tool, &up, &limits, None)
+            {
+                let path: Vec<JointVector> = line.sampled(self.cell.servo.dt_s).iter().map(|s| s.q).collect();
+                self.retrace(&path, 1)?;
+            }
+        } else {
+            // Elsewhere: back along the faulted motion, at a third of its speed.
+            let back: Vec<JointVector> = path.iter().rev().copied().collect();
+            self.retrace(&back, 3)?;
+        }
+        (self.st.arm.q, self.st.arm.qd) = (self.st.world.joints(), JointVector::zeros());
+        self.st.world.gripper.take_events();
+        self.st.gripper_events.clear();
+        self.span(Stage::Stall, t, self.st.world.time_s, "fault reset and retreat");
+        self.st.arm.free_s = self.st.world.time_s;
+        Ok(())
+    }
+
+    /// After a fault: parts the arm pressed into the tray or into each other (deeper than the
+    /// health monitor allows) are damaged goods: taken out of the cell and counted as lost.
+    fn clear_deep_penetrations(&mut self) {
+        for _ in 0..8 {
+            let (depth, pair) = self.st.world.max_penetration_m();
+            let Some((a, b)) = pair.filter(|_| depth > self.st.world.health.deep_penetration_m) else {
+                return;
+            };
+            let mut removed = false;
+            for tag in [a, b] {
+                if let crate::physics::Tag::Part(i) = tag
+                    && self.st.world.parts[i as usize].state != PartState::Held
+                {
+                    self.st.world.remove_part(i as usize);
+                    self.st.parts_lost += 1;
+                    self.event(Event::PartLost(PartLoss::PressedDeep {
+                        part: i as usize,
+                        depth_m: depth,
+                    }));
+                    removed = true;
+                }
+            }
+            if !removed {
+                return;
+            }
+        }
+    }
+
+    /// Moves the arm's bodies through servo-rate positions `path`, `slow` times slower, without
+    /// treating contacts as new faults (the arm is getting out of one).
+    fn retrace(&mut self, path: &[JointVector], slow: usize) -> Result<(), CycleError> {
+        let per_step = (self.st.world.dt_s() / self.cell.servo.dt_s).round().max(1.0) as usize;
+        for q in path.iter().step_by(per_step) {
+            for _ in 0..slow {
+                self.st.world.set_joint_target(q);
+                self.step()?;
+            }
+        }
+        Ok(())
+    }
+}

@@ -1,0 +1,353 @@
+//! The cell cycle: capture, recognise, select a grasp, plan and accelerate, Pick, Place, repeat.
+//!
+//! Job: run picks of one workpiece end to end in the simulated cell and time them, following the
+//! reference system's time chart (its Fig. 3). The arm is driven by the torque-limited servo
+//! ([`crate::execution`]) whose joint states move the arm's bodies in the physics world every
+//! physics step, so the arm pushes parts and hides them from the sensor.
+//!
+//! The cycle is a constant [`Cell`] (robot, scene, grasp selector, servo, budgets, place slots)
+//! and a mutable [`CellState`] (the world, the sensor's pending capture, the arm's state, the
+//! spots where grasps failed, the trays' state). One pick, in the order the files take it:
+//!
+//! 1. [`sensing`]: the capture is triggered at the first physics step of the previous Place at
+//!    which the arm has left the camera's view frustum (or, at the start and after a failure, as
+//!    soon as the arm is out of view). The recognition result arrives `latency_s` after the
+//!    trigger. A capture spoiled by motion in the scene is repeated when its exposure is over.
+//! 2. [`motions`]: from the result, grasp selection ([`crate::grasp::choose_grasp`]), then the
+//!    Pick motion (transfer to the approach pose, straight descent, straight lift) is planned
+//!    and accelerated; the Place motion (transfer to above the slot, straight descent, straight
+//!    retreat) is planned next, while the Pick runs. Compute is charged to the simulation
+//!    clock: fixed budgets from the cell file with `deterministic`, the measured wall time of
+//!    our own code otherwise.
+//! 3. [`pick_place`]: Pick: transfer, descent, vacuum on and build-up, lift. Place: transfer,
+//!    descent, release, retreat. The arm waits only when the next motion is not ready: a stall,
+//!    split into waiting for the sensor and waiting for compute.
+//! 4. [`execute`]: each motion is played through the servo into the world. Faults: a
+//!    protective stop, a collision of the arm (or the held part) with the cell or a part
+//!    pressed into the tray (the world's health monitor), a part slipping off the cup. Each ends
+//!    the pick with its outcome; after a stop or a collision the arm waits the reset time and
+//!    retraces its path out. Parts pushed out of a tray are taken out of the cell as lost.
+//! 5. [`trays`]: nothing detected or nothing graspable: re-capture; after
+//!    `empty_after_captures` in a row the cell file's policy exchanges the pick tray for a full
+//!    one (`refill_s`) or ends the run. A full place tray is exchanged for an empty one.
+//! 6. [`records`]: each pick's record and the run's summary.
+//!
+//! Whoever watches a run (recordings, the time chart, the event log, a progress display) sees it
+//! through one [`Observer`] ([`events`]).
+//!
+//! Held parts: the transfer, lift and descent motions with a part on the cup are slowed (a
+//! uniform time scaling) where the tool's acceleration would need more than
+//! [`SUCTION_MARGIN`] of the cup's holding force ([`crate::geometry::SuctionModel`], with the
+//! centre-of-mass offset of the grasp as recognised plus three standard deviations of the
+//! recognition's position noise).
+//!
+//! Units: s, m, rad. Frames: world.
+
+mod events;
+mod execute;
+mod motions;
+mod pick_place;
+mod records;
+mod sensing;
+mod trays;
+
+use nalgebra::{Isometry3, Vector3};
+
+pub use events::{
+    CycleEvent, EndReason, Event, EventLog, Fault, Observer, Observers, Outcome, PartLoss, Planned, Recognised, Stage,
+    StallCause,
+};
+pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
+pub use records::{
+    PickRecord, RunCounts, RunLabel, RunResult, RunSummary, TaktStats, release_span, summarise, takts_in_stats,
+};
+pub use sensing::SensedResult;
+
+use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
+use crate::execution::Servo;
+use crate::geometry::SuctionModel;
+use crate::grasp::GraspSelector;
+use crate::physics::pile::PileOptions;
+use crate::physics::suction::GripperEvent;
+use crate::physics::{HealthError, PartShape, World};
+use crate::robot::{JointVector, Payload, RobotModel};
+use crate::sensor::{CaptureJob, Sensor};
+
+pub use crate::reference::reference_takt;
+
+/// Why a run stopped early.
+#[derive(Debug, thiserror::Error)]
+pub enum CycleError {
+    /// The workpiece's shape could not be built.
+    #[error(transparent)]
+    Shape(#[from] crate::physics::ShapeError),
+    /// The physics world failed beyond recovery (a non-finite state).
+    #[error("physics: {0}")]
+    Health(#[from] HealthError),
+    /// Something the cycle needs is missing (sensor pose, place slots).
+    #[error("{0}")]
+    Setup(String),
+}
+
+/// Options of a run.
+#[derive(Debug, Clone, Copy)]
+pub struct RunOptions {
+    /// Picks to attempt.
+    pub picks: usize,
+    /// Run seed.
+    pub seed: u64,
+    /// Charge fixed compute budgets instead of measured wall time (byte-identical results).
+    pub deterministic: bool,
+    /// Set (by a Ctrl-C handler) to end the run after the pick under way: the results so far are
+    /// returned and the summary says `interrupted`.
+    pub stop: Option<&'static std::sync::atomic::AtomicBool>,
+}
+
+/// The constant parts of the cell: what does not change while it runs.
+pub struct Cell<'a> {
+    /// The arm.
+    pub robot: &'a RobotModel,
+    /// The cell file.
+    pub scene: &'a Scene,
+    /// The grasp selector for this workpiece.
+    pub selector: GraspSelector,
+    /// The joint servo.
+    pub servo: Servo,
+    /// The hand on the flange (no part).
+    pub hand: Payload,
+    /// The workpiece's shape and mass.
+    pub shape: PartShape,
+    /// The cup's holding-force model.
+    pub suction: SuctionModel,
+    /// The place slots in the world, in filling order.
+    pub slots: Vec<Isometry3<f64>>,
+    /// The part's yaw symmetry [rad] (0: none), for the placement error.
+    pub yaw_symmetry_rad: f64,
+    /// Compute budgets charged in deterministic mode: grasp selection, Pick and Place motion [s].
+    pub budgets_s: [f64; 3],
+    /// Parts per pile.
+    pub pile_count: usize,
+    /// Run options.
+    pub opts: RunOptions,
+}
+
+/// The arm as the cycle knows it between motions.
+#[derive(Debug, Clone, Copy)]
+pub struct ArmState {
+    /// Actual joint positions and velocities after the last motion [rad, rad/s].
+    pub q: JointVector,
+    /// Joint velocities [rad/s].
+    pub qd: JointVector,
+    /// When the arm has nothing to do from [s].
+    pub free_s: f64,
+    /// Largest tracking error since the pick's motions began [rad].
+    pub max_error_rad: f64,
+    /// Largest |torque| / limit since the pick's motions began.
+    pub peak_torque_ratio: f64,
+}
+
+/// The mutable state of the cell.
+pub struct CellState {
+    /// The physics world: trays, parts, the arm's bodies, the gripper.
+    pub world: World,
+    /// The sensor (its capture counters).
+    pub sensor: Sensor,
+    /// The capture being exposed or processed.
+    pub pending: Option<CaptureJob>,
+    /// The arm.
+    pub arm: ArmState,
+    /// Grasp points where a pick failed at the part, in this pile [m, world].
+    pub failed_spots: Vec<Vector3<f64>>,
+    /// Gripper events seen while a motion played (a seal decided before the descent settled).
+    pub gripper_events: Vec<GripperEvent>,
+    /// The trays' state.
+    pub trays: trays::TrayState,
+    /// The pick under way.
+    pub pick: Option<usize>,
+    /// Parts lost out of the trays.
+    pub parts_lost: usize,
+}
+
+/// A running cycle: the constant cell, its state, and who watches.
+struct Run<'a, 'o> {
+    cell: &'a Cell<'a>,
+    st: CellState,
+    obs: &'o mut dyn Observer,
+}
+
+impl Run<'_, '_> {
+    /// Reports an event now.
+    fn event(&mut self, event: Event) {
+        self.obs.event(self.st.world.time_s, self.st.pick, &event);
+    }
+
+    /// Reports an event at time `t_s`.
+    fn event_at(&mut self, t_s: f64, event: Event) {
+        self.obs.event(t_s, self.st.pick, &event);
+    }
+
+    /// Reports a busy interval of a stage (if it has a positive length).
+    fn span(&mut self, stage: Stage, start_s: f64, end_s: f64, label: &str) {
+        if end_s > start_s {
+            self.obs.span(stage, start_s, end_s, label);
+        }
+    }
+}
+
+impl<'a> Cell<'a> {
+    /// The cell of `scene` for `workpiece`.
+    pub fn new(
+        scene: &'a LoadedScene,
+        robot: &'a RobotModel,
+        workpiece: &LoadedWorkpiece,
+        opts: RunOptions,
+    ) -> Result<Self, CycleError> {
+        let wp = &workpiece.workpiece;
+        let s = &scene.scene;
+        let slots = s.world_from_slots(wp);
+        if slots.is_empty() {
+            return Err(CycleError::Setup("no place slot for this workpiece".into()));
+        }
+        Ok(Cell {
+            robot,
+            scene: s,
+            selector: GraspSelector::new(s, robot, wp),
+            servo: Servo::from_config(&s.sim),
+            hand: Payload::from_gripper(&s.gripper),
+            shape: PartShape::build(wp, &workpiece.source)?,
+            suction: SuctionModel::new(&s.gripper),
+            slots,
+            yaw_symmetry_rad: wp.grasp.yaw_symmetry_deg.to_radians(),
+            budgets_s: [
+                s.compute.grasp_estimation_s,
+                s.compute.motion_generation_s,
+                s.compute.motion_generation_s,
+            ],
+            pile_count: wp.pile_count as usize,
+            opts,
+        })
+    }
+
+    /// The cell's state at the start: the world with its first pile poured and the sensor over it.
+    pub fn start(&self, obs: &mut dyn Observer) -> Result<CellState, CycleError> {
+        let mut world = World::new(self.scene, self.robot, self.shape.clone());
+        world.build_pile_observed(&PileOptions::new(self.pile_count, self.opts.seed), &mut |w| {
+            obs.stepped(w)
+        })?;
+        let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed)
+            .ok_or_else(|| CycleError::Setup("degenerate sensor pose".into()))?;
+        let q = world.joints();
+        Ok(CellState {
+            arm: ArmState {
+                q,
+                qd: JointVector::zeros(),
+                free_s: world.time_s,
+                max_error_rad: 0.0,
+                peak_torque_ratio: 0.0,
+            },
+            world,
+            sensor,
+            pending: None,
+            failed_spots: Vec::new(),
+            gripper_events: Vec::new(),
+            trays: trays::TrayState::default(),
+            pick: None,
+            parts_lost: 0,
+        })
+    }
+}
+
+/// Runs `opts.picks` picks of `workpiece` in the cell of `scene`, watched by `obs`.
+pub fn run(
+    scene: &LoadedScene,
+    robot: &RobotModel,
+    workpiece: &LoadedWorkpiece,
+    opts: &RunOptions,
+    obs: &mut dyn Observer,
+) -> Result<RunResult, CycleError> {
+    let cell = Cell::new(scene, robot, workpiece, *opts)?;
+    let st = cell.start(obs)?;
+    let mut run = Run { cell: &cell, st, obs };
+    let (records, ended) = run.picks()?;
+    let st = &run.st;
+    let counts = RunCounts {
+        parts_lost: st.parts_lost,
+        captures: (st.sensor.triggered, st.sensor.spoiled),
+        refills: st.trays.refills,
+        place_tray_exchanges: st.trays.exchanges,
+    };
+    let label = RunLabel {
+        workpiece: workpiece.workpiece.name.clone(),
+        seed: opts.seed,
+        deterministic: opts.deterministic,
+    };
+    let summary = summarise(label, &records, counts, ended, st.world.time_s);
+    Ok(RunResult { records, summary })
+}
+
+/// The first recognition result of a fresh cell: the world with its pile, the arm moved out of
+/// the view if needed, the capture triggered, spoiled exposures repeated, the result awaited, as
+/// the cycle does before its first pick. `None` if the arm found no path out of the view.
+pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState, Option<SensedResult>), CycleError> {
+    let st = cell.start(obs)?;
+    let mut run = Run { cell, st, obs };
+    let sensed = run.next_result()?;
+    Ok((run.st, sensed))
+}
+
+impl Run<'_, '_> {
+    /// The pick loop: until the asked-for attempts are made or the run ends otherwise.
+    fn picks(&mut self) -> Result<(Vec<PickRecord>, EndReason), CycleError> {
+        let opts = self.cell.opts;
+        let mut records: Vec<PickRecord> = Vec::new();
+        let mut attempts = 0usize;
+        while attempts < opts.picks {
+            if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
+                return Ok((records, EndReason::Interrupted));
+            }
+            let index = records.len();
+            self.st.pick = Some(index);
+            if index > 20 * opts.picks + 20 {
+                return Ok((records, EndReason::TooManyEmptyCaptures));
+            }
+            let Some(result) = self.next_result()? else {
+                return Ok((records, EndReason::NoPathOutOfView));
+            };
+            let mut rec = PickRecord::new(index, result.capture_s, result.job.ready_s);
+            let prepared = match result.detections.as_deref() {
+                None | Some([]) => {
+                    self.obs.recognised(&Recognised {
+                        t_s: result.job.ready_s,
+                        detections: &[],
+                        ranked: &[],
+                        chosen: None,
+                    });
+                    Err(None)
+                }
+                Some(dets) => self.prepare(dets, &result.job).map_err(Some),
+            };
+            let (prep, wall_s) = match prepared {
+                Ok(p) => p,
+                Err(why) => {
+                    rec.outcome = why.map_or(Outcome::NothingDetected, Outcome::NothingGraspable);
+                    self.event(Event::Outcome(rec.outcome.clone()));
+                    records.push(rec);
+                    if let Some(end) = self.nothing_to_pick()? {
+                        return Ok((records, end));
+                    }
+                    continue;
+                }
+            };
+            attempts += 1;
+            self.st.trays.attempted();
+            let charged = if opts.deterministic {
+                self.cell.budgets_s
+            } else {
+                wall_s
+            };
+            self.pick_and_place(&prep, charged, result.job.ready_s, &mut rec)?;
+            records.push(rec);
+        }
+        Ok((records, EndReason::PicksDone))
+    }
+}

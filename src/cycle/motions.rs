@@ -1,0 +1,229 @@
+//! Cycle step 2, motion generation: from a recognition result to the Pick and Place motions of
+//! one pick.
+//!
+//! Job: choose the grasp ([`crate::pipeline::sense_and_grasp`]); plan the Pick transfer from
+//! where the arm is to the approach pose above the grasp in the planning scene of that grasp,
+//! accelerate it under the torque limits inside the certified corridor, and add the straight
+//! descent; then, with the part on the cup (its centre of mass where the recognition put it),
+//! the straight lift, the Place transfer to above the slot (planned with the part's box on the
+//! hand, slowed where the cup's holding force would not hold), the straight descent to the
+//! release pose and the straight retreat. The wall time of each stage is measured.
+//!
+//! Units: m, rad, s. Frames: world (`world_from_tool`), the tool frame for the held part
+//! (`tool_from_part`), the flange frame for payloads.
+
+use std::time::Instant;
+
+use nalgebra::{Isometry3, Translation3, Vector3};
+
+use super::Cell;
+use super::Run;
+use super::events::Recognised;
+use crate::grasp::GraspCandidate;
+use crate::pipeline::{GraspContext, sense_and_grasp};
+use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
+use crate::robot::{JointVector, Payload};
+use crate::sensor::{CaptureJob, Detection};
+use crate::trajectory::{LineLimits, LineMotion, Trajectory, accelerate_in_corridor, limit_tool_force, straight_line};
+
+/// Fraction of the cup's holding force a held-part motion may use.
+pub const SUCTION_MARGIN: f64 = 0.75;
+/// The part is released this far above its resting height in the slot [m] (the recognised pose
+/// is a little off; the part drops the rest).
+pub const RELEASE_ABOVE_M: f64 = 0.003;
+/// The Place transfer ends this far above the release pose [m].
+pub const PLACE_APPROACH_M: f64 = 0.03;
+/// Corridor check interval of the accelerated transfers [s].
+const CORRIDOR_CHECK_S: f64 = 0.01;
+
+/// The Place transfer's goal for a grasp: the tool [`PLACE_APPROACH_M`] above where the part
+/// touches down in its slot.
+pub fn above_place(grasp: &GraspCandidate) -> Isometry3<f64> {
+    Isometry3::from_parts(
+        Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * PLACE_APPROACH_M),
+        grasp.world_from_tool_place.rotation,
+    )
+}
+
+/// The Place motion after the lift: transfer, descent, retreat, and the transfer's time scaling
+/// for the cup's holding force.
+pub(super) type PlaceMotion = (Trajectory, LineMotion, LineMotion, f64);
+
+/// The motions of one pick, generated from one recognition result.
+pub(super) struct Prepared {
+    /// The grasp.
+    pub grasp: GraspCandidate,
+    /// Where the part goes.
+    pub slot: Isometry3<f64>,
+    /// Transfer to the approach pose (or why not).
+    pub pick_transfer: Result<Trajectory, String>,
+    /// Straight descent to the grasp.
+    pub descent: LineMotion,
+    /// Straight lift with the part, generated while the Pick runs.
+    pub lift: LineMotion,
+    /// The Place motion (or why not), generated while the Pick runs.
+    pub place: Result<PlaceMotion, String>,
+    /// Hand and part as the controller believes them.
+    pub held: Payload,
+    /// The part the chosen detection is (for the event log only; nothing decides on it).
+    pub truth_part: usize,
+}
+
+impl Cell<'_> {
+    /// A straight tool line at the cell's line speed and acceleration, torque-limited and, with a
+    /// part on the cup, limited to the cup's holding force.
+    pub(super) fn line(
+        &self,
+        q_from: &JointVector,
+        from: &Isometry3<f64>,
+        to: &Isometry3<f64>,
+        payload: &Payload,
+        max_force: Option<f64>,
+    ) -> Option<LineMotion> {
+        let limits = LineLimits {
+            speed_m_s: self.scene.cycle.line_speed_m_s,
+            accel_m_s2: self.scene.cycle.line_accel_m_s2,
+        };
+        straight_line(
+            self.robot,
+            &self.robot.dynamics(payload),
+            q_from,
+            from,
+            to,
+            &limits,
+            max_force,
+        )
+    }
+}
+
+impl Run<'_, '_> {
+    /// Grasp selection and motion generation for one recognition result. Returns the motions
+    /// and the wall time of each stage [s], or why nothing can be picked.
+    pub(super) fn prepare(
+        &mut self,
+        detections: &[Detection],
+        job: &CaptureJob,
+    ) -> Result<(Prepared, [f64; 3]), String> {
+        let cell = self.cell;
+        let robot = cell.robot;
+        let wall = Instant::now();
+        let slot = cell.slots[self.st.trays.next_slot % cell.slots.len()];
+        let q_now = self.st.world.joints();
+        let ctx = GraspContext {
+            scene: cell.scene,
+            robot,
+            selector: &cell.selector,
+            pick_tray: &self.st.world.pick_tray,
+        };
+        let choice = sense_and_grasp(&ctx, &job.capture, detections, &slot, &q_now, &self.st.failed_spots);
+        self.obs.recognised(&Recognised {
+            t_s: job.ready_s,
+            detections,
+            ranked: &choice.plan.ranked,
+            chosen: choice.chosen.as_ref().map(|c| c.rank),
+        });
+        let why_none = choice.why_none();
+        let Some(chosen) = choice.chosen else {
+            return Err(why_none);
+        };
+        let (grasp, env, empty) = (chosen.grasp, chosen.env, chosen.model);
+        let grasp_s = wall.elapsed().as_secs_f64();
+        // Pick: transfer to the approach pose, straight descent.
+        let wall = Instant::now();
+        let mut rng = crate::rng::stream(cell.opts.seed.wrapping_add(self.st.world.steps), "planner");
+        let q_approach = JointVector::from(grasp.q_approach);
+        let hand = cell.hand;
+        let dyn_hand = robot.dynamics(&hand);
+        let pick_transfer = empty
+            .plan(&q_now, &q_approach, &PlanOptions::default(), &mut rng)
+            .map(|p| {
+                let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+                accelerate_in_corridor(robot, &dyn_hand, &via, &empty, CORRIDOR_CHECK_S)
+                    .1
+                    .trajectory
+            })
+            .map_err(|e| format!("pick transfer: {e}"));
+        let descent = cell.line(
+            &q_approach,
+            &grasp.world_from_tool_approach,
+            &grasp.world_from_tool,
+            &hand,
+            None,
+        );
+        let pick_s = wall.elapsed().as_secs_f64();
+        // Place: with the part on the cup, its centre of mass where the recognition put it.
+        let wall = Instant::now();
+        let world_from_part = detections[grasp.detection].world_from_part;
+        let tool_from_part = grasp.world_from_tool.inverse() * world_from_part;
+        // The recognised pose is off by up to three standard deviations of its noise.
+        let offset = tool_from_part.translation.vector.xy().norm() + 3.0 * self.st.sensor.pose_noise_m;
+        let max_force = cell
+            .suction
+            .max_specific_force_m_s2(SUCTION_MARGIN, cell.shape.mass_kg, offset);
+        let held = hand.combined(&Payload::point(
+            cell.shape.mass_kg,
+            robot.flange_from_tool * tool_from_part.translation.vector,
+        ));
+        // The lift starts where the descent ends (the same line, IK-chained from the approach).
+        let q_grasp = descent
+            .as_ref()
+            .map_or(JointVector::from(grasp.q_grasp), LineMotion::end_q);
+        let lift = cell.line(
+            &q_grasp,
+            &grasp.world_from_tool,
+            &grasp.world_from_tool_approach,
+            &held,
+            Some(max_force),
+        );
+        let above_place = above_place(&grasp);
+        let release_pose = Isometry3::from_parts(
+            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * RELEASE_ABOVE_M),
+            grasp.world_from_tool_place.rotation,
+        );
+        let holding = CollisionModel::new(
+            robot,
+            RobotSpheres::new(robot, cell.scene, Some((tool_from_part, cell.shape.half_extents_m))),
+            env,
+        );
+        let dyn_held = robot.dynamics(&held);
+        let place = (|| {
+            let q_above = robot
+                .ik_tool_nearest(&above_place, &JointVector::from(grasp.q_place))
+                .map_err(|e| format!("place pose: {e}"))?
+                .q;
+            let q_lifted = lift.as_ref().map_or(q_approach, LineMotion::end_q);
+            let path = holding
+                .plan(&q_lifted, &q_above, &PlanOptions::default(), &mut rng)
+                .map_err(|e| format!("place transfer: {e}"))?;
+            let via: Vec<JointVector> = path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+            let (via, acc, _) = accelerate_in_corridor(robot, &dyn_held, &via, &holding, CORRIDOR_CHECK_S);
+            let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, max_force);
+            let down = cell
+                .line(&q_above, &above_place, &release_pose, &held, Some(max_force))
+                .ok_or("place descent: no joint path along the line")?;
+            let q_release = down.end_q();
+            let up = cell
+                .line(&q_release, &release_pose, &above_place, &hand, None)
+                .ok_or("place retreat: no joint path along the line")?;
+            Ok::<_, String>((transfer, down, up, k))
+        })();
+        let place_s = wall.elapsed().as_secs_f64();
+        let (Some(descent), Some(lift)) = (descent, lift) else {
+            return Err("no joint path along the straight descent".into());
+        };
+        let truth_part = detections[grasp.detection].truth_part;
+        Ok((
+            Prepared {
+                grasp,
+                slot,
+                pick_transfer,
+                descent,
+                lift,
+                place,
+                held,
+                truth_part,
+            },
+            [grasp_s, pick_s, place_s],
+        ))
+    }
+}

@@ -1,0 +1,260 @@
+//! Cycle step 3, one pick: charge the compute, wait where the motion is not ready, Pick, Place,
+//! and account for the outcome.
+//!
+//! Job: from the prepared motions, place the compute on the simulation clock (grasp selection,
+//! then Pick motion generation, then Place motion generation, all after the recognition
+//! result), stall the arm until the Pick is ready (waiting for the sensor, then for compute),
+//! then play the Pick (transfer, descent with the vacuum valve opening `vacuum_lead_s` before
+//! the cup touches, vacuum build-up, lift) and the Place (transfer, descent, release, retreat),
+//! and record the pick: its stages' times, its outcome, the takt since the last release.
+//!
+//! Units: s, m, rad. Frames: world.
+
+use super::events::{Event, Outcome, Planned, Stage, StallCause};
+use super::execute::Played;
+use super::motions::Prepared;
+use super::records::PickRecord;
+use super::{CycleError, Run};
+use crate::physics::suction::GripperEvent;
+use crate::robot::JointVector;
+use crate::trajectory::Motion;
+
+impl Run<'_, '_> {
+    /// The pick of `prep`, whose recognition result arrived at `ready_s`, with `charged` compute
+    /// (grasp selection, Pick and Place motion generation [s]): stalls, motions, outcome.
+    pub(super) fn pick_and_place(
+        &mut self,
+        prep: &Prepared,
+        charged: [f64; 3],
+        ready_s: f64,
+        rec: &mut PickRecord,
+    ) -> Result<(), CycleError> {
+        [rec.grasp_compute_s, rec.pick_compute_s, rec.place_compute_s] = charged;
+        let grasp_done = ready_s + charged[0];
+        let pick_ready = grasp_done + charged[1];
+        let place_ready = pick_ready + charged[2];
+        self.span(Stage::Grasp, ready_s, grasp_done, "grasp selection");
+        self.span(Stage::Planning, grasp_done, pick_ready, "Pick motion");
+        self.span(Stage::Planning, pick_ready, place_ready, "Place motion");
+        self.event_at(
+            grasp_done,
+            Event::GraspChosen {
+                detection: prep.grasp.detection,
+                face: prep.grasp.face,
+                score: prep.grasp.score.total,
+            },
+        );
+        // Stall before the Pick: waiting for the sensor, then for compute.
+        let free = self.st.arm.free_s;
+        rec.stall_sensor_s = (ready_s.min(pick_ready) - free).max(0.0);
+        rec.stall_compute_s = (pick_ready - free.max(ready_s)).max(0.0);
+        let pick_planned = match &prep.pick_transfer {
+            Ok(t) => Planned::Pick {
+                transfer_s: t.duration_s(),
+                descent_s: prep.descent.duration_s(),
+                compute_s: charged[1],
+            },
+            Err(e) => Planned::Failed {
+                motion: "Pick",
+                why: e.clone(),
+            },
+        };
+        let place_planned = match &prep.place {
+            Ok((t, descent, retreat, _)) => Planned::Place {
+                lift_s: prep.lift.duration_s(),
+                transfer_s: t.duration_s(),
+                descent_s: descent.duration_s(),
+                retreat_s: retreat.duration_s(),
+                compute_s: charged[2],
+            },
+            Err(e) => Planned::Failed {
+                motion: "Place",
+                why: e.clone(),
+            },
+        };
+        let mut stages = vec![
+            (pick_ready, Event::Planned(pick_planned)),
+            (place_ready, Event::Planned(place_planned)),
+        ];
+        if rec.stall_sensor_s > 0.0 {
+            self.span(Stage::Stall, free, ready_s, "waiting for the sensor");
+            let duration_s = rec.stall_sensor_s;
+            stages.push((
+                free,
+                Event::Stall {
+                    cause: StallCause::Sensor,
+                    duration_s,
+                },
+            ));
+        }
+        if rec.stall_compute_s > 0.0 {
+            self.span(Stage::Stall, free.max(ready_s), pick_ready, "waiting for compute");
+            let duration_s = rec.stall_compute_s;
+            stages.push((
+                free.max(ready_s),
+                Event::Stall {
+                    cause: StallCause::Compute,
+                    duration_s,
+                },
+            ));
+        }
+        for (t_s, event) in stages {
+            self.event_at(t_s, event);
+        }
+        self.idle_until(pick_ready.max(self.st.world.time_s))?;
+        let outcome = self.motions(prep, rec, place_ready)?;
+        if outcome != Outcome::Placed && self.st.world.held_part().is_some() {
+            // A pick that ended with the part still on the cup (no Place motion): let it go where
+            // the arm is, over the pick tray, before anything else moves.
+            self.st.world.vacuum_off();
+            let t = self.st.world.time_s + self.st.world.gripper.release_s + self.st.world.dt_s();
+            self.idle_until(t)?;
+            self.st.world.gripper.take_events();
+            self.event(Event::PartLetGo);
+            self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s);
+        }
+        if matches!(
+            outcome,
+            Outcome::GraspFailed(_) | Outcome::Collision(_) | Outcome::ProtectiveStop(_)
+        ) && rec.place_s == 0.0
+        {
+            self.st.failed_spots.push(prep.grasp.world_from_tool.translation.vector);
+        }
+        if rec.place_s > 0.0 && matches!(outcome, Outcome::Collision(_) | Outcome::ProtectiveStop(_)) {
+            // Something is in the slot (a part that bounced there): the next part goes to the next.
+            self.event(Event::SlotSkipped(self.st.trays.next_slot % self.cell.slots.len()));
+            self.st.trays.next_slot += 1;
+        }
+        rec.outcome = outcome;
+        self.event(Event::Outcome(rec.outcome.clone()));
+        if rec.outcome == Outcome::Placed {
+            let release = rec.release_s.unwrap_or(self.st.world.time_s);
+            rec.takt_s = self.st.trays.last_release_s.map(|r| release - r);
+            rec.first_of_pile = self.st.trays.first_of_pile;
+            self.st.trays.first_of_pile = false;
+            self.st.trays.last_release_s = Some(release);
+            self.st.trays.next_slot += 1;
+        }
+        self.exchange_full_place_tray()?;
+        rec.max_tracking_error_deg = self.st.arm.max_error_rad.to_degrees();
+        rec.peak_torque_ratio = self.st.arm.peak_torque_ratio;
+        Ok(())
+    }
+
+    /// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat).
+    fn motions(&mut self, prep: &Prepared, rec: &mut PickRecord, place_ready: f64) -> Result<Outcome, CycleError> {
+        let hand = self.cell.hand;
+        let t_pick = self.st.world.time_s;
+        self.event(Event::PickStart);
+        let pick_transfer = match &prep.pick_transfer {
+            Ok(t) => t,
+            Err(e) => return Ok(Outcome::NoMotion(e.clone())),
+        };
+        self.st.arm.max_error_rad = 0.0;
+        self.st.arm.peak_torque_ratio = 0.0;
+        self.st.gripper_events.clear();
+        let pick_done = |run: &mut Self, rec: &mut PickRecord| {
+            rec.pick_s = run.st.world.time_s - t_pick;
+            run.span(Stage::Pick, t_pick, run.st.world.time_s, "Pick");
+            run.st.arm.free_s = run.st.world.time_s;
+        };
+        if let Played::Failed(o) = self.play_with(pick_transfer, &hand, false, None, false)? {
+            pick_done(self, rec);
+            return Ok(o);
+        }
+        // The vacuum valve opens `vacuum_lead_s` before the cup reaches the face.
+        let lead = self.cell.scene.cycle.vacuum_lead_s;
+        let descent = &prep.descent;
+        let vacuum_at = (descent.duration_s() - lead).max(0.0);
+        let t_descent = self.st.world.time_s;
+        if let Played::Failed(o) = self.play_with(descent, &hand, false, Some(vacuum_at), true)? {
+            pick_done(self, rec);
+            return Ok(o);
+        }
+        self.st.world.vacuum_on();
+        let t =
+            (t_descent + vacuum_at).min(self.st.world.time_s) + self.st.world.gripper.build_up_s + self.st.world.dt_s();
+        self.idle_until(t)?;
+        let mut failure = None;
+        let mut events = std::mem::take(&mut self.st.gripper_events);
+        events.extend(self.st.world.gripper.take_events());
+        for ev in events {
+            match ev {
+                GripperEvent::Grasped { seal, .. } => {
+                    self.event(Event::Grasped {
+                        part: seal.part,
+                        aimed_at: prep.truth_part,
+                        com_offset_m: seal.com_offset_m,
+                        tilt_rad: seal.tilt_rad,
+                    });
+                }
+                GripperEvent::GraspFailed { reason, .. } => failure = Some(Outcome::GraspFailed(reason.to_string())),
+                GripperEvent::Slipped { required_n, .. } => {
+                    failure = Some(Outcome::Dropped(format!("slipped at rest: {required_n:.2} N")))
+                }
+                GripperEvent::Released { .. } => {}
+            }
+        }
+        if self.st.world.held_part().is_none() {
+            self.st.world.vacuum_off();
+            self.play(&prep.lift, &hand, false)?;
+            pick_done(self, rec);
+            return Ok(failure.unwrap_or_else(|| Outcome::GraspFailed("no seal".into())));
+        }
+        let held = prep.held;
+        if let Played::Failed(o) = self.play_with(&prep.lift, &held, true, None, false)? {
+            pick_done(self, rec);
+            return Ok(o);
+        }
+        pick_done(self, rec);
+        // Place: the motions were generated while the Pick ran; wait if they are not ready yet.
+        if place_ready > self.st.world.time_s {
+            let t = self.st.world.time_s;
+            rec.stall_compute_s += place_ready - t;
+            self.span(Stage::Stall, t, place_ready, "waiting for compute");
+            self.idle_until(place_ready)?;
+            self.st.arm.qd = JointVector::zeros();
+        }
+        let (transfer, down, up, k) = match &prep.place {
+            Ok(p) => p,
+            Err(e) => return Ok(Outcome::NoMotion(e.clone())),
+        };
+        rec.suction_speed_factor = *k;
+        let t_place = self.st.world.time_s;
+        self.event(Event::PlaceStart);
+        let place_done = |run: &mut Self, rec: &mut PickRecord| {
+            rec.place_s = run.st.world.time_s - t_place;
+            run.span(Stage::Place, t_place, run.st.world.time_s, "Place");
+            run.st.arm.free_s = run.st.world.time_s;
+        };
+        if let Played::Failed(o) = self.play_with(transfer, &held, true, None, false)? {
+            place_done(self, rec);
+            return Ok(o);
+        }
+        if let Played::Failed(o) = self.play(down, &held, true)? {
+            place_done(self, rec);
+            return Ok(o);
+        }
+        let part = self.st.world.held_part();
+        self.st.world.vacuum_off();
+        let t = self.st.world.time_s + self.st.world.gripper.release_s + self.st.world.dt_s();
+        self.idle_until(t)?;
+        self.st.world.gripper.take_events();
+        self.st.gripper_events.clear();
+        let release = self.st.world.time_s;
+        self.event(Event::Released);
+        self.obs.marker(release, &format!("release {}", rec.index));
+        if let Played::Failed(o) = self.play(up, &hand, true)? {
+            place_done(self, rec);
+            return Ok(o);
+        }
+        place_done(self, rec);
+        if let Some(i) = part {
+            let (d, yaw) = self.st.world.placement_error(i, &prep.slot, self.cell.yaw_symmetry_rad);
+            rec.placement_error_mm = Some(d * 1e3);
+            rec.yaw_error_deg = Some(yaw.to_degrees());
+        }
+        rec.release_s = Some(release);
+        Ok(Outcome::Placed)
+    }
+}

@@ -1,0 +1,141 @@
+//! Cycle step 1, sensing: trigger the capture as soon as the arm is out of the camera's view,
+//! watch the exposure, wait for the recognition result.
+//!
+//! Job: keep one capture pending; trigger it at the first physics step at which the arm (and the
+//! held part) is outside the view frustum over the pick tray; repeat an exposure spoiled by the
+//! arm entering the view; hand over the recognition result when it arrives (`latency_s` after
+//! the trigger). When the arm stands in the view with nothing pending (at the start, after a
+//! fault), move it home first.
+//!
+//! Units: s, rad. Frames: world.
+
+use nalgebra::{Isometry3, Translation3};
+
+use super::events::{Event, Fault, Stage};
+use super::{CycleError, Run};
+use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
+use crate::robot::JointVector;
+use crate::sensor::{CaptureJob, Detection};
+use crate::trajectory::accelerate_in_corridor;
+
+/// A recognition result to pick from.
+pub struct SensedResult {
+    /// The capture job (its image and timing).
+    pub job: CaptureJob,
+    /// When the capture was triggered [s].
+    pub capture_s: f64,
+    /// The recognised parts (`None` if the result was not available).
+    pub detections: Option<Vec<Detection>>,
+}
+
+impl Run<'_, '_> {
+    /// Triggers a capture if none is pending (or the pending one was spoiled and the sensor has
+    /// finished exposing it) and the arm is out of view.
+    pub(super) fn maybe_trigger(&mut self) {
+        if let Some(j) = &self.st.pending
+            && (j.spoiled.is_none() || self.st.world.time_s + 1e-9 < j.exposure_end_s)
+        {
+            return;
+        }
+        if let Ok(job) = self.st.sensor.trigger(&self.st.world) {
+            self.event(Event::Capture(job.capture.id));
+            self.obs.captured(&job.capture);
+            self.st.pending = Some(job);
+        }
+    }
+
+    /// A recognition result to pick from: triggers a capture if none is pending (moving the arm
+    /// out of view first if needed) and waits for it. `None` if the arm cannot leave the view.
+    pub(super) fn next_result(&mut self) -> Result<Option<SensedResult>, CycleError> {
+        loop {
+            self.maybe_trigger();
+            if self.st.pending.is_none() {
+                if !self.move_out_of_view()? {
+                    return Ok(None);
+                }
+                self.maybe_trigger();
+                if self.st.pending.is_none() {
+                    return Ok(None);
+                }
+            }
+            let (exposure_end_s, ready_s, spoiled) = match &self.st.pending {
+                Some(j) => (j.exposure_end_s, j.ready_s, j.spoiled.is_some()),
+                None => return Ok(None),
+            };
+            if spoiled {
+                self.idle_until(exposure_end_s)?;
+                continue;
+            }
+            let capture_s = exposure_end_s - self.st.sensor.exposure_s;
+            // A spoiled exposure is known when it ends: expose again right away.
+            self.idle_until(exposure_end_s)?;
+            if self.st.pending.as_ref().is_some_and(|j| j.spoiled.is_some()) {
+                continue;
+            }
+            self.idle_until(ready_s)?;
+            let Some(job) = self.st.pending.take() else {
+                continue;
+            };
+            if job.spoiled.is_some() {
+                continue;
+            }
+            self.span(Stage::Sensor, capture_s, job.exposure_end_s, "exposure");
+            self.span(Stage::Recognition, job.exposure_end_s, job.ready_s, "recognition");
+            let detections = self.st.sensor.result(&job, &self.st.world);
+            self.event_at(
+                job.ready_s,
+                Event::RecognitionReady {
+                    detected: detections.as_ref().map_or(0, Vec::len),
+                    blurred: job.blurred(),
+                },
+            );
+            return Ok(Some(SensedResult {
+                job,
+                capture_s,
+                detections,
+            }));
+        }
+    }
+
+    /// Moves the arm home when it is in the camera's view and nothing is pending.
+    fn move_out_of_view(&mut self) -> Result<bool, CycleError> {
+        if self.st.sensor.frustum.arm_inside(&self.st.world).is_none() {
+            return Ok(true);
+        }
+        let (robot, scene) = (self.cell.robot, self.cell.scene);
+        let home = JointVector::from(scene.robot.home_rad());
+        let free = CollisionModel::new(
+            robot,
+            RobotSpheres::new(robot, scene, None),
+            Environment::from_scene(scene),
+        );
+        let mut rng = crate::rng::stream(self.cell.opts.seed.wrapping_add(self.st.world.steps), "planner-home");
+        let t = self.st.world.time_s;
+        let mut plan = free.plan(&self.st.world.joints(), &home, &PlanOptions::default(), &mut rng);
+        if plan.is_err() {
+            // Down in the tray (after a fault): straight up above the rim first.
+            let tool = self.st.world.world_from_tool();
+            let rim_z = self.st.world.pick_tray.world_from_tray.translation.z + scene.pick_tray.wall_height_m + 0.1;
+            let up = Isometry3::from_parts(
+                Translation3::new(tool.translation.x, tool.translation.y, tool.translation.z.max(rim_z)),
+                tool.rotation,
+            );
+            let hand = self.cell.hand;
+            if let Some(line) = self.cell.line(&self.st.world.joints(), &tool, &up, &hand, None) {
+                self.play(&line, &hand, true)?;
+            }
+            plan = free.plan(&self.st.world.joints(), &home, &PlanOptions::default(), &mut rng);
+        }
+        let Ok(p) = plan else {
+            self.event(Event::Fault(Fault::NoPathOutOfView));
+            return Ok(false);
+        };
+        let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+        let hand = self.cell.hand;
+        let (_, acc, _) = accelerate_in_corridor(robot, &robot.dynamics(&hand), &via, &free, 0.01);
+        let played = self.play(&acc.trajectory, &hand, true)?;
+        self.span(Stage::Place, t, self.st.world.time_s, "out of view");
+        self.st.arm.free_s = self.st.world.time_s;
+        Ok(matches!(played, super::execute::Played::Done))
+    }
+}

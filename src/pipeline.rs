@@ -1,0 +1,158 @@
+//! Sense and grasp: from one capture and its recognition result to the grasp the cell will try
+//! and the planning scene around it. One function, used by the cell cycle, by `binpick sense`
+//! and by the benchmarks, so they all decide the same way.
+//!
+//! Job: bin the capture's point cloud into a height map over the pick tray; rank suction grasps
+//! on the recognised parts ([`crate::grasp::GraspSelector`]); keep the pile inside the tray's
+//! inner walls as the planner's obstacle columns (max-pooled, conservative), with a disc around
+//! the grasp point cut out (the part to be picked); take the best-ranked grasp that is not at a
+//! spot where a grasp just failed and whose approach pose is clear in that planning scene.
+//! Everything here comes from what the sensor measured: no ground truth.
+//!
+//! Units: m, rad. Frames: world; the pick tray frame for the height map and the cut-out.
+
+use nalgebra::{Point3, Vector3};
+
+use crate::config::Scene;
+use crate::grasp::{GraspCandidate, GraspPlan, GraspSelector};
+use crate::physics::TrayVolume;
+use crate::planning::{CollisionModel, Environment, PileColumns, PlanStats, RobotSpheres};
+use crate::robot::{JointVector, RobotModel};
+use crate::sensor::{Capture, Detection, HeightMap};
+
+/// Height-map cell edge [m].
+pub const HEIGHT_MAP_CELL_M: f64 = 0.002;
+/// Height-map cells per planning column side (the columns keep the highest point of 5 x 5).
+pub const PILE_POOL_CELLS: usize = 5;
+/// Radius of the disc around the grasp point whose columns the planner ignores [m].
+pub const CUT_OUT_RADIUS_M: f64 = 0.02;
+/// A grasp within this distance of a spot where one failed in the same pile is not tried [m].
+pub const FAILED_SPOT_RADIUS_M: f64 = 0.004;
+/// How many of the best-ranked grasps are tried for a clear approach.
+pub const APPROACH_CANDIDATES: usize = 8;
+
+/// What sense-and-grasp needs besides the capture: the cell, the arm, the selector.
+#[derive(Clone, Copy)]
+pub struct GraspContext<'a> {
+    /// The cell file.
+    pub scene: &'a Scene,
+    /// The arm.
+    pub robot: &'a RobotModel,
+    /// The grasp selector for the workpiece.
+    pub selector: &'a GraspSelector,
+    /// The pick tray's volume (height map extent).
+    pub pick_tray: &'a TrayVolume,
+}
+
+/// The grasp chosen on one recognition result, with its planning scene.
+#[derive(Debug, Clone)]
+pub struct ChosenGrasp {
+    /// Index into the ranked candidates.
+    pub rank: usize,
+    /// The grasp.
+    pub grasp: GraspCandidate,
+    /// The cell and the pile as seen, the grasp's part cut out.
+    pub env: Environment,
+    /// The planner's model of the arm with the hand (no part) in `env`.
+    pub model: CollisionModel,
+}
+
+/// The result of sense-and-grasp.
+#[derive(Debug, Clone)]
+pub struct GraspChoice {
+    /// The capture's height map over the pick tray (walls included).
+    pub height_map: HeightMap,
+    /// The selector's ranking and rejections.
+    pub plan: GraspPlan,
+    /// The grasp to try, if any.
+    pub chosen: Option<ChosenGrasp>,
+}
+
+impl GraspChoice {
+    /// Why nothing was chosen: no feasible grasp (with the rejection counts), or no clear approach.
+    pub fn why_none(&self) -> String {
+        if self.plan.ranked.is_empty() {
+            let reasons = self
+                .plan
+                .rejected_counts()
+                .iter()
+                .map(|(k, v)| format!("{k} {v}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            format!("no feasible grasp ({reasons})")
+        } else {
+            format!(
+                "no grasp with a clear approach among {}",
+                self.plan.ranked.len().min(APPROACH_CANDIDATES)
+            )
+        }
+    }
+}
+
+/// The planning scene of a grasp: the cell's boxes and the pile inside the tray's inner walls as
+/// columns of `pile` (a height map cleared outside the inner walls), with the disc around the
+/// grasp point cut out.
+pub fn planning_environment(scene: &Scene, pile: &HeightMap, grasp: &GraspCandidate) -> Environment {
+    let local = pile.world_from_tray.inverse() * Point3::from(grasp.world_from_tool.translation.vector);
+    let mut env = Environment::from_scene(scene);
+    env.pile = Some(PileColumns::new(
+        pile,
+        PILE_POOL_CELLS,
+        Some((local.x, local.y, CUT_OUT_RADIUS_M)),
+    ));
+    env
+}
+
+/// The pile as the planner sees it: the height map with every cell outside the pick tray's inner
+/// walls cleared (what the sensor saw over the walls is not pile; the walls are in the cell model).
+pub fn pile_map(scene: &Scene, height_map: &HeightMap) -> HeightMap {
+    let inner = scene.pick_tray.inner_size_m;
+    height_map.inner_only([inner[0] / 2.0, inner[1] / 2.0])
+}
+
+/// Sense and grasp on one capture: the height map, the ranked grasps for the part to go to
+/// `world_from_slot` with the arm at `q_now`, and the best one not within
+/// [`FAILED_SPOT_RADIUS_M`] of a `failed_spots` entry whose approach pose is clear.
+pub fn sense_and_grasp(
+    ctx: &GraspContext<'_>,
+    capture: &Capture,
+    detections: &[Detection],
+    world_from_slot: &nalgebra::Isometry3<f64>,
+    q_now: &JointVector,
+    failed_spots: &[Vector3<f64>],
+) -> GraspChoice {
+    let height_map = HeightMap::from_capture(capture, ctx.pick_tray, HEIGHT_MAP_CELL_M);
+    let plan = ctx.selector.select(detections, &height_map, world_from_slot, q_now);
+    let pile = pile_map(ctx.scene, &height_map);
+    // Not where a grasp has just failed: the same spot would fail the same way.
+    let tried = |g: &GraspCandidate| {
+        failed_spots
+            .iter()
+            .any(|p| (p - g.world_from_tool.translation.vector).norm() < FAILED_SPOT_RADIUS_M)
+    };
+    let mut chosen = None;
+    for (rank, g) in plan
+        .ranked
+        .iter()
+        .enumerate()
+        .filter(|(_, g)| !tried(g))
+        .take(APPROACH_CANDIDATES)
+    {
+        let env = planning_environment(ctx.scene, &pile, g);
+        let model = CollisionModel::new(ctx.robot, RobotSpheres::new(ctx.robot, ctx.scene, None), env.clone());
+        if model.free(&JointVector::from(g.q_approach), &mut PlanStats::default()) {
+            chosen = Some(ChosenGrasp {
+                rank,
+                grasp: g.clone(),
+                env,
+                model,
+            });
+            break;
+        }
+    }
+    GraspChoice {
+        height_map,
+        plan,
+        chosen,
+    }
+}

@@ -1,0 +1,174 @@
+//! Report stage, tables: the per-pick CSV and text table of a run, and the CSV writer every
+//! CSV file of binpick goes through (the `csv` crate: names and reasons quoted as needed,
+//! nothing replaced or lost).
+//!
+//! Units: as the column names say (`_s`, `_mm`, `_deg`); fixed decimals, empty where absent.
+
+use serde::{Serialize, Serializer};
+
+use crate::cycle::PickRecord;
+
+/// A number written with `D` decimals in a CSV file, empty when absent or not finite.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Fixed<const D: usize>(pub Option<f64>);
+
+impl<const D: usize> Fixed<D> {
+    /// A value (empty if not finite).
+    pub fn of(v: f64) -> Self {
+        Fixed(v.is_finite().then_some(v))
+    }
+}
+
+impl<const D: usize> Serialize for Fixed<D> {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        match self.0 {
+            Some(v) if v.is_finite() => s.serialize_str(&format!("{v:.D$}")),
+            _ => s.serialize_str(""),
+        }
+    }
+}
+
+/// A CSV document: the `header` line, then one line per row (serialised in field order, so the
+/// row type's fields must be the header's columns; a test per file checks it).
+pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) -> String {
+    let mut w = csv::WriterBuilder::new().has_headers(false).from_writer(Vec::new());
+    // Writing to memory cannot fail; a row that does not serialise is a bug caught by the tests.
+    w.write_record(header).expect("header to memory");
+    for r in rows {
+        w.serialize(r).expect("a CSV row of plain fields");
+    }
+    let bytes = w.into_inner().expect("flush to memory");
+    String::from_utf8(bytes).expect("CSV of UTF-8 fields")
+}
+
+/// The columns of `picks.csv`.
+pub const PICKS_CSV_HEADER: [&str; 20] = [
+    "pick",
+    "outcome",
+    "detail",
+    "capture_s",
+    "ready_s",
+    "release_s",
+    "takt_s",
+    "first_of_pile",
+    "pick_s",
+    "place_s",
+    "stall_sensor_s",
+    "stall_compute_s",
+    "grasp_compute_s",
+    "pick_compute_s",
+    "place_compute_s",
+    "placement_error_mm",
+    "yaw_error_deg",
+    "max_tracking_error_deg",
+    "peak_torque_ratio",
+    "suction_speed_factor",
+];
+
+/// One row of `picks.csv`.
+#[derive(Serialize)]
+struct PickRow<'a> {
+    pick: usize,
+    outcome: &'a str,
+    detail: &'a str,
+    capture_s: Fixed<6>,
+    ready_s: Fixed<6>,
+    release_s: Fixed<6>,
+    takt_s: Fixed<6>,
+    first_of_pile: bool,
+    pick_s: Fixed<6>,
+    place_s: Fixed<6>,
+    stall_sensor_s: Fixed<6>,
+    stall_compute_s: Fixed<6>,
+    grasp_compute_s: Fixed<6>,
+    pick_compute_s: Fixed<6>,
+    place_compute_s: Fixed<6>,
+    placement_error_mm: Fixed<6>,
+    yaw_error_deg: Fixed<6>,
+    max_tracking_error_deg: Fixed<6>,
+    peak_torque_ratio: Fixed<6>,
+    suction_speed_factor: Fixed<4>,
+}
+
+/// `picks.csv`: one row per pick (and per capture that found nothing to pick), SI units in
+/// the column names; the outcome's reason in full (quoted where it holds commas or quotes).
+pub fn picks_csv(records: &[PickRecord]) -> String {
+    to_csv(
+        &PICKS_CSV_HEADER,
+        records.iter().map(|r| PickRow {
+            pick: r.index,
+            outcome: r.outcome.name(),
+            detail: r.outcome.detail(),
+            capture_s: Fixed::of(r.capture_s),
+            ready_s: Fixed::of(r.ready_s),
+            release_s: Fixed(r.release_s),
+            takt_s: Fixed(r.takt_s),
+            first_of_pile: r.first_of_pile,
+            pick_s: Fixed::of(r.pick_s),
+            place_s: Fixed::of(r.place_s),
+            stall_sensor_s: Fixed::of(r.stall_sensor_s),
+            stall_compute_s: Fixed::of(r.stall_compute_s),
+            grasp_compute_s: Fixed::of(r.grasp_compute_s),
+            pick_compute_s: Fixed::of(r.pick_compute_s),
+            place_compute_s: Fixed::of(r.place_compute_s),
+            placement_error_mm: Fixed(r.placement_error_mm),
+            yaw_error_deg: Fixed(r.yaw_error_deg),
+            max_tracking_error_deg: Fixed::of(r.max_tracking_error_deg),
+            peak_torque_ratio: Fixed::of(r.peak_torque_ratio),
+            suction_speed_factor: Fixed::of(r.suction_speed_factor),
+        }),
+    )
+}
+
+/// The per-pick table printed by `binpick run`.
+pub fn picks_table(records: &[PickRecord]) -> String {
+    let mut out = String::from(
+        "pick  outcome            takt_s  pick_s  place_s  wait_sensor_s  wait_compute_s  place_err_mm  detail\n",
+    );
+    for r in records {
+        let takt = r.takt_s.map_or("-".to_string(), |t| {
+            if r.first_of_pile {
+                format!("({t:.3})")
+            } else {
+                format!("{t:.3}")
+            }
+        });
+        let err = r.placement_error_mm.map_or("-".to_string(), |e| format!("{e:.2}"));
+        out += &format!(
+            "{:>4}  {:<17} {:>7}  {:>6.3}  {:>7.3}  {:>13.3}  {:>14.3}  {:>12}  {:.60}\n",
+            r.index,
+            r.outcome.name(),
+            takt,
+            r.pick_s,
+            r.place_s,
+            r.stall_sensor_s,
+            r.stall_compute_s,
+            err,
+            r.outcome.detail()
+        );
+    }
+    out
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cycle::Outcome;
+
+    #[test]
+    fn picks_csv_quotes_reasons_and_keeps_them_whole() {
+        let mut r = PickRecord::new(3, 1.0, 2.1);
+        r.outcome = Outcome::NothingGraspable("no feasible grasp (crowded 3, face \"tilted\" 2)".into());
+        let text = picks_csv(&[r]);
+        let mut rd = csv::Reader::from_reader(text.as_bytes());
+        let header: Vec<String> = rd.headers().unwrap().iter().map(String::from).collect();
+        assert_eq!(header, PICKS_CSV_HEADER);
+        let rows: Vec<csv::StringRecord> = rd.records().map(Result::unwrap).collect();
+        assert_eq!(rows.len(), 1);
+        assert_eq!(rows[0].len(), PICKS_CSV_HEADER.len());
+        assert_eq!(&rows[0][2], "no feasible grasp (crowded 3, face \"tilted\" 2)");
+        assert_eq!(&rows[0][3], "1.000000");
+        assert_eq!(&rows[0][5], "");
+        assert_eq!(&rows[0][19], "1.0000");
+    }
+}
