@@ -10,12 +10,48 @@
 //! points whose blends cut a corner. Also the controller's default parameters (the "before" of
 //! the reference's comparison) and the TOPP-RA bound on the same path.
 //!
+//! The reference's and this cell's numbers are the documented constants below, named once.
+//!
 //! Units: rad, rad/s, rad/s^2, N m, s. Frames: joint space.
 
 use super::retime::{Shares, toppra};
 use super::torque::{TorqueProfile, torques};
 use super::{Motion, MotionLimits, Trajectory};
 use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
+
+/// §4.2 step 1: torques are evaluated on the trajectory sampled every millisecond [s].
+pub const TORQUE_DT_S: f64 = 0.001;
+/// §4.2 step 2: a joint's acceleration is settled when its peak torque is within this fraction
+/// of its limit below the limit (and no joint is above).
+pub const TORQUE_THRESHOLD: f64 = 0.05;
+/// Time between the samples whose edges [`check_corridor`] certifies in the cell's cycle [s]:
+/// the chord of a blend between samples deviates from it by at most a dt^2 / 8, below 1 mrad at
+/// 10 ms, under half a millimetre of robot motion, inside the collision model's 2 mm margin.
+pub const CORRIDOR_CHECK_DT_S: f64 = 0.01;
+/// §4.2 step 1: the search starts from this share of each joint's specification acceleration.
+const START_SHARE: f64 = 0.5;
+/// The bisection's iterations at most (each one trajectory and its torques).
+const SEARCH_ITERATIONS: usize = 30;
+/// An acceleration at or above this share of the specification counts as at the specification:
+/// the search does not raise it further, and a fold cannot help J1.
+const AT_SPEC: f64 = 0.999;
+/// After a stop is inserted, the search restarts from the accelerations just found, with this
+/// share of them as the lower bracket (a stop changes little).
+const WARM_LOWER_SHARE: f64 = 0.8;
+/// The controller's default acceleration: this share of the torque limit over the worst inertia.
+const DEFAULT_TORQUE_SHARE: f64 = 0.8;
+/// §4.3: rounds of folding at most (each a pass over the segments).
+const FOLD_ROUNDS: usize = 4;
+/// §4.3 step 3: J2 and J3 fold out and back at this share of their top speed, each way within
+/// half of J1's time for the segment.
+const FOLD_SPEED_SHARE: f64 = 0.8;
+/// §4.3: the full fold, half and a quarter of it are tried; the fastest that is safe and helps
+/// is kept.
+const FOLD_SHARES: [f64; 3] = [1.0, 0.5, 0.25];
+/// Step of the central differences of J1's inertia M11 in J2 and J3 [rad].
+const M11_STEP_RAD: f64 = 1e-4;
+/// A fold is kept only if it shortens the motion by more than this [s].
+const MIN_FOLD_GAIN_S: f64 = 1e-6;
 
 /// The controller's default parameters: top speeds from the data sheet, and one acceleration
 /// setting safe for the worst posture at maximum payload: per joint, 80 % of the torque limit over
@@ -45,7 +81,7 @@ pub fn default_limits(
     MotionLimits {
         vel_rad_s: robot.max_vel_rad_s(),
         accel_rad_s2: JointVector::from_fn(|i, _| {
-            (0.8 * robot.joints[i].torque_limit_nm / worst[i]).min(robot.joints[i].max_accel_rad_s2)
+            (DEFAULT_TORQUE_SHARE * robot.joints[i].torque_limit_nm / worst[i]).min(robot.joints[i].max_accel_rad_s2)
         }),
     }
 }
@@ -64,8 +100,10 @@ pub struct Accelerated {
 }
 
 /// The reference system's §4.2: speed fixed at the top; accelerations start at 50 % of the
-/// specification; torques every `dt_s`; each joint's acceleration is bisected until its peak
-/// torque is within `threshold` (a fraction of the limit) below its limit, none above.
+/// specification; torques every `dt_s` (the reference: [`TORQUE_DT_S`]); each joint's
+/// acceleration is bisected until its peak torque is within `threshold` (a fraction of the
+/// limit; the reference: [`TORQUE_THRESHOLD`]) below its limit, none above. Returns the
+/// fastest try whose torques all stay within their limits (the last try if none does).
 pub fn optimise_accelerations(
     robot: &RobotModel,
     dynamics: &DynamicsModel,
@@ -74,7 +112,15 @@ pub fn optimise_accelerations(
     threshold: f64,
 ) -> Accelerated {
     let spec = robot.max_accel_rad_s2();
-    search_accelerations(robot, dynamics, via, dt_s, threshold, spec * 0.5, JointVector::zeros())
+    search_accelerations(
+        robot,
+        dynamics,
+        via,
+        dt_s,
+        threshold,
+        spec * START_SHARE,
+        JointVector::zeros(),
+    )
 }
 
 /// The bisection of [`optimise_accelerations`] from a given start and lower bracket (a warm
@@ -94,7 +140,7 @@ fn search_accelerations(
     let mut scale = start;
     let vel = robot.max_vel_rad_s();
     let mut best: Option<Accelerated> = None;
-    for it in 1..=30 {
+    for it in 1..=SEARCH_ITERATIONS {
         let limits = MotionLimits {
             vel_rad_s: vel,
             accel_rad_s2: scale,
@@ -120,7 +166,7 @@ fn search_accelerations(
             if r > 1.0 {
                 hi[i] = scale[i];
                 settled = false;
-            } else if r < 1.0 - threshold && scale[i] < spec[i] * 0.999 {
+            } else if r < 1.0 - threshold && scale[i] < spec[i] * AT_SPEC {
                 lo[i] = scale[i];
                 settled = false;
             } else {
@@ -144,7 +190,7 @@ fn search_accelerations(
             limits,
             trajectory,
             torques,
-            iterations: 30,
+            iterations: SEARCH_ITERATIONS,
         }
     });
     out.iterations = out.iterations.max(1);
@@ -165,8 +211,8 @@ pub struct Corrected {
 }
 
 /// The reference system's §4.3, alternated with §4.2 until no gain, starting from `accelerated`
-/// (the §4.2 result on `via`): in each segment where J1
-/// needs the longest time and travels more than `min_j1_rad`, insert a via point at the middle
+/// (the §4.2 result on `via`): in each segment where J1 needs the longest time (the segment is
+/// "rate-controlled" by J1) and travels more than `min_j1_rad`, insert a via point at the middle
 /// with J2 and J3 moved down the gradient of J1's inertia M11 (folding the arm toward the body),
 /// by no more than they can travel out and back within J1's time for the segment; keep the fold
 /// only if the re-accelerated motion is faster and, with a collision model, its new edges certify.
@@ -183,7 +229,7 @@ pub fn correct_path(
     let (mut folds, mut tried) = (0, 0);
     // Folding lowers J1's inertia, which only pays when J1's acceleration is held down by its
     // torque, not by its specification.
-    if best.limits.accel_rad_s2[0] >= 0.999 * robot.joints[0].max_accel_rad_s2 {
+    if best.limits.accel_rad_s2[0] >= AT_SPEC * robot.joints[0].max_accel_rad_s2 {
         return Corrected {
             via: current,
             accelerated: best,
@@ -193,7 +239,7 @@ pub fn correct_path(
     }
     let vmax = robot.max_vel_rad_s();
     let mut stats = crate::planning::PlanStats::default();
-    for _round in 0..4 {
+    for _round in 0..FOLD_ROUNDS {
         let mut improved = false;
         let mut k = 0;
         while k + 1 < current.len() {
@@ -209,7 +255,7 @@ pub fn correct_path(
             let mid = (a + b) / 2.0;
             // Gradient of M11 in (q2, q3) by central differences.
             let m11 = |q: &JointVector| dynamics.mass_matrix(q)[(0, 0)];
-            let h = 1e-4;
+            let h = M11_STEP_RAD;
             let grad: Vec<f64> = [1usize, 2]
                 .iter()
                 .map(|&i| {
@@ -225,11 +271,14 @@ pub fn correct_path(
                 continue;
             }
             // Out and back within half of J1's segment time each way, at 80 % of top speed.
-            let reach = [0.8 * vmax[1] * t1 / 2.0, 0.8 * vmax[2] * t1 / 2.0];
+            let reach = [
+                FOLD_SPEED_SHARE * vmax[1] * t1 / 2.0,
+                FOLD_SPEED_SHARE * vmax[2] * t1 / 2.0,
+            ];
             let step = (reach[0] / (grad[0].abs() / norm).max(1e-9)).min(reach[1] / (grad[1].abs() / norm).max(1e-9));
             // The full fold, half and a quarter of it: the fastest that is safe and helps.
             let mut kept: Option<(Vec<JointVector>, Accelerated)> = None;
-            for share in [1.0, 0.5, 0.25] {
+            for share in FOLD_SHARES {
                 let mut fold = mid;
                 fold[1] -= share * step * grad[0] / norm;
                 fold[2] -= share * step * grad[1] / norm;
@@ -243,12 +292,12 @@ pub fn correct_path(
                 }
                 let mut candidate = current.clone();
                 candidate.insert(k + 1, fold);
-                let acc = optimise_accelerations(robot, dynamics, &candidate, 0.001, 0.05);
+                let acc = optimise_accelerations(robot, dynamics, &candidate, TORQUE_DT_S, TORQUE_THRESHOLD);
                 let to_beat = kept
                     .as_ref()
                     .map_or(best.trajectory.duration_s, |(_, k)| k.trajectory.duration_s);
                 let within_torque = acc.torques.peak_ratio.iter().all(|r| *r <= 1.0);
-                if within_torque && acc.trajectory.duration_s < to_beat - 1e-6 {
+                if within_torque && acc.trajectory.duration_s < to_beat - MIN_FOLD_GAIN_S {
                     kept = Some((candidate, acc));
                 }
             }
@@ -289,10 +338,11 @@ pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Mot
 }
 
 /// §4.2 with the blends kept inside the certified corridor: the accelerated trajectory's corridor
-/// is checked every `check_dt_s` (edges between samples certified; the chord of a blend between
-/// samples deviates from it by at most a dt^2 / 8: below 1 mrad at 10 ms, under half a
-/// millimetre of robot motion, inside the model's 2 mm margin); where it fails, the via point whose blend cuts the corner becomes a stop
-/// (duplicated: the arm passes exactly through it) and the search runs again.
+/// is checked every `check_dt_s` (edges between samples certified; the cell uses
+/// [`CORRIDOR_CHECK_DT_S`], whose documentation bounds the chord's deviation); where it fails,
+/// the via point whose blend cuts the corner becomes a stop (duplicated: the arm passes exactly
+/// through it) and the search runs again, warm-started from the accelerations just found.
+/// Returns the via points with their stops, the accelerated trajectory and the number of stops.
 pub fn accelerate_in_corridor(
     robot: &RobotModel,
     dynamics: &DynamicsModel,
@@ -302,12 +352,20 @@ pub fn accelerate_in_corridor(
 ) -> (Vec<JointVector>, Accelerated, usize) {
     let mut via = via.to_vec();
     let mut stops = 0;
-    let mut acc = optimise_accelerations(robot, dynamics, &via, 0.001, 0.05);
+    let mut acc = optimise_accelerations(robot, dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
     loop {
         if stops > 0 {
             // A stop changes little: restart the bisection from the accelerations just found.
             let prev = acc.limits.accel_rad_s2;
-            acc = search_accelerations(robot, dynamics, &via, 0.001, 0.05, prev, prev * 0.8);
+            acc = search_accelerations(
+                robot,
+                dynamics,
+                &via,
+                TORQUE_DT_S,
+                TORQUE_THRESHOLD,
+                prev,
+                prev * WARM_LOWER_SHARE,
+            );
         }
         match check_corridor(model, &acc.trajectory, check_dt_s) {
             Ok(()) => return (via, acc, stops),

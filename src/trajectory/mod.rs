@@ -32,8 +32,8 @@ mod retime;
 mod torque;
 
 pub use accel::{
-    Accelerated, Corrected, accelerate_in_corridor, check_corridor, correct_path, default_limits, optimal_duration,
-    optimise_accelerations,
+    Accelerated, CORRIDOR_CHECK_DT_S, Corrected, TORQUE_DT_S, TORQUE_THRESHOLD, accelerate_in_corridor, check_corridor,
+    correct_path, default_limits, optimal_duration, optimise_accelerations,
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
 pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, straight_line};

@@ -6,7 +6,10 @@ use crate::support::planned_fig5_paths;
 use binpick::bench::fig5_cases;
 use binpick::config::LoadedScene;
 use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
-use binpick::trajectory::{Motion, Shares, Trajectory, correct_path, default_limits, optimise_accelerations, toppra};
+use binpick::trajectory::{
+    Motion, Shares, TORQUE_DT_S, TORQUE_THRESHOLD, Trajectory, correct_path, default_limits, optimise_accelerations,
+    toppra,
+};
 
 /// Torques by Lagrange: d/dt(M q') - dT/dq + dV/dq + friction, with the time derivative and the
 /// partials taken by central differences of the energy functions (not the RNEA).
@@ -41,7 +44,7 @@ fn accelerated_motions_stay_within_torque_speed_and_position_limits_in_an_indepe
     for (case, via) in planned_fig5_paths(&scene, &robot) {
         for payload in [hand, held] {
             let dynamics = robot.dynamics(&payload);
-            let fast = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+            let fast = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
             let slow = Trajectory::through(&via, &default_limits(&robot, &hand, 5.0, 20_000));
             assert!(
                 fast.trajectory.duration_s < slow.duration_s,
@@ -153,7 +156,7 @@ fn time_optimal_retiming_respects_every_limit_and_bounds_the_accelerator() {
     let hand = Payload::from_gripper(&scene.scene.gripper);
     let dynamics = robot.dynamics(&hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector)));
     for (case, via) in planned_fig5_paths(&scene, &robot) {
-        let fast = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+        let fast = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
         let optimal = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::BOUND).expect("feasible");
         let executable = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::EXECUTE).expect("feasible");
         // Same path, same ends.
@@ -210,7 +213,7 @@ fn path_correction_folds_the_arm_when_j1_is_torque_limited_and_stays_certified()
     };
     let (a, b) = (at(0.55), at(-0.55));
     let via = vec![a, b];
-    let acc = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+    let acc = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
     assert!(
         acc.limits.accel_rad_s2[0] < 0.9 * robot.joints[0].max_accel_rad_s2,
         "J1 should be torque-limited"
