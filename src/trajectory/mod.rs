@@ -16,9 +16,10 @@
 //!    ([`straight_line`]), and the cap on the force the tool exerts on a held part
 //!    ([`limit_tool_force`]).
 //!
-//! The time-optimal bound the accelerator is measured against is TOPP-RA, in `retime`: the
-//! trajectory's path retimed under the robot's speed, acceleration and torque limits
-//! ([`toppra`], [`optimal_duration`]).
+//! The time-optimal bound the accelerator is measured against is TOPP-RA: `toppra` holds the
+//! generic algorithm over any [`PathConstraints`] (linear in (s'', s'^2), nothing of robots),
+//! `retime` the robot's speed, acceleration and torque constraints along a trajectory's path
+//! and the retimed [`Motion`] ([`toppra`], [`optimal_duration`]).
 //!
 //! Everything that can be sampled in time implements [`Motion`] and yields [`Sample`]s.
 //!
@@ -29,6 +30,7 @@ mod accel;
 mod blend;
 mod line;
 mod retime;
+mod toppra;
 mod torque;
 
 pub use accel::{
@@ -37,7 +39,8 @@ pub use accel::{
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
 pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, straight_line};
-pub use retime::{ArcPath, Retimed, Shares, toppra};
+pub use retime::{ArcPath, Retimed, RobotPathConstraints, Shares, toppra};
+pub use toppra::{PathConstraints, PathPoint, PathTiming, StageRow, time_optimal};
 pub use torque::{TorqueProfile, torques};
 
 use crate::robot::JointVector;
