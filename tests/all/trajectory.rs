@@ -6,7 +6,10 @@ use crate::support::planned_fig5_paths;
 use binpick::bench::fig5_cases;
 use binpick::config::LoadedScene;
 use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
-use binpick::trajectory::{Motion, Shares, Trajectory, correct_path, default_limits, optimise_accelerations, toppra};
+use binpick::trajectory::{
+    Motion, Shares, TORQUE_DT_S, TORQUE_THRESHOLD, Trajectory, correct_path, default_limits, optimise_accelerations,
+    toppra,
+};
 
 /// Torques by Lagrange: d/dt(M q') - dT/dq + dV/dq + friction, with the time derivative and the
 /// partials taken by central differences of the energy functions (not the RNEA).
@@ -41,7 +44,7 @@ fn accelerated_motions_stay_within_torque_speed_and_position_limits_in_an_indepe
     for (case, via) in planned_fig5_paths(&scene, &robot) {
         for payload in [hand, held] {
             let dynamics = robot.dynamics(&payload);
-            let fast = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+            let fast = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
             let slow = Trajectory::through(&via, &default_limits(&robot, &hand, 5.0, 20_000));
             assert!(
                 fast.trajectory.duration_s < slow.duration_s,
@@ -153,7 +156,7 @@ fn time_optimal_retiming_respects_every_limit_and_bounds_the_accelerator() {
     let hand = Payload::from_gripper(&scene.scene.gripper);
     let dynamics = robot.dynamics(&hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector)));
     for (case, via) in planned_fig5_paths(&scene, &robot) {
-        let fast = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+        let fast = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
         let optimal = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::BOUND).expect("feasible");
         let executable = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::EXECUTE).expect("feasible");
         // Same path, same ends.
@@ -210,7 +213,7 @@ fn path_correction_folds_the_arm_when_j1_is_torque_limited_and_stays_certified()
     };
     let (a, b) = (at(0.55), at(-0.55));
     let via = vec![a, b];
-    let acc = optimise_accelerations(&robot, &dynamics, &via, 0.001, 0.05);
+    let acc = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
     assert!(
         acc.limits.accel_rad_s2[0] < 0.9 * robot.joints[0].max_accel_rad_s2,
         "J1 should be torque-limited"
@@ -240,4 +243,55 @@ fn path_correction_folds_the_arm_when_j1_is_torque_limited_and_stays_certified()
     if !full_fold_clear {
         assert_ne!(c.via, free.via, "the colliding fold was kept");
     }
+}
+
+/// The robot's constraints composed with one more row through the generic TOPP-RA: a cap on the
+/// path speed (a fraction of the path per second) on top of the joint limits.
+struct CappedSpeed<'a> {
+    robot: binpick::trajectory::RobotPathConstraints<'a>,
+    per_s: f64,
+}
+
+impl binpick::trajectory::PathConstraints for CappedSpeed<'_> {
+    fn end_s(&self) -> f64 {
+        self.robot.end_s()
+    }
+    fn rows(&self, s: f64) -> Vec<binpick::trajectory::StageRow> {
+        let mut rows = self.robot.rows(s);
+        rows.push(binpick::trajectory::StageRow::new(0.0, 1.0, self.per_s * self.per_s));
+        rows
+    }
+}
+
+#[test]
+fn the_generic_retiming_takes_the_robots_constraints_and_more() {
+    use binpick::trajectory::{ArcPath, PathConstraints, RobotPathConstraints, time_optimal};
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let hand = Payload::from_gripper(&scene.scene.gripper);
+    let dynamics = robot.dynamics(&hand);
+    let (case, via) = planned_fig5_paths(&scene, &robot).remove(0);
+    let fast = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+    let arc = ArcPath::new(&fast.trajectory);
+    let constraints = RobotPathConstraints::new(&robot, &dynamics, &arc, Shares::BOUND);
+    assert_eq!(constraints.end_s(), 1.0);
+    // The generic algorithm on the robot's constraints is exactly what toppra() returns.
+    let free = time_optimal(&constraints, 300).expect("feasible");
+    let composed = toppra(&robot, &dynamics, &fast.trajectory, 300, Shares::BOUND).expect("feasible");
+    assert_eq!(free.duration_s(), composed.duration_s(), "{}", case.name);
+    assert_eq!(free.path_speeds(), composed.path_speeds());
+    // A cap on the path speed below the robot's own: the motion takes at least 1 / cap.
+    let top = free.path_speeds().iter().fold(0.0f64, |m, x| m.max(x.sqrt()));
+    let per_s = 0.5 * top;
+    let capped = time_optimal(
+        &CappedSpeed {
+            robot: constraints,
+            per_s,
+        },
+        300,
+    )
+    .expect("feasible");
+    assert!(capped.duration_s() > free.duration_s());
+    assert!(capped.duration_s() >= 1.0 / per_s);
+    assert!(capped.path_speeds().iter().all(|x| x.sqrt() <= per_s * (1.0 + 1e-9)));
 }

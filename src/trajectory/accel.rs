@@ -1,0 +1,410 @@
+//! The reference system's motion accelerator (OMRON, fast motion planning on the Viper 650):
+//! §4.2's acceleration search, §4.3's path correction ("fold"), both kept inside the planner's
+//! certified corridor, and the time-optimal bound they are measured against.
+//!
+//! Job: with the speeds fixed at the top, bisect each joint's acceleration until its peak torque
+//! (inverse dynamics every millisecond along the blended trajectory) sits just below its limit
+//! (§4.2); where J1 sets a segment's time and its acceleration is held down by its torque, insert
+//! a via point with J2 and J3 folded toward the body (lower J1 inertia) and search again while
+//! it pays (§4.3); re-check the blends' corridor against the collision model and stop at the via
+//! points whose blends cut a corner. Also the controller's default parameters (the "before" of
+//! the reference's comparison) and the TOPP-RA bound on the same path.
+//!
+//! The reference's and this cell's numbers are the documented constants below, named once.
+//!
+//! Units: rad, rad/s, rad/s^2, N m, s. Frames: joint space.
+
+use super::retime::{Shares, toppra};
+use super::torque::{TorqueProfile, torques};
+use super::{Motion, MotionLimits, Trajectory};
+use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
+
+/// §4.2 step 1: torques are evaluated on the trajectory sampled every millisecond [s].
+pub const TORQUE_DT_S: f64 = 0.001;
+/// §4.2 step 2: a joint's acceleration is settled when its peak torque is within this fraction
+/// of its limit below the limit (and no joint is above).
+pub const TORQUE_THRESHOLD: f64 = 0.05;
+/// Time between the samples whose edges [`check_corridor`] certifies in the cell's cycle [s]:
+/// the chord of a blend between samples deviates from it by at most a dt^2 / 8, below 1 mrad at
+/// 10 ms, under half a millimetre of robot motion, inside the collision model's 2 mm margin.
+pub const CORRIDOR_CHECK_DT_S: f64 = 0.01;
+/// §4.2 step 1: the search starts from this share of each joint's specification acceleration.
+const START_SHARE: f64 = 0.5;
+/// The bisection's iterations at most (each one trajectory and its torques).
+const SEARCH_ITERATIONS: usize = 30;
+/// An acceleration at or above this share of the specification counts as at the specification:
+/// the search does not raise it further, and a fold cannot help J1.
+const AT_SPEC: f64 = 0.999;
+/// After a stop is inserted, the search restarts from the accelerations just found, with this
+/// share of them as the lower bracket (a stop changes little).
+const WARM_LOWER_SHARE: f64 = 0.8;
+/// The controller's default acceleration: this share of the torque limit over the worst inertia.
+const DEFAULT_TORQUE_SHARE: f64 = 0.8;
+/// §4.3: rounds of folding at most (each a pass over the segments).
+const FOLD_ROUNDS: usize = 4;
+/// §4.3 step 3: J2 and J3 fold out and back at this share of their top speed, each way within
+/// half of J1's time for the segment.
+const FOLD_SPEED_SHARE: f64 = 0.8;
+/// §4.3: the full fold, half and a quarter of it are tried; the fastest that is safe and helps
+/// is kept.
+const FOLD_SHARES: [f64; 3] = [1.0, 0.5, 0.25];
+/// Step of the central differences of J1's inertia M11 in J2 and J3 [rad].
+const M11_STEP_RAD: f64 = 1e-4;
+/// A fold is kept only if it shortens the motion by more than this [s].
+const MIN_FOLD_GAIN_S: f64 = 1e-6;
+
+/// The controller's default parameters: top speeds from the data sheet, and one acceleration
+/// setting safe for the worst posture at maximum payload: per joint, 80 % of the torque limit over
+/// the largest diagonal inertia found over `samples` seeded random postures with a `payload_kg`
+/// point mass at the tool tip, capped at the specification acceleration.
+pub fn default_limits(
+    robot: &RobotModel,
+    hand: &crate::robot::Payload,
+    payload_kg: f64,
+    samples: usize,
+) -> MotionLimits {
+    use rand::RngExt;
+    let part = crate::robot::Payload::point(
+        (payload_kg - hand.mass_kg).max(0.0),
+        robot.flange_from_tool.translation.vector,
+    );
+    let d = robot.dynamics(&hand.combined(&part));
+    let mut rng = crate::rng::stream(0, "default-limits");
+    let mut worst = [0.0f64; DOF];
+    for _ in 0..samples {
+        let q = JointVector::from_fn(|i, _| rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad));
+        let m = d.mass_matrix(&q);
+        for (i, w) in worst.iter_mut().enumerate() {
+            *w = w.max(m[(i, i)]);
+        }
+    }
+    MotionLimits {
+        vel_rad_s: robot.max_vel_rad_s(),
+        accel_rad_s2: JointVector::from_fn(|i, _| {
+            (DEFAULT_TORQUE_SHARE * robot.joints[i].torque_limit_nm / worst[i]).min(robot.joints[i].max_accel_rad_s2)
+        }),
+    }
+}
+
+/// Result of the acceleration search.
+#[derive(Debug, Clone)]
+pub struct Accelerated {
+    /// The limits found.
+    pub limits: MotionLimits,
+    /// The trajectory under them.
+    pub trajectory: Trajectory,
+    /// Its torques.
+    pub torques: TorqueProfile,
+    /// Search iterations.
+    pub iterations: usize,
+}
+
+/// The reference system's §4.2: speed fixed at the top; accelerations start at 50 % of the
+/// specification; torques every `dt_s` (the reference: [`TORQUE_DT_S`]); each joint's
+/// acceleration is bisected until its peak torque is within `threshold` (a fraction of the
+/// limit; the reference: [`TORQUE_THRESHOLD`]) below its limit, none above. Returns the
+/// fastest try whose torques all stay within their limits (the last try if none does).
+pub fn optimise_accelerations(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    dt_s: f64,
+    threshold: f64,
+) -> Accelerated {
+    let spec = robot.max_accel_rad_s2();
+    search_accelerations(
+        robot,
+        dynamics,
+        via,
+        dt_s,
+        threshold,
+        spec * START_SHARE,
+        JointVector::zeros(),
+    )
+}
+
+/// The bisection of [`optimise_accelerations`] from a given start and lower bracket (a warm
+/// start after a small change of the path).
+fn search_accelerations(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    dt_s: f64,
+    threshold: f64,
+    start: JointVector,
+    lower: JointVector,
+) -> Accelerated {
+    let spec = robot.max_accel_rad_s2();
+    let mut lo = lower;
+    let mut hi = spec;
+    let mut scale = start;
+    let vel = robot.max_vel_rad_s();
+    let mut best: Option<Accelerated> = None;
+    for it in 1..=SEARCH_ITERATIONS {
+        let limits = MotionLimits {
+            vel_rad_s: vel,
+            accel_rad_s2: scale,
+        };
+        let trajectory = Trajectory::through(via, &limits);
+        let profile = torques(dynamics, robot, &trajectory.samples(dt_s), dt_s);
+        let feasible = profile.peak_ratio.iter().all(|r| *r <= 1.0);
+        if feasible
+            && best
+                .as_ref()
+                .is_none_or(|b| trajectory.duration_s < b.trajectory.duration_s)
+        {
+            best = Some(Accelerated {
+                limits,
+                trajectory: trajectory.clone(),
+                torques: profile.clone(),
+                iterations: it,
+            });
+        }
+        let mut settled = true;
+        for i in 0..DOF {
+            let r = profile.peak_ratio[i];
+            if r > 1.0 {
+                hi[i] = scale[i];
+                settled = false;
+            } else if r < 1.0 - threshold && scale[i] < spec[i] * AT_SPEC {
+                lo[i] = scale[i];
+                settled = false;
+            } else {
+                continue;
+            }
+            scale[i] = 0.5 * (lo[i] + hi[i]);
+        }
+        if settled {
+            break;
+        }
+    }
+    let mut out = best.unwrap_or_else(|| {
+        // Even the lowest accelerations exceed a limit (a static overload): report the last try.
+        let limits = MotionLimits {
+            vel_rad_s: vel,
+            accel_rad_s2: scale,
+        };
+        let trajectory = Trajectory::through(via, &limits);
+        let torques = torques(dynamics, robot, &trajectory.samples(dt_s), dt_s);
+        Accelerated {
+            limits,
+            trajectory,
+            torques,
+            iterations: SEARCH_ITERATIONS,
+        }
+    });
+    out.iterations = out.iterations.max(1);
+    out
+}
+
+/// Outcome of the alternating path correction and acceleration search (the reference's §4.3).
+#[derive(Debug, Clone)]
+pub struct Corrected {
+    /// The via points after correction (the input's if no fold helped).
+    pub via: Vec<JointVector>,
+    /// The accelerated trajectory along them.
+    pub accelerated: Accelerated,
+    /// Folds kept.
+    pub folds: usize,
+    /// Folds tried.
+    pub tried: usize,
+}
+
+/// The reference system's §4.3, alternated with §4.2 until no gain, starting from `accelerated`
+/// (the §4.2 result on `via`): in each segment where J1 needs the longest time (the segment is
+/// "rate-controlled" by J1) and travels more than `min_j1_rad`, insert a via point at the middle
+/// with J2 and J3 moved down the gradient of J1's inertia M11 (folding the arm toward the body),
+/// by no more than they can travel out and back within J1's time for the segment; keep the fold
+/// only if the re-accelerated motion is faster and, with a collision model, its new edges certify.
+pub fn correct_path(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    accelerated: &Accelerated,
+    collision: Option<&crate::planning::CollisionModel>,
+    min_j1_rad: f64,
+) -> Corrected {
+    let mut current: Vec<JointVector> = via.to_vec();
+    let mut best = accelerated.clone();
+    let (mut folds, mut tried) = (0, 0);
+    // Folding lowers J1's inertia, which only pays when J1's acceleration is held down by its
+    // torque, not by its specification.
+    if best.limits.accel_rad_s2[0] >= AT_SPEC * robot.joints[0].max_accel_rad_s2 {
+        return Corrected {
+            via: current,
+            accelerated: best,
+            folds,
+            tried,
+        };
+    }
+    let vmax = robot.max_vel_rad_s();
+    let mut stats = crate::planning::PlanStats::default();
+    for _round in 0..FOLD_ROUNDS {
+        let mut improved = false;
+        let mut k = 0;
+        while k + 1 < current.len() {
+            let (a, b) = (current[k], current[k + 1]);
+            let d = b - a;
+            let t1 = d[0].abs() / vmax[0];
+            let j1_limits = (1..DOF).all(|i| d[i].abs() / vmax[i] <= t1);
+            if !j1_limits || d[0].abs() < min_j1_rad {
+                k += 1;
+                continue;
+            }
+            tried += 1;
+            let mid = (a + b) / 2.0;
+            // Gradient of M11 in (q2, q3) by central differences.
+            let m11 = |q: &JointVector| dynamics.mass_matrix(q)[(0, 0)];
+            let h = M11_STEP_RAD;
+            let grad: Vec<f64> = [1usize, 2]
+                .iter()
+                .map(|&i| {
+                    let (mut p, mut m) = (mid, mid);
+                    p[i] += h;
+                    m[i] -= h;
+                    (m11(&p) - m11(&m)) / (2.0 * h)
+                })
+                .collect();
+            let norm = grad[0].hypot(grad[1]);
+            if norm < 1e-9 {
+                k += 1;
+                continue;
+            }
+            // Out and back within half of J1's segment time each way, at 80 % of top speed.
+            let reach = [
+                FOLD_SPEED_SHARE * vmax[1] * t1 / 2.0,
+                FOLD_SPEED_SHARE * vmax[2] * t1 / 2.0,
+            ];
+            let step = (reach[0] / (grad[0].abs() / norm).max(1e-9)).min(reach[1] / (grad[1].abs() / norm).max(1e-9));
+            // The full fold, half and a quarter of it: the fastest that is safe and helps.
+            let mut kept: Option<(Vec<JointVector>, Accelerated)> = None;
+            for share in FOLD_SHARES {
+                let mut fold = mid;
+                fold[1] -= share * step * grad[0] / norm;
+                fold[2] -= share * step * grad[1] / norm;
+                if !robot.within_limits(&fold, 0.0) {
+                    continue;
+                }
+                let safe = collision
+                    .is_none_or(|m| m.certify_edge(&a, &fold, &mut stats) && m.certify_edge(&fold, &b, &mut stats));
+                if !safe {
+                    continue;
+                }
+                let mut candidate = current.clone();
+                candidate.insert(k + 1, fold);
+                let acc = optimise_accelerations(robot, dynamics, &candidate, TORQUE_DT_S, TORQUE_THRESHOLD);
+                let to_beat = kept
+                    .as_ref()
+                    .map_or(best.trajectory.duration_s, |(_, k)| k.trajectory.duration_s);
+                let within_torque = acc.torques.peak_ratio.iter().all(|r| *r <= 1.0);
+                if within_torque && acc.trajectory.duration_s < to_beat - MIN_FOLD_GAIN_S {
+                    kept = Some((candidate, acc));
+                }
+            }
+            if let Some((candidate, acc)) = kept {
+                current = candidate;
+                best = acc;
+                folds += 1;
+                improved = true;
+                k += 2;
+                continue;
+            }
+            k += 1;
+        }
+        if !improved {
+            break;
+        }
+    }
+    Corrected {
+        via: current,
+        accelerated: best,
+        folds,
+        tried,
+    }
+}
+
+/// Re-checks a timed motion against the collision model: every edge between consecutive samples
+/// `dt_s` apart must certify (the blends leave the planned, certified polyline, so the corridor
+/// they sweep is checked again). Returns the first time at which it does not.
+pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Motion, dt_s: f64) -> Result<(), f64> {
+    let mut stats = crate::planning::PlanStats::default();
+    let samples = motion.sampled(dt_s);
+    for w in samples.windows(2) {
+        if !model.certify_edge(&w[0].q, &w[1].q, &mut stats) {
+            return Err(w[0].t);
+        }
+    }
+    Ok(())
+}
+
+/// §4.2 with the blends kept inside the certified corridor: the accelerated trajectory's corridor
+/// is checked every `check_dt_s` (edges between samples certified; the cell uses
+/// [`CORRIDOR_CHECK_DT_S`], whose documentation bounds the chord's deviation); where it fails,
+/// the via point whose blend cuts the corner becomes a stop (duplicated: the arm passes exactly
+/// through it) and the search runs again, warm-started from the accelerations just found.
+/// Returns the via points with their stops, the accelerated trajectory and the number of stops.
+pub fn accelerate_in_corridor(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    model: &crate::planning::CollisionModel,
+    check_dt_s: f64,
+) -> (Vec<JointVector>, Accelerated, usize) {
+    let mut via = via.to_vec();
+    let mut stops = 0;
+    let mut acc = optimise_accelerations(robot, dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+    loop {
+        if stops > 0 {
+            // A stop changes little: restart the bisection from the accelerations just found.
+            let prev = acc.limits.accel_rad_s2;
+            acc = search_accelerations(
+                robot,
+                dynamics,
+                &via,
+                TORQUE_DT_S,
+                TORQUE_THRESHOLD,
+                prev,
+                prev * WARM_LOWER_SHARE,
+            );
+        }
+        match check_corridor(model, &acc.trajectory, check_dt_s) {
+            Ok(()) => return (via, acc, stops),
+            Err(t) if stops < via.len() => {
+                let j = acc.trajectory.via_near(t);
+                let dup = j.clamp(1, via.len() - 2);
+                if via[dup] == via[dup + 1] || via[dup] == via[dup - 1] {
+                    // Already a stop there: nothing more to take out of the blend.
+                    return (via, acc, stops);
+                }
+                via.insert(dup, via[dup]);
+                stops += 1;
+            }
+            Err(_) => return (via, acc, stops),
+        }
+    }
+}
+
+/// The time-optimal bound along a path that may stop at via points: the path is cut at every
+/// stop (a duplicated via point), each stop-free piece is retimed by TOPP-RA on the geometry
+/// `limits` blend it with, and the durations add up. `None` if a piece is infeasible.
+pub fn optimal_duration(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    via: &[JointVector],
+    limits: &MotionLimits,
+    grid: usize,
+) -> Option<f64> {
+    let mut total = 0.0;
+    let mut start = 0;
+    for k in 1..=via.len() {
+        if k == via.len() || via[k] == via[k - 1] {
+            let piece = &via[start..k];
+            if piece.len() >= 2 {
+                let path = Trajectory::through(piece, limits);
+                total += toppra(robot, dynamics, &path, grid, Shares::BOUND)?.duration_s();
+            }
+            start = k;
+        }
+    }
+    Some(total)
+}

@@ -1,0 +1,242 @@
+//! Straight tool lines (descent, lift, retreat) and the force on what the tool holds.
+//!
+//! Job: move the tool centre point along a straight line in Cartesian space with a trapezoidal
+//! speed profile, joint positions by inverse kinematics every millisecond, slowed until the
+//! torques keep a margin for the servo and, holding a part, until the tool's specific force
+//! |a - g| stays within what the suction cup holds; and slow a blended joint trajectory uniformly
+//! in time for the same reason.
+//!
+//! Units: m, m/s, m/s^2 for the tool; rad, rad/s, rad/s^2, N m for the joints; s.
+//! Frames: tool poses are `world_from_tool`; joints in joint space.
+
+use super::{Motion, MotionLimits, Sample, Trajectory};
+use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
+
+/// Fraction of the torque limit a straight line may use (the servo's feedback needs the rest).
+const LINE_TORQUE_SHARE: f64 = 0.85;
+/// A straight line is sampled (inverse kinematics, finite differences) every millisecond [s].
+const LINE_DT_S: f64 = 0.001;
+/// Length of the line per radian of tool rotation, so a pure turn takes time too [m/rad].
+const ROTATION_LENGTH_M_PER_RAD: f64 = 0.05;
+/// Slow-downs tried before a line is given up.
+const LINE_TRIES: usize = 12;
+/// Each slow-down multiplies the tool acceleration by this.
+const LINE_SLOWDOWN: f64 = 0.75;
+/// Lowest tool acceleration a force limit may leave [m/s^2].
+const MIN_LINE_ACCEL_M_S2: f64 = 0.5;
+/// Largest joint step between 1 ms samples before it counts as a branch change [rad].
+const MAX_JOINT_STEP_RAD: f64 = 0.05;
+/// Below this |J5| the wrist is near its singularity and J4 is kept [rad].
+const WRIST_SINGULAR_RAD: f64 = 0.02;
+/// A wrist fix is kept only if the tool pose still matches to this position [m] ...
+const WRIST_FIX_POSITION_M: f64 = 2e-5;
+/// ... and this rotation [rad].
+const WRIST_FIX_ANGLE_RAD: f64 = 2e-4;
+/// The tool's specific force is checked on samples this far apart [s].
+const FORCE_CHECK_DT_S: f64 = 0.004;
+/// Slowest uniform time scale [`limit_tool_force`] tries.
+const MIN_TIME_SCALE: f64 = 0.05;
+/// [`limit_tool_force`] bisects its time scale to this.
+const TIME_SCALE_TOLERANCE: f64 = 0.02;
+
+/// Speed and acceleration of the tool along a straight line [m/s, m/s^2].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct LineLimits {
+    /// Top tool speed [m/s].
+    pub speed_m_s: f64,
+    /// Tool acceleration [m/s^2].
+    pub accel_m_s2: f64,
+}
+
+/// A straight tool line (descent, lift, retreat) with a trapezoidal speed profile along it,
+/// sampled every `dt_s`: joint positions by inverse kinematics (nearest to the previous sample),
+/// velocities and accelerations by central differences. Sampled linearly in between.
+#[derive(Debug, Clone)]
+pub struct LineMotion {
+    dt_s: f64,
+    samples: Vec<Sample>,
+    /// The profile's tool acceleration after the torque check [m/s^2].
+    pub accel_m_s2: f64,
+}
+
+impl Motion for LineMotion {
+    fn duration_s(&self) -> f64 {
+        self.samples.last().map_or(0.0, |s| s.t)
+    }
+    fn at(&self, t: f64) -> Sample {
+        let n = self.samples.len() - 1;
+        let x = (t / self.dt_s).clamp(0.0, n as f64);
+        let k = (x.floor() as usize).min(n.saturating_sub(1));
+        let f = x - k as f64;
+        let (a, b) = (&self.samples[k], &self.samples[(k + 1).min(n)]);
+        Sample {
+            t,
+            q: a.q + (b.q - a.q) * f,
+            qd: a.qd + (b.qd - a.qd) * f,
+            qdd: a.qdd + (b.qdd - a.qdd) * f,
+        }
+    }
+}
+
+impl LineMotion {
+    /// Joint positions at the end.
+    pub fn end_q(&self) -> JointVector {
+        self.samples.last().map_or_else(JointVector::zeros, |s| s.q)
+    }
+}
+
+/// The straight tool line from `from` (the arm at `q_from`) to `to` under `limits`, slowed until
+/// the torques (inverse dynamics with `dynamics`' payload) stay within 85 % of each joint's limit
+/// and, with `max_specific_force_m_s2`, the tool's |a - g| within it (a part on a suction cup).
+/// `None` if the inverse kinematics fails along the line (limits, singularity) or a joint would
+/// jump (a branch change).
+pub fn straight_line(
+    robot: &RobotModel,
+    dynamics: &DynamicsModel,
+    q_from: &JointVector,
+    from: &nalgebra::Isometry3<f64>,
+    to: &nalgebra::Isometry3<f64>,
+    limits: &LineLimits,
+    max_specific_force_m_s2: Option<f64>,
+) -> Option<LineMotion> {
+    let g = crate::robot::GRAVITY_M_S2;
+    let length = (to.translation.vector - from.translation.vector).norm()
+        + ROTATION_LENGTH_M_PER_RAD * from.rotation.angle_to(&to.rotation);
+    let mut accel = limits.accel_m_s2;
+    if let Some(f) = max_specific_force_m_s2 {
+        // |a u - g| <= |a| + g along any direction u.
+        accel = accel.min((f - g).max(MIN_LINE_ACCEL_M_S2));
+    }
+    let limit = robot.torque_limit_nm();
+    for _ in 0..LINE_TRIES {
+        let v = limits.speed_m_s.min((accel * length).sqrt());
+        let t_acc = v / accel;
+        let duration = if length <= 1e-9 {
+            LINE_DT_S
+        } else {
+            2.0 * t_acc + (length - v * t_acc).max(0.0) / v
+        };
+        let s_at = |t: f64| -> f64 {
+            if length <= 1e-9 {
+                return 1.0;
+            }
+            let t = t.clamp(0.0, duration);
+            let d = if t < t_acc {
+                0.5 * accel * t * t
+            } else if t > duration - t_acc {
+                let r = duration - t;
+                length - 0.5 * accel * r * r
+            } else {
+                0.5 * accel * t_acc * t_acc + v * (t - t_acc)
+            };
+            (d / length).clamp(0.0, 1.0)
+        };
+        let n = (duration / LINE_DT_S).ceil() as usize;
+        let mut qs = Vec::with_capacity(n + 1);
+        let mut q = *q_from;
+        for k in 0..=n {
+            let pose = from.lerp_slerp(to, s_at(k as f64 * LINE_DT_S));
+            let mut next = robot.ik_tool_nearest(&pose, &q).ok()?.q;
+            if k > 0 && next[4].abs() < WRIST_SINGULAR_RAD {
+                // Near the wrist singularity (J5 ~ 0) only J4 + J6 is well determined and the
+                // solver's J4 is noise: keep J4, give J6 the sum, if the pose still matches.
+                let mut kept = next;
+                kept[5] += next[3] - q[3];
+                kept[3] = q[3];
+                let err = robot.world_from_tool(&kept).inverse() * pose;
+                if err.translation.vector.norm() < WRIST_FIX_POSITION_M && err.rotation.angle() < WRIST_FIX_ANGLE_RAD {
+                    next = kept;
+                }
+            }
+            if k > 0 && (next - q).amax() > MAX_JOINT_STEP_RAD {
+                return None;
+            }
+            q = next;
+            qs.push(q);
+        }
+        let samples: Vec<Sample> = (0..=n)
+            .map(|k| {
+                let (a, b) = (qs[k.saturating_sub(1)], qs[(k + 1).min(n)]);
+                let qd = if k == 0 || k == n {
+                    JointVector::zeros()
+                } else {
+                    (b - a) / (2.0 * LINE_DT_S)
+                };
+                let qdd = if k == 0 || k == n {
+                    JointVector::zeros()
+                } else {
+                    (b - qs[k] * 2.0 + a) / (LINE_DT_S * LINE_DT_S)
+                };
+                Sample {
+                    t: k as f64 * LINE_DT_S,
+                    q: qs[k],
+                    qd,
+                    qdd,
+                }
+            })
+            .collect();
+        let within = samples.iter().all(|s| {
+            let tau = dynamics.inverse_dynamics(&s.q, &s.qd, &s.qdd);
+            (0..DOF).all(|i| tau[i].abs() <= LINE_TORQUE_SHARE * limit[i])
+        });
+        if within {
+            return Some(LineMotion {
+                dt_s: LINE_DT_S,
+                samples,
+                accel_m_s2: accel,
+            });
+        }
+        accel *= LINE_SLOWDOWN;
+    }
+    None
+}
+
+/// The largest specific force the tool exerts on what it holds along `motion`: max |a - g| of
+/// the tool centre point, from the forward kinematics sampled every `dt_s` (second differences)
+/// [m/s^2]. At rest it is g.
+pub fn peak_tool_specific_force(robot: &RobotModel, motion: &impl Motion, dt_s: f64) -> f64 {
+    let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
+    let p: Vec<nalgebra::Vector3<f64>> = motion
+        .sampled(dt_s)
+        .iter()
+        .map(|s| robot.world_from_tool(&s.q).translation.vector)
+        .collect();
+    p.windows(3)
+        .map(|w| ((w[2] - 2.0 * w[1] + w[0]) / (dt_s * dt_s) - g).norm())
+        .fold(crate::robot::GRAVITY_M_S2, f64::max)
+}
+
+/// Slows a trajectory through `via` under `limits` uniformly in time (speeds x k, accelerations
+/// x k^2, which scales the profile's time by 1/k exactly) until the tool's peak specific force
+/// is at most `max_specific_force_m_s2`: a suction cup holds its part only up to a force. Returns
+/// the trajectory and k (1 when no slowing was needed). Bisection on k to 2 %.
+pub fn limit_tool_force(
+    robot: &RobotModel,
+    via: &[JointVector],
+    limits: &MotionLimits,
+    max_specific_force_m_s2: f64,
+) -> (Trajectory, f64) {
+    let at = |k: f64| {
+        Trajectory::through(
+            via,
+            &MotionLimits {
+                vel_rad_s: limits.vel_rad_s * k,
+                accel_rad_s2: limits.accel_rad_s2 * (k * k),
+            },
+        )
+    };
+    let full = at(1.0);
+    if peak_tool_specific_force(robot, &full, FORCE_CHECK_DT_S) <= max_specific_force_m_s2 {
+        return (full, 1.0);
+    }
+    let (mut lo, mut hi) = (MIN_TIME_SCALE, 1.0);
+    while hi - lo > TIME_SCALE_TOLERANCE {
+        let mid = 0.5 * (lo + hi);
+        if peak_tool_specific_force(robot, &at(mid), FORCE_CHECK_DT_S) <= max_specific_force_m_s2 {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    (at(lo), lo)
+}
