@@ -373,3 +373,49 @@ impl LoadedWorkpiece {
             .collect()
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn default_scene() -> Scene {
+        LoadedScene::embedded_default().expect("embedded default scene").scene
+    }
+
+    #[test]
+    fn slot_count_counts_the_slots_without_building_them() {
+        let scene = default_scene();
+        for wp in LoadedWorkpiece::all_embedded().unwrap() {
+            let footprint = [wp.workpiece.size_m[0], wp.workpiece.size_m[1]];
+            let n = scene.place_tray.slots_in_tray(footprint).len();
+            assert!(n > 0);
+            assert_eq!(scene.place_tray.slot_count(footprint), n as f64, "{}", wp.label);
+        }
+        // A part of micrometres in a grid without gaps: refused, not built.
+        let mut scene = default_scene();
+        scene.place_tray.gap_m = Some(0.0);
+        let mut wp = LoadedWorkpiece::all_embedded().unwrap().remove(4).workpiece;
+        wp.size_m = [1e-9, 1e-9, 0.01];
+        assert!(scene.place_tray.slot_count([1e-9, 1e-9]) > 1e14);
+        let e = wp.check_fits_scene("w.toml", &scene).unwrap_err().to_string();
+        assert!(
+            e.contains("w.toml: size_m gives 47999999800000000 placement slots"),
+            "{e}"
+        );
+    }
+
+    #[test]
+    fn sensor_resolution_is_capped_by_pixel_count() {
+        let mut scene = default_scene();
+        scene.sensor.resolution_px = [2048, 2048];
+        scene.validate("s.toml").unwrap();
+        scene.sensor.resolution_px = [2049, 2048];
+        let e = scene.validate("s.toml").unwrap_err().to_string();
+        assert!(
+            e.starts_with("s.toml: sensor.resolution_px must have at most 4194304 pixels"),
+            "{e}"
+        );
+        scene.sensor.resolution_px = [4096, 1024];
+        scene.validate("s.toml").unwrap();
+    }
+}

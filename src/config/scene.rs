@@ -300,6 +300,38 @@ pub struct SimConfig {
     pub protective_stop_reset_s: f64,
 }
 
+/// Largest sensor image [px]: 4 MP, e.g. 2048 x 2048, twelve times the default cell's 320 x 256 and
+/// above the 3 MP class of the 3D sensors used for bin picking. A capture holds per pixel an f32
+/// depth, three f32 world coordinates and a hit tag (24 bytes), the sensor keeps per pixel what the
+/// fixed cell shows, and a run keeps a few captures at once, in every parallel run of a batch: at
+/// this cap a capture takes about 100 MB and a run under a gigabyte, while the 8192 x 8192 that
+/// each axis alone allows would take 1.6 GB per capture.
+pub const MAX_SENSOR_PIXELS: u64 = 1 << 22;
+
+/// Bytes a capture holds per pixel: depth (f32), world point (3 x f32), hit tag (8).
+const CAPTURE_BYTES_PER_PIXEL: u64 = 24;
+
+/// How far the camera's optical centre must be above the pick tray's rim plane at least [m]. The
+/// view frustum over the tray (apex at the optical centre, base the tray's outer rim at floor
+/// level) is then a pyramid of positive height, and the view over the rim reaches into the tray; a
+/// camera level with the tray would flatten the pyramid into a plane.
+pub const MIN_CAMERA_ABOVE_RIM_M: f64 = 0.05;
+
+/// The sensor's view over the pick tray is a pyramid only while the tray is more than a point in
+/// it: the tray's outer rim (inner size plus walls) must span, each way, at least this fraction of
+/// the camera's distance to the farthest rim corner (0.6 deg of view). A camera hundreds of metres
+/// from a tray sees it as a point, and the frustum degenerates into a line.
+pub const MIN_VIEW_BASE_PER_DISTANCE: f64 = 0.01;
+
+/// The camera and the pick tray must lie within this distance of the world origin along each axis
+/// [m]: the physics queries the view frustum in single precision (millimetres), where a cell
+/// farther out would lose its shape.
+pub const MAX_CELL_EXTENT_M: f64 = 1000.0;
+
+/// Most placement slots a grid place tray may offer one workpiece: more is a unit mistake (a part
+/// of micrometres, a tray of kilometres), and the grid's slots are built as a list.
+pub const MAX_PLACE_SLOTS: f64 = 10_000.0;
+
 fn deg(v: f64) -> f64 {
     v.to_radians()
 }
@@ -367,22 +399,43 @@ impl SensorConfig {
 }
 
 impl PlaceTrayConfig {
+    /// The grid pattern for a footprint: gap [m], slot yaw [rad], the rotated footprint's extent
+    /// along the tray's x and y [m], and the slot counts along them (whole numbers, as f64 so a
+    /// tiny footprint cannot overflow them).
+    fn grid(&self, footprint_m: [f64; 2]) -> (f64, f64, [f64; 2], [f64; 2]) {
+        let gap = self.gap_m.unwrap_or(0.0);
+        let yaw = deg(self.slot_yaw_deg.unwrap_or(0.0));
+        // Footprint of the part rotated by yaw, as an axis-aligned box in the tray frame.
+        let (c, s) = (yaw.cos().abs(), yaw.sin().abs());
+        let fx = footprint_m[0] * c + footprint_m[1] * s;
+        let fy = footprint_m[0] * s + footprint_m[1] * c;
+        let [lx, ly] = self.tray.inner_size_m;
+        let nx = ((lx - gap) / (fx + gap)).floor().max(0.0);
+        let ny = ((ly - gap) / (fy + gap)).floor().max(0.0);
+        (gap, yaw, [fx, fy], [nx, ny])
+    }
+
+    /// How many placement slots [`Self::slots_in_tray`] gives for a footprint, without building
+    /// them.
+    pub fn slot_count(&self, footprint_m: [f64; 2]) -> f64 {
+        match self.pattern {
+            SlotPattern::List => self.poses.as_ref().map_or(0, Vec::len) as f64,
+            SlotPattern::Grid => {
+                let [nx, ny] = self.grid(footprint_m).3;
+                nx * ny
+            }
+        }
+    }
+
     /// Placement poses in the tray frame, `(x_m, y_m, yaw_rad)`, for a part with the given
     /// footprint `[length_m, width_m]` (along the slot's own x and y).
     pub fn slots_in_tray(&self, footprint_m: [f64; 2]) -> Vec<(f64, f64, f64)> {
         match self.pattern {
             SlotPattern::List => self.poses.iter().flatten().map(|p| (p[0], p[1], deg(p[2]))).collect(),
             SlotPattern::Grid => {
-                let gap = self.gap_m.unwrap_or(0.0);
-                let yaw = deg(self.slot_yaw_deg.unwrap_or(0.0));
-                // Footprint of the part rotated by yaw, as an axis-aligned box in the tray frame.
-                let (c, s) = (yaw.cos().abs(), yaw.sin().abs());
-                let fx = footprint_m[0] * c + footprint_m[1] * s;
-                let fy = footprint_m[0] * s + footprint_m[1] * c;
-                let [lx, ly] = self.tray.inner_size_m;
-                let nx = ((lx - gap) / (fx + gap)).floor().max(0.0) as usize;
-                let ny = ((ly - gap) / (fy + gap)).floor().max(0.0) as usize;
-                let mut out = Vec::with_capacity(nx * ny);
+                let (gap, yaw, [fx, fy], [nx, ny]) = self.grid(footprint_m);
+                let (nx, ny) = (nx as usize, ny as usize);
+                let mut out = Vec::with_capacity(nx.saturating_mul(ny));
                 for j in 0..ny {
                     for i in 0..nx {
                         let x = (i as f64 - (nx as f64 - 1.0) / 2.0) * (fx + gap);
@@ -487,6 +540,19 @@ impl Scene {
                     format!("must be within [1, 8192], got {v}"),
                 );
             }
+        }
+        let pixels = u64::from(s.resolution_px[0]) * u64::from(s.resolution_px[1]);
+        if pixels > MAX_SENSOR_PIXELS {
+            c.fail(
+                "sensor.resolution_px",
+                format!(
+                    "must have at most {MAX_SENSOR_PIXELS} pixels (4 MP, e.g. 2048 x 2048): a capture holds {CAPTURE_BYTES_PER_PIXEL} bytes per pixel and a run keeps several, so {} x {} = {pixels} pixels would need {:.1} GB per capture; got {:?}",
+                    s.resolution_px[0],
+                    s.resolution_px[1],
+                    (pixels * CAPTURE_BYTES_PER_PIXEL) as f64 / 1e9,
+                    s.resolution_px
+                ),
+            );
         }
         c.positive_all("sensor.focal_px", &s.focal_px);
         c.finite_all("sensor.principal_point_px", &s.principal_point_px);
@@ -627,13 +693,84 @@ impl Scene {
     /// Layout checks that need only the scene: the sensor looks at the pick tray, the pick tray
     /// lies in the image and within range, trays stand on the table.
     fn check_layout(&self, c: &mut Checker) {
+        self.check_view(c);
+        for (key, t) in [
+            ("pick_tray", &self.pick_tray),
+            ("place_tray.tray", &self.place_tray.tray),
+        ] {
+            let bottom = t.center_m[2] - t.floor_thickness_m;
+            if (bottom - self.table.top_z_m).abs() > 1e-3 {
+                c.fail(
+                    &format!("{key}.center_m[2]"),
+                    format!(
+                        "puts the tray bottom at z = {bottom:.4} m, not on the table top (table.top_z_m = {}); got {}",
+                        self.table.top_z_m, t.center_m[2]
+                    ),
+                );
+            }
+        }
+    }
+
+    /// The sensor's view of the pick tray: its frustum over the tray (apex at the optical centre,
+    /// base the tray's outer rim at floor level, as [`crate::sensor::ViewFrustum`] builds it) spans
+    /// a pyramid, and the whole tray floor lies in the image and within range.
+    fn check_view(&self, c: &mut Checker) {
         let Some(world_from_camera) = self.sensor.world_from_camera() else {
             return;
         };
         let camera_from_world = world_from_camera.inverse();
         let s = &self.sensor;
         let tray = &self.pick_tray;
+        // A pyramid: near enough the origin for single-precision geometry, the camera well above the
+        // rim plane (the tray frame is world z up), the base more than a point from the camera.
+        let mut pyramid = true;
+        for (key, p) in [
+            ("sensor.position_m", s.position_m),
+            ("pick_tray.center_m", tray.center_m),
+        ] {
+            if p.iter().any(|v| v.abs() > MAX_CELL_EXTENT_M) {
+                c.fail(
+                    key,
+                    format!("must lie within {MAX_CELL_EXTENT_M} m of the world origin, got {p:?}"),
+                );
+                pyramid = false;
+            }
+        }
+        let rim_z = tray.center_m[2] + tray.wall_height_m;
+        if s.position_m[2] < rim_z + MIN_CAMERA_ABOVE_RIM_M {
+            c.fail(
+                "sensor.position_m",
+                format!(
+                    "must be at least {MIN_CAMERA_ABOVE_RIM_M} m above the pick tray's rim (z = {rim_z:.3} m) so its view over the tray spans a pyramid, got {:?}",
+                    s.position_m
+                ),
+            );
+            pyramid = false;
+        }
+        let outer = tray.inner_size_m.map(|l| l + 2.0 * tray.wall_thickness_m);
         let world_from_tray = tray.world_from_tray();
+        let farthest_m = [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            .iter()
+            .map(|(sx, sy)| {
+                let corner = world_from_tray * nalgebra::Point3::new(sx * outer[0] / 2.0, sy * outer[1] / 2.0, 0.0);
+                (corner.coords - Vector3::from(s.position_m)).norm()
+            })
+            .fold(0.0, f64::max);
+        let smallest_m = outer[0].min(outer[1]);
+        if pyramid && smallest_m < MIN_VIEW_BASE_PER_DISTANCE * farthest_m {
+            c.fail(
+                "sensor.position_m",
+                format!(
+                    "is {farthest_m:.3} m from the pick tray's rim, more than {} times its width of {smallest_m:.3} m: the tray is a point in its view, which spans no pyramid; got {:?}",
+                    1.0 / MIN_VIEW_BASE_PER_DISTANCE,
+                    s.position_m
+                ),
+            );
+            pyramid = false;
+        }
+        if !pyramid {
+            return;
+        }
         let [lx, ly] = tray.inner_size_m;
         let mut outside = Vec::new();
         for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
@@ -657,18 +794,6 @@ impl Scene {
                     outside.join(", ")
                 ),
             );
-        }
-        for (key, t) in [("pick_tray", tray), ("place_tray.tray", &self.place_tray.tray)] {
-            let bottom = t.center_m[2] - t.floor_thickness_m;
-            if (bottom - self.table.top_z_m).abs() > 1e-3 {
-                c.fail(
-                    &format!("{key}.center_m[2]"),
-                    format!(
-                        "puts the tray bottom at z = {bottom:.4} m, not on the table top (table.top_z_m = {}); got {}",
-                        self.table.top_z_m, t.center_m[2]
-                    ),
-                );
-            }
         }
     }
 }

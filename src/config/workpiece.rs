@@ -10,7 +10,7 @@
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
-use super::{Checker, ConfigError, Scene};
+use super::{Checker, ConfigError, MAX_PLACE_SLOTS, Scene, SlotPattern};
 
 /// A workpiece type: one kind of part to be piled and picked.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -372,7 +372,16 @@ impl Workpiece {
             );
         }
         let footprint = [self.size_m[0], self.size_m[1]];
-        if scene.place_tray.slots_in_tray(footprint).is_empty() {
+        let slots = scene.place_tray.slot_count(footprint);
+        if scene.place_tray.pattern == SlotPattern::Grid && slots > MAX_PLACE_SLOTS {
+            c.fail(
+                "size_m",
+                format!(
+                    "gives {slots} placement slots in the place tray (inner {:?} m, gap {:?} m), more than {MAX_PLACE_SLOTS}: check the units",
+                    scene.place_tray.tray.inner_size_m, scene.place_tray.gap_m
+                ),
+            );
+        } else if scene.place_tray.slots_in_tray(footprint).is_empty() {
             c.fail(
                 "size_m",
                 format!(
