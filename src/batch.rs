@@ -80,33 +80,55 @@ impl BatchSpec {
     }
 }
 
-/// Parses `1-3` or `1,2,5` (or a mix, `1-3,7`) into seeds.
+/// Parses `1-3` or `1,2,5` (or a mix, `1-3,7`) into seeds: any u64 (a range may end at
+/// `u64::MAX`), ranges ascending, no seed twice, at most 10,000 in all.
 pub fn parse_seeds(text: &str) -> Result<Vec<u64>, BatchError> {
-    let bad = || BatchError::Input(format!("--seeds: expected e.g. 1-3 or 1,2,5, got {text:?}"));
+    // Most seeds in one batch. Every seed is a cell run of each workpiece (seconds to a minute of
+    // wall time each), and the expanded list and every run's entry are held in memory and in
+    // `takt.json`: 10,000 seeds are 60,000 runs of the six workpieces, hours to days of compute,
+    // so more is a typo (`1-1000000`) rather than a plan; a larger sweep is several batches.
+    const MAX_SEEDS: usize = 10_000;
+    let input = |m: String| BatchError::Input(format!("--seeds: {m}"));
+    let bad = || input(format!("expected e.g. 1-3 or 1,2,5, got {text:?}"));
+    let seed = |s: &str| -> Result<u64, BatchError> {
+        let s = s.trim();
+        match s.parse::<u64>() {
+            Ok(v) => Ok(v),
+            Err(_) if !s.is_empty() && s.bytes().all(|b| b.is_ascii_digit()) => {
+                Err(input(format!("seed {s} is out of range: seeds are 0 to {}", u64::MAX)))
+            }
+            Err(_) => Err(bad()),
+        }
+    };
+    let too_many = || {
+        input(format!(
+            "{text:?} gives more than {MAX_SEEDS} seeds, the most one batch runs"
+        ))
+    };
     let mut seeds = Vec::new();
     for part in text.split(',') {
-        let part = part.trim();
         if let Some((a, b)) = part.split_once('-') {
-            let (a, b): (u64, u64) = (
-                a.trim().parse().map_err(|_| bad())?,
-                b.trim().parse().map_err(|_| bad())?,
-            );
-            if b < a || b - a > 10_000 {
-                return Err(bad());
+            let (a, b) = (seed(a)?, seed(b)?);
+            if b < a {
+                return Err(input(format!(
+                    "range {a}-{b} is reversed (it ends below its start); write {b}-{a}"
+                )));
+            }
+            // `b - a` cannot overflow (b >= a); the count `b - a + 1` could, so compare first.
+            if b - a >= (MAX_SEEDS - seeds.len()) as u64 {
+                return Err(too_many());
             }
             seeds.extend(a..=b);
         } else {
-            seeds.push(part.parse().map_err(|_| bad())?);
+            seeds.push(seed(part)?);
+            if seeds.len() > MAX_SEEDS {
+                return Err(too_many());
+            }
         }
-    }
-    if seeds.is_empty() {
-        return Err(bad());
     }
     let mut seen = std::collections::BTreeSet::new();
     if let Some(d) = seeds.iter().find(|s| !seen.insert(**s)) {
-        return Err(BatchError::Input(format!(
-            "--seeds: seed {d} appears twice in {text:?}"
-        )));
+        return Err(input(format!("seed {d} appears twice in {text:?}")));
     }
     Ok(seeds)
 }
@@ -164,9 +186,40 @@ mod tests {
     fn seeds_and_shards_parse_and_shards_partition_the_batch() {
         assert_eq!(parse_seeds("1-3").unwrap(), vec![1, 2, 3]);
         assert_eq!(parse_seeds("4,1-2").unwrap(), vec![4, 1, 2]);
-        assert!(parse_seeds("3-1").is_err());
+        assert!(
+            parse_seeds("3-1")
+                .unwrap_err()
+                .to_string()
+                .contains("range 3-1 is reversed")
+        );
         assert!(parse_seeds("1,1").is_err());
-        assert!(parse_seeds("x").is_err());
+        for bad in ["x", "", "1,", "-3", "1-", "1-2-3", "1 2", "-1"] {
+            assert!(parse_seeds(bad).is_err(), "{bad:?}");
+        }
+        // Up to u64::MAX, and not one past it.
+        let max = u64::MAX;
+        assert_eq!(parse_seeds(&format!("{}-{max}", max - 1)).unwrap(), vec![max - 1, max]);
+        assert_eq!(parse_seeds(&format!("{max},0")).unwrap(), vec![max, 0]);
+        let past = parse_seeds(&format!("{max}-18446744073709551616"))
+            .unwrap_err()
+            .to_string();
+        assert!(past.contains("seed 18446744073709551616 is out of range"), "{past}");
+        // At most MAX_SEEDS, however written; a range over the whole u64 does not overflow.
+        assert_eq!(parse_seeds("1-10000").unwrap().len(), 10_000);
+        for many in [
+            "1-10001".to_string(),
+            "0-18446744073709551615".to_string(),
+            "1-5000,6001-11001".to_string(),
+            format!("1-10000,{max}"),
+        ] {
+            assert!(
+                parse_seeds(&many)
+                    .unwrap_err()
+                    .to_string()
+                    .contains("more than 10000 seeds"),
+                "{many}"
+            );
+        }
         assert_eq!(parse_shard("2/3").unwrap(), (2, 3));
         for bad in ["0/3", "4/3", "1", "a/b", "1/0"] {
             assert!(parse_shard(bad).is_err(), "{bad}");

@@ -20,7 +20,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
 
-use crate::config::{Checker, ConfigError, GripperConfig, RobotConfig};
+use crate::config::{Checker, ConfigError, GripperConfig, Problem, RobotConfig};
 
 pub use dynamics::{DynamicsModel, Payload};
 pub use ik::{IkError, IkSolution};
@@ -163,6 +163,170 @@ fn all_finite(vals: &[f64]) -> bool {
     vals.iter().all(|v| v.is_finite())
 }
 
+/// The joints from the root link to the flange link, each with its child link.
+type Chain<'u> = Vec<(&'u urdf_rs::Joint, &'u urdf_rs::Link)>;
+
+/// How many times each name occurs, for the names that occur more than once.
+fn repeated<'u>(names: impl Iterator<Item = &'u str>) -> BTreeMap<&'u str, usize> {
+    let mut count: BTreeMap<&str, usize> = BTreeMap::new();
+    for n in names {
+        *count.entry(n).or_default() += 1;
+    }
+    count.retain(|_, n| *n > 1);
+    count
+}
+
+/// Checks every reference between the URDF's elements and finds the serial chain from the root
+/// link to `flange_link`: link and joint names are unique, every joint's parent and child are
+/// links the file defines, no link has two parent joints, the flange link exists, the chain up
+/// from it reaches a root without a cycle and has [`DOF`] joints. Returns the root link and the
+/// chain, base to flange; every problem names the URDF, the element and the bad name.
+///
+/// `scene` is the label of the cell file that names the flange link, when there is one: a flange
+/// link the URDF lacks, or one that is not the end of the URDF's chain, is then that file's problem
+/// (key `robot.flange_link`); on its own, the URDF is to blame.
+fn kinematic_chain<'u>(
+    label: &str,
+    urdf: &'u urdf_rs::Robot,
+    flange_link: &str,
+    scene: Option<&str>,
+) -> Result<(&'u urdf_rs::Link, Chain<'u>), ConfigError> {
+    let scene_problem = |scene: &str, message: String| ConfigError {
+        problems: vec![Problem {
+            file: scene.to_string(),
+            key: "robot.flange_link".to_string(),
+            message,
+        }],
+    };
+    let mut c = Checker::new(label);
+    for (name, n) in repeated(urdf.links.iter().map(|l| l.name.as_str())) {
+        c.fail(
+            &format!("link[{name}]"),
+            format!("is defined {n} times; link names must be unique"),
+        );
+    }
+    for (name, n) in repeated(urdf.joints.iter().map(|j| j.name.as_str())) {
+        c.fail(
+            &format!("joint[{name}]"),
+            format!("is defined {n} times; joint names must be unique"),
+        );
+    }
+    let links_by_name: BTreeMap<&str, &urdf_rs::Link> = urdf.links.iter().map(|l| (l.name.as_str(), l)).collect();
+    let mut by_child: BTreeMap<&str, &urdf_rs::Joint> = BTreeMap::new();
+    for j in &urdf.joints {
+        let key = format!("joint[{}]", j.name);
+        for (end, link) in [("parent", &j.parent.link), ("child", &j.child.link)] {
+            if !links_by_name.contains_key(link.as_str()) {
+                c.fail(
+                    &format!("{key}.{end}"),
+                    format!("names link {link:?}, which the URDF does not define"),
+                );
+            }
+        }
+        if j.parent.link == j.child.link {
+            c.fail(
+                &key,
+                format!("has the same parent and child link, got {:?}", j.child.link),
+            );
+        }
+        if let Some(first) = by_child.insert(j.child.link.as_str(), j) {
+            c.fail(
+                &format!("joint[{}].child", j.name),
+                format!(
+                    "names link {:?}, which is already the child of joint {:?}; a link has one parent joint",
+                    j.child.link, first.name
+                ),
+            );
+        }
+    }
+    let mut problems = c.problems;
+    if !links_by_name.contains_key(flange_link) {
+        match scene {
+            Some(scene) => {
+                problems.extend(scene_problem(scene, format!("names no link of {label}, got {flange_link:?}")).problems)
+            }
+            None => problems.push(Problem {
+                file: label.to_string(),
+                key: String::new(),
+                message: format!("has no link named {flange_link:?} (the cell's robot.flange_link)"),
+            }),
+        }
+    }
+    if !problems.is_empty() {
+        return Err(ConfigError { problems });
+    }
+
+    // Walk from the flange link up to the root through the joints' child links.
+    let mut chain: Chain<'u> = Vec::new();
+    let mut link = flange_link;
+    let mut visited = std::collections::BTreeSet::new();
+    while let Some(&j) = by_child.get(link) {
+        if !visited.insert(link) {
+            let names: Vec<&str> = chain.iter().map(|(j, _)| j.name.as_str()).collect();
+            return Err(ConfigError::one(
+                label,
+                &format!("joint[{}]", j.name),
+                format!(
+                    "closes a cycle in the joint tree: walking up from {flange_link:?} through joints {} returns to link {link:?}",
+                    names.join(", ")
+                ),
+            ));
+        }
+        let child = links_by_name.get(link).copied();
+        let Some(child) = child else {
+            return Err(ConfigError::one(
+                label,
+                &format!("joint[{}].child", j.name),
+                format!("names link {link:?}, which the URDF does not define"),
+            ));
+        };
+        chain.push((j, child));
+        link = j.parent.link.as_str();
+    }
+    chain.reverse();
+    let Some(root) = links_by_name.get(link).copied() else {
+        return Err(ConfigError::one(
+            label,
+            "",
+            format!("has no link named {link:?} (the root of the chain to {flange_link:?})"),
+        ));
+    };
+    if chain.len() != DOF {
+        let names: Vec<&str> = chain.iter().map(|(j, _)| j.name.as_str()).collect();
+        let mid_chain = urdf.joints.iter().any(|j| j.parent.link == flange_link);
+        if let (Some(scene), true) = (scene, mid_chain) {
+            return Err(scene_problem(
+                scene,
+                format!(
+                    "names link {flange_link:?} of {label}, which is {} joint(s) from its root link ({}) and has more joints beyond it; the flange link must end a chain of {DOF} revolute joints",
+                    chain.len(),
+                    names.join(", ")
+                ),
+            ));
+        }
+        let roots = urdf
+            .links
+            .iter()
+            .filter(|l| !by_child.contains_key(l.name.as_str()))
+            .count();
+        let hint = if roots > 1 {
+            format!("; link {link:?} is the child of no joint, so a joint between it and its parent is missing")
+        } else {
+            String::new()
+        };
+        return Err(ConfigError::one(
+            label,
+            "",
+            format!(
+                "needs a chain of {DOF} revolute joints from its root link to {flange_link:?}, found {} ({}){hint}",
+                chain.len(),
+                names.join(", ")
+            ),
+        ));
+    }
+    Ok((root, chain))
+}
+
 impl RobotModel {
     /// Builds the model from URDF text and the cell's robot and gripper sections.
     /// `label` names the URDF in error messages.
@@ -172,64 +336,38 @@ impl RobotModel {
         robot: &RobotConfig,
         gripper: &GripperConfig,
     ) -> Result<Self, ConfigError> {
+        Self::build(label, urdf_text, robot, gripper, None)
+    }
+
+    /// Builds the model of a loaded scene.
+    pub fn from_scene(scene: &crate::config::LoadedScene) -> Result<Self, ConfigError> {
+        Self::build(
+            &scene.urdf_label,
+            &scene.urdf_text,
+            &scene.scene.robot,
+            &scene.scene.gripper,
+            Some(&scene.label),
+        )
+    }
+
+    /// [`Self::from_urdf`]; `scene` labels the cell file the robot section came from, if any.
+    fn build(
+        label: &str,
+        urdf_text: &str,
+        robot: &RobotConfig,
+        gripper: &GripperConfig,
+        scene: Option<&str>,
+    ) -> Result<Self, ConfigError> {
         let urdf = urdf_rs::read_from_string(urdf_text).map_err(|e| {
             let msg = e.to_string().replace('\n', " ");
             ConfigError::one(label, "", format!("is not a valid URDF: {msg}"))
         })?;
+        let (root, chain) = kinematic_chain(label, &urdf, &robot.flange_link, scene)?;
         let mut c = Checker::new(label);
-
-        // Walk from the flange link up to the root through the joints' child links.
-        let by_child: BTreeMap<&str, &urdf_rs::Joint> =
-            urdf.joints.iter().map(|j| (j.child.link.as_str(), j)).collect();
-        let links_by_name: BTreeMap<&str, &urdf_rs::Link> = urdf.links.iter().map(|l| (l.name.as_str(), l)).collect();
-        if !links_by_name.contains_key(robot.flange_link.as_str()) {
-            return Err(ConfigError::one(
-                label,
-                "",
-                format!(
-                    "has no link named {:?} (the cell's robot.flange_link)",
-                    robot.flange_link
-                ),
-            ));
-        }
-        let mut chain: Vec<&urdf_rs::Joint> = Vec::new();
-        let mut link = robot.flange_link.as_str();
-        while let Some(j) = by_child.get(link) {
-            chain.push(j);
-            link = j.parent.link.as_str();
-            if chain.len() > urdf.joints.len() {
-                return Err(ConfigError::one(label, "", "has a cycle in its joint tree"));
-            }
-        }
-        chain.reverse();
-        let root = link;
-        let root_is_a_child_nowhere = urdf
-            .links
-            .iter()
-            .filter(|l| !by_child.contains_key(l.name.as_str()))
-            .count();
-        if chain.len() != DOF {
-            let names: Vec<&str> = chain.iter().map(|j| j.name.as_str()).collect();
-            let hint = if root_is_a_child_nowhere > 1 {
-                format!("; link {root:?} is the child of no joint, so a joint between it and its parent is missing")
-            } else {
-                String::new()
-            };
-            return Err(ConfigError::one(
-                label,
-                "",
-                format!(
-                    "needs a chain of {DOF} revolute joints from its root link to {:?}, found {} ({}){hint}",
-                    robot.flange_link,
-                    chain.len(),
-                    names.join(", ")
-                ),
-            ));
-        }
 
         let d = &robot.drives;
         let mut joints = Vec::with_capacity(DOF);
-        for (i, j) in chain.iter().enumerate() {
+        for (i, &(j, _)) in chain.iter().enumerate() {
             let key = format!("joint[{}]", j.name);
             if j.joint_type != urdf_rs::JointType::Revolute {
                 c.fail(&key, format!("must be revolute, got {:?}", j.joint_type));
@@ -302,11 +440,9 @@ impl RobotModel {
         }
 
         let mut links = Vec::with_capacity(DOF + 1);
-        let link_names: Vec<&str> = std::iter::once(root)
-            .chain(chain.iter().map(|j| j.child.link.as_str()))
-            .collect();
-        for (i, name) in link_names.iter().enumerate() {
-            let l = links_by_name[name];
+        let chain_links = std::iter::once(root).chain(chain.iter().map(|&(_, l)| l));
+        for (i, l) in chain_links.enumerate() {
+            let name = l.name.as_str();
             let key = format!("link[{name}].inertial");
             let inn = &l.inertial;
             let m = inn.mass.value;
@@ -314,6 +450,8 @@ impl RobotModel {
             let inertia = Matrix3::new(it.ixx, it.ixy, it.ixz, it.ixy, it.iyy, it.iyz, it.ixz, it.iyz, it.izz);
             if i > 0 && !(m.is_finite() && m > 0.0) {
                 c.fail(&format!("{key}.mass"), format!("must be > 0, got {m}"));
+            } else if i == 0 && !(m.is_finite() && m >= 0.0) {
+                c.fail(&format!("{key}.mass"), format!("must be >= 0, got {m}"));
             }
             if !all_finite(inertia.as_slice()) || !all_finite(&inn.origin.xyz.0) || !all_finite(&inn.origin.rpy.0) {
                 c.fail(&key, "must be finite");
@@ -369,6 +507,15 @@ impl RobotModel {
                     if dims.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
                         c.fail(&skey, format!("dimensions must be > 0, got {dims:?}"));
                     }
+                    if !all_finite(&col.origin.xyz.0) || !all_finite(&col.origin.rpy.0) {
+                        c.fail(
+                            &format!("{skey}.origin"),
+                            format!(
+                                "must be finite, got xyz {:?} rpy {:?}",
+                                col.origin.xyz.0, col.origin.rpy.0
+                            ),
+                        );
+                    }
                     shapes.push(LinkShape {
                         link_from_shape: pose(&col.origin),
                         primitive: p,
@@ -400,16 +547,6 @@ impl RobotModel {
             coulomb_smoothing_rad_s: d.coulomb_smoothing_deg_s.to_radians(),
             ik_geometry,
         })
-    }
-
-    /// Builds the model of a loaded scene.
-    pub fn from_scene(scene: &crate::config::LoadedScene) -> Result<Self, ConfigError> {
-        Self::from_urdf(
-            &scene.urdf_label,
-            &scene.urdf_text,
-            &scene.scene.robot,
-            &scene.scene.gripper,
-        )
     }
 
     /// Lower position limits [rad].
@@ -519,5 +656,115 @@ pub(crate) mod test_support {
     /// Uniformly random in-limit configuration from a simple deterministic generator.
     pub fn random_q(robot: &RobotModel, rng: &mut impl rand::RngExt) -> JointVector {
         JointVector::from_fn(|i, _| rng.random_range(robot.joints[i].lower_rad..robot.joints[i].upper_rad))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{LoadedScene, embedded::VIPER_S650_URDF};
+
+    /// Loads `urdf` with the default cell's robot section: on its own (`check x.urdf`), and as the
+    /// URDF of a cell file labelled `cell.toml` whose flange link is `flange`.
+    fn load(urdf: &str, flange: &str) -> (Result<RobotModel, ConfigError>, Result<RobotModel, ConfigError>) {
+        let mut scene = LoadedScene::embedded_default().expect("embedded default scene");
+        let alone = RobotModel::from_urdf("x.urdf", urdf, &scene.scene.robot, &scene.scene.gripper);
+        scene.scene.robot.flange_link = flange.to_string();
+        scene.label = "cell.toml".into();
+        scene.urdf_label = "x.urdf".into();
+        scene.urdf_text = urdf.to_string();
+        (alone, RobotModel::from_scene(&scene))
+    }
+
+    fn lines(r: Result<RobotModel, ConfigError>) -> String {
+        r.map(|_| String::new()).unwrap_or_else(|e| e.to_string())
+    }
+
+    #[test]
+    fn every_reference_between_urdf_elements_is_checked() {
+        let link3 = VIPER_S650_URDF.find("<link name=\"link_3\">").unwrap();
+        let link3_end = link3 + VIPER_S650_URDF[link3..].find("</link>").unwrap() + "</link>".len();
+        let joint4 = VIPER_S650_URDF.find("<joint name=\"joint_4\"").unwrap();
+        let joint4_end = joint4 + VIPER_S650_URDF[joint4..].find("</joint>").unwrap() + "</joint>".len();
+        let cases: [(String, &[&str]); 7] = [
+            (
+                format!("{}{}", &VIPER_S650_URDF[..link3], &VIPER_S650_URDF[link3_end..]),
+                &[
+                    "x.urdf: joint[joint_3].child names link \"link_3\", which the URDF does not define",
+                    "x.urdf: joint[joint_4].parent names link \"link_3\", which the URDF does not define",
+                ],
+            ),
+            (
+                VIPER_S650_URDF.replacen("<link name=\"link_2\">", "<link name=\"link_two\">", 1),
+                &["x.urdf: joint[joint_2].child names link \"link_2\", which the URDF does not define"],
+            ),
+            (
+                VIPER_S650_URDF.replacen("<link name=\"link_2\">", "<link name=\"link_1\">", 1),
+                &["x.urdf: link[link_1] is defined 2 times; link names must be unique"],
+            ),
+            (
+                VIPER_S650_URDF.replacen("<joint name=\"joint_5\"", "<joint name=\"joint_4\"", 1),
+                &["x.urdf: joint[joint_4] is defined 2 times; joint names must be unique"],
+            ),
+            (
+                VIPER_S650_URDF.replacen("<child link=\"link_5\"/>", "<child link=\"link_4\"/>", 1),
+                &[
+                    "x.urdf: joint[joint_5] has the same parent and child link, got \"link_4\"",
+                    "x.urdf: joint[joint_5].child names link \"link_4\", which is already the child of joint \"joint_4\"",
+                ],
+            ),
+            (
+                VIPER_S650_URDF.replacen("<parent link=\"base_link\"/>", "<parent link=\"link_3\"/>", 1),
+                &["x.urdf: joint[joint_3] closes a cycle in the joint tree: walking up from \"link_6\""],
+            ),
+            (
+                format!("{}{}", &VIPER_S650_URDF[..joint4], &VIPER_S650_URDF[joint4_end..]),
+                &["x.urdf: needs a chain of 6 revolute joints from its root link to \"link_6\", found 2"],
+            ),
+        ];
+        for (urdf, expected) in cases {
+            let (alone, in_cell) = load(&urdf, "link_6");
+            let (alone, in_cell) = (lines(alone), lines(in_cell));
+            for e in expected {
+                assert!(alone.contains(e), "lacks {e:?}:\n{alone}");
+            }
+            assert_eq!(alone, in_cell, "the URDF is to blame in a cell too");
+        }
+    }
+
+    #[test]
+    fn a_flange_link_the_urdf_lacks_or_that_is_mid_chain_is_the_cell_files_problem() {
+        let (alone, in_cell) = load(VIPER_S650_URDF, "link_9");
+        assert!(lines(in_cell).starts_with("cell.toml: robot.flange_link names no link of x.urdf, got \"link_9\""));
+        assert!(
+            alone.is_ok(),
+            "alone, the URDF is checked against the default cell's flange link_6"
+        );
+        let (_, in_cell) = load(VIPER_S650_URDF, "link_3");
+        let e = lines(in_cell);
+        assert!(
+            e.starts_with("cell.toml: robot.flange_link names link \"link_3\" of x.urdf, which is 3 joint(s) from its root link (joint_1, joint_2, joint_3) and has more joints beyond it"),
+            "{e}"
+        );
+        // A URDF that names the default flange link nowhere: the URDF's problem when checked alone.
+        let renamed = VIPER_S650_URDF.replace("\"link_6\"", "\"tool0\"");
+        let (alone, _) = load(&renamed, "link_6");
+        assert_eq!(
+            lines(alone),
+            "x.urdf: has no link named \"link_6\" (the cell's robot.flange_link)"
+        );
+    }
+
+    #[test]
+    fn collision_origins_must_be_finite() {
+        let at = VIPER_S650_URDF.find("<collision>").unwrap();
+        let origin = at + VIPER_S650_URDF[at..].find("<origin xyz=\"").unwrap() + "<origin xyz=\"".len();
+        assert_eq!(&VIPER_S650_URDF[origin..origin + 2], "0 ");
+        let urdf = format!("{}nan{}", &VIPER_S650_URDF[..origin], &VIPER_S650_URDF[origin + 1..]);
+        let e = lines(load(&urdf, "link_6").0);
+        assert!(
+            e.contains("x.urdf: link[base_link].collision[0].origin must be finite, got xyz [NaN,"),
+            "{e}"
+        );
     }
 }

@@ -374,7 +374,7 @@ fn runs_and_batches_refuse_bad_cells_before_starting() {
             &["batch", "--workpieces", "A,workpieces/tiny.toml"],
             "workpieces/tiny.toml: size_m has no face the suction cup fits on",
         ),
-        (&["batch", "--seeds", "3-1"], "--seeds: expected e.g. 1-3"),
+        (&["batch", "--seeds", "3-1"], "--seeds: range 3-1 is reversed"),
     ];
     for (args, expected) in cases {
         let before = ws.listing();
@@ -388,4 +388,186 @@ fn runs_and_batches_refuse_bad_cells_before_starting() {
         assert_eq!(ws.listing(), before, "{args:?} wrote files");
         assert!(!ws.path("out").exists(), "{args:?} left an output folder");
     }
+}
+
+/// Runs `binpick ARGS --out out` in the workspace and asserts exit 2, no panic, the expected
+/// fragments on stderr, nothing written and no output folder.
+fn refuses_to_start(ws: &Workspace, args: &[&str], expected: &[&str]) {
+    let before = ws.listing();
+    let mut all = args.to_vec();
+    all.extend_from_slice(&["--out", "out"]);
+    let out = binpick_in(ws.dir.path(), &all);
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{args:?}: {err}");
+    assert!(!err.contains("panicked"), "{args:?}: {err}");
+    for e in expected {
+        assert!(err.contains(e), "{args:?}: stderr lacks {e:?}:\n{err}");
+    }
+    assert_eq!(ws.listing(), before, "{args:?} wrote files");
+    assert!(!ws.path("out").exists(), "{args:?} left an output folder");
+}
+
+/// `--seeds` ranges: reversed, past u64::MAX, and more seeds than a batch runs; a range ending at
+/// u64::MAX itself is valid (see the unit tests of `parse_seeds`).
+#[test]
+fn batch_seeds_reversed_overflowing_or_too_many() {
+    let ws = Workspace::new();
+    let max = u64::MAX;
+    for (seeds, expected) in [
+        (
+            "5-3".to_string(),
+            "--seeds: range 5-3 is reversed (it ends below its start); write 3-5",
+        ),
+        (
+            format!("{}-{max}1", max - 1),
+            "--seeds: seed 184467440737095516151 is out of range: seeds are 0 to 18446744073709551615",
+        ),
+        (
+            "18446744073709551615-18446744073709551616".to_string(),
+            "seed 18446744073709551616 is out of range",
+        ),
+        (
+            format!("0-{max}"),
+            "gives more than 10000 seeds, the most one batch runs",
+        ),
+        ("1-6000,7000-12000".to_string(), "gives more than 10000 seeds"),
+    ] {
+        refuses_to_start(&ws, &["batch", "--seeds", &seeds], &[expected]);
+    }
+}
+
+/// A camera level with the pick tray (beside it at floor height, looking across it, it sees the
+/// floor's corners in one image row, and its view over the tray is a flat pyramid) or so far from
+/// it that the tray is a point: the cell file is refused naming `sensor.position_m` and its value,
+/// by `check` and before a `sense` starts.
+#[test]
+fn camera_level_with_or_far_from_the_tray() {
+    let ws = Workspace::new();
+    let p = ws.edit(
+        "scenes/default.toml",
+        "scenes/level.toml",
+        "position_m = [0.10, 0.45, 1.008]",
+        "position_m = [0.10, 1.45, 0.008]",
+    );
+    let text =
+        std::fs::read_to_string(&p)
+            .unwrap()
+            .replacen("image_up = [0.0, 1.0, 0.0]", "image_up = [0.0, 0.0, 1.0]", 1);
+    std::fs::write(&p, text).unwrap();
+    let expected = [
+        "scenes/level.toml: sensor.position_m must be at least 0.05 m above the pick tray's rim (z = 0.068 m) so its view over the tray spans a pyramid, got [0.1, 1.45, 0.008]",
+    ];
+    let err = rejects(&ws, "scenes/level.toml", &expected);
+    assert_eq!(err.lines().count(), 1, "{err}");
+    refuses_to_start(
+        &ws,
+        &[
+            "sense",
+            "--workpiece",
+            "C",
+            "--count",
+            "2",
+            "--scene",
+            "scenes/level.toml",
+        ],
+        &expected,
+    );
+    // A camera 500 m above the tray sees it as a point: the frustum over it degenerates into a line
+    // (before this check, `sense` panicked building it: "a camera above a tray spans a pyramid").
+    let p = ws.edit(
+        "scenes/default.toml",
+        "scenes/far.toml",
+        "position_m = [0.10, 0.45, 1.008]",
+        "position_m = [0.10, 0.45, 500.008]",
+    );
+    let text = std::fs::read_to_string(&p)
+        .unwrap()
+        .replacen("min_range_m = 0.5", "min_range_m = 499.0", 1)
+        .replacen("max_range_m = 1.5", "max_range_m = 501.0", 1);
+    std::fs::write(&p, text).unwrap();
+    let expected = [
+        "scenes/far.toml: sensor.position_m is 500.000 m from the pick tray's rim, more than 100 times its width of 0.256 m",
+        "spans no pyramid; got [0.1, 0.45, 500.008]",
+    ];
+    rejects(&ws, "scenes/far.toml", &expected);
+    refuses_to_start(
+        &ws,
+        &[
+            "sense",
+            "--workpiece",
+            "C",
+            "--count",
+            "1",
+            "--scene",
+            "scenes/far.toml",
+        ],
+        &expected,
+    );
+    // Just above the rim plus the margin is a pyramid, and accepted.
+    ws.edit(
+        "scenes/level.toml",
+        "scenes/low.toml",
+        "position_m = [0.10, 1.45, 0.008]",
+        "position_m = [0.10, 1.45, 0.20]",
+    );
+    let out = binpick_in(ws.dir.path(), &["check", "scenes/low.toml"]);
+    assert!(!stderr(&out).contains("sensor.position_m"), "{}", stderr(&out));
+}
+
+/// An 8192 x 8192 image is within each axis's range but would need 1.6 GB per capture: refused,
+/// with the cap and the reason.
+#[test]
+fn sensor_resolution_needing_gigabytes_per_capture() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/huge.toml",
+        "resolution_px = [320, 256]",
+        "resolution_px = [8192, 8192]",
+    );
+    let err = rejects(
+        &ws,
+        "scenes/huge.toml",
+        &[
+            "scenes/huge.toml: sensor.resolution_px must have at most 4194304 pixels (4 MP, e.g. 2048 x 2048)",
+            "8192 x 8192 = 67108864 pixels would need 1.6 GB per capture; got [8192, 8192]",
+        ],
+    );
+    assert_eq!(err.lines().count(), 1, "{err}");
+    // The cap itself is accepted.
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/cap.toml",
+        "resolution_px = [320, 256]",
+        "resolution_px = [2048, 2048]",
+    );
+    let out = binpick_in(ws.dir.path(), &["check", "scenes/cap.toml"]);
+    assert!(!stderr(&out).contains("resolution_px"), "{}", stderr(&out));
+}
+
+/// A part 1 nm long in a place tray without gaps would give 5 billion grid slots: refused with the
+/// count (before, building the slot list aborted the process: "memory allocation ... failed").
+#[test]
+fn a_part_giving_billions_of_place_slots() {
+    let ws = Workspace::new();
+    ws.edit("scenes/default.toml", "scenes/gap0.toml", "gap_m = 0.01", "gap_m = 0.0");
+    ws.edit(
+        "workpieces/E.toml",
+        "workpieces/thin.toml",
+        "size_m = [0.010, 0.005, 0.010]",
+        "size_m = [0.000000001, 0.01, 0.01]",
+    );
+    let before = ws.listing();
+    let out = binpick_in(
+        ws.dir.path(),
+        &["check", "--scene", "scenes/gap0.toml", "workpieces/thin.toml"],
+    );
+    let err = stderr(&out);
+    assert_eq!(out.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("workpieces/thin.toml: size_m gives 4799999980 placement slots in the place tray")
+            && err.contains("more than 10000: check the units"),
+        "{err}"
+    );
+    assert_eq!(ws.listing(), before);
 }

@@ -5,6 +5,7 @@ mod cli_pile;
 mod cli_robot;
 mod cli_sense;
 mod execution;
+mod fuzz;
 mod golden;
 mod physics;
 mod planning;

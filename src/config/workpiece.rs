@@ -1,0 +1,395 @@
+//! The workpiece files: one kind of part to be piled and picked.
+//!
+//! Job: the workpiece TOML as typed structs, its shape resolved into primitives ([`Piece`]),
+//! [`Workpiece::validate`] on its own and [`Workpiece::check_fits_scene`] against a cell (the part
+//! fits both trays, the suction cup fits on one of its faces).
+//!
+//! Units: metres, kilograms, degrees only in `grasp.*_deg` (as read). Frame: the part frame, origin
+//! at the centre of the bounding box `size_m`, its axes along the box edges.
+
+use nalgebra::Vector3;
+use serde::{Deserialize, Serialize};
+
+use super::{Checker, ConfigError, MAX_PLACE_SLOTS, Scene, SlotPattern};
+
+/// A workpiece type: one kind of part to be piled and picked.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct Workpiece {
+    /// Short name (A ... F in the reference table).
+    pub name: String,
+    /// What electronic part this is.
+    pub kind: String,
+    /// Bounding box of the whole part (body and leads) in the part frame [m].
+    pub size_m: [f64; 3],
+    /// Part mass [kg].
+    pub mass_kg: f64,
+    /// Coulomb friction coefficient against trays and other parts.
+    pub friction: f64,
+    /// Restitution coefficient.
+    pub restitution: f64,
+    /// Default number of parts in a pile.
+    pub pile_count: u32,
+    /// Collision shape.
+    pub shape: ShapeConfig,
+    /// Grasp hints.
+    pub grasp: GraspHints,
+}
+
+/// Kinds of workpiece shape.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum ShapeKind {
+    /// The bounding box `size_m`.
+    Box,
+    /// A compound of boxes and cylinders (`parts`), e.g. a body with leads.
+    Compound,
+    /// A triangle mesh file (OBJ or STL), convex-decomposed for the physics.
+    Mesh,
+}
+
+/// The collision shape of a workpiece, in the part frame (origin at the bounding box centre).
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ShapeConfig {
+    /// Box, compound or mesh.
+    pub kind: ShapeKind,
+    /// Compound: the primitives.
+    #[serde(default)]
+    pub parts: Vec<ShapePart>,
+    /// Mesh: file path relative to the workpiece file.
+    #[serde(default)]
+    pub mesh_file: Option<String>,
+    /// Mesh: scale from file units to metres.
+    #[serde(default)]
+    pub mesh_scale: Option<f64>,
+}
+
+/// Primitive kinds in a compound shape.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Primitive {
+    /// A box with edge lengths `size_m`.
+    Box,
+    /// A cylinder of `radius_m` and `length_m` along `axis`.
+    Cylinder,
+}
+
+/// Roles of compound parts: the body carries the suction faces; leads do not.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PartRole {
+    /// The part's body (suction faces).
+    Body,
+    /// A lead or pin.
+    Lead,
+}
+
+/// Axes of the part frame.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum Axis {
+    /// Part x.
+    X,
+    /// Part y.
+    Y,
+    /// Part z.
+    Z,
+}
+
+/// One primitive of a compound shape.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ShapePart {
+    /// Box or cylinder.
+    pub primitive: Primitive,
+    /// Body or lead.
+    pub role: PartRole,
+    /// Centre in the part frame [m].
+    pub center_m: [f64; 3],
+    /// Box: edge lengths [m].
+    #[serde(default)]
+    pub size_m: Option<[f64; 3]>,
+    /// Cylinder: radius [m].
+    #[serde(default)]
+    pub radius_m: Option<f64>,
+    /// Cylinder: length [m].
+    #[serde(default)]
+    pub length_m: Option<f64>,
+    /// Cylinder: axis.
+    #[serde(default)]
+    pub axis: Option<Axis>,
+}
+
+impl ShapePart {
+    /// Half extents of the primitive's axis-aligned bounding box [m].
+    pub fn half_extents_m(&self) -> Option<[f64; 3]> {
+        match self.primitive {
+            Primitive::Box => self.size_m.map(|s| [s[0] / 2.0, s[1] / 2.0, s[2] / 2.0]),
+            Primitive::Cylinder => {
+                let (r, h) = (self.radius_m?, self.length_m? / 2.0);
+                Some(match self.axis? {
+                    Axis::X => [h, r, r],
+                    Axis::Y => [r, h, r],
+                    Axis::Z => [r, r, h],
+                })
+            }
+        }
+    }
+}
+
+/// A workpiece primitive resolved to its geometry, in the part frame [m].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum Piece {
+    /// A box.
+    Box {
+        /// Centre.
+        center_m: Vector3<f64>,
+        /// Half extents.
+        half_m: Vector3<f64>,
+    },
+    /// A cylinder.
+    Cylinder {
+        /// Centre.
+        center_m: Vector3<f64>,
+        /// Radius.
+        radius_m: f64,
+        /// Half length along `axis`.
+        half_length_m: f64,
+        /// Axis.
+        axis: Axis,
+    },
+}
+
+impl Workpiece {
+    /// The shape's primitives with their roles: a box workpiece is one body box, a compound its
+    /// parts, a mesh none (its geometry lives in the mesh file). For validated workpieces.
+    pub fn pieces(&self) -> Vec<(PartRole, Piece)> {
+        match self.shape.kind {
+            ShapeKind::Box => vec![(
+                PartRole::Body,
+                Piece::Box {
+                    center_m: Vector3::zeros(),
+                    half_m: Vector3::from(self.size_m) / 2.0,
+                },
+            )],
+            ShapeKind::Compound => self
+                .shape
+                .parts
+                .iter()
+                .map(|p| {
+                    let center_m = Vector3::from(p.center_m);
+                    let piece = match p.primitive {
+                        Primitive::Box => Piece::Box {
+                            center_m,
+                            half_m: Vector3::from(p.size_m.unwrap_or([0.0; 3])) / 2.0,
+                        },
+                        Primitive::Cylinder => Piece::Cylinder {
+                            center_m,
+                            radius_m: p.radius_m.unwrap_or(0.0),
+                            half_length_m: p.length_m.unwrap_or(0.0) / 2.0,
+                            axis: p.axis.unwrap_or(Axis::Z),
+                        },
+                    };
+                    (p.role, piece)
+                })
+                .collect(),
+            ShapeKind::Mesh => Vec::new(),
+        }
+    }
+}
+
+/// Grasp hints for a workpiece.
+#[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct GraspHints {
+    /// The part looks the same after this yaw about its top face normal [deg]
+    /// (90 for a square top, 180 for a rectangle, 360 for none, 0 for a round top: any yaw).
+    pub yaw_symmetry_deg: f64,
+    /// Yaw of the part's x axis in its place slot, relative to the slot [deg].
+    pub place_yaw_deg: f64,
+    /// Smallest margin between cup edge and face edge that still seals [m].
+    pub face_margin_m: f64,
+}
+
+impl Workpiece {
+    /// Checks every value of the workpiece on its own.
+    pub fn validate(&self, file: &str) -> Result<(), ConfigError> {
+        let mut c = Checker::new(file);
+        if self.name.trim().is_empty() {
+            c.fail("name", "must not be empty");
+        }
+        c.positive_all("size_m", &self.size_m);
+        c.positive("mass_kg", self.mass_kg);
+        c.within("friction", self.friction, 0.0, 2.0);
+        c.within("restitution", self.restitution, 0.0, 1.0);
+        if !(1..=1000).contains(&self.pile_count) {
+            c.fail(
+                "pile_count",
+                format!("must be within [1, 1000], got {}", self.pile_count),
+            );
+        }
+        c.within("grasp.yaw_symmetry_deg", self.grasp.yaw_symmetry_deg, 0.0, 360.0);
+        c.finite("grasp.place_yaw_deg", self.grasp.place_yaw_deg);
+        c.non_negative("grasp.face_margin_m", self.grasp.face_margin_m);
+        let sh = &self.shape;
+        match sh.kind {
+            ShapeKind::Box => {
+                if !sh.parts.is_empty() {
+                    c.fail("shape.parts", "is only allowed when kind = \"compound\"");
+                }
+                if sh.mesh_file.is_some() {
+                    c.fail("shape.mesh_file", "is only allowed when kind = \"mesh\"");
+                }
+            }
+            ShapeKind::Compound => {
+                if sh.parts.is_empty() {
+                    c.fail(
+                        "shape.parts",
+                        "must list at least one primitive when kind = \"compound\"",
+                    );
+                }
+                if !sh.parts.iter().any(|p| p.role == PartRole::Body) {
+                    c.fail("shape.parts", "must contain at least one part with role = \"body\"");
+                }
+                let half = self.size_m.map(|s| s / 2.0);
+                for (i, p) in sh.parts.iter().enumerate() {
+                    let k = format!("shape.parts[{i}]");
+                    c.finite_all(&format!("{k}.center_m"), &p.center_m);
+                    match p.primitive {
+                        Primitive::Box => match p.size_m {
+                            Some(s) => c.positive_all(&format!("{k}.size_m"), &s),
+                            None => c.fail(&format!("{k}.size_m"), "is required for a box"),
+                        },
+                        Primitive::Cylinder => {
+                            match p.radius_m {
+                                Some(r) => c.positive(&format!("{k}.radius_m"), r),
+                                None => c.fail(&format!("{k}.radius_m"), "is required for a cylinder"),
+                            }
+                            match p.length_m {
+                                Some(l) => c.positive(&format!("{k}.length_m"), l),
+                                None => c.fail(&format!("{k}.length_m"), "is required for a cylinder"),
+                            }
+                            if p.axis.is_none() {
+                                c.fail(&format!("{k}.axis"), "is required for a cylinder");
+                            }
+                        }
+                    }
+                    if let Some(he) = p.half_extents_m() {
+                        for a in 0..3 {
+                            let (lo, hi) = (p.center_m[a] - he[a], p.center_m[a] + he[a]);
+                            if lo < -half[a] - 1e-9 || hi > half[a] + 1e-9 {
+                                c.fail(
+                                    &k,
+                                    format!(
+                                        "sticks out of the bounding box size_m along axis {a}: spans [{lo:.4}, {hi:.4}], box is ±{:.4}",
+                                        half[a]
+                                    ),
+                                );
+                                break;
+                            }
+                        }
+                    }
+                }
+            }
+            ShapeKind::Mesh => {
+                match &sh.mesh_file {
+                    None => c.fail("shape.mesh_file", "is required when kind = \"mesh\""),
+                    Some(f) if !(f.ends_with(".obj") || f.ends_with(".stl")) => {
+                        c.fail("shape.mesh_file", format!("must be an .obj or .stl file, got {f:?}"))
+                    }
+                    _ => {}
+                }
+                if let Some(s) = sh.mesh_scale {
+                    c.positive("shape.mesh_scale", s);
+                }
+            }
+        }
+        c.finish()
+    }
+
+    /// The faces of the body's bounding box as `(normal axis, [edge_a_m, edge_b_m])`:
+    /// the candidate suction faces (a face is only as large as the body's box).
+    pub fn body_faces_m(&self) -> Vec<(Axis, [f64; 2])> {
+        let body = self.body_size_m();
+        vec![
+            (Axis::X, [body[1], body[2]]),
+            (Axis::Y, [body[0], body[2]]),
+            (Axis::Z, [body[0], body[1]]),
+        ]
+    }
+
+    /// Edge lengths of the body's bounding box (without leads) [m].
+    pub fn body_size_m(&self) -> [f64; 3] {
+        if self.shape.kind != ShapeKind::Compound {
+            return self.size_m;
+        }
+        let mut lo = [f64::INFINITY; 3];
+        let mut hi = [f64::NEG_INFINITY; 3];
+        for p in self.shape.parts.iter().filter(|p| p.role == PartRole::Body) {
+            if let Some(he) = p.half_extents_m() {
+                for a in 0..3 {
+                    lo[a] = lo[a].min(p.center_m[a] - he[a]);
+                    hi[a] = hi[a].max(p.center_m[a] + he[a]);
+                }
+            }
+        }
+        [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]
+    }
+
+    /// Checks that the workpiece fits the scene: it fits in both trays, and the gripper's cup fits
+    /// on at least one face of the body.
+    pub fn check_fits_scene(&self, file: &str, scene: &Scene) -> Result<(), ConfigError> {
+        let mut c = Checker::new(file);
+        // Lying flat, the part's two longest edges must fit the tray's inner floor.
+        let mut dims = self.size_m;
+        dims.sort_by(|a, b| b.total_cmp(a));
+        let [tx, ty] = scene.pick_tray.inner_size_m;
+        let (tray_long, tray_short) = (tx.max(ty), tx.min(ty));
+        if dims[0] > tray_long || dims[1] > tray_short {
+            c.fail(
+                "size_m",
+                format!(
+                    "is larger than the pick tray: a part of {} x {} m lying flat does not fit its {tx} x {ty} m inner floor",
+                    dims[0], dims[1]
+                ),
+            );
+        }
+        let cup = scene.gripper.cup_diameter_m + 2.0 * self.grasp.face_margin_m;
+        let faces = self.body_faces_m();
+        if !faces.iter().any(|(_, [a, b])| a.min(*b) >= cup) {
+            let largest = faces
+                .iter()
+                .map(|(_, [a, b])| format!("{a}x{b}"))
+                .collect::<Vec<_>>()
+                .join(", ");
+            c.fail(
+                "size_m",
+                format!(
+                    "has no face the suction cup fits on: cup {} m plus margin 2x{} m, faces {largest} m",
+                    scene.gripper.cup_diameter_m, self.grasp.face_margin_m
+                ),
+            );
+        }
+        let footprint = [self.size_m[0], self.size_m[1]];
+        let slots = scene.place_tray.slot_count(footprint);
+        if scene.place_tray.pattern == SlotPattern::Grid && slots > MAX_PLACE_SLOTS {
+            c.fail(
+                "size_m",
+                format!(
+                    "gives {slots} placement slots in the place tray (inner {:?} m, gap {:?} m), more than {MAX_PLACE_SLOTS}: check the units",
+                    scene.place_tray.tray.inner_size_m, scene.place_tray.gap_m
+                ),
+            );
+        } else if scene.place_tray.slots_in_tray(footprint).is_empty() {
+            c.fail(
+                "size_m",
+                format!(
+                    "leaves no placement slot in the place tray (inner {:?} m, gap {:?} m)",
+                    scene.place_tray.tray.inner_size_m, scene.place_tray.gap_m
+                ),
+            );
+        }
+        c.finish()
+    }
+}
