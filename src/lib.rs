@@ -27,6 +27,7 @@ pub mod chart;
 pub mod config;
 pub mod cycle;
 pub mod execution;
+pub mod geometry;
 pub mod grasp;
 pub mod physics;
 pub mod planning;

@@ -25,7 +25,7 @@
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, Vector3};
 use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
@@ -111,14 +111,8 @@ impl RobotSpheres {
             links.push(v);
         }
         // The hand: body cylinder from the flange, cup to the tool frame (as in the physics).
-        let g = &scene.gripper;
-        let cup_len = (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0);
-        let body_len = g.tool_length_m - cup_len;
         let flange = links.len() - 1;
-        for (r, z0, z1) in [
-            (g.body_diameter_m / 2.0, 0.0, body_len),
-            (g.cup_diameter_m / 2.0, body_len, g.tool_length_m),
-        ] {
+        for (r, z0, z1) in crate::geometry::HandGeometry::new(&scene.gripper).cylinders() {
             links[flange].extend(cover_cylinder(r, (z1 - z0) / 2.0).into_iter().map(|s| Sphere {
                 center: s.center + Vector3::z() * (z0 + z1) / 2.0,
                 radius: s.radius,
@@ -232,50 +226,17 @@ pub struct Environment {
     pub pile: Option<PileColumns>,
 }
 
-fn tray_boxes(name: &str, t: &crate::config::TrayConfig) -> Vec<EnvBox> {
-    crate::physics::overlap::tray_pieces(t)
-        .into_iter()
-        .enumerate()
-        .map(|(k, (world_from_tray, poly))| {
-            let lo = poly
-                .vertices
-                .iter()
-                .fold(Vector3::repeat(f64::MAX), |a, v| a.inf(&v.coords));
-            let hi = poly
-                .vertices
-                .iter()
-                .fold(Vector3::repeat(f64::MIN), |a, v| a.sup(&v.coords));
-            EnvBox {
-                name: format!("{name} {}", ["floor", "wall +x", "wall -x", "wall +y", "wall -y"][k]),
-                world_from_box: world_from_tray
-                    * Isometry3::translation((lo.x + hi.x) / 2.0, (lo.y + hi.y) / 2.0, (lo.z + hi.z) / 2.0),
-                half_m: (hi - lo) / 2.0,
-            }
-        })
-        .collect()
-}
-
 impl Environment {
     /// The cell's fixed geometry: table, both trays, obstacles.
     pub fn from_scene(scene: &Scene) -> Self {
-        let t = &scene.table;
-        let mut boxes = vec![EnvBox {
-            name: "table".into(),
-            world_from_box: Isometry3::translation(t.center_xy_m[0], t.center_xy_m[1], t.top_z_m - t.thickness_m / 2.0),
-            half_m: Vector3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, t.thickness_m / 2.0),
-        }];
-        boxes.extend(tray_boxes("pick tray", &scene.pick_tray));
-        boxes.extend(tray_boxes("place tray", &scene.place_tray.tray));
-        for o in &scene.obstacles {
-            boxes.push(EnvBox {
-                name: o.name.clone(),
-                world_from_box: Isometry3::from_parts(
-                    Translation3::new(o.center_m[0], o.center_m[1], o.center_m[2]),
-                    UnitQuaternion::from_euler_angles(0.0, 0.0, o.yaw_deg.to_radians()),
-                ),
-                half_m: Vector3::from(o.size_m) / 2.0,
-            });
-        }
+        let boxes = crate::geometry::cell_boxes(scene)
+            .into_iter()
+            .map(|(_, b)| EnvBox {
+                world_from_box: b.world_from_box(),
+                half_m: b.half_m,
+                name: b.name,
+            })
+            .collect();
         Environment { boxes, pile: None }
     }
 

@@ -1,0 +1,255 @@
+//! Cell geometry: the one description of the cell's solid shapes and of the suction cup's force
+//! model, from the cell file.
+//!
+//! Job: turn the cell file's table, trays, obstacles and gripper into named boxes, the hand's two
+//! cylinders and the cup's holding-force model, once. The physics world builds its colliders from
+//! them, the planner its obstacles and the hand's spheres, the overlap check its tray pieces, the
+//! grasp selector its cup length, the recordings their cell boxes and the benchmarks their scenes,
+//! so none of these can drift apart.
+//!
+//! Units: m, N, kg, m/s^2. Frames: each box is placed in a frame (`world_from_frame`: the world
+//! for the table, the tray frame for tray pieces, the obstacle's own yawed frame) at a centre in
+//! that frame; the hand's cylinders lie along the flange z axis, from the flange face (z = 0) to
+//! the tool frame at the cup lip (z = `tool_length_m`).
+
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+
+use crate::config::{GripperConfig, Scene, TrayConfig};
+
+/// A named solid box of the cell.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NamedBox {
+    /// What it is (`table`, `pick tray wall +x`, `obstacle "sensor post"`, ...).
+    pub name: String,
+    /// The frame the box is placed in, in the world.
+    pub world_from_frame: Isometry3<f64>,
+    /// The box's centre in that frame [m].
+    pub center_m: Vector3<f64>,
+    /// Half extents along the frame's axes [m].
+    pub half_m: Vector3<f64>,
+}
+
+impl NamedBox {
+    /// `world_from_box`: the box's own frame (centre, axes of its frame).
+    pub fn world_from_box(&self) -> Isometry3<f64> {
+        self.world_from_frame * Isometry3::translation(self.center_m.x, self.center_m.y, self.center_m.z)
+    }
+}
+
+/// Which part of the cell a box belongs to.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BoxRole {
+    /// The table top.
+    Table,
+    /// A piece of the pick tray (floor or wall).
+    PickTray,
+    /// A piece of the place tray.
+    PlaceTray,
+    /// An obstacle from the cell file.
+    Obstacle,
+}
+
+/// The table top as a box.
+pub fn table_box(scene: &Scene) -> NamedBox {
+    let t = &scene.table;
+    NamedBox {
+        name: "table".into(),
+        world_from_frame: Isometry3::identity(),
+        center_m: Vector3::new(t.center_xy_m[0], t.center_xy_m[1], t.top_z_m - t.thickness_m / 2.0),
+        half_m: Vector3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, t.thickness_m / 2.0),
+    }
+}
+
+/// Names of a tray's pieces, in the order [`tray_boxes`] returns them.
+pub const TRAY_PIECES: [&str; 5] = ["floor", "wall +x", "wall -x", "wall +y", "wall -y"];
+
+/// A tray's floor and four walls, named `"{name} floor"`, `"{name} wall +x"`, ... in the tray
+/// frame (origin at the centre of the inner floor surface). The floor reaches under the walls;
+/// the x walls span the whole outer length, the y walls fit between them.
+pub fn tray_boxes(name: &str, t: &TrayConfig) -> Vec<NamedBox> {
+    let world_from_tray = t.world_from_tray();
+    let [lx, ly] = t.inner_size_m;
+    let (w, h, f) = (t.wall_thickness_m, t.wall_height_m, t.floor_thickness_m);
+    let zc = (h - f) / 2.0;
+    let hz = (h + f) / 2.0;
+    let pieces = [
+        (
+            Vector3::new(0.0, 0.0, -f / 2.0),
+            Vector3::new(lx / 2.0 + w, ly / 2.0 + w, f / 2.0),
+        ),
+        (
+            Vector3::new(lx / 2.0 + w / 2.0, 0.0, zc),
+            Vector3::new(w / 2.0, ly / 2.0 + w, hz),
+        ),
+        (
+            Vector3::new(-lx / 2.0 - w / 2.0, 0.0, zc),
+            Vector3::new(w / 2.0, ly / 2.0 + w, hz),
+        ),
+        (
+            Vector3::new(0.0, ly / 2.0 + w / 2.0, zc),
+            Vector3::new(lx / 2.0, w / 2.0, hz),
+        ),
+        (
+            Vector3::new(0.0, -ly / 2.0 - w / 2.0, zc),
+            Vector3::new(lx / 2.0, w / 2.0, hz),
+        ),
+    ];
+    pieces
+        .into_iter()
+        .zip(TRAY_PIECES)
+        .map(|((center_m, half_m), piece)| NamedBox {
+            name: format!("{name} {piece}"),
+            world_from_frame: world_from_tray,
+            center_m,
+            half_m,
+        })
+        .collect()
+}
+
+/// The cell file's obstacles as boxes, named as in the file.
+pub fn obstacle_boxes(scene: &Scene) -> Vec<NamedBox> {
+    scene
+        .obstacles
+        .iter()
+        .map(|o| NamedBox {
+            name: o.name.clone(),
+            world_from_frame: Isometry3::from_parts(
+                Translation3::new(o.center_m[0], o.center_m[1], o.center_m[2]),
+                UnitQuaternion::from_euler_angles(0.0, 0.0, o.yaw_deg.to_radians()),
+            ),
+            center_m: Vector3::zeros(),
+            half_m: Vector3::from(o.size_m) / 2.0,
+        })
+        .collect()
+}
+
+/// Every fixed box of the cell with its role, in a fixed order: the table, the pick tray's five
+/// pieces, the place tray's five pieces, the obstacles in file order.
+pub fn cell_boxes(scene: &Scene) -> Vec<(BoxRole, NamedBox)> {
+    let mut out = vec![(BoxRole::Table, table_box(scene))];
+    out.extend(tray_boxes("pick tray", &scene.pick_tray).into_iter().map(|b| (BoxRole::PickTray, b)));
+    out.extend(
+        tray_boxes("place tray", &scene.place_tray.tray)
+            .into_iter()
+            .map(|b| (BoxRole::PlaceTray, b)),
+    );
+    out.extend(obstacle_boxes(scene).into_iter().map(|b| (BoxRole::Obstacle, b)));
+    out
+}
+
+/// The suction hand's solid shape: a body cylinder from the flange face, then the cup, both
+/// along the flange z axis, ending at the tool frame (the cup lip).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct HandGeometry {
+    /// Flange face to cup lip [m].
+    pub tool_length_m: f64,
+    /// Radius of the body cylinder [m].
+    pub body_radius_m: f64,
+    /// Length of the body cylinder, from the flange face [m].
+    pub body_length_m: f64,
+    /// Radius of the cup [m].
+    pub cup_radius_m: f64,
+    /// Length of the cup, ending at the lip [m].
+    pub cup_length_m: f64,
+}
+
+impl HandGeometry {
+    /// The hand of a cell file. The cup is one and a half cup diameters long (a bellows cup),
+    /// but at most half the tool.
+    pub fn new(g: &GripperConfig) -> Self {
+        let cup_length_m = (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0);
+        HandGeometry {
+            tool_length_m: g.tool_length_m,
+            body_radius_m: g.body_diameter_m / 2.0,
+            body_length_m: g.tool_length_m - cup_length_m,
+            cup_radius_m: g.cup_diameter_m / 2.0,
+            cup_length_m,
+        }
+    }
+
+    /// The two cylinders as (radius, z from, z to) along the flange z axis [m]: body, then cup.
+    pub fn cylinders(&self) -> [(f64, f64, f64); 2] {
+        [
+            (self.body_radius_m, 0.0, self.body_length_m),
+            (self.cup_radius_m, self.body_length_m, self.tool_length_m),
+        ]
+    }
+}
+
+/// The cup's holding-force model (simplified, stated in the README): a full seal holds
+/// vacuum x cup area; the force the cup must exert on a part, m |a_tool - g|, is amplified for
+/// peeling by (1 + 4 e / d), e the part's centre-of-mass offset from the cup axis and d the cup
+/// diameter.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SuctionModel {
+    /// Cup lip radius [m].
+    pub cup_radius_m: f64,
+    /// Holding force of a full seal [N].
+    pub holding_n: f64,
+}
+
+impl SuctionModel {
+    /// The cup of a cell file.
+    pub fn new(g: &GripperConfig) -> Self {
+        let r = g.cup_diameter_m / 2.0;
+        SuctionModel {
+            cup_radius_m: r,
+            holding_n: g.vacuum_kpa * 1e3 * std::f64::consts::PI * r * r,
+        }
+    }
+
+    /// The peel amplification (1 + 4 e / d) for a centre-of-mass offset `offset_m` [m].
+    pub fn peel_factor(&self, offset_m: f64) -> f64 {
+        1.0 + 4.0 * offset_m / (2.0 * self.cup_radius_m)
+    }
+
+    /// The force the cup must exert [N] to hold `mass_kg` under a tool specific force of
+    /// magnitude `specific_force_m_s2` (|a - g|), with the centre of mass `offset_m` off the axis.
+    pub fn required_n(&self, mass_kg: f64, specific_force_m_s2: f64, offset_m: f64) -> f64 {
+        mass_kg * specific_force_m_s2 * self.peel_factor(offset_m)
+    }
+
+    /// The largest tool specific force [m/s^2] that needs at most `share` of the holding force
+    /// for a part of `mass_kg` held `offset_m` off the cup axis.
+    pub fn max_specific_force_m_s2(&self, share: f64, mass_kg: f64, offset_m: f64) -> f64 {
+        share * self.holding_n / (mass_kg * self.peel_factor(offset_m))
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::LoadedScene;
+
+    #[test]
+    fn trays_are_five_pieces_that_enclose_the_inner_floor() {
+        let s = LoadedScene::embedded_default().unwrap().scene;
+        let boxes = tray_boxes("pick tray", &s.pick_tray);
+        assert_eq!(boxes.len(), 5);
+        let t = &s.pick_tray;
+        // The floor's top is the tray frame's z = 0; the walls reach from under the floor to the rim.
+        assert!((boxes[0].center_m.z + boxes[0].half_m.z).abs() < 1e-12);
+        for b in &boxes[1..] {
+            assert!((b.center_m.z + b.half_m.z - t.wall_height_m).abs() < 1e-12, "{}", b.name);
+            assert!((b.center_m.z - b.half_m.z + t.floor_thickness_m).abs() < 1e-12, "{}", b.name);
+        }
+        // Inner faces of the walls at +-inner/2.
+        assert!((boxes[1].center_m.x - boxes[1].half_m.x - t.inner_size_m[0] / 2.0).abs() < 1e-12);
+        assert!((boxes[4].center_m.y + boxes[4].half_m.y + t.inner_size_m[1] / 2.0).abs() < 1e-12);
+        let all = cell_boxes(&s);
+        assert_eq!(all.len(), 11 + s.obstacles.len());
+        assert_eq!(all[0].1.name, "table");
+    }
+
+    #[test]
+    fn hand_and_suction_model() {
+        let s = LoadedScene::embedded_default().unwrap().scene;
+        let h = HandGeometry::new(&s.gripper);
+        assert!((h.body_length_m + h.cup_length_m - h.tool_length_m).abs() < 1e-15);
+        let m = SuctionModel::new(&s.gripper);
+        assert_eq!(m.peel_factor(0.0), 1.0);
+        // At the limit the required force equals the share of the holding force.
+        let a = m.max_specific_force_m_s2(0.75, 0.01, 0.002);
+        assert!((m.required_n(0.01, a, 0.002) - 0.75 * m.holding_n).abs() < 1e-9);
+    }
+}
