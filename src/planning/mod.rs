@@ -19,6 +19,6 @@ pub mod model;
 pub mod planner;
 pub mod search;
 
-pub use model::{CollisionModel, EnvBox, Environment, PileColumns, RobotSpheres, SELF_PAIRS, Sphere};
+pub use model::{CollisionModel, EnvBox, Environment, Nearest, PileColumns, RobotSpheres, SELF_PAIRS, Sphere};
 pub use planner::{Algorithm, CertifiedEdges, DiscreteEdges, Plan, PlanError, PlanOptions};
 pub use search::{Budget, ConfigSpace, EdgeValidity, JointBox, PlanStats, Search};

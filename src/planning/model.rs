@@ -234,13 +234,14 @@ impl Environment {
         Environment { boxes, pile: None }
     }
 
-    /// Signed distance from a sphere to the environment, capped at `horizon` [m], and what is nearest.
-    fn sphere_distance(&self, c: &Vector3<f64>, r: f64, horizon: f64) -> (f64, usize) {
-        let mut best = (horizon, usize::MAX);
+    /// Signed distance from a sphere to the environment, capped at `horizon` [m], and what is
+    /// nearest (`None` when nothing is nearer than the horizon).
+    fn sphere_distance(&self, c: &Vector3<f64>, r: f64, horizon: f64) -> (f64, Option<EnvPart>) {
+        let mut best = (horizon, None);
         for (k, b) in self.boxes.iter().enumerate() {
             let d = point_box_distance(c, b) - r;
             if d < best.0 {
-                best = (d, k);
+                best = (d, Some(EnvPart::Box(k)));
             }
         }
         if let Some(p) = &self.pile {
@@ -274,7 +275,7 @@ impl Environment {
                         );
                         let d = q.sup(&Vector3::zeros()).norm() + q.max().min(0.0) - r;
                         if d < best.0 {
-                            best = (d, usize::MAX - 1);
+                            best = (d, Some(EnvPart::Pile));
                         }
                     }
                 }
@@ -282,6 +283,36 @@ impl Environment {
         }
         best
     }
+}
+
+/// A part of the environment: one of its boxes or the pile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EnvPart {
+    /// `Environment::boxes[k]`.
+    Box(usize),
+    /// The pile's columns.
+    Pile,
+}
+
+/// What is nearest to the arm at a clearance query (named by [`CollisionModel::describe`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Nearest {
+    /// Nothing within the horizon.
+    Nothing,
+    /// Link `link` of the robot and the environment's box `k` (`Environment::boxes[k]`).
+    Box {
+        /// Index of the robot's link.
+        link: usize,
+        /// Index of the box.
+        k: usize,
+    },
+    /// Link `link` of the robot and the pile.
+    Pile {
+        /// Index of the robot's link.
+        link: usize,
+    },
+    /// Two links of the robot (a pair of [`SELF_PAIRS`]).
+    Links(usize, usize),
 }
 
 /// Link pairs checked for self-collision (non-adjacent, and not the base with link 2 whose
@@ -315,49 +346,63 @@ impl CollisionModel {
         }
     }
 
-    /// Lower bound on the robot's clearance at `q` (environment and self) [m], and what is nearest.
+    /// Lower bound on the robot's clearance at `q` (environment and self) [m], and what is nearest,
+    /// named (`"link4 and pick tray wall +x"`; empty when nothing is within the horizon).
     pub fn clearance(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, String) {
+        let (d, nearest) = self.nearest(q, stats);
+        (d, self.describe(nearest))
+    }
+
+    /// Lower bound on the robot's clearance at `q` (environment and self) [m], capped at the
+    /// horizon, and what is nearest, unnamed: the hot path of [`CollisionModel::free`] and the
+    /// edge checks, which never need the name ([`CollisionModel::describe`] gives it).
+    pub fn nearest(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest) {
         stats.clearance_checks += 1;
         let frames = self.robot.link_frames(q);
         let base = self.robot.world_from_base;
-        let mut best = (self.horizon_m, String::new());
-        let mut centers: Vec<Vec<Vector3<f64>>> = Vec::with_capacity(DOF + 1);
-        for (li, spheres) in self.spheres.links.iter().enumerate() {
+        let mut best = (self.horizon_m, Nearest::Nothing);
+        // Sphere centres in the world, link after link; link `li`'s from `first[li]` on.
+        let links = &self.spheres.links;
+        let mut centers: Vec<Vector3<f64>> = Vec::with_capacity(links.iter().map(Vec::len).sum());
+        let mut first = [0usize; DOF + 2];
+        for (li, spheres) in links.iter().enumerate() {
             let world_from_link = base * frames[li].to_isometry();
-            let pts: Vec<Vector3<f64>> = spheres
-                .iter()
-                .map(|s| (world_from_link * Point3::from(s.center)).coords)
-                .collect();
+            first[li] = centers.len();
+            centers.extend(
+                spheres
+                    .iter()
+                    .map(|s| (world_from_link * Point3::from(s.center)).coords),
+            );
             // The base stands on the table: it is not checked against the environment.
             if li > 0 {
                 let b = &self.spheres.bounds[li];
                 let bc = (world_from_link * Point3::from(b.center)).coords;
                 let (db, _) = self.env.sphere_distance(&bc, b.radius, best.0);
                 if db < best.0 {
-                    for (p, s) in pts.iter().zip(spheres) {
-                        let (d, k) = self.env.sphere_distance(p, s.radius, best.0);
+                    for (p, s) in centers[first[li]..].iter().zip(spheres) {
+                        let (d, part) = self.env.sphere_distance(p, s.radius, best.0);
                         if d < best.0 {
-                            let what = match k {
-                                usize::MAX => String::new(),
-                                k if k == usize::MAX - 1 => "the pile".into(),
-                                k => self.env.boxes[k].name.clone(),
-                            };
-                            best = (d, format!("{} and {what}", self.robot.links[li].name));
+                            best = (
+                                d,
+                                match part {
+                                    Some(EnvPart::Box(k)) => Nearest::Box { link: li, k },
+                                    Some(EnvPart::Pile) => Nearest::Pile { link: li },
+                                    None => Nearest::Nothing,
+                                },
+                            );
                         }
                     }
                 }
             }
-            centers.push(pts);
         }
+        first[links.len()] = centers.len();
+        let on = |li: usize| &centers[first[li]..first[li + 1]];
         for (a, b) in SELF_PAIRS {
-            for (pa, sa) in centers[a].iter().zip(&self.spheres.links[a]) {
-                for (pb, sb) in centers[b].iter().zip(&self.spheres.links[b]) {
+            for (pa, sa) in on(a).iter().zip(&links[a]) {
+                for (pb, sb) in on(b).iter().zip(&links[b]) {
                     let d = (pa - pb).norm() - sa.radius - sb.radius;
                     if d < best.0 {
-                        best = (
-                            d,
-                            format!("{} and {}", self.robot.links[a].name, self.robot.links[b].name),
-                        );
+                        best = (d, Nearest::Links(a, b));
                     }
                 }
             }
@@ -365,9 +410,20 @@ impl CollisionModel {
         best
     }
 
+    /// What `nearest` names, as `"{link} and {what}"` (empty for [`Nearest::Nothing`]).
+    pub fn describe(&self, nearest: Nearest) -> String {
+        let link = |li: usize| &self.robot.links[li].name;
+        match nearest {
+            Nearest::Nothing => String::new(),
+            Nearest::Box { link: li, k } => format!("{} and {}", link(li), self.env.boxes[k].name),
+            Nearest::Pile { link: li } => format!("{} and the pile", link(li)),
+            Nearest::Links(a, b) => format!("{} and {}", link(a), link(b)),
+        }
+    }
+
     /// Whether `q` is within limits and clear by the margin.
     pub fn free(&self, q: &JointVector, stats: &mut PlanStats) -> bool {
-        self.robot.within_limits(q, 0.0) && self.clearance(q, stats).0 > self.margin_m
+        self.robot.within_limits(q, 0.0) && self.nearest(q, stats).0 > self.margin_m
     }
 
     /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
@@ -383,8 +439,8 @@ impl CollisionModel {
                 (d - self.margin_m) / sweep
             }
         };
-        let d0 = self.clearance(a, stats).0;
-        let d1 = self.clearance(b, stats).0;
+        let d0 = self.nearest(a, stats).0;
+        let d1 = self.nearest(b, stats).0;
         if d0 <= self.margin_m || d1 <= self.margin_m {
             return false;
         }
@@ -395,7 +451,7 @@ impl CollisionModel {
                 continue;
             }
             let mid = 0.5 * (lo + hi);
-            let d = self.clearance(&at(mid), stats).0;
+            let d = self.nearest(&at(mid), stats).0;
             // A certified step must make progress: below a micrometre of motion, call it a collision.
             let c = cover(d);
             if d <= self.margin_m || c * sweep < 1e-6 {

@@ -146,18 +146,20 @@ impl CollisionModel {
     ) -> Result<Plan, PlanError> {
         let t0 = Instant::now();
         let mut stats = PlanStats::default();
-        let (ds, ws) = self.clearance(start, &mut stats);
+        let (ds, ns) = self.nearest(start, &mut stats);
         if !self.robot.within_limits(start, 1e-9) || ds <= self.margin_m {
             return Err(PlanError::StartInCollision(format!(
-                "clearance {:.1} mm between {ws}",
-                ds * 1e3
+                "clearance {:.1} mm between {}",
+                ds * 1e3,
+                self.describe(ns)
             )));
         }
-        let (dg, wg) = self.clearance(goal, &mut stats);
+        let (dg, ng) = self.nearest(goal, &mut stats);
         if !self.robot.within_limits(goal, 1e-9) || dg <= self.margin_m {
             return Err(PlanError::GoalInCollision(format!(
-                "clearance {:.1} mm between {wg}",
-                dg * 1e3
+                "clearance {:.1} mm between {}",
+                dg * 1e3,
+                self.describe(ng)
             )));
         }
         let space = self.joint_box();
