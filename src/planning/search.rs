@@ -290,3 +290,198 @@ where
     }
     out
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use nalgebra::{Vector2, Vector3};
+    use rand::SeedableRng;
+    use rand_chacha::ChaCha8Rng;
+
+    type P = Vector2<f64>;
+
+    /// The unit square.
+    const SQUARE: JointBox<2> = JointBox {
+        lower_rad: Vector2::new(0.0, 0.0),
+        upper_rad: Vector2::new(1.0, 1.0),
+    };
+    const START: P = Vector2::new(0.1, 0.2);
+    const GOAL: P = Vector2::new(0.9, 0.2);
+
+    /// Closed axis-aligned rectangles (lo, hi) a point must stay out of.
+    struct Walls(Vec<(P, P)>);
+
+    impl Walls {
+        /// A wall across the square at x in [0.45, 0.55], open at y in `gap` if any.
+        fn across(gap: Option<(f64, f64)>) -> Self {
+            let (x0, x1) = (0.45, 0.55);
+            Walls(match gap {
+                Some((y0, y1)) => vec![(P::new(x0, -1.0), P::new(x1, y0)), (P::new(x0, y1), P::new(x1, 2.0))],
+                None => vec![(P::new(x0, -1.0), P::new(x1, 2.0))],
+            })
+        }
+
+        fn inside(&self, p: &P) -> bool {
+            self.0
+                .iter()
+                .any(|(lo, hi)| (0..2).all(|i| p[i] >= lo[i] && p[i] <= hi[i]))
+        }
+    }
+
+    impl EdgeValidity<P> for Walls {
+        /// Exact: the segment misses every rectangle (slab clipping).
+        fn valid(&self, a: &P, b: &P, stats: &mut PlanStats) -> bool {
+            stats.edges += 1;
+            let d = b - a;
+            self.0.iter().all(|(lo, hi)| {
+                let (mut t0, mut t1) = (0.0f64, 1.0f64);
+                for i in 0..2 {
+                    if d[i] == 0.0 {
+                        if a[i] < lo[i] || a[i] > hi[i] {
+                            return true;
+                        }
+                    } else {
+                        let (u, v) = ((lo[i] - a[i]) / d[i], (hi[i] - a[i]) / d[i]);
+                        t0 = t0.max(u.min(v));
+                        t1 = t1.min(u.max(v));
+                        if t0 > t1 {
+                            return true;
+                        }
+                    }
+                }
+                false
+            })
+        }
+    }
+
+    /// Accepts every edge: the control that the dense check below can fail.
+    struct AnyEdge;
+
+    impl EdgeValidity<P> for AnyEdge {
+        fn valid(&self, _: &P, _: &P, stats: &mut PlanStats) -> bool {
+            stats.edges += 1;
+            true
+        }
+    }
+
+    /// Independent of the slab test: points every 0.1 mm along every edge, none in a wall.
+    fn dense_check(walls: &Walls, path: &[P]) -> Result<(), String> {
+        for (k, w) in path.windows(2).enumerate() {
+            let n = ((w[1] - w[0]).norm() / 1e-4).ceil().max(1.0) as usize;
+            for s in 0..=n {
+                let p = w[0] + (w[1] - w[0]) * (s as f64 / n as f64);
+                if walls.inside(&p) {
+                    return Err(format!("edge {k} enters a wall at {p:?}"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    fn length(path: &[P]) -> f64 {
+        path.windows(2).map(|w| (w[1] - w[0]).norm()).sum()
+    }
+
+    fn search<'a, V>(edges: &'a V, max_samples: usize) -> Search<'a, JointBox<2>, V> {
+        Search {
+            space: &SQUARE,
+            edges,
+            step: 0.1,
+            budget: Budget {
+                max_samples,
+                wall_s: 30.0,
+                started: Instant::now(),
+            },
+        }
+    }
+
+    /// Both searches, seeded.
+    fn both(
+        s: &Search<'_, JointBox<2>, impl EdgeValidity<P>>,
+        seed: u64,
+    ) -> [(&'static str, Option<Vec<P>>, usize); 2] {
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let (mut a, mut b) = (PlanStats::default(), PlanStats::default());
+        let p = rrt(s, &START, &GOAL, 0.05, &mut rng, &mut a);
+        let q = rrt_connect(s, &START, &GOAL, &mut rng, &mut b);
+        [("rrt", p, a.samples), ("rrt-connect", q, b.samples)]
+    }
+
+    #[test]
+    fn rrt_and_rrt_connect_go_through_the_gap_and_shortcutting_never_lengthens() {
+        let walls = Walls::across(Some((0.6, 0.7)));
+        let s = search(&walls, 20_000);
+        for seed in 1..=5 {
+            for (name, path, _) in both(&s, seed) {
+                let path = path.unwrap_or_else(|| panic!("{name}, seed {seed}: no path"));
+                assert_eq!((path[0], path[path.len() - 1]), (START, GOAL), "{name}");
+                assert!(path.iter().all(|p| p.iter().all(|x| (0.0..=1.0).contains(x))), "{name}");
+                assert!(
+                    path.windows(2).all(|w| (w[1] - w[0]).amax() <= 0.1 + 1e-12),
+                    "{name}: step"
+                );
+                dense_check(&walls, &path).unwrap_or_else(|e| panic!("{name}, seed {seed}: {e}"));
+                let before = length(&path);
+                let mut rng = ChaCha8Rng::seed_from_u64(seed);
+                let short = shortcut(&walls, path, 20, &mut rng, &mut PlanStats::default());
+                assert_eq!((short[0], short[short.len() - 1]), (START, GOAL), "{name}");
+                dense_check(&walls, &short).unwrap_or_else(|e| panic!("{name}, seed {seed}, shortcut: {e}"));
+                assert!(
+                    length(&short) <= before + 1e-12,
+                    "{name}, seed {seed}: shortcut lengthened"
+                );
+                // Through the gap and round its corners: not much longer than the two straight legs.
+                assert!(length(&short) < 1.2 * 2.0 * (0.5f64.powi(2) + 0.45f64.powi(2)).sqrt());
+            }
+        }
+    }
+
+    #[test]
+    fn a_wall_without_a_gap_exhausts_the_budget() {
+        let walls = Walls::across(None);
+        for (name, path, samples) in both(&search(&walls, 2_000), 1) {
+            assert!(path.is_none(), "{name} crossed a closed wall");
+            assert_eq!(samples, 2_000, "{name}");
+        }
+    }
+
+    #[test]
+    fn the_dense_check_catches_a_path_through_a_wall() {
+        let walls = Walls::across(Some((0.6, 0.7)));
+        for (name, path, _) in both(&search(&AnyEdge, 20_000), 1) {
+            let path = path.expect("any edge will do");
+            assert!(dense_check(&walls, &path).is_err(), "{name}: {path:?}");
+        }
+    }
+
+    #[test]
+    fn a_seeded_search_is_repeatable() {
+        let walls = Walls::across(Some((0.6, 0.7)));
+        let s = search(&walls, 20_000);
+        let [(_, a, _), (_, b, _)] = both(&s, 7);
+        let [(_, c, _), (_, d, _)] = both(&s, 7);
+        assert_eq!((a, b), (c, d));
+    }
+
+    #[test]
+    fn the_joint_box_samples_within_limits_and_steers_by_the_largest_joint_motion() {
+        let space = JointBox {
+            lower_rad: Vector3::new(-1.0, 0.0, 2.0),
+            upper_rad: Vector3::new(1.0, 0.5, 2.0),
+        };
+        let mut rng = ChaCha8Rng::seed_from_u64(3);
+        for _ in 0..100 {
+            let q = space.sample(&mut rng);
+            assert!(
+                (0..3).all(|i| q[i] >= space.lower_rad[i] && q[i] <= space.upper_rad[i]),
+                "{q:?}"
+            );
+        }
+        let (a, b) = (Vector3::new(0.0, 0.0, 2.0), Vector3::new(1.0, 0.5, 2.0));
+        let s = space.steer(&a, &b, 0.2);
+        assert!((s - Vector3::new(0.2, 0.1, 2.0)).amax() < 1e-15);
+        assert!((space.step_length(&a, &s) - 0.2).abs() < 1e-15);
+        assert_eq!(space.steer(&a, &b, 1.0), b);
+        assert!((space.distance_sq(&a, &b) - 1.25).abs() < 1e-15);
+    }
+}
