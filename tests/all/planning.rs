@@ -52,13 +52,8 @@ fn exact(model: &CollisionModel, scene: &LoadedScene) -> Exact {
                 .collect()
         })
         .collect();
-    let g = &scene.scene.gripper;
-    let cup_len = (1.5 * g.cup_diameter_m).min(g.tool_length_m / 2.0);
-    let body = g.tool_length_m - cup_len;
-    for (r, z0, z1) in [
-        (g.body_diameter_m / 2.0, 0.0, body),
-        (g.cup_diameter_m / 2.0, body, g.tool_length_m),
-    ] {
+    // The hand as the physics builds it, from the one cell geometry.
+    for (r, z0, z1) in binpick::geometry::HandGeometry::new(&scene.scene.gripper).cylinders() {
         let (rot, shape) = cyl_z(r, (z1 - z0) / 2.0);
         links[6].push((Isometry3::translation(0.0, 0.0, (z0 + z1) / 2.0) * rot, shape));
     }
@@ -278,4 +273,24 @@ fn failures_are_reported_with_their_reason() {
         Err(PlanError::BudgetExhausted { samples, .. }) => assert!(samples > 0),
         other => panic!("{other:?}"),
     }
+}
+
+#[test]
+fn the_nearest_pair_is_named_only_on_request_and_the_same() {
+    let (scene, robot) = setup();
+    let mut rng = binpick::rng::stream(3, "nearest");
+    let mut stats = PlanStats::default();
+    let mut named = 0;
+    for case in fig5_cases(&scene.scene, &robot).unwrap() {
+        for _ in 0..50 {
+            let q = case.start + JointVector::from_fn(|_, _| rng.random_range(-0.5..0.5));
+            let (d, nearest) = case.model.nearest(&q, &mut stats);
+            let (dc, name) = case.model.clearance(&q, &mut stats);
+            assert_eq!(d.to_bits(), dc.to_bits());
+            assert_eq!(name, case.model.describe(nearest));
+            assert_eq!(name.is_empty(), d >= case.model.horizon_m, "{d} {name:?}");
+            named += usize::from(!name.is_empty());
+        }
+    }
+    assert!(named > 20, "only {named} configurations near anything");
 }

@@ -1,13 +1,15 @@
-//! Collision model and path planner for the Pick and Place motions.
+//! The cell's collision model for planning: the arm as spheres, the cell as boxes and pile columns.
 //!
-//! Job: plan joint-space paths whose every edge is *certified* collision-free, fast.
+//! Job: answer "how far is the arm from touching anything at `q`?" with a lower bound, fast, and
+//! from it whether a configuration is free and whether a straight joint-space edge is certified
+//! free (conservative advancement) or checked at discrete steps (the baselines' test).
 //!
-//! Collision model: every link's primitives (and the hand, and a held part) are covered by
-//! spheres that contain them, so a clearance computed on the spheres is a lower bound on the true
-//! clearance; each link also has one bounding sphere for early rejection. The environment is
-//! boxes (table, trays, obstacles) plus the pile as the sensor saw it: columns of a height map,
-//! never ground truth, with the part to be grasped cut out around the grasp point. Non-adjacent
-//! links are checked against each other.
+//! Every link's primitives (and the hand, and a held part) are covered by spheres that contain
+//! them, so a clearance computed on the spheres is a lower bound on the true clearance; each link
+//! also has one bounding sphere for early rejection. The environment is boxes (table, trays,
+//! obstacles) plus the pile as the sensor saw it: columns of a height map, never ground truth,
+//! with the part to be grasped cut out around the grasp point. The link pairs of [`SELF_PAIRS`]
+//! are checked against each other.
 //!
 //! Edge certification (conservative advancement, as in the collision-detection seed): with
 //! clearance d at a configuration and an upper bound R_i on how far any robot point moves per
@@ -15,21 +17,13 @@
 //! Endpoints are checked first, then midpoints in bisection order, each certifying the interval
 //! its clearance allows: coarse far from obstacles, fine near them.
 //!
-//! Planner: the direct connection first; then, if an end sits in a confined place (a container,
-//! under a bar), a workspace-guided escape: the tool moved along straight Cartesian lines out of
-//! the trap until it has room, which removes the narrow passage the joint-space search would
-//! have to find; then RRT-Connect between the free ends; then shortcutting. Baselines in the same
-//! code: plain RRT (5 % goal bias) and plain RRT-Connect with fixed-step discrete edge checks.
-//!
-//! Units: m, rad, s. Frames: world.
+//! Units: m, rad. Frames: sphere centres in their link frame (the hand and a held part in the
+//! flange link's frame), boxes by `world_from_box`, pile columns in the tray frame of the height
+//! map; distances are computed in the world frame.
 
-use std::time::Instant;
+use nalgebra::{Isometry3, Point3, Vector3};
 
-use nalgebra::{Isometry3, Point3, Translation3, Vector3};
-use rand::RngExt;
-use rand_chacha::ChaCha8Rng;
-use serde::Serialize;
-
+use super::search::PlanStats;
 use crate::config::Scene;
 use crate::robot::{DOF, JointVector, Primitive, RobotModel};
 use crate::sensor::HeightMap;
@@ -240,13 +234,14 @@ impl Environment {
         Environment { boxes, pile: None }
     }
 
-    /// Signed distance from a sphere to the environment, capped at `horizon` [m], and what is nearest.
-    fn sphere_distance(&self, c: &Vector3<f64>, r: f64, horizon: f64) -> (f64, usize) {
-        let mut best = (horizon, usize::MAX);
+    /// Signed distance from a sphere to the environment, capped at `horizon` [m], and what is
+    /// nearest (`None` when nothing is nearer than the horizon).
+    fn sphere_distance(&self, c: &Vector3<f64>, r: f64, horizon: f64) -> (f64, Option<EnvPart>) {
+        let mut best = (horizon, None);
         for (k, b) in self.boxes.iter().enumerate() {
             let d = point_box_distance(c, b) - r;
             if d < best.0 {
-                best = (d, k);
+                best = (d, Some(EnvPart::Box(k)));
             }
         }
         if let Some(p) = &self.pile {
@@ -280,7 +275,7 @@ impl Environment {
                         );
                         let d = q.sup(&Vector3::zeros()).norm() + q.max().min(0.0) - r;
                         if d < best.0 {
-                            best = (d, usize::MAX - 1);
+                            best = (d, Some(EnvPart::Pile));
                         }
                     }
                 }
@@ -290,20 +285,39 @@ impl Environment {
     }
 }
 
+/// A part of the environment: one of its boxes or the pile.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum EnvPart {
+    /// `Environment::boxes[k]`.
+    Box(usize),
+    /// The pile's columns.
+    Pile,
+}
+
+/// What is nearest to the arm at a clearance query (named by [`CollisionModel::describe`]).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Nearest {
+    /// Nothing within the horizon.
+    Nothing,
+    /// Link `link` of the robot and the environment's box `k` (`Environment::boxes[k]`).
+    Box {
+        /// Index of the robot's link.
+        link: usize,
+        /// Index of the box.
+        k: usize,
+    },
+    /// Link `link` of the robot and the pile.
+    Pile {
+        /// Index of the robot's link.
+        link: usize,
+    },
+    /// Two links of the robot (a pair of [`SELF_PAIRS`]).
+    Links(usize, usize),
+}
+
 /// Link pairs checked for self-collision (non-adjacent, and not the base with link 2 whose
 /// castings overlap at the shoulder by design).
-const SELF_PAIRS: [(usize, usize); 8] = [(0, 3), (0, 4), (0, 5), (0, 6), (1, 4), (1, 5), (1, 6), (2, 6)];
-
-/// Counters of one planning query.
-#[derive(Debug, Clone, Copy, Default, Serialize)]
-pub struct PlanStats {
-    /// Random samples drawn.
-    pub samples: usize,
-    /// Configurations whose clearance was computed.
-    pub clearance_checks: usize,
-    /// Edges certified or rejected.
-    pub edges: usize,
-}
+pub const SELF_PAIRS: [(usize, usize); 8] = [(0, 3), (0, 4), (0, 5), (0, 6), (1, 4), (1, 5), (1, 6), (2, 6)];
 
 /// The planning scene: robot spheres plus environment, and the queries on them.
 #[derive(Debug, Clone)]
@@ -332,49 +346,63 @@ impl CollisionModel {
         }
     }
 
-    /// Lower bound on the robot's clearance at `q` (environment and self) [m], and what is nearest.
+    /// Lower bound on the robot's clearance at `q` (environment and self) [m], and what is nearest,
+    /// named (`"link4 and pick tray wall +x"`; empty when nothing is within the horizon).
     pub fn clearance(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, String) {
+        let (d, nearest) = self.nearest(q, stats);
+        (d, self.describe(nearest))
+    }
+
+    /// Lower bound on the robot's clearance at `q` (environment and self) [m], capped at the
+    /// horizon, and what is nearest, unnamed: the hot path of [`CollisionModel::free`] and the
+    /// edge checks, which never need the name ([`CollisionModel::describe`] gives it).
+    pub fn nearest(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest) {
         stats.clearance_checks += 1;
         let frames = self.robot.link_frames(q);
         let base = self.robot.world_from_base;
-        let mut best = (self.horizon_m, String::new());
-        let mut centers: Vec<Vec<Vector3<f64>>> = Vec::with_capacity(DOF + 1);
-        for (li, spheres) in self.spheres.links.iter().enumerate() {
+        let mut best = (self.horizon_m, Nearest::Nothing);
+        // Sphere centres in the world, link after link; link `li`'s from `first[li]` on.
+        let links = &self.spheres.links;
+        let mut centers: Vec<Vector3<f64>> = Vec::with_capacity(links.iter().map(Vec::len).sum());
+        let mut first = [0usize; DOF + 2];
+        for (li, spheres) in links.iter().enumerate() {
             let world_from_link = base * frames[li].to_isometry();
-            let pts: Vec<Vector3<f64>> = spheres
-                .iter()
-                .map(|s| (world_from_link * Point3::from(s.center)).coords)
-                .collect();
+            first[li] = centers.len();
+            centers.extend(
+                spheres
+                    .iter()
+                    .map(|s| (world_from_link * Point3::from(s.center)).coords),
+            );
             // The base stands on the table: it is not checked against the environment.
             if li > 0 {
                 let b = &self.spheres.bounds[li];
                 let bc = (world_from_link * Point3::from(b.center)).coords;
                 let (db, _) = self.env.sphere_distance(&bc, b.radius, best.0);
                 if db < best.0 {
-                    for (p, s) in pts.iter().zip(spheres) {
-                        let (d, k) = self.env.sphere_distance(p, s.radius, best.0);
+                    for (p, s) in centers[first[li]..].iter().zip(spheres) {
+                        let (d, part) = self.env.sphere_distance(p, s.radius, best.0);
                         if d < best.0 {
-                            let what = match k {
-                                usize::MAX => String::new(),
-                                k if k == usize::MAX - 1 => "the pile".into(),
-                                k => self.env.boxes[k].name.clone(),
-                            };
-                            best = (d, format!("{} and {what}", self.robot.links[li].name));
+                            best = (
+                                d,
+                                match part {
+                                    Some(EnvPart::Box(k)) => Nearest::Box { link: li, k },
+                                    Some(EnvPart::Pile) => Nearest::Pile { link: li },
+                                    None => Nearest::Nothing,
+                                },
+                            );
                         }
                     }
                 }
             }
-            centers.push(pts);
         }
+        first[links.len()] = centers.len();
+        let on = |li: usize| &centers[first[li]..first[li + 1]];
         for (a, b) in SELF_PAIRS {
-            for (pa, sa) in centers[a].iter().zip(&self.spheres.links[a]) {
-                for (pb, sb) in centers[b].iter().zip(&self.spheres.links[b]) {
+            for (pa, sa) in on(a).iter().zip(&links[a]) {
+                for (pb, sb) in on(b).iter().zip(&links[b]) {
                     let d = (pa - pb).norm() - sa.radius - sb.radius;
                     if d < best.0 {
-                        best = (
-                            d,
-                            format!("{} and {}", self.robot.links[a].name, self.robot.links[b].name),
-                        );
+                        best = (d, Nearest::Links(a, b));
                     }
                 }
             }
@@ -382,9 +410,20 @@ impl CollisionModel {
         best
     }
 
+    /// What `nearest` names, as `"{link} and {what}"` (empty for [`Nearest::Nothing`]).
+    pub fn describe(&self, nearest: Nearest) -> String {
+        let link = |li: usize| &self.robot.links[li].name;
+        match nearest {
+            Nearest::Nothing => String::new(),
+            Nearest::Box { link: li, k } => format!("{} and {}", link(li), self.env.boxes[k].name),
+            Nearest::Pile { link: li } => format!("{} and the pile", link(li)),
+            Nearest::Links(a, b) => format!("{} and {}", link(a), link(b)),
+        }
+    }
+
     /// Whether `q` is within limits and clear by the margin.
     pub fn free(&self, q: &JointVector, stats: &mut PlanStats) -> bool {
-        self.robot.within_limits(q, 0.0) && self.clearance(q, stats).0 > self.margin_m
+        self.robot.within_limits(q, 0.0) && self.nearest(q, stats).0 > self.margin_m
     }
 
     /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
@@ -400,8 +439,8 @@ impl CollisionModel {
                 (d - self.margin_m) / sweep
             }
         };
-        let d0 = self.clearance(a, stats).0;
-        let d1 = self.clearance(b, stats).0;
+        let d0 = self.nearest(a, stats).0;
+        let d1 = self.nearest(b, stats).0;
         if d0 <= self.margin_m || d1 <= self.margin_m {
             return false;
         }
@@ -412,7 +451,7 @@ impl CollisionModel {
                 continue;
             }
             let mid = 0.5 * (lo + hi);
-            let d = self.clearance(&at(mid), stats).0;
+            let d = self.nearest(&at(mid), stats).0;
             // A certified step must make progress: below a micrometre of motion, call it a collision.
             let c = cover(d);
             if d <= self.margin_m || c * sweep < 1e-6 {
@@ -429,343 +468,6 @@ impl CollisionModel {
         stats.edges += 1;
         let n = ((b - a).amax() / step_rad).ceil().max(1.0) as usize;
         (0..=n).all(|k| self.free(&(a + (b - a) * (k as f64 / n as f64)), stats))
-    }
-}
-
-/// Which planner.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
-pub enum Algorithm {
-    /// Ours: direct, escape, RRT-Connect with certified edges, shortcutting.
-    Ours,
-    /// Plain RRT, 5 % goal bias, discrete edge checks.
-    Rrt,
-    /// Plain RRT-Connect, discrete edge checks.
-    RrtConnect,
-}
-
-/// Why planning failed.
-#[derive(Debug, Clone, PartialEq, Serialize, thiserror::Error)]
-pub enum PlanError {
-    /// The start configuration collides or is out of limits.
-    #[error("start in collision: {0}")]
-    StartInCollision(String),
-    /// The goal configuration collides or is out of limits.
-    #[error("goal in collision: {0}")]
-    GoalInCollision(String),
-    /// No path within the budget.
-    #[error("budget exhausted after {samples} samples, {elapsed_ms:.1} ms")]
-    BudgetExhausted {
-        /// Samples drawn.
-        samples: usize,
-        /// Time spent [ms].
-        elapsed_ms: f64,
-    },
-}
-
-/// A planned path.
-#[derive(Debug, Clone, Serialize)]
-pub struct Plan {
-    /// Joint waypoints, start to goal; every edge certified (ours) or checked (baselines).
-    pub waypoints: Vec<[f64; DOF]>,
-    /// How it was found.
-    pub how: &'static str,
-    /// Counters.
-    pub stats: PlanStats,
-    /// Wall time [s].
-    pub time_s: f64,
-}
-
-/// Planner options.
-#[derive(Debug, Clone, Copy)]
-pub struct PlanOptions {
-    /// The algorithm.
-    pub algorithm: Algorithm,
-    /// Wall-time budget [s].
-    pub budget_s: f64,
-    /// Sample budget.
-    pub max_samples: usize,
-    /// Tree extension step (max-norm) [rad].
-    pub step_rad: f64,
-    /// Discrete edge check interval for the baselines (max-norm) [rad].
-    pub check_step_rad: f64,
-}
-
-impl Default for PlanOptions {
-    fn default() -> Self {
-        PlanOptions {
-            algorithm: Algorithm::Ours,
-            budget_s: 10.0,
-            max_samples: 200_000,
-            step_rad: 0.35,
-            check_step_rad: 0.02,
-        }
-    }
-}
-
-struct Tree {
-    nodes: Vec<JointVector>,
-    parent: Vec<usize>,
-}
-
-impl Tree {
-    fn new(root: JointVector) -> Self {
-        Tree {
-            nodes: vec![root],
-            parent: vec![usize::MAX],
-        }
-    }
-    fn nearest(&self, q: &JointVector) -> usize {
-        let mut best = (f64::INFINITY, 0);
-        for (i, n) in self.nodes.iter().enumerate() {
-            let d = (n - q).norm_squared();
-            if d < best.0 {
-                best = (d, i);
-            }
-        }
-        best.1
-    }
-    fn add(&mut self, q: JointVector, parent: usize) -> usize {
-        self.nodes.push(q);
-        self.parent.push(parent);
-        self.nodes.len() - 1
-    }
-    fn path_to_root(&self, mut i: usize) -> Vec<JointVector> {
-        let mut out = Vec::new();
-        while i != usize::MAX {
-            out.push(self.nodes[i]);
-            i = self.parent[i];
-        }
-        out
-    }
-}
-
-fn steer(from: &JointVector, to: &JointVector, step: f64) -> JointVector {
-    let d = to - from;
-    let m = d.amax();
-    if m <= step { *to } else { from + d * (step / m) }
-}
-
-impl CollisionModel {
-    fn edge(&self, a: &JointVector, b: &JointVector, opts: &PlanOptions, stats: &mut PlanStats) -> bool {
-        match opts.algorithm {
-            Algorithm::Ours => self.certify_edge(a, b, stats),
-            _ => self.discrete_edge(a, b, opts.check_step_rad, stats),
-        }
-    }
-
-    fn random_q(&self, rng: &mut ChaCha8Rng) -> JointVector {
-        JointVector::from_fn(|i, _| rng.random_range(self.robot.joints[i].lower_rad..=self.robot.joints[i].upper_rad))
-    }
-
-    /// A workspace-guided escape from a confined configuration: the tool moved along a straight
-    /// Cartesian line (up first; sideways if up is blocked within 3 cm) in 1 cm steps, each step a
-    /// certified edge, up to 25 cm. Returns the configurations after `q` along the line.
-    fn escape(&self, q: &JointVector, stats: &mut PlanStats) -> Vec<JointVector> {
-        let start = self.robot.world_from_tool(q);
-        let mut best = Vec::new();
-        for dir in [Vector3::z(), Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y()] {
-            let mut path = Vec::new();
-            let mut cur = *q;
-            for k in 1..=25 {
-                let pose = Isometry3::from_parts(
-                    Translation3::from(start.translation.vector + dir * (0.01 * k as f64)),
-                    start.rotation,
-                );
-                let Ok(sol) = self.robot.ik_tool_nearest(&pose, &cur) else {
-                    break;
-                };
-                if (sol.q - cur).amax() > 0.3 || !self.certify_edge(&cur, &sol.q, stats) {
-                    break;
-                }
-                cur = sol.q;
-                path.push(cur);
-            }
-            if path.len() >= 3 {
-                return path;
-            }
-            if path.len() > best.len() {
-                best = path;
-            }
-        }
-        best
-    }
-
-    /// Plans a path from `start` to `goal`.
-    pub fn plan(
-        &self,
-        start: &JointVector,
-        goal: &JointVector,
-        opts: &PlanOptions,
-        rng: &mut ChaCha8Rng,
-    ) -> Result<Plan, PlanError> {
-        let t0 = Instant::now();
-        let mut stats = PlanStats::default();
-        let (ds, ws) = self.clearance(start, &mut stats);
-        if !self.robot.within_limits(start, 1e-9) || ds <= self.margin_m {
-            return Err(PlanError::StartInCollision(format!(
-                "clearance {:.1} mm between {ws}",
-                ds * 1e3
-            )));
-        }
-        let (dg, wg) = self.clearance(goal, &mut stats);
-        if !self.robot.within_limits(goal, 1e-9) || dg <= self.margin_m {
-            return Err(PlanError::GoalInCollision(format!(
-                "clearance {:.1} mm between {wg}",
-                dg * 1e3
-            )));
-        }
-        let done = |path: Vec<JointVector>, how: &'static str, stats: PlanStats| Plan {
-            waypoints: path.iter().map(|q| (*q).into()).collect(),
-            how,
-            stats,
-            time_s: t0.elapsed().as_secs_f64(),
-        };
-        if self.edge(start, goal, opts, &mut stats) {
-            return Ok(done(vec![*start, *goal], "direct", stats));
-        }
-        // Ours: lift confined ends out along Cartesian lines, and try to join the lines directly
-        // at rising heights; else search between the line ends.
-        let (mut head, mut tail) = (vec![*start], vec![*goal]);
-        let mut how = "rrt-connect";
-        if opts.algorithm == Algorithm::Ours {
-            head.extend(self.escape(start, &mut stats));
-            tail.extend(self.escape(goal, &mut stats));
-            let top = head.len().max(tail.len()) - 1;
-            for k in (2..=top).step_by(3).chain(std::iter::once(top)) {
-                let (i, j) = (k.min(head.len() - 1), k.min(tail.len() - 1));
-                if self.edge(&head[i], &tail[j], opts, &mut stats) {
-                    let path: Vec<JointVector> = head[..=i].iter().chain(tail[..=j].iter().rev()).copied().collect();
-                    return Ok(done(self.shortcut(path, rng, &mut stats), "escape + direct", stats));
-                }
-            }
-            how = "escape + rrt-connect";
-        }
-        let (a, b) = (*head.last().expect("start"), *tail.last().expect("goal"));
-        let middle = match opts.algorithm {
-            Algorithm::Rrt => self.rrt(&a, &b, opts, rng, &mut stats, &t0),
-            _ => self.rrt_connect(&a, &b, opts, rng, &mut stats, &t0),
-        };
-        let Some(middle) = middle else {
-            return Err(PlanError::BudgetExhausted {
-                samples: stats.samples,
-                elapsed_ms: t0.elapsed().as_secs_f64() * 1e3,
-            });
-        };
-        let mut path = head;
-        path.extend(middle.into_iter().skip(1));
-        path.extend(tail.into_iter().rev().skip(1));
-        if opts.algorithm == Algorithm::Ours {
-            path = self.shortcut(path, rng, &mut stats);
-        }
-        Ok(done(path, how, stats))
-    }
-
-    fn out_of_budget(&self, opts: &PlanOptions, stats: &PlanStats, t0: &Instant) -> bool {
-        stats.samples >= opts.max_samples || t0.elapsed().as_secs_f64() > opts.budget_s
-    }
-
-    fn rrt(
-        &self,
-        a: &JointVector,
-        b: &JointVector,
-        opts: &PlanOptions,
-        rng: &mut ChaCha8Rng,
-        stats: &mut PlanStats,
-        t0: &Instant,
-    ) -> Option<Vec<JointVector>> {
-        let mut tree = Tree::new(*a);
-        while !self.out_of_budget(opts, stats, t0) {
-            stats.samples += 1;
-            let target = if rng.random::<f64>() < 0.05 {
-                *b
-            } else {
-                self.random_q(rng)
-            };
-            let near = tree.nearest(&target);
-            let new = steer(&tree.nodes[near], &target, opts.step_rad);
-            if !self.edge(&tree.nodes[near], &new, opts, stats) {
-                continue;
-            }
-            let id = tree.add(new, near);
-            if (new - b).amax() <= opts.step_rad && self.edge(&new, b, opts, stats) {
-                let mut p = tree.path_to_root(id);
-                p.reverse();
-                p.push(*b);
-                return Some(p);
-            }
-        }
-        None
-    }
-
-    fn rrt_connect(
-        &self,
-        a: &JointVector,
-        b: &JointVector,
-        opts: &PlanOptions,
-        rng: &mut ChaCha8Rng,
-        stats: &mut PlanStats,
-        t0: &Instant,
-    ) -> Option<Vec<JointVector>> {
-        let mut trees = [Tree::new(*a), Tree::new(*b)];
-        let mut k = 0usize;
-        while !self.out_of_budget(opts, stats, t0) {
-            stats.samples += 1;
-            let target = self.random_q(rng);
-            let (ta, tb) = if k.is_multiple_of(2) { (0, 1) } else { (1, 0) };
-            k += 1;
-            let near = trees[ta].nearest(&target);
-            let new = steer(&trees[ta].nodes[near], &target, opts.step_rad);
-            if !self.edge(&trees[ta].nodes[near], &new, opts, stats) {
-                continue;
-            }
-            let ia = trees[ta].add(new, near);
-            // Connect: grow the other tree toward `new` until it arrives or is blocked.
-            let mut ib = trees[tb].nearest(&new);
-            loop {
-                let from = trees[tb].nodes[ib];
-                let step = steer(&from, &new, opts.step_rad);
-                if !self.edge(&from, &step, opts, stats) {
-                    break;
-                }
-                ib = trees[tb].add(step, ib);
-                if (step - new).amax() < 1e-12 {
-                    let mut pa = trees[ta].path_to_root(ia);
-                    let pb = trees[tb].path_to_root(ib);
-                    pa.reverse();
-                    pa.extend(pb.into_iter().skip(1));
-                    if ta == 1 {
-                        pa.reverse();
-                    }
-                    return Some(pa);
-                }
-            }
-        }
-        None
-    }
-
-    /// Shortcuts: random pairs joined when the edge certifies, then a greedy farthest-reach pass.
-    fn shortcut(&self, mut path: Vec<JointVector>, rng: &mut ChaCha8Rng, stats: &mut PlanStats) -> Vec<JointVector> {
-        for _ in 0..20 {
-            if path.len() < 3 {
-                break;
-            }
-            let i = rng.random_range(0..path.len() - 2);
-            let j = rng.random_range(i + 2..path.len());
-            if self.certify_edge(&path[i], &path[j], stats) {
-                path.drain(i + 1..j);
-            }
-        }
-        let mut out = vec![path[0]];
-        let mut i = 0;
-        while i + 1 < path.len() {
-            let mut j = path.len() - 1;
-            while j > i + 1 && !self.certify_edge(&path[i], &path[j], stats) {
-                j -= 1;
-            }
-            out.push(path[j]);
-            i = j;
-        }
-        out
     }
 }
 
