@@ -698,8 +698,13 @@ pub fn accel_bench(
                 .plan(&start, &goal, &PlanOptions::default(), &mut rng)
                 .map_err(|e| format!("{name}: {e}"))?;
             let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-            let (via, accelerated, _stops) =
-                crate::trajectory::accelerate_in_corridor(robot, &dynamics, &via, model, 0.01);
+            let (via, accelerated, _stops) = crate::trajectory::accelerate_in_corridor(
+                robot,
+                &dynamics,
+                &via,
+                model,
+                crate::trajectory::CORRIDOR_CHECK_DT_S,
+            );
             let corrected = correct_path(robot, &dynamics, &via, &accelerated, Some(model), 60f64.to_radians());
             worst_ms = worst_ms.max(t0.elapsed().as_secs_f64() * 1e3);
             all_ms.push(t0.elapsed().as_secs_f64() * 1e3);
@@ -748,7 +753,12 @@ pub fn accel_bench(
             folds: (corrected.folds, corrected.tried),
             compute_max_ms: worst_ms,
             compute_median_ms: median(all_ms).0,
-            corridor_clear: crate::trajectory::check_corridor(model, &corrected.accelerated.trajectory, 0.01).is_ok(),
+            corridor_clear: crate::trajectory::check_corridor(
+                model,
+                &corrected.accelerated.trajectory,
+                crate::trajectory::CORRIDOR_CHECK_DT_S,
+            )
+            .is_ok(),
             peak_ratio: corrected.accelerated.torques.peak_ratio,
             energy: (slow_torque.energy, corrected.accelerated.torques.energy),
             reference: (case.table4_improvement_pct, case.table4_compute_ms),

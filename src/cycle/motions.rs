@@ -24,7 +24,9 @@ use crate::pipeline::{GraspContext, sense_and_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
 use crate::robot::{JointVector, Payload};
 use crate::sensor::{CaptureJob, Detection};
-use crate::trajectory::{LineLimits, LineMotion, Trajectory, accelerate_in_corridor, limit_tool_force, straight_line};
+use crate::trajectory::{
+    CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Trajectory, accelerate_in_corridor, limit_tool_force, straight_line,
+};
 
 /// Fraction of the cup's holding force a held-part motion may use.
 pub const SUCTION_MARGIN: f64 = 0.75;
@@ -33,8 +35,6 @@ pub const SUCTION_MARGIN: f64 = 0.75;
 pub const RELEASE_ABOVE_M: f64 = 0.003;
 /// The Place transfer ends this far above the release pose [m].
 pub const PLACE_APPROACH_M: f64 = 0.03;
-/// Corridor check interval of the accelerated transfers [s].
-const CORRIDOR_CHECK_S: f64 = 0.01;
 
 /// The Place transfer's goal for a grasp: the tool [`PLACE_APPROACH_M`] above where the part
 /// touches down in its slot.
@@ -138,7 +138,7 @@ impl Run<'_, '_> {
             .plan(&q_now, &q_approach, &PlanOptions::default(), &mut rng)
             .map(|p| {
                 let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-                accelerate_in_corridor(robot, &dyn_hand, &via, &empty, CORRIDOR_CHECK_S)
+                accelerate_in_corridor(robot, &dyn_hand, &via, &empty, CORRIDOR_CHECK_DT_S)
                     .1
                     .trajectory
             })
@@ -196,7 +196,7 @@ impl Run<'_, '_> {
                 .plan(&q_lifted, &q_above, &PlanOptions::default(), &mut rng)
                 .map_err(|e| format!("place transfer: {e}"))?;
             let via: Vec<JointVector> = path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-            let (via, acc, _) = accelerate_in_corridor(robot, &dyn_held, &via, &holding, CORRIDOR_CHECK_S);
+            let (via, acc, _) = accelerate_in_corridor(robot, &dyn_held, &via, &holding, CORRIDOR_CHECK_DT_S);
             let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, max_force);
             let down = cell
                 .line(&q_above, &above_place, &release_pose, &held, Some(max_force))

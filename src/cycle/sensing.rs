@@ -16,7 +16,7 @@ use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
 use crate::sensor::{CaptureJob, Detection};
-use crate::trajectory::accelerate_in_corridor;
+use crate::trajectory::{CORRIDOR_CHECK_DT_S, accelerate_in_corridor};
 
 /// A recognition result to pick from.
 pub struct SensedResult {
@@ -132,7 +132,7 @@ impl Run<'_, '_> {
         };
         let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
         let hand = self.cell.hand;
-        let (_, acc, _) = accelerate_in_corridor(robot, &robot.dynamics(&hand), &via, &free, 0.01);
+        let (_, acc, _) = accelerate_in_corridor(robot, &robot.dynamics(&hand), &via, &free, CORRIDOR_CHECK_DT_S);
         let played = self.play(&acc.trajectory, &hand, true)?;
         self.span(Stage::Place, t, self.st.world.time_s, "out of view");
         self.st.arm.free_s = self.st.world.time_s;

@@ -6,7 +6,7 @@ use crate::support::planned_fig5_paths;
 use binpick::config::LoadedScene;
 use binpick::execution::{Servo, Trip, execute};
 use binpick::robot::{JointVector, Payload, RobotModel};
-use binpick::trajectory::{MotionLimits, Trajectory, optimise_accelerations};
+use binpick::trajectory::{MotionLimits, TORQUE_DT_S, TORQUE_THRESHOLD, Trajectory, optimise_accelerations};
 
 #[test]
 fn optimised_motions_execute_within_tolerance_and_an_overload_trips_a_protective_stop() {
@@ -18,7 +18,7 @@ fn optimised_motions_execute_within_tolerance_and_an_overload_trips_a_protective
     let limit = robot.torque_limit_nm();
     for (case, via) in planned_fig5_paths(&scene, &robot) {
         let plant = robot.dynamics(&held);
-        let motion = optimise_accelerations(&robot, &plant, &via, 0.001, 0.05).trajectory;
+        let motion = optimise_accelerations(&robot, &plant, &via, TORQUE_DT_S, TORQUE_THRESHOLD).trajectory;
         // The controller knows the part, and then does not.
         for model in [robot.dynamics(&held), robot.dynamics(&hand)] {
             let run = execute(&robot, &model, &plant, &servo, &motion);
