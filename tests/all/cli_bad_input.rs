@@ -571,3 +571,48 @@ fn a_part_giving_billions_of_place_slots() {
     );
     assert_eq!(ws.listing(), before);
 }
+
+/// A mesh workpiece whose mesh cannot be built is bad input for `run` and `batch` as for `pile`
+/// (before, `run` started, failed in the cycle and exited 1): exit 2, the mesh file named,
+/// nothing written.
+#[test]
+fn a_broken_mesh_workpiece_is_bad_input_for_every_command() {
+    let ws = Workspace::new();
+    // Two vertices and one degenerate triangle: no closed mesh.
+    std::fs::write(ws.path("workpieces/flat.obj"), "v 0 0 0\nv 0.01 0 0\nf 1 2 1\n").unwrap();
+    std::fs::write(
+        ws.path("workpieces/flat.toml"),
+        "name = \"flat\"\nkind = \"a mesh that is not closed\"\nsize_m = [0.03, 0.03, 0.02]\nmass_kg = 0.01\n\
+         friction = 0.4\nrestitution = 0.1\npile_count = 10\n\n[shape]\nkind = \"mesh\"\nmesh_file = \"flat.obj\"\n\n\
+         [grasp]\nyaw_symmetry_deg = 90.0\nplace_yaw_deg = 0.0\nface_margin_m = 0.0005\n",
+    )
+    .unwrap();
+    for cmd in [
+        &["pile", "--workpiece", "workpieces/flat.toml"][..],
+        &["sense", "--workpiece", "workpieces/flat.toml"],
+        &["run", "--workpiece", "workpieces/flat.toml", "--picks", "2"],
+        &["batch", "--workpieces", "workpieces/flat.toml", "--picks", "2"],
+    ] {
+        refuses_to_start(&ws, cmd, &["flat.obj", "cannot load mesh"]);
+    }
+}
+
+/// The planner benchmark's seeds wrap instead of overflowing: `--seed` at u64::MAX runs (one
+/// trials per case and no baseline trials keep it short).
+#[test]
+fn bench_planner_with_the_largest_seed_runs() {
+    let o = crate::support::binpick(&[
+        "bench",
+        "planner",
+        "--trials",
+        "2",
+        "--baseline-trials",
+        "0",
+        "--seed",
+        "18446744073709551615",
+        "--json",
+    ]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let rows: serde_json::Value = serde_json::from_str(&crate::support::stdout(&o)).unwrap();
+    assert!(rows.as_array().is_some_and(|r| !r.is_empty()));
+}
