@@ -287,10 +287,7 @@ pub fn physics_bench(
         let (med, lo, hi) = median(walls);
         // Peer: rapier's defaults for contact stiffness and iterations, one step per step.
         let mut w = World::new(&scene.scene, robot, shape.clone());
-        w.params.contact_softness = rapier3d::prelude::SpringCoefficients::contact_defaults();
-        w.params.static_contact_softness = rapier3d::prelude::SpringCoefficients::contact_static_defaults();
-        w.params.num_solver_iterations = 4;
-        w.max_substeps = 1;
+        w.set_solver(crate::physics::Solver::RapierDefaults);
         let t0 = Instant::now();
         let peer = w
             .build_pile(&PileOptions::new(count, 1))
@@ -320,7 +317,7 @@ pub fn physics_bench(
     let over_pick = robot
         .ik_tool_nearest(
             &crate::robot::tool_down_pose(
-                w.pick_tray.world_from_tray.translation.vector + nalgebra::Vector3::z() * 0.15,
+                w.pick_tray().world_from_tray.translation.vector + nalgebra::Vector3::z() * 0.15,
                 0.0,
             ),
             &home,
@@ -422,7 +419,7 @@ pub fn sense_bench(
             scene: &scene.scene,
             robot,
             selector: &selector,
-            pick_tray: &w.pick_tray,
+            pick_tray: w.pick_tray(),
         };
         // The cycle's own sense-and-grasp: height map, candidates, IK, ranking, clear approach.
         let grasp = time_ms(&mut || {
@@ -433,7 +430,7 @@ pub fn sense_bench(
         });
         rows.push(SenseTiming {
             workpiece: wp.workpiece.name.clone(),
-            parts: w.parts.len(),
+            parts: w.part_count(),
             capture_ms: cap,
             capture_one_thread_ms: single.0,
             grasp_ms: grasp,
@@ -596,7 +593,7 @@ pub fn binpicking_queries(
                 scene: &scene.scene,
                 robot,
                 selector: &selector,
-                pick_tray: &w.pick_tray,
+                pick_tray: w.pick_tray(),
             };
             // The cycle's own grasp ranking and planning scenes; the poses of its motions.
             let choice = sense_and_grasp(&ctx, &c, &det, &slots[0], &w.joints(), &[]);

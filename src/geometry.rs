@@ -141,6 +141,50 @@ pub fn cell_boxes(scene: &Scene) -> Vec<(BoxRole, NamedBox)> {
     out
 }
 
+/// A tray's volume in the world: its footprint (walls included), from just below the floor up
+/// to 1 m; a part of the tray's belongs inside it.
+#[derive(Debug, Clone, Copy)]
+pub struct TrayVolume {
+    /// `world_from_tray`.
+    pub world_from_tray: Isometry3<f64>,
+    /// Half the inner size plus the wall thickness [m].
+    pub half_xy_m: [f64; 2],
+    /// Wall height above the inner floor [m].
+    pub wall_height_m: f64,
+    /// Wall thickness [m].
+    pub wall_thickness_m: f64,
+}
+
+impl TrayVolume {
+    /// The volume of a tray of the cell file.
+    pub fn new(t: &TrayConfig) -> Self {
+        TrayVolume {
+            world_from_tray: t.world_from_tray(),
+            half_xy_m: [
+                t.inner_size_m[0] / 2.0 + t.wall_thickness_m,
+                t.inner_size_m[1] / 2.0 + t.wall_thickness_m,
+            ],
+            wall_height_m: t.wall_height_m,
+            wall_thickness_m: t.wall_thickness_m,
+        }
+    }
+
+    /// Whether a world point is in the tray's column (footprint incl. walls, floor - 2 mm to 1 m).
+    pub fn contains(&self, p: &Vector3<f64>) -> bool {
+        let l = self.world_from_tray.inverse_transform_point(&(*p).into());
+        l.x.abs() <= self.half_xy_m[0] && l.y.abs() <= self.half_xy_m[1] && l.z >= -0.002 && l.z <= 1.0
+    }
+
+    /// Whether a world point is inside the tray's inner walls, below the rim.
+    pub fn inside_inner(&self, p: &Vector3<f64>) -> bool {
+        let l = self.world_from_tray.inverse_transform_point(&(*p).into());
+        l.x.abs() <= self.half_xy_m[0] - self.wall_thickness_m
+            && l.y.abs() <= self.half_xy_m[1] - self.wall_thickness_m
+            && l.z >= -0.001
+            && l.z <= self.wall_height_m
+    }
+}
+
 /// The suction hand's solid shape: a body cylinder from the flange face, then the cup, both
 /// along the flange z axis, ending at the tool frame (the cup lip).
 #[derive(Debug, Clone, Copy, PartialEq)]

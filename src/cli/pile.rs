@@ -147,7 +147,7 @@ pub fn sense(a: &PileArgs) -> Result<()> {
         scene: &loaded.scene,
         robot: &robot,
         selector: &cell.selector,
-        pick_tray: &world.pick_tray,
+        pick_tray: world.pick_tray(),
     };
     let choice = sense_and_grasp(&ctx, &job.capture, &detections, &cell.slots[0], &world.joints(), &[]);
     let grasp_ms = t1.elapsed().as_secs_f64() * 1e3;

@@ -17,7 +17,7 @@ use super::events::{Event, Fault, Outcome, PartLoss, Stage};
 use super::{CycleError, Run};
 use crate::execution::execute_from;
 use crate::physics::suction::GripperEvent;
-use crate::physics::{HealthError, PartState};
+use crate::physics::{HealthEvent, PartState};
 use crate::robot::{DOF, JointVector, Payload};
 use crate::trajectory::{LineLimits, Motion, straight_line};
 
@@ -30,8 +30,9 @@ pub(super) enum Played {
 }
 
 impl Run<'_, '_> {
-    /// One physics step. Parts that left their tray are taken out of the cell (lost); a collision
-    /// of the arm or a part pressed into the tray is returned; a non-finite state ends the run.
+    /// One physics step, watched. Parts that left their tray are taken out of the cell (lost);
+    /// the first collision of the arm or part pressed into the tray is returned; a non-finite
+    /// state ends the run.
     pub(super) fn step(&mut self) -> Result<Option<String>, CycleError> {
         let result = self.st.world.step();
         self.obs.stepped(&self.st.world);
@@ -40,35 +41,54 @@ impl Run<'_, '_> {
         {
             self.event(Event::CaptureSpoiled(problem));
         }
-        match result {
-            Ok(()) => Ok(None),
-            Err(HealthError::LeftVolume { body, volume, .. }) => {
-                let world = &mut self.st.world;
-                for i in 0..world.parts.len() {
-                    let c = world.part_pose(i).translation.vector;
-                    let lost = match world.parts[i].state {
-                        PartState::Free => !world.pick_tray.contains(&c),
-                        PartState::Placed => !world.place_tray.contains(&c),
-                        PartState::Held | PartState::Removed => false,
-                    };
-                    if lost {
-                        world.remove_part(i);
-                        self.st.parts_lost += 1;
+        let Err(report) = result else {
+            return Ok(None);
+        };
+        if report.is_fatal() {
+            return Err(report.into());
+        }
+        // Every problem of the step: parts out of their tray are taken out of the cell (all at
+        // once), a collision or a part pressed into the tray stops the motion.
+        let mut fault = None;
+        let mut lost_removed = false;
+        for event in report.events {
+            match event {
+                HealthEvent::LeftVolume { body, volume, .. } => {
+                    if !lost_removed {
+                        self.remove_lost_parts();
+                        lost_removed = true;
                     }
+                    self.event(Event::PartLost(PartLoss::LeftTray { body, tray: volume }));
                 }
-                self.event(Event::PartLost(PartLoss::LeftTray { body, tray: volume }));
-                Ok(None)
+                e @ (HealthEvent::ArmCollision { .. } | HealthEvent::DeepPenetration { .. }) => {
+                    fault.get_or_insert(e.to_string());
+                }
+                HealthEvent::NonFinite { .. } => {}
             }
-            Err(e @ (HealthError::ArmCollision { .. } | HealthError::DeepPenetration { .. })) => {
-                Ok(Some(e.to_string()))
+        }
+        Ok(fault)
+    }
+
+    /// Takes every part that is out of the tray it belongs in out of the cell, counting it lost.
+    fn remove_lost_parts(&mut self) {
+        let world = &mut self.st.world;
+        for i in 0..world.part_count() {
+            let c = world.part_pose(i).translation.vector;
+            let lost = match world.part_state(i) {
+                PartState::Free => !world.pick_tray().contains(&c),
+                PartState::Placed => !world.place_tray().contains(&c),
+                PartState::Held | PartState::Removed => false,
+            };
+            if lost {
+                world.remove_part(i);
+                self.st.parts_lost += 1;
             }
-            Err(e @ HealthError::NonFinite { .. }) => Err(e.into()),
         }
     }
 
     /// Steps the world to `t` with the arm still. Contacts of a resting arm are not new faults.
     pub(super) fn idle_until(&mut self, t: f64) -> Result<(), CycleError> {
-        while self.st.world.time_s + 1e-9 < t {
+        while self.st.world.time_s() + 1e-9 < t {
             self.step()?;
         }
         Ok(())
@@ -111,7 +131,7 @@ impl Run<'_, '_> {
         );
         (self.st.arm.q, self.st.arm.qd) = run.end_state;
         let limit = robot.torque_limit_nm();
-        let t0 = self.st.world.time_s;
+        let t0 = self.st.world.time_s();
         let arm = &mut self.st.arm;
         for t in &run.ticks {
             for i in 0..DOF {
@@ -139,7 +159,7 @@ impl Run<'_, '_> {
             if trigger {
                 self.maybe_trigger();
             }
-            for ev in self.st.world.gripper.take_events() {
+            for ev in self.st.world.take_gripper_events() {
                 if let GripperEvent::Slipped {
                     required_n,
                     holding_n,
@@ -172,7 +192,7 @@ impl Run<'_, '_> {
     /// After a fault: the vacuum goes off, the controller waits its reset time, then the arm
     /// retraces `path` (the executed positions of the faulted motion) back to where it started.
     fn recover(&mut self, path: &[JointVector], fault: Fault) -> Result<(), CycleError> {
-        let t = self.st.world.time_s;
+        let t = self.st.world.time_s();
         self.event(Event::Fault(fault));
         self.obs.marker(t, "fault");
         self.st.world.vacuum_off();
@@ -181,7 +201,7 @@ impl Run<'_, '_> {
         self.clear_deep_penetrations();
         let robot = self.cell.robot;
         let tool = self.st.world.world_from_tool();
-        let tray = &self.st.world.pick_tray;
+        let tray = self.st.world.pick_tray();
         let above_z = tray.world_from_tray.translation.z + self.cell.scene.pick_tray.wall_height_m + 0.1;
         let local = tray.world_from_tray.inverse() * nalgebra::Point3::from(tool.translation.vector);
         let over_pick_tray = local.x.abs() < tray.half_xy_m[0] && local.y.abs() < tray.half_xy_m[1];
@@ -207,10 +227,10 @@ impl Run<'_, '_> {
             self.retrace(&back, 3)?;
         }
         (self.st.arm.q, self.st.arm.qd) = (self.st.world.joints(), JointVector::zeros());
-        self.st.world.gripper.take_events();
+        self.st.world.take_gripper_events();
         self.st.gripper_events.clear();
-        self.span(Stage::Stall, t, self.st.world.time_s, "fault reset and retreat");
-        self.st.arm.free_s = self.st.world.time_s;
+        self.span(Stage::Stall, t, self.st.world.time_s(), "fault reset and retreat");
+        self.st.arm.free_s = self.st.world.time_s();
         Ok(())
     }
 
@@ -219,13 +239,13 @@ impl Run<'_, '_> {
     fn clear_deep_penetrations(&mut self) {
         for _ in 0..8 {
             let (depth, pair) = self.st.world.max_penetration_m();
-            let Some((a, b)) = pair.filter(|_| depth > self.st.world.health.deep_penetration_m) else {
+            let Some((a, b)) = pair.filter(|_| depth > self.st.world.health_limits().deep_penetration_m) else {
                 return;
             };
             let mut removed = false;
             for tag in [a, b] {
                 if let crate::physics::Tag::Part(i) = tag
-                    && self.st.world.parts[i as usize].state != PartState::Held
+                    && self.st.world.part_state(i as usize) != PartState::Held
                 {
                     self.st.world.remove_part(i as usize);
                     self.st.parts_lost += 1;

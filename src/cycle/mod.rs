@@ -178,7 +178,7 @@ struct Run<'a, 'o> {
 impl Run<'_, '_> {
     /// Reports an event now.
     fn event(&mut self, event: Event) {
-        self.obs.event(self.st.world.time_s, self.st.pick, &event);
+        self.obs.event(self.st.world.time_s(), self.st.pick, &event);
     }
 
     /// Reports an event at time `t_s`.
@@ -241,7 +241,7 @@ impl<'a> Cell<'a> {
             arm: ArmState {
                 q,
                 qd: JointVector::zeros(),
-                free_s: world.time_s,
+                free_s: world.time_s(),
                 max_error_rad: 0.0,
                 peak_torque_ratio: 0.0,
             },
@@ -281,7 +281,7 @@ pub fn run(
         seed: opts.seed,
         deterministic: opts.deterministic,
     };
-    let summary = summarise(label, &records, counts, ended, st.world.time_s);
+    let summary = summarise(label, &records, counts, ended, st.world.time_s());
     Ok(RunResult { records, summary })
 }
 

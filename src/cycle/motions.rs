@@ -113,7 +113,7 @@ impl Run<'_, '_> {
             scene: cell.scene,
             robot,
             selector: &cell.selector,
-            pick_tray: &self.st.world.pick_tray,
+            pick_tray: self.st.world.pick_tray(),
         };
         let choice = sense_and_grasp(&ctx, &job.capture, detections, &slot, &q_now, &self.st.failed_spots);
         self.obs.recognised(&Recognised {
@@ -130,7 +130,7 @@ impl Run<'_, '_> {
         let grasp_s = wall.elapsed().as_secs_f64();
         // Pick: transfer to the approach pose, straight descent.
         let wall = Instant::now();
-        let mut rng = crate::rng::stream(cell.opts.seed.wrapping_add(self.st.world.steps), "planner");
+        let mut rng = crate::rng::stream(cell.opts.seed.wrapping_add(self.st.world.steps()), "planner");
         let q_approach = JointVector::from(grasp.q_approach);
         let hand = cell.hand;
         let dyn_hand = robot.dynamics(&hand);

@@ -101,17 +101,17 @@ impl Run<'_, '_> {
         for (t_s, event) in stages {
             self.event_at(t_s, event);
         }
-        self.idle_until(pick_ready.max(self.st.world.time_s))?;
+        self.idle_until(pick_ready.max(self.st.world.time_s()))?;
         let outcome = self.motions(prep, rec, place_ready)?;
         if outcome != Outcome::Placed && self.st.world.held_part().is_some() {
             // A pick that ended with the part still on the cup (no Place motion): let it go where
             // the arm is, over the pick tray, before anything else moves.
             self.st.world.vacuum_off();
-            let t = self.st.world.time_s + self.st.world.gripper.release_s + self.st.world.dt_s();
+            let t = self.st.world.time_s() + self.st.world.gripper().release_s + self.st.world.dt_s();
             self.idle_until(t)?;
-            self.st.world.gripper.take_events();
+            self.st.world.take_gripper_events();
             self.event(Event::PartLetGo);
-            self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s);
+            self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
         }
         if matches!(
             outcome,
@@ -128,7 +128,7 @@ impl Run<'_, '_> {
         rec.outcome = outcome;
         self.event(Event::Outcome(rec.outcome.clone()));
         if rec.outcome == Outcome::Placed {
-            let release = rec.release_s.unwrap_or(self.st.world.time_s);
+            let release = rec.release_s.unwrap_or(self.st.world.time_s());
             rec.takt_s = self.st.trays.last_release_s.map(|r| release - r);
             rec.first_of_pile = self.st.trays.first_of_pile;
             self.st.trays.first_of_pile = false;
@@ -144,7 +144,7 @@ impl Run<'_, '_> {
     /// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat).
     fn motions(&mut self, prep: &Prepared, rec: &mut PickRecord, place_ready: f64) -> Result<Outcome, CycleError> {
         let hand = self.cell.hand;
-        let t_pick = self.st.world.time_s;
+        let t_pick = self.st.world.time_s();
         self.event(Event::PickStart);
         let pick_transfer = match &prep.pick_transfer {
             Ok(t) => t,
@@ -154,9 +154,9 @@ impl Run<'_, '_> {
         self.st.arm.peak_torque_ratio = 0.0;
         self.st.gripper_events.clear();
         let pick_done = |run: &mut Self, rec: &mut PickRecord| {
-            rec.pick_s = run.st.world.time_s - t_pick;
-            run.span(Stage::Pick, t_pick, run.st.world.time_s, "Pick");
-            run.st.arm.free_s = run.st.world.time_s;
+            rec.pick_s = run.st.world.time_s() - t_pick;
+            run.span(Stage::Pick, t_pick, run.st.world.time_s(), "Pick");
+            run.st.arm.free_s = run.st.world.time_s();
         };
         if let Played::Failed(o) = self.play_with(pick_transfer, &hand, false, None, false)? {
             pick_done(self, rec);
@@ -166,18 +166,19 @@ impl Run<'_, '_> {
         let lead = self.cell.scene.cycle.vacuum_lead_s;
         let descent = &prep.descent;
         let vacuum_at = (descent.duration_s() - lead).max(0.0);
-        let t_descent = self.st.world.time_s;
+        let t_descent = self.st.world.time_s();
         if let Played::Failed(o) = self.play_with(descent, &hand, false, Some(vacuum_at), true)? {
             pick_done(self, rec);
             return Ok(o);
         }
         self.st.world.vacuum_on();
-        let t =
-            (t_descent + vacuum_at).min(self.st.world.time_s) + self.st.world.gripper.build_up_s + self.st.world.dt_s();
+        let t = (t_descent + vacuum_at).min(self.st.world.time_s())
+            + self.st.world.gripper().build_up_s
+            + self.st.world.dt_s();
         self.idle_until(t)?;
         let mut failure = None;
         let mut events = std::mem::take(&mut self.st.gripper_events);
-        events.extend(self.st.world.gripper.take_events());
+        events.extend(self.st.world.take_gripper_events());
         for ev in events {
             match ev {
                 GripperEvent::Grasped { seal, .. } => {
@@ -208,8 +209,8 @@ impl Run<'_, '_> {
         }
         pick_done(self, rec);
         // Place: the motions were generated while the Pick ran; wait if they are not ready yet.
-        if place_ready > self.st.world.time_s {
-            let t = self.st.world.time_s;
+        if place_ready > self.st.world.time_s() {
+            let t = self.st.world.time_s();
             rec.stall_compute_s += place_ready - t;
             self.span(Stage::Stall, t, place_ready, "waiting for compute");
             self.idle_until(place_ready)?;
@@ -220,12 +221,12 @@ impl Run<'_, '_> {
             Err(e) => return Ok(Outcome::NoMotion(e.clone())),
         };
         rec.suction_speed_factor = *k;
-        let t_place = self.st.world.time_s;
+        let t_place = self.st.world.time_s();
         self.event(Event::PlaceStart);
         let place_done = |run: &mut Self, rec: &mut PickRecord| {
-            rec.place_s = run.st.world.time_s - t_place;
-            run.span(Stage::Place, t_place, run.st.world.time_s, "Place");
-            run.st.arm.free_s = run.st.world.time_s;
+            rec.place_s = run.st.world.time_s() - t_place;
+            run.span(Stage::Place, t_place, run.st.world.time_s(), "Place");
+            run.st.arm.free_s = run.st.world.time_s();
         };
         if let Played::Failed(o) = self.play_with(transfer, &held, true, None, false)? {
             place_done(self, rec);
@@ -237,11 +238,11 @@ impl Run<'_, '_> {
         }
         let part = self.st.world.held_part();
         self.st.world.vacuum_off();
-        let t = self.st.world.time_s + self.st.world.gripper.release_s + self.st.world.dt_s();
+        let t = self.st.world.time_s() + self.st.world.gripper().release_s + self.st.world.dt_s();
         self.idle_until(t)?;
-        self.st.world.gripper.take_events();
+        self.st.world.take_gripper_events();
         self.st.gripper_events.clear();
-        let release = self.st.world.time_s;
+        let release = self.st.world.time_s();
         self.event(Event::Released);
         self.obs.marker(release, &format!("release {}", rec.index));
         if let Played::Failed(o) = self.play(up, &hand, true)? {

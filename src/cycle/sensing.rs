@@ -33,7 +33,7 @@ impl Run<'_, '_> {
     /// finished exposing it) and the arm is out of view.
     pub(super) fn maybe_trigger(&mut self) {
         if let Some(j) = &self.st.pending
-            && (j.spoiled.is_none() || self.st.world.time_s + 1e-9 < j.exposure_end_s)
+            && (j.spoiled.is_none() || self.st.world.time_s() + 1e-9 < j.exposure_end_s)
         {
             return;
         }
@@ -109,13 +109,13 @@ impl Run<'_, '_> {
             RobotSpheres::new(robot, scene, None),
             Environment::from_scene(scene),
         );
-        let mut rng = crate::rng::stream(self.cell.opts.seed.wrapping_add(self.st.world.steps), "planner-home");
-        let t = self.st.world.time_s;
+        let mut rng = crate::rng::stream(self.cell.opts.seed.wrapping_add(self.st.world.steps()), "planner-home");
+        let t = self.st.world.time_s();
         let mut plan = free.plan(&self.st.world.joints(), &home, &PlanOptions::default(), &mut rng);
         if plan.is_err() {
             // Down in the tray (after a fault): straight up above the rim first.
             let tool = self.st.world.world_from_tool();
-            let rim_z = self.st.world.pick_tray.world_from_tray.translation.z + scene.pick_tray.wall_height_m + 0.1;
+            let rim_z = self.st.world.pick_tray().world_from_tray.translation.z + scene.pick_tray.wall_height_m + 0.1;
             let up = Isometry3::from_parts(
                 Translation3::new(tool.translation.x, tool.translation.y, tool.translation.z.max(rim_z)),
                 tool.rotation,
@@ -134,8 +134,8 @@ impl Run<'_, '_> {
         let hand = self.cell.hand;
         let (_, acc, _) = accelerate_in_corridor(robot, &robot.dynamics(&hand), &via, &free, CORRIDOR_CHECK_DT_S);
         let played = self.play(&acc.trajectory, &hand, true)?;
-        self.span(Stage::Place, t, self.st.world.time_s, "out of view");
-        self.st.arm.free_s = self.st.world.time_s;
+        self.span(Stage::Place, t, self.st.world.time_s(), "out of view");
+        self.st.arm.free_s = self.st.world.time_s();
         Ok(matches!(played, super::execute::Played::Done))
     }
 }

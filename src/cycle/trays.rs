@@ -94,7 +94,7 @@ impl Run<'_, '_> {
         for i in self.st.world.parts_in_state(PartState::Free) {
             self.st.world.remove_part(i);
         }
-        let t = self.st.world.time_s;
+        let t = self.st.world.time_s();
         self.event(Event::Refill(fill));
         self.idle_until(t + self.cell.scene.cycle.refill_s)?;
         self.st.failed_spots.clear();
@@ -107,8 +107,8 @@ impl Run<'_, '_> {
         self.st
             .world
             .build_pile_observed(&PileOptions::new(self.cell.pile_count, seed), &mut |w| obs.stepped(w))?;
-        self.span(Stage::Stall, t, self.st.world.time_s, "pick tray refill");
-        self.st.arm.free_s = self.st.world.time_s;
+        self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
+        self.st.arm.free_s = self.st.world.time_s();
         Ok(())
     }
 
@@ -123,9 +123,9 @@ impl Run<'_, '_> {
         }
         self.st.trays.exchanges += 1;
         self.event(Event::PlaceTrayExchange);
-        let t = self.st.world.time_s + self.cell.scene.cycle.place_tray_exchange_s;
+        let t = self.st.world.time_s() + self.cell.scene.cycle.place_tray_exchange_s;
         self.idle_until(t)?;
-        self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s);
+        self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
         Ok(())
     }
 }

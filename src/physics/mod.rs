@@ -1,22 +1,24 @@
 //! Physics world: the cell in rapier, with the piled parts, the arm and the suction gripper.
 //!
-//! Job: build the table, trays and obstacles from the cell file as fixed colliders; put the arm's
-//! links in as kinematic bodies that follow the joint state every step (so a moving arm pushes
-//! parts and hides them from the sensor); drop piles of parts ([`pile`]); hold and release parts
-//! with the suction gripper ([`suction`]); and watch the world's health every step.
+//! Job: build the table, trays and obstacles from the cell's geometry ([`crate::geometry`]) as
+//! fixed colliders; put the arm's links in as kinematic bodies that follow the joint state every
+//! step (so a moving arm pushes parts and hides them from the sensor); drop piles of parts
+//! ([`pile`]); hold and release parts with the suction gripper ([`suction`]); report every
+//! health problem of each step ([`health`]); answer scene queries in metres ([`query`]).
 //!
-//! Units: SI (m, s, kg); rapier runs in f32 with `length_unit` tuned for centimetre parts.
-//! Frames: the rapier frame is the world frame of the cell file (z up). Conversions between our
-//! f64 isometries and rapier's f32 poses are [`to_pose`] and [`to_isometry`]; rapier lengths are
-//! millimetres ([`SIM_UNITS_PER_M`]), everything outside this module is in metres.
+//! The API is in metres and SI units: rapier runs in f32 millimetres inside this module
+//! ([`SIM_UNITS_PER_M`]), and nothing outside it sees a rapier length, handle or collider.
+//! Frames: the rapier frame is the world frame of the cell file (z up).
 //!
 //! Solver tuning for 5-150 mm parts of a few grams (see README, "Physics"): rapier runs in
 //! millimetres; length unit 1 cm (allowed penetration 0.05 mm, prediction distance 0.2 mm);
 //! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; CCD on every part;
 //! the cell file's timestep.
 
+pub mod health;
 pub mod overlap;
 pub mod pile;
+pub mod query;
 pub mod script;
 pub mod shapes;
 pub mod suction;
@@ -25,8 +27,11 @@ use nalgebra::{Isometry3, Vector3};
 use rapier3d::math::{Pose, Vector};
 use rapier3d::prelude::*;
 
-use crate::config::{Scene, TrayConfig};
+use crate::config::Scene;
+pub use crate::geometry::TrayVolume;
 use crate::robot::{DOF, JointVector, Primitive as LinkPrimitive, RobotModel};
+pub use health::{HealthError, HealthEvent, HealthLimits, HealthMonitor};
+pub use query::{RayCaster, RayHit, RayTargets, ViewVolume};
 pub use shapes::{PartShape, ShapeError};
 pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
 
@@ -34,23 +39,23 @@ pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
 /// while they drift less than a hard-coded 1e-3 units (`ContactManifold::try_update_contacts`);
 /// in metres that is 1 mm, enough for centimetre parts to sink into each other unseen along an
 /// edge. In millimetres it is 1 um.
-pub const SIM_UNITS_PER_M: f64 = 1000.0;
+pub(crate) const SIM_UNITS_PER_M: f64 = 1000.0;
 
 /// A length [m] in rapier units.
 #[inline]
-pub fn sim(v: f64) -> f32 {
+pub(crate) fn sim(v: f64) -> f32 {
     (v * SIM_UNITS_PER_M) as f32
 }
 
 /// Our f64 isometry [m] as a rapier pose [rapier units].
-pub fn to_pose(iso: &Isometry3<f64>) -> Pose {
+pub(crate) fn to_pose(iso: &Isometry3<f64>) -> Pose {
     let mut p: Pose = iso.cast::<f32>().into();
     p.translation = sim_point(&iso.translation.vector);
     p
 }
 
 /// A rapier pose [rapier units] as our f64 isometry [m].
-pub fn to_isometry(p: &Pose) -> Isometry3<f64> {
+pub(crate) fn to_isometry(p: &Pose) -> Isometry3<f64> {
     let i: Isometry3<f32> = (*p).into();
     let mut i = i.cast::<f64>();
     i.translation.vector = point_from_sim(p.translation);
@@ -58,22 +63,22 @@ pub fn to_isometry(p: &Pose) -> Isometry3<f64> {
 }
 
 /// A position or velocity [m, m/s] in rapier units.
-pub fn sim_point(v: &Vector3<f64>) -> Vector {
+pub(crate) fn sim_point(v: &Vector3<f64>) -> Vector {
     Vector::new(sim(v.x), sim(v.y), sim(v.z))
 }
 
 /// A position or velocity in rapier units as metres [m, m/s].
-pub fn point_from_sim(v: Vector) -> Vector3<f64> {
+pub(crate) fn point_from_sim(v: Vector) -> Vector3<f64> {
     Vector3::new(v.x as f64, v.y as f64, v.z as f64) / SIM_UNITS_PER_M
 }
 
 /// A direction (unscaled) as a rapier vector.
-pub fn sim_dir(v: &Vector3<f64>) -> Vector {
+pub(crate) fn sim_dir(v: &Vector3<f64>) -> Vector {
     Vector::new(v.x as f32, v.y as f32, v.z as f32)
 }
 
 /// A rapier direction (unscaled) as an f64 vector.
-pub fn dir_from_sim(v: Vector) -> Vector3<f64> {
+pub(crate) fn dir_from_sim(v: Vector) -> Vector3<f64> {
     Vector3::new(v.x as f64, v.y as f64, v.z as f64)
 }
 
@@ -81,20 +86,6 @@ pub fn dir_from_sim(v: Vector) -> Vector3<f64> {
 pub const MAX_SUBSTEP_MOTION_M: f64 = 0.0005;
 /// Most substeps one physics step is divided into.
 pub const MAX_SUBSTEPS: usize = 8;
-
-/// The arm's collision shapes for standalone queries: `(link index, link_from_shape [m], shape
-/// in rapier units)`, the tool and cup on link 6. Place with `to_pose(world_from_link * link_from_shape)`.
-pub fn arm_query_shapes(w: &World) -> Vec<(usize, Isometry3<f64>, SharedShape)> {
-    let mut out = Vec::new();
-    for (i, h) in w.link_bodies.iter().enumerate() {
-        for c in w.bodies[*h].colliders() {
-            let col = &w.colliders[*c];
-            let local = col.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY);
-            out.push((i, to_isometry(&local), col.shared_shape().clone()));
-        }
-    }
-    out
-}
 
 /// Collision groups.
 const ENV: Group = Group::GROUP_1;
@@ -120,7 +111,7 @@ pub enum Tag {
 const VIEW_FLAG: u128 = 1 << 100;
 
 /// Scene-query predicate: rays see a part through its view twin, not its physics collider.
-fn ray_visible(_: ColliderHandle, c: &Collider) -> bool {
+pub(crate) fn ray_visible(_: ColliderHandle, c: &Collider) -> bool {
     !(matches!(Tag::decode(c.user_data), Some(Tag::Part(_))) && c.user_data & VIEW_FLAG == 0)
 }
 
@@ -173,182 +164,76 @@ pub enum PartState {
 #[derive(Debug, Clone)]
 pub struct PartBody {
     /// Its rigid body.
-    pub body: RigidBodyHandle,
+    body: RigidBodyHandle,
     /// Its collider (physics: convex polyhedra).
-    pub collider: ColliderHandle,
+    collider: ColliderHandle,
     /// Its twin for rays (sensor pixels, suction probes): the same geometry with boxes as
     /// cuboids, a massless sensor that takes part in no contact.
-    pub view_collider: ColliderHandle,
+    view_collider: ColliderHandle,
     /// Where it is in its life.
     pub state: PartState,
-}
-
-/// A failure of the simulation's health: the run stops with it.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-pub enum HealthError {
-    /// A body's pose or velocity became NaN or infinite.
-    #[error("t = {time_s:.4} s: {body} has a non-finite {what}")]
-    NonFinite {
-        /// Simulation time [s].
-        time_s: f64,
-        /// Which body.
-        body: String,
-        /// Pose or velocity.
-        what: &'static str,
-    },
-    /// A part left the tray it should be in.
-    #[error("t = {time_s:.4} s: {body} left the {volume} volume, now at ({x:.4}, {y:.4}, {z:.4}) m")]
-    LeftVolume {
-        /// Simulation time [s].
-        time_s: f64,
-        /// Which part.
-        body: String,
-        /// Which tray's volume.
-        volume: &'static str,
-        /// Position [m].
-        x: f64,
-        /// Position [m].
-        y: f64,
-        /// Position [m].
-        z: f64,
-    },
-    /// Two bodies overlap far more than the solver allows.
-    #[error("t = {time_s:.4} s: deep penetration {depth_mm:.2} mm between {a} and {b}")]
-    DeepPenetration {
-        /// Simulation time [s].
-        time_s: f64,
-        /// First body.
-        a: String,
-        /// Second body.
-        b: String,
-        /// Overlap [mm].
-        depth_mm: f64,
-    },
-    /// The arm, its tool or the held part ran into the table, a tray or an obstacle.
-    #[error("t = {time_s:.4} s: collision: {robot} penetrates {obstacle} by {depth_mm:.2} mm")]
-    ArmCollision {
-        /// Simulation time [s].
-        time_s: f64,
-        /// Which link, the tool or the held part.
-        robot: String,
-        /// What it hit.
-        obstacle: String,
-        /// Overlap [mm].
-        depth_mm: f64,
-    },
-}
-
-/// Limits of the health monitor.
-#[derive(Debug, Clone, Copy)]
-pub struct HealthLimits {
-    /// Part-part or part-environment overlap that counts as a failure [m].
-    pub deep_penetration_m: f64,
-    /// Arm-environment overlap that counts as a collision [m].
-    pub arm_collision_m: f64,
-}
-
-impl Default for HealthLimits {
-    fn default() -> Self {
-        HealthLimits {
-            deep_penetration_m: 0.002,
-            arm_collision_m: 0.0002,
-        }
-    }
-}
-
-/// A tray's volume in the world: its inner footprint, from just below the floor up to 1 m.
-#[derive(Debug, Clone, Copy)]
-pub struct TrayVolume {
-    /// `world_from_tray`.
-    pub world_from_tray: Isometry3<f64>,
-    /// Half the inner size plus the wall thickness [m].
-    pub half_xy_m: [f64; 2],
-    /// Wall height above the inner floor [m].
-    pub wall_height_m: f64,
-}
-
-impl TrayVolume {
-    fn new(t: &TrayConfig) -> Self {
-        TrayVolume {
-            world_from_tray: t.world_from_tray(),
-            half_xy_m: [
-                t.inner_size_m[0] / 2.0 + t.wall_thickness_m,
-                t.inner_size_m[1] / 2.0 + t.wall_thickness_m,
-            ],
-            wall_height_m: t.wall_height_m,
-        }
-    }
-
-    /// Whether a world point is in the tray's column (footprint incl. walls, floor - 2 mm to 1 m).
-    pub fn contains(&self, p: &Vector3<f64>) -> bool {
-        let l = self.world_from_tray.inverse_transform_point(&(*p).into());
-        l.x.abs() <= self.half_xy_m[0] && l.y.abs() <= self.half_xy_m[1] && l.z >= -0.002 && l.z <= 1.0
-    }
-
-    /// Whether a world point is inside the tray's inner walls, below the rim.
-    pub fn inside_inner(&self, p: &Vector3<f64>, wall_thickness_m: f64) -> bool {
-        let l = self.world_from_tray.inverse_transform_point(&(*p).into());
-        l.x.abs() <= self.half_xy_m[0] - wall_thickness_m
-            && l.y.abs() <= self.half_xy_m[1] - wall_thickness_m
-            && l.z >= -0.001
-            && l.z <= self.wall_height_m
-    }
 }
 
 /// The simulated cell.
 pub struct World {
     /// rapier's integration parameters (tuned; see the module header).
-    pub params: IntegrationParameters,
+    params: IntegrationParameters,
     gravity: Vector,
     pipeline: PhysicsPipeline,
     islands: IslandManager,
     broad_phase: BroadPhaseBvh,
     narrow_phase: NarrowPhase,
-    /// All rigid bodies.
-    pub bodies: RigidBodySet,
-    /// All colliders.
-    pub colliders: ColliderSet,
+    bodies: RigidBodySet,
+    colliders: ColliderSet,
     impulse_joints: ImpulseJointSet,
     multibody_joints: MultibodyJointSet,
     soft_bodies: SoftBodySet,
     ccd_solver: CCDSolver,
     /// Simulation time [s].
-    pub time_s: f64,
+    time_s: f64,
     /// Steps taken.
-    pub steps: u64,
+    steps: u64,
     /// Substeps taken (more than `steps` while parts move fast).
-    pub substeps: u64,
+    substeps: u64,
     /// Most substeps a step may be divided into (1 turns adaptive substepping off).
-    pub max_substeps: usize,
+    max_substeps: usize,
     /// The arm.
-    pub robot: RobotModel,
+    robot: RobotModel,
     /// Joint positions the arm bodies are at after the last step [rad].
     q: JointVector,
     /// Joint positions the arm reaches at the end of the next step [rad].
     q_target: JointVector,
     link_bodies: Vec<RigidBodyHandle>,
     /// The parts, in insertion order.
-    pub parts: Vec<PartBody>,
+    parts: Vec<PartBody>,
     /// The shape every part of this world has.
-    pub part_shape: PartShape,
+    part_shape: PartShape,
     /// Names of the environment objects, indexed by [`Tag::Env`].
-    pub env_names: Vec<String>,
+    env_names: Vec<String>,
     /// The pick tray's volume.
-    pub pick_tray: TrayVolume,
+    pick_tray: TrayVolume,
     /// The place tray's volume.
-    pub place_tray: TrayVolume,
+    place_tray: TrayVolume,
     /// The suction gripper.
-    pub gripper: SuctionGripper,
-    /// Health limits.
-    pub health: HealthLimits,
-    /// Pick tray wall thickness [m].
-    pick_wall_m: f64,
+    gripper: SuctionGripper,
+    /// The health monitor.
+    health: HealthMonitor,
     /// Tool positions after the last steps, newest last, for the tool's acceleration.
     tool_history: [Vector3<f64>; 3],
     /// The physics step [s] (`params.dt` holds the substep's while a step runs).
     step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
     tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
+}
+
+/// The solver settings a world steps with.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Solver {
+    /// binpick's tuning (see the module header) with adaptive substeps.
+    Tuned,
+    /// rapier's default contact stiffness and solver iterations, one substep per step: the peer
+    /// the physics benchmark compares with.
+    RapierDefaults,
 }
 
 fn arm_collider(shape: SharedShape, pose: Pose, tag: Tag, with_fixed: bool) -> Collider {
@@ -375,11 +260,6 @@ impl World {
             dt,
             min_ccd_dt: dt / 100.0,
             length_unit: sim(0.01),
-            num_solver_iterations: 8,
-            // Stiff contacts: a few grams resting on each other sink well under 0.3 mm (measured
-            // by the independent overlap check over many piles; rapier's defaults are 30 and 60 Hz).
-            contact_softness: SpringCoefficients::new(200.0, 10.0),
-            static_contact_softness: SpringCoefficients::new(400.0, 10.0),
             ..IntegrationParameters::default()
         };
         let mut w = World {
@@ -409,8 +289,7 @@ impl World {
             pick_tray: TrayVolume::new(&scene.pick_tray),
             place_tray: TrayVolume::new(&scene.place_tray.tray),
             gripper: SuctionGripper::new(&scene.gripper),
-            health: HealthLimits::default(),
-            pick_wall_m: scene.pick_tray.wall_thickness_m,
+            health: HealthMonitor::default(),
             tool_history: [Vector3::zeros(); 3],
             step_dt_s: f64::from(scene.sim.physics_dt_s as f32),
             tray_pieces: overlap::tray_pieces(&scene.pick_tray)
@@ -426,6 +305,7 @@ impl World {
             };
             w.add_env_box(&name, b.world_from_box(), b.half_m);
         }
+        w.set_solver(Solver::Tuned);
         w.add_arm(scene);
         w.tool_history = [w.tool_position(); 3];
         // One zero-length step so that queries see the world as built.
@@ -609,7 +489,12 @@ impl World {
         self.steps += 1;
         self.substeps += n as u64;
         self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
-        self.check_health()
+        let events = self.health.check(self);
+        if events.is_empty() {
+            Ok(())
+        } else {
+            Err(HealthError { events })
+        }
     }
 
     /// How many substeps the next step needs so that no awake part moves more than
@@ -761,254 +646,6 @@ impl World {
         self.colliders.get(c).and_then(|c| Tag::decode(c.user_data))
     }
 
-    /// A scene-query pipeline over every collider, for casting many rays (the sensor's pixels).
-    pub fn query_pipeline(&self) -> QueryPipeline<'_> {
-        self.broad_phase.as_query_pipeline(
-            self.narrow_phase.query_dispatcher(),
-            &self.bodies,
-            &self.colliders,
-            QueryFilter::default().predicate(&ray_visible),
-        )
-    }
-
-    /// A scene-query pipeline over the fixed colliders only (table, trays, obstacles): what the
-    /// sensor sees behind everything that moves.
-    pub fn query_pipeline_fixed(&self) -> QueryPipeline<'_> {
-        self.broad_phase.as_query_pipeline(
-            self.narrow_phase.query_dispatcher(),
-            &self.bodies,
-            &self.colliders,
-            QueryFilter::only_fixed().predicate(&ray_visible),
-        )
-    }
-
-    /// World-frame bounding boxes (min, max corners) [m] of every collider the sensor can see that
-    /// is not fixed: parts, arm links, tool, cup, held part. A pixel whose ray misses all of them
-    /// sees the fixed cell.
-    pub fn moving_view_boxes(&self) -> Vec<(Vector3<f64>, Vector3<f64>)> {
-        self.colliders
-            .iter()
-            .filter(|(h, c)| {
-                ray_visible(*h, c)
-                    && c.is_enabled()
-                    && c.parent()
-                        .is_some_and(|b| self.bodies.get(b).is_some_and(|b| !b.is_fixed()))
-            })
-            .map(|(_, c)| {
-                let a = c.compute_aabb();
-                (point_from_sim(a.mins), point_from_sim(a.maxs))
-            })
-            .collect()
-    }
-
-    /// A scene-query pipeline over everything that moves (parts, arm, tool, held part).
-    pub fn query_pipeline_moving(&self) -> QueryPipeline<'_> {
-        self.broad_phase.as_query_pipeline(
-            self.narrow_phase.query_dispatcher(),
-            &self.bodies,
-            &self.colliders,
-            QueryFilter::exclude_fixed().predicate(&ray_visible),
-        )
-    }
-
-    /// Casts a ray with a pipeline from [`World::query_pipeline`]: first hit's tag, distance along
-    /// the unit `dir` [m] and surface normal.
-    pub fn cast_ray_with(
-        &self,
-        qp: &QueryPipeline<'_>,
-        origin: &Vector3<f64>,
-        dir: &Vector3<f64>,
-        max_m: f64,
-    ) -> Option<(Tag, f64, Vector3<f64>)> {
-        let ray = Ray::new(sim_point(origin), sim_dir(dir));
-        qp.cast_ray_and_get_normal(&ray, sim(max_m), true).and_then(|(h, hit)| {
-            let tag = self.tag_of(h)?;
-            Some((
-                tag,
-                hit.time_of_impact as f64 / SIM_UNITS_PER_M,
-                dir_from_sim(hit.normal),
-            ))
-        })
-    }
-
-    /// Casts a ray into the world; returns the first hit's tag, distance along `dir` (unit) and
-    /// surface normal. `skip` decides which colliders the ray passes through.
-    pub fn cast_ray(
-        &self,
-        origin: &Vector3<f64>,
-        dir: &Vector3<f64>,
-        max_m: f64,
-        skip: &dyn Fn(Tag) -> bool,
-    ) -> Option<(Tag, f64, Vector3<f64>)> {
-        let pred =
-            |h: ColliderHandle, c: &Collider| ray_visible(h, c) && Tag::decode(c.user_data).is_some_and(|t| !skip(t));
-        let qp = self.broad_phase.as_query_pipeline(
-            self.narrow_phase.query_dispatcher(),
-            &self.bodies,
-            &self.colliders,
-            QueryFilter::default().predicate(&pred),
-        );
-        self.cast_ray_with(&qp, origin, dir, max_m)
-    }
-
-    /// Deepest overlap between two parts, or a part and a tray [m], with the bodies involved.
-    /// Computed independently of the solver: exact separating-axis depths between the workpiece's
-    /// convex pieces ([`overlap`]); for mesh workpieces, parry's contact query on the colliders.
-    pub fn max_penetration_m(&self) -> (f64, Option<(Tag, Tag)>) {
-        let Some(pieces) = &self.part_shape.pieces else {
-            return self.max_penetration_parry();
-        };
-        let poses: Vec<Isometry3<f64>> = (0..self.parts.len()).map(|i| self.part_pose(i)).collect();
-        let (d, i, j) = overlap::max_depth(&poses, pieces, self.part_shape.bounding_radius_m, &self.tray_pieces);
-        if d <= 0.0 {
-            return (0.0, None);
-        }
-        let b = if j == usize::MAX {
-            Tag::Env(u32::MAX)
-        } else {
-            Tag::Part(j as u32)
-        };
-        (d, Some((Tag::Part(i as u32), b)))
-    }
-
-    fn max_penetration_parry(&self) -> (f64, Option<(Tag, Tag)>) {
-        let mut worst = (0.0, None);
-        for pair in self.narrow_phase.contact_pairs() {
-            let (Some(c1), Some(c2)) = (self.colliders.get(pair.collider1), self.colliders.get(pair.collider2)) else {
-                continue;
-            };
-            let (t1, t2) = (Tag::decode(c1.user_data), Tag::decode(c2.user_data));
-            if t1.is_some_and(Tag::is_robot) || t2.is_some_and(Tag::is_robot) {
-                continue;
-            }
-            // parry's `contact` can report a depth for shapes that are apart; ask first whether they meet.
-            let (p1, s1, p2, s2) = (c1.position(), c1.shape(), c2.position(), c2.shape());
-            if !rapier3d::parry::query::intersection_test(p1, s1, p2, s2).is_ok_and(|r| r.intersecting) {
-                continue;
-            }
-            if let Ok(Some(c)) = rapier3d::parry::query::contact(p1, s1, p2, s2, 0.0) {
-                let depth = -(c.dist as f64) / SIM_UNITS_PER_M;
-                if depth > worst.0 {
-                    worst = (depth, t1.zip(t2));
-                }
-            }
-        }
-        worst
-    }
-
-    /// Exact overlap depth of two colliders now [m]: separating axes on the workpiece's convex
-    /// pieces against a part or a box, else parry's contact query.
-    pub fn exact_depth_m(&self, a: ColliderHandle, b: ColliderHandle) -> f64 {
-        let piece_sets = |h: ColliderHandle| -> Option<(Isometry3<f64>, Vec<overlap::Polytope>)> {
-            let c = self.colliders.get(h)?;
-            match Tag::decode(c.user_data)? {
-                Tag::Part(i) => Some((self.part_pose(i as usize), self.part_shape.pieces.clone()?)),
-                _ => {
-                    let he = c.shape().as_cuboid()?.half_extents;
-                    Some((
-                        to_isometry(c.position()),
-                        vec![overlap::Polytope::cuboid(Vector3::zeros(), point_from_sim(he))],
-                    ))
-                }
-            }
-        };
-        if let (Some((pa, ka)), Some((pb, kb))) = (piece_sets(a), piece_sets(b)) {
-            return ka
-                .iter()
-                .flat_map(|x| kb.iter().map(move |y| (x, y)))
-                .map(|(x, y)| overlap::depth(&pa, x, &pb, y))
-                .fold(0.0, f64::max);
-        }
-        let (Some(c1), Some(c2)) = (self.colliders.get(a), self.colliders.get(b)) else {
-            return 0.0;
-        };
-        let (p1, s1, p2, s2) = (c1.position(), c1.shape(), c2.position(), c2.shape());
-        if !rapier3d::parry::query::intersection_test(p1, s1, p2, s2).is_ok_and(|r| r.intersecting) {
-            return 0.0;
-        }
-        match rapier3d::parry::query::contact(p1, s1, p2, s2, 0.0) {
-            Ok(Some(c)) => (-(c.dist as f64) / SIM_UNITS_PER_M).max(0.0),
-            _ => 0.0,
-        }
-    }
-
-    fn check_health(&self) -> Result<(), HealthError> {
-        let t = self.time_s;
-        for (i, p) in self.parts.iter().enumerate() {
-            let b = &self.bodies[p.body];
-            let pos = b.position();
-            let name = || self.describe(Some(Tag::Part(i as u32)));
-            if !(pos.translation.is_finite() && pos.rotation.is_finite()) {
-                return Err(HealthError::NonFinite {
-                    time_s: t,
-                    body: name(),
-                    what: "pose",
-                });
-            }
-            if !(b.linvel().is_finite() && b.angvel().is_finite()) {
-                return Err(HealthError::NonFinite {
-                    time_s: t,
-                    body: name(),
-                    what: "velocity",
-                });
-            }
-            let c = point_from_sim(pos.translation);
-            let (ok, volume) = match p.state {
-                PartState::Free => (self.pick_tray.contains(&c), "pick tray"),
-                PartState::Placed => (self.place_tray.contains(&c), "place tray"),
-                PartState::Held | PartState::Removed => (true, ""),
-            };
-            if !ok {
-                return Err(HealthError::LeftVolume {
-                    time_s: t,
-                    body: name(),
-                    volume,
-                    x: c.x,
-                    y: c.y,
-                    z: c.z,
-                });
-            }
-        }
-        for pair in self.narrow_phase.contact_pairs() {
-            if !pair.has_any_active_contact() {
-                continue;
-            }
-            let (t1, t2) = (self.tag_of(pair.collider1), self.tag_of(pair.collider2));
-            let deepest = pair
-                .manifolds()
-                .iter()
-                .flat_map(|m| m.points.iter())
-                .map(|p| -(p.dist as f64) / SIM_UNITS_PER_M)
-                .fold(0.0, f64::max);
-            let held = |tag: Option<Tag>| matches!(tag, Some(Tag::Part(i)) if self.parts.get(i as usize).is_some_and(|p| p.state == PartState::Held));
-            let robotish = |tag: Option<Tag>| tag.is_some_and(Tag::is_robot) || held(tag);
-            let env = |tag: Option<Tag>| matches!(tag, Some(Tag::Env(_)));
-            if (robotish(t1) && env(t2)) || (robotish(t2) && env(t1)) {
-                if deepest > self.health.arm_collision_m {
-                    let (r, o) = if robotish(t1) { (t1, t2) } else { (t2, t1) };
-                    return Err(HealthError::ArmCollision {
-                        time_s: t,
-                        robot: self.describe(r),
-                        obstacle: self.describe(o),
-                        depth_mm: deepest * 1e3,
-                    });
-                }
-            } else if !robotish(t1) && !robotish(t2) && deepest > self.health.deep_penetration_m {
-                // The manifold is from the start of the step: confirm with the exact depth now.
-                let exact = self.exact_depth_m(pair.collider1, pair.collider2);
-                if exact > self.health.deep_penetration_m {
-                    return Err(HealthError::DeepPenetration {
-                        time_s: t,
-                        a: self.describe(t1),
-                        b: self.describe(t2),
-                        depth_mm: exact * 1e3,
-                    });
-                }
-            }
-        }
-        Ok(())
-    }
-
     /// How far part `i` landed from where it should be: horizontal distance of the centres [m]
     /// and yaw difference [rad], the latter modulo the part's yaw symmetry (0: any yaw).
     pub fn placement_error(&self, i: usize, world_from_slot: &Isometry3<f64>, yaw_symmetry_rad: f64) -> (f64, f64) {
@@ -1031,10 +668,102 @@ impl World {
         (0..self.parts.len())
             .filter(|&i| {
                 self.parts[i].state == PartState::Free
-                    && self
-                        .pick_tray
-                        .inside_inner(&self.part_pose(i).translation.vector, self.pick_wall_m)
+                    && self.pick_tray.inside_inner(&self.part_pose(i).translation.vector)
             })
             .collect()
+    }
+
+    /// Simulation time [s].
+    pub fn time_s(&self) -> f64 {
+        self.time_s
+    }
+
+    /// Physics steps taken.
+    pub fn steps(&self) -> u64 {
+        self.steps
+    }
+
+    /// Substeps taken (more than the steps while parts move fast).
+    pub fn substeps(&self) -> u64 {
+        self.substeps
+    }
+
+    /// The arm.
+    pub fn robot(&self) -> &RobotModel {
+        &self.robot
+    }
+
+    /// How many parts were ever added (removed ones keep their index).
+    pub fn part_count(&self) -> usize {
+        self.parts.len()
+    }
+
+    /// Where part `i` is in its life.
+    pub fn part_state(&self, i: usize) -> PartState {
+        self.parts[i].state
+    }
+
+    /// The shape every part of this world has.
+    pub fn part_shape(&self) -> &PartShape {
+        &self.part_shape
+    }
+
+    /// The pick tray's volume.
+    pub fn pick_tray(&self) -> &TrayVolume {
+        &self.pick_tray
+    }
+
+    /// The place tray's volume.
+    pub fn place_tray(&self) -> &TrayVolume {
+        &self.place_tray
+    }
+
+    /// The suction gripper (its settings and state).
+    pub fn gripper(&self) -> &SuctionGripper {
+        &self.gripper
+    }
+
+    /// Takes the gripper's events produced so far.
+    pub fn take_gripper_events(&mut self) -> Vec<GripperEvent> {
+        self.gripper.take_events()
+    }
+
+    /// The health monitor's limits.
+    pub fn health_limits(&self) -> HealthLimits {
+        self.health.limits
+    }
+
+    /// Steps with `solver`'s settings from now on.
+    pub fn set_solver(&mut self, solver: Solver) {
+        match solver {
+            Solver::Tuned => {
+                // Stiff contacts: a few grams resting on each other sink well under 0.3 mm
+                // (measured by the independent overlap check over many piles; rapier's defaults
+                // are 30 and 60 Hz).
+                self.params.contact_softness = SpringCoefficients::new(200.0, 10.0);
+                self.params.static_contact_softness = SpringCoefficients::new(400.0, 10.0);
+                self.params.num_solver_iterations = 8;
+                self.max_substeps = MAX_SUBSTEPS;
+            }
+            Solver::RapierDefaults => {
+                self.params.contact_softness = SpringCoefficients::contact_defaults();
+                self.params.static_contact_softness = SpringCoefficients::contact_static_defaults();
+                self.params.num_solver_iterations = 4;
+                self.max_substeps = 1;
+            }
+        }
+    }
+
+    /// Wakes every part up (for tests that disturb a settled pile).
+    pub fn wake_parts(&mut self) {
+        for p in &self.parts {
+            self.bodies[p.body].wake_up(true);
+        }
+    }
+
+    /// Moves part `i` to `world_from_part` at once, awake (for set-ups and tests).
+    pub fn set_part_pose(&mut self, i: usize, world_from_part: &Isometry3<f64>) {
+        let b = &mut self.bodies[self.parts[i].body];
+        b.set_position(to_pose(world_from_part), true);
     }
 }

@@ -119,8 +119,8 @@ impl World {
         let tray = self.pick_tray.world_from_tray;
         let floor_z = tray.translation.vector.z;
         let inner = [
-            self.pick_tray.half_xy_m[0] - self.pick_wall_m,
-            self.pick_tray.half_xy_m[1] - self.pick_wall_m,
+            self.pick_tray.half_xy_m[0] - self.pick_tray.wall_thickness_m,
+            self.pick_tray.half_xy_m[1] - self.pick_tray.wall_thickness_m,
         ];
         let he = self.part_shape.half_extents_m;
         // A part more than three times longer than its width is poured lying (see below).

@@ -11,6 +11,10 @@
 //! when the force the cup must exert, m |a_tool - g|, amplified for peeling by (1 + 4 e / d)
 //! (e: centre-of-mass offset from the cup axis, d: cup diameter), exceeds the holding force.
 //!
+//! The gripper itself ([`SuctionGripper`]) is a state machine (idle, building up, holding,
+//! releasing) that says what is due at a step ([`SuctionGripper::due`]); the world decides it
+//! with its geometry (the seal probe, the tool's acceleration) and moves the bodies.
+//!
 //! Units: m, s, N, Pa. Frames: `world_from_tool` (z axis out of the cup), `tool_from_part`.
 
 use nalgebra::{Isometry3, Matrix3, Vector3};
@@ -165,9 +169,22 @@ pub struct SuctionGripper {
     /// Release time [s].
     pub release_s: f64,
     /// Current state.
-    pub state: GripperState,
+    state: GripperState,
     /// Events not yet taken by the caller.
-    pub events: Vec<GripperEvent>,
+    events: Vec<GripperEvent>,
+}
+
+/// What the gripper needs the world to decide or do at a step.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum GripperDue {
+    /// Nothing.
+    Nothing,
+    /// The vacuum has built up: probe the seal under the cup and seal or fail.
+    DecideSeal,
+    /// A part is held: check that the cup still holds it against the tool's motion.
+    CheckHold(Seal),
+    /// The vacuum is off long enough: the part comes off the cup.
+    Release(Seal),
 }
 
 impl SuctionGripper {
@@ -190,6 +207,89 @@ impl SuctionGripper {
     /// Takes the events produced so far.
     pub fn take_events(&mut self) -> Vec<GripperEvent> {
         std::mem::take(&mut self.events)
+    }
+
+    /// Opens the vacuum valve at `now_s`: the seal is decided when the vacuum has built up.
+    pub fn vacuum_on(&mut self, now_s: f64) {
+        if self.state == GripperState::Idle {
+            self.state = GripperState::BuildingUp { since_s: now_s };
+        }
+    }
+
+    /// Closes the vacuum valve at `now_s`: a held part comes off after `release_s`; a vacuum
+    /// still building up fails the grasp.
+    pub fn vacuum_off(&mut self, now_s: f64) {
+        match self.state {
+            GripperState::BuildingUp { .. } => {
+                self.state = GripperState::Idle;
+                self.events.push(GripperEvent::GraspFailed {
+                    time_s: now_s,
+                    reason: GraspFailure::Aborted,
+                });
+            }
+            GripperState::Holding { seal, tool_from_part } => {
+                self.state = GripperState::Releasing {
+                    since_s: now_s,
+                    seal,
+                    tool_from_part,
+                };
+            }
+            _ => {}
+        }
+    }
+
+    /// What is due at `now_s`.
+    pub fn due(&self, now_s: f64) -> GripperDue {
+        match self.state {
+            GripperState::Idle => GripperDue::Nothing,
+            GripperState::BuildingUp { since_s } if now_s + 1e-9 >= since_s + self.build_up_s => GripperDue::DecideSeal,
+            GripperState::BuildingUp { .. } => GripperDue::Nothing,
+            GripperState::Holding { seal, .. } => GripperDue::CheckHold(seal),
+            GripperState::Releasing { since_s, seal, .. } if now_s + 1e-9 >= since_s + self.release_s => {
+                GripperDue::Release(seal)
+            }
+            GripperState::Releasing { .. } => GripperDue::Nothing,
+        }
+    }
+
+    /// The vacuum built up on `seal` at `now_s`; the part sits at `tool_from_part` on the tool.
+    pub fn sealed(&mut self, now_s: f64, seal: Seal, tool_from_part: Isometry3<f64>) {
+        self.state = GripperState::Holding { seal, tool_from_part };
+        self.events.push(GripperEvent::Grasped { time_s: now_s, seal });
+    }
+
+    /// The vacuum did not build up at `now_s`.
+    pub fn failed(&mut self, now_s: f64, reason: GraspFailure) {
+        self.state = GripperState::Idle;
+        self.events.push(GripperEvent::GraspFailed { time_s: now_s, reason });
+    }
+
+    /// The held part tore off at `now_s`: the cup had to exert `required_n`.
+    pub fn slipped(&mut self, now_s: f64, part: usize, required_n: f64) {
+        self.state = GripperState::Idle;
+        self.events.push(GripperEvent::Slipped {
+            time_s: now_s,
+            part,
+            required_n,
+            holding_n: self.holding_n,
+        });
+    }
+
+    /// The part came off the cup at `now_s`.
+    pub fn released(&mut self, now_s: f64, part: usize) {
+        self.state = GripperState::Idle;
+        self.events.push(GripperEvent::Released { time_s: now_s, part });
+    }
+
+    /// The part on the cup and where it sits on the tool, if any.
+    pub fn held(&self) -> Option<(Seal, Isometry3<f64>)> {
+        match self.state {
+            GripperState::Holding { seal, tool_from_part }
+            | GripperState::Releasing {
+                seal, tool_from_part, ..
+            } => Some((seal, tool_from_part)),
+            _ => None,
+        }
     }
 }
 
@@ -218,7 +318,7 @@ impl World {
         let reach = PROBE_BACK_M + 0.02;
         let hit = self.cast_ray(&(centre - axis * PROBE_BACK_M), &axis, reach, &skip);
         let (tag, toi, normal) = match hit {
-            Some(h) => h,
+            Some(h) => (h.tag, h.distance_m, h.normal),
             None => return Err(GraspFailure::NoPart("nothing within 2 cm".into())),
         };
         let Tag::Part(part) = tag else {
@@ -242,7 +342,11 @@ impl World {
         let face_point = centre - axis * PROBE_BACK_M + axis * toi;
         let on_face = |p: &Vector3<f64>, dir: &Vector3<f64>| -> Result<(), Option<Tag>> {
             match self.cast_ray(&(p - dir * PROBE_BACK_M), dir, reach, &skip) {
-                Some((t, d, n)) => {
+                Some(super::query::RayHit {
+                    tag: t,
+                    distance_m: d,
+                    normal: n,
+                }) => {
                     let q = p - dir * PROBE_BACK_M + dir * d;
                     let same = t == Tag::Part(part as u32)
                         && n.dot(&normal).clamp(-1.0, 1.0).acos() < SAME_FACE_RAD
@@ -314,47 +418,22 @@ impl World {
 
     /// Opens the vacuum valve: the seal is decided when the vacuum has built up.
     pub fn vacuum_on(&mut self) {
-        if self.gripper.state == GripperState::Idle {
-            self.gripper.state = GripperState::BuildingUp { since_s: self.time_s };
-        }
+        self.gripper.vacuum_on(self.time_s);
     }
 
     /// Closes the vacuum valve: a held part comes off after `release_s`.
     pub fn vacuum_off(&mut self) {
-        match self.gripper.state {
-            GripperState::BuildingUp { .. } => {
-                self.gripper.state = GripperState::Idle;
-                self.gripper.events.push(GripperEvent::GraspFailed {
-                    time_s: self.time_s,
-                    reason: GraspFailure::Aborted,
-                });
-            }
-            GripperState::Holding { seal, tool_from_part } => {
-                self.gripper.state = GripperState::Releasing {
-                    since_s: self.time_s,
-                    seal,
-                    tool_from_part,
-                };
-            }
-            _ => {}
-        }
+        self.gripper.vacuum_off(self.time_s);
     }
 
     /// The part on the cup, if any.
     pub fn held_part(&self) -> Option<usize> {
-        match self.gripper.state {
-            GripperState::Holding { seal, .. } | GripperState::Releasing { seal, .. } => Some(seal.part),
-            _ => None,
-        }
+        self.gripper.held().map(|(seal, _)| seal.part)
     }
 
     /// The held part as a payload on the flange (for the robot's dynamics).
     pub fn held_payload(&self) -> Option<Payload> {
-        let (GripperState::Holding { tool_from_part, .. } | GripperState::Releasing { tool_from_part, .. }) =
-            self.gripper.state
-        else {
-            return None;
-        };
+        let (_, tool_from_part) = self.gripper.held()?;
         let flange_from_part = self.robot.flange_from_tool * tool_from_part;
         let s = &self.part_shape;
         let r = flange_from_part.rotation.to_rotation_matrix();
@@ -399,26 +478,16 @@ impl World {
     /// the solver, with the tool pose at the end of the step.
     pub(super) fn update_gripper(&mut self, world_from_tool_next: &Isometry3<f64>) {
         let now = self.time_s;
-        match self.gripper.state {
-            GripperState::Idle => {}
-            GripperState::BuildingUp { since_s } => {
-                if now + 1e-9 >= since_s + self.gripper.build_up_s {
-                    match self.check_seal(&self.world_from_tool()) {
-                        Ok(seal) => {
-                            let tool_from_part = self.attach(seal);
-                            self.gripper.state = GripperState::Holding { seal, tool_from_part };
-                            self.gripper.events.push(GripperEvent::Grasped { time_s: now, seal });
-                        }
-                        Err(reason) => {
-                            self.gripper.state = GripperState::Idle;
-                            self.gripper
-                                .events
-                                .push(GripperEvent::GraspFailed { time_s: now, reason });
-                        }
-                    }
+        match self.gripper.due(now) {
+            GripperDue::Nothing => {}
+            GripperDue::DecideSeal => match self.check_seal(&self.world_from_tool()) {
+                Ok(seal) => {
+                    let tool_from_part = self.attach(seal);
+                    self.gripper.sealed(now, seal, tool_from_part);
                 }
-            }
-            GripperState::Holding { seal, .. } => {
+                Err(reason) => self.gripper.failed(now, reason),
+            },
+            GripperDue::CheckHold(seal) => {
                 let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
                 let specific_force = (self.tool_acceleration() - g).norm();
                 let required =
@@ -427,31 +496,15 @@ impl World {
                         .required_n(self.part_shape.mass_kg, specific_force, seal.com_offset_m);
                 if required > self.gripper.holding_n {
                     self.detach(seal.part);
-                    self.gripper.state = GripperState::Idle;
-                    self.gripper.events.push(GripperEvent::Slipped {
-                        time_s: now,
-                        part: seal.part,
-                        required_n: required,
-                        holding_n: self.gripper.holding_n,
-                    });
+                    self.gripper.slipped(now, seal.part, required);
                 }
             }
-            GripperState::Releasing { since_s, seal, .. } => {
-                if now + 1e-9 >= since_s + self.gripper.release_s {
-                    self.detach(seal.part);
-                    self.gripper.state = GripperState::Idle;
-                    self.gripper.events.push(GripperEvent::Released {
-                        time_s: now,
-                        part: seal.part,
-                    });
-                }
+            GripperDue::Release(seal) => {
+                self.detach(seal.part);
+                self.gripper.released(now, seal.part);
             }
         }
-        if let GripperState::Holding { seal, tool_from_part }
-        | GripperState::Releasing {
-            seal, tool_from_part, ..
-        } = self.gripper.state
-        {
+        if let Some((seal, tool_from_part)) = self.gripper.held() {
             let body = self.parts[seal.part].body;
             self.bodies[body].set_next_kinematic_position(to_pose(&(world_from_tool_next * tool_from_part)));
         }

@@ -155,14 +155,14 @@ impl Observer for Recorder<'_> {
         if self
             .scene_frames
             .last()
-            .is_some_and(|f| world.time_s + 1e-9 < f.t_s + SCENE_FRAME_S)
+            .is_some_and(|f| world.time_s() + 1e-9 < f.t_s + SCENE_FRAME_S)
         {
             return;
         }
         self.scene_frames.push(SceneFrame {
-            t_s: world.time_s,
-            parts: (0..world.parts.len())
-                .map(|i| (world.parts[i].state, world.part_pose(i)))
+            t_s: world.time_s(),
+            parts: (0..world.part_count())
+                .map(|i| (world.part_state(i), world.part_pose(i)))
                 .collect(),
         });
     }

@@ -4,7 +4,7 @@
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::physics::pile::{PileOptions, max_motion};
 use binpick::physics::suction::{GraspFailure, GripperEvent};
-use binpick::physics::{HealthError, PartShape, World};
+use binpick::physics::{HealthEvent, PartShape, World};
 use binpick::robot::{RobotModel, tool_down_pose};
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
@@ -19,7 +19,7 @@ fn world(workpiece: &str) -> (World, LoadedScene, LoadedWorkpiece) {
 }
 
 fn floor_z(w: &World) -> f64 {
-    w.pick_tray.world_from_tray.translation.vector.z
+    w.pick_tray().world_from_tray.translation.vector.z
 }
 
 #[test]
@@ -67,12 +67,9 @@ fn settled_piles_do_not_jitter() {
             .unwrap()
             .poses;
         // Wake everything and watch one more second.
-        let bodies: Vec<_> = w.parts.iter().map(|p| p.body).collect();
-        for b in bodies {
-            w.bodies[b].wake_up(true);
-        }
+        w.wake_parts();
         w.run_for(1.0).unwrap();
-        let after: Vec<_> = (0..w.parts.len())
+        let after: Vec<_> = (0..w.part_count())
             .map(|i| {
                 let p = w.part_pose(i);
                 let q = p.rotation.quaternion();
@@ -99,7 +96,7 @@ fn thin_parts_do_not_tunnel_through_the_tray_floor() {
     for name in ["C", "F"] {
         for (height, tilt) in [(0.3, 0.0), (0.3, 1.2), (0.5, 0.05)] {
             let (mut w, _, wp) = world(name);
-            let c = w.pick_tray.world_from_tray.translation.vector;
+            let c = w.pick_tray().world_from_tray.translation.vector;
             let pose = Isometry3::new(Vector3::new(c.x, c.y, c.z + height), Vector3::new(tilt, 0.3, 0.0));
             w.add_part(&pose);
             w.run_for(1.0).unwrap_or_else(|e| panic!("{name} from {height} m: {e}"));
@@ -117,11 +114,11 @@ fn thin_parts_do_not_tunnel_through_the_tray_floor() {
 
 /// A single part lying on the pick tray floor at `xy` (tray frame), settled; returns its top face centre.
 fn lone_part(w: &mut World, size_z: f64, xy: (f64, f64), rot: UnitQuaternion<f64>) -> Vector3<f64> {
-    let tray = w.pick_tray.world_from_tray;
+    let tray = w.pick_tray().world_from_tray;
     let pose = tray * Isometry3::from_parts(Translation3::new(xy.0, xy.1, size_z / 2.0 + 0.0005), rot);
     w.add_part(&pose);
     w.run_for(0.5).unwrap();
-    let p = w.part_pose(w.parts.len() - 1);
+    let p = w.part_pose(w.part_count() - 1);
     p.translation.vector + p.rotation * Vector3::new(0.0, 0.0, size_z / 2.0)
 }
 
@@ -135,8 +132,8 @@ fn grasp_events(w: &mut World, tool: Isometry3<f64>) -> Vec<GripperEvent> {
     w.place_tool(&above).unwrap();
     w.move_tool_line(&tool, 0.3).unwrap();
     w.vacuum_on();
-    w.run_for(w.gripper.build_up_s + 0.01).unwrap();
-    w.gripper.take_events()
+    w.run_for(w.gripper().build_up_s + 0.01).unwrap();
+    w.take_gripper_events()
 }
 
 fn grasp_at(w: &mut World, tool: Isometry3<f64>) -> GripperEvent {
@@ -164,7 +161,7 @@ fn suction_seals_on_a_flat_top_face_lifts_and_places_within_tolerance() {
     let heading = slot_x.y.atan2(slot_x.x);
     let over_slot = tool_down_pose(slot.translation.vector + Vector3::z() * 0.12, heading);
     // Swing over in joint space (a straight tool line would pass near the base).
-    let q_over = w.robot.ik_tool_nearest(&over_slot, &w.joints()).unwrap().q;
+    let q_over = w.robot().ik_tool_nearest(&over_slot, &w.joints()).unwrap().q;
     w.move_joints(&q_over, 1.2).unwrap();
     let drift = w.world_from_tool().inverse() * w.part_pose(0) * tool_from_part.inverse();
     assert!(
@@ -175,9 +172,9 @@ fn suction_seals_on_a_flat_top_face_lifts_and_places_within_tolerance() {
     let release = tool_down_pose(slot.translation.vector + Vector3::z() * (0.010 + 0.001), heading);
     w.move_tool_line(&release, 0.5).unwrap();
     w.vacuum_off();
-    w.run_for(w.gripper.release_s + 0.01).unwrap();
+    w.run_for(w.gripper().release_s + 0.01).unwrap();
     assert!(matches!(
-        w.gripper.take_events()[..],
+        w.take_gripper_events()[..],
         [GripperEvent::Released { part: 0, .. }]
     ));
     w.move_tool_line(&over_slot, 0.3).unwrap();
@@ -241,7 +238,7 @@ fn suction_fails_on_an_edge_on_a_small_face_and_when_tilted() {
     }
     // Nothing there.
     let (mut w, _, _) = world("B");
-    let floor = w.pick_tray.world_from_tray.translation.vector;
+    let floor = w.pick_tray().world_from_tray.translation.vector;
     let ev = grasp_at(&mut w, tool_down_pose(floor, 0.0));
     assert!(
         matches!(
@@ -267,7 +264,7 @@ fn an_off_centre_grasp_on_a_heavy_part_slips_with_the_reason() {
     if events.len() == 1 {
         w.move_tool_line(&tool_down_pose(off + Vector3::z() * 0.05, 0.0), 0.3)
             .unwrap();
-        events.extend(w.gripper.take_events());
+        events.extend(w.take_gripper_events());
     }
     let slipped = events.iter().find_map(|e| match e {
         GripperEvent::Slipped {
@@ -298,17 +295,20 @@ fn the_moving_arm_pushes_a_part_it_sweeps_through() {
 #[test]
 fn the_arm_entering_a_tray_wall_is_reported() {
     let (mut w, _, _) = world("F");
-    let tray = w.pick_tray.world_from_tray;
-    let half = w.pick_tray.half_xy_m;
+    let tray = w.pick_tray().world_from_tray;
+    let half = w.pick_tray().half_xy_m;
     // Above the middle of the +x wall, then down into it.
-    let wall_top = tray * nalgebra::Point3::new(half[0] - 0.004, 0.0, w.pick_tray.wall_height_m);
+    let wall_top = tray * nalgebra::Point3::new(half[0] - 0.004, 0.0, w.pick_tray().wall_height_m);
     w.place_tool(&tool_down_pose(wall_top.coords + Vector3::z() * 0.03, 0.0))
         .unwrap();
     let err = w
         .move_tool_line(&tool_down_pose(wall_top.coords - Vector3::z() * 0.01, 0.0), 0.5)
         .unwrap_err();
-    match err {
-        binpick::physics::script::ScriptError::Health(HealthError::ArmCollision { robot, obstacle, .. }) => {
+    let binpick::physics::script::ScriptError::Health(report) = err else {
+        panic!("{err:?}");
+    };
+    match report.first() {
+        Some(HealthEvent::ArmCollision { robot, obstacle, .. }) => {
             assert!(robot.contains("cup") || robot.contains("tool"), "{robot}");
             assert!(obstacle.contains("pick tray wall +x"), "{obstacle}");
         }
@@ -316,25 +316,50 @@ fn the_arm_entering_a_tray_wall_is_reported() {
     }
 }
 
+/// A step reports every problem it has: a part off its tray does not hide the arm pressing into
+/// a wall in the same step (before, the monitor returned the first problem only).
+#[test]
+fn every_problem_of_a_step_is_reported() {
+    let (mut w, _, _) = world("F");
+    let tray = w.pick_tray().world_from_tray;
+    let half = w.pick_tray().half_xy_m;
+    let wall_top = tray * nalgebra::Point3::new(half[0] - 0.004, 0.0, w.pick_tray().wall_height_m);
+    // The cup 5 mm down into the wall, and a part on the table outside both trays.
+    w.place_tool(&tool_down_pose(wall_top.coords - Vector3::z() * 0.005, 0.0))
+        .unwrap();
+    w.add_part(&Isometry3::translation(-0.3, -0.3, 0.01));
+    let report = w.step().unwrap_err();
+    let left = report
+        .events
+        .iter()
+        .any(|e| matches!(e, HealthEvent::LeftVolume { body, .. } if body == "part 0"));
+    let hit = report
+        .events
+        .iter()
+        .any(|e| matches!(e, HealthEvent::ArmCollision { obstacle, .. } if obstacle.contains("wall +x")));
+    assert!(left && hit, "{report}");
+    assert!(!report.is_fatal());
+}
+
 #[test]
 fn the_health_monitor_stops_on_a_stray_part_and_on_nan() {
     let (mut w, _, _) = world("F");
     // A part on the table, outside both trays.
     w.add_part(&Isometry3::translation(-0.3, -0.3, 0.01));
-    match w.step().unwrap_err() {
-        HealthError::LeftVolume { body, volume, .. } => {
+    match w.step().unwrap_err().first() {
+        Some(HealthEvent::LeftVolume { body, volume, .. }) => {
             assert_eq!(body, "part 0");
-            assert_eq!(volume, "pick tray");
+            assert_eq!(*volume, "pick tray");
         }
         other => panic!("{other:?}"),
     }
     let (mut w, _, _) = world("F");
     lone_part(&mut w, 0.005, (0.0, 0.0), UnitQuaternion::identity());
-    let b = w.parts[0].body;
-    let mut pose = *w.bodies[b].position();
-    pose.translation.x = f32::NAN;
-    w.bodies[b].set_position(pose, true);
+    let mut pose = w.part_pose(0);
+    pose.translation.x = f64::NAN;
+    w.set_part_pose(0, &pose);
     let e = w.step().unwrap_err();
-    assert!(matches!(e, HealthError::NonFinite { .. }), "{e:?}");
+    assert!(e.is_fatal(), "{e:?}");
+    assert!(matches!(e.first(), Some(HealthEvent::NonFinite { .. })), "{e:?}");
     assert!(e.to_string().contains("part 0 has a non-finite"), "{e}");
 }

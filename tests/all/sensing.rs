@@ -4,7 +4,7 @@
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::grasp::GraspSelector;
 use binpick::physics::pile::PileOptions;
-use binpick::physics::{PartShape, World, to_pose};
+use binpick::physics::{PartShape, Tag, World};
 use binpick::robot::{JointVector, RobotModel, tool_down_pose};
 use binpick::sensor::{CaptureProblem, HeightMap, Sensor, evaluate};
 use nalgebra::{Isometry3, Vector3};
@@ -22,7 +22,7 @@ fn cell(workpiece: &str, seed: u64) -> (World, LoadedScene, LoadedWorkpiece, Rob
 
 /// Parks the arm with the tool 12 cm above the pile's middle, in the sensor's view.
 fn park_over_tray(w: &mut World) {
-    let c = w.pick_tray.world_from_tray.translation.vector;
+    let c = w.pick_tray().world_from_tray.translation.vector;
     w.place_tool(&tool_down_pose(c + Vector3::z() * 0.12, 0.0)).unwrap();
 }
 
@@ -37,7 +37,7 @@ fn the_arm_hides_what_is_under_it() {
     let seen_blocked: Vec<usize> = sensor.recognize(&w, &blocked).iter().map(|d| d.truth_part).collect();
     // Parts right under the tool (within 2 cm of its axis) are seen with the arm away and not under it.
     let axis = w.world_from_tool().translation.vector;
-    let under: Vec<usize> = (0..w.parts.len())
+    let under: Vec<usize> = (0..w.part_count())
         .filter(|&i| (w.part_pose(i).translation.vector - axis).xy().norm() < 0.02)
         .filter(|i| seen_clear.contains(i))
         .collect();
@@ -61,10 +61,10 @@ fn capture_is_refused_or_spoiled_with_the_arm_in_view_and_ready_exactly_after_la
     w.place_arm(&home);
     let mut job = sensor.trigger(&w).unwrap();
     let over = w
-        .robot
+        .robot()
         .ik_tool_nearest(
             &tool_down_pose(
-                w.pick_tray.world_from_tray.translation.vector + Vector3::z() * 0.25,
+                w.pick_tray().world_from_tray.translation.vector + Vector3::z() * 0.25,
                 0.0,
             ),
             &home,
@@ -89,7 +89,7 @@ fn capture_is_refused_or_spoiled_with_the_arm_in_view_and_ready_exactly_after_la
     assert!(sensor.result(&job, &w).is_none());
     // Arm away, a clean capture: no result before latency_s, a result at exactly latency_s.
     w.place_arm(&home);
-    let trigger = w.time_s;
+    let trigger = w.time_s();
     let mut job = sensor.trigger(&w).unwrap();
     assert_eq!(job.ready_s, trigger + scene.scene.sensor.latency_s);
     let mut first_ready = None;
@@ -97,7 +97,7 @@ fn capture_is_refused_or_spoiled_with_the_arm_in_view_and_ready_exactly_after_la
         w.step().unwrap();
         assert!(sensor.watch(&mut job, &w).is_none());
         if sensor.result(&job, &w).is_some() {
-            first_ready = Some(w.time_s);
+            first_ready = Some(w.time_s());
         }
     }
     let t = first_ready.unwrap();
@@ -120,35 +120,19 @@ fn approach_collides(
 ) -> Option<String> {
     let n = ((grasp.translation.vector - approach.translation.vector).norm() / 0.001).ceil() as usize;
     let mut q = *q_start;
-    let shapes = binpick::physics::arm_query_shapes(w);
     for s in 0..=n {
         let pose = approach.lerp_slerp(grasp, s as f64 / n as f64);
         q = robot.ik_tool_nearest(&pose, &q).ok()?.q;
-        let frames = robot.world_from_links(&q);
         // The cup's last 2 mm meet the target by design (it is planned on the measured surface,
         // with the sensor's depth noise).
         let near_face = (pose.translation.vector - grasp.translation.vector).norm() < 0.002;
-        // The base (link 0) stands on the table and never moves.
-        for (link, local, shape) in shapes.iter().filter(|(l, _, _)| *l > 0) {
-            let world_pose = to_pose(&(frames[*link] * local));
-            for (_, c) in w.colliders.iter() {
-                let tag = binpick::physics::Tag::decode(c.user_data);
-                if tag.is_none_or(|t| t.is_robot()) || c.is_sensor() {
-                    continue;
-                }
-                if near_face && tag == Some(binpick::physics::Tag::Part(target as u32)) {
-                    continue;
-                }
-                if rapier3d::parry::query::intersection_test(&world_pose, &**shape, c.position(), c.shape())
-                    .is_ok_and(|r| r.intersecting)
-                {
-                    return Some(format!(
-                        "{} at {:.1} mm before the grasp",
-                        w.describe(tag),
-                        (n - s) as f64
-                    ));
-                }
-            }
+        let skip = |t: Tag| near_face && t == Tag::Part(target as u32);
+        if let Some(tag) = w.arm_touches_at(&q, &skip) {
+            return Some(format!(
+                "{} at {:.1} mm before the grasp",
+                w.describe(Some(tag)),
+                (n - s) as f64
+            ));
         }
     }
     None
@@ -170,7 +154,7 @@ fn every_workpiece_top_layer_recall_at_least_90_percent_and_chosen_grasps_are_re
                 "{name} seed {seed}: recall {:.3} ({report:?})",
                 report.top_layer_recall
             );
-            let hm = HeightMap::from_capture(&job.capture, &w.pick_tray, 0.002);
+            let hm = HeightMap::from_capture(&job.capture, w.pick_tray(), 0.002);
             let selector = GraspSelector::new(&scene.scene, &robot, &wp.workpiece);
             let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
             let plan = selector.select(&detections, &hm, &slot, &w.joints());

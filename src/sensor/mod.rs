@@ -1,0 +1,201 @@
+//! The fixed overhead 3D sensor: depth capture by ray casting, exposure timing, recognition.
+//!
+//! Files: [`camera`] (the pinhole camera), [`capture`] (ray-cast depth images), [`recognition`]
+//! (parts found in a capture, and their evaluation against ground truth), [`heightmap`] (the
+//! point cloud binned over the pick tray); this file: the sensor's timing (trigger, exposure,
+//! latency) and its view frustum.
+//!
+//! Job: capture the pile exactly as a fixed pinhole camera sees it: one ray per pixel into the
+//! physics world (arm links, held part, parts, trays), so the arm and the parts really hide what
+//! lies beneath them; add depth noise growing with range squared and drop returns at grazing
+//! angles and at random. A capture needs an exposure window in which the arm stays out of the view
+//! frustum over the pick tray (else it is spoiled and repeated); a part that moves more than
+//! [`STILL_MOTION_M`] during the exposure is blurred and not recognised (the others are). The
+//! recognition result is ready `latency_s` after the trigger. Recognition (simplified, stated in the README): a part counts as
+//! detected when at least `detect_min_visible_fraction` of the pixels it would cover, unoccluded,
+//! show it in the capture; its pose then comes with Gaussian noise. The ground-truth body per
+//! pixel is used only for that visibility count, never to reveal a hidden part.
+//!
+//! Units: m, s, px. Frames: `world_from_camera` in the optical convention (x right, y down, z
+//! along the view); depth is the z coordinate in the camera frame; points are in the world frame.
+//! Randomness: the `sensor` stream (pixel noise, positioned per row so threads cannot reorder it)
+//! and the `recognition` stream, both of the run seed, offset by the capture number.
+
+mod camera;
+mod capture;
+mod heightmap;
+mod recognition;
+
+use nalgebra::{Point3, Vector3};
+use serde::Serialize;
+
+pub use camera::Camera;
+pub use capture::{Background, Capture, capture, capture_over};
+pub use heightmap::HeightMap;
+pub use recognition::{Detection, RecognitionReport, evaluate, ser_pose, top_layer};
+
+use crate::config::SensorConfig;
+use crate::physics::{PartState, TrayVolume, ViewVolume, World};
+
+/// The camera's view frustum over the pick tray: the pyramid from the optical centre to the tray's
+/// outer rim at floor level. The arm must be outside it to expose.
+#[derive(Clone)]
+pub struct ViewFrustum {
+    /// The pyramid.
+    volume: ViewVolume,
+}
+
+impl ViewFrustum {
+    /// The frustum of `camera` over the pick tray `tray`; `None` if it spans no volume (the
+    /// cell file's validation refuses such a camera).
+    pub fn over_tray(tray: &TrayVolume, camera: &Camera) -> Option<Self> {
+        let [hx, hy] = tray.half_xy_m;
+        let mut pts = vec![camera.world_from_camera.translation.vector];
+        for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+            pts.push((tray.world_from_tray * Point3::new(sx * hx, sy * hy, 0.0)).coords);
+        }
+        ViewVolume::hull(&pts).map(|volume| ViewFrustum { volume })
+    }
+
+    /// The first part of the robot (link, tool, cup or held part) inside the frustum, named.
+    pub fn arm_inside(&self, world: &World) -> Option<String> {
+        world.robot_inside(&self.volume)
+    }
+}
+
+/// Why a capture could not be taken or was spoiled.
+#[derive(Debug, Clone, PartialEq, Serialize)]
+pub enum CaptureProblem {
+    /// The arm was in the view frustum at the trigger.
+    ArmInView(String),
+    /// The arm entered the view frustum during exposure.
+    ArmEnteredDuringExposure(String),
+}
+
+/// A capture in progress: exposing, then processing, then ready (or spoiled).
+#[derive(Debug, Clone)]
+pub struct CaptureJob {
+    /// The image taken at the trigger.
+    pub capture: Capture,
+    /// End of the exposure window [s].
+    pub exposure_end_s: f64,
+    /// When the recognition result is available [s].
+    pub ready_s: f64,
+    /// Set if the exposure was spoiled.
+    pub spoiled: Option<CaptureProblem>,
+    /// Part positions at the trigger, to tell whether the scene stays still [m].
+    positions_at_trigger: Vec<Vector3<f64>>,
+    /// How far each part moved during the exposure [m].
+    moved_m: Vec<f64>,
+}
+
+impl CaptureJob {
+    /// Parts that moved more than [`STILL_MOTION_M`] during the exposure: blurred, not recognised.
+    pub fn blurred(&self) -> usize {
+        self.moved_m.iter().filter(|m| **m > STILL_MOTION_M).count()
+    }
+}
+
+/// A part moving more than this during the exposure is blurred [m]: a third of a pixel at the
+/// tray floor. Motion, not velocity: a part resting on a flat face can keep a small solver
+/// velocity that moves nothing.
+pub const STILL_MOTION_M: f64 = 0.0005;
+
+/// The sensor: camera, frustum, timing, noise and recognition settings.
+#[derive(Clone)]
+pub struct Sensor {
+    /// The camera.
+    pub camera: Camera,
+    /// The frustum over the pick tray.
+    pub frustum: ViewFrustum,
+    /// What every pixel sees of the fixed cell (shared by the clones).
+    background: std::sync::Arc<Background>,
+    /// Trigger to recognition result [s].
+    pub latency_s: f64,
+    /// Exposure window [s].
+    pub exposure_s: f64,
+    /// Detection threshold on the visible fraction.
+    pub detect_min_visible_fraction: f64,
+    /// Pose noise, position sigma [m].
+    pub pose_noise_m: f64,
+    /// Pose noise, rotation sigma [rad].
+    pub pose_noise_rad: f64,
+    /// Run seed.
+    pub seed: u64,
+    /// Captures triggered so far (spoiled ones included).
+    pub triggered: u64,
+    /// Captures spoiled so far.
+    pub spoiled: u64,
+}
+
+impl Sensor {
+    /// The sensor of a cell over `world`'s pick tray.
+    pub fn new(cfg: &SensorConfig, world: &World, seed: u64) -> Option<Self> {
+        let camera = Camera::from_config(cfg)?;
+        Some(Sensor {
+            frustum: ViewFrustum::over_tray(world.pick_tray(), &camera)?,
+            background: std::sync::Arc::new(Background::new(world, &camera)),
+            camera,
+            latency_s: cfg.latency_s,
+            exposure_s: cfg.exposure_s,
+            detect_min_visible_fraction: cfg.detect_min_visible_fraction,
+            pose_noise_m: cfg.pose_noise_m,
+            pose_noise_rad: cfg.pose_noise_deg.to_radians(),
+            seed,
+            triggered: 0,
+            spoiled: 0,
+        })
+    }
+
+    /// Triggers a capture now: refused while the arm is in view; otherwise exposes from now.
+    pub fn trigger(&mut self, world: &World) -> Result<CaptureJob, CaptureProblem> {
+        if let Some(link) = self.frustum.arm_inside(world) {
+            return Err(CaptureProblem::ArmInView(link));
+        }
+        let capture = capture_over(world, &self.camera, self.seed, self.triggered, Some(&self.background));
+        self.triggered += 1;
+        Ok(CaptureJob {
+            exposure_end_s: world.time_s() + self.exposure_s,
+            ready_s: world.time_s() + self.latency_s,
+            capture,
+            spoiled: None,
+            positions_at_trigger: (0..world.part_count())
+                .map(|i| world.part_pose(i).translation.vector)
+                .collect(),
+            moved_m: vec![0.0; world.part_count()],
+        })
+    }
+
+    /// Watches an exposing job after a world step: spoils it if the arm entered the frustum, and
+    /// notes how far each free part has moved. Returns the problem the first time it happens.
+    pub fn watch(&mut self, job: &mut CaptureJob, world: &World) -> Option<CaptureProblem> {
+        if job.spoiled.is_some() || world.time_s() > job.exposure_end_s + 1e-9 {
+            return None;
+        }
+        for (i, p) in job.positions_at_trigger.iter().enumerate() {
+            if world.part_state(i) == PartState::Free {
+                let d = (world.part_pose(i).translation.vector - p).norm();
+                job.moved_m[i] = job.moved_m[i].max(d);
+            }
+        }
+        let problem = self
+            .frustum
+            .arm_inside(world)
+            .map(CaptureProblem::ArmEnteredDuringExposure);
+        if problem.is_some() {
+            self.spoiled += 1;
+            job.spoiled = problem.clone();
+        }
+        problem
+    }
+
+    /// The recognition result of a job, once `ready_s` has come and if it was not spoiled: the
+    /// recognised parts less those blurred by moving during the exposure.
+    pub fn result(&self, job: &CaptureJob, world: &World) -> Option<Vec<Detection>> {
+        (job.spoiled.is_none() && world.time_s() + 1e-9 >= job.ready_s).then(|| {
+            let mut d = self.recognize(world, &job.capture);
+            d.retain(|d| job.moved_m.get(d.truth_part).is_none_or(|m| *m <= STILL_MOTION_M));
+            d
+        })
+    }
+}
