@@ -177,7 +177,7 @@ pub fn robot_bench(robot: &RobotModel, payload: &Payload, runs: usize, calls: us
     );
     timings.push(t);
     timings.push(time_per_call("fk all link frames", runs, calls, None, |i| {
-        black_box(robot.link_frames(black_box(&qs[i % n])));
+        black_box(robot.base_from_links(black_box(&qs[i % n])));
     }));
     timings.push(time_per_call(
         "inverse dynamics RNEA, full model (ours)",

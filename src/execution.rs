@@ -71,15 +71,15 @@ pub enum Trip {
 #[derive(Debug, Clone, Copy)]
 pub struct Tick {
     /// Time [s].
-    pub t: f64,
+    pub t_s: f64,
     /// Measured positions [rad].
     pub q: JointVector,
     /// Measured velocities [rad/s].
     pub qd: JointVector,
     /// Applied (saturated) torques [N m].
-    pub tau: JointVector,
+    pub tau_nm: JointVector,
     /// Tracking error q_d - q [rad].
-    pub error: JointVector,
+    pub error_rad: JointVector,
 }
 
 /// What the execution did.
@@ -167,11 +167,11 @@ pub fn execute_from(
             saturated_ticks += 1;
         }
         ticks.push(Tick {
-            t,
+            t_s: t,
             q,
             qd,
-            tau,
-            error: e,
+            tau_nm: tau,
+            error_rad: e,
         });
         let trip = (0..DOF)
             .find(|&i| e[i].abs() > servo.tolerance_rad)

@@ -163,8 +163,8 @@ pub fn sense(a: &PileArgs) -> Result<()> {
         .context("writing cloud.ply")?;
     let file = json!({
         "binpick_version": env!("CARGO_PKG_VERSION"), "workpiece": wp.workpiece.name, "seed": seed, "count": count,
-        "capture": {"trigger_s": job.capture.trigger_s, "ready_s": job.ready_s, "width_px": job.capture.width,
-                    "height_px": job.capture.height, "valid_px": job.capture.valid_count(),
+        "capture": {"trigger_s": job.capture.trigger_s, "ready_s": job.ready_s, "width_px": job.capture.width_px,
+                    "height_px": job.capture.height_px, "valid_px": job.capture.valid_count(),
                     "spoiled_before": state.sensor.spoiled},
         "recognition": &report, "detections": &detections,
         "grasp": {"chosen": chosen, "ranked": choice.plan.ranked.len(), "rejected": choice.plan.rejected_counts(),
@@ -186,8 +186,8 @@ pub fn sense(a: &PileArgs) -> Result<()> {
     );
     println!(
         "  capture          {} x {} px, {} returns; {} spoiled exposure(s) repeated",
-        job.capture.width,
-        job.capture.height,
+        job.capture.width_px,
+        job.capture.height_px,
         job.capture.valid_count(),
         state.sensor.spoiled
     );

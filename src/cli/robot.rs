@@ -175,7 +175,7 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
 
 fn robot_fk(robot: &RobotModel, deg: &[f64], json: bool) -> Result<()> {
     let q = joints_from_deg("--deg", deg)?;
-    let frames = robot.world_from_links(&q);
+    let world_from_links = robot.world_from_links(&q);
     let tool = robot.world_from_tool(&q);
     let within = robot.within_limits(&q, 0.0);
     let manip = robot.manipulability(&q);
@@ -183,21 +183,25 @@ fn robot_fk(robot: &RobotModel, deg: &[f64], json: bool) -> Result<()> {
         let links: Vec<_> = robot
             .links
             .iter()
-            .zip(&frames)
+            .zip(&world_from_links)
             .map(|(l, f)| json!({"link": l.name, "world_from_link": pose_json(f)}))
             .collect();
         let out = json!({
             "q_deg": deg_list(&q), "within_limits": within, "links": links,
-            "world_from_flange": pose_json(&frames[frames.len() - 1]),
+            "world_from_flange": pose_json(&world_from_links[world_from_links.len() - 1]),
             "world_from_tool": pose_json(&tool), "manipulability": manip,
         });
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
-    for (l, f) in robot.links.iter().zip(&frames) {
+    for (l, f) in robot.links.iter().zip(&world_from_links) {
         println!("{:<10} {}", l.name, pose_text(f));
     }
-    println!("{:<10} {}", "flange", pose_text(&frames[frames.len() - 1]));
+    println!(
+        "{:<10} {}",
+        "flange",
+        pose_text(&world_from_links[world_from_links.len() - 1])
+    );
     println!("{:<10} {}", "tool", pose_text(&tool));
     println!("manipulability {manip:.5}; within joint limits: {within}");
     Ok(())

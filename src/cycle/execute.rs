@@ -135,7 +135,7 @@ impl Run<'_, '_> {
         let arm = &mut self.st.arm;
         for t in &run.ticks {
             for i in 0..DOF {
-                arm.peak_torque_ratio = arm.peak_torque_ratio.max(t.tau[i].abs() / limit[i]);
+                arm.peak_torque_ratio = arm.peak_torque_ratio.max(t.tau_nm[i].abs() / limit[i]);
             }
         }
         arm.max_error_rad = run.max_error_rad.iter().fold(arm.max_error_rad, |a, e| a.max(*e));
@@ -146,7 +146,7 @@ impl Run<'_, '_> {
         while k < run.ticks.len() + per_step {
             let end = k.min(run.ticks.len() - 1);
             self.st.world.set_joint_target(&run.ticks[end].q);
-            if vacuum_at_s.is_some_and(|t| run.ticks[end].t + 1e-9 >= t) {
+            if vacuum_at_s.is_some_and(|t| run.ticks[end].t_s + 1e-9 >= t) {
                 self.st.world.vacuum_on();
             }
             played = end + 1;

@@ -325,14 +325,14 @@ impl World {
     }
 
     fn add_arm(&mut self, scene: &Scene) {
-        let frames = self.robot.world_from_links(&self.q);
+        let world_from_links = self.robot.world_from_links(&self.q);
         for (i, link) in self.robot.links.iter().enumerate() {
             let builder = if i == 0 {
                 RigidBodyBuilder::fixed()
             } else {
                 RigidBodyBuilder::kinematic_position_based()
             };
-            let body = self.bodies.insert(builder.pose(to_pose(&frames[i])));
+            let body = self.bodies.insert(builder.pose(to_pose(&world_from_links[i])));
             for s in &link.shapes {
                 let (shape, local) = match s.primitive {
                     LinkPrimitive::Box { half_extents_m: h } => (
@@ -428,9 +428,9 @@ impl World {
     pub fn place_arm(&mut self, q: &JointVector) {
         self.q = *q;
         self.q_target = *q;
-        let frames = self.robot.world_from_links(q);
+        let world_from_links = self.robot.world_from_links(q);
         for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
-            let pose = to_pose(&frames[i]);
+            let pose = to_pose(&world_from_links[i]);
             let b = &mut self.bodies[*h];
             b.set_position(pose, true);
             b.set_next_kinematic_position(pose);
@@ -475,11 +475,11 @@ impl World {
             } else {
                 q_from + (q_to - q_from) * (k as f64 / n as f64)
             };
-            let frames = self.robot.world_from_links(&q_k);
+            let world_from_links = self.robot.world_from_links(&q_k);
             for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
-                self.bodies[*h].set_next_kinematic_position(to_pose(&frames[i]));
+                self.bodies[*h].set_next_kinematic_position(to_pose(&world_from_links[i]));
             }
-            let world_from_tool_next = frames[DOF] * self.robot.flange_from_tool;
+            let world_from_tool_next = world_from_links[DOF] * self.robot.flange_from_tool;
             self.update_gripper(&world_from_tool_next);
             self.pipeline_step();
             self.time_s += dt_s / n as f64;

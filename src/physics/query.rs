@@ -177,12 +177,12 @@ impl World {
     /// against every collider of the world but the robot's own, sensors and those `skip` passes:
     /// the first one touched, if any. An independent check of planned motions.
     pub fn arm_touches_at(&self, q: &JointVector, skip: &dyn Fn(Tag) -> bool) -> Option<Tag> {
-        let frames = self.robot.world_from_links(q);
+        let world_from_links = self.robot.world_from_links(q);
         for (link, h) in self.link_bodies.iter().enumerate().skip(1) {
             for ch in self.bodies[*h].colliders() {
                 let arm = &self.colliders[*ch];
                 let local: Isometry3<f64> = super::to_isometry(arm.position_wrt_parent().unwrap_or(&Pose::IDENTITY));
-                let pose = to_pose(&(frames[link] * local));
+                let pose = to_pose(&(world_from_links[link] * local));
                 for (_, c) in self.colliders.iter() {
                     let Some(tag) = Tag::decode(c.user_data) else { continue };
                     if tag.is_robot() || c.is_sensor() || !c.is_enabled() || skip(tag) {

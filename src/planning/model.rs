@@ -31,10 +31,10 @@ use crate::sensor::HeightMap;
 /// A sphere [m].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sphere {
-    /// Centre in its frame.
-    pub center: Vector3<f64>,
-    /// Radius.
-    pub radius: f64,
+    /// Centre in its frame [m].
+    pub center_m: Vector3<f64>,
+    /// Radius [m].
+    pub radius_m: f64,
 }
 
 /// Spheres covering a box of half extents `he` centred at the origin: along its longest axis.
@@ -45,8 +45,8 @@ fn cover_box(he: &Vector3<f64>) -> Vec<Sphere> {
     let half = he[a] / n as f64;
     (0..n)
         .map(|k| Sphere {
-            center: Vector3::ith(a, -he[a] + (2 * k + 1) as f64 * half),
-            radius: (cross * cross + half * half).sqrt(),
+            center_m: Vector3::ith(a, -he[a] + (2 * k + 1) as f64 * half),
+            radius_m: (cross * cross + half * half).sqrt(),
         })
         .collect()
 }
@@ -57,8 +57,8 @@ fn cover_cylinder(r: f64, h: f64) -> Vec<Sphere> {
     let half = h / n as f64;
     (0..n)
         .map(|k| Sphere {
-            center: Vector3::z() * (-h + (2 * k + 1) as f64 * half),
-            radius: (r * r + half * half).sqrt(),
+            center_m: Vector3::z() * (-h + (2 * k + 1) as f64 * half),
+            radius_m: (r * r + half * half).sqrt(),
         })
         .collect()
 }
@@ -93,13 +93,13 @@ impl RobotSpheres {
                         half_length_m,
                     } => cover_cylinder(radius_m, half_length_m),
                     Primitive::Sphere { radius_m } => vec![Sphere {
-                        center: Vector3::zeros(),
-                        radius: radius_m,
+                        center_m: Vector3::zeros(),
+                        radius_m,
                     }],
                 };
                 v.extend(local.into_iter().map(|sp| Sphere {
-                    center: (s.link_from_shape * Point3::from(sp.center)).coords,
-                    radius: sp.radius,
+                    center_m: (s.link_from_shape * Point3::from(sp.center_m)).coords,
+                    radius_m: sp.radius_m,
                 }));
             }
             links.push(v);
@@ -108,15 +108,15 @@ impl RobotSpheres {
         let flange = links.len() - 1;
         for (r, z0, z1) in crate::geometry::HandGeometry::new(&scene.gripper).cylinders() {
             links[flange].extend(cover_cylinder(r, (z1 - z0) / 2.0).into_iter().map(|s| Sphere {
-                center: s.center + Vector3::z() * (z0 + z1) / 2.0,
-                radius: s.radius,
+                center_m: s.center_m + Vector3::z() * (z0 + z1) / 2.0,
+                radius_m: s.radius_m,
             }));
         }
         if let Some((tool_from_part, he)) = held {
             let flange_from_part = robot.flange_from_tool * tool_from_part;
             links[flange].extend(cover_box(&he).into_iter().map(|s| Sphere {
-                center: (flange_from_part * Point3::from(s.center)).coords,
-                radius: s.radius,
+                center_m: (flange_from_part * Point3::from(s.center_m)).coords,
+                radius_m: s.radius_m,
             }));
         }
         let bounds: Vec<Sphere> = links
@@ -124,13 +124,19 @@ impl RobotSpheres {
             .map(|v| {
                 if v.is_empty() {
                     return Sphere {
-                        center: Vector3::zeros(),
-                        radius: 0.0,
+                        center_m: Vector3::zeros(),
+                        radius_m: 0.0,
                     };
                 }
-                let c = v.iter().map(|s| s.center).sum::<Vector3<f64>>() / v.len() as f64;
-                let r = v.iter().map(|s| (s.center - c).norm() + s.radius).fold(0.0, f64::max);
-                Sphere { center: c, radius: r }
+                let c = v.iter().map(|s| s.center_m).sum::<Vector3<f64>>() / v.len() as f64;
+                let r = v
+                    .iter()
+                    .map(|s| (s.center_m - c).norm() + s.radius_m)
+                    .fold(0.0, f64::max);
+                Sphere {
+                    center_m: c,
+                    radius_m: r,
+                }
             })
             .collect();
         // Lever bound for joint i: the chain's origin offsets beyond it plus the farthest sphere
@@ -141,7 +147,7 @@ impl RobotSpheres {
             let reach = links[(i + 1)..]
                 .iter()
                 .flatten()
-                .map(|s| s.center.norm() + s.radius)
+                .map(|s| s.center_m.norm() + s.radius_m)
                 .fold(0.0, f64::max);
             *lever = chain + reach;
         }
@@ -358,7 +364,7 @@ impl CollisionModel {
     /// edge checks, which never need the name ([`CollisionModel::describe`] gives it).
     pub fn nearest(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest) {
         stats.clearance_checks += 1;
-        let frames = self.robot.link_frames(q);
+        let base_from_links = self.robot.base_from_links(q);
         let base = self.robot.world_from_base;
         let mut best = (self.horizon_m, Nearest::Nothing);
         // Sphere centres in the world, link after link; link `li`'s from `first[li]` on.
@@ -366,21 +372,21 @@ impl CollisionModel {
         let mut centers: Vec<Vector3<f64>> = Vec::with_capacity(links.iter().map(Vec::len).sum());
         let mut first = [0usize; DOF + 2];
         for (li, spheres) in links.iter().enumerate() {
-            let world_from_link = base * frames[li].to_isometry();
+            let world_from_link = base * base_from_links[li].to_isometry();
             first[li] = centers.len();
             centers.extend(
                 spheres
                     .iter()
-                    .map(|s| (world_from_link * Point3::from(s.center)).coords),
+                    .map(|s| (world_from_link * Point3::from(s.center_m)).coords),
             );
             // The base stands on the table: it is not checked against the environment.
             if li > 0 {
                 let b = &self.spheres.bounds[li];
-                let bc = (world_from_link * Point3::from(b.center)).coords;
-                let (db, _) = self.env.sphere_distance(&bc, b.radius, best.0);
+                let bc = (world_from_link * Point3::from(b.center_m)).coords;
+                let (db, _) = self.env.sphere_distance(&bc, b.radius_m, best.0);
                 if db < best.0 {
                     for (p, s) in centers[first[li]..].iter().zip(spheres) {
-                        let (d, part) = self.env.sphere_distance(p, s.radius, best.0);
+                        let (d, part) = self.env.sphere_distance(p, s.radius_m, best.0);
                         if d < best.0 {
                             best = (
                                 d,
@@ -400,7 +406,7 @@ impl CollisionModel {
         for (a, b) in SELF_PAIRS {
             for (pa, sa) in on(a).iter().zip(&links[a]) {
                 for (pb, sb) in on(b).iter().zip(&links[b]) {
-                    let d = (pa - pb).norm() - sa.radius - sb.radius;
+                    let d = (pa - pb).norm() - sa.radius_m - sb.radius_m;
                     if d < best.0 {
                         best = (d, Nearest::Links(a, b));
                     }
@@ -484,7 +490,7 @@ mod tests {
                 for sz in [-1.0, 1.0] {
                     let p = Vector3::new(sx * he.x, sy * he.y, sz * he.z);
                     assert!(
-                        s.iter().any(|sp| (p - sp.center).norm() <= sp.radius + 1e-12),
+                        s.iter().any(|sp| (p - sp.center_m).norm() <= sp.radius_m + 1e-12),
                         "corner {p:?} uncovered"
                     );
                 }
@@ -493,7 +499,7 @@ mod tests {
         let c = cover_cylinder(0.015, 0.055);
         for z in [-0.055, 0.055] {
             let p = Vector3::new(0.015, 0.0, z);
-            assert!(c.iter().any(|sp| (p - sp.center).norm() <= sp.radius + 1e-12));
+            assert!(c.iter().any(|sp| (p - sp.center_m).norm() <= sp.radius_m + 1e-12));
         }
     }
 

@@ -170,14 +170,14 @@ impl Observer for Recorder<'_> {
     fn captured(&mut self, c: &Capture) {
         self.captures.push(CaptureImage {
             t_s: c.trigger_s,
-            size_px: (c.width, c.height),
+            size_px: (c.width_px, c.height_px),
             depth_mm: c.depth_m.iter().map(|d| (d * 1000.0).round() as u16).collect(),
             points_world_m: c
                 .points_world
                 .iter()
                 .enumerate()
                 .filter(|(k, p)| {
-                    let (u, v) = (k % c.width, k / c.width);
+                    let (u, v) = (k % c.width_px, k / c.width_px);
                     u % CLOUD_EVERY_PX == 0 && v % CLOUD_EVERY_PX == 0 && p[0].is_finite()
                 })
                 .map(|(_, p)| *p)
@@ -207,10 +207,10 @@ impl Observer for Recorder<'_> {
             planned_m: planned.sampled(0.01).iter().map(|s| tip(&s.q)).collect(),
             executed_m: ticks.iter().step_by(10).map(|t| tip(&t.q)).collect(),
         });
-        self.trace.extend(
-            ticks[..played.min(ticks.len())]
-                .iter()
-                .map(|tk| Tick { t: t0_s + tk.t, ..*tk }),
-        );
+        self.trace
+            .extend(ticks[..played.min(ticks.len())].iter().map(|tk| Tick {
+                t_s: t0_s + tk.t_s,
+                ..*tk
+            }));
     }
 }

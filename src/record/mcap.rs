@@ -396,21 +396,21 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
     };
     for t in result.trace.iter().step_by(JOINT_STATE_EVERY) {
         m.push(
-            t.t,
+            t.t_s,
             "/robot/joint_states",
             &json!({
-                "t_s": t.t,
+                "t_s": t.t_s,
                 "position_rad": t.q.as_slice(),
                 "velocity_rad_s": t.qd.as_slice(),
-                "torque_nm": t.tau.as_slice(),
+                "torque_nm": t.tau_nm.as_slice(),
                 "torque_limit_nm": limit.as_slice(),
-                "tracking_error_rad": t.error.as_slice(),
+                "tracking_error_rad": t.error_rad.as_slice(),
             }),
         )?;
     }
     for (t_s, q) in arm_samples(result) {
-        let frames = robot.world_from_links(&q);
-        let mut transforms: Vec<serde_json::Value> = frames
+        let world_from_links = robot.world_from_links(&q);
+        let mut transforms: Vec<serde_json::Value> = world_from_links
             .iter()
             .enumerate()
             .take(DOF + 1)
@@ -449,11 +449,11 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
             t,
             "/camera/calibration",
             &json!({
-                "timestamp": stamp(t), "frame_id": "camera", "width": c.width, "height": c.height,
+                "timestamp": stamp(t), "frame_id": "camera", "width": c.width_px, "height": c.height_px,
                 "distortion_model": "plumb_bob", "D": [0.0, 0.0, 0.0, 0.0, 0.0],
-                "K": [c.fx, 0.0, c.cx, 0.0, c.fy, c.cy, 0.0, 0.0, 1.0],
+                "K": [c.fx_px, 0.0, c.cx_px, 0.0, c.fy_px, c.cy_px, 0.0, 0.0, 1.0],
                 "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-                "P": [c.fx, 0.0, c.cx, 0.0, 0.0, c.fy, c.cy, 0.0, 0.0, 0.0, 1.0, 0.0],
+                "P": [c.fx_px, 0.0, c.cx_px, 0.0, 0.0, c.fy_px, c.cy_px, 0.0, 0.0, 0.0, 1.0, 0.0],
             }),
         )?;
         let depth: Vec<u8> = cap.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect();

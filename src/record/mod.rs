@@ -149,10 +149,10 @@ pub(crate) const TRANSFORMS_EVERY: usize = 20;
 /// every [`TRANSFORMS_EVERY`] servo ticks. Between motions the arm stands still, so the last
 /// frames hold. (simulation time [s], joint positions [rad])
 pub(crate) fn arm_samples(result: &Recording) -> Vec<(f64, crate::robot::JointVector)> {
-    let start = result.trace.first().filter(|t| t.t > 0.0).map(|t| (0.0, t.q));
+    let start = result.trace.first().filter(|t| t.t_s > 0.0).map(|t| (0.0, t.q));
     start
         .into_iter()
-        .chain(result.trace.iter().step_by(TRANSFORMS_EVERY).map(|t| (t.t, t.q)))
+        .chain(result.trace.iter().step_by(TRANSFORMS_EVERY).map(|t| (t.t_s, t.q)))
         .collect()
 }
 
@@ -188,9 +188,9 @@ pub(crate) const CANDIDATE_ARROW_M: f64 = 0.03;
 pub(crate) fn frustum_corners(c: &crate::sensor::Camera, range_m: f64) -> [nalgebra::Vector3<f64>; 5] {
     let apex = c.world_from_camera.translation.vector;
     let corner = |u: f64, v: f64| {
-        let d = nalgebra::Vector3::new((u - c.cx) / c.fx, (v - c.cy) / c.fy, 1.0);
+        let d = nalgebra::Vector3::new((u - c.cx_px) / c.fx_px, (v - c.cy_px) / c.fy_px, 1.0);
         apex + c.world_from_camera.rotation * (d * range_m)
     };
-    let (w, h) = (c.width as f64, c.height as f64);
+    let (w, h) = (c.width_px as f64, c.height_px as f64);
     [apex, corner(0.0, 0.0), corner(w, 0.0), corner(w, h), corner(0.0, h)]
 }

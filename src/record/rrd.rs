@@ -252,10 +252,10 @@ fn log_cell(rec: &mut Rec, result: &Recording, scene: &Scene) -> Result<(), Reco
     rec.log_static(
         "world/camera",
         &rerun::Pinhole::from_focal_length_and_resolution(
-            [c.fx as f32, c.fy as f32],
-            [c.width as f32, c.height as f32],
+            [c.fx_px as f32, c.fy_px as f32],
+            [c.width_px as f32, c.height_px as f32],
         )
-        .with_principal_point([c.cx as f32, c.cy as f32])
+        .with_principal_point([c.cx_px as f32, c.cy_px as f32])
         .with_camera_xyz(rerun::components::ViewCoordinates::RDF)
         .with_image_plane_distance(range_m as f32),
     )?;
@@ -326,18 +326,18 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
     // Link frames at 50 Hz, one columnar call per link.
     let samples = arm_samples(result);
     let times: Vec<f64> = samples.iter().map(|(t, _)| *t).collect();
-    let frames: Vec<Vec<Isometry3<f64>>> = samples.iter().map(|(_, q)| robot.world_from_links(q)).collect();
+    let world_from_links: Vec<Vec<Isometry3<f64>>> = samples.iter().map(|(_, q)| robot.world_from_links(q)).collect();
     for i in 0..=DOF.min(robot.links.len().saturating_sub(1)) {
         let columns = rerun::Transform3D::update_fields()
-            .with_many_translation(frames.iter().map(|f| v3(&f[i].translation.vector)))
-            .with_many_quaternion(frames.iter().map(|f| quat(&f[i])))
+            .with_many_translation(world_from_links.iter().map(|f| v3(&f[i].translation.vector)))
+            .with_many_quaternion(world_from_links.iter().map(|f| quat(&f[i])))
             .columns_of_unit_batches()
             .map_err(rr)?;
         rec.columns(&link_path(i), &times, columns)?;
     }
     // Joint series at 100 Hz: positions and velocities (six series each), torque beside its limit.
     let ticks: Vec<&crate::execution::Tick> = result.trace.iter().step_by(JOINT_STATE_EVERY).collect();
-    let times: Vec<f64> = ticks.iter().map(|t| t.t).collect();
+    let times: Vec<f64> = ticks.iter().map(|t| t.t_s).collect();
     let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
     rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;
     rec.log_static("joints/velocity", &rerun::SeriesLines::new().with_names(names))?;
@@ -364,7 +364,7 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
                     rerun::Color::from_rgb(220, 40, 40),
                 ]),
         )?;
-        let values: Vec<f64> = ticks.iter().flat_map(|t| [t.tau[j], limit[j], -limit[j]]).collect();
+        let values: Vec<f64> = ticks.iter().flat_map(|t| [t.tau_nm[j], limit[j], -limit[j]]).collect();
         rec.series(&path, &times, values, 3)?;
     }
     Ok(())

@@ -90,7 +90,7 @@ impl RobotModel {
     }
 
     /// `base_from_link` for links 0 (base, identity) to 6 (flange).
-    pub fn link_frames(&self, q: &JointVector) -> [Frame; DOF + 1] {
+    pub fn base_from_links(&self, q: &JointVector) -> [Frame; DOF + 1] {
         let mut out = [Frame::identity(); DOF + 1];
         for i in 0..DOF {
             out[i + 1] = out[i].compose(&self.joint_frame(i, q[i]));
@@ -100,7 +100,7 @@ impl RobotModel {
 
     /// `base_from_flange`.
     pub fn base_from_flange(&self, q: &JointVector) -> Isometry3<f64> {
-        self.link_frames(q)[DOF].to_isometry()
+        self.base_from_links(q)[DOF].to_isometry()
     }
 
     /// `base_from_tool`.
@@ -115,7 +115,7 @@ impl RobotModel {
 
     /// `world_from_link` for every link, base first.
     pub fn world_from_links(&self, q: &JointVector) -> Vec<Isometry3<f64>> {
-        self.link_frames(q)
+        self.base_from_links(q)
             .iter()
             .map(|f| self.world_from_base * f.to_isometry())
             .collect()
@@ -124,11 +124,11 @@ impl RobotModel {
     /// Geometric Jacobian of the tool point in the base frame: rows 0-2 linear velocity [m/s per
     /// rad/s], rows 3-5 angular velocity.
     pub fn jacobian_tool(&self, q: &JointVector) -> Matrix6<f64> {
-        let frames = self.link_frames(q);
-        let tool = frames[DOF].transform_point(&self.flange_from_tool.translation.vector);
+        let base_from_links = self.base_from_links(q);
+        let tool = base_from_links[DOF].transform_point(&self.flange_from_tool.translation.vector);
         let mut jac = Matrix6::zeros();
         for i in 0..DOF {
-            let f = &frames[i + 1];
+            let f = &base_from_links[i + 1];
             let z = f.rot * self.joints[i].axis;
             let v = z.cross(&(tool - f.pos));
             jac.fixed_view_mut::<3, 1>(0, i).copy_from(&v);

@@ -33,9 +33,9 @@ pub struct Capture {
     /// The camera's optical centre in the world [m].
     pub camera_position_m: Vector3<f64>,
     /// Image width [px].
-    pub width: usize,
+    pub width_px: usize,
     /// Image height [px].
-    pub height: usize,
+    pub height_px: usize,
     /// Depth along the optical axis per pixel, row-major; 0 where there is no return [m].
     pub depth_m: Vec<f32>,
     /// World point per pixel (NaN where there is no return) [m]: the organised point cloud.
@@ -54,7 +54,11 @@ impl Capture {
     /// Writes the depth image as a 16-bit greyscale PNG in millimetres (0 = no return).
     pub fn write_depth_png(&self, path: &Path) -> std::io::Result<()> {
         let file = std::fs::File::create(path)?;
-        let mut enc = png::Encoder::new(std::io::BufWriter::new(file), self.width as u32, self.height as u32);
+        let mut enc = png::Encoder::new(
+            std::io::BufWriter::new(file),
+            self.width_px as u32,
+            self.height_px as u32,
+        );
         enc.set_color(png::ColorType::Grayscale);
         enc.set_depth(png::BitDepth::Sixteen);
         let mut w = enc.write_header().map_err(std::io::Error::other)?;
@@ -114,8 +118,8 @@ impl Background {
     pub fn new(world: &World, camera: &Camera) -> Self {
         let origin = camera.world_from_camera.translation.vector;
         let rays = world.ray_caster(RayTargets::Fixed);
-        let hits = (0..camera.height)
-            .flat_map(|v| (0..camera.width).map(move |u| (u, v)))
+        let hits = (0..camera.height_px)
+            .flat_map(|v| (0..camera.width_px).map(move |u| (u, v)))
             .map(|(u, v)| rays.cast(&origin, &camera.pixel_dir(u, v), camera.max_range_m))
             .collect();
         Background { hits }
@@ -125,7 +129,7 @@ impl Background {
 /// As [`capture`], with the fixed colliders' hits known (`background`): identical images, rays
 /// cast only against the parts and the arm, stopping at the background.
 pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, background: Option<&Background>) -> Capture {
-    let (w, h) = (camera.width, camera.height);
+    let (w, h) = (camera.width_px, camera.height_px);
     let origin = camera.world_from_camera.translation.vector;
     let optical = camera.world_from_camera.rotation * Vector3::z();
     let stream = crate::rng::stream(seed, "sensor");
@@ -222,8 +226,8 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
         id,
         trigger_s: world.time_s(),
         camera_position_m: origin,
-        width: w,
-        height: h,
+        width_px: w,
+        height_px: h,
         depth_m: Vec::with_capacity(w * h),
         points_world: Vec::with_capacity(w * h),
         truth: Vec::with_capacity(w * h),

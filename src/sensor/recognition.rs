@@ -79,8 +79,8 @@ impl Sensor {
         let clamp = |x: f64, n: usize| (x.floor().max(0.0) as usize).min(n.saturating_sub(1));
         let origin = cam.world_from_camera.translation.vector;
         let mut n = 0;
-        for v in clamp(v0, cam.height)..=clamp(v1, cam.height) {
-            for u in clamp(u0, cam.width)..=clamp(u1, cam.width) {
+        for v in clamp(v0, cam.height_px)..=clamp(v1, cam.height_px) {
+            for u in clamp(u0, cam.width_px)..=clamp(u1, cam.width_px) {
                 if world.part_meets_ray(i, &origin, &cam.pixel_dir(u, v), cam.max_range_m) {
                     n += 1;
                 }

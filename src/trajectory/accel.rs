@@ -331,7 +331,7 @@ pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Mot
     let samples = motion.sampled(dt_s);
     for w in samples.windows(2) {
         if !model.certify_edge(&w[0].q, &w[1].q, &mut stats) {
-            return Err(w[0].t);
+            return Err(w[0].t_s);
         }
     }
     Ok(())

@@ -185,7 +185,7 @@ impl Trajectory {
                 // Entering the blend: on the incoming line at via_t - tb/2.
                 let p0 = self.via[j] - before * (tb / 2.0);
                 return Sample {
-                    t,
+                    t_s: t,
                     q: p0 + before * tau + dv * (tb * shape_integral),
                     qd: before + dv * shape,
                     qdd: dv * (shape_rate / tb),
@@ -196,7 +196,7 @@ impl Trajectory {
         let k = (0..n).rev().find(|&k| t >= via_t[k]).unwrap_or(0);
         let v = self.seg_vel[k];
         Sample {
-            t,
+            t_s: t,
             q: self.via[k] + v * (t - via_t[k]),
             qd: v,
             qdd: JointVector::zeros(),
@@ -249,7 +249,7 @@ mod tests {
             assert!(s[0].qd.amax() < 1e-12 && s.last().unwrap().qd.amax() < 1e-9);
             let mut worst_jump = 0.0f64;
             for w in s.windows(2) {
-                let dt = w[1].t - w[0].t;
+                let dt = w[1].t_s - w[0].t_s;
                 assert!(
                     (w[1].q - w[0].q - (w[0].qd + w[1].qd) * (dt / 2.0)).amax() < 1e-6,
                     "{c:?} position/velocity"
@@ -299,7 +299,7 @@ mod tests {
         let t = Trajectory::through(&via, &lim);
         let s = t.samples(0.001);
         for w in s.windows(2) {
-            let dt = w[1].t - w[0].t;
+            let dt = w[1].t_s - w[0].t_s;
             if dt <= 0.0 {
                 continue;
             }

@@ -61,7 +61,7 @@ pub struct LineMotion {
 
 impl Motion for LineMotion {
     fn duration_s(&self) -> f64 {
-        self.samples.last().map_or(0.0, |s| s.t)
+        self.samples.last().map_or(0.0, |s| s.t_s)
     }
     fn at(&self, t: f64) -> Sample {
         let n = self.samples.len() - 1;
@@ -70,7 +70,7 @@ impl Motion for LineMotion {
         let f = x - k as f64;
         let (a, b) = (&self.samples[k], &self.samples[(k + 1).min(n)]);
         Sample {
-            t,
+            t_s: t,
             q: a.q + (b.q - a.q) * f,
             qd: a.qd + (b.qd - a.qd) * f,
             qdd: a.qdd + (b.qdd - a.qdd) * f,
@@ -168,7 +168,7 @@ pub fn straight_line(
                     (b - qs[k] * 2.0 + a) / (LINE_DT_S * LINE_DT_S)
                 };
                 Sample {
-                    t: k as f64 * LINE_DT_S,
+                    t_s: k as f64 * LINE_DT_S,
                     q: qs[k],
                     qd,
                     qdd,

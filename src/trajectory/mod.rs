@@ -49,7 +49,7 @@ use crate::robot::JointVector;
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
     /// Time [s].
-    pub t: f64,
+    pub t_s: f64,
     /// Positions [rad].
     pub q: JointVector,
     /// Velocities [rad/s].

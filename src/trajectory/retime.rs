@@ -216,7 +216,7 @@ impl Motion for Retimed {
         let p = self.timing.at(t);
         let (q, qp, qpp) = self.path.at(p.s);
         Sample {
-            t: p.t_s,
+            t_s: p.t_s,
             q,
             qd: qp * p.s_dot,
             qdd: qp * p.s_ddot + qpp * (p.s_dot * p.s_dot),

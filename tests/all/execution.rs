@@ -38,7 +38,7 @@ fn optimised_motions_execute_within_tolerance_and_an_overload_trips_a_protective
             );
             for t in &run.ticks {
                 for i in 0..6 {
-                    assert!(t.tau[i].abs() <= limit[i] + 1e-9);
+                    assert!(t.tau_nm[i].abs() <= limit[i] + 1e-9);
                 }
             }
         }

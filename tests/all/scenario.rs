@@ -53,18 +53,18 @@ fn recheck_torques(robot: &RobotModel, hand: &Payload, part_kg: f64, trace: &[Ti
     for w in trace.windows(2).step_by(3) {
         let (a, b) = (&w[0], &w[1]);
         // One integration step: q_b = q_a + qd_b dt (semi-implicit Euler), one dt apart.
-        if ((b.t - a.t) - dt).abs() > 1e-9 || (b.q - (a.q + b.qd * dt)).amax() > 1e-9 {
+        if ((b.t_s - a.t_s) - dt).abs() > 1e-9 || (b.q - (a.q + b.qd * dt)).amax() > 1e-9 {
             continue;
         }
         let qdd = (b.qd - a.qd) / dt;
         let needs: Vec<JointVector> = models.iter().map(|m| euler_lagrange(m, &a.q, &a.qd, &qdd)).collect();
         let matches = needs
             .iter()
-            .any(|n| (0..DOF).all(|i| (n[i] - a.tau[i]).abs() <= 0.02 * limit[i]));
+            .any(|n| (0..DOF).all(|i| (n[i] - a.tau_nm[i]).abs() <= 0.02 * limit[i]));
         assert!(
             matches,
             "t = {:.3} s: recorded torque {:?} is not what the motion needs ({:?} / {:?})",
-            a.t, a.tau, needs[0], needs[1]
+            a.t_s, a.tau_nm, needs[0], needs[1]
         );
         for n in &needs {
             for i in 0..DOF {
@@ -152,7 +152,7 @@ fn scenario(workpiece: &str) {
         s.takt.mean_s
     );
     // The trace is in time order and the cycle's events are too.
-    assert!(rec.trace.windows(2).all(|w| w[1].t >= w[0].t - 1e-9));
+    assert!(rec.trace.windows(2).all(|w| w[1].t_s >= w[0].t_s - 1e-9));
     assert!(rec.events.windows(2).all(|w| w[1].t_s >= w[0].t_s - 1e-9));
 }
 
