@@ -9,8 +9,8 @@
 //!
 //! Units: s, counts. Rows are in workpiece order as given.
 
-mod runner;
-mod table;
+pub mod runner;
+pub mod table;
 
 use serde::{Deserialize, Serialize};
 

@@ -4,19 +4,29 @@
 //! The modules follow one pick through the data flow:
 //!
 //! 1. [`config`]: the cell (scene) file and the workpiece files: strict parsing and validation.
-//! 2. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
-//! 3. [`physics`]: the rapier world: trays, piles of parts, the arm's bodies, the suction gripper.
+//! 2. [`geometry`]: the cell's solid shapes (trays, table, obstacles as named boxes, the hand's
+//!    cylinders) and the suction cup's force model, defined once for every stage below.
+//! 3. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
+//! 4. [`physics`]: the rapier world behind an API in metres: trays, piles of parts, the arm's
+//!    bodies, the suction gripper, the health monitor, scene queries.
+//! 5. [`sensor`]: the fixed overhead 3D sensor: ray-cast depth capture, exposure timing,
+//!    recognition, the height map.
+//! 6. [`grasp`]: the grasp selector: suction grasps from detections and the point cloud, ranked;
+//!    [`pipeline`]: sense and grasp, from one capture to the grasp tried and its planning scene.
+//! 7. [`planning`]: the collision model (robot spheres, cell boxes, pile columns), certified
+//!    edges, generic sampling-based search, the cell's planner.
+//! 8. [`trajectory`]: timed trajectories through via points, torques, the acceleration search,
+//!    path correction, TOPP-RA, straight tool lines.
+//! 9. [`execution`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
+//! 10. [`cycle`]: the cell cycle end to end (sensing, motion generation, Pick, Place, faults,
+//!     trays), its events and the observer interface through which a run is watched.
+//! 11. [`record`]: the run written to Rerun (`.rrd`) and MCAP files.
+//! 12. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
+//!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG); [`batch`]:
+//!     takt-time tables over many runs.
 //!
-//! 4. [`sensor`]: the fixed overhead 3D sensor: ray-cast depth capture, exposure timing, recognition.
-//! 5. [`grasp`]: the grasp selector: suction grasps from detections and the point cloud, ranked.
-//! 6. [`planning`]: collision model (robot spheres, cell boxes, pile columns), certified edges, planner.
-//! 7. [`trajectory`]: timed trajectories through via points, torques, the acceleration search.
-//! 8. [`execution`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
-//! 9. [`cycle`]: the cell cycle end to end: pipelined sensing and compute, Pick, Place, faults,
-//!    refills, takt time.
-//! 10. [`record`]: the run written to MCAP for Foxglove (Rerun to come; see README.md).
-//! 11. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the results;
-//!     [`chart`]: the cycle's time chart (SVG); [`batch`]: takt-time tables over many runs.
+//! Beside the flow: [`mod@reference`] (the reference system's cases and tables), [`stats`]
+//! (statistics), [`rng`] (named seeded random streams), [`bench`] (the benchmarks).
 //!
 //! Units are SI inside the crate (m, rad, s, kg, N m); degrees appear only at the file and
 //! command-line boundary. Frame names read `target_from_source` (e.g. `world_from_tool`).

@@ -275,7 +275,7 @@ fn bench_accel(runs: usize, json: bool) -> Result<()> {
             r.energy.1
         );
     }
-    let mean = rows.iter().map(|r| r.improvement).sum::<f64>() / rows.len().max(1) as f64;
+    let mean = binpick::stats::mean_of(rows.iter().map(|r| r.improvement));
     let lo = rows.iter().map(|r| r.improvement_range.0).fold(f64::INFINITY, f64::min);
     let hi = rows
         .iter()

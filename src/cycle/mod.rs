@@ -13,7 +13,7 @@
 //!    which the arm has left the camera's view frustum (or, at the start and after a failure, as
 //!    soon as the arm is out of view). The recognition result arrives `latency_s` after the
 //!    trigger. A capture spoiled by motion in the scene is repeated when its exposure is over.
-//! 2. [`motions`]: from the result, grasp selection ([`crate::grasp::choose_grasp`]), then the
+//! 2. [`motions`]: from the result, grasp selection ([`crate::pipeline::sense_and_grasp`]), then the
 //!    Pick motion (transfer to the approach pose, straight descent, straight lift) is planned
 //!    and accelerated; the Place motion (transfer to above the slot, straight descent, straight
 //!    retreat) is planned next, while the Pick runs. Compute is charged to the simulation
@@ -43,13 +43,13 @@
 //!
 //! Units: s, m, rad. Frames: world.
 
-mod events;
-mod execute;
-mod motions;
-mod pick_place;
-mod records;
-mod sensing;
-mod trays;
+pub mod events;
+pub mod execute;
+pub mod motions;
+pub mod pick_place;
+pub mod records;
+pub mod sensing;
+pub mod trays;
 
 use nalgebra::{Isometry3, Vector3};
 

@@ -10,7 +10,7 @@ use nalgebra::{Matrix3, Vector3};
 use rapier3d::math::{Pose, Vector};
 use rapier3d::prelude::SharedShape;
 
-use crate::config::{PartRole, Piece, ShapeKind, Source, Workpiece};
+use crate::config::{Piece, ShapeKind, Source, Workpiece};
 
 /// Why a workpiece shape could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -34,14 +34,12 @@ pub enum ShapeError {
 /// A workpiece's collision shape and mass properties, built once and shared by every part.
 #[derive(Clone)]
 pub struct PartShape {
-    /// The collider shape in the part frame, in rapier units ([`super::SIM_UNITS_PER_M`]):
+    /// The collider shape in the part frame, in rapier units (millimetres):
     /// convex polyhedra, whose contacts rest parts stably.
-    pub shape: SharedShape,
+    pub(super) shape: SharedShape,
     /// The same geometry for rays (sensor, suction probes): boxes as cuboids, whose ray test is
     /// analytic and twice as fast as a polyhedron's.
-    pub view_shape: SharedShape,
-    /// The primitives of the body (not the leads), for face look-ups: `(part_from_primitive, shape)`.
-    pub body_primitives: Vec<(Pose, SharedShape)>,
+    pub(super) view_shape: SharedShape,
     /// Mass [kg].
     pub mass_kg: f64,
     /// Centre of mass in the part frame [m].
@@ -61,7 +59,7 @@ pub struct PartShape {
 }
 
 /// Loads a triangle mesh from an OBJ or STL file, scaled to metres.
-pub fn load_mesh(path: &Path, scale: f64) -> Result<(Vec<Vector>, Vec<[u32; 3]>), ShapeError> {
+pub(crate) fn load_mesh(path: &Path, scale: f64) -> Result<(Vec<Vector>, Vec<[u32; 3]>), ShapeError> {
     let err = |reason: String| ShapeError::Mesh {
         file: path.display().to_string(),
         reason,
@@ -154,16 +152,15 @@ impl PartShape {
                 SharedShape::cuboid(super::sim(he.x), super::sim(he.y), super::sim(he.z)),
             )
         };
-        let (shape, view_shape, body_primitives) = match workpiece.shape.kind {
+        let (shape, view_shape) = match workpiece.shape.kind {
             ShapeKind::Box => {
                 let s = polytope_shape(&super::overlap::Polytope::cuboid(Vector3::zeros(), he), &workpiece.name)?;
-                (s.clone(), cuboid(Vector3::zeros(), he).1, vec![(Pose::IDENTITY, s)])
+                (s, cuboid(Vector3::zeros(), he).1)
             }
             ShapeKind::Compound => {
                 let mut all = Vec::new();
                 let mut view = Vec::new();
-                let mut body = Vec::new();
-                for (role, piece) in workpiece.pieces() {
+                for (_, piece) in workpiece.pieces() {
                     // Physics: convex polyhedra (cylinders as 16-sided prisms: polyhedral contacts
                     // rest stably where rapier's round cylinders roll and jitter; the overlap check
                     // uses the same prisms). Rays: boxes as cuboids.
@@ -172,12 +169,9 @@ impl PartShape {
                         Piece::Box { center_m, half_m } => cuboid(center_m, half_m),
                         Piece::Cylinder { .. } => (Pose::IDENTITY, hull.clone()),
                     });
-                    if role == PartRole::Body {
-                        body.push((Pose::IDENTITY, hull.clone()));
-                    }
                     all.push((Pose::IDENTITY, hull));
                 }
-                (SharedShape::compound(all), SharedShape::compound(view), body)
+                (SharedShape::compound(all), SharedShape::compound(view))
             }
             ShapeKind::Mesh => {
                 let file = workpiece.shape.mesh_file.clone().unwrap_or_default();
@@ -212,11 +206,7 @@ impl PartShape {
                 }
                 let sim_verts: Vec<Vector> = verts.iter().map(|v| *v * super::sim(1.0)).collect();
                 let decomposed = SharedShape::convex_decomposition(&sim_verts, &tris);
-                (
-                    decomposed.clone(),
-                    decomposed.clone(),
-                    vec![(Pose::IDENTITY, decomposed)],
-                )
+                (decomposed.clone(), decomposed)
             }
         };
         // Mass properties: the shape's, at the density that gives the workpiece's mass.
@@ -240,7 +230,6 @@ impl PartShape {
         Ok(PartShape {
             shape,
             view_shape,
-            body_primitives,
             mass_kg: workpiece.mass_kg,
             com_m: super::point_from_sim(mp.local_com),
             inertia_com_kg_m2: r.matrix() * diag * r.matrix().transpose(),
@@ -277,7 +266,6 @@ mod tests {
                 s.half_extents_m,
                 he
             );
-            assert!(!s.body_primitives.is_empty());
         }
     }
 

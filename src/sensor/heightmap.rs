@@ -113,15 +113,11 @@ impl HeightMap {
     /// quartile on top put the cup 0.4 mm high on average and up to 1.1 mm, beyond the seal's
     /// 0.8 mm touch tolerance: one grasp in twenty failed.)
     pub fn surface_within(&self, x: f64, y: f64, radius_m: f64, expected_m: f64, band_m: f64) -> f64 {
-        let mut v: Vec<f64> = self
+        let v: Vec<f64> = self
             .heights_within(x, y, radius_m)
             .filter(|h| h.is_finite() && (h - expected_m).abs() <= band_m)
             .collect();
-        if v.is_empty() {
-            return f64::NAN;
-        }
-        v.sort_by(f64::total_cmp);
-        v[v.len() / 2]
+        crate::stats::median_sorted(&crate::stats::sorted(&v))
     }
 
     /// Highest seen point above the tray floor within `radius_m` of tray point (x, y) [m]

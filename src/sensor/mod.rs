@@ -21,10 +21,10 @@
 //! Randomness: the `sensor` stream (pixel noise, positioned per row so threads cannot reorder it)
 //! and the `recognition` stream, both of the run seed, offset by the capture number.
 
-mod camera;
-mod capture;
-mod heightmap;
-mod recognition;
+pub mod camera;
+pub mod capture;
+pub mod heightmap;
+pub mod recognition;
 
 use nalgebra::{Point3, Vector3};
 use serde::Serialize;
