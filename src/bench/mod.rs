@@ -19,5 +19,3 @@ pub use physics::{PhysicsBench, PileTiming, physics_bench};
 pub use planner::{PlannerRow, binpicking_queries, planner_bench};
 pub use robot::{RobotBench, Timing, numerical_ik, robot_bench, time_per_call};
 pub use sensor::{SenseBench, SenseTiming, sense_bench};
-
-pub use crate::reference::{PlannerCase, fig5_cases};

@@ -1,9 +1,10 @@
 //! The planner: every returned path re-checked densely with exact geometry (parry primitives,
 //! independent of the planner's spheres), failure reporting, and certified edges spot-checked.
 
-use binpick::bench::{PlannerCase, binpicking_queries, fig5_cases};
+use binpick::bench::binpicking_queries;
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::planning::{Algorithm, CollisionModel, PlanError, PlanOptions, PlanStats};
+use binpick::reference::{PlannerCase, fig5_cases};
 use binpick::robot::{JointVector, Primitive, RobotModel};
 use nalgebra::{Isometry3, Vector3};
 use rand::RngExt;

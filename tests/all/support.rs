@@ -1,8 +1,8 @@
 //! Helpers: run the binary, make edited copies of the shipped files in a temporary folder.
 
-use binpick::bench::{PlannerCase, fig5_cases};
 use binpick::config::LoadedScene;
 use binpick::planning::PlanOptions;
+use binpick::reference::{PlannerCase, fig5_cases};
 use binpick::robot::{JointVector, RobotModel};
 use std::path::{Path, PathBuf};
 use std::process::Output;

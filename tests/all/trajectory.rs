@@ -3,8 +3,8 @@
 //! energy), and its position, speed and acceleration limits.
 
 use crate::support::planned_fig5_paths;
-use binpick::bench::fig5_cases;
 use binpick::config::LoadedScene;
+use binpick::reference::fig5_cases;
 use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
 use binpick::trajectory::{
     Motion, Shares, TORQUE_DT_S, TORQUE_THRESHOLD, Trajectory, correct_path, default_limits, optimise_accelerations,
