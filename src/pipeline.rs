@@ -69,23 +69,28 @@ pub struct GraspChoice {
 }
 
 impl GraspChoice {
-    /// Why nothing was chosen: no feasible grasp (with the rejection counts), or no clear approach.
+    /// Why nothing was chosen (see [`why_none`]).
     pub fn why_none(&self) -> String {
-        if self.plan.ranked.is_empty() {
-            let reasons = self
-                .plan
-                .rejected_counts()
-                .iter()
-                .map(|(k, v)| format!("{k} {v}"))
-                .collect::<Vec<_>>()
-                .join(", ");
-            format!("no feasible grasp ({reasons})")
-        } else {
-            format!(
-                "no grasp with a clear approach among {}",
-                self.plan.ranked.len().min(APPROACH_CANDIDATES)
-            )
-        }
+        why_none(&self.plan)
+    }
+}
+
+/// Why sense-and-grasp chose nothing from `plan`: no feasible grasp (with the rejection counts),
+/// or no clear approach among the best-ranked.
+pub fn why_none(plan: &GraspPlan) -> String {
+    if plan.ranked.is_empty() {
+        let reasons = plan
+            .rejected_counts()
+            .iter()
+            .map(|(k, v)| format!("{k} {v}"))
+            .collect::<Vec<_>>()
+            .join(", ");
+        format!("no feasible grasp ({reasons})")
+    } else {
+        format!(
+            "no grasp with a clear approach among {}",
+            plan.ranked.len().min(APPROACH_CANDIDATES)
+        )
     }
 }
 

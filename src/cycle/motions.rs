@@ -122,9 +122,8 @@ impl Run<'_, '_> {
             ranked: &choice.plan.ranked,
             chosen: choice.chosen.as_ref().map(|c| c.rank),
         });
-        let why_none = choice.why_none();
         let Some(chosen) = choice.chosen else {
-            return Err(why_none);
+            return Err(crate::pipeline::why_none(&choice.plan));
         };
         let (grasp, env, empty) = (chosen.grasp, chosen.env, chosen.model);
         let grasp_s = wall.elapsed().as_secs_f64();
