@@ -19,9 +19,11 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+pub mod model_error;
 pub mod scene;
 pub mod workpiece;
 
+pub use model_error::ModelErrorConfig;
 pub use scene::*;
 pub use workpiece::*;
 

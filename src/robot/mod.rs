@@ -15,6 +15,7 @@
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
+pub mod model_error;
 
 use std::collections::BTreeMap;
 
