@@ -15,7 +15,7 @@ use nalgebra::{Isometry3, Translation3};
 
 use super::events::{Event, Fault, Outcome, PartLoss, Stage};
 use super::{CycleError, Run};
-use crate::execution::execute_from;
+use crate::execution::{ServoState, execute_from};
 use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthEvent, PartState};
 use crate::robot::{DOF, JointVector, Payload};
@@ -119,25 +119,28 @@ impl Run<'_, '_> {
         if jump > 1e-3 {
             self.event(Event::MotionStartMismatch(jump));
         }
-        let dynamics = robot.dynamics(payload);
+        // The controller's model with the payload it believes; the plant with its own model
+        // error and the part as it actually sits on the cup.
+        let model = robot.dynamics(payload);
+        let plant = self.cell.plant.dynamics(&self.plant_payload(payload));
         let run = execute_from(
             robot,
-            &dynamics,
-            &dynamics,
+            &model,
+            &plant,
             &self.cell.servo,
             motion,
-            (self.st.arm.q, self.st.arm.qd),
+            self.st.arm.servo,
             settle,
         );
-        (self.st.arm.q, self.st.arm.qd) = run.end_state;
-        let limit = robot.torque_limit_nm();
+        self.st.arm.servo = run.end_state;
         let t0 = self.st.world.time_s();
         let arm = &mut self.st.arm;
-        for t in &run.ticks {
-            for i in 0..DOF {
-                arm.peak_torque_ratio = arm.peak_torque_ratio.max(t.tau_nm[i].abs() / limit[i]);
-            }
+        for i in 0..DOF {
+            arm.peak_demand_ratio[i] = arm.peak_demand_ratio[i].max(run.peak_demand_ratio[i]);
+            let run_peak = &mut self.st.run_peak_demand_ratio[i];
+            *run_peak = run_peak.max(run.peak_demand_ratio[i]);
         }
+        arm.saturated_s += run.saturated_ticks as f64 * self.cell.servo.dt_s;
         arm.max_error_rad = run.max_error_rad.iter().fold(arm.max_error_rad, |a, e| a.max(*e));
         let per_step = (self.st.world.dt_s() / self.cell.servo.dt_s).round().max(1.0) as usize;
         let mut dropped = None;
@@ -189,6 +192,20 @@ impl Run<'_, '_> {
         Ok(Played::Done)
     }
 
+    /// What the plant carries while the controller believes `believed`: with the cell file's
+    /// `held_part_as_sealed`, the hand and the part as the physics holds it on the cup (its
+    /// mass, inertia and centre of mass where the cup sealed), or the hand alone when nothing is
+    /// held; otherwise what the controller believes.
+    fn plant_payload(&self, believed: &Payload) -> Payload {
+        if !self.cell.scene.model_error.held_part_as_sealed {
+            return *believed;
+        }
+        match self.st.world.held_payload() {
+            Some(part) => self.cell.hand.combined(&part),
+            None => self.cell.hand,
+        }
+    }
+
     /// After a fault: the vacuum goes off, the controller waits its reset time, then the arm
     /// retraces `path` (the executed positions of the faulted motion) back to where it started.
     fn recover(&mut self, path: &[JointVector], fault: Fault) -> Result<(), CycleError> {
@@ -197,9 +214,8 @@ impl Run<'_, '_> {
         self.obs.marker(t, "fault");
         self.st.world.vacuum_off();
         self.idle_until(t + self.cell.scene.sim.protective_stop_reset_s)?;
-        (self.st.arm.q, self.st.arm.qd) = (self.st.world.joints(), JointVector::zeros());
+        self.st.arm.servo = ServoState::at_rest(self.st.world.joints());
         self.clear_deep_penetrations();
-        let robot = self.cell.robot;
         let tool = self.st.world.world_from_tool();
         let tray = self.st.world.pick_tray();
         let above_z = tray.world_from_tray.translation.z + self.cell.scene.pick_tray.wall_height_m + 0.1;
@@ -216,8 +232,15 @@ impl Run<'_, '_> {
                 speed_m_s: 0.1,
                 accel_m_s2: 1.0,
             };
-            if let Some(line) = straight_line(robot, &robot.dynamics(&hand), &self.st.arm.q, &tool, &up, &limits, None)
-            {
+            if let Some(line) = straight_line(
+                &self.cell.accel_robot,
+                &self.cell.accel_robot.dynamics(&hand),
+                &self.st.arm.servo.q,
+                &tool,
+                &up,
+                &limits,
+                None,
+            ) {
                 let path: Vec<JointVector> = line.sampled(self.cell.servo.dt_s).iter().map(|s| s.q).collect();
                 self.retrace(&path, 1)?;
             }
@@ -226,7 +249,7 @@ impl Run<'_, '_> {
             let back: Vec<JointVector> = path.iter().rev().copied().collect();
             self.retrace(&back, 3)?;
         }
-        (self.st.arm.q, self.st.arm.qd) = (self.st.world.joints(), JointVector::zeros());
+        self.st.arm.servo = ServoState::at_rest(self.st.world.joints());
         self.st.world.take_gripper_events();
         self.st.gripper_events.clear();
         self.span(Stage::Stall, t, self.st.world.time_s(), "fault reset and retreat");

@@ -59,7 +59,7 @@ pub use events::{
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use records::{
-    PickRecord, RunCounts, RunLabel, RunResult, RunSummary, TaktStats, release_span, summarise, takts_in_stats,
+    PickRecord, RunCounts, RunLabel, RunResult, RunSummary, TaktStats, summarise, takts, takts_excl_refills,
 };
 pub use sensing::SensedResult;
 
@@ -70,7 +70,7 @@ use crate::grasp::GraspSelector;
 use crate::physics::pile::PileOptions;
 use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthError, PartShape, World};
-use crate::robot::{JointVector, Payload, RobotModel};
+use crate::robot::{Payload, RobotModel};
 use crate::sensor::{CaptureJob, Sensor};
 
 pub use crate::reference::reference_takt;
@@ -105,8 +105,12 @@ pub struct RunOptions {
 
 /// The constant parts of the cell: what does not change while it runs.
 pub struct Cell<'a> {
-    /// The arm.
+    /// The arm as the controller models it (nominal inertials, friction, armature).
     pub robot: &'a RobotModel,
+    /// The arm as the plant is: the model with the cell file's model error, drawn once per run.
+    pub plant: RobotModel,
+    /// The arm as the motion accelerator budgets it: torque limits less `cycle.torque_margin`.
+    pub accel_robot: RobotModel,
     /// The cell file.
     pub scene: &'a Scene,
     /// The grasp selector for this workpiece.
@@ -115,6 +119,8 @@ pub struct Cell<'a> {
     pub servo: Servo,
     /// The hand on the flange (no part).
     pub hand: Payload,
+    /// The part as the controller believes it on the cup: the nominal mass at the cup centre.
+    pub nominal_part: Payload,
     /// The workpiece's shape and mass.
     pub shape: PartShape,
     /// The cup's holding-force model.
@@ -134,16 +140,16 @@ pub struct Cell<'a> {
 /// The arm as the cycle knows it between motions.
 #[derive(Debug, Clone, Copy)]
 pub struct ArmState {
-    /// Actual joint positions and velocities after the last motion [rad, rad/s].
-    pub q: JointVector,
-    /// Joint velocities [rad/s].
-    pub qd: JointVector,
+    /// The arm's actual joint state and the servo's integral after the last motion.
+    pub servo: crate::execution::ServoState,
     /// When the arm has nothing to do from [s].
     pub free_s: f64,
     /// Largest tracking error since the pick's motions began [rad].
     pub max_error_rad: f64,
-    /// Largest |torque| / limit since the pick's motions began.
-    pub peak_torque_ratio: f64,
+    /// Largest |demanded torque| / limit per joint since the pick's motions began.
+    pub peak_demand_ratio: [f64; crate::robot::DOF],
+    /// Time some joint was saturated since the pick's motions began [s].
+    pub saturated_s: f64,
 }
 
 /// The mutable state of the cell.
@@ -166,6 +172,8 @@ pub struct CellState {
     pub pick: Option<usize>,
     /// Parts lost out of the trays.
     pub parts_lost: usize,
+    /// Largest |demanded torque| / limit per joint over the run.
+    pub run_peak_demand_ratio: [f64; crate::robot::DOF],
 }
 
 /// A running cycle: the constant cell, its state, and who watches.
@@ -210,10 +218,14 @@ impl<'a> Cell<'a> {
         }
         Ok(Cell {
             robot,
+            plant: robot.with_model_error(&s.model_error, opts.seed),
+            accel_robot: robot.with_torque_share(1.0 - s.cycle.torque_margin),
             scene: s,
             selector: GraspSelector::new(s, robot, wp),
-            servo: Servo::from_config(&s.sim),
+            // The controller compensates the share of its friction model it is sure of.
+            servo: Servo::from_config(&s.sim).with_friction_compensation(1.0 - s.model_error.joint_friction_fraction),
             hand: Payload::from_gripper(&s.gripper),
+            nominal_part: Payload::point(wp.mass_kg, robot.flange_from_tool.translation.vector),
             shape: PartShape::build(wp, &workpiece.source)?,
             suction: SuctionModel::new(&s.gripper),
             slots,
@@ -236,14 +248,13 @@ impl<'a> Cell<'a> {
         })?;
         let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed)
             .ok_or_else(|| CycleError::Setup("degenerate sensor pose".into()))?;
-        let q = world.joints();
         Ok(CellState {
             arm: ArmState {
-                q,
-                qd: JointVector::zeros(),
+                servo: crate::execution::ServoState::at_rest(world.joints()),
                 free_s: world.time_s(),
                 max_error_rad: 0.0,
-                peak_torque_ratio: 0.0,
+                peak_demand_ratio: [0.0; crate::robot::DOF],
+                saturated_s: 0.0,
             },
             world,
             sensor,
@@ -253,6 +264,7 @@ impl<'a> Cell<'a> {
             trays: trays::TrayState::default(),
             pick: None,
             parts_lost: 0,
+            run_peak_demand_ratio: [0.0; crate::robot::DOF],
         })
     }
 }
@@ -275,6 +287,7 @@ pub fn run(
         captures: (st.sensor.triggered, st.sensor.spoiled),
         refills: st.trays.refills,
         place_tray_exchanges: st.trays.exchanges,
+        peak_demand_ratio: st.run_peak_demand_ratio,
     };
     let label = RunLabel {
         workpiece: workpiece.workpiece.name.clone(),
@@ -296,20 +309,17 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
 }
 
 impl Run<'_, '_> {
-    /// The pick loop: until the asked-for attempts are made or the run ends otherwise.
+    /// The pick loop: until the asked-for attempts are made (every pick is one, a re-capture
+    /// too) or the run ends otherwise.
     fn picks(&mut self) -> Result<(Vec<PickRecord>, EndReason), CycleError> {
         let opts = self.cell.opts;
         let mut records: Vec<PickRecord> = Vec::new();
-        let mut attempts = 0usize;
-        while attempts < opts.picks {
+        while records.len() < opts.picks {
             if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
                 return Ok((records, EndReason::Interrupted));
             }
             let index = records.len();
             self.st.pick = Some(index);
-            if index > 20 * opts.picks + 20 {
-                return Ok((records, EndReason::TooManyEmptyCaptures));
-            }
             let Some(result) = self.next_result()? else {
                 return Ok((records, EndReason::NoPathOutOfView));
             };
@@ -338,7 +348,6 @@ impl Run<'_, '_> {
                     continue;
                 }
             };
-            attempts += 1;
             self.st.trays.attempted();
             let charged = if opts.deterministic {
                 self.cell.budgets_s

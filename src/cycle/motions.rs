@@ -3,9 +3,9 @@
 //!
 //! Job: choose the grasp ([`crate::pipeline::sense_and_grasp`]); plan the Pick transfer from
 //! where the arm is to the approach pose above the grasp in the planning scene of that grasp,
-//! accelerate it under the torque limits inside the certified corridor, and add the straight
-//! descent; then, with the part on the cup (its centre of mass where the recognition put it),
-//! the straight lift, the Place transfer to above the slot (planned with the part's box on the
+//! accelerate it under the torque limits less the cell's torque margin inside the certified
+//! corridor, and add the straight descent; then, with the part on the cup (as the controller
+//! believes it: the nominal part at the cup centre), the straight lift, the Place transfer to above the slot (planned with the part's box on the
 //! hand, slowed where the cup's holding force would not hold), the straight descent to the
 //! release pose and the straight retreat. The wall time of each stage is measured.
 //!
@@ -30,9 +30,12 @@ use crate::trajectory::{
 
 /// Fraction of the cup's holding force a held-part motion may use.
 pub const SUCTION_MARGIN: f64 = 0.75;
-/// The part is released this far above its resting height in the slot [m] (the recognised pose
-/// is a little off; the part drops the rest).
+/// The part is released at least this far above its resting height in the slot [m] (the
+/// recognised pose is a little off; the part drops the rest). See [`Cell::release_above_m`].
 pub const RELEASE_ABOVE_M: f64 = 0.003;
+/// The tilt a part may hang at on the cup, in standard deviations of the recognition's angular
+/// noise per axis (the tilt of two axes' Gaussian errors is Rayleigh: 3.5 sigma covers 99.8 %).
+pub const RELEASE_TILT_SIGMAS: f64 = 3.5;
 /// The Place transfer ends this far above the release pose [m].
 pub const PLACE_APPROACH_M: f64 = 0.03;
 
@@ -63,13 +66,25 @@ pub(super) struct Prepared {
     pub lift: LineMotion,
     /// The Place motion (or why not), generated while the Pick runs.
     pub place: Result<PlaceMotion, String>,
-    /// Hand and part as the controller believes them.
+    /// Hand and part as the controller believes them (the nominal part at the cup centre).
     pub held: Payload,
     /// The part the chosen detection is (for the event log only; nothing decides on it).
     pub truth_part: usize,
 }
 
 impl Cell<'_> {
+    /// How far above its resting height the part is released [m]: [`RELEASE_ABOVE_M`] plus how
+    /// far a tilt of the part on the cup ([`RELEASE_TILT_SIGMAS`] of the recognition's angular
+    /// noise) lowers its farthest corner. The cup is aligned with the recognised face, so a
+    /// part hangs as tilted as the recognition was wrong: a 150 mm strip 2.7 deg off dips 3.5 mm
+    /// at its ends, and with 3 mm alone C's strip once touched the place-tray floor while still
+    /// on the cup (a collision).
+    pub(super) fn release_above_m(&self) -> f64 {
+        let h = self.shape.half_extents_m;
+        let tilt_rad = (RELEASE_TILT_SIGMAS * self.scene.sensor.pose_noise_deg).to_radians();
+        RELEASE_ABOVE_M + h.x.hypot(h.y) * tilt_rad.sin()
+    }
+
     /// A straight tool line at the cell's line speed and acceleration, torque-limited and, with a
     /// part on the cup, limited to the cup's holding force.
     pub(super) fn line(
@@ -84,9 +99,11 @@ impl Cell<'_> {
             speed_m_s: self.scene.cycle.line_speed_m_s,
             accel_m_s2: self.scene.cycle.line_accel_m_s2,
         };
+        // Within the accelerator's torque share, like every other motion: the margin covers
+        // the plant's model error and the servo's feedback.
         straight_line(
-            self.robot,
-            &self.robot.dynamics(payload),
+            &self.accel_robot,
+            &self.accel_robot.dynamics(payload),
             q_from,
             from,
             to,
@@ -137,7 +154,7 @@ impl Run<'_, '_> {
             .plan(&q_now, &q_approach, &PlanOptions::default(), &mut rng)
             .map(|p| {
                 let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-                accelerate_in_corridor(robot, &dyn_hand, &via, &empty, CORRIDOR_CHECK_DT_S)
+                accelerate_in_corridor(&cell.accel_robot, &dyn_hand, &via, &empty, CORRIDOR_CHECK_DT_S)
                     .1
                     .trajectory
             })
@@ -159,10 +176,9 @@ impl Run<'_, '_> {
         let max_force = cell
             .suction
             .max_specific_force_m_s2(SUCTION_MARGIN, cell.shape.mass_kg, offset);
-        let held = hand.combined(&Payload::point(
-            cell.shape.mass_kg,
-            robot.flange_from_tool * tool_from_part.translation.vector,
-        ));
+        // The controller's payload: the nominal part at the cup centre (the plant carries the
+        // part where the cup actually sealed: see `execute`).
+        let held = hand.combined(&cell.nominal_part);
         // The lift starts where the descent ends (the same line, IK-chained from the approach).
         let q_grasp = descent
             .as_ref()
@@ -176,7 +192,7 @@ impl Run<'_, '_> {
         );
         let above_place = above_place(&grasp);
         let release_pose = Isometry3::from_parts(
-            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * RELEASE_ABOVE_M),
+            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * cell.release_above_m()),
             grasp.world_from_tool_place.rotation,
         );
         let holding = CollisionModel::new(
@@ -195,7 +211,8 @@ impl Run<'_, '_> {
                 .plan(&q_lifted, &q_above, &PlanOptions::default(), &mut rng)
                 .map_err(|e| format!("place transfer: {e}"))?;
             let via: Vec<JointVector> = path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-            let (via, acc, _) = accelerate_in_corridor(robot, &dyn_held, &via, &holding, CORRIDOR_CHECK_DT_S);
+            let (via, acc, _) =
+                accelerate_in_corridor(&cell.accel_robot, &dyn_held, &via, &holding, CORRIDOR_CHECK_DT_S);
             let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, max_force);
             let down = cell
                 .line(&q_above, &above_place, &release_pose, &held, Some(max_force))

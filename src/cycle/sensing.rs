@@ -132,7 +132,13 @@ impl Run<'_, '_> {
         };
         let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
         let hand = self.cell.hand;
-        let (_, acc, _) = accelerate_in_corridor(robot, &robot.dynamics(&hand), &via, &free, CORRIDOR_CHECK_DT_S);
+        let (_, acc, _) = accelerate_in_corridor(
+            &self.cell.accel_robot,
+            &robot.dynamics(&hand),
+            &via,
+            &free,
+            CORRIDOR_CHECK_DT_S,
+        );
         let played = self.play(&acc.trajectory, &hand, true)?;
         self.span(Stage::Place, t, self.st.world.time_s(), "out of view");
         self.st.arm.free_s = self.st.world.time_s();

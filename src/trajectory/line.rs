@@ -2,7 +2,7 @@
 //!
 //! Job: move the tool centre point along a straight line in Cartesian space with a trapezoidal
 //! speed profile, joint positions by inverse kinematics every millisecond, slowed until the
-//! torques keep a margin for the servo and, holding a part, until the tool's specific force
+//! torques stay within the limits given (less the cell's margin) and, holding a part, until the tool's specific force
 //! |a - g| stays within what the suction cup holds; and slow a blended joint trajectory uniformly
 //! in time for the same reason.
 //!
@@ -12,8 +12,6 @@
 use super::{Motion, MotionLimits, Sample, Trajectory};
 use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
 
-/// Fraction of the torque limit a straight line may use (the servo's feedback needs the rest).
-const LINE_TORQUE_SHARE: f64 = 0.85;
 /// A straight line is sampled (inverse kinematics, finite differences) every millisecond [s].
 const LINE_DT_S: f64 = 0.001;
 /// Length of the line per radian of tool rotation, so a pure turn takes time too [m/rad].
@@ -86,8 +84,9 @@ impl LineMotion {
 }
 
 /// The straight tool line from `from` (the arm at `q_from`) to `to` under `limits`, slowed until
-/// the torques (inverse dynamics with `dynamics`' payload) stay within 85 % of each joint's limit
-/// and, with `max_specific_force_m_s2`, the tool's |a - g| within it (a part on a suction cup).
+/// the torques (with `dynamics`' payload, friction at its worst near rest) stay within `robot`'s
+/// limits (the cell passes them less its torque margin, which the servo's feedback and the
+/// plant's model error need) and, with `max_specific_force_m_s2`, the tool's |a - g| within it (a part on a suction cup).
 /// `None` if the inverse kinematics fails along the line (limits, singularity) or a joint would
 /// jump (a branch change).
 pub fn straight_line(
@@ -162,8 +161,16 @@ pub fn straight_line(
                 } else {
                     (b - a) / (2.0 * LINE_DT_S)
                 };
-                let qdd = if k == 0 || k == n {
+                // At the ends (at rest) the acceleration the first and last step take, so the
+                // servo's feedforward starts and stops the line on its first and last tick (a
+                // zero there left the drives a step behind: the feedback then asked up to 160 %
+                // of a wrist's torque to catch up).
+                let qdd = if n == 0 {
                     JointVector::zeros()
+                } else if k == 0 {
+                    (qs[1] - qs[0]) * (2.0 / (LINE_DT_S * LINE_DT_S))
+                } else if k == n {
+                    (qs[n - 1] - qs[n]) * (2.0 / (LINE_DT_S * LINE_DT_S))
                 } else {
                     (b - qs[k] * 2.0 + a) / (LINE_DT_S * LINE_DT_S)
                 };
@@ -176,8 +183,8 @@ pub fn straight_line(
             })
             .collect();
         let within = samples.iter().all(|s| {
-            let tau = dynamics.inverse_dynamics(&s.q, &s.qd, &s.qdd);
-            (0..DOF).all(|i| tau[i].abs() <= LINE_TORQUE_SHARE * limit[i])
+            let tau = dynamics.drive_torque_bound_nm(&s.q, &s.qd, &s.qdd);
+            (0..DOF).all(|i| tau[i] <= limit[i])
         });
         if within {
             return Some(LineMotion {

@@ -1,7 +1,8 @@
 //! Joint torques along a sampled motion, and the energy measure.
 //!
 //! Job: evaluate inverse dynamics (payload included, friction included) at every sample of a
-//! motion: the peak |torque| of each joint, its share of the joint's limit, and an energy measure,
+//! motion: the peak |torque| of each joint (friction at its worst near rest, where its sign is
+//! unknown), its share of the joint's limit, and an energy measure,
 //! the time integral of the sum of squared torques (the smoothing seed's approximation of the
 //! energy a motion consumes).
 //!
@@ -23,17 +24,18 @@ pub struct TorqueProfile {
     pub energy: f64,
 }
 
-/// Evaluates torques at every sample with inverse dynamics (payload included).
+/// Evaluates torques at every sample with inverse dynamics (payload included), friction at its
+/// worst near rest ([`DynamicsModel::drive_torque_bound_nm`]).
 pub fn torques(dynamics: &DynamicsModel, robot: &RobotModel, samples: &[Sample], dt_s: f64) -> TorqueProfile {
     let limit = robot.torque_limit_nm();
     let mut peak = [0.0f64; DOF];
     let mut energy = 0.0;
     for s in samples {
-        let tau = dynamics.inverse_dynamics(&s.q, &s.qd, &s.qdd);
+        let bound = dynamics.drive_torque_bound_nm(&s.q, &s.qd, &s.qdd);
         for i in 0..DOF {
-            peak[i] = peak[i].max(tau[i].abs());
+            peak[i] = peak[i].max(bound[i]);
         }
-        energy += tau.norm_squared() * dt_s;
+        energy += dynamics.inverse_dynamics(&s.q, &s.qd, &s.qdd).norm_squared() * dt_s;
     }
     TorqueProfile {
         peak_nm: peak,

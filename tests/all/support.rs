@@ -107,3 +107,40 @@ pub fn planned_fig5_paths(scene: &LoadedScene, robot: &RobotModel) -> Vec<(Plann
         })
         .collect()
 }
+
+/// The servo's limit check on what it was asked for: every tick's demanded torque (before the
+/// drive's saturation) within each joint's limit, and every tracking error within the servo's
+/// tolerance. Returns the largest demand / limit and error / tolerance, or the first tick beyond.
+pub fn demand_check(
+    robot: &RobotModel,
+    servo: &binpick::execution::Servo,
+    trace: &[binpick::execution::Tick],
+) -> Result<(f64, f64), String> {
+    let limit = robot.torque_limit_nm();
+    let (mut demand, mut error) = (0.0f64, 0.0f64);
+    for t in trace {
+        for i in 0..binpick::robot::DOF {
+            let d = t.demand_nm[i].abs() / limit[i];
+            let e = t.error_rad[i].abs() / servo.tolerance_rad;
+            if d > 1.0 {
+                return Err(format!(
+                    "t = {:.3} s: J{} demanded {:.1} % of its torque limit",
+                    t.t_s,
+                    i + 1,
+                    100.0 * d
+                ));
+            }
+            if e > 1.0 {
+                return Err(format!(
+                    "t = {:.3} s: J{} tracking error {:.3} deg beyond the tolerance",
+                    t.t_s,
+                    i + 1,
+                    t.error_rad[i].to_degrees()
+                ));
+            }
+            demand = demand.max(d);
+            error = error.max(e);
+        }
+    }
+    Ok((demand, error))
+}
