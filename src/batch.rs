@@ -166,8 +166,10 @@ mod tests {
             seed,
             attempts: takts.len() + 1,
             placed: takts.len() + 1,
+            set_out: takts.len() + 1,
             takts_s: takts.to_vec(),
-            release_span: (takts.iter().sum(), takts.len()),
+            // The last interval spans a tray refill.
+            takts_excl_refills_s: takts[..takts.len() - 1].to_vec(),
             pick_s: vec![1.0; takts.len() + 1],
             place_s: vec![1.0; takts.len() + 1],
             compute_sum_s: [0.05 * (takts.len() + 1) as f64, 0.0, 0.0],
@@ -175,7 +177,9 @@ mod tests {
             compute_waits: (0, 0.0),
             faults: [0, 0, 0, 0, 0],
             refills: 0,
-            peak_torque_ratio: 0.9,
+            peak_demand_ratio: [0.9, 0.5, 0.5, 0.5, 0.5, 0.5],
+            saturated_s: 0.0,
+            max_tracking_error_deg: 0.1,
             sim_time_s: 10.0,
             wall_s: Some(0.5),
             ended: "picks done".into(),
@@ -274,7 +278,13 @@ mod tests {
             "a missing shard must be refused"
         );
         assert!(merge(&[("s1".into(), file(1)), ("s1b".into(), file(1)), ("s2".into(), file(2))]).is_err());
-        assert!(markdown(&whole).contains("| A | 2 | 6/6 | 100.0 % | 2.325 |"));
-        assert!((whole[0].effective_takt_s - 2.325).abs() < 1e-12);
+        assert!(
+            markdown(&whole).contains("| A | 2 | 6/6 | 100.0 % | 2.325 |"),
+            "{}",
+            markdown(&whole)
+        );
+        // Excluding the intervals that span a refill: 2.1 and 2.2.
+        assert!((whole[0].takt_excl_refills.mean_s - 2.15).abs() < 1e-12);
+        assert!(csv(&whole).lines().next().unwrap().contains("takt_excl_refills_mean_s"));
     }
 }

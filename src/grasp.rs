@@ -20,6 +20,11 @@ use crate::config::{Axis, PartRole, Piece, Scene, Workpiece};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
 
+/// How far the cloud may stand above a face's plane over the face before something counts as
+/// lying on it [m]: depth noise (0.5 mm-class), the cell's highest point, and the face's tilt
+/// across a cell, well below the thinnest part (C: 5 mm).
+pub const COVER_TOLERANCE_M: f64 = 0.003;
+
 /// A flat face of a workpiece's body, in the part frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Face {
@@ -156,6 +161,9 @@ pub enum Rejection {
     FaceTooSmall,
     /// Points of the cloud rise into the cup's or tool's path around the grasp point.
     Crowded,
+    /// Points of the cloud stand above the face somewhere over the part: something lies on it
+    /// (a part across a long strip is lifted with it and flung out of the tray).
+    Covered,
     /// The straight approach or retreat would meet a tray wall.
     TrayWall,
     /// No joint solution within limits along the straight descent, or at the place pose.
@@ -169,6 +177,7 @@ impl Rejection {
             Rejection::FaceTilted => "face tilted",
             Rejection::FaceTooSmall => "face too small",
             Rejection::Crowded => "crowded",
+            Rejection::Covered => "covered",
             Rejection::TrayWall => "tray wall",
             Rejection::Unreachable => "unreachable",
         }
@@ -302,6 +311,63 @@ impl GraspSelector {
         &self.faces
     }
 
+    /// Whether the cloud stands above the face anywhere over it: a cell whose centre lies on the
+    /// face (shrunk by the pose's uncertainty and a cell) higher than the face's plane there by
+    /// more than [`COVER_TOLERANCE_M`]. `face_point_tray` is the face point under the cup (tray
+    /// frame, its height measured). Unseen cells say nothing here (the planner treats them as
+    /// occupied).
+    fn covered(&self, height_map: &HeightMap, det: &Detection, face: &Face, face_point_tray: &Vector3<f64>) -> bool {
+        let tray_from_part = self.tray.inverse() * det.world_from_part;
+        let n = tray_from_part.rotation * face.normal;
+        if n.z < 0.5 {
+            return false;
+        }
+        let u_dir = tray_from_part.rotation * face.along;
+        let v_dir = n.cross(&u_dir);
+        let shrink = self.face_margin_m + height_map.cell_m;
+        let half = [face.extent_m[0] / 2.0 - shrink, face.extent_m[1] / 2.0 - shrink];
+        if half[0] <= 0.0 || half[1] <= 0.0 {
+            return false;
+        }
+        // The face's centre (tray frame) on the plane through the measured point.
+        let centre = {
+            let c = tray_from_part * Point3::from(face.center);
+            let dz =
+                face_point_tray.z - (c.z - (n.x * (face_point_tray.x - c.x) + n.y * (face_point_tray.y - c.y)) / n.z);
+            Vector3::new(c.x, c.y, c.z + dz)
+        };
+        let reach = [
+            u_dir.x.abs() * half[0] + v_dir.x.abs() * half[1],
+            u_dir.y.abs() * half[0] + v_dir.y.abs() * half[1],
+        ];
+        let cell = height_map.cell_m;
+        let [ox, oy] = height_map.origin_xy_m;
+        let i0 = (((centre.x - reach[0] - ox) / cell).floor().max(0.0)) as usize;
+        let j0 = (((centre.y - reach[1] - oy) / cell).floor().max(0.0)) as usize;
+        let i1 = ((((centre.x + reach[0] - ox) / cell).ceil()) as usize).min(height_map.nx);
+        let j1 = ((((centre.y + reach[1] - oy) / cell).ceil()) as usize).min(height_map.ny);
+        for j in j0..j1 {
+            for i in i0..i1 {
+                let h = height_map.height_m[j * height_map.nx + i];
+                if !h.is_finite() {
+                    continue;
+                }
+                let dx = ox + (i as f64 + 0.5) * cell - centre.x;
+                let dy = oy + (j as f64 + 0.5) * cell - centre.y;
+                // The face's plane above the cell, and the cell's position on the face.
+                let dz = -(n.x * dx + n.y * dy) / n.z;
+                let d = Vector3::new(dx, dy, dz);
+                if d.dot(&u_dir).abs() > half[0] || d.dot(&v_dir).abs() > half[1] {
+                    continue;
+                }
+                if h > centre.z + dz + COVER_TOLERANCE_M {
+                    return true;
+                }
+            }
+        }
+        false
+    }
+
     /// Estimated time of a joint move at top speed and half the specification acceleration [s].
     pub fn motion_time_s(&self, a: &JointVector, b: &JointVector) -> f64 {
         (0..6)
@@ -370,6 +436,10 @@ impl GraspSelector {
                     || body_clear > face_h + self.cup_length_m - self.height_tolerance_m
                 {
                     plan.rejected.push((di, fi, Rejection::Crowded));
+                    continue;
+                }
+                if self.covered(height_map, det, face, &local.coords) {
+                    plan.rejected.push((di, fi, Rejection::Covered));
                     continue;
                 }
                 let clearance = self.clearance_radius(height_map, local.x, local.y, face_h);

@@ -3,9 +3,12 @@
 //!
 //! Job: keep per run the values the table needs ([`RunEntry`]), so shards of a batch run on
 //! different machines merge into the same table as the whole batch would give; one row per
-//! workpiece over all its seeds: takt mean, p95, min and max over the placed picks after the
-//! first of each pile, success rate, waits, faults, mean Pick and Place times and compute per
-//! stage, with the reference system's takt beside it (its Table 5).
+//! workpiece over all its seeds: the takt as the reference defines it (mean, p95, min, max of
+//! every release-to-release interval after a run's first release, failures, re-captures, waits
+//! and refills included) beside the reference's Table 5, the takt excluding the intervals that
+//! span a tray refill (a labelled side figure), success (placed / attempts, re-captures
+//! counted), waits, faults, mean Pick and Place times, compute per stage, and what the servo
+//! was asked for: the peak demanded torque, the time saturated, the largest tracking error.
 //!
 //! Units: s (ms in the Markdown's compute columns), counts. Rows are in workpiece order as given.
 
@@ -22,19 +25,21 @@ pub struct RunEntry {
     pub workpiece: String,
     /// Seed.
     pub seed: u64,
-    /// Picks attempted.
+    /// Attempts: every pick, re-captures included.
     pub attempts: usize,
     /// Picks placed.
     pub placed: usize,
-    /// Takts in the statistics [s].
+    /// Picks the arm set out to make (a grasp chosen, motions generated).
+    pub set_out: usize,
+    /// Every release-to-release interval after the first release [s] (the reference's takt).
     pub takts_s: Vec<f64>,
-    /// First to last release [s] and the releases in between (end-to-end takt = ratio).
-    pub release_span: (f64, usize),
-    /// Pick and Place times of the placed picks [s].
+    /// The intervals that span no pick-tray refill [s].
+    pub takts_excl_refills_s: Vec<f64>,
+    /// Pick times of the placed picks [s].
     pub pick_s: Vec<f64>,
     /// Place times of the placed picks [s].
     pub place_s: Vec<f64>,
-    /// Compute charged per attempt, summed: grasp, Pick, Place [s].
+    /// Compute charged per pick set out, summed: grasp, Pick, Place [s].
     pub compute_sum_s: [f64; 3],
     /// Waits for the sensor in the takts: count and total [s].
     pub sensor_waits: (usize, f64),
@@ -44,8 +49,12 @@ pub struct RunEntry {
     pub faults: [usize; 5],
     /// Refills of the pick tray.
     pub refills: usize,
-    /// Largest |torque| / limit.
-    pub peak_torque_ratio: f64,
+    /// Largest |demanded torque| / limit per joint (before saturation).
+    pub peak_demand_ratio: [f64; 6],
+    /// Time some joint was saturated [s].
+    pub saturated_s: f64,
+    /// Largest servo tracking error [deg].
+    pub max_tracking_error_deg: f64,
     /// Simulated time [s].
     pub sim_time_s: f64,
     /// Wall time of the run [s]: a measurement, not a result, so a deterministic batch's
@@ -61,15 +70,16 @@ impl RunEntry {
     pub fn from_run(r: &RunResult, wall_s: Option<f64>) -> Self {
         let s = &r.summary;
         let placed: Vec<_> = r.records.iter().filter(|p| p.outcome == Outcome::Placed).collect();
-        let attempts: Vec<_> = r.records.iter().filter(|p| p.outcome.is_attempt()).collect();
-        let sum = |f: fn(&crate::cycle::PickRecord) -> f64| attempts.iter().map(|p| f(p)).sum::<f64>();
+        let set_out: Vec<_> = r.records.iter().filter(|p| p.outcome.set_out()).collect();
+        let sum = |f: fn(&crate::cycle::PickRecord) -> f64| set_out.iter().map(|p| f(p)).sum::<f64>();
         RunEntry {
             workpiece: s.workpiece.clone(),
             seed: s.seed,
             attempts: s.attempts,
             placed: s.placed,
-            takts_s: crate::cycle::takts_in_stats(&r.records),
-            release_span: crate::cycle::release_span(&r.records),
+            set_out: set_out.len(),
+            takts_s: crate::cycle::takts(&r.records),
+            takts_excl_refills_s: crate::cycle::takts_excl_refills(&r.records),
             pick_s: placed.iter().map(|p| p.pick_s).collect(),
             place_s: placed.iter().map(|p| p.place_s).collect(),
             compute_sum_s: [
@@ -83,14 +93,16 @@ impl RunEntry {
                 s.protective_stops,
                 s.collisions,
                 s.drops,
-                attempts
+                r.records
                     .iter()
                     .filter(|p| matches!(p.outcome, Outcome::GraspFailed(_)))
                     .count(),
                 s.parts_lost,
             ],
             refills: s.refills,
-            peak_torque_ratio: s.peak_torque_ratio,
+            peak_demand_ratio: s.peak_demand_ratio,
+            saturated_s: s.saturated_s,
+            max_tracking_error_deg: s.max_tracking_error_deg,
             sim_time_s: s.sim_time_s,
             wall_s,
             ended: s.ended.text().to_string(),
@@ -105,23 +117,23 @@ pub struct Row {
     pub workpiece: String,
     /// Runs.
     pub runs: usize,
-    /// Picks attempted.
+    /// Attempts: every pick, re-captures included.
     pub attempts: usize,
     /// Picks placed.
     pub placed: usize,
     /// placed / attempts.
     pub success_rate: f64,
-    /// Takt statistics over all runs' takts.
+    /// Takt as the reference defines it, over all runs' release-to-release intervals.
     pub takt: TaktStats,
-    /// The reference system's takt [s].
+    /// The same leaving out the intervals that span a pick-tray refill (a side figure).
+    pub takt_excl_refills: TaktStats,
+    /// The reference system's takt [s] (its Table 5).
     pub reference_takt_s: Option<f64>,
-    /// End-to-end takt over all runs: refills, re-captures and failures included [s].
-    pub effective_takt_s: f64,
     /// Mean Pick time [s].
     pub mean_pick_s: f64,
     /// Mean Place time [s].
     pub mean_place_s: f64,
-    /// Mean compute per attempt: grasp, Pick, Place [s].
+    /// Mean compute per pick set out: grasp, Pick, Place [s].
     pub mean_compute_s: [f64; 3],
     /// Waits for the sensor: count, mean [s].
     pub sensor_waits: (usize, f64),
@@ -139,8 +151,12 @@ pub struct Row {
     pub parts_lost: usize,
     /// Refills.
     pub refills: usize,
-    /// Largest |torque| / limit.
-    pub peak_torque_ratio: f64,
+    /// Largest |demanded torque| / limit over every joint and run (before saturation).
+    pub peak_demand_ratio: f64,
+    /// Time some joint was saturated, all runs [s].
+    pub saturated_s: f64,
+    /// Largest servo tracking error [deg].
+    pub max_tracking_error_deg: f64,
     /// Simulated time, all runs [s].
     pub sim_time_s: f64,
     /// Wall time, all runs [s] (`None` if a run's is not known).
@@ -160,16 +176,17 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
             let cat = |f: fn(&RunEntry) -> &Vec<f64>| es.iter().flat_map(|e| f(e).iter().copied()).collect::<Vec<_>>();
             let attempts: usize = es.iter().map(|e| e.attempts).sum();
             let placed: usize = es.iter().map(|e| e.placed).sum();
+            let set_out: usize = es.iter().map(|e| e.set_out).sum();
             let waits = |f: fn(&RunEntry) -> (usize, f64)| {
                 let (n, t) = es.iter().map(|e| f(e)).fold((0, 0.0), |(n, t), (a, b)| (n + a, t + b));
                 (n, if n == 0 { 0.0 } else { t / n as f64 })
             };
             let fault = |i: usize| es.iter().map(|e| e.faults[i]).sum();
             let compute = |i: usize| {
-                if attempts == 0 {
+                if set_out == 0 {
                     f64::NAN
                 } else {
-                    es.iter().map(|e| e.compute_sum_s[i]).sum::<f64>() / attempts as f64
+                    es.iter().map(|e| e.compute_sum_s[i]).sum::<f64>() / set_out as f64
                 }
             };
             Some(Row {
@@ -183,13 +200,8 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                     placed as f64 / attempts as f64
                 },
                 takt: TaktStats::of(&cat(|e| &e.takts_s)),
+                takt_excl_refills: TaktStats::of(&cat(|e| &e.takts_excl_refills_s)),
                 reference_takt_s: crate::reference::reference_takt(w),
-                effective_takt_s: {
-                    let (t, n) = es
-                        .iter()
-                        .fold((0.0, 0), |(t, n), e| (t + e.release_span.0, n + e.release_span.1));
-                    if n == 0 { f64::NAN } else { t / n as f64 }
-                },
                 mean_pick_s: crate::stats::mean(&cat(|e| &e.pick_s)),
                 mean_place_s: crate::stats::mean(&cat(|e| &e.place_s)),
                 mean_compute_s: [compute(0), compute(1), compute(2)],
@@ -201,7 +213,12 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                 grasp_failures: fault(3),
                 parts_lost: fault(4),
                 refills: es.iter().map(|e| e.refills).sum(),
-                peak_torque_ratio: es.iter().map(|e| e.peak_torque_ratio).fold(0.0, f64::max),
+                peak_demand_ratio: es
+                    .iter()
+                    .flat_map(|e| e.peak_demand_ratio.iter().copied())
+                    .fold(0.0, f64::max),
+                saturated_s: es.iter().map(|e| e.saturated_s).sum(),
+                max_tracking_error_deg: es.iter().map(|e| e.max_tracking_error_deg).fold(0.0, f64::max),
                 sim_time_s: es.iter().map(|e| e.sim_time_s).sum(),
                 wall_s: es.iter().map(|e| e.wall_s).sum(),
             })
@@ -220,14 +237,15 @@ fn num(v: f64, digits: usize) -> String {
 /// The table as Markdown.
 pub fn markdown(rows: &[Row]) -> String {
     let mut md = String::from(
-        "| part | runs | placed | success | takt mean [s] | p95 | min | max | reference [s] | end-to-end [s] | Pick [s] | Place [s] \
-         | compute grasp/Pick/Place [ms] | sensor waits (mean s) | compute waits (mean s) | stops | collisions \
-         | drops | grasp fails | lost | refills |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+        "| part | runs | placed / attempts | success | takt mean [s] | p95 | min | max | reference [s] \
+         | takt excl. tray refills [s] | Pick [s] | Place [s] | compute grasp/Pick/Place [ms] | sensor waits (mean s) \
+         | compute waits (mean s) | stops | collisions | drops | grasp fails | lost | refills \
+         | peak torque demand | saturated [s] | max tracking error [deg] |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         md += &format!(
-            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} | {} | {} |\n",
+            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} | {} | {} | {} % | {} | {} |\n",
             r.workpiece,
             r.runs,
             r.placed,
@@ -238,7 +256,7 @@ pub fn markdown(rows: &[Row]) -> String {
             num(r.takt.min_s, 3),
             num(r.takt.max_s, 3),
             r.reference_takt_s.map_or("-".into(), |t| num(t, 1)),
-            num(r.effective_takt_s, 3),
+            num(r.takt_excl_refills.mean_s, 3),
             num(r.mean_pick_s, 3),
             num(r.mean_place_s, 3),
             num(r.mean_compute_s[0] * 1e3, 1),
@@ -254,13 +272,16 @@ pub fn markdown(rows: &[Row]) -> String {
             r.grasp_failures,
             r.parts_lost,
             r.refills,
+            num(100.0 * r.peak_demand_ratio, 1),
+            num(r.saturated_s, 3),
+            num(r.max_tracking_error_deg, 3),
         );
     }
     md
 }
 
 /// The columns of `takt.csv`.
-pub const TAKT_CSV_HEADER: [&str; 29] = [
+pub const TAKT_CSV_HEADER: [&str; 31] = [
     "workpiece",
     "runs",
     "attempts",
@@ -272,7 +293,7 @@ pub const TAKT_CSV_HEADER: [&str; 29] = [
     "takt_max_s",
     "takt_count",
     "reference_takt_s",
-    "effective_takt_s",
+    "takt_excl_refills_mean_s",
     "mean_pick_s",
     "mean_place_s",
     "mean_grasp_compute_s",
@@ -288,7 +309,9 @@ pub const TAKT_CSV_HEADER: [&str; 29] = [
     "grasp_failures",
     "parts_lost",
     "refills",
-    "peak_torque_ratio",
+    "peak_demand_ratio",
+    "saturated_s",
+    "max_tracking_error_deg",
     "sim_time_s",
 ];
 
@@ -306,7 +329,7 @@ struct CsvRow<'a> {
     takt_max_s: Fixed<6>,
     takt_count: usize,
     reference_takt_s: Fixed<6>,
-    effective_takt_s: Fixed<6>,
+    takt_excl_refills_mean_s: Fixed<6>,
     mean_pick_s: Fixed<6>,
     mean_place_s: Fixed<6>,
     mean_grasp_compute_s: Fixed<6>,
@@ -322,7 +345,9 @@ struct CsvRow<'a> {
     grasp_failures: usize,
     parts_lost: usize,
     refills: usize,
-    peak_torque_ratio: Fixed<6>,
+    peak_demand_ratio: Fixed<6>,
+    saturated_s: Fixed<6>,
+    max_tracking_error_deg: Fixed<6>,
     sim_time_s: Fixed<6>,
 }
 
@@ -342,7 +367,7 @@ pub fn csv(rows: &[Row]) -> String {
             takt_max_s: Fixed::of(r.takt.max_s),
             takt_count: r.takt.count,
             reference_takt_s: Fixed(r.reference_takt_s),
-            effective_takt_s: Fixed::of(r.effective_takt_s),
+            takt_excl_refills_mean_s: Fixed::of(r.takt_excl_refills.mean_s),
             mean_pick_s: Fixed::of(r.mean_pick_s),
             mean_place_s: Fixed::of(r.mean_place_s),
             mean_grasp_compute_s: Fixed::of(r.mean_compute_s[0]),
@@ -358,7 +383,9 @@ pub fn csv(rows: &[Row]) -> String {
             grasp_failures: r.grasp_failures,
             parts_lost: r.parts_lost,
             refills: r.refills,
-            peak_torque_ratio: Fixed::of(r.peak_torque_ratio),
+            peak_demand_ratio: Fixed::of(r.peak_demand_ratio),
+            saturated_s: Fixed::of(r.saturated_s),
+            max_tracking_error_deg: Fixed::of(r.max_tracking_error_deg),
             sim_time_s: Fixed::of(r.sim_time_s),
         }),
     )

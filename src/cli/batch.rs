@@ -194,7 +194,7 @@ fn write_batch(
     );
     print!("{md}");
     println!(
-        "\ntakt over the placed picks after the first of each pile; {sim_s:.1} s simulated{}, {wall_s:.1} s wall on {jobs} threads",
+        "\ntakt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); success = placed / attempts, re-captures counted; torque demand before saturation; {sim_s:.1} s simulated{}, {wall_s:.1} s wall on {jobs} threads",
         run_wall_s.map_or(String::new(), |w| format!(
             " in {w:.1} s of run time ({:.0}x real time per core)",
             sim_s / w.max(1e-9)

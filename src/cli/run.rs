@@ -126,9 +126,11 @@ pub fn run(a: &RunArgs) -> Result<()> {
     }
     print!("{}", binpick::report::picks_table(&result.records));
     println!(
-        "{} of {} placed ({:.1} %); takt mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} picks (reference {}); \
-         Pick {:.3} s, Place {:.3} s; waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
+        "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \
+         defines it) mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} intervals (reference {}); excluding \
+         tray refills {:.3} s; Pick {:.3} s, Place {:.3} s; waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
          stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), refills {}; \
+         peak torque demand {:.0} % of a limit, saturated {:.3} s, max tracking error {:.3} deg; \
          {:.1} s simulated in {:.2} s wall ({:.0}x real time)",
         s.placed,
         s.attempts,
@@ -139,6 +141,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
         s.takt.max_s,
         s.takt.count,
         s.reference_takt_s.map_or("-".to_string(), |t| format!("{t:.1} s")),
+        s.takt_excl_refills.mean_s,
         s.mean_pick_s,
         s.mean_place_s,
         s.sensor_stalls.0,
@@ -152,6 +155,9 @@ pub fn run(a: &RunArgs) -> Result<()> {
         s.captures.0,
         s.captures.1,
         s.refills,
+        100.0 * s.peak_demand_ratio.iter().cloned().fold(0.0, f64::max),
+        s.saturated_s,
+        s.max_tracking_error_deg,
         s.sim_time_s,
         wall_s,
         s.sim_time_s / wall_s

@@ -59,8 +59,9 @@ pub enum Outcome {
 }
 
 impl Outcome {
-    /// Whether the arm set out to pick (the success rate counts these).
-    pub fn is_attempt(&self) -> bool {
+    /// Whether the arm set out to pick (a grasp was chosen and motions generated), as opposed to
+    /// a re-capture. (The success rate counts every pick as an attempt, re-captures too.)
+    pub fn set_out(&self) -> bool {
         !matches!(self, Outcome::NothingDetected | Outcome::NothingGraspable(_))
     }
 
@@ -101,8 +102,6 @@ pub enum EndReason {
     TrayEmpty,
     /// A refilled tray held nothing graspable either.
     NothingGraspableInFullTray,
-    /// Twenty times the asked-for picks passed without enough attempts (a safety stop).
-    TooManyEmptyCaptures,
     /// The arm found no path out of the sensor's view.
     NoPathOutOfView,
     /// Ctrl-C: the run ended after the pick under way.
@@ -116,7 +115,6 @@ impl EndReason {
             EndReason::PicksDone => "picks done",
             EndReason::TrayEmpty => "tray empty",
             EndReason::NothingGraspableInFullTray => "nothing graspable in a full tray",
-            EndReason::TooManyEmptyCaptures => "too many empty captures",
             EndReason::NoPathOutOfView => "the arm found no path out of the sensor's view",
             EndReason::Interrupted => "interrupted",
         }

@@ -130,14 +130,22 @@ impl Run<'_, '_> {
         if rec.outcome == Outcome::Placed {
             let release = rec.release_s.unwrap_or(self.st.world.time_s());
             rec.takt_s = self.st.trays.last_release_s.map(|r| release - r);
-            rec.first_of_pile = self.st.trays.first_of_pile;
-            self.st.trays.first_of_pile = false;
+            rec.spans_refill = rec.takt_s.is_some() && self.st.trays.refilled_since_release;
+            self.st.trays.refilled_since_release = false;
             self.st.trays.last_release_s = Some(release);
             self.st.trays.next_slot += 1;
         }
         self.exchange_full_place_tray()?;
-        rec.max_tracking_error_deg = self.st.arm.max_error_rad.to_degrees();
-        rec.peak_torque_ratio = self.st.arm.peak_torque_ratio;
+        let arm = &self.st.arm;
+        rec.max_tracking_error_deg = arm.max_error_rad.to_degrees();
+        let (joint, peak) = arm
+            .peak_demand_ratio
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |best, (i, r)| if *r > best.1 { (i, *r) } else { best });
+        rec.peak_demand_ratio = peak;
+        rec.peak_demand_joint = joint + 1;
+        rec.saturated_s = arm.saturated_s;
         Ok(())
     }
 
@@ -146,12 +154,13 @@ impl Run<'_, '_> {
         let hand = self.cell.hand;
         let t_pick = self.st.world.time_s();
         self.event(Event::PickStart);
+        self.st.arm.max_error_rad = 0.0;
+        self.st.arm.peak_demand_ratio = [0.0; crate::robot::DOF];
+        self.st.arm.saturated_s = 0.0;
         let pick_transfer = match &prep.pick_transfer {
             Ok(t) => t,
             Err(e) => return Ok(Outcome::NoMotion(e.clone())),
         };
-        self.st.arm.max_error_rad = 0.0;
-        self.st.arm.peak_torque_ratio = 0.0;
         self.st.gripper_events.clear();
         let pick_done = |run: &mut Self, rec: &mut PickRecord| {
             rec.pick_s = run.st.world.time_s() - t_pick;
@@ -214,7 +223,7 @@ impl Run<'_, '_> {
             rec.stall_compute_s += place_ready - t;
             self.span(Stage::Stall, t, place_ready, "waiting for compute");
             self.idle_until(place_ready)?;
-            self.st.arm.qd = JointVector::zeros();
+            self.st.arm.servo.qd = JointVector::zeros();
         }
         let (transfer, down, up, k) = match &prep.place {
             Ok(p) => p,

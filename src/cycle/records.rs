@@ -5,9 +5,14 @@
 //! result, compute, stalls, Pick, Place, release), its outcome and its errors; summarise a run
 //! (success, takt, waits, faults) from those records alone.
 //!
-//! Takt of a pick = time between consecutive successful releases. The first pick of each pile
-//! (the start, and after a refill) follows the initial sensing and is left out of the takt
-//! statistics. Units: s, mm and deg where a name says so.
+//! Takt, as the reference system defines it (its Table 5: the mean of consecutive Pick-and-Place
+//! cycles, only the very first cycle's sensing and motion generation excluded): the intervals
+//! between consecutive releases after the run's first release, everything in between included
+//! (failed picks, re-captures, waits, tray refills). The takt "excluding tray refills" leaves out
+//! the intervals that span a refill: a labelled side figure, not the headline. Success = placed /
+//! attempts, where every pick counts as an attempt: a re-capture (nothing detected, nothing
+//! graspable), a grasp failure, a drop and a missing motion too. Units: s, mm and deg where a
+//! name says so.
 
 use serde::Serialize;
 
@@ -27,10 +32,10 @@ pub struct PickRecord {
     pub ready_s: f64,
     /// When the part was released [s] (placed picks).
     pub release_s: Option<f64>,
-    /// Time since the previous successful release [s].
+    /// Time since the previous release [s] (none for the run's first release).
     pub takt_s: Option<f64>,
-    /// The first pick of a pile (start or refill): left out of the takt statistics.
-    pub first_of_pile: bool,
+    /// A pick-tray refill happened since the previous release.
+    pub spans_refill: bool,
     /// Pick: transfer, descent, vacuum build-up and lift [s].
     pub pick_s: f64,
     /// Place: transfer, descent, release and retreat [s].
@@ -51,8 +56,13 @@ pub struct PickRecord {
     pub yaw_error_deg: Option<f64>,
     /// Largest servo tracking error over the pick's motions [deg].
     pub max_tracking_error_deg: f64,
-    /// Largest |applied torque| / torque limit over the pick's motions.
-    pub peak_torque_ratio: f64,
+    /// Largest |demanded torque| / torque limit over the pick's motions and joints (before the
+    /// drive's saturation).
+    pub peak_demand_ratio: f64,
+    /// The joint (1..6) of that peak.
+    pub peak_demand_joint: usize,
+    /// Time some joint was saturated during the pick's motions [s].
+    pub saturated_s: f64,
     /// Time scaling of the held-part Place transfer for the cup's holding force (1: none).
     pub suction_speed_factor: f64,
 }
@@ -67,7 +77,7 @@ impl PickRecord {
             ready_s,
             release_s: None,
             takt_s: None,
-            first_of_pile: false,
+            spans_refill: false,
             pick_s: 0.0,
             place_s: 0.0,
             stall_sensor_s: 0.0,
@@ -78,13 +88,15 @@ impl PickRecord {
             placement_error_mm: None,
             yaw_error_deg: None,
             max_tracking_error_deg: 0.0,
-            peak_torque_ratio: 0.0,
+            peak_demand_ratio: 0.0,
+            peak_demand_joint: 0,
+            saturated_s: 0.0,
             suction_speed_factor: 1.0,
         }
     }
 }
 
-/// Takt statistics [s] over the placed picks that follow another release in the same pile.
+/// Takt statistics [s] over release-to-release intervals.
 pub type TaktStats = Summary;
 
 /// A run's summary.
@@ -96,26 +108,26 @@ pub struct RunSummary {
     pub seed: u64,
     /// Deterministic mode.
     pub deterministic: bool,
-    /// Picks the arm set out to make.
+    /// Attempts: every pick, re-captures included.
     pub attempts: usize,
     /// Picks placed.
     pub placed: usize,
     /// placed / attempts.
     pub success_rate: f64,
-    /// Takt statistics.
+    /// Takt as the reference defines it: every release-to-release interval after the first.
     pub takt: TaktStats,
+    /// The same, leaving out the intervals that span a pick-tray refill (a side figure).
+    pub takt_excl_refills: TaktStats,
     /// The reference system's takt for this workpiece [s], if it is one of A..F.
     pub reference_takt_s: Option<f64>,
-    /// End-to-end takt: time from the first to the last release over the releases in between
-    /// [s], refills, re-captures and failed picks included (NaN below two releases).
-    pub effective_takt_s: f64,
     /// Mean Pick time over the placed picks [s].
     pub mean_pick_s: f64,
     /// Mean Place time over the placed picks [s].
     pub mean_place_s: f64,
-    /// Mean compute charged per attempt: grasp selection, Pick and Place motion generation [s].
+    /// Mean compute charged per pick the arm set out to make: grasp selection, Pick and Place
+    /// motion generation [s].
     pub mean_compute_s: [f64; 3],
-    /// Stalls waiting for the sensor: count and total [s] (placed picks after the first of a pile).
+    /// Stalls waiting for the sensor: count and total [s] (placed picks with a takt).
     pub sensor_stalls: (usize, f64),
     /// Stalls waiting for compute: count and total [s].
     pub compute_stalls: (usize, f64),
@@ -133,8 +145,10 @@ pub struct RunSummary {
     pub refills: usize,
     /// Place-tray exchanges.
     pub place_tray_exchanges: usize,
-    /// Largest |applied torque| / limit over the run.
-    pub peak_torque_ratio: f64,
+    /// Largest |demanded torque| / limit over the run, per joint (before saturation).
+    pub peak_demand_ratio: [f64; 6],
+    /// Time some joint was saturated, over the run [s].
+    pub saturated_s: f64,
     /// Largest servo tracking error over the run [deg].
     pub max_tracking_error_deg: f64,
     /// Why the run ended.
@@ -152,23 +166,19 @@ pub struct RunResult {
     pub summary: RunSummary,
 }
 
-/// The takts the statistics are over [s]: placed picks after the first of their pile.
-pub fn takts_in_stats(records: &[PickRecord]) -> Vec<f64> {
-    records
-        .iter()
-        .filter(|r| r.outcome == Outcome::Placed && !r.first_of_pile)
-        .filter_map(|r| r.takt_s)
-        .collect()
+/// The takts [s]: every release-to-release interval after the run's first release (the
+/// reference's definition).
+pub fn takts(records: &[PickRecord]) -> Vec<f64> {
+    records.iter().filter_map(|r| r.takt_s).collect()
 }
 
-/// Time from the first to the last release [s] and the releases after the first: their ratio is
-/// the end-to-end takt. (0, 0) below two releases.
-pub fn release_span(records: &[PickRecord]) -> (f64, usize) {
-    let r: Vec<f64> = records.iter().filter_map(|p| p.release_s).collect();
-    match (r.first(), r.last()) {
-        (Some(a), Some(b)) if r.len() > 1 => (b - a, r.len() - 1),
-        _ => (0.0, 0),
-    }
+/// The takts [s] of intervals that span no pick-tray refill.
+pub fn takts_excl_refills(records: &[PickRecord]) -> Vec<f64> {
+    records
+        .iter()
+        .filter(|r| !r.spans_refill)
+        .filter_map(|r| r.takt_s)
+        .collect()
 }
 
 /// Counts of a run that the records do not hold.
@@ -182,6 +192,8 @@ pub struct RunCounts {
     pub refills: usize,
     /// Place-tray exchanges.
     pub place_tray_exchanges: usize,
+    /// Largest |demanded torque| / limit per joint over the run.
+    pub peak_demand_ratio: [f64; 6],
 }
 
 /// What a run was.
@@ -203,42 +215,34 @@ pub fn summarise(
     ended: EndReason,
     sim_time_s: f64,
 ) -> RunSummary {
-    let attempts: Vec<&PickRecord> = records.iter().filter(|r| r.outcome.is_attempt()).collect();
-    let placed: Vec<&PickRecord> = attempts
-        .iter()
-        .copied()
-        .filter(|r| r.outcome == Outcome::Placed)
-        .collect();
-    let takts = takts_in_stats(records);
-    let in_takt = || placed.iter().filter(|r| !r.first_of_pile);
+    let placed: Vec<&PickRecord> = records.iter().filter(|r| r.outcome == Outcome::Placed).collect();
+    let in_takt = || placed.iter().filter(|r| r.takt_s.is_some());
+    let set_out = || records.iter().filter(|r| r.outcome.set_out());
     let stalls = |f: fn(&PickRecord) -> f64| {
         let v: Vec<f64> = in_takt().map(|r| f(r)).filter(|s| *s > 1e-9).collect();
         (v.len(), v.iter().sum())
     };
-    let count = |f: fn(&Outcome) -> bool| attempts.iter().filter(|r| f(&r.outcome)).count();
+    let count = |f: fn(&Outcome) -> bool| records.iter().filter(|r| f(&r.outcome)).count();
     RunSummary {
         reference_takt_s: crate::reference::reference_takt(&label.workpiece),
         workpiece: label.workpiece,
         seed: label.seed,
         deterministic: label.deterministic,
-        attempts: attempts.len(),
+        attempts: records.len(),
         placed: placed.len(),
-        success_rate: if attempts.is_empty() {
+        success_rate: if records.is_empty() {
             f64::NAN
         } else {
-            placed.len() as f64 / attempts.len() as f64
+            placed.len() as f64 / records.len() as f64
         },
-        takt: TaktStats::of(&takts),
-        effective_takt_s: match release_span(records) {
-            (_, 0) => f64::NAN,
-            (t, n) => t / n as f64,
-        },
+        takt: TaktStats::of(&takts(records)),
+        takt_excl_refills: TaktStats::of(&takts_excl_refills(records)),
         mean_pick_s: mean_of(placed.iter().map(|r| r.pick_s)),
         mean_place_s: mean_of(placed.iter().map(|r| r.place_s)),
         mean_compute_s: [
-            mean_of(attempts.iter().map(|r| r.grasp_compute_s)),
-            mean_of(attempts.iter().map(|r| r.pick_compute_s)),
-            mean_of(attempts.iter().map(|r| r.place_compute_s)),
+            mean_of(set_out().map(|r| r.grasp_compute_s)),
+            mean_of(set_out().map(|r| r.pick_compute_s)),
+            mean_of(set_out().map(|r| r.place_compute_s)),
         ],
         sensor_stalls: stalls(|r| r.stall_sensor_s),
         compute_stalls: stalls(|r| r.stall_compute_s),
@@ -249,7 +253,8 @@ pub fn summarise(
         captures: counts.captures,
         refills: counts.refills,
         place_tray_exchanges: counts.place_tray_exchanges,
-        peak_torque_ratio: records.iter().map(|r| r.peak_torque_ratio).fold(0.0, f64::max),
+        peak_demand_ratio: counts.peak_demand_ratio,
+        saturated_s: records.iter().map(|r| r.saturated_s).sum(),
         max_tracking_error_deg: records.iter().map(|r| r.max_tracking_error_deg).fold(0.0, f64::max),
         ended,
         sim_time_s,

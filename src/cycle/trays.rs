@@ -5,8 +5,8 @@
 //! follow the cell file's `on_empty` policy: end the run, or exchange the pick tray for a full
 //! one (`refill_s`, a new seeded pile) unless a refilled tray gave nothing either. Fill the place
 //! tray's slots in order; when they are used up, exchange it for an empty one
-//! (`place_tray_exchange_s`). Keep the pile's bookkeeping: the first pick of a pile, the last
-//! release.
+//! (`place_tray_exchange_s`). Keep the bookkeeping the takt needs: the last release, and whether
+//! a refill happened since.
 //!
 //! Units: s. Frames: none.
 
@@ -31,8 +31,8 @@ pub struct TrayState {
     pub refills: usize,
     /// Place-tray exchanges.
     pub exchanges: usize,
-    /// The next placed pick is the first of its pile.
-    pub first_of_pile: bool,
+    /// A pick-tray refill happened since the last release.
+    pub refilled_since_release: bool,
     /// The last release [s].
     pub last_release_s: Option<f64>,
 }
@@ -46,7 +46,7 @@ impl Default for TrayState {
             empty_in_row: 0,
             refills: 0,
             exchanges: 0,
-            first_of_pile: true,
+            refilled_since_release: false,
             last_release_s: None,
         }
     }
@@ -83,7 +83,7 @@ impl Run<'_, '_> {
                 let trays = &mut self.st.trays;
                 trays.fills += 1;
                 trays.refills += 1;
-                trays.first_of_pile = true;
+                trays.refilled_since_release = true;
                 Ok(None)
             }
         }

@@ -6,8 +6,8 @@
 //! - `/robot/geometry` (`foxglove.SceneUpdate`, once): each link's collision primitives, locked to
 //!   the link's frame;
 //! - `/tf` (`foxglove.FrameTransforms`, 50 Hz): `world` -> each link, `world` -> `camera`;
-//! - `/robot/joint_states` (`binpick.JointState`, 100 Hz): positions, velocities, applied torques
-//!   beside each joint's limit, tracking errors;
+//! - `/robot/joint_states` (`binpick.JointState`, 100 Hz): positions, velocities, applied and
+//!   demanded torques beside each joint's limit, tracking errors;
 //! - `/parts` (`foxglove.SceneUpdate`, 10 Hz): all parts as one entity, a cube per part;
 //! - `/camera/calibration` (`foxglove.CameraCalibration`), `/camera/depth` (`foxglove.RawImage`,
 //!   16UC1, mm) and `/camera/points` (`foxglove.PointCloud`, world frame) at each trigger time;
@@ -58,6 +58,7 @@ const JOINT_SCHEMA: &str = r#"{"title":"binpick.JointState","type":"object","pro
 "position_rad":{"type":"array","items":{"type":"number"}},
 "velocity_rad_s":{"type":"array","items":{"type":"number"}},
 "torque_nm":{"type":"array","items":{"type":"number"},"description":"applied (saturated) motor torque"},
+"torque_demand_nm":{"type":"array","items":{"type":"number"},"description":"torque the controller demanded, before saturation"},
 "torque_limit_nm":{"type":"array","items":{"type":"number"}},
 "tracking_error_rad":{"type":"array","items":{"type":"number"}}}}"#;
 
@@ -119,7 +120,7 @@ const IMAGE_SCHEMA: &str = r#"{"title":"foxglove.RawImage","type":"object","prop
 
 const TAKT_SCHEMA: &str = r#"{"title":"binpick.Takt","type":"object","properties":{
 "t_s":{"type":"number","description":"release time [s]"},"pick":{"type":"integer"},
-"takt_s":{"type":"number"},"first_of_pile":{"type":"boolean"}}}"#;
+"takt_s":{"type":"number"},"spans_refill":{"type":"boolean"}}}"#;
 
 fn nanos(t_s: f64) -> u64 {
     (t_s.max(0.0) * 1e9).round() as u64
@@ -403,6 +404,7 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
                 "position_rad": t.q.as_slice(),
                 "velocity_rad_s": t.qd.as_slice(),
                 "torque_nm": t.tau_nm.as_slice(),
+                "torque_demand_nm": t.demand_nm.as_slice(),
                 "torque_limit_nm": limit.as_slice(),
                 "tracking_error_rad": t.error_rad.as_slice(),
             }),
@@ -557,7 +559,7 @@ fn event_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordErro
             m.push(
                 release,
                 "/cycle/takt",
-                &json!({"t_s": release, "pick": r.index, "takt_s": t, "first_of_pile": r.first_of_pile}),
+                &json!({"t_s": release, "pick": r.index, "takt_s": t, "spans_refill": r.spans_refill}),
             )?;
         }
     }

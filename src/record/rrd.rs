@@ -11,8 +11,9 @@
 //! - `world/recognition/detections` and `world/recognition/candidates` (arrows down to the grasp
 //!   points, best first, the chosen one green and labelled) when each result arrived;
 //! - `world/paths/planned`, `world/paths/executed`: each motion's tool path at its start;
-//! - `joints/position`, `joints/velocity` (six series each, 100 Hz), `joints/torque/J<i>` (the
-//!   applied torque beside +/- the joint's limit);
+//! - `joints/position`, `joints/velocity`, `joints/tracking_error` (six series each, 100 Hz),
+//!   `joints/torque/J<i>` (the applied torque beside +/- the joint's limit and the torque the
+//!   controller demanded before saturation);
 //! - `events`: the cycle's events as text log entries (faults and failed picks as warnings);
 //! - `cycle/takt`: the takt of every placed pick, at its release.
 //!
@@ -166,6 +167,11 @@ fn layout() -> rerun::blueprint::Blueprint {
     series.push(
         TimeSeriesView::new("joint velocities [rad/s]")
             .with_origin("/joints/velocity")
+            .into(),
+    );
+    series.push(
+        TimeSeriesView::new("tracking error [rad]")
+            .with_origin("/joints/tracking_error")
             .into(),
     );
     series.push(TimeSeriesView::new("takt [s]").with_origin("/cycle/takt").into());
@@ -340,7 +346,8 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
     let times: Vec<f64> = ticks.iter().map(|t| t.t_s).collect();
     let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
     rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;
-    rec.log_static("joints/velocity", &rerun::SeriesLines::new().with_names(names))?;
+    rec.log_static("joints/velocity", &rerun::SeriesLines::new().with_names(names.clone()))?;
+    rec.log_static("joints/tracking_error", &rerun::SeriesLines::new().with_names(names))?;
     let position: Vec<f64> = ticks
         .iter()
         .flat_map(|t| t.q.iter().copied().collect::<Vec<_>>())
@@ -351,21 +358,30 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
         .flat_map(|t| t.qd.iter().copied().collect::<Vec<_>>())
         .collect();
     rec.series("joints/velocity", &times, velocity, DOF)?;
+    let error: Vec<f64> = ticks
+        .iter()
+        .flat_map(|t| t.error_rad.iter().copied().collect::<Vec<_>>())
+        .collect();
+    rec.series("joints/tracking_error", &times, error, DOF)?;
     let limit = robot.torque_limit_nm();
     for j in 0..DOF {
         let path = format!("joints/torque/J{}", j + 1);
         rec.log_static(
             &path,
             &rerun::SeriesLines::new()
-                .with_names(["torque [N m]", "+limit", "-limit"])
+                .with_names(["applied [N m]", "+limit", "-limit", "demanded [N m]"])
                 .with_colors([
                     rerun::Color::from_rgb(30, 120, 230),
                     rerun::Color::from_rgb(220, 40, 40),
                     rerun::Color::from_rgb(220, 40, 40),
+                    rerun::Color::from_rgb(240, 160, 20),
                 ]),
         )?;
-        let values: Vec<f64> = ticks.iter().flat_map(|t| [t.tau_nm[j], limit[j], -limit[j]]).collect();
-        rec.series(&path, &times, values, 3)?;
+        let values: Vec<f64> = ticks
+            .iter()
+            .flat_map(|t| [t.tau_nm[j], limit[j], -limit[j], t.demand_nm[j]])
+            .collect();
+        rec.series(&path, &times, values, 4)?;
     }
     Ok(())
 }

@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 20] = [
+pub const PICKS_CSV_HEADER: [&str; 22] = [
     "pick",
     "outcome",
     "detail",
@@ -50,7 +50,7 @@ pub const PICKS_CSV_HEADER: [&str; 20] = [
     "ready_s",
     "release_s",
     "takt_s",
-    "first_of_pile",
+    "spans_refill",
     "pick_s",
     "place_s",
     "stall_sensor_s",
@@ -61,7 +61,9 @@ pub const PICKS_CSV_HEADER: [&str; 20] = [
     "placement_error_mm",
     "yaw_error_deg",
     "max_tracking_error_deg",
-    "peak_torque_ratio",
+    "peak_demand_ratio",
+    "peak_demand_joint",
+    "saturated_s",
     "suction_speed_factor",
 ];
 
@@ -75,7 +77,7 @@ struct PickRow<'a> {
     ready_s: Fixed<6>,
     release_s: Fixed<6>,
     takt_s: Fixed<6>,
-    first_of_pile: bool,
+    spans_refill: bool,
     pick_s: Fixed<6>,
     place_s: Fixed<6>,
     stall_sensor_s: Fixed<6>,
@@ -86,7 +88,9 @@ struct PickRow<'a> {
     placement_error_mm: Fixed<6>,
     yaw_error_deg: Fixed<6>,
     max_tracking_error_deg: Fixed<6>,
-    peak_torque_ratio: Fixed<6>,
+    peak_demand_ratio: Fixed<6>,
+    peak_demand_joint: usize,
+    saturated_s: Fixed<6>,
     suction_speed_factor: Fixed<4>,
 }
 
@@ -103,7 +107,7 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             ready_s: Fixed::of(r.ready_s),
             release_s: Fixed(r.release_s),
             takt_s: Fixed(r.takt_s),
-            first_of_pile: r.first_of_pile,
+            spans_refill: r.spans_refill,
             pick_s: Fixed::of(r.pick_s),
             place_s: Fixed::of(r.place_s),
             stall_sensor_s: Fixed::of(r.stall_sensor_s),
@@ -114,20 +118,22 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             placement_error_mm: Fixed(r.placement_error_mm),
             yaw_error_deg: Fixed(r.yaw_error_deg),
             max_tracking_error_deg: Fixed::of(r.max_tracking_error_deg),
-            peak_torque_ratio: Fixed::of(r.peak_torque_ratio),
+            peak_demand_ratio: Fixed::of(r.peak_demand_ratio),
+            peak_demand_joint: r.peak_demand_joint,
+            saturated_s: Fixed::of(r.saturated_s),
             suction_speed_factor: Fixed::of(r.suction_speed_factor),
         }),
     )
 }
 
-/// The per-pick table printed by `binpick run`.
+/// The per-pick table printed by `binpick run` (a takt in brackets spans a pick-tray refill).
 pub fn picks_table(records: &[PickRecord]) -> String {
     let mut out = String::from(
-        "pick  outcome            takt_s  pick_s  place_s  wait_sensor_s  wait_compute_s  place_err_mm  detail\n",
+        "pick  outcome            takt_s  pick_s  place_s  wait_sensor_s  wait_compute_s  place_err_mm  torque_demand  detail\n",
     );
     for r in records {
         let takt = r.takt_s.map_or("-".to_string(), |t| {
-            if r.first_of_pile {
+            if r.spans_refill {
                 format!("({t:.3})")
             } else {
                 format!("{t:.3}")
@@ -135,7 +141,7 @@ pub fn picks_table(records: &[PickRecord]) -> String {
         });
         let err = r.placement_error_mm.map_or("-".to_string(), |e| format!("{e:.2}"));
         out += &format!(
-            "{:>4}  {:<17} {:>7}  {:>6.3}  {:>7.3}  {:>13.3}  {:>14.3}  {:>12}  {:.60}\n",
+            "{:>4}  {:<17} {:>7}  {:>6.3}  {:>7.3}  {:>13.3}  {:>14.3}  {:>12}  {:>13}  {:.60}\n",
             r.index,
             r.outcome.name(),
             takt,
@@ -144,6 +150,11 @@ pub fn picks_table(records: &[PickRecord]) -> String {
             r.stall_sensor_s,
             r.stall_compute_s,
             err,
+            if r.outcome.set_out() {
+                format!("{:.0} % J{}", 100.0 * r.peak_demand_ratio, r.peak_demand_joint)
+            } else {
+                "-".into()
+            },
             r.outcome.detail()
         );
     }
@@ -169,6 +180,6 @@ mod tests {
         assert_eq!(&rows[0][2], "no feasible grasp (crowded 3, face \"tilted\" 2)");
         assert_eq!(&rows[0][3], "1.000000");
         assert_eq!(&rows[0][5], "");
-        assert_eq!(&rows[0][19], "1.0000");
+        assert_eq!(&rows[0][21], "1.0000");
     }
 }

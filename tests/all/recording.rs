@@ -20,7 +20,7 @@ struct RrdContents {
     store_ids: std::collections::BTreeSet<String>,
     /// Rows of the layout's views.
     blueprint_views: usize,
-    /// Per joint (1-based): the rows of `joints/torque/J<i>` as [torque, +limit, -limit].
+    /// Per joint (1-based): the rows of `joints/torque/J<i>` as [applied, +limit, -limit, demanded].
     torques: BTreeMap<usize, Vec<Vec<f64>>>,
 }
 
@@ -155,6 +155,7 @@ fn run_mcap_holds_what_the_run_did() {
     let mut count = BTreeMap::<String, usize>::new();
     let mut chosen = 0;
     let mut mcap_torques: Vec<Vec<f64>> = Vec::new();
+    let mut mcap_demands: Vec<Vec<f64>> = Vec::new();
     let mut last = 0u64;
     let mut parts_span = (u64::MAX, 0u64);
     for m in mcap::MessageStream::new(&bytes).unwrap() {
@@ -207,11 +208,21 @@ fn run_mcap_holds_what_the_run_did() {
         }
         if m.channel.topic == "/robot/joint_states" {
             let tau = v["torque_nm"].as_array().unwrap();
+            let demand = v["torque_demand_nm"].as_array().unwrap();
             let limit = v["torque_limit_nm"].as_array().unwrap();
             mcap_torques.push(tau.iter().map(|t| t.as_f64().unwrap()).collect());
-            assert_eq!(tau.len(), 6);
-            for (t, l) in tau.iter().zip(limit) {
-                assert!(t.as_f64().unwrap().abs() <= l.as_f64().unwrap() + 1e-9);
+            mcap_demands.push(demand.iter().map(|t| t.as_f64().unwrap()).collect());
+            assert_eq!(
+                (
+                    tau.len(),
+                    demand.len(),
+                    v["tracking_error_rad"].as_array().unwrap().len()
+                ),
+                (6, 6, 6)
+            );
+            // What was demanded, not what the clamp let through, stays within each limit.
+            for (d, l) in demand.iter().zip(limit) {
+                assert!(d.as_f64().unwrap().abs() <= l.as_f64().unwrap());
             }
         }
     }
@@ -271,8 +282,9 @@ fn run_mcap_holds_what_the_run_did() {
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1, "one recording");
     assert_eq!(rrd.blueprints, 1, "one viewer layout");
-    // The layout: the cell, the depth camera, the events, six torques, positions, velocities, takt.
-    assert_eq!(rrd.blueprint_views, 12);
+    // The layout: the cell, the depth camera, the events, six torques, positions, velocities,
+    // tracking errors, takt.
+    assert_eq!(rrd.blueprint_views, 13);
     let rows = |e: &str| rrd.rows.get(e).copied().unwrap_or(0);
     assert_eq!(
         rrd.timelines,
@@ -299,6 +311,7 @@ fn run_mcap_holds_what_the_run_did() {
     );
     assert_eq!(rows("/world/paths/planned"), count["/paths"]);
     assert_eq!(rows("/joints/position"), count["/robot/joint_states"]);
+    assert_eq!(rows("/joints/tracking_error"), count["/robot/joint_states"]);
     for j in 1..=6 {
         assert_eq!(rows(&format!("/joints/torque/J{j}")), count["/robot/joint_states"]);
         assert_eq!(rows(&format!("/world/arm/link_{j}")), count["/tf"]);
@@ -311,8 +324,9 @@ fn run_mcap_holds_what_the_run_did() {
     for j in 1..=6 {
         let rows = &rrd.torques[&j];
         assert_eq!(rows.len(), mcap_torques.len());
-        for (row, mcap) in rows.iter().zip(&mcap_torques) {
-            assert_eq!(row.len(), 3);
+        for ((row, mcap), demand) in rows.iter().zip(&mcap_torques).zip(&mcap_demands) {
+            assert_eq!(row.len(), 4);
+            assert!((row[3] - demand[j - 1]).abs() <= 1e-9, "J{j} demand {row:?}");
             assert!(
                 (row[0] - mcap[j - 1]).abs() <= 1e-9,
                 "J{j}: {} against {}",
