@@ -8,7 +8,8 @@
 //! them, so a clearance computed on the spheres is a lower bound on the true clearance; each link
 //! also has one bounding sphere for early rejection. The environment is boxes (table, trays,
 //! obstacles) plus the pile as the sensor saw it: columns of a height map, never ground truth,
-//! with the part to be grasped cut out around the grasp point. The link pairs of [`SELF_PAIRS`]
+//! with the part to be grasped cut out around the grasp point, and what the sensor did not see
+//! inside the tray occupied, never free ([`PileColumns`]). The link pairs of [`SELF_PAIRS`]
 //! are checked against each other.
 //!
 //! Edge certification (conservative advancement, as in the collision-detection seed): with
@@ -175,6 +176,12 @@ fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
 }
 
 /// The pile as the sensor saw it: height-map columns, with a disc around the grasp cut out.
+///
+/// A NaN column is not pile: it lies outside the tray's inner walls (the walls are boxes of the
+/// cell). Cells the sensor did not see inside the walls must come filled as occupied
+/// ([`HeightMap::unseen_filled`], which [`crate::pipeline::pile_map`] applies): a hole in the map
+/// is not free space. Max-pooling keeps a filled cell's height, so no column is lower than any of
+/// its cells, seen or filled.
 #[derive(Debug, Clone)]
 pub struct PileColumns {
     /// The height map (heights above the tray floor), max-pooled to planning cells.

@@ -295,3 +295,93 @@ fn the_nearest_pair_is_named_only_on_request_and_the_same() {
     }
     assert!(named > 20, "only {named} configurations near anything");
 }
+
+/// Issue 14: the planner does not assume what it did not see. A hole in the height map (an
+/// occlusion: nothing seen over a 6 x 6 cm patch of the pick tray) with the top of a 5 cm part
+/// seen at its border hides that part. Left as a hole, the pile model certifies the tool's
+/// descent into it (the negative control: the old behaviour); filled, it refuses it, as the
+/// hidden part itself (ground truth, a box under the hole) does.
+#[test]
+fn the_planner_does_not_descend_into_what_it_did_not_see() {
+    use binpick::physics::TrayVolume;
+    use binpick::pipeline::{HEIGHT_MAP_CELL_M, PILE_POOL_CELLS, pile_map};
+    use binpick::planning::{EnvBox, Environment, PileColumns, RobotSpheres};
+    use binpick::sensor::HeightMap;
+    let (scene, robot) = setup();
+    let tray = TrayVolume::new(&scene.scene.pick_tray);
+    let [hx, hy] = tray.half_xy_m;
+    let cell = HEIGHT_MAP_CELL_M;
+    let (nx, ny) = (((2.0 * hx) / cell).ceil() as usize, ((2.0 * hy) / cell).ceil() as usize);
+    // The floor seen everywhere at 0 (the walls' cells too; they are cleared as not pile).
+    let mut hm = HeightMap {
+        world_from_tray: tray.world_from_tray,
+        cell_m: cell,
+        nx,
+        ny,
+        origin_xy_m: [-hx, -hy],
+        height_m: vec![0.0; nx * ny],
+    };
+    let (hole_x, hole_y, hole_half) = (0.05, 0.0, 0.03);
+    let cell_of = |x: f64, y: f64| (((y + hy) / cell).floor() as usize) * nx + ((x + hx) / cell).floor() as usize;
+    for j in 0..ny {
+        for i in 0..nx {
+            let x = -hx + (i as f64 + 0.5) * cell;
+            let y = -hy + (j as f64 + 0.5) * cell;
+            if (x - hole_x).abs() < hole_half && (y - hole_y).abs() < hole_half {
+                hm.height_m[j * nx + i] = f64::NAN;
+            }
+        }
+    }
+    // The hidden part's top edge, seen just outside the hole's corner.
+    hm.height_m[cell_of(hole_x + hole_half + 0.001, hole_y + hole_half + 0.001)] = 0.05;
+    let inner = [
+        scene.scene.pick_tray.inner_size_m[0] / 2.0,
+        scene.scene.pick_tray.inner_size_m[1] / 2.0,
+    ];
+    let model_of = |pile: &HeightMap| {
+        let mut env = Environment::from_scene(&scene.scene);
+        env.pile = Some(PileColumns::new(pile, PILE_POOL_CELLS, None));
+        CollisionModel::new(&robot, RobotSpheres::new(&robot, &scene.scene, None), env)
+    };
+    let as_hole = model_of(&hm.inner_only(inner));
+    let filled = model_of(&pile_map(&scene.scene, &hm));
+    // Ground truth: a 4 cm square part 4.5 cm tall under the hole's middle.
+    let floor = tray.world_from_tray * nalgebra::Point3::new(hole_x, hole_y, 0.0);
+    let mut truth_env = Environment::from_scene(&scene.scene);
+    truth_env.boxes.push(EnvBox {
+        name: "hidden part".into(),
+        world_from_box: Isometry3::translation(floor.x, floor.y, floor.z + 0.0225),
+        half_m: Vector3::new(0.02, 0.02, 0.0225),
+    });
+    let truth = CollisionModel::new(&robot, RobotSpheres::new(&robot, &scene.scene, None), truth_env);
+    // The tool straight down into the hole: from 12 cm to 2 cm above the floor.
+    let above = robot
+        .ik_tool_nearest(
+            &binpick::robot::tool_down_pose(floor.coords + Vector3::z() * 0.12, 0.0),
+            &JointVector::from(scene.scene.robot.home_rad()),
+        )
+        .unwrap()
+        .q;
+    let into = robot
+        .ik_tool_nearest(
+            &binpick::robot::tool_down_pose(floor.coords + Vector3::z() * 0.02, 0.0),
+            &above,
+        )
+        .unwrap()
+        .q;
+    let mut stats = PlanStats::default();
+    assert!(
+        as_hole.free(&above, &mut stats) && filled.free(&above, &mut stats),
+        "the start above the tray must be free in both"
+    );
+    // The negative control: the hole, read as free, certifies a descent into the hidden part.
+    assert!(as_hole.certify_edge(&above, &into, &mut stats));
+    assert!(!truth.free(&into, &mut stats), "the hidden part is where the tool goes");
+    // Filled, the pile refuses it.
+    assert!(!filled.free(&into, &mut stats), "the unseen hole was taken as free");
+    assert!(!filled.certify_edge(&above, &into, &mut stats));
+    match filled.plan(&above, &into, &PlanOptions::default(), &mut binpick::rng::stream(1, "planner")) {
+        Err(PlanError::GoalInCollision(why)) => assert!(why.contains("pile"), "{why}"),
+        other => panic!("{other:?}"),
+    }
+}
