@@ -26,7 +26,8 @@
 //!
 //! Units: m, rad (degrees printed). Frames: link frames, the base at the origin.
 //!
-//! Run: `cargo run --release --example derive_self_pairs`
+//! Run: `cargo run --release --example derive_self_pairs` (with `DEBUG_PAIRS=1`, the intersecting
+//! shapes are printed to stderr).
 
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::grasp::GraspSelector;

@@ -328,9 +328,32 @@ pub enum Nearest {
     Links(usize, usize),
 }
 
-/// Link pairs checked for self-collision (non-adjacent, and not the base with link 2 whose
-/// castings overlap at the shoulder by design).
-pub const SELF_PAIRS: [(usize, usize); 8] = [(0, 3), (0, 4), (0, 5), (0, 6), (1, 4), (1, 5), (1, 6), (2, 6)];
+/// Link pairs checked for self-collision: every pair that can meet over the joint ranges, on the
+/// exact shapes (URDF primitives; link 6 with the flange, the hand, and the envelope of any
+/// shipped workpiece held on any face the cup can grasp), derived by
+/// `cargo run --release --example derive_self_pairs`: a branch and bound over the joints between
+/// the two links with a Lipschitz bound on the exact distance (parry), which either finds the
+/// shapes intersecting, or within 0.2 mm, or proves them apart over the whole range.
+///
+/// Can meet (exact shapes, example configuration): base-link3 (J2 -181, J3 10 deg),
+/// base-link4/5/6, link1-link3 (J2 -156, J3 -7), link1-link4/5, link1-link6 (within 0.2 mm),
+/// link2-link6, link4-link6 (the flange clips link 4's casing beyond J5 ~110 deg).
+/// Proved apart: base-link2 (62.8 mm at least), link2-link4 (35.4), link2-link5 (44.5),
+/// link3-link5 (147.0), link3-link6 (133.4; 62.3 with a held part: J5's +-120 deg keeps the hand
+/// off the forearm), link5 with the hand and a held part, its flange excluded (15.0). Adjacent
+/// links share a joint housing and are not checked.
+pub const SELF_PAIRS: [(usize, usize); 10] = [
+    (0, 3),
+    (0, 4),
+    (0, 5),
+    (0, 6),
+    (1, 3),
+    (1, 4),
+    (1, 5),
+    (1, 6),
+    (2, 6),
+    (4, 6),
+];
 
 /// The planning scene: robot spheres plus environment, and the queries on them.
 #[derive(Debug, Clone)]

@@ -99,9 +99,32 @@ fn exact(model: &CollisionModel, scene: &LoadedScene) -> Exact {
     Exact { links, env }
 }
 
+/// Which of the arm's exact shapes intersect each other at `q`, if any: every pair of
+/// non-adjacent links (link 6 with the hand), whatever the planner's `SELF_PAIRS` say.
+fn self_collides(ex: &Exact, robot: &RobotModel, q: &JointVector) -> Option<String> {
+    let frames = robot.world_from_links(q);
+    for a in 0..ex.links.len() {
+        for b in (a + 2)..ex.links.len() {
+            for (la, sa) in &ex.links[a] {
+                let pa: rapier3d::math::Pose = (frames[a] * la).cast::<f32>().into();
+                for (lb, sb) in &ex.links[b] {
+                    let pb: rapier3d::math::Pose = (frames[b] * lb).cast::<f32>().into();
+                    if intersection_test(&pa, &**sa, &pb, &**sb).is_ok_and(|r| r.intersecting) {
+                        return Some(format!("{} hits {}", robot.links[a].name, robot.links[b].name));
+                    }
+                }
+            }
+        }
+    }
+    None
+}
+
 /// What collides at `q`, if anything (links 1-6 and the hand against the environment; the base
-/// stands on the table and is not checked against it).
+/// stands on the table and is not checked against it; then the links against each other).
 fn collides(ex: &Exact, robot: &RobotModel, q: &JointVector) -> Option<String> {
+    if let Some(hit) = self_collides(ex, robot, q) {
+        return Some(hit);
+    }
     let frames = robot.world_from_links(q);
     for (li, shapes) in ex.links.iter().enumerate().skip(1) {
         for (local, shape) in shapes {
@@ -384,4 +407,42 @@ fn the_planner_does_not_descend_into_what_it_did_not_see() {
         Err(PlanError::GoalInCollision(why)) => assert!(why.contains("pile"), "{why}"),
         other => panic!("{other:?}"),
     }
+}
+
+/// Self-collision is caught by the planner and by the dense exact re-check alike. The pair the
+/// planner used to miss: link 4 against the flange and hand (link 6), which meet beyond J5 ~110
+/// deg (the derivation in `examples/derive_self_pairs.rs`; link 3 cannot reach the hand within
+/// J5's +-120 deg, it stays 133 mm away). The negative control: the old eight pairs did not
+/// include it, and the exact check sees the collision on its own shapes.
+#[test]
+fn self_collision_is_caught_by_the_planner_and_the_dense_check() {
+    use binpick::planning::{Nearest, SELF_PAIRS};
+    const OLD_PAIRS: [(usize, usize); 8] = [(0, 3), (0, 4), (0, 5), (0, 6), (1, 4), (1, 5), (1, 6), (2, 6)];
+    let (scene, robot) = setup();
+    let case = &fig5_cases(&scene.scene, &robot).unwrap()[0];
+    let ex = exact(&case.model, &scene);
+    let home = JointVector::from(scene.scene.robot.home_rad());
+    let mut bent = home;
+    bent[4] = 116f64.to_radians();
+    let mut stats = PlanStats::default();
+    // The exact shapes intersect, link 4 and link 6, and nothing else is hit.
+    let hit = self_collides(&ex, &robot, &bent).expect("the exact shapes meet at J5 116 deg");
+    assert!(hit.contains("link_4") && hit.contains("link_6"), "{hit}");
+    assert!(collides(&ex, &robot, &home).is_none(), "home is clear");
+    // The planner sees it, as the pair it used to miss.
+    let (d, nearest) = case.model.nearest(&bent, &mut stats);
+    assert_eq!(nearest, Nearest::Links(4, 6), "{d}");
+    assert!(d <= case.model.margin_m && !case.model.free(&bent, &mut stats));
+    assert!(SELF_PAIRS.contains(&(4, 6)) && !OLD_PAIRS.contains(&(4, 6)));
+    // A path bending the wrist into it: refused by the planner, caught by the dense check.
+    assert!(!case.model.certify_edge(&home, &bent, &mut stats));
+    let e = dense_check(&ex, &robot, &[home.into(), bent.into()]).expect_err("the dense check misses it");
+    assert!(e.contains("link_4 hits link_6"), "{e}");
+    // Link 1 against link 3, the other pair that was missing, at the derivation's configuration.
+    let mut folded = JointVector::zeros();
+    folded[1] = (-156f64).to_radians();
+    folded[2] = (-7f64).to_radians();
+    let hit = self_collides(&ex, &robot, &folded).expect("link 1 and link 3 meet");
+    assert!(hit.contains("link_1") && hit.contains("link_3"), "{hit}");
+    assert!(!case.model.free(&folded, &mut stats));
 }
