@@ -446,3 +446,63 @@ fn self_collision_is_caught_by_the_planner_and_the_dense_check() {
     assert!(hit.contains("link_1") && hit.contains("link_3"), "{hit}");
     assert!(!case.model.free(&folded, &mut stats));
 }
+
+/// Deepest penetration of the arm's exact shapes (links 1-6 and the hand) into the environment at
+/// `q` [m] (0 when nothing intersects).
+fn penetration_m(ex: &Exact, robot: &RobotModel, q: &JointVector) -> f64 {
+    let frames = robot.world_from_links(q);
+    let mut deepest = 0.0f64;
+    for (li, shapes) in ex.links.iter().enumerate().skip(1) {
+        for (local, shape) in shapes {
+            let pose: rapier3d::math::Pose = (frames[li] * local).cast::<f32>().into();
+            for (epose, eshape, _) in &ex.env {
+                let ep: rapier3d::math::Pose = epose.cast::<f32>().into();
+                if let Ok(Some(c)) = rapier3d::parry::query::contact(&pose, &**shape, &ep, &**eshape, 0.0) {
+                    deepest = deepest.max(-(c.dist as f64));
+                }
+            }
+        }
+    }
+    deepest
+}
+
+/// The three reference cases are not trivial: the straight joint-space edge from start to goal
+/// collides, over a good part of its length and deeply, on the exact shapes (so a planner that
+/// returned it, or a case edited until it became free, would show). Measured (2001 samples):
+/// J1 case 31.4 % of the edge, 60.0 mm deep (link 3 into the wall); J2 case 46.7 %, 56.2 mm
+/// (link 5 into the bar); J3 case 16.0 %, 19.9 mm (link 6 into container 1's wall). The floors
+/// are about half of that.
+#[test]
+fn the_direct_edge_of_each_reference_case_collides_deeply() {
+    let (scene, robot) = setup();
+    // (least fraction of the edge in collision, least deepest penetration [m]) per case.
+    let floors = [(0.15, 0.03), (0.20, 0.025), (0.08, 0.01)];
+    let mut report = Vec::new();
+    for (case, (min_fraction, min_depth_m)) in fig5_cases(&scene.scene, &robot).unwrap().iter().zip(floors) {
+        let ex = exact(&case.model, &scene);
+        let (a, b) = (case.start, case.goal);
+        let n = 2000;
+        let (mut hits, mut deepest, mut what) = (0, 0.0f64, String::new());
+        for k in 0..=n {
+            let q = a + (b - a) * (k as f64 / n as f64);
+            if let Some(hit) = collides(&ex, &robot, &q) {
+                hits += 1;
+                let d = penetration_m(&ex, &robot, &q);
+                if d > deepest {
+                    (deepest, what) = (d, hit);
+                }
+            }
+        }
+        let fraction = hits as f64 / (n + 1) as f64;
+        let line = format!(
+            "{}: {:.1} % of the direct edge in collision, {:.1} mm deep at most ({what})",
+            case.name,
+            100.0 * fraction,
+            deepest * 1e3
+        );
+        assert!(!case.model.certify_edge(&a, &b, &mut PlanStats::default()), "{line}");
+        assert!(fraction >= min_fraction && deepest >= min_depth_m, "too easy: {line}");
+        report.push(line);
+    }
+    println!("{}", report.join("\n"));
+}
