@@ -465,6 +465,19 @@ impl CollisionModel {
     /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
     /// every configuration on it is clear by the margin.
     pub fn certify_edge(&self, a: &JointVector, b: &JointVector, stats: &mut PlanStats) -> bool {
+        self.certify_edge_with_margin(a, b, self.margin_m, stats)
+    }
+
+    /// As [`CollisionModel::certify_edge`], with every configuration on the edge required clear by
+    /// `margin_m` instead of the model's margin (a corridor check raises it by how far the motion
+    /// may stray from the edge).
+    pub fn certify_edge_with_margin(
+        &self,
+        a: &JointVector,
+        b: &JointVector,
+        margin_m: f64,
+        stats: &mut PlanStats,
+    ) -> bool {
         stats.edges += 1;
         let sweep: f64 = (0..DOF).map(|i| self.spheres.lever_m[i] * (b[i] - a[i]).abs()).sum();
         let at = |t: f64| a + (b - a) * t;
@@ -472,12 +485,12 @@ impl CollisionModel {
             if sweep <= 0.0 {
                 f64::INFINITY
             } else {
-                (d - self.margin_m) / sweep
+                (d - margin_m) / sweep
             }
         };
         let d0 = self.nearest(a, stats).0;
         let d1 = self.nearest(b, stats).0;
-        if d0 <= self.margin_m || d1 <= self.margin_m {
+        if d0 <= margin_m || d1 <= margin_m {
             return false;
         }
         // Uncovered intervals, processed breadth-first: midpoints spread out over the edge.
@@ -490,7 +503,7 @@ impl CollisionModel {
             let d = self.nearest(&at(mid), stats).0;
             // A certified step must make progress: below a micrometre of motion, call it a collision.
             let c = cover(d);
-            if d <= self.margin_m || c * sweep < 1e-6 {
+            if d <= margin_m || c * sweep < 1e-6 {
                 return false;
             }
             queue.push_back((lo, mid - c));

@@ -10,7 +10,7 @@
 
 use serde::Serialize;
 
-use super::{Motion, Sample};
+use super::{Motion, Sample, Stretch};
 use crate::robot::{DOF, JointVector};
 
 /// Speed and acceleration limits a trajectory is generated with.
@@ -218,6 +218,63 @@ impl Motion for Trajectory {
     }
     fn at(&self, t: f64) -> Sample {
         self.sample(t)
+    }
+    /// The linear segments (straight), and the blends: straight where the motion keeps to one
+    /// line without turning back (from or to rest, at the start, the end and every stop; between
+    /// parallel segments), bent otherwise, by each joint's blend acceleration (its velocity change
+    /// over the blend, times the blend's peak factor).
+    fn stretches(&self) -> Option<Vec<Stretch>> {
+        let n = self.seg_time.len();
+        let mut out = Vec::with_capacity(2 * n + 1);
+        let mut t = 0.0;
+        for (j, &tv) in self.via_t.iter().enumerate() {
+            let tb = self.blend[j];
+            let (b0, b1) = (
+                (tv - tb / 2.0).clamp(0.0, self.duration_s),
+                (tv + tb / 2.0).clamp(0.0, self.duration_s),
+            );
+            if b0 > t {
+                out.push(Stretch {
+                    t0_s: t,
+                    t1_s: b0,
+                    bend_rad_s2: JointVector::zeros(),
+                });
+            }
+            if b1 > b0 {
+                let before = if j == 0 {
+                    JointVector::zeros()
+                } else {
+                    self.seg_vel[j - 1]
+                };
+                let after = if j == n { JointVector::zeros() } else { self.seg_vel[j] };
+                let dv = after - before;
+                // Along one line without turning back: no speed before, or the change a multiple
+                // c >= -1 of the speed before (after = (1 + c) before).
+                let b2 = before.norm_squared();
+                let straight = b2 == 0.0 || {
+                    let c = dv.dot(&before) / b2;
+                    c >= -1.0 && (dv - before * c).amax() <= 1e-12 * (1.0 + dv.amax())
+                };
+                out.push(Stretch {
+                    t0_s: b0,
+                    t1_s: b1,
+                    bend_rad_s2: if straight {
+                        JointVector::zeros()
+                    } else {
+                        dv.abs() * (self.continuity.peak_factor() / tb)
+                    },
+                });
+            }
+            t = t.max(b1);
+        }
+        if self.duration_s > t {
+            out.push(Stretch {
+                t0_s: t,
+                t1_s: self.duration_s,
+                bend_rad_s2: JointVector::zeros(),
+            });
+        }
+        Some(out)
     }
 }
 
