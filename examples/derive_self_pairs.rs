@@ -115,7 +115,8 @@ fn hand(scene: &LoadedScene) -> Vec<Piece> {
 fn held_envelopes(robot: &RobotModel, scene: &LoadedScene) -> anyhow::Result<(Vec<Piece>, Vec<String>)> {
     let lip = robot.flange_from_tool.translation.vector.z;
     let need = |wp: &LoadedWorkpiece| {
-        scene.scene.gripper.cup_diameter_m + 2.0 * (wp.workpiece.grasp.face_margin_m + 2.0 * scene.scene.sensor.pose_noise_m)
+        scene.scene.gripper.cup_diameter_m
+            + 2.0 * (wp.workpiece.grasp.face_margin_m + 2.0 * scene.scene.sensor.pose_noise_m)
     };
     let mut out = Vec::new();
     let mut what = Vec::new();
@@ -133,9 +134,18 @@ fn held_envelopes(robot: &RobotModel, scene: &LoadedScene) -> anyhow::Result<(Ve
             }
             let k = f.normal.iamax();
             let depth = size[k];
-            let across: f64 = (0..3).filter(|&i| i != k).map(|i| size[i] * size[i]).sum::<f64>().sqrt() / 2.0;
+            let across: f64 = (0..3)
+                .filter(|&i| i != k)
+                .map(|i| size[i] * size[i])
+                .sum::<f64>()
+                .sqrt()
+                / 2.0;
             let r = across + HELD_POSE_SLACK_M;
-            out.push(cylinder(Isometry3::translation(0.0, 0.0, lip + depth / 2.0), r, depth / 2.0));
+            out.push(cylinder(
+                Isometry3::translation(0.0, 0.0, lip + depth / 2.0),
+                r,
+                depth / 2.0,
+            ));
             what.push(format!("{name}: {:.0} mm deep, r {:.1} mm", depth * 1e3, r * 1e3));
         }
     }
@@ -155,7 +165,14 @@ fn pair_distance(robot: &RobotModel, a: (usize, &[Piece]), b: (usize, &[Piece]),
             let wb: rapier3d::math::Pose = (frames[b.0] * pb.link_from_shape).cast::<f32>().into();
             let d = distance(&wa, &*pa.shape, &wb, &*pb.shape).map_or(0.0, |d| d.distance as f64);
             if std::env::var("DEBUG_PAIRS").is_ok() && d <= 0.0 {
-                eprintln!("{} {:?} {} {:?} at {:?}", a.0, pa.link_from_shape.translation, b.0, pb.link_from_shape.translation, q.map(f64::to_degrees));
+                eprintln!(
+                    "{} {:?} {} {:?} at {:?}",
+                    a.0,
+                    pa.link_from_shape.translation,
+                    b.0,
+                    pb.link_from_shape.translation,
+                    q.map(f64::to_degrees)
+                );
             }
             best = best.min(d);
         }
@@ -179,7 +196,13 @@ fn decide(robot: &RobotModel, a: (usize, &[Piece]), b: (usize, &[Piece]), joints
     let reach = b.1.iter().map(|p| p.reach_m).fold(0.0, f64::max);
     let lever: Vec<f64> = joints
         .iter()
-        .map(|&i| robot.joints[(i + 1)..b.0].iter().map(|j| j.origin_pos_m.norm()).sum::<f64>() + reach)
+        .map(|&i| {
+            robot.joints[(i + 1)..b.0]
+                .iter()
+                .map(|j| j.origin_pos_m.norm())
+                .sum::<f64>()
+                + reach
+        })
         .collect();
     let full = std::f64::consts::TAU;
     let root: Vec<(f64, f64)> = joints
@@ -212,7 +235,9 @@ fn decide(robot: &RobotModel, a: (usize, &[Piece]), b: (usize, &[Piece]), joints
         if slack < TOLERANCE_M {
             return (Verdict::Within(q, d), evals);
         }
-        let k = (0..spans.len()).max_by(|&x, &y| spans[x].total_cmp(&spans[y])).unwrap_or(0);
+        let k = (0..spans.len())
+            .max_by(|&x, &y| spans[x].total_cmp(&spans[y]))
+            .unwrap_or(0);
         let mid = 0.5 * (bx[k].0 + bx[k].1);
         let (mut lo, mut hi) = (bx.clone(), bx);
         lo[k].1 = mid;
@@ -246,7 +271,10 @@ fn main() -> anyhow::Result<()> {
             } else if a + 1 == b {
                 vec![("hand", &hand), ("hand + held", &hand_held)]
             } else {
-                vec![("flange + hand", &flange_hand), ("flange + hand + held", &flange_hand_held)]
+                vec![
+                    ("flange + hand", &flange_hand),
+                    ("flange + hand + held", &flange_hand_held),
+                ]
             };
             for (label, set) in sets {
                 let joints: Vec<usize> = (a.max(1)..b.min(DOF - 1)).collect();
@@ -268,7 +296,11 @@ fn main() -> anyhow::Result<()> {
                 }
                 println!(
                     "| {a}-{b} | {label} | {} | {evals} | {verdict} | {at} | {} |",
-                    joints.iter().map(|i| format!("J{}", i + 1)).collect::<Vec<_>>().join(" "),
+                    joints
+                        .iter()
+                        .map(|i| format!("J{}", i + 1))
+                        .collect::<Vec<_>>()
+                        .join(" "),
                     if SELF_PAIRS.contains(&(a, b)) { "yes" } else { "no" },
                 );
             }

@@ -403,7 +403,12 @@ fn the_planner_does_not_descend_into_what_it_did_not_see() {
     // Filled, the pile refuses it.
     assert!(!filled.free(&into, &mut stats), "the unseen hole was taken as free");
     assert!(!filled.certify_edge(&above, &into, &mut stats));
-    match filled.plan(&above, &into, &PlanOptions::default(), &mut binpick::rng::stream(1, "planner")) {
+    match filled.plan(
+        &above,
+        &into,
+        &PlanOptions::default(),
+        &mut binpick::rng::stream(1, "planner"),
+    ) {
         Err(PlanError::GoalInCollision(why)) => assert!(why.contains("pile"), "{why}"),
         other => panic!("{other:?}"),
     }
