@@ -329,6 +329,48 @@ mod tests {
     }
 
     #[test]
+    fn stretches_cover_the_motion_and_straight_ones_keep_to_their_chord() {
+        let via = [
+            JointVector::zeros(),
+            JointVector::new(1.0, -0.5, 0.3, 0.0, 0.2, 0.0),
+            JointVector::new(1.0, -0.5, 0.3, 0.0, 0.2, 0.0),
+            JointVector::new(1.5, 0.2, 0.8, 0.5, -0.3, 1.0),
+            JointVector::new(0.2, 0.1, 0.2, 0.0, 0.0, 0.0),
+        ];
+        for c in [Continuity::Velocity, Continuity::Acceleration, Continuity::Jerk] {
+            let t = Trajectory::through_with(&via, &limits(), c);
+            let st = t.stretches().expect("a trajectory knows its stretches");
+            assert_eq!(st[0].t0_s, 0.0);
+            assert_eq!(st.last().map(|s| s.t1_s), Some(t.duration_s));
+            assert!(st.windows(2).all(|w| w[0].t1_s == w[1].t0_s), "{c:?}: gaps");
+            // Bent: only the blend at via 3 (via 1-2 is a stop, 0 and 4 are rest).
+            let bent: Vec<&Stretch> = st.iter().filter(|s| s.bend_rad_s2.amax() > 0.0).collect();
+            assert_eq!(bent.len(), 1, "{c:?}: {st:?}");
+            for s in &st {
+                let (a, b) = (t.sample(s.t0_s).q, t.sample(s.t1_s).q);
+                for k in 0..=200 {
+                    let x = t.sample(s.t0_s + (s.t1_s - s.t0_s) * k as f64 / 200.0);
+                    // Within the joint accelerations the stretch claims.
+                    for i in 0..DOF {
+                        assert!(x.qdd[i].abs() <= s.bend_rad_s2[i] + 1e-9 || s.bend_rad_s2.amax() == 0.0);
+                    }
+                    if s.bend_rad_s2.amax() == 0.0 {
+                        // On the chord between the stretch's ends, between them.
+                        let d = b - a;
+                        let u = if d.norm_squared() > 0.0 {
+                            (x.q - a).dot(&d) / d.norm_squared()
+                        } else {
+                            0.0
+                        };
+                        assert!((-1e-9..=1.0 + 1e-9).contains(&u), "{c:?}: off the chord's ends");
+                        assert!((x.q - (a + d * u)).amax() < 1e-9, "{c:?}: off the chord");
+                    }
+                }
+            }
+        }
+    }
+
+    #[test]
     fn single_segment_is_a_trapezoid_from_rest_to_rest() {
         let a = JointVector::zeros();
         let b = JointVector::new(2.0, 1.0, 0.0, 0.0, 0.0, 0.0);
