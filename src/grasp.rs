@@ -401,6 +401,10 @@ impl GraspSelector {
             .fold(0.0, f64::max)
             .max(1e-3);
         let need = 2.0 * (self.cup_radius_m + self.face_margin_m);
+        // The collision decisions (crowding under the cup and the body, the clear height of the
+        // approach, the free radius) read the map with its unseen cells occupied: a hole in the
+        // map is not free space. The face height is measured on what was seen only.
+        let occupied = height_map.unseen_filled(self.tray_inner_half_m, self.rim_height_m);
         for (di, det) in detections.iter().enumerate() {
             for (fi, face) in self.faces.iter().enumerate() {
                 let n = det.world_from_part.rotation * face.normal;
@@ -430,8 +434,8 @@ impl GraspSelector {
                 let face_h = local.z;
                 // Clearance from the cloud: nothing higher than the face (plus noise) under the
                 // cup, nothing higher than the cup's top under the tool body.
-                let cup_clear = height_map.max_within(local.x, local.y, self.cup_radius_m + 0.001);
-                let body_clear = height_map.max_within(local.x, local.y, self.tool_radius_m + 0.002);
+                let cup_clear = occupied.max_within(local.x, local.y, self.cup_radius_m + 0.001);
+                let body_clear = occupied.max_within(local.x, local.y, self.tool_radius_m + 0.002);
                 if cup_clear > face_h + self.height_tolerance_m
                     || body_clear > face_h + self.cup_length_m - self.height_tolerance_m
                 {
@@ -442,7 +446,7 @@ impl GraspSelector {
                     plan.rejected.push((di, fi, Rejection::Covered));
                     continue;
                 }
-                let clearance = self.clearance_radius(height_map, local.x, local.y, face_h);
+                let clearance = self.clearance_radius(&occupied, local.x, local.y, face_h);
                 // Tray walls: the tool's axis from the face up past the rim, at each height its
                 // radius (cup near the lip, body above) inside the inner walls.
                 if !self.clear_of_walls(&point.coords, &(-n)) {
@@ -454,7 +458,7 @@ impl GraspSelector {
                 // within half its length plus 10 mm.
                 let half_length = 0.5 * self.size_m.iter().cloned().fold(0.0, f64::max);
                 let hang = self.size_m[face.normal.iamax()];
-                let around = height_map.max_within(local.x, local.y, half_length + 0.01);
+                let around = occupied.max_within(local.x, local.y, half_length + 0.01);
                 let clear_z = if around.is_finite() {
                     self.tray.translation.vector.z + around + hang + 0.015
                 } else {

@@ -4,7 +4,8 @@
 //!
 //! Job: bin the capture's point cloud into a height map over the pick tray; rank suction grasps
 //! on the recognised parts ([`crate::grasp::GraspSelector`]); keep the pile inside the tray's
-//! inner walls as the planner's obstacle columns (max-pooled, conservative), with a disc around
+//! inner walls as the planner's obstacle columns (max-pooled, conservative; unseen cells occupied
+//! up to the highest seen cell around them, never free), with a disc around
 //! the grasp point cut out (the part to be picked); take the best-ranked grasp that is not at a
 //! spot where a grasp just failed and whose approach pose is clear in that planning scene.
 //! Everything here comes from what the sensor measured: no ground truth.
@@ -109,10 +110,13 @@ pub fn planning_environment(scene: &Scene, pile: &HeightMap, grasp: &GraspCandid
 }
 
 /// The pile as the planner sees it: the height map with every cell outside the pick tray's inner
-/// walls cleared (what the sensor saw over the walls is not pile; the walls are in the cell model).
+/// walls cleared (what the sensor saw over the walls is not pile; the walls are in the cell model),
+/// and every unseen cell inside them occupied ([`HeightMap::unseen_filled`]: up to the highest seen
+/// cell bordering its hole, or to the rim): the planner does not assume what it did not see.
 pub fn pile_map(scene: &Scene, height_map: &HeightMap) -> HeightMap {
-    let inner = scene.pick_tray.inner_size_m;
-    height_map.inner_only([inner[0] / 2.0, inner[1] / 2.0])
+    let t = &scene.pick_tray;
+    let inner = [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0];
+    height_map.unseen_filled(inner, t.wall_height_m).inner_only(inner)
 }
 
 /// Sense and grasp on one capture: the height map, the ranked grasps for the part to go to

@@ -8,7 +8,8 @@
 //! them, so a clearance computed on the spheres is a lower bound on the true clearance; each link
 //! also has one bounding sphere for early rejection. The environment is boxes (table, trays,
 //! obstacles) plus the pile as the sensor saw it: columns of a height map, never ground truth,
-//! with the part to be grasped cut out around the grasp point. The link pairs of [`SELF_PAIRS`]
+//! with the part to be grasped cut out around the grasp point, and what the sensor did not see
+//! inside the tray occupied, never free ([`PileColumns`]). The link pairs of [`SELF_PAIRS`]
 //! are checked against each other.
 //!
 //! Edge certification (conservative advancement, as in the collision-detection seed): with
@@ -175,6 +176,12 @@ fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
 }
 
 /// The pile as the sensor saw it: height-map columns, with a disc around the grasp cut out.
+///
+/// A NaN column is not pile: it lies outside the tray's inner walls (the walls are boxes of the
+/// cell). Cells the sensor did not see inside the walls must come filled as occupied
+/// ([`HeightMap::unseen_filled`], which [`crate::pipeline::pile_map`] applies): a hole in the map
+/// is not free space. Max-pooling keeps a filled cell's height, so no column is lower than any of
+/// its cells, seen or filled.
 #[derive(Debug, Clone)]
 pub struct PileColumns {
     /// The height map (heights above the tray floor), max-pooled to planning cells.
@@ -321,9 +328,32 @@ pub enum Nearest {
     Links(usize, usize),
 }
 
-/// Link pairs checked for self-collision (non-adjacent, and not the base with link 2 whose
-/// castings overlap at the shoulder by design).
-pub const SELF_PAIRS: [(usize, usize); 8] = [(0, 3), (0, 4), (0, 5), (0, 6), (1, 4), (1, 5), (1, 6), (2, 6)];
+/// Link pairs checked for self-collision: every pair that can meet over the joint ranges, on the
+/// exact shapes (URDF primitives; link 6 with the flange, the hand, and the envelope of any
+/// shipped workpiece held on any face the cup can grasp), derived by
+/// `cargo run --release --example derive_self_pairs`: a branch and bound over the joints between
+/// the two links with a Lipschitz bound on the exact distance (parry), which either finds the
+/// shapes intersecting, or within 0.2 mm, or proves them apart over the whole range.
+///
+/// Can meet (exact shapes, example configuration): base-link3 (J2 -181, J3 10 deg),
+/// base-link4/5/6, link1-link3 (J2 -156, J3 -7), link1-link4/5, link1-link6 (within 0.2 mm),
+/// link2-link6, link4-link6 (the flange clips link 4's casing beyond J5 ~110 deg).
+/// Proved apart: base-link2 (62.8 mm at least), link2-link4 (35.4), link2-link5 (44.5),
+/// link3-link5 (147.0), link3-link6 (133.4; 62.3 with a held part: J5's +-120 deg keeps the hand
+/// off the forearm), link5 with the hand and a held part, its flange excluded (15.0). Adjacent
+/// links share a joint housing and are not checked.
+pub const SELF_PAIRS: [(usize, usize); 10] = [
+    (0, 3),
+    (0, 4),
+    (0, 5),
+    (0, 6),
+    (1, 3),
+    (1, 4),
+    (1, 5),
+    (1, 6),
+    (2, 6),
+    (4, 6),
+];
 
 /// The planning scene: robot spheres plus environment, and the queries on them.
 #[derive(Debug, Clone)]
@@ -435,6 +465,19 @@ impl CollisionModel {
     /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
     /// every configuration on it is clear by the margin.
     pub fn certify_edge(&self, a: &JointVector, b: &JointVector, stats: &mut PlanStats) -> bool {
+        self.certify_edge_with_margin(a, b, self.margin_m, stats)
+    }
+
+    /// As [`CollisionModel::certify_edge`], with every configuration on the edge required clear by
+    /// `margin_m` instead of the model's margin (a corridor check raises it by how far the motion
+    /// may stray from the edge).
+    pub fn certify_edge_with_margin(
+        &self,
+        a: &JointVector,
+        b: &JointVector,
+        margin_m: f64,
+        stats: &mut PlanStats,
+    ) -> bool {
         stats.edges += 1;
         let sweep: f64 = (0..DOF).map(|i| self.spheres.lever_m[i] * (b[i] - a[i]).abs()).sum();
         let at = |t: f64| a + (b - a) * t;
@@ -442,12 +485,12 @@ impl CollisionModel {
             if sweep <= 0.0 {
                 f64::INFINITY
             } else {
-                (d - self.margin_m) / sweep
+                (d - margin_m) / sweep
             }
         };
         let d0 = self.nearest(a, stats).0;
         let d1 = self.nearest(b, stats).0;
-        if d0 <= self.margin_m || d1 <= self.margin_m {
+        if d0 <= margin_m || d1 <= margin_m {
             return false;
         }
         // Uncovered intervals, processed breadth-first: midpoints spread out over the edge.
@@ -460,7 +503,7 @@ impl CollisionModel {
             let d = self.nearest(&at(mid), stats).0;
             // A certified step must make progress: below a micrometre of motion, call it a collision.
             let c = cover(d);
-            if d <= self.margin_m || c * sweep < 1e-6 {
+            if d <= margin_m || c * sweep < 1e-6 {
                 return false;
             }
             queue.push_back((lo, mid - c));

@@ -82,6 +82,69 @@ impl HeightMap {
         m
     }
 
+    /// The map with every unseen cell inside the tray's inner walls (`inner_half_m`, tray frame)
+    /// filled as occupied: nothing seen there (occlusion, shadow, dropout) is not evidence of free
+    /// space. Each connected region of unseen inner cells (8-connected) is filled up to the highest
+    /// seen inner cell bordering it, or to `rim_height_m` if none borders it (nothing inside the
+    /// walls was seen at all). Cells outside the inner walls are left as they are.
+    ///
+    /// Why the bordering maximum: a shadow or occlusion is cast by what borders it (the occluder's
+    /// top is seen), and the line of sight past the occluder only descends behind it, so nothing
+    /// hidden there reaches above the occluder's top. An isolated dropout is bounded by the same
+    /// rule by its seen neighbours (a spike narrower than a cell would be assumed away; at 2 mm
+    /// cells that is below what the planner's columns resolve anyway).
+    pub fn unseen_filled(&self, inner_half_m: [f64; 2], rim_height_m: f64) -> HeightMap {
+        let (nx, ny) = (self.nx, self.ny);
+        let inside: Vec<bool> = (0..nx * ny)
+            .map(|k| {
+                let x = self.origin_xy_m[0] + ((k % nx) as f64 + 0.5) * self.cell_m;
+                let y = self.origin_xy_m[1] + ((k / nx) as f64 + 0.5) * self.cell_m;
+                x.abs() <= inner_half_m[0] && y.abs() <= inner_half_m[1]
+            })
+            .collect();
+        let unseen = |k: usize| inside[k] && self.height_m[k].is_nan();
+        let neighbours = move |k: usize| {
+            let (i, j) = ((k % nx) as isize, (k / nx) as isize);
+            (-1..=1isize)
+                .flat_map(move |dj| (-1..=1isize).map(move |di| (i + di, j + dj)))
+                .filter(move |&(a, b)| (a, b) != (i, j) && a >= 0 && b >= 0 && a < nx as isize && b < ny as isize)
+                .map(move |(a, b)| b as usize * nx + a as usize)
+        };
+        let mut m = self.clone();
+        let mut done = vec![false; nx * ny];
+        let mut region = Vec::new();
+        for start in 0..nx * ny {
+            if done[start] || !unseen(start) {
+                continue;
+            }
+            // Flood the region, keeping the highest seen inner cell on its border.
+            region.clear();
+            region.push(start);
+            done[start] = true;
+            let mut border = f64::NAN;
+            let mut next = 0;
+            while next < region.len() {
+                let k = region[next];
+                next += 1;
+                for n in neighbours(k) {
+                    if unseen(n) {
+                        if !done[n] {
+                            done[n] = true;
+                            region.push(n);
+                        }
+                    } else if inside[n] && (border.is_nan() || self.height_m[n] > border) {
+                        border = self.height_m[n];
+                    }
+                }
+            }
+            let fill = if border.is_nan() { rim_height_m } else { border };
+            for &k in &region {
+                m.height_m[k] = fill;
+            }
+        }
+        m
+    }
+
     fn index(&self, x: f64, y: f64) -> Option<usize> {
         let i = ((x - self.origin_xy_m[0]) / self.cell_m).floor();
         let j = ((y - self.origin_xy_m[1]) / self.cell_m).floor();
@@ -127,5 +190,78 @@ impl HeightMap {
         self.heights_within(x, y, radius_m + self.cell_m * 0.71)
             .filter(|h| !h.is_nan())
             .fold(f64::NAN, |best, h| if best.is_nan() || h > best { h } else { best })
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A 10 x 8 map of 1 cm cells over a tray of inner half size 4 x 3 cm (cells of the outer
+    /// ring lie outside the inner walls), all seen at `h` except as edited.
+    fn map(h: f64) -> HeightMap {
+        HeightMap {
+            world_from_tray: Isometry3::identity(),
+            cell_m: 0.01,
+            nx: 10,
+            ny: 8,
+            origin_xy_m: [-0.05, -0.04],
+            height_m: vec![h; 80],
+        }
+    }
+
+    const INNER: [f64; 2] = [0.04, 0.03];
+
+    #[test]
+    fn an_unseen_hole_is_filled_to_its_highest_seen_border() {
+        let mut m = map(0.0);
+        // A 2 x 2 hole, one of its bordering cells the top of a 5 cm part.
+        for k in [3 * 10 + 4, 3 * 10 + 5, 4 * 10 + 4, 4 * 10 + 5] {
+            m.height_m[k] = f64::NAN;
+        }
+        m.height_m[2 * 10 + 3] = 0.05;
+        // A lone dropout elsewhere, on the floor.
+        m.height_m[6 * 10 + 8] = f64::NAN;
+        let f = m.unseen_filled(INNER, 0.06);
+        for k in [3 * 10 + 4, 3 * 10 + 5, 4 * 10 + 4, 4 * 10 + 5] {
+            assert_eq!(f.height_m[k], 0.05);
+        }
+        assert_eq!(f.height_m[6 * 10 + 8], 0.0);
+        assert!(f.height_m.iter().all(|h| h.is_finite()));
+        // Seen cells are untouched.
+        assert_eq!(f.height_m[2 * 10 + 3], 0.05);
+        assert_eq!(f.height_m[0], 0.0);
+    }
+
+    #[test]
+    fn a_map_with_nothing_seen_inside_is_full_to_the_rim_and_the_outside_is_kept() {
+        let mut m = map(f64::NAN);
+        // Over the walls: the wall top seen in one cell, nothing in the others.
+        m.height_m[0] = 0.06;
+        m.height_m[9] = 0.02;
+        let f = m.unseen_filled(INNER, 0.06);
+        for j in 0..8 {
+            for i in 0..10 {
+                let k = j * 10 + i;
+                let outside = i == 0 || i == 9 || j == 0 || j == 7;
+                if outside {
+                    // Left as it was (wall cells do not count as seen pile either).
+                    assert_eq!(f.height_m[k].to_bits(), m.height_m[k].to_bits(), "{i} {j}");
+                } else {
+                    assert_eq!(f.height_m[k], 0.06, "{i} {j}");
+                }
+            }
+        }
+    }
+
+    #[test]
+    fn separate_holes_are_filled_separately() {
+        let mut m = map(0.0);
+        m.height_m[2 * 10 + 2] = f64::NAN;
+        m.height_m[2 * 10 + 3] = 0.03;
+        m.height_m[5 * 10 + 7] = f64::NAN;
+        let f = m.unseen_filled(INNER, 0.06);
+        assert_eq!(f.height_m[2 * 10 + 2], 0.03);
+        assert_eq!(f.height_m[5 * 10 + 7], 0.0);
     }
 }

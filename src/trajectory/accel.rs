@@ -24,10 +24,23 @@ pub const TORQUE_DT_S: f64 = 0.001;
 /// §4.2 step 2: a joint's acceleration is settled when its peak torque is within this fraction
 /// of its limit below the limit (and no joint is above).
 pub const TORQUE_THRESHOLD: f64 = 0.05;
-/// Time between the samples whose edges [`check_corridor`] certifies in the cell's cycle [s]:
-/// the chord of a blend between samples deviates from it by at most a dt^2 / 8, below 1 mrad at
-/// 10 ms, under half a millimetre of robot motion, inside the collision model's 2 mm margin.
+/// Longest time between the configurations whose chords [`check_corridor`] certifies in the
+/// cell's cycle [s].
+///
+/// Between two samples dt apart, a joint whose acceleration stays within a deviates from the
+/// chord by at most a dt^2 / 8 ([`chord_deviation_rad`]). At 10 ms with the default cell's
+/// specification accelerations (`max_accel_deg_s2`) that is, per joint J1..J6:
+/// 0.63, 1.00, 2.40, 3.93, 5.45, 3.27 mrad (not "below 1 mrad": only J1 and J2 are), and
+/// summed over the joints with the planner's lever bounds several millimetres of robot motion,
+/// more than the collision model's 2 mm margin. So chords at this spacing are not enough by
+/// themselves: [`check_corridor`] certifies the straight stretches of a trajectory (segments,
+/// blends from and to rest) as they are, and cuts each bent blend into chords short enough that
+/// their deviation is at most [`CORRIDOR_BEND_BUDGET_M`] of robot motion, each certified with the
+/// margin raised by its own deviation bound: the blended trajectory itself keeps the margin.
 pub const CORRIDOR_CHECK_DT_S: f64 = 0.01;
+/// Largest deviation of robot motion [m] between a bent blend and the chords [`check_corridor`]
+/// certifies in its place (each chord's own bound is added to the margin it is certified with).
+pub const CORRIDOR_BEND_BUDGET_M: f64 = 0.0002;
 /// §4.2 step 1: the search starts from this share of each joint's specification acceleration.
 const START_SHARE: f64 = 0.5;
 /// The bisection's iterations at most (each one trajectory and its torques).
@@ -323,15 +336,65 @@ pub fn correct_path(
     }
 }
 
-/// Re-checks a timed motion against the collision model: every edge between consecutive samples
-/// `dt_s` apart must certify (the blends leave the planned, certified polyline, so the corridor
-/// they sweep is checked again). Returns the first time at which it does not.
+/// Per joint, the largest deviation [rad] from its chord of a motion sampled `dt_s` apart whose
+/// accelerations stay within `accel_rad_s2`: a dt^2 / 8 (the interpolation error of a function
+/// with a bounded second derivative, reached by a constant acceleration over the interval).
+pub fn chord_deviation_rad(accel_rad_s2: &JointVector, dt_s: f64) -> JointVector {
+    accel_rad_s2.abs() * (dt_s * dt_s / 8.0)
+}
+
+/// Re-checks a timed motion against the collision model: certifies that every configuration the
+/// motion passes is clear by the model's margin (the blends leave the planned, certified polyline,
+/// so the corridor they sweep is checked again). Returns the first time at which it fails.
+///
+/// With the motion's [`Stretch`](super::Stretch)es: a straight stretch is certified as the edge
+/// between its ends (it passes exactly those configurations); a bent one is cut into chords at
+/// most `dt_s` long and short enough that their deviation, summed over the joints with the model's
+/// lever bounds, is within [`CORRIDOR_BEND_BUDGET_M`], and each chord is certified with the margin
+/// raised by its deviation (every point of the robot is then clear by the margin). Without them,
+/// chords every `dt_s` with the margin raised by the deviation the robot's specification
+/// accelerations allow (valid for motions within them).
 pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Motion, dt_s: f64) -> Result<(), f64> {
     let mut stats = crate::planning::PlanStats::default();
-    let samples = motion.sampled(dt_s);
-    for w in samples.windows(2) {
-        if !model.certify_edge(&w[0].q, &w[1].q, &mut stats) {
-            return Err(w[0].t_s);
+    let lever = &model.spheres.lever_m;
+    let sweep_m = |bend: &JointVector, h: f64| -> f64 {
+        let dev = chord_deviation_rad(bend, h);
+        (0..DOF).map(|i| lever[i] * dev[i]).sum()
+    };
+    let Some(stretches) = motion.stretches() else {
+        let spec = model.robot.max_accel_rad_s2();
+        let samples = motion.sampled(dt_s);
+        for w in samples.windows(2) {
+            let extra = sweep_m(&spec, w[1].t_s - w[0].t_s);
+            if !model.certify_edge_with_margin(&w[0].q, &w[1].q, model.margin_m + extra, &mut stats) {
+                return Err(w[0].t_s);
+            }
+        }
+        return Ok(());
+    };
+    for st in stretches {
+        let len = st.t1_s - st.t0_s;
+        if len <= 0.0 {
+            continue;
+        }
+        let per_s2 = sweep_m(&st.bend_rad_s2, 1.0);
+        let n = if per_s2 == 0.0 {
+            1
+        } else {
+            // Chords of length h deviate by per_s2 h^2 of robot motion.
+            let h = dt_s.min((CORRIDOR_BEND_BUDGET_M / per_s2).sqrt());
+            (len / h).ceil().max(1.0) as usize
+        };
+        let h = len / n as f64;
+        let extra = per_s2 * h * h;
+        let mut a = motion.at(st.t0_s);
+        for k in 1..=n {
+            let t = if k == n { st.t1_s } else { st.t0_s + h * k as f64 };
+            let b = motion.at(t);
+            if !model.certify_edge_with_margin(&a.q, &b.q, model.margin_m + extra, &mut stats) {
+                return Err(a.t_s);
+            }
+            a = b;
         }
     }
     Ok(())

@@ -10,7 +10,7 @@
 
 use serde::Serialize;
 
-use super::{Motion, Sample};
+use super::{Motion, Sample, Stretch};
 use crate::robot::{DOF, JointVector};
 
 /// Speed and acceleration limits a trajectory is generated with.
@@ -219,6 +219,63 @@ impl Motion for Trajectory {
     fn at(&self, t: f64) -> Sample {
         self.sample(t)
     }
+    /// The linear segments (straight), and the blends: straight where the motion keeps to one
+    /// line without turning back (from or to rest, at the start, the end and every stop; between
+    /// parallel segments), bent otherwise, by each joint's blend acceleration (its velocity change
+    /// over the blend, times the blend's peak factor).
+    fn stretches(&self) -> Option<Vec<Stretch>> {
+        let n = self.seg_time.len();
+        let mut out = Vec::with_capacity(2 * n + 1);
+        let mut t = 0.0;
+        for (j, &tv) in self.via_t.iter().enumerate() {
+            let tb = self.blend[j];
+            let (b0, b1) = (
+                (tv - tb / 2.0).clamp(0.0, self.duration_s),
+                (tv + tb / 2.0).clamp(0.0, self.duration_s),
+            );
+            if b0 > t {
+                out.push(Stretch {
+                    t0_s: t,
+                    t1_s: b0,
+                    bend_rad_s2: JointVector::zeros(),
+                });
+            }
+            if b1 > b0 {
+                let before = if j == 0 {
+                    JointVector::zeros()
+                } else {
+                    self.seg_vel[j - 1]
+                };
+                let after = if j == n { JointVector::zeros() } else { self.seg_vel[j] };
+                let dv = after - before;
+                // Along one line without turning back: no speed before, or the change a multiple
+                // c >= -1 of the speed before (after = (1 + c) before).
+                let b2 = before.norm_squared();
+                let straight = b2 == 0.0 || {
+                    let c = dv.dot(&before) / b2;
+                    c >= -1.0 && (dv - before * c).amax() <= 1e-12 * (1.0 + dv.amax())
+                };
+                out.push(Stretch {
+                    t0_s: b0,
+                    t1_s: b1,
+                    bend_rad_s2: if straight {
+                        JointVector::zeros()
+                    } else {
+                        dv.abs() * (self.continuity.peak_factor() / tb)
+                    },
+                });
+            }
+            t = t.max(b1);
+        }
+        if self.duration_s > t {
+            out.push(Stretch {
+                t0_s: t,
+                t1_s: self.duration_s,
+                bend_rad_s2: JointVector::zeros(),
+            });
+        }
+        Some(out)
+    }
 }
 
 #[cfg(test)]
@@ -269,6 +326,48 @@ mod tests {
             }
         }
         assert!(durations[0] < durations[1] && durations[1] < durations[2]);
+    }
+
+    #[test]
+    fn stretches_cover_the_motion_and_straight_ones_keep_to_their_chord() {
+        let via = [
+            JointVector::zeros(),
+            JointVector::new(1.0, -0.5, 0.3, 0.0, 0.2, 0.0),
+            JointVector::new(1.0, -0.5, 0.3, 0.0, 0.2, 0.0),
+            JointVector::new(1.5, 0.2, 0.8, 0.5, -0.3, 1.0),
+            JointVector::new(0.2, 0.1, 0.2, 0.0, 0.0, 0.0),
+        ];
+        for c in [Continuity::Velocity, Continuity::Acceleration, Continuity::Jerk] {
+            let t = Trajectory::through_with(&via, &limits(), c);
+            let st = t.stretches().expect("a trajectory knows its stretches");
+            assert_eq!(st[0].t0_s, 0.0);
+            assert_eq!(st.last().map(|s| s.t1_s), Some(t.duration_s));
+            assert!(st.windows(2).all(|w| w[0].t1_s == w[1].t0_s), "{c:?}: gaps");
+            // Bent: only the blend at via 3 (via 1-2 is a stop, 0 and 4 are rest).
+            let bent: Vec<&Stretch> = st.iter().filter(|s| s.bend_rad_s2.amax() > 0.0).collect();
+            assert_eq!(bent.len(), 1, "{c:?}: {st:?}");
+            for s in &st {
+                let (a, b) = (t.sample(s.t0_s).q, t.sample(s.t1_s).q);
+                for k in 0..=200 {
+                    let x = t.sample(s.t0_s + (s.t1_s - s.t0_s) * k as f64 / 200.0);
+                    // Within the joint accelerations the stretch claims.
+                    for i in 0..DOF {
+                        assert!(x.qdd[i].abs() <= s.bend_rad_s2[i] + 1e-9 || s.bend_rad_s2.amax() == 0.0);
+                    }
+                    if s.bend_rad_s2.amax() == 0.0 {
+                        // On the chord between the stretch's ends, between them.
+                        let d = b - a;
+                        let u = if d.norm_squared() > 0.0 {
+                            (x.q - a).dot(&d) / d.norm_squared()
+                        } else {
+                            0.0
+                        };
+                        assert!((-1e-9..=1.0 + 1e-9).contains(&u), "{c:?}: off the chord's ends");
+                        assert!((x.q - (a + d * u)).amax() < 1e-9, "{c:?}: off the chord");
+                    }
+                }
+            }
+        }
     }
 
     #[test]

@@ -34,8 +34,9 @@ mod toppra;
 mod torque;
 
 pub use accel::{
-    Accelerated, CORRIDOR_CHECK_DT_S, Corrected, TORQUE_DT_S, TORQUE_THRESHOLD, accelerate_in_corridor, check_corridor,
-    correct_path, default_limits, optimal_duration, optimise_accelerations,
+    Accelerated, CORRIDOR_BEND_BUDGET_M, CORRIDOR_CHECK_DT_S, Corrected, TORQUE_DT_S, TORQUE_THRESHOLD,
+    accelerate_in_corridor, check_corridor, chord_deviation_rad, correct_path, default_limits, optimal_duration,
+    optimise_accelerations,
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
 pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, straight_line};
@@ -58,8 +59,27 @@ pub struct Sample {
     pub qdd: JointVector,
 }
 
+/// A stretch of a motion in time, for certifying the corridor it sweeps ([`check_corridor`]).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Stretch {
+    /// Start [s].
+    pub t0_s: f64,
+    /// End [s].
+    pub t1_s: f64,
+    /// Per joint, a bound on the acceleration that bends the motion off a straight joint-space
+    /// line over the stretch [rad/s^2]; all zero: the stretch runs monotonically along the straight
+    /// line between its ends (its chord is the set of configurations it passes).
+    pub bend_rad_s2: JointVector,
+}
+
 /// Anything that can be sampled in time like a trajectory.
 pub trait Motion {
+    /// The motion cut into [`Stretch`]es, straight ones and bent ones with their acceleration
+    /// bounds, when it knows them (`None`: unknown; [`check_corridor`] then assumes the robot's
+    /// specification accelerations everywhere).
+    fn stretches(&self) -> Option<Vec<Stretch>> {
+        None
+    }
     /// Duration [s].
     fn duration_s(&self) -> f64;
     /// Position, velocity and acceleration at `t`.
