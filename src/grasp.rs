@@ -693,6 +693,65 @@ mod tests {
     }
 
     #[test]
+    fn a_strip_with_a_part_across_it_is_covered() {
+        let scene = crate::config::LoadedScene::embedded_default().unwrap();
+        let robot = crate::robot::test_support::default_robot();
+        let c = LoadedWorkpiece::resolve("C").unwrap().workpiece;
+        let sel = GraspSelector::new(&scene.scene, &robot, &c);
+        let top = body_faces(&c)
+            .into_iter()
+            .position(|f| f.normal == Vector3::z())
+            .unwrap();
+        let face = sel.faces()[top];
+        // The strip lies flat at the tray's centre, turned 30 deg; the map is 1 mm cells.
+        let tray_from_part = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, c.size_m[2] / 2.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5),
+        );
+        let det = Detection {
+            world_from_part: sel.tray * tray_from_part,
+            visible_fraction: 1.0,
+            truth_part: 0,
+        };
+        let cell_m = 0.001;
+        let (nx, ny) = (200, 200);
+        let mut map = HeightMap {
+            world_from_tray: sel.tray,
+            cell_m,
+            nx,
+            ny,
+            origin_xy_m: [-0.1, -0.1],
+            height_m: vec![0.0; nx * ny],
+        };
+        let inverse = tray_from_part.inverse();
+        let centre =
+            |i: usize, j: usize| Point3::new(-0.1 + (i as f64 + 0.5) * cell_m, -0.1 + (j as f64 + 0.5) * cell_m, 0.0);
+        for j in 0..ny {
+            for i in 0..nx {
+                let p = inverse * centre(i, j);
+                if p.x.abs() <= c.size_m[0] / 2.0 && p.y.abs() <= c.size_m[1] / 2.0 {
+                    map.height_m[j * nx + i] = c.size_m[2];
+                }
+            }
+        }
+        let face_point = (tray_from_part * Point3::from(face.center)).coords;
+        assert!(!sel.covered(&map, &det, &face, &face_point), "a bare strip is covered");
+        // Negative control: a 10 mm part lying across the strip 55 mm from its centre.
+        for j in 0..ny {
+            for i in 0..nx {
+                let p = inverse * centre(i, j);
+                if (p.x - 0.055).abs() <= 0.005 && p.y.abs() <= 0.02 {
+                    map.height_m[j * nx + i] = c.size_m[2] + 0.01;
+                }
+            }
+        }
+        assert!(
+            sel.covered(&map, &det, &face, &face_point),
+            "a part across the strip is not seen"
+        );
+    }
+
+    #[test]
     fn trapezoid_times() {
         assert!((joint_move_s(1.0, 1.0, 1.0) - 2.0).abs() < 1e-12);
         assert!((joint_move_s(0.25, 1.0, 1.0) - 1.0).abs() < 1e-12);

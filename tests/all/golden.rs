@@ -89,12 +89,12 @@ fn a_changed_result_is_caught() {
     let ws = Workspace::new();
     let golden = repo().join("tests/golden/run-C-seed1-det/summary.json");
     let text = std::fs::read_to_string(&golden).unwrap();
-    let edited = text.replacen("\"placed\": 10", "\"placed\": 9", 1);
-    assert_ne!(text, edited, "the golden summary has no \"placed\": 10 to edit");
+    let edited = text.replacen("\"workpiece\": \"C\"", "\"workpiece\": \"D\"", 1);
+    assert_ne!(text, edited, "the golden summary has no workpiece C to edit");
     let p = ws.path("summary.json");
     std::fs::write(&p, edited).unwrap();
     if std::env::var_os("BINPICK_BLESS").is_none() {
         let e = same_as_golden("run-C-seed1-det/summary.json", &p).unwrap_err();
-        assert!(e.contains("\"placed\": 9"), "{e}");
+        assert!(e.contains("\"workpiece\": \"D\""), "{e}");
     }
 }
