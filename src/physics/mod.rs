@@ -172,7 +172,22 @@ pub struct PartBody {
     view_collider: ColliderHandle,
     /// Where it is in its life.
     pub state: PartState,
+    /// A placed part's pose at the start of its current rest window: (time [s], pose).
+    rest_ref: Option<(f64, Isometry3<f64>)>,
 }
+
+/// A placed part whose pose changes less than [`PLACED_REST_M`] and [`PLACED_REST_RAD`] over
+/// this window is put to sleep [s]. A real part resting in the place tray is held by static
+/// friction; in rapier, D's can resting on its 16-sided cap keeps a solver velocity of ~4 cm/s
+/// that jitters it across the floor at ~1.3 mm/s, 22 mm over a run, into the next slot, where
+/// the next part was pressed onto it (a collision). Asleep it stays put until something touches
+/// it, which wakes it.
+pub const PLACED_REST_WINDOW_S: f64 = 0.2;
+/// See [`PLACED_REST_WINDOW_S`] [m]: 2.5 mm/s, faster than the solver's creep, slower than
+/// anything a falling, sliding or toppling part does.
+pub const PLACED_REST_M: f64 = 0.0005;
+/// See [`PLACED_REST_WINDOW_S`] [rad].
+pub const PLACED_REST_RAD: f64 = 0.02;
 
 /// The simulated cell.
 pub struct World {
@@ -489,11 +504,41 @@ impl World {
         self.steps += 1;
         self.substeps += n as u64;
         self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
+        self.rest_placed_parts();
         let events = self.health.check(self);
         if events.is_empty() {
             Ok(())
         } else {
             Err(HealthError { events })
+        }
+    }
+
+    /// Puts placed parts that have come to rest to sleep ([`PLACED_REST_WINDOW_S`]).
+    fn rest_placed_parts(&mut self) {
+        let now = self.time_s;
+        for i in 0..self.parts.len() {
+            let body = self.parts[i].body;
+            if self.parts[i].state != PartState::Placed
+                || self.bodies[body].is_sleeping()
+                || !self.bodies[body].is_dynamic()
+            {
+                self.parts[i].rest_ref = None;
+                continue;
+            }
+            let pose = self.part_pose(i);
+            match self.parts[i].rest_ref {
+                Some((t0, before)) if now - t0 >= PLACED_REST_WINDOW_S - 1e-9 => {
+                    let moved = before.inverse() * pose;
+                    if moved.translation.vector.norm() < PLACED_REST_M && moved.rotation.angle() < PLACED_REST_RAD {
+                        self.bodies[body].sleep();
+                        self.parts[i].rest_ref = None;
+                    } else {
+                        self.parts[i].rest_ref = Some((now, pose));
+                    }
+                }
+                Some(_) => {}
+                None => self.parts[i].rest_ref = Some((now, pose)),
+            }
         }
     }
 
@@ -569,6 +614,7 @@ impl World {
             collider,
             view_collider,
             state: PartState::Free,
+            rest_ref: None,
         });
         idx
     }
