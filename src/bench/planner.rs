@@ -148,7 +148,7 @@ pub fn binpicking_queries(
             w.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed))?;
             let sensor = Sensor::new(&scene.scene.sensor, &w, seed).ok_or("degenerate sensor")?;
             let c = crate::sensor::capture(&w, &sensor.camera, seed, 0);
-            let det = sensor.recognize(&w, &c);
+            let det = sensor.recognize_oracle(&crate::sensor::TruthAtTrigger::take(&w, &sensor, &c));
             let slots = scene.scene.world_from_slots(&wp.workpiece);
             let selector = crate::grasp::GraspSelector::new(&scene.scene, robot, &wp.workpiece);
             let ctx = GraspContext {

@@ -72,8 +72,9 @@ pub fn sense_bench(
         let mut c = capture(&w, &sensor.camera, 1, 0);
         let cap = time_ms(&mut || c = capture(&w, &sensor.camera, 1, 0));
         let single = one.install(|| time_ms(&mut || c = capture(&w, &sensor.camera, 1, 0)));
-        let detections = sensor.recognize(&w, &c);
-        let report = crate::sensor::evaluate(&w, &detections);
+        let truth = crate::sensor::TruthAtTrigger::take(&w, &sensor, &c);
+        let detections = sensor.recognize_oracle(&truth);
+        let report = crate::sensor::evaluate(&truth, &detections);
         let selector = crate::grasp::GraspSelector::new(&scene.scene, robot, &wp.workpiece);
         let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
         let q = w.joints();

@@ -141,7 +141,7 @@ pub fn sense(a: &PileArgs) -> Result<()> {
     let sensed = sensed.context("the arm found no path out of the sensor's view")?;
     let (job, detections) = (&sensed.job, sensed.detections.clone().unwrap_or_default());
     let world = &state.world;
-    let report = binpick::sensor::evaluate(world, &detections);
+    let report = binpick::sensor::evaluate(&job.truth, &detections);
     let t1 = std::time::Instant::now();
     let ctx = GraspContext {
         scene: &loaded.scene,

@@ -81,7 +81,7 @@ impl Run<'_, '_> {
             }
             self.span(Stage::Sensor, capture_s, job.exposure_end_s, "exposure");
             self.span(Stage::Recognition, job.exposure_end_s, job.ready_s, "recognition");
-            let detections = self.st.sensor.result(&job, &self.st.world);
+            let detections = self.st.sensor.result(&job, self.st.world.time_s());
             self.event_at(
                 job.ready_s,
                 Event::RecognitionReady {

@@ -26,13 +26,13 @@ pub mod capture;
 pub mod heightmap;
 pub mod recognition;
 
-use nalgebra::{Point3, Vector3};
+use nalgebra::Point3;
 use serde::Serialize;
 
 pub use camera::Camera;
 pub use capture::{Background, Capture, capture, capture_over};
 pub use heightmap::HeightMap;
-pub use recognition::{Detection, RecognitionReport, evaluate, ser_pose, top_layer};
+pub use recognition::{Detection, RecognitionReport, TruthAtTrigger, evaluate, ser_pose, top_layer};
 
 use crate::config::SensorConfig;
 use crate::physics::{PartState, TrayVolume, ViewVolume, World};
@@ -83,9 +83,11 @@ pub struct CaptureJob {
     pub ready_s: f64,
     /// Set if the exposure was spoiled.
     pub spoiled: Option<CaptureProblem>,
-    /// Part positions at the trigger, to tell whether the scene stays still [m].
-    positions_at_trigger: Vec<Vector3<f64>>,
-    /// How far each part moved during the exposure [m].
+    /// Ground truth at the trigger (evaluation and the oracle recognition only).
+    pub truth: TruthAtTrigger,
+    /// How far each part's farthest point moved during the exposure [m]: its centre's travel
+    /// plus its turn times its bounding radius (a 15 cm strip turning about its centre moves its
+    /// ends).
     moved_m: Vec<f64>,
 }
 
@@ -96,8 +98,8 @@ impl CaptureJob {
     }
 }
 
-/// A part moving more than this during the exposure is blurred [m]: a third of a pixel at the
-/// tray floor. Motion, not velocity: a part resting on a flat face can keep a small solver
+/// A part any point of which moves more than this during the exposure is blurred [m]: a third
+/// of a pixel at the tray floor. Motion, not velocity: a part resting on a flat face can keep a small solver
 /// velocity that moves nothing.
 pub const STILL_MOTION_M: f64 = 0.0005;
 
@@ -154,14 +156,13 @@ impl Sensor {
         }
         let capture = capture_over(world, &self.camera, self.seed, self.triggered, Some(&self.background));
         self.triggered += 1;
+        let truth = TruthAtTrigger::take(world, self, &capture);
         Ok(CaptureJob {
             exposure_end_s: world.time_s() + self.exposure_s,
             ready_s: world.time_s() + self.latency_s,
             capture,
             spoiled: None,
-            positions_at_trigger: (0..world.part_count())
-                .map(|i| world.part_pose(i).translation.vector)
-                .collect(),
+            truth,
             moved_m: vec![0.0; world.part_count()],
         })
     }
@@ -172,9 +173,12 @@ impl Sensor {
         if job.spoiled.is_some() || world.time_s() > job.exposure_end_s + 1e-9 {
             return None;
         }
-        for (i, p) in job.positions_at_trigger.iter().enumerate() {
+        let radius_m = world.part_shape().bounding_radius_m;
+        for (i, at_trigger) in job.truth.world_from_part.iter().enumerate() {
             if world.part_state(i) == PartState::Free {
-                let d = (world.part_pose(i).translation.vector - p).norm();
+                let now = world.part_pose(i);
+                let d = (now.translation.vector - at_trigger.translation.vector).norm()
+                    + now.rotation.angle_to(&at_trigger.rotation) * radius_m;
                 job.moved_m[i] = job.moved_m[i].max(d);
             }
         }
@@ -189,11 +193,12 @@ impl Sensor {
         problem
     }
 
-    /// The recognition result of a job, once `ready_s` has come and if it was not spoiled: the
-    /// recognised parts less those blurred by moving during the exposure.
-    pub fn result(&self, job: &CaptureJob, world: &World) -> Option<Vec<Detection>> {
-        (job.spoiled.is_none() && world.time_s() + 1e-9 >= job.ready_s).then(|| {
-            let mut d = self.recognize(world, &job.capture);
+    /// The recognition result of a job, once `ready_s` has come (`now_s`) and if it was not
+    /// spoiled: the recognised parts less those blurred by moving during the exposure. Reads
+    /// nothing of the world: what the picture showed at the trigger.
+    pub fn result(&self, job: &CaptureJob, now_s: f64) -> Option<Vec<Detection>> {
+        (job.spoiled.is_none() && now_s + 1e-9 >= job.ready_s).then(|| {
+            let mut d = self.recognize_oracle(&job.truth);
             d.retain(|d| job.moved_m.get(d.truth_part).is_none_or(|m| *m <= STILL_MOTION_M));
             d
         })

@@ -1,11 +1,16 @@
 //! Recognition: which parts a capture shows and where, and the evaluation of that against the
 //! ground truth.
 //!
-//! Model (simplified, stated in the README): a part counts as detected when at least
+//! Ground truth is snapshotted at the trigger ([`TruthAtTrigger`]): which parts the capture
+//! showed, how much of each, where every part was at that instant, and the pile's top layer.
+//! Nothing is read from the world after the trigger: a part that slides after the exposure is
+//! reported where the picture showed it.
+//!
+//! The oracle model (simplified, stated in the README): a part counts as detected when at least
 //! `detect_min_visible_fraction` of the pixels it would cover, unoccluded, show it in the
-//! capture; its pose then comes with Gaussian noise. The ground-truth body per pixel is used only
-//! for that visibility count, never to reveal a hidden part. Evaluation ([`evaluate`]) compares
-//! detections with the world: the pile's top layer, recall, pose errors.
+//! capture; its pose at the trigger then comes with Gaussian noise. The ground-truth body per
+//! pixel is used only for that visibility count, never to reveal a hidden part. Evaluation
+//! ([`evaluate`]) compares detections with the snapshot: the top layer, recall, pose errors.
 //!
 //! Units: m, rad, px. Frames: world. Randomness: the `recognition` stream of the run seed,
 //! positioned by the capture number.
@@ -17,24 +22,72 @@ use super::capture::gaussian;
 use super::{Capture, Sensor};
 use crate::physics::{PartState, RayHit, Tag, World};
 
-impl Sensor {
-    /// Recognition on a capture: detected parts with noisy poses (see the module header).
-    pub fn recognize(&self, world: &World, c: &Capture) -> Vec<Detection> {
-        let mut visible = vec![0usize; world.part_count()];
+/// Ground truth at a capture's trigger, for evaluation and for the oracle recognition only: the
+/// cell's decisions never read it.
+#[derive(Debug, Clone)]
+pub struct TruthAtTrigger {
+    /// The capture's number.
+    pub capture_id: u64,
+    /// The trigger [s].
+    pub t_s: f64,
+    /// Every part's `world_from_part` at the trigger.
+    pub world_from_part: Vec<Isometry3<f64>>,
+    /// Parts free in the pick tray at the trigger.
+    pub free: Vec<bool>,
+    /// Pixels of the capture showing each part.
+    pub visible_px: Vec<usize>,
+    /// Pixels each part that shows in the capture would cover with nothing in front of it (0 for
+    /// the others).
+    pub unoccluded_px: Vec<usize>,
+    /// Parts in the pile's top layer at the trigger ([`top_layer`]).
+    pub top_layer: Vec<usize>,
+}
+
+impl TruthAtTrigger {
+    /// Snapshots `world` as `c` was taken (call it at the trigger).
+    pub fn take(world: &World, sensor: &Sensor, c: &Capture) -> Self {
+        let n = world.part_count();
+        let mut visible_px = vec![0usize; n];
         for t in c.truth.iter().flatten() {
             if let Tag::Part(i) = t {
-                visible[*i as usize] += 1;
+                visible_px[*i as usize] += 1;
             }
         }
+        let free: Vec<bool> = (0..n).map(|i| world.part_state(i) == PartState::Free).collect();
+        let unoccluded_px = (0..n)
+            .map(|i| {
+                if free[i] && visible_px[i] > 0 {
+                    sensor.unoccluded_pixels(world, i)
+                } else {
+                    0
+                }
+            })
+            .collect();
+        TruthAtTrigger {
+            capture_id: c.id,
+            t_s: c.trigger_s,
+            world_from_part: (0..n).map(|i| world.part_pose(i)).collect(),
+            free,
+            visible_px,
+            unoccluded_px,
+            top_layer: top_layer(world),
+        }
+    }
+}
+
+impl Sensor {
+    /// The oracle recognition: the parts the capture showed enough of, at their poses at the
+    /// trigger with Gaussian noise (see the module header). Reads the snapshot, not the world.
+    pub fn recognize_oracle(&self, truth: &TruthAtTrigger) -> Vec<Detection> {
         let mut rng = crate::rng::stream(self.seed, "recognition");
-        rng.set_word_pos(c.id as u128 * 1_000_000);
+        rng.set_word_pos(truth.capture_id as u128 * 1_000_000);
         let mut out = Vec::new();
-        for (i, &seen) in visible.iter().enumerate() {
+        for (i, &seen) in truth.visible_px.iter().enumerate() {
             // Parts in view only: free parts in the pick tray column.
-            if world.part_state(i) != PartState::Free || seen == 0 {
+            if !truth.free[i] || seen == 0 {
                 continue;
             }
-            let full = self.unoccluded_pixels(world, i);
+            let full = truth.unoccluded_px[i];
             if full == 0 {
                 continue;
             }
@@ -42,7 +95,7 @@ impl Sensor {
             if fraction < self.detect_min_visible_fraction {
                 continue;
             }
-            let truth = world.part_pose(i);
+            let truth = truth.world_from_part[i];
             let dp = Vector3::new(gaussian(&mut rng), gaussian(&mut rng), gaussian(&mut rng)) * self.pose_noise_m;
             let dr = Vector3::new(gaussian(&mut rng), gaussian(&mut rng), gaussian(&mut rng)) * self.pose_noise_rad;
             let pose = Isometry3::from_parts(
@@ -59,7 +112,7 @@ impl Sensor {
     }
 
     /// Pixels part `i` would cover with nothing in front of it (rays against it alone).
-    fn unoccluded_pixels(&self, world: &World, i: usize) -> usize {
+    pub(super) fn unoccluded_pixels(&self, world: &World, i: usize) -> usize {
         let cam = &self.camera;
         let (lo, hi) = world.part_view_box_m(i);
         let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
@@ -161,14 +214,14 @@ pub fn top_layer(world: &World) -> Vec<usize> {
         .collect()
 }
 
-/// Scores detections against the world's ground truth.
-pub fn evaluate(world: &World, detections: &[Detection]) -> RecognitionReport {
-    let top = top_layer(world);
+/// Scores detections against the ground truth at their capture's trigger.
+pub fn evaluate(truth: &TruthAtTrigger, detections: &[Detection]) -> RecognitionReport {
+    let top = &truth.top_layer;
     let found: std::collections::BTreeSet<usize> = detections.iter().map(|d| d.truth_part).collect();
     let top_found = top.iter().filter(|i| found.contains(i)).count();
     let (mut sp, mut mp, mut sr, mut mr) = (0.0, 0.0f64, 0.0, 0.0f64);
     for d in detections {
-        let truth = world.part_pose(d.truth_part);
+        let truth = truth.world_from_part[d.truth_part];
         let ep = (truth.translation.vector - d.world_from_part.translation.vector).norm();
         let er = truth.rotation.angle_to(&d.world_from_part.rotation);
         sp += ep;
@@ -178,7 +231,7 @@ pub fn evaluate(world: &World, detections: &[Detection]) -> RecognitionReport {
     }
     let n = detections.len().max(1) as f64;
     RecognitionReport {
-        parts: world.parts_in_pick_tray().len(),
+        parts: truth.free.iter().filter(|f| **f).count(),
         top_layer: top.len(),
         top_layer_detected: top_found,
         detected: detections.len(),
