@@ -54,6 +54,7 @@ fn main() -> anyhow::Result<()> {
         let sym = Symmetry::of(&wp.workpiece);
         let (mut top_n, mut top_found, mut det_n, mut right_n) = (0, 0, 0, 0);
         let (mut pos, mut rot, mut ms) = (Vec::new(), Vec::new(), Vec::new());
+        let (mut wrong_rot, mut wrong_pos, mut wrong_rot_deg) = (0, 0, Vec::new());
         for seed in 1..=seeds {
             let shape = PartShape::build(&wp.workpiece, &wp.source)?;
             let mut world = World::new(&scene.scene, &robot, shape);
@@ -80,6 +81,23 @@ fn main() -> anyhow::Result<()> {
                     right_parts.insert(i);
                     pos.push(dp * 1e3);
                     rot.push(dr.to_degrees());
+                } else if let Some((_, (dp, dr))) = best {
+                    if dp <= RIGHT_M {
+                        wrong_rot += 1;
+                        wrong_rot_deg.push(dr.to_degrees());
+                    } else {
+                        wrong_pos += 1;
+                    }
+                    if std::env::var_os("CLOUD_EVAL_VERBOSE").is_some() {
+                        eprintln!(
+                            "{name} seed {seed}: wrong face {} score {:.2} vis {:.2}: {:.2} mm {:.1} deg",
+                            d.face_up,
+                            d.score,
+                            d.visible_fraction,
+                            dp * 1e3,
+                            dr.to_degrees()
+                        );
+                    }
                 }
             }
             top_n += top.len();
@@ -92,6 +110,10 @@ fn main() -> anyhow::Result<()> {
             100.0 * top_found as f64 / top_n.max(1) as f64,
             100.0 * right_n as f64 / det_n.max(1) as f64,
             quantile(&mut ms, 0.5)
+        );
+        println!(
+            "      wrong: {wrong_rot} by rotation only (median {:.1} deg), {wrong_pos} by position",
+            quantile(&mut wrong_rot_deg, 0.5)
         );
     }
     Ok(())

@@ -64,10 +64,23 @@ pub struct CloudModel {
 }
 
 impl CloudModel {
-    /// The model of a workpiece (mesh workpieces have no faces: nothing is recognised).
+    /// The model of a workpiece (mesh workpieces have no faces: nothing is recognised). The faces
+    /// are [`body_faces`] (same indices), then the body's faces that only leads stand out of (a
+    /// relay lying on its back shows its pinned face: it must be matched to be told apart).
     pub fn new(w: &Workpiece) -> Self {
+        let mut faces = body_faces(w);
+        let mut bare = w.clone();
+        bare.shape.parts.retain(|p| p.role == PartRole::Body);
+        for f in body_faces(&bare) {
+            if !faces
+                .iter()
+                .any(|g| (g.center - f.center).norm() < 1e-9 && (g.normal - f.normal).norm() < 1e-9)
+            {
+                faces.push(f);
+            }
+        }
         CloudModel {
-            faces: body_faces(w),
+            faces,
             pieces: w.pieces().into_iter().map(|(_, p)| p).collect(),
             half_size_m: Vector3::from(w.size_m) / 2.0,
             half_turn_matters: w.shape.kind == ShapeKind::Compound,
@@ -224,14 +237,11 @@ impl<'a> Cloud<'a> {
                 continue;
             }
             let c = self.pts[i];
-            let ring: Vec<Option<Vector3<f64>>> = RING
-                .iter()
-                .map(|&(du, dv)| {
-                    self.neighbour(i, du, dv)
-                        .filter(|&j| self.fg[j] && (self.depth[j] - self.depth[i]).abs() < 0.004)
-                        .map(|j| self.pts[j] - c)
-                })
-                .collect();
+            let ring: [Option<Vector3<f64>>; 8] = RING.map(|(du, dv)| {
+                self.neighbour(i, du, dv)
+                    .filter(|&j| self.fg[j] && (self.depth[j] - self.depth[i]).abs() < 0.004)
+                    .map(|j| self.pts[j] - c)
+            });
             let mut n = Vector3::zeros();
             let mut pairs = 0;
             for k in 0..8 {
@@ -350,23 +360,23 @@ impl<'a> Cloud<'a> {
             .iter()
             .filter_map(|&i| self.ray_on_plane(i, &plane).map(|(p, _)| to2(p)))
             .collect();
-        let mut member = std::collections::BTreeSet::new();
-        member.extend(patch.pixels.iter().copied());
-        let mut seen = std::collections::BTreeSet::new();
-        let mut outside = Vec::new();
-        for &i in &patch.pixels {
-            for &(du, dv) in &RING {
-                let Some(j) = self.neighbour(i, du, dv) else { continue };
-                if member.contains(&j) || !seen.insert(j) || self.depth[j] <= 0.0 {
-                    continue;
-                }
-                if let Some((p, z)) = self.ray_on_plane(j, &plane)
-                    && self.depth[j] > z + BEHIND_TOL_M
-                {
-                    outside.push(to2(p));
-                }
-            }
-        }
+        let mut member = patch.pixels.clone();
+        member.sort_unstable();
+        let mut ring: Vec<usize> = patch
+            .pixels
+            .iter()
+            .flat_map(|&i| RING.iter().filter_map(move |&(du, dv)| self.neighbour(i, du, dv)))
+            .filter(|j| member.binary_search(j).is_err() && self.depth[*j] > 0.0)
+            .collect();
+        ring.sort_unstable();
+        ring.dedup();
+        let outside: Vec<[f64; 2]> = ring
+            .into_iter()
+            .filter_map(|j| {
+                let (p, z) = self.ray_on_plane(j, &plane)?;
+                (self.depth[j] > z + BEHIND_TOL_M).then(|| to2(p))
+            })
+            .collect();
         (plane, [e1, e2], inside, outside)
     }
 
@@ -375,8 +385,17 @@ impl<'a> Cloud<'a> {
         let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
         let n = plane.normal;
         let theta0 = min_area_theta(&inside);
-        let mut best: Option<CloudDetection> = None;
+        // (evidence, detection): the hypothesis the image supports most.
+        let mut best: Option<(i64, CloudDetection)> = None;
         for (fi, face) in model.faces.iter().enumerate() {
+            // A box's faces of equal extents look alike: the first stands for them.
+            let twin = |g: &Face| {
+                let (a, b) = (face.extent_m, g.extent_m);
+                (a[0] - b[0]).abs() + (a[1] - b[1]).abs() < 1e-9 || (a[0] - b[1]).abs() + (a[1] - b[0]).abs() < 1e-9
+            };
+            if !model.half_turn_matters && model.faces[..fi].iter().any(twin) {
+                continue;
+            }
             let mut fits = Vec::new();
             if face.disc {
                 if let Some(c) = fit_disc(&inside, &outside, face.extent_m[0] / 2.0) {
@@ -405,26 +424,30 @@ impl<'a> Cloud<'a> {
                     let u = e1 * t.cos() + e2 * t.sin();
                     let center = plane.point + e1 * c[0] + e2 * c[1];
                     let pose = pose_from_face(face, &center, &n, &u);
-                    let Some((score, visible)) = self.verify(model, &pose) else {
+                    let Some((score, visible, evidence)) = self.verify(model, &pose) else {
                         continue;
                     };
-                    if score >= MIN_SCORE && best.as_ref().is_none_or(|b| score > b.score + 1e-12) {
-                        best = Some(CloudDetection {
-                            world_from_part: pose,
-                            face_up: fi,
-                            score,
-                            visible_fraction: visible,
-                        });
+                    if score >= MIN_SCORE && best.as_ref().is_none_or(|b| evidence > b.0) {
+                        best = Some((
+                            evidence,
+                            CloudDetection {
+                                world_from_part: pose,
+                                face_up: fi,
+                                score,
+                                visible_fraction: visible,
+                            },
+                        ));
                     }
                 }
             }
         }
-        best
+        best.map(|b| b.1)
     }
 
     /// Renders the model at `pose` into the image and compares with the measured depth: (score,
-    /// visible fraction), `None` if it renders too few agreeing pixels.
-    fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<(f64, f64)> {
+    /// visible fraction, evidence = agreeing less 3 x contradicting pixels), `None` if it renders
+    /// too few agreeing pixels.
+    fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<(f64, f64, i64)> {
         let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
         let hs = model.half_size_m;
         for k in 0..8 {
@@ -463,6 +486,7 @@ impl<'a> Cloud<'a> {
             (
                 agree as f64 / (agree + contradict) as f64,
                 (agree as f64 / rendered.max(1) as f64).min(1.0),
+                agree as i64 - 3 * contradict as i64,
             )
         })
     }
@@ -643,8 +667,8 @@ fn rect_intervals(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], thet
 /// centre the middle of the feasible intervals at that yaw. `None` if infeasible or ambiguous.
 /// Returns (centre in the plane basis, yaw).
 fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta0: f64) -> Option<([f64; 2], f64)> {
-    let step = 0.1f64.to_radians();
-    let widths: Vec<[f64; 2]> = (-100..=100)
+    let step = 0.25f64.to_radians();
+    let widths: Vec<[f64; 2]> = (-40..=40)
         .map(|k| {
             let iv = rect_intervals(inside, outside, ext, theta0 + k as f64 * step);
             [iv[0][1] - iv[0][0], iv[1][1] - iv[1][0]]
@@ -653,7 +677,7 @@ fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta0: f6
     // Strictly consistent yaws if there are any, else those within the plane's error.
     let mean_k = [0.02 * FIT_VIOLATION_M, FIT_VIOLATION_M].iter().find_map(|soft| {
         let (mut sw, mut sk) = (0.0, 0.0);
-        for (k, w) in (-100..=100).zip(&widths) {
+        for (k, w) in (-40..=40).zip(&widths) {
             let wgt = (w[0] + soft).max(0.0) * (w[1] + soft).max(0.0);
             sw += wgt;
             sk += wgt * k as f64;
