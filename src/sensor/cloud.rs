@@ -152,7 +152,11 @@ struct Cloud<'a> {
     height: Vec<f64>,
 }
 
-/// A smooth surface patch: its pixels and plane.
+/// A patch's plane, its in-plane basis (e1, e2), the in-plane points of its pixels' rays (inside)
+/// and of the neighbours seen behind the plane (outside) [m].
+type Silhouette = (Plane, [Vector3<f64>; 2], Vec<[f64; 2]>, Vec<[f64; 2]>);
+
+/// A smooth surface patch: its pixels.
 struct Patch {
     pixels: Vec<usize>,
 }
@@ -338,7 +342,7 @@ impl<'a> Cloud<'a> {
 
     /// A patch's plane, its pixels' rays cut with the plane (inside) and the neighbours whose
     /// measured point lies behind the plane (outside), both in the plane's basis (e1, e2).
-    fn silhouette(&self, patch: &Patch) -> (Plane, [Vector3<f64>; 2], Vec<[f64; 2]>, Vec<[f64; 2]>) {
+    fn silhouette(&self, patch: &Patch) -> Silhouette {
         let origin = self.pts[patch.pixels[0]];
         let (mut s, mut ss) = (Vector3::zeros(), Matrix3::zeros());
         for &i in &patch.pixels {

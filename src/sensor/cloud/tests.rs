@@ -8,8 +8,6 @@ use super::*;
 use crate::config::{LoadedScene, LoadedWorkpiece};
 use crate::sensor::capture::gaussian;
 
-const NOISE: f64 = 1.0;
-
 struct Cell {
     camera: Camera,
     tray: TrayVolume,
@@ -58,7 +56,7 @@ fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) -> Capture {
                 }
             }
             let z = t * d.dot(&optical);
-            let zn = z + NOISE * gaussian(&mut rng) * cam.depth_noise_at_1m_m * z * z;
+            let zn = z + gaussian(&mut rng) * cam.depth_noise_at_1m_m * z * z;
             let p = origin + d * (zn / d.dot(&optical));
             c.depth_m[v * w + u] = zn as f32;
             c.points_world[v * w + u] = [p.x as f32, p.y as f32, p.z as f32];
@@ -205,83 +203,4 @@ fn symmetries_of_the_workpieces() {
     assert_eq!(count("C"), 4);
     assert_eq!(count("D"), 0);
     assert_eq!(count("F"), 8);
-}
-
-#[test]
-#[ignore]
-fn debug_errors() {
-    let cell = cell();
-    for name in ["F", "E", "B", "D"] {
-        let w = workpiece(name);
-        let m = CloudModel::new(&w);
-        let sym = Symmetry::of(&w);
-        for k in 0..8 {
-            let pose = resting(
-                &cell,
-                &w,
-                -0.06 + 0.017 * k as f64,
-                0.013 * k as f64 - 0.04,
-                0.0,
-                yaw(7.0 + 11.0 * k as f64),
-            );
-            let found = recognize(&synthetic(&cell, &[(&m, pose)]), &cell.camera, &cell.tray, &m);
-            for d in &found {
-                let (dp, dr) = sym.pose_error(&pose, &d.world_from_part);
-                let tilt = (pose.rotation * Vector3::z()).angle(&(d.world_from_part.rotation * Vector3::z()));
-                println!(
-                    "{name} k{k} pos {:.2} mm rot {:.2} deg tilt {:.2} face {} score {:.2}",
-                    dp * 1e3,
-                    dr.to_degrees(),
-                    tilt.to_degrees(),
-                    d.face_up,
-                    d.score
-                );
-            }
-            if found.is_empty() {
-                println!("{name} k{k} none");
-            }
-        }
-    }
-}
-
-#[test]
-#[ignore]
-fn debug_yaw() {
-    let cell = cell();
-    let w = workpiece("F");
-    let m = CloudModel::new(&w);
-    let k = 4;
-    let pose = resting(
-        &cell,
-        &w,
-        -0.06 + 0.017 * k as f64,
-        0.013 * k as f64 - 0.04,
-        0.0,
-        yaw(7.0 + 11.0 * k as f64),
-    );
-    let cap = synthetic(&cell, &[(&m, pose)]);
-    let cloud = Cloud::new(&cap, &cell.camera, &cell.tray);
-    let patches = cloud.segment();
-    for p in &patches {
-        let (plane, _, inside, outside) = cloud.silhouette(p);
-        println!(
-            "patch {} px, normal {:?}, inside {} outside {}",
-            p.pixels.len(),
-            plane.normal,
-            inside.len(),
-            outside.len()
-        );
-        let t0 = min_area_theta(&inside);
-        println!("theta0 {:.2}", t0.to_degrees());
-        for kk in -20..=20 {
-            let t = (51.0 - 90.0 + kk as f64 * 0.5).to_radians();
-            let iv = rect_intervals(&inside, &outside, [0.01, 0.01], t);
-            println!(
-                "t {:.1}: widths {:.3} {:.3}",
-                t.to_degrees(),
-                (iv[0][1] - iv[0][0]) * 1e3,
-                (iv[1][1] - iv[1][0]) * 1e3
-            );
-        }
-    }
 }
