@@ -23,6 +23,7 @@
 
 pub mod camera;
 pub mod capture;
+pub mod cloud;
 pub mod heightmap;
 pub mod recognition;
 
@@ -31,6 +32,7 @@ use serde::Serialize;
 
 pub use camera::Camera;
 pub use capture::{Background, Capture, capture, capture_over};
+pub use cloud::{CloudDetection, CloudModel};
 pub use heightmap::HeightMap;
 pub use recognition::{Detection, RecognitionReport, TruthAtTrigger, evaluate, ser_pose, top_layer};
 

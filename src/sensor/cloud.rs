@@ -1,0 +1,811 @@
+//! Recognition from the point cloud: parts found in a depth capture from the capture alone, the
+//! workpiece model and the fixed cell (issue 15). It never sees the physics world: its inputs are
+//! [`Capture`] (depth and organised points), [`Camera`], [`TrayVolume`] and [`CloudModel`].
+//!
+//! Pipeline: (1) background removal: points within [`FLOOR_TOL_M`] of the tray floor or outside
+//! its inner walls; (2) normals per pixel from the ring of its 8 neighbours; (3) region growing
+//! from smooth seed pixels, highest first: a 4-neighbour joins when it lies within
+//! [`PLANE_TOL_M`] of the region's plane (refitted as it doubles) and its normal within
+//! [`NORMAL_TOL_RAD`] of the plane's; (4) per patch the least-squares plane, and each pixel's ray
+//! cut with that plane (noise-free in-plane positions); the neighbours whose measured point lies
+//! behind the plane are "outside" (the ray passed the face), those in front or missing say
+//! nothing; (5) per model face a silhouette fit: the face's rectangle (or disc) placed so it holds
+//! every inside point and no outside point, the yaw scanned around the patch's minimum-area
+//! rectangle, the centre the middle of the feasible interval per axis; a face too small, too large
+//! or not pinned down (both edges of an axis hidden) is no hypothesis; (6) each hypothesis (the
+//! face up, the body below it) is rendered by ray casting the model into the depth image and
+//! compared: agreeing within [`AGREE_TOL_M`], measured in front (occluded, allowed) or measured
+//! behind (a contradiction); score = agree / (agree + contradict); (7) the best hypothesis per
+//! patch if it scores at least [`MIN_SCORE`], then non-maximum suppression by centre distance.
+//!
+//! Units: m, rad, px. Frames: world (`world_from_part`), the pick tray frame for the background,
+//! a patch's plane basis (e1, e2, normal toward the camera) for the silhouette fits.
+//! Deterministic: no randomness, fixed iteration orders.
+
+use nalgebra::{Isometry3, Matrix3, Point3, Rotation3, Translation3, UnitQuaternion, Vector3};
+use serde::Serialize;
+
+use super::{Camera, Capture};
+use crate::config::{Axis, PartRole, Piece, ShapeKind, Workpiece};
+use crate::geometry::TrayVolume;
+use crate::grasp::{Face, body_faces};
+
+/// Points lower than this above the tray floor are background [m]: depth noise is 0.3 mm at 1 m.
+pub const FLOOR_TOL_M: f64 = 0.0012;
+/// A pixel joins a patch when its point lies this close to the patch's plane [m].
+pub const PLANE_TOL_M: f64 = 0.001;
+/// ... and its local normal lies within this of the plane's [rad].
+pub const NORMAL_TOL_RAD: f64 = 0.6;
+/// A neighbour measured this far behind a patch's plane shows the ray passed the face [m].
+pub const BEHIND_TOL_M: f64 = 0.0015;
+/// Rendered and measured depth agree within this [m].
+pub const AGREE_TOL_M: f64 = 0.002;
+/// Smallest patch considered [px].
+pub const MIN_PATCH_PX: usize = 8;
+/// A silhouette fit may violate its constraints by this much (plane error) [m].
+pub const FIT_VIOLATION_M: f64 = 0.0006;
+/// A silhouette fit whose feasible interval is wider than this does not pin the part down [m].
+pub const FIT_AMBIGUITY_M: f64 = 0.0025;
+/// Lowest verification score kept.
+pub const MIN_SCORE: f64 = 0.8;
+
+/// The workpiece as recognition sees it: its flat body faces (to match patches) and all its
+/// pieces, leads included (to render hypotheses).
+#[derive(Debug, Clone)]
+pub struct CloudModel {
+    /// The flat body faces, as [`body_faces`] gives them; `face_up` indexes this.
+    pub faces: Vec<Face>,
+    /// Every primitive, in the part frame.
+    pieces: Vec<Piece>,
+    /// Half the bounding box [m].
+    half_size_m: Vector3<f64>,
+    /// Whether a half turn about a face's normal can change the part (compounds: leads, bases).
+    half_turn_matters: bool,
+}
+
+impl CloudModel {
+    /// The model of a workpiece (mesh workpieces have no faces: nothing is recognised). The faces
+    /// are [`body_faces`] (same indices), then the body's faces that only leads stand out of (a
+    /// relay lying on its back shows its pinned face: it must be matched to be told apart).
+    pub fn new(w: &Workpiece) -> Self {
+        let mut faces = body_faces(w);
+        let mut bare = w.clone();
+        bare.shape.parts.retain(|p| p.role == PartRole::Body);
+        for f in body_faces(&bare) {
+            if !faces
+                .iter()
+                .any(|g| (g.center - f.center).norm() < 1e-9 && (g.normal - f.normal).norm() < 1e-9)
+            {
+                faces.push(f);
+            }
+        }
+        CloudModel {
+            faces,
+            pieces: w.pieces().into_iter().map(|(_, p)| p).collect(),
+            half_size_m: Vector3::from(w.size_m) / 2.0,
+            half_turn_matters: w.shape.kind == ShapeKind::Compound,
+        }
+    }
+
+    /// Smallest edge of the bounding box [m].
+    fn min_size_m(&self) -> f64 {
+        2.0 * self.half_size_m.min()
+    }
+}
+
+/// A part recognised in the point cloud.
+#[derive(Debug, Clone, Serialize)]
+pub struct CloudDetection {
+    /// Estimated `world_from_part`.
+    #[serde(serialize_with = "crate::sensor::ser_pose")]
+    pub world_from_part: Isometry3<f64>,
+    /// The model face seen on top (index into [`CloudModel::faces`]).
+    pub face_up: usize,
+    /// Verification score: agreeing pixels over agreeing plus contradicting ones.
+    pub score: f64,
+    /// Agreeing pixels over the pixels the part would cover unoccluded.
+    pub visible_fraction: f64,
+}
+
+/// Recognises parts in a capture from the capture, the camera, the pick tray's geometry and the
+/// workpiece model only (no physics world, no ground truth). Best first.
+pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &CloudModel) -> Vec<CloudDetection> {
+    let cloud = Cloud::new(capture, camera, tray);
+    let patches = cloud.segment();
+    let mut found: Vec<CloudDetection> = Vec::new();
+    for patch in &patches {
+        if let Some(d) = cloud.best_hypothesis(patch, model) {
+            found.push(d);
+        }
+    }
+    found.sort_by(|a, b| b.score.total_cmp(&a.score));
+    let mut kept: Vec<CloudDetection> = Vec::new();
+    let radius = 0.5 * model.min_size_m();
+    for d in found {
+        let c = d.world_from_part.translation.vector;
+        if kept
+            .iter()
+            .all(|k| (k.world_from_part.translation.vector - c).norm() > radius)
+        {
+            kept.push(d);
+        }
+    }
+    kept
+}
+
+/// The capture prepared for recognition.
+struct Cloud<'a> {
+    camera: &'a Camera,
+    w: usize,
+    h: usize,
+    origin: Vector3<f64>,
+    optical: Vector3<f64>,
+    /// World point per pixel (NaN: no return).
+    pts: Vec<Vector3<f64>>,
+    /// Depth per pixel, 0 where no return [m].
+    depth: Vec<f64>,
+    /// Foreground: a return inside the tray's inner walls, above the floor.
+    fg: Vec<bool>,
+    /// Local normal toward the camera (zero where not computable).
+    normal: Vec<Vector3<f64>>,
+    /// Height above the tray floor [m].
+    height: Vec<f64>,
+}
+
+/// A patch's plane, its in-plane basis (e1, e2), the in-plane points of its pixels' rays (inside)
+/// and of the neighbours seen behind the plane (outside) [m].
+type Silhouette = (Plane, [Vector3<f64>; 2], Vec<[f64; 2]>, Vec<[f64; 2]>);
+
+/// A smooth surface patch: its pixels.
+struct Patch {
+    pixels: Vec<usize>,
+}
+
+/// The 8-ring around a pixel, in circular order.
+const RING: [(i64, i64); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
+
+/// A plane: a point and a unit normal toward the camera.
+#[derive(Debug, Clone, Copy)]
+struct Plane {
+    point: Vector3<f64>,
+    normal: Vector3<f64>,
+}
+
+/// Least-squares plane of points given as sums relative to `origin`: count, sum, sum of outer
+/// products. The normal is oriented toward `eye`.
+fn plane_from_sums(n: f64, s: &Vector3<f64>, ss: &Matrix3<f64>, origin: &Vector3<f64>, eye: &Vector3<f64>) -> Plane {
+    let mean = s / n;
+    let cov = ss / n - mean * mean.transpose();
+    let eig = cov.symmetric_eigen();
+    let k = eig.eigenvalues.imin();
+    let mut normal: Vector3<f64> = eig.eigenvectors.column(k).into();
+    let point = origin + mean;
+    if normal.dot(&(eye - point)) < 0.0 {
+        normal = -normal;
+    }
+    Plane { point, normal }
+}
+
+impl<'a> Cloud<'a> {
+    fn new(c: &Capture, camera: &'a Camera, tray: &TrayVolume) -> Self {
+        let (w, h) = (c.width_px, c.height_px);
+        let tray_from_world = tray.world_from_tray.inverse();
+        let inner = [
+            tray.half_xy_m[0] - tray.wall_thickness_m,
+            tray.half_xy_m[1] - tray.wall_thickness_m,
+        ];
+        let mut pts = Vec::with_capacity(w * h);
+        let mut depth = Vec::with_capacity(w * h);
+        let mut fg = Vec::with_capacity(w * h);
+        let mut height = Vec::with_capacity(w * h);
+        for (p, d) in c.points_world.iter().zip(&c.depth_m) {
+            let v = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let ok = *d > 0.0 && v.x.is_finite();
+            let l = tray_from_world * Point3::from(v);
+            let inside = ok
+                && l.z > FLOOR_TOL_M
+                && l.z < tray.wall_height_m + 0.05
+                && l.x.abs() < inner[0] - 0.0005
+                && l.y.abs() < inner[1] - 0.0005;
+            pts.push(v);
+            depth.push(if ok { *d as f64 } else { 0.0 });
+            fg.push(inside);
+            height.push(if ok { l.z } else { f64::NAN });
+        }
+        let mut cloud = Cloud {
+            camera,
+            w,
+            h,
+            origin: camera.world_from_camera.translation.vector,
+            optical: camera.world_from_camera.rotation * Vector3::z(),
+            pts,
+            depth,
+            fg,
+            normal: vec![Vector3::zeros(); w * h],
+            height,
+        };
+        cloud.normals();
+        cloud
+    }
+
+    fn neighbour(&self, i: usize, du: i64, dv: i64) -> Option<usize> {
+        let (u, v) = ((i % self.w) as i64 + du, (i / self.w) as i64 + dv);
+        (u >= 0 && v >= 0 && (u as usize) < self.w && (v as usize) < self.h).then(|| v as usize * self.w + u as usize)
+    }
+
+    /// Local normals: the summed cross products of consecutive ring neighbours that are
+    /// foreground and within 4 mm of depth.
+    fn normals(&mut self) {
+        for i in 0..self.w * self.h {
+            if !self.fg[i] {
+                continue;
+            }
+            let c = self.pts[i];
+            let ring: [Option<Vector3<f64>>; 8] = RING.map(|(du, dv)| {
+                self.neighbour(i, du, dv)
+                    .filter(|&j| self.fg[j] && (self.depth[j] - self.depth[i]).abs() < 0.004)
+                    .map(|j| self.pts[j] - c)
+            });
+            let mut n = Vector3::zeros();
+            let mut pairs = 0;
+            for k in 0..8 {
+                if let (Some(a), Some(b)) = (ring[k], ring[(k + 1) % 8]) {
+                    n += a.cross(&b);
+                    pairs += 1;
+                }
+            }
+            if pairs >= 4 && n.norm() > 0.0 {
+                n.normalize_mut();
+                if n.dot(&(self.origin - c)) < 0.0 {
+                    n = -n;
+                }
+                self.normal[i] = n;
+            }
+        }
+    }
+
+    /// Whether pixel `i` can seed a region: all 8 neighbours foreground, on its local plane.
+    fn smooth(&self, i: usize) -> bool {
+        let n = self.normal[i];
+        n != Vector3::zeros()
+            && RING.iter().all(|&(du, dv)| {
+                self.neighbour(i, du, dv)
+                    .is_some_and(|j| self.fg[j] && n.dot(&(self.pts[j] - self.pts[i])).abs() < 0.8 * PLANE_TOL_M)
+            })
+    }
+
+    /// Region growing into smooth patches, seeds highest first.
+    fn segment(&self) -> Vec<Patch> {
+        let n = self.w * self.h;
+        let mut seeds: Vec<usize> = (0..n).filter(|&i| self.fg[i] && self.smooth(i)).collect();
+        seeds.sort_by(|&a, &b| self.height[b].total_cmp(&self.height[a]).then(a.cmp(&b)));
+        let mut label = vec![u32::MAX; n];
+        let mut patches = Vec::new();
+        let mut queue = std::collections::VecDeque::new();
+        for s in seeds {
+            if label[s] != u32::MAX {
+                continue;
+            }
+            let id = patches.len() as u32;
+            let origin = self.pts[s];
+            let mut plane = Plane {
+                point: origin,
+                normal: self.normal[s],
+            };
+            let (mut cnt, mut sum, mut sum2) = (0.0, Vector3::zeros(), Matrix3::zeros());
+            let mut refit_at = 6.0;
+            let mut pixels = Vec::new();
+            label[s] = id;
+            queue.push_back(s);
+            while let Some(i) = queue.pop_front() {
+                pixels.push(i);
+                let r = self.pts[i] - origin;
+                cnt += 1.0;
+                sum += r;
+                sum2 += r * r.transpose();
+                if cnt >= refit_at {
+                    plane = plane_from_sums(cnt, &sum, &sum2, &origin, &self.origin);
+                    refit_at *= 2.0;
+                }
+                for (du, dv) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
+                    let Some(j) = self.neighbour(i, du, dv) else { continue };
+                    if label[j] != u32::MAX || !self.fg[j] {
+                        continue;
+                    }
+                    if plane.normal.dot(&(self.pts[j] - plane.point)).abs() > PLANE_TOL_M {
+                        continue;
+                    }
+                    let nj = self.normal[j];
+                    if nj != Vector3::zeros() && nj.dot(&plane.normal) < NORMAL_TOL_RAD.cos() {
+                        continue;
+                    }
+                    label[j] = id;
+                    queue.push_back(j);
+                }
+            }
+            patches.push(Patch { pixels });
+        }
+        patches.retain(|p| p.pixels.len() >= MIN_PATCH_PX);
+        patches
+    }
+
+    /// Where pixel `i`'s ray meets `plane` (world), and the ray's depth there.
+    fn ray_on_plane(&self, i: usize, plane: &Plane) -> Option<(Vector3<f64>, f64)> {
+        let d = self.camera.pixel_dir(i % self.w, i / self.w);
+        let den = plane.normal.dot(&d);
+        if den.abs() < 1e-6 {
+            return None;
+        }
+        let t = plane.normal.dot(&(plane.point - self.origin)) / den;
+        (t > 0.0).then(|| (self.origin + d * t, t * d.dot(&self.optical)))
+    }
+
+    /// A patch's plane, its pixels' rays cut with the plane (inside) and the neighbours whose
+    /// measured point lies behind the plane (outside), both in the plane's basis (e1, e2).
+    fn silhouette(&self, patch: &Patch) -> Silhouette {
+        let origin = self.pts[patch.pixels[0]];
+        let (mut s, mut ss) = (Vector3::zeros(), Matrix3::zeros());
+        for &i in &patch.pixels {
+            let r = self.pts[i] - origin;
+            s += r;
+            ss += r * r.transpose();
+        }
+        let plane = plane_from_sums(patch.pixels.len() as f64, &s, &ss, &origin, &self.origin);
+        let n = plane.normal;
+        let e1 = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        let e1 = (e1 - n * n.dot(&e1)).normalize();
+        let e2 = n.cross(&e1);
+        let to2 = |p: Vector3<f64>| {
+            let q = p - plane.point;
+            [q.dot(&e1), q.dot(&e2)]
+        };
+        let inside: Vec<[f64; 2]> = patch
+            .pixels
+            .iter()
+            .filter_map(|&i| self.ray_on_plane(i, &plane).map(|(p, _)| to2(p)))
+            .collect();
+        let mut member = patch.pixels.clone();
+        member.sort_unstable();
+        let mut ring: Vec<usize> = patch
+            .pixels
+            .iter()
+            .flat_map(|&i| RING.iter().filter_map(move |&(du, dv)| self.neighbour(i, du, dv)))
+            .filter(|j| member.binary_search(j).is_err() && self.depth[*j] > 0.0)
+            .collect();
+        ring.sort_unstable();
+        ring.dedup();
+        let outside: Vec<[f64; 2]> = ring
+            .into_iter()
+            .filter_map(|j| {
+                let (p, z) = self.ray_on_plane(j, &plane)?;
+                (self.depth[j] > z + BEHIND_TOL_M).then(|| to2(p))
+            })
+            .collect();
+        (plane, [e1, e2], inside, outside)
+    }
+
+    /// The best verified hypothesis for a patch, if any.
+    fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> Option<CloudDetection> {
+        let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
+        let n = plane.normal;
+        let theta0 = min_area_theta(&inside);
+        // (evidence, detection): the hypothesis the image supports most.
+        let mut best: Option<(i64, CloudDetection)> = None;
+        for (fi, face) in model.faces.iter().enumerate() {
+            // A box's faces of equal extents look alike: the first stands for them.
+            let twin = |g: &Face| {
+                let (a, b) = (face.extent_m, g.extent_m);
+                (a[0] - b[0]).abs() + (a[1] - b[1]).abs() < 1e-9 || (a[0] - b[1]).abs() + (a[1] - b[0]).abs() < 1e-9
+            };
+            if !model.half_turn_matters && model.faces[..fi].iter().any(twin) {
+                continue;
+            }
+            let mut fits = Vec::new();
+            if face.disc {
+                if let Some(c) = fit_disc(&inside, &outside, face.extent_m[0] / 2.0) {
+                    // Any yaw looks the same: the face's first axis along the world x in the plane.
+                    let x = Vector3::x() - n * n.x;
+                    let x = if x.norm() > 1e-6 { x.normalize() } else { e1 };
+                    fits.push((c, x.dot(&e2).atan2(x.dot(&e1))));
+                }
+            } else {
+                let square = (face.extent_m[0] - face.extent_m[1]).abs() < 1e-9;
+                for k in 0..if square { 1 } else { 2 } {
+                    let t0 = theta0 + k as f64 * std::f64::consts::FRAC_PI_2;
+                    if let Some((c, t)) = fit_rect(&inside, &outside, face.extent_m, t0) {
+                        fits.push((c, t));
+                    }
+                }
+            }
+            for (c, theta) in fits {
+                let turns: &[f64] = if model.half_turn_matters {
+                    &[0.0, std::f64::consts::PI]
+                } else {
+                    &[0.0]
+                };
+                for &turn in turns {
+                    let t = theta + turn;
+                    let u = e1 * t.cos() + e2 * t.sin();
+                    let center = plane.point + e1 * c[0] + e2 * c[1];
+                    let pose = pose_from_face(face, &center, &n, &u);
+                    let Some((score, visible, evidence)) = self.verify(model, &pose) else {
+                        continue;
+                    };
+                    if score >= MIN_SCORE && best.as_ref().is_none_or(|b| evidence > b.0) {
+                        best = Some((
+                            evidence,
+                            CloudDetection {
+                                world_from_part: pose,
+                                face_up: fi,
+                                score,
+                                visible_fraction: visible,
+                            },
+                        ));
+                    }
+                }
+            }
+        }
+        best.map(|b| b.1)
+    }
+
+    /// Renders the model at `pose` into the image and compares with the measured depth: (score,
+    /// visible fraction, evidence = agreeing less 3 x contradicting pixels), `None` if it renders
+    /// too few agreeing pixels.
+    fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<(f64, f64, i64)> {
+        let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
+        let hs = model.half_size_m;
+        for k in 0..8 {
+            let s = |bit: usize| if k & bit == 0 { -1.0 } else { 1.0 };
+            let p = pose * Point3::new(s(1) * hs.x, s(2) * hs.y, s(4) * hs.z);
+            let (u, v, _) = self.camera.project(&p)?;
+            u0 = u0.min(u);
+            v0 = v0.min(v);
+            u1 = u1.max(u);
+            v1 = v1.max(v);
+        }
+        let clamp = |x: f64, n: usize| (x.floor().max(0.0) as usize).min(n - 1);
+        let inv = pose.inverse();
+        let o = inv * Point3::from(self.origin);
+        let (mut agree, mut contradict, mut rendered) = (0usize, 0usize, 0usize);
+        for v in clamp(v0, self.h)..=clamp(v1, self.h) {
+            for u in clamp(u0, self.w)..=clamp(u1, self.w) {
+                let d = self.camera.pixel_dir(u, v);
+                let Some(t) = ray_model(model, &o, &(inv.rotation * d)) else {
+                    continue;
+                };
+                rendered += 1;
+                let measured = self.depth[v * self.w + u];
+                if measured <= 0.0 {
+                    continue;
+                }
+                let predicted = t * d.dot(&self.optical);
+                if (measured - predicted).abs() <= AGREE_TOL_M {
+                    agree += 1;
+                } else if measured > predicted {
+                    contradict += 1;
+                }
+            }
+        }
+        (agree >= MIN_PATCH_PX).then(|| {
+            (
+                agree as f64 / (agree + contradict) as f64,
+                (agree as f64 / rendered.max(1) as f64).min(1.0),
+                agree as i64 - 3 * contradict as i64,
+            )
+        })
+    }
+}
+
+/// `world_from_part` with face `face` centred at `center` (world), its outward normal along `n`
+/// and its first axis along `u`.
+fn pose_from_face(face: &Face, center: &Vector3<f64>, n: &Vector3<f64>, u: &Vector3<f64>) -> Isometry3<f64> {
+    let world = Matrix3::from_columns(&[*u, n.cross(u), *n]);
+    let part = Matrix3::from_columns(&[face.along, face.normal.cross(&face.along), face.normal]);
+    let r = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(world * part.transpose()));
+    Isometry3::from_parts(Translation3::from(center - r * face.center), r)
+}
+
+/// Nearest entry distance of a ray (part frame, unit direction) into the model's pieces.
+pub(crate) fn ray_model(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    model
+        .pieces
+        .iter()
+        .filter_map(|p| ray_piece(p, &o.coords, d))
+        .min_by(|a, b| a.total_cmp(b))
+}
+
+/// Entry distance of a ray into a box or cylinder (part frame); `None` if it misses or starts inside.
+fn ray_piece(piece: &Piece, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    match *piece {
+        Piece::Box { center_m, half_m } => {
+            let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+            for a in 0..3 {
+                let (p, q) = (o[a] - center_m[a], d[a]);
+                if q.abs() < 1e-12 {
+                    if p.abs() > half_m[a] {
+                        return None;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((-half_m[a] - p) / q, (half_m[a] - p) / q);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+            (t0 <= t1 && t0 > 0.0).then_some(t0)
+        }
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            half_length_m,
+            axis,
+        } => {
+            let k = match axis {
+                Axis::X => 0,
+                Axis::Y => 1,
+                Axis::Z => 2,
+            };
+            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+            let p = o - center_m;
+            // Slab along the axis.
+            let (mut t0, mut t1) = if d[k].abs() < 1e-12 {
+                if p[k].abs() > half_length_m {
+                    return None;
+                }
+                (f64::NEG_INFINITY, f64::INFINITY)
+            } else {
+                let (ta, tb) = ((-half_length_m - p[k]) / d[k], (half_length_m - p[k]) / d[k]);
+                (ta.min(tb), ta.max(tb))
+            };
+            // Infinite cylinder.
+            let a = d[i] * d[i] + d[j] * d[j];
+            let b = p[i] * d[i] + p[j] * d[j];
+            let c = p[i] * p[i] + p[j] * p[j] - radius_m * radius_m;
+            if a < 1e-12 {
+                if c > 0.0 {
+                    return None;
+                }
+            } else {
+                let disc = b * b - a * c;
+                if disc < 0.0 {
+                    return None;
+                }
+                let s = disc.sqrt();
+                t0 = t0.max((-b - s) / a);
+                t1 = t1.min((-b + s) / a);
+            }
+            (t0 <= t1 && t0 > 0.0).then_some(t0)
+        }
+    }
+}
+
+/// Yaw of the minimum-area rectangle around the points (rotating calipers on the convex hull)
+/// [rad], in (-pi/2, pi/2].
+fn min_area_theta(pts: &[[f64; 2]]) -> f64 {
+    let hull = convex_hull(pts);
+    let mut best = (f64::INFINITY, 0.0);
+    for k in 0..hull.len() {
+        let (a, b) = (hull[k], hull[(k + 1) % hull.len()]);
+        let t = (b[1] - a[1]).atan2(b[0] - a[0]);
+        let (c, s) = (t.cos(), t.sin());
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in &hull {
+            let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+            for a in 0..2 {
+                lo[a] = lo[a].min(q[a]);
+                hi[a] = hi[a].max(q[a]);
+            }
+        }
+        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        if area < best.0 - 1e-15 {
+            best = (area, t);
+        }
+    }
+    best.1
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise.
+fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = pts.to_vec();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// Feasible centre intervals of a rectangle of extents `ext` at yaw `theta` holding every inside
+/// point and no outside point, per rotated axis: ([lo, hi]; 2).
+fn rect_intervals(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta: f64) -> [[f64; 2]; 2] {
+    let (c, s) = (theta.cos(), theta.sin());
+    let rot = |p: &[f64; 2]| [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for p in inside {
+        let q = rot(p);
+        for a in 0..2 {
+            lo[a] = lo[a].min(q[a]);
+            hi[a] = hi[a].max(q[a]);
+        }
+    }
+    let mut iv = [
+        [hi[0] - ext[0] / 2.0, lo[0] + ext[0] / 2.0],
+        [hi[1] - ext[1] / 2.0, lo[1] + ext[1] / 2.0],
+    ];
+    for p in outside {
+        let q = rot(p);
+        for a in 0..2 {
+            let b = 1 - a;
+            if q[b] < lo[b] || q[b] > hi[b] {
+                continue;
+            }
+            if q[a] > hi[a] {
+                iv[a][1] = iv[a][1].min(q[a] - ext[a] / 2.0);
+            } else if q[a] < lo[a] {
+                iv[a][0] = iv[a][0].max(q[a] + ext[a] / 2.0);
+            }
+        }
+    }
+    iv
+}
+
+/// Silhouette fit of a rectangle of extents `ext`: every pose consistent with the silhouette is
+/// equally likely, so the estimate is their mean: yaws within 10 degrees of `theta0` weighted by
+/// the area of their feasible centres (softened by [`FIT_VIOLATION_M`] if none is feasible), the
+/// centre the middle of the feasible intervals at that yaw. `None` if infeasible or ambiguous.
+/// Returns (centre in the plane basis, yaw).
+fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta0: f64) -> Option<([f64; 2], f64)> {
+    let step = 0.25f64.to_radians();
+    let widths: Vec<[f64; 2]> = (-40..=40)
+        .map(|k| {
+            let iv = rect_intervals(inside, outside, ext, theta0 + k as f64 * step);
+            [iv[0][1] - iv[0][0], iv[1][1] - iv[1][0]]
+        })
+        .collect();
+    // Strictly consistent yaws if there are any, else those within the plane's error.
+    let mean_k = [0.02 * FIT_VIOLATION_M, FIT_VIOLATION_M].iter().find_map(|soft| {
+        let (mut sw, mut sk) = (0.0, 0.0);
+        for (k, w) in (-40..=40).zip(&widths) {
+            let wgt = (w[0] + soft).max(0.0) * (w[1] + soft).max(0.0);
+            sw += wgt;
+            sk += wgt * k as f64;
+        }
+        (sw > 0.0).then(|| sk / sw)
+    })?;
+    let t = theta0 + mean_k * step;
+    let iv = rect_intervals(inside, outside, ext, t);
+    let widths = [iv[0][1] - iv[0][0], iv[1][1] - iv[1][0]];
+    if widths.iter().any(|w| *w < -FIT_VIOLATION_M || *w > FIT_AMBIGUITY_M) {
+        return None;
+    }
+    let m = [(iv[0][0] + iv[0][1]) / 2.0, (iv[1][0] + iv[1][1]) / 2.0];
+    let (c, s) = (t.cos(), t.sin());
+    Some(([c * m[0] - s * m[1], s * m[0] + c * m[1]], t))
+}
+
+/// Silhouette fit of a disc of radius `r`: the mean of the centres holding every inside point and
+/// no outside point (within half [`FIT_VIOLATION_M`]), on a 0.1 mm grid around the centroid. `None` if infeasible
+/// or ambiguous (the feasible centres spread wider than [`FIT_AMBIGUITY_M`]).
+fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Option<[f64; 2]> {
+    let n = inside.len() as f64;
+    let c0 = [
+        inside.iter().map(|p| p[0]).sum::<f64>() / n,
+        inside.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let room = |c: [f64; 2]| {
+        let d = |p: &[f64; 2]| ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2)).sqrt();
+        let a = inside.iter().map(|p| r - d(p)).fold(f64::INFINITY, f64::min);
+        let b = outside.iter().map(|p| d(p) - r).fold(f64::INFINITY, f64::min);
+        a.min(b)
+    };
+    let step = 0.0001;
+    let (mut sum, mut cnt) = ([0.0; 2], 0.0);
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for i in -20..=20 {
+        for j in -20..=20 {
+            let c = [c0[0] + i as f64 * step, c0[1] + j as f64 * step];
+            if room(c) >= -FIT_VIOLATION_M / 2.0 {
+                for a in 0..2 {
+                    sum[a] += c[a];
+                    lo[a] = lo[a].min(c[a]);
+                    hi[a] = hi[a].max(c[a]);
+                }
+                cnt += 1.0;
+            }
+        }
+    }
+    let spread = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    (cnt > 0.0 && spread <= FIT_AMBIGUITY_M).then(|| [sum[0] / cnt, sum[1] / cnt])
+}
+
+/// How a workpiece looks the same, for evaluation: a finite set of rotations of the part frame,
+/// or any turn about the part's z axis.
+#[derive(Debug, Clone)]
+pub enum Symmetry {
+    /// These rotations (the identity included) leave the part's look unchanged.
+    Finite(Vec<UnitQuaternion<f64>>),
+    /// Any turn about the part z axis (a can standing on its base: its top hides the base).
+    AboutZ,
+}
+
+impl Symmetry {
+    /// A box workpiece: the box's own proper rotations (a half turn about every axis, a quarter
+    /// turn about an axis whose two other edges are equal). A compound: turns about z by
+    /// `grasp.yaw_symmetry_deg`; any turn if its body has a cylinder along z (its yaw cannot be
+    /// seen from above).
+    pub fn of(w: &Workpiece) -> Self {
+        let pieces = w.pieces();
+        if w.shape.kind == ShapeKind::Compound {
+            if pieces
+                .iter()
+                .any(|(role, p)| *role == PartRole::Body && matches!(p, Piece::Cylinder { axis: Axis::Z, .. }))
+            {
+                return Symmetry::AboutZ;
+            }
+            let step = w.grasp.yaw_symmetry_deg;
+            let k = if step > 0.0 {
+                (360.0 / step).round().max(1.0) as usize
+            } else {
+                1
+            };
+            return Symmetry::Finite(
+                (0..k)
+                    .map(|i| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), (i as f64 * step).to_radians()))
+                    .collect(),
+            );
+        }
+        let size = Vector3::from(w.size_m);
+        let mut out = Vec::new();
+        for perm in [[0, 1, 2], [0, 2, 1], [1, 0, 2], [1, 2, 0], [2, 0, 1], [2, 1, 0]] {
+            for signs in 0..8 {
+                let mut m = Matrix3::zeros();
+                for (r, &c) in perm.iter().enumerate() {
+                    m[(r, c)] = if signs & (1 << r) == 0 { 1.0 } else { -1.0 };
+                }
+                if m.determinant() < 0.0 || ((m.abs() * size) - size).norm() > 1e-9 {
+                    continue;
+                }
+                out.push(UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(
+                    m,
+                )));
+            }
+        }
+        Symmetry::Finite(out)
+    }
+
+    /// Position [m] and rotation [rad] error of `estimate` against `truth`, the least over the
+    /// symmetries.
+    pub fn pose_error(&self, truth: &Isometry3<f64>, estimate: &Isometry3<f64>) -> (f64, f64) {
+        let dp = (truth.translation.vector - estimate.translation.vector).norm();
+        let dr = match self {
+            Symmetry::Finite(g) => g
+                .iter()
+                .map(|s| (truth.rotation * s).angle_to(&estimate.rotation))
+                .fold(f64::INFINITY, f64::min),
+            Symmetry::AboutZ => (truth.rotation * Vector3::z())
+                .dot(&(estimate.rotation * Vector3::z()))
+                .clamp(-1.0, 1.0)
+                .acos(),
+        };
+        (dp, dr)
+    }
+}
+
+#[cfg(test)]
+mod tests;

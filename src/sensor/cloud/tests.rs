@@ -1,0 +1,206 @@
+//! Tests of recognition from the point cloud on synthetic captures: parts at known poses ray-cast
+//! through the default cell's camera over the pick tray floor, with the sensor's depth noise.
+
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
+use rand::SeedableRng;
+
+use super::*;
+use crate::config::{LoadedScene, LoadedWorkpiece};
+use crate::sensor::capture::gaussian;
+
+struct Cell {
+    camera: Camera,
+    tray: TrayVolume,
+}
+
+fn cell() -> Cell {
+    let s = LoadedScene::embedded_default().unwrap().scene;
+    Cell {
+        camera: Camera::from_config(&s.sensor).unwrap(),
+        tray: TrayVolume::new(&s.pick_tray),
+    }
+}
+
+fn workpiece(name: &str) -> Workpiece {
+    LoadedWorkpiece::resolve(name).unwrap().workpiece
+}
+
+/// A capture of `parts` (model, `world_from_part`) lying over the tray floor, noise as the
+/// default sensor's (seeded).
+fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) -> Capture {
+    let cam = &cell.camera;
+    let origin = cam.world_from_camera.translation.vector;
+    let optical = cam.world_from_camera.rotation * Vector3::z();
+    let floor_n = cell.tray.world_from_tray.rotation * Vector3::z();
+    let floor_p = cell.tray.world_from_tray.translation.vector;
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+    let (w, h) = (cam.width_px, cam.height_px);
+    let mut c = Capture {
+        id: 0,
+        trigger_s: 0.0,
+        camera_position_m: origin,
+        width_px: w,
+        height_px: h,
+        depth_m: vec![0.0; w * h],
+        points_world: vec![[f32::NAN; 3]; w * h],
+        truth: vec![None; w * h],
+    };
+    for v in 0..h {
+        for u in 0..w {
+            let d = cam.pixel_dir(u, v);
+            let mut t = floor_n.dot(&(floor_p - origin)) / floor_n.dot(&d);
+            for (m, pose) in parts {
+                let inv = pose.inverse();
+                if let Some(tp) = ray_model(m, &(inv * Point3::from(origin)), &(inv.rotation * d)) {
+                    t = t.min(tp);
+                }
+            }
+            let z = t * d.dot(&optical);
+            let zn = z + gaussian(&mut rng) * cam.depth_noise_at_1m_m * z * z;
+            let p = origin + d * (zn / d.dot(&optical));
+            c.depth_m[v * w + u] = zn as f32;
+            c.points_world[v * w + u] = [p.x as f32, p.y as f32, p.z as f32];
+        }
+    }
+    c
+}
+
+/// `world_from_part` for a part whose lowest point rests `lift_m` above the tray floor at tray
+/// (x, y), rotated by `r` (world).
+fn resting(cell: &Cell, w: &Workpiece, x: f64, y: f64, lift_m: f64, r: UnitQuaternion<f64>) -> Isometry3<f64> {
+    let hs = Vector3::from(w.size_m) / 2.0;
+    let low = (0..8)
+        .map(|k| {
+            let s = |bit: usize| if k & bit == 0 { -1.0 } else { 1.0 };
+            (r * Vector3::new(s(1) * hs.x, s(2) * hs.y, s(4) * hs.z)).z
+        })
+        .fold(f64::INFINITY, f64::min);
+    let base = cell.tray.world_from_tray * Point3::new(x, y, 0.0);
+    Isometry3::from_parts(Translation3::new(base.x, base.y, base.z - low + lift_m), r)
+}
+
+fn yaw(deg: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::z_axis(), deg.to_radians())
+}
+
+fn roll(deg: f64) -> UnitQuaternion<f64> {
+    UnitQuaternion::from_axis_angle(&Vector3::x_axis(), deg.to_radians())
+}
+
+/// The detection nearest `truth` and its error, asserting it is within the limits.
+fn assert_found(w: &Workpiece, found: &[CloudDetection], truth: &Isometry3<f64>, max_m: f64, max_deg: f64) {
+    let sym = Symmetry::of(w);
+    let best = found
+        .iter()
+        .map(|d| sym.pose_error(truth, &d.world_from_part))
+        .min_by(|a, b| a.0.total_cmp(&b.0));
+    let Some((dp, dr)) = best else {
+        panic!("{}: nothing found", w.name)
+    };
+    assert!(
+        dp <= max_m && dr.to_degrees() <= max_deg,
+        "{}: error {:.2} mm / {:.2} deg; found {found:?}",
+        w.name,
+        dp * 1e3,
+        dr.to_degrees()
+    );
+}
+
+#[test]
+fn a_part_alone_is_found_at_its_pose() {
+    let cell = cell();
+    for (name, r) in [
+        ("F", yaw(20.0)),
+        ("B", yaw(-35.0)),
+        ("E", yaw(10.0)),
+        ("C", yaw(5.0)),
+        ("A", yaw(70.0)),
+        ("D", yaw(0.0)),
+    ] {
+        let w = workpiece(name);
+        let m = CloudModel::new(&w);
+        let pose = resting(&cell, &w, 0.031, -0.017, 0.0, r);
+        let found = recognize(&synthetic(&cell, &[(&m, pose)]), &cell.camera, &cell.tray, &m);
+        assert_eq!(found.len(), 1, "{name}: {found:?}");
+        assert_found(&w, &found, &pose, 0.0008, 5.0);
+    }
+}
+
+#[test]
+fn a_part_on_its_side_or_tilted_is_found() {
+    let cell = cell();
+    let w = workpiece("E");
+    let m = CloudModel::new(&w);
+    let side = resting(&cell, &w, -0.05, 0.04, 0.0, yaw(30.0) * roll(90.0));
+    let found = recognize(&synthetic(&cell, &[(&m, side)]), &cell.camera, &cell.tray, &m);
+    assert_found(&w, &found, &side, 0.0008, 2.5);
+    let w = workpiece("B");
+    let m = CloudModel::new(&w);
+    let tilted = resting(&cell, &w, 0.06, 0.02, 0.004, yaw(-20.0) * roll(25.0));
+    let found = recognize(&synthetic(&cell, &[(&m, tilted)]), &cell.camera, &cell.tray, &m);
+    assert_found(&w, &found, &tilted, 0.0008, 2.5);
+}
+
+#[test]
+fn two_touching_parts_at_different_heights_are_both_found() {
+    let cell = cell();
+    let w = workpiece("F");
+    let m = CloudModel::new(&w);
+    let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(15.0));
+    let b = resting(&cell, &w, 0.0102, 0.001, 0.002, yaw(-10.0));
+    let found = recognize(&synthetic(&cell, &[(&m, a), (&m, b)]), &cell.camera, &cell.tray, &m);
+    assert_eq!(found.len(), 2, "{found:?}");
+    assert_found(&w, &found, &a, 0.0008, 5.0);
+    assert_found(&w, &found, &b, 0.0008, 5.0);
+}
+
+#[test]
+fn a_half_covered_part_is_found() {
+    let cell = cell();
+    let (wc, wb) = (workpiece("C"), workpiece("B"));
+    let (mc, mb) = (CloudModel::new(&wc), CloudModel::new(&wb));
+    let strip = resting(&cell, &wc, 0.0, 0.0, 0.0, yaw(8.0));
+    // The block lies over the strip's middle third: both ends of the strip stay in view.
+    let block = resting(&cell, &wb, 0.0, 0.0, 0.006, yaw(40.0));
+    let found = recognize(
+        &synthetic(&cell, &[(&mc, strip), (&mb, block)]),
+        &cell.camera,
+        &cell.tray,
+        &mc,
+    );
+    assert_found(&wc, &found, &strip, 0.0008, 2.0);
+    // A block covering half of an F: one edge of each axis still in view pins it down.
+    let wf = workpiece("F");
+    let mf = CloudModel::new(&wf);
+    let part = resting(&cell, &wf, 0.02, 0.03, 0.0, yaw(25.0));
+    let cover = resting(&cell, &wb, 0.02 + 0.019, 0.03, 0.0055, yaw(25.0));
+    let found = recognize(
+        &synthetic(&cell, &[(&mf, part), (&mb, cover)]),
+        &cell.camera,
+        &cell.tray,
+        &mf,
+    );
+    assert_found(&wf, &found, &part, 0.0008, 5.0);
+    assert!(found.iter().all(|d| d.visible_fraction < 0.95), "{found:?}");
+}
+
+#[test]
+fn an_empty_tray_shows_nothing() {
+    let cell = cell();
+    let w = workpiece("F");
+    let m = CloudModel::new(&w);
+    assert!(recognize(&synthetic(&cell, &[]), &cell.camera, &cell.tray, &m).is_empty());
+}
+
+#[test]
+fn symmetries_of_the_workpieces() {
+    let count = |n: &str| match Symmetry::of(&workpiece(n)) {
+        Symmetry::Finite(g) => g.len(),
+        Symmetry::AboutZ => 0,
+    };
+    assert_eq!(count("A"), 2);
+    assert_eq!(count("B"), 8);
+    assert_eq!(count("C"), 4);
+    assert_eq!(count("D"), 0);
+    assert_eq!(count("F"), 8);
+}
