@@ -19,13 +19,6 @@ use crate::config::SimConfig;
 use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
 use crate::trajectory::Motion;
 
-/// The controller's bias terms but friction: gravity, Coriolis and centrifugal, armature.
-const NO_FRICTION: crate::robot::dynamics::Terms = crate::robot::dynamics::Terms {
-    gravity: true,
-    friction: false,
-    armature: true,
-};
-
 /// In-position window at the end of a motion: every joint this close to its target [rad] ...
 pub const IN_POSITION_RAD: f64 = 1e-4;
 /// ... and slower than this [rad/s] (about 5 mm/s at the tool: the cup lands and lets go softly;
@@ -222,7 +215,7 @@ pub fn execute_from(
         // model's friction the controller is sure of (compensating more friction than the plant
         // has turns the excess into negative damping near rest: a limit cycle).
         let zero = JointVector::zeros();
-        let h = model.inverse_dynamics_terms(&q, &qd, &zero, NO_FRICTION)
+        let h = model.inverse_dynamics_terms(&q, &qd, &zero, crate::robot::dynamics::Terms::NO_FRICTION)
             + JointVector::from_fn(|i, _| servo.friction_compensation * model.friction_nm(i, qd[i]));
         let m = model.mass_matrix(&q);
         let demand = m * command + h;

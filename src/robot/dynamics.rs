@@ -111,6 +111,13 @@ impl Terms {
         friction: true,
         armature: true,
     };
+    /// Everything but friction: what a drive must deliver besides friction (the servo's bias,
+    /// the breakaway bound, the implicit friction step).
+    pub const NO_FRICTION: Terms = Terms {
+        gravity: true,
+        friction: false,
+        armature: true,
+    };
     /// Rigid bodies only (no friction, no armature), gravity on.
     pub const RIGID: Terms = Terms {
         gravity: true,
@@ -198,16 +205,7 @@ impl DynamicsModel {
     /// value alone the servo demanded up to 121 % of the limit at motion starts). A joint that
     /// does not accelerate is held by its static friction, which the drive need not overcome.
     pub fn drive_torque_bound_nm(&self, q: &JointVector, qd: &JointVector, qdd: &JointVector) -> JointVector {
-        let rigid = self.inverse_dynamics_terms(
-            q,
-            qd,
-            qdd,
-            Terms {
-                gravity: true,
-                friction: false,
-                armature: true,
-            },
-        );
+        let rigid = self.inverse_dynamics_terms(q, qd, qdd, Terms::NO_FRICTION);
         JointVector::from_fn(|i, _| {
             let modelled = (rigid[i] + self.friction_nm(i, qd[i])).abs();
             if qd[i].abs() > 3.0 * self.coulomb_smoothing_rad_s || qdd[i].abs() < BREAKAWAY_MIN_ACCEL_RAD_S2 {
@@ -241,16 +239,7 @@ impl DynamicsModel {
         tau: &JointVector,
         dt_s: f64,
     ) -> Option<JointVector> {
-        let rigid = self.inverse_dynamics_terms(
-            q,
-            qd,
-            &JointVector::zeros(),
-            Terms {
-                gravity: true,
-                friction: false,
-                armature: true,
-            },
-        );
+        let rigid = self.inverse_dynamics_terms(q, qd, &JointVector::zeros(), Terms::NO_FRICTION);
         let m = self.mass_matrix(q);
         let rhs = tau - rigid;
         let solve_at = |qdd: &JointVector| {
@@ -557,11 +546,7 @@ mod tests {
             let (q, qd, _) = state(t);
             dynamics.kinetic_energy(&q, &qd) + dynamics.potential_energy(&q)
         };
-        let terms = Terms {
-            gravity: true,
-            friction: false,
-            armature: true,
-        };
+        let terms = Terms::NO_FRICTION;
         let h = 1e-5;
         for k in 0..200 {
             let t = k as f64 * 0.01;
@@ -611,11 +596,7 @@ mod tests {
                 JointVector::from_fn(|_, _| rng.random_range(-2.0..2.0))
             };
             let want = JointVector::from_fn(|_, _| rng.random_range(-300.0..300.0));
-            let rigid = Terms {
-                gravity: true,
-                friction: false,
-                armature: true,
-            };
+            let rigid = Terms::NO_FRICTION;
             let tau = d.inverse_dynamics_terms(&q, &qd, &want, rigid)
                 + JointVector::from_fn(|i, _| d.friction_nm(i, qd[i] + want[i] * dt));
             let qdd = d.forward_dynamics_implicit_friction(&q, &qd, &tau, dt).unwrap();
