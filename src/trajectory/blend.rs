@@ -163,6 +163,18 @@ impl Trajectory {
             .unwrap_or(0)
     }
 
+    /// The segment velocities before and after via point `j` (zero before the first segment
+    /// and after the last: the trajectory starts and ends at rest).
+    fn velocities_around(&self, j: usize) -> (JointVector, JointVector) {
+        let before = if j == 0 {
+            JointVector::zeros()
+        } else {
+            self.seg_vel[j - 1]
+        };
+        let after = self.seg_vel.get(j).copied().unwrap_or_else(JointVector::zeros);
+        (before, after)
+    }
+
     /// Position, velocity and acceleration at time `t` (clamped to the trajectory).
     pub fn sample(&self, t: f64) -> Sample {
         let t = t.clamp(0.0, self.duration_s);
@@ -172,12 +184,7 @@ impl Trajectory {
         for (j, &tv) in via_t.iter().enumerate() {
             let tb = self.blend[j];
             if (t - tv).abs() <= tb / 2.0 + 1e-15 && tb > 0.0 {
-                let before = if j == 0 {
-                    JointVector::zeros()
-                } else {
-                    self.seg_vel[j - 1]
-                };
-                let after = if j == n { JointVector::zeros() } else { self.seg_vel[j] };
+                let (before, after) = self.velocities_around(j);
                 let dv = after - before;
                 let tau = t - (tv - tb / 2.0);
                 let sigma = tau / tb;
@@ -241,12 +248,7 @@ impl Motion for Trajectory {
                 });
             }
             if b1 > b0 {
-                let before = if j == 0 {
-                    JointVector::zeros()
-                } else {
-                    self.seg_vel[j - 1]
-                };
-                let after = if j == n { JointVector::zeros() } else { self.seg_vel[j] };
+                let (before, after) = self.velocities_around(j);
                 let dv = after - before;
                 // Along one line without turning back: no speed before, or the change a multiple
                 // c >= -1 of the speed before (after = (1 + c) before).
