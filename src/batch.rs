@@ -160,6 +160,19 @@ pub fn shard(jobs: &[(String, u64)], k: usize, n: usize) -> Vec<(String, u64)> {
 mod tests {
     use super::*;
 
+    /// Two captures' worth of recognition figures (all finite, so rows compare equal).
+    fn recognition_fixture() -> crate::sensor::RecognitionTotals {
+        crate::sensor::RecognitionTotals {
+            captures: 2,
+            top_layer: 10,
+            top_layer_found: 9,
+            detected: 11,
+            correct: 11,
+            position_errors_m: vec![0.0002, 0.0004],
+            rotation_errors_rad: vec![0.01, 0.02],
+        }
+    }
+
     fn entry(w: &str, seed: u64, takts: &[f64]) -> RunEntry {
         RunEntry {
             workpiece: w.into(),
@@ -177,6 +190,9 @@ mod tests {
             compute_waits: (0, 0.0),
             faults: [0, 0, 0, 0, 0],
             refills: 0,
+            grasps: (takts.len() + 1, takts.len() + 1),
+            misrecognised: 0,
+            recognition: recognition_fixture(),
             peak_demand_ratio: [0.9, 0.5, 0.5, 0.5, 0.5, 0.5],
             saturated_s: 0.0,
             max_tracking_error_deg: 0.1,

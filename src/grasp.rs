@@ -711,7 +711,8 @@ mod tests {
         let det = Detection {
             world_from_part: sel.tray * tray_from_part,
             visible_fraction: 1.0,
-            truth_part: 0,
+            score: 1.0,
+            face_up: None,
         };
         let cell_m = 0.001;
         let (nx, ny) = (200, 200);

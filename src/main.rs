@@ -48,7 +48,7 @@ enum Command {
     /// Build and settle a random pile of one workpiece type in the pick tray.
     Pile(cli::pile::PileArgs),
     /// Build a pile, take a depth capture, recognise the parts and select a grasp.
-    Sense(cli::pile::PileArgs),
+    Sense(cli::pile::SenseArgs),
     /// One cell run: picks of one workpiece end to end, timed; results, time charts and the run's
     /// recordings (`run.rrd` for Rerun, `run.mcap` for Foxglove) in the run folder.
     Run(cli::run::RunArgs),

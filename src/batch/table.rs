@@ -17,6 +17,7 @@ use serde::{Deserialize, Serialize};
 use super::{BatchError, BatchSpec};
 use crate::cycle::{Outcome, RunResult, TaktStats};
 use crate::report::{Fixed, to_csv};
+use crate::sensor::{RecognitionSummary, RecognitionTotals};
 
 /// What the table keeps of one run.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -49,6 +50,15 @@ pub struct RunEntry {
     pub faults: [usize; 5],
     /// Refills of the pick tray.
     pub refills: usize,
+    /// Grasps attempted (the cup reached the part) and sealed.
+    #[serde(default)]
+    pub grasps: (usize, usize),
+    /// Grasp failures on a wrong detection.
+    #[serde(default)]
+    pub misrecognised: usize,
+    /// Recognition of the results the run used, against the truth at each trigger.
+    #[serde(default)]
+    pub recognition: RecognitionTotals,
     /// Largest |demanded torque| / limit per joint (before saturation).
     pub peak_demand_ratio: [f64; 6],
     /// Time some joint was saturated [s].
@@ -100,6 +110,13 @@ impl RunEntry {
                 s.parts_lost,
             ],
             refills: s.refills,
+            grasps: s.grasps,
+            misrecognised: s.misrecognised,
+            recognition: {
+                let mut t = RecognitionTotals::default();
+                s.recognition_per_capture.iter().for_each(|c| t.add(c));
+                t
+            },
             peak_demand_ratio: s.peak_demand_ratio,
             saturated_s: s.saturated_s,
             max_tracking_error_deg: s.max_tracking_error_deg,
@@ -151,6 +168,14 @@ pub struct Row {
     pub parts_lost: usize,
     /// Refills.
     pub refills: usize,
+    /// Grasps attempted (the cup reached the part) and sealed, all runs.
+    pub grasps: (usize, usize),
+    /// sealed / attempted.
+    pub grasp_success_rate: f64,
+    /// Grasp failures on a wrong detection.
+    pub misrecognised: usize,
+    /// Recognition over every result the runs used, against the truth at each trigger.
+    pub recognition: RecognitionSummary,
     /// Largest |demanded torque| / limit over every joint and run (before saturation).
     pub peak_demand_ratio: f64,
     /// Time some joint was saturated, all runs [s].
@@ -182,6 +207,7 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                 (n, if n == 0 { 0.0 } else { t / n as f64 })
             };
             let fault = |i: usize| es.iter().map(|e| e.faults[i]).sum();
+            let grasps = es.iter().fold((0, 0), |(a, b), e| (a + e.grasps.0, b + e.grasps.1));
             let compute = |i: usize| {
                 if set_out == 0 {
                     f64::NAN
@@ -213,6 +239,18 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                 grasp_failures: fault(3),
                 parts_lost: fault(4),
                 refills: es.iter().map(|e| e.refills).sum(),
+                grasps,
+                grasp_success_rate: if grasps.0 == 0 {
+                    f64::NAN
+                } else {
+                    grasps.1 as f64 / grasps.0 as f64
+                },
+                misrecognised: es.iter().map(|e| e.misrecognised).sum(),
+                recognition: {
+                    let mut t = RecognitionTotals::default();
+                    es.iter().for_each(|e| t.merge(&e.recognition));
+                    t.summary()
+                },
                 peak_demand_ratio: es
                     .iter()
                     .flat_map(|e| e.peak_demand_ratio.iter().copied())
@@ -239,13 +277,13 @@ pub fn markdown(rows: &[Row]) -> String {
     let mut md = String::from(
         "| part | runs | placed / attempts | success | takt mean [s] | p95 | min | max | reference [s] \
          | takt excl. tray refills [s] | Pick [s] | Place [s] | compute grasp/Pick/Place [ms] | sensor waits (mean s) \
-         | compute waits (mean s) | stops | collisions | drops | grasp fails | lost | refills \
-         | peak torque demand | saturated [s] | max tracking error [deg] |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         | compute waits (mean s) | stops | collisions | drops | grasps sealed | grasp fails (misrecognised) | lost | refills \
+         | recognition recall / precision | pose error med mm / deg | peak torque demand | saturated [s] | max tracking error [deg] |\n\
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         md += &format!(
-            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} | {} | {} | {} % | {} | {} |\n",
+            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} % | {} ({}) | {} | {} | {} % / {} % | {} / {} | {} % | {} | {} |\n",
             r.workpiece,
             r.runs,
             r.placed,
@@ -269,9 +307,15 @@ pub fn markdown(rows: &[Row]) -> String {
             r.protective_stops,
             r.collisions,
             r.drops,
+            num(100.0 * r.grasp_success_rate, 1),
             r.grasp_failures,
+            r.misrecognised,
             r.parts_lost,
             r.refills,
+            num(100.0 * r.recognition.recall, 1),
+            num(100.0 * r.recognition.precision, 1),
+            num(r.recognition.position_error_mm[0], 2),
+            num(r.recognition.rotation_error_deg[0], 2),
             num(100.0 * r.peak_demand_ratio, 1),
             num(r.saturated_s, 3),
             num(r.max_tracking_error_deg, 3),
@@ -281,7 +325,7 @@ pub fn markdown(rows: &[Row]) -> String {
 }
 
 /// The columns of `takt.csv`.
-pub const TAKT_CSV_HEADER: [&str; 31] = [
+pub const TAKT_CSV_HEADER: [&str; 40] = [
     "workpiece",
     "runs",
     "attempts",
@@ -309,6 +353,15 @@ pub const TAKT_CSV_HEADER: [&str; 31] = [
     "grasp_failures",
     "parts_lost",
     "refills",
+    "grasps_attempted",
+    "grasps_sealed",
+    "misrecognised",
+    "recognition_recall",
+    "recognition_precision",
+    "pose_error_median_mm",
+    "pose_error_p95_mm",
+    "pose_error_median_deg",
+    "pose_error_p95_deg",
     "peak_demand_ratio",
     "saturated_s",
     "max_tracking_error_deg",
@@ -345,6 +398,15 @@ struct CsvRow<'a> {
     grasp_failures: usize,
     parts_lost: usize,
     refills: usize,
+    grasps_attempted: usize,
+    grasps_sealed: usize,
+    misrecognised: usize,
+    recognition_recall: Fixed<6>,
+    recognition_precision: Fixed<6>,
+    pose_error_median_mm: Fixed<6>,
+    pose_error_p95_mm: Fixed<6>,
+    pose_error_median_deg: Fixed<6>,
+    pose_error_p95_deg: Fixed<6>,
     peak_demand_ratio: Fixed<6>,
     saturated_s: Fixed<6>,
     max_tracking_error_deg: Fixed<6>,
@@ -383,6 +445,15 @@ pub fn csv(rows: &[Row]) -> String {
             grasp_failures: r.grasp_failures,
             parts_lost: r.parts_lost,
             refills: r.refills,
+            grasps_attempted: r.grasps.0,
+            grasps_sealed: r.grasps.1,
+            misrecognised: r.misrecognised,
+            recognition_recall: Fixed::of(r.recognition.recall),
+            recognition_precision: Fixed::of(r.recognition.precision),
+            pose_error_median_mm: Fixed::of(r.recognition.position_error_mm[0]),
+            pose_error_p95_mm: Fixed::of(r.recognition.position_error_mm[1]),
+            pose_error_median_deg: Fixed::of(r.recognition.rotation_error_deg[0]),
+            pose_error_p95_deg: Fixed::of(r.recognition.rotation_error_deg[1]),
             peak_demand_ratio: Fixed::of(r.peak_demand_ratio),
             saturated_s: Fixed::of(r.saturated_s),
             max_tracking_error_deg: Fixed::of(r.max_tracking_error_deg),

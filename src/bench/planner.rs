@@ -146,7 +146,7 @@ pub fn binpicking_queries(
             let shape = PartShape::build(&wp.workpiece, &wp.source)?;
             let mut w = World::new(&scene.scene, robot, shape.clone());
             w.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed))?;
-            let sensor = Sensor::new(&scene.scene.sensor, &w, seed).ok_or("degenerate sensor")?;
+            let sensor = Sensor::new(&scene.scene.sensor, &w, seed, &wp.workpiece).ok_or("degenerate sensor")?;
             let c = crate::sensor::capture(&w, &sensor.camera, seed, 0);
             let det = sensor.recognize_oracle(&crate::sensor::TruthAtTrigger::take(&w, &sensor, &c));
             let slots = scene.scene.world_from_slots(&wp.workpiece);

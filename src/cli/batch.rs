@@ -41,6 +41,10 @@ pub struct BatchArgs {
     pub record: bool,
     #[command(flatten)]
     pub skip: SkipFormats,
+    /// Recognition: `cloud` (from the depth capture, the default) or `oracle` (the what-if of
+    /// perfect recognition); overrides the cell file's `sensor.recognition`.
+    #[arg(long, value_name = "cloud|oracle")]
+    pub recognition: Option<binpick::config::RecognitionMode>,
     /// Scene file (default: the embedded default cell).
     #[arg(long)]
     pub scene: Option<PathBuf>,
@@ -67,7 +71,8 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
     // Every input is loaded and checked before anything runs or is written.
-    let loaded = LoadedScene::load(a.scene.as_deref())?;
+    let mut loaded = LoadedScene::load(a.scene.as_deref())?;
+    super::override_recognition(&mut loaded, a.recognition);
     let robot = RobotModel::from_scene(&loaded)?;
     robot.check_scene_reach(&loaded.label, &loaded.scene)?;
     let mut workpieces: Vec<LoadedWorkpiece> = Vec::new();

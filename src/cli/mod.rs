@@ -66,6 +66,13 @@ pub fn load_cell(scene: Option<&Path>, workpiece: &str) -> Result<(LoadedScene, 
     Ok((loaded, wp, robot))
 }
 
+/// Applies `--recognition` to the cell (so the resolved scene a run writes says which it used).
+pub fn override_recognition(loaded: &mut LoadedScene, mode: Option<binpick::config::RecognitionMode>) {
+    if let Some(m) = mode {
+        loaded.scene.sensor.recognition = m;
+    }
+}
+
 /// `--picks` of `run` and `batch`: 1 to 10,000.
 pub fn check_picks(picks: usize) -> Result<()> {
     if picks == 0 || picks > 10_000 {

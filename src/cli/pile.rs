@@ -34,6 +34,17 @@ pub struct PileArgs {
     pub json: bool,
 }
 
+/// Arguments of `binpick sense`.
+#[derive(Args)]
+pub struct SenseArgs {
+    #[command(flatten)]
+    pub pile: PileArgs,
+    /// Recognition: `cloud` (from the depth capture, the default) or `oracle` (the what-if of
+    /// perfect recognition); overrides the cell file's `sensor.recognition`.
+    #[arg(long, value_name = "cloud|oracle")]
+    pub recognition: Option<binpick::config::RecognitionMode>,
+}
+
 /// `--count`, or the workpiece's pile count: 1 to 1000.
 fn pile_count(a: &PileArgs, wp: &LoadedWorkpiece) -> Result<usize> {
     let count = a.count.unwrap_or(wp.workpiece.pile_count as usize);
@@ -123,10 +134,12 @@ pub fn pile(a: &PileArgs) -> Result<()> {
 /// `binpick sense`: a pile, the cycle's first capture of it (the arm out of view, a spoiled
 /// exposure repeated), the recognition result scored against the world at that moment, and the
 /// grasp the cell would choose ([`binpick::pipeline::sense_and_grasp`]).
-pub fn sense(a: &PileArgs) -> Result<()> {
+pub fn sense(args: &SenseArgs) -> Result<()> {
+    let a = &args.pile;
     use binpick::cycle::{Cell, RunOptions};
     use binpick::pipeline::{GraspContext, sense_and_grasp};
-    let (loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
+    let (mut loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
+    super::override_recognition(&mut loaded, args.recognition);
     let count = pile_count(a, &wp)?;
     let (seed, out, json) = (a.seed, &a.out, a.json);
     let opts = RunOptions {
@@ -141,7 +154,8 @@ pub fn sense(a: &PileArgs) -> Result<()> {
     let sensed = sensed.context("the arm found no path out of the sensor's view")?;
     let (job, detections) = (&sensed.job, sensed.detections.clone().unwrap_or_default());
     let world = &state.world;
-    let report = binpick::sensor::evaluate(&job.truth, &detections);
+    // Evaluation only: the detections against the truth at the trigger.
+    let report = sensed.evaluation.clone().context("no recognition result")?;
     let t1 = std::time::Instant::now();
     let ctx = GraspContext {
         scene: &loaded.scene,
@@ -166,7 +180,9 @@ pub fn sense(a: &PileArgs) -> Result<()> {
         "capture": {"trigger_s": job.capture.trigger_s, "ready_s": job.ready_s, "width_px": job.capture.width_px,
                     "height_px": job.capture.height_px, "valid_px": job.capture.valid_count(),
                     "spoiled_before": state.sensor.spoiled},
-        "recognition": &report, "detections": &detections,
+        "recognition": &report, "recognition_mode": loaded.scene.sensor.recognition.name(),
+        "detections": &detections,
+        "detections_truth": &report.matches,
         "grasp": {"chosen": chosen, "ranked": choice.plan.ranked.len(), "rejected": choice.plan.rejected_counts(),
                   "why_none": chosen.is_none().then(|| choice.why_none())},
     });
@@ -174,7 +190,7 @@ pub fn sense(a: &PileArgs) -> Result<()> {
     let dest = run.finish()?;
     if json {
         let mut v = file;
-        v["timing_ms"] = json!({"grasp": grasp_ms});
+        v["timing_ms"] = json!({"recognition": sensed.recognition_wall_s * 1e3, "grasp": grasp_ms});
         v["run_dir"] = json!(dest.display().to_string());
         v.as_object_mut().map(|o| o.remove("detections"));
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -192,19 +208,23 @@ pub fn sense(a: &PileArgs) -> Result<()> {
         state.sensor.spoiled
     );
     println!(
-        "  recognition      {} detected of {} in the tray; top layer {} / {} detected (recall {:.1} %)",
+        "  recognition      {} ({:.1} ms): {} detected, {} correct (precision {:.1} %); top layer {} / {} found (recall {:.1} %); {} parts in the tray",
+        loaded.scene.sensor.recognition.name(),
+        sensed.recognition_wall_s * 1e3,
         report.detected,
-        report.parts,
-        report.top_layer_detected,
+        report.correct,
+        report.precision * 100.0,
+        report.top_layer_found,
         report.top_layer,
-        report.top_layer_recall * 100.0
+        report.recall * 100.0,
+        report.parts,
     );
     println!(
-        "  pose error       position mean {:.2} / max {:.2} mm, rotation mean {:.2} / max {:.2} deg",
-        report.position_error_m.0 * 1e3,
-        report.position_error_m.1 * 1e3,
-        report.rotation_error_rad.0.to_degrees(),
-        report.rotation_error_rad.1.to_degrees()
+        "  pose error       of the correct ones: position median {:.2} / max {:.2} mm, rotation median {:.2} / max {:.2} deg",
+        report.position_error_m[0] * 1e3,
+        report.position_error_m[1] * 1e3,
+        report.rotation_error_rad[0].to_degrees(),
+        report.rotation_error_rad[1].to_degrees()
     );
     match chosen {
         Some(g) => {

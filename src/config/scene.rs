@@ -125,6 +125,39 @@ pub struct GripperConfig {
     pub inertia_kg_m2: [f64; 3],
 }
 
+/// How the sensor's captures are turned into recognised parts.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum RecognitionMode {
+    /// From the depth capture and the workpiece model alone ([`crate::sensor::cloud`]).
+    #[default]
+    Cloud,
+    /// The what-if of perfect recognition: the parts the capture showed enough of, at their poses
+    /// at the trigger plus Gaussian noise.
+    Oracle,
+}
+
+impl RecognitionMode {
+    /// The name in the cell file and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            RecognitionMode::Cloud => "cloud",
+            RecognitionMode::Oracle => "oracle",
+        }
+    }
+}
+
+impl std::str::FromStr for RecognitionMode {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "cloud" => Ok(RecognitionMode::Cloud),
+            "oracle" => Ok(RecognitionMode::Oracle),
+            _ => Err(format!("unknown recognition `{s}` (cloud or oracle)")),
+        }
+    }
+}
+
 /// The fixed overhead 3D sensor (pinhole; optical frame x right, y down, z along the view).
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -155,11 +188,18 @@ pub struct SensorConfig {
     pub dropout_grazing_deg: f64,
     /// Probability that a valid pixel drops out anyway.
     pub dropout_probability: f64,
-    /// Recognition: a part counts as detected when at least this fraction of its camera-facing surface is visible.
+    /// How parts are recognised: `cloud` (from the depth capture and the part's model, the
+    /// default) or `oracle` (the what-if of perfect recognition: the parts the capture showed, at
+    /// their poses at the trigger plus `pose_noise_*`).
+    #[serde(default)]
+    pub recognition: RecognitionMode,
+    /// Oracle recognition: a part counts as detected when at least this fraction of its camera-facing surface is visible.
     pub detect_min_visible_fraction: f64,
-    /// Recognition pose noise, position standard deviation [m].
+    /// Oracle recognition pose noise, position standard deviation [m]; also the recognition
+    /// accuracy the place release height allows for.
     pub pose_noise_m: f64,
-    /// Recognition pose noise, rotation standard deviation [deg].
+    /// Oracle recognition pose noise, rotation standard deviation [deg]; also the recognition
+    /// accuracy the place release height allows for.
     pub pose_noise_deg: f64,
 }
 

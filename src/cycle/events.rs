@@ -15,7 +15,7 @@ use serde::{Serialize, Serializer};
 use crate::execution::Tick;
 use crate::grasp::GraspCandidate;
 use crate::physics::World;
-use crate::sensor::{Capture, CaptureProblem, Detection};
+use crate::sensor::{Capture, CaptureProblem, Detection, RecognitionReport, TruthAtTrigger};
 use crate::trajectory::Motion;
 
 /// A stage of the cell cycle, as the time chart draws it (one lane each, top to bottom).
@@ -36,6 +36,10 @@ pub enum Stage {
     /// The cell waits (for the sensor, for compute, a fault reset, a refill).
     Stall,
 }
+
+/// How a grasp failure's detail starts when the chosen detection was wrong: `grasp_failed:
+/// misrecognised ...` (evaluation against the truth at the trigger names it; nothing decides on it).
+pub const MISRECOGNISED: &str = "misrecognised";
 
 /// Why a pick went wrong or did not start.
 #[derive(Debug, Clone, PartialEq, Serialize)]
@@ -63,6 +67,12 @@ impl Outcome {
     /// a re-capture. (The success rate counts every pick as an attempt, re-captures too.)
     pub fn set_out(&self) -> bool {
         !matches!(self, Outcome::NothingDetected | Outcome::NothingGraspable(_))
+    }
+
+    /// A grasp failure on a detection that was wrong (the detail starts with
+    /// [`MISRECOGNISED`]).
+    pub fn misrecognised(&self) -> bool {
+        matches!(self, Outcome::GraspFailed(s) if s.starts_with(MISRECOGNISED))
     }
 
     /// A short name: `placed`, `grasp_failed`, ...
@@ -244,8 +254,8 @@ pub enum Event {
     Grasped {
         /// The part the cup holds.
         part: usize,
-        /// The part the chosen detection was (evaluation only).
-        aimed_at: usize,
+        /// The part nearest to the chosen detection at the trigger (evaluation only).
+        aimed_at: Option<usize>,
         /// Cup axis to the part's centre of mass [m].
         com_offset_m: f64,
         /// Tilt of the tool axis from the face normal [rad].
@@ -356,7 +366,8 @@ impl fmt::Display for Event {
                 tilt_rad,
             } => write!(
                 f,
-                "part {part} (aimed at part {aimed_at}), cup axis {:.1} mm from its centre of mass, tilt {:.1} deg",
+                "part {part} (aimed at part {}), cup axis {:.1} mm from its centre of mass, tilt {:.1} deg",
+                aimed_at.map_or("-".to_string(), |p| p.to_string()),
                 com_offset_m * 1e3,
                 tilt_rad.to_degrees()
             ),
@@ -421,6 +432,9 @@ pub trait Observer {
     fn captured(&mut self, _capture: &Capture) {}
     /// A recognition result was used.
     fn recognised(&mut self, _result: &Recognised<'_>) {}
+    /// The recognition result ready at `t_s` was evaluated against the ground truth at its
+    /// trigger (evaluation only: the true poses beside the detections).
+    fn evaluated(&mut self, _t_s: f64, _truth: &TruthAtTrigger, _report: &RecognitionReport) {}
     /// A motion ran from simulation time `t0_s`: the motion as planned, every servo tick of its
     /// execution (times from the motion's start) and how many of them the world played before
     /// a fault stopped it (all of them otherwise).
@@ -451,6 +465,9 @@ impl Observer for Observers<'_> {
     }
     fn recognised(&mut self, result: &Recognised<'_>) {
         self.0.iter_mut().for_each(|o| o.recognised(result));
+    }
+    fn evaluated(&mut self, t_s: f64, truth: &TruthAtTrigger, report: &RecognitionReport) {
+        self.0.iter_mut().for_each(|o| o.evaluated(t_s, truth, report));
     }
     fn executed(&mut self, t0_s: f64, planned: &dyn Motion, ticks: &[Tick], played: usize) {
         self.0.iter_mut().for_each(|o| o.executed(t0_s, planned, ticks, played));

@@ -71,7 +71,7 @@ use crate::physics::pile::PileOptions;
 use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthError, PartShape, World};
 use crate::robot::{Payload, RobotModel};
-use crate::sensor::{CaptureJob, Sensor};
+use crate::sensor::{CaptureJob, RecognitionReport, Sensor};
 
 pub use crate::reference::reference_takt;
 
@@ -133,6 +133,8 @@ pub struct Cell<'a> {
     pub budgets_s: [f64; 3],
     /// Parts per pile.
     pub pile_count: usize,
+    /// The workpiece (its model, for the sensor's recognition).
+    pub workpiece: crate::config::Workpiece,
     /// Run options.
     pub opts: RunOptions,
 }
@@ -174,6 +176,8 @@ pub struct CellState {
     pub parts_lost: usize,
     /// Largest |demanded torque| / limit per joint over the run.
     pub run_peak_demand_ratio: [f64; crate::robot::DOF],
+    /// Every recognition result used, evaluated against the truth at its trigger (evaluation only).
+    pub recognitions: Vec<RecognitionReport>,
 }
 
 /// A running cycle: the constant cell, its state, and who watches.
@@ -236,6 +240,7 @@ impl<'a> Cell<'a> {
                 s.compute.motion_generation_s,
             ],
             pile_count: wp.pile_count as usize,
+            workpiece: wp.clone(),
             opts,
         })
     }
@@ -246,7 +251,7 @@ impl<'a> Cell<'a> {
         world.build_pile_observed(&PileOptions::new(self.pile_count, self.opts.seed), &mut |w| {
             obs.stepped(w)
         })?;
-        let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed)
+        let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed, &self.workpiece)
             .ok_or_else(|| CycleError::Setup("degenerate sensor pose".into()))?;
         Ok(CellState {
             arm: ArmState {
@@ -265,6 +270,7 @@ impl<'a> Cell<'a> {
             pick: None,
             parts_lost: 0,
             run_peak_demand_ratio: [0.0; crate::robot::DOF],
+            recognitions: Vec::new(),
         })
     }
 }
@@ -294,7 +300,7 @@ pub fn run(
         seed: opts.seed,
         deterministic: opts.deterministic,
     };
-    let summary = summarise(label, &records, counts, ended, st.world.time_s());
+    let summary = summarise(label, &records, counts, &st.recognitions, ended, st.world.time_s());
     Ok(RunResult { records, summary })
 }
 
@@ -324,6 +330,7 @@ impl Run<'_, '_> {
                 return Ok((records, EndReason::NoPathOutOfView));
             };
             let mut rec = PickRecord::new(index, result.capture_s, result.job.ready_s);
+            rec.recognition = result.evaluation.as_ref().map(|e| (e.detected, e.correct));
             let prepared = match result.detections.as_deref() {
                 None | Some([]) => {
                     self.obs.recognised(&Recognised {
@@ -348,6 +355,11 @@ impl Run<'_, '_> {
                     continue;
                 }
             };
+            // Evaluation only: how far the chosen detection was from the part it is nearest to.
+            rec.aimed_at = result
+                .evaluation
+                .as_ref()
+                .and_then(|e| e.matches.get(prep.grasp.detection).copied().flatten());
             self.st.trays.attempted();
             let charged = if opts.deterministic {
                 self.cell.budgets_s

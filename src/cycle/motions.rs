@@ -68,8 +68,6 @@ pub(super) struct Prepared {
     pub place: Result<PlaceMotion, String>,
     /// Hand and part as the controller believes them (the nominal part at the cup centre).
     pub held: Payload,
-    /// The part the chosen detection is (for the event log only; nothing decides on it).
-    pub truth_part: usize,
 }
 
 impl Cell<'_> {
@@ -227,7 +225,6 @@ impl Run<'_, '_> {
         let (Some(descent), Some(lift)) = (descent, lift) else {
             return Err("no joint path along the straight descent".into());
         };
-        let truth_part = detections[grasp.detection].truth_part;
         Ok((
             Prepared {
                 grasp,
@@ -237,7 +234,6 @@ impl Run<'_, '_> {
                 lift,
                 place,
                 held,
-                truth_part,
             },
             [grasp_s, pick_s, place_s],
         ))

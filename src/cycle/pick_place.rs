@@ -10,7 +10,7 @@
 //!
 //! Units: s, m, rad. Frames: world.
 
-use super::events::{Event, Outcome, Planned, Stage, StallCause};
+use super::events::{Event, MISRECOGNISED, Outcome, Planned, Stage, StallCause};
 use super::execute::Played;
 use super::motions::Prepared;
 use super::records::PickRecord;
@@ -193,7 +193,7 @@ impl Run<'_, '_> {
                 GripperEvent::Grasped { seal, .. } => {
                     self.event(Event::Grasped {
                         part: seal.part,
-                        aimed_at: prep.truth_part,
+                        aimed_at: rec.aimed_at.map(|m| m.part),
                         com_offset_m: seal.com_offset_m,
                         tilt_rad: seal.tilt_rad,
                     });
@@ -205,11 +205,25 @@ impl Run<'_, '_> {
                 GripperEvent::Released { .. } => {}
             }
         }
+        rec.sealed = Some(self.st.world.held_part().is_some());
         if self.st.world.held_part().is_none() {
             self.st.world.vacuum_off();
             self.play(&prep.lift, &hand, false)?;
             pick_done(self, rec);
-            return Ok(failure.unwrap_or_else(|| Outcome::GraspFailed("no seal".into())));
+            let failure = failure.unwrap_or_else(|| Outcome::GraspFailed("no seal".into()));
+            // Evaluation only: a failure on a wrong detection is named for what started it.
+            return Ok(match (failure, rec.aimed_at) {
+                (Outcome::GraspFailed(why), Some(m)) if !m.correct => Outcome::GraspFailed(format!(
+                    "{MISRECOGNISED}: believed pose {:.1} mm / {:.1} deg from part {} ({why})",
+                    m.position_error_m * 1e3,
+                    m.rotation_error_rad.to_degrees(),
+                    m.part
+                )),
+                (Outcome::GraspFailed(why), None) => {
+                    Outcome::GraspFailed(format!("{MISRECOGNISED}: no part there ({why})"))
+                }
+                (f, _) => f,
+            });
         }
         let held = prep.held;
         if let Played::Failed(o) = self.play_with(&prep.lift, &held, true, None, false)? {

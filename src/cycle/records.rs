@@ -17,6 +17,7 @@
 use serde::Serialize;
 
 use super::events::{EndReason, Outcome};
+use crate::sensor::{RecognitionReport, RecognitionSummary, RecognitionTotals, TruthMatch};
 use crate::stats::{Summary, mean_of};
 
 /// One pick (or one capture that found nothing to pick).
@@ -65,6 +66,13 @@ pub struct PickRecord {
     pub saturated_s: f64,
     /// Time scaling of the held-part Place transfer for the cup's holding force (1: none).
     pub suction_speed_factor: f64,
+    /// Whether the cup sealed on a part, once it reached the grasp (`None`: it never got there).
+    pub sealed: Option<bool>,
+    /// The recognition result this pick used: detections and correct ones (evaluation only).
+    pub recognition: Option<(usize, usize)>,
+    /// The chosen detection against the part nearest to it at the trigger (evaluation only):
+    /// how far the believed pose was from the true one.
+    pub aimed_at: Option<TruthMatch>,
 }
 
 impl PickRecord {
@@ -92,6 +100,9 @@ impl PickRecord {
             peak_demand_joint: 0,
             saturated_s: 0.0,
             suction_speed_factor: 1.0,
+            sealed: None,
+            recognition: None,
+            aimed_at: None,
         }
     }
 }
@@ -151,6 +162,14 @@ pub struct RunSummary {
     pub saturated_s: f64,
     /// Largest servo tracking error over the run [deg].
     pub max_tracking_error_deg: f64,
+    /// Grasps attempted (the cup reached the part) and sealed.
+    pub grasps: (usize, usize),
+    /// Grasp failures on a detection that was wrong (more than 2 mm or 5 deg from every part).
+    pub misrecognised: usize,
+    /// Recognition over the run's results, against the truth at each trigger.
+    pub recognition: RecognitionSummary,
+    /// Per recognition result.
+    pub recognition_per_capture: Vec<RecognitionReport>,
     /// Why the run ended.
     pub ended: EndReason,
     /// Simulated time [s].
@@ -212,6 +231,7 @@ pub fn summarise(
     label: RunLabel,
     records: &[PickRecord],
     counts: RunCounts,
+    recognitions: &[RecognitionReport],
     ended: EndReason,
     sim_time_s: f64,
 ) -> RunSummary {
@@ -256,6 +276,17 @@ pub fn summarise(
         peak_demand_ratio: counts.peak_demand_ratio,
         saturated_s: records.iter().map(|r| r.saturated_s).sum(),
         max_tracking_error_deg: records.iter().map(|r| r.max_tracking_error_deg).fold(0.0, f64::max),
+        grasps: (
+            records.iter().filter(|r| r.sealed.is_some()).count(),
+            records.iter().filter(|r| r.sealed == Some(true)).count(),
+        ),
+        misrecognised: count(Outcome::misrecognised),
+        recognition: {
+            let mut t = RecognitionTotals::default();
+            recognitions.iter().for_each(|r| t.add(r));
+            t.summary()
+        },
+        recognition_per_capture: recognitions.to_vec(),
         ended,
         sim_time_s,
     }

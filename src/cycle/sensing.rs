@@ -15,7 +15,7 @@ use super::events::{Event, Fault, Stage};
 use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
-use crate::sensor::{CaptureJob, Detection};
+use crate::sensor::{CaptureJob, Detection, RecognitionReport, evaluate};
 use crate::trajectory::{CORRIDOR_CHECK_DT_S, accelerate_in_corridor};
 
 /// A recognition result to pick from.
@@ -26,6 +26,11 @@ pub struct SensedResult {
     pub capture_s: f64,
     /// The recognised parts (`None` if the result was not available).
     pub detections: Option<Vec<Detection>>,
+    /// The detections against the ground truth at the trigger: evaluation only, never read by
+    /// a decision.
+    pub evaluation: Option<RecognitionReport>,
+    /// Wall time the recognition took [s] (not charged: it runs inside the sensor's latency).
+    pub recognition_wall_s: f64,
 }
 
 impl Run<'_, '_> {
@@ -73,7 +78,7 @@ impl Run<'_, '_> {
                 continue;
             }
             self.idle_until(ready_s)?;
-            let Some(job) = self.st.pending.take() else {
+            let Some(mut job) = self.st.pending.take() else {
                 continue;
             };
             if job.spoiled.is_some() {
@@ -81,7 +86,16 @@ impl Run<'_, '_> {
             }
             self.span(Stage::Sensor, capture_s, job.exposure_end_s, "exposure");
             self.span(Stage::Recognition, job.exposure_end_s, job.ready_s, "recognition");
-            let detections = self.st.sensor.result(&job, self.st.world.time_s());
+            let wall = std::time::Instant::now();
+            let detections = self.st.sensor.result(&mut job, self.st.world.time_s());
+            let recognition_wall_s = wall.elapsed().as_secs_f64();
+            let evaluation = detections
+                .as_ref()
+                .map(|d| evaluate(&job.truth, d, &self.st.sensor.symmetry));
+            if let Some(e) = &evaluation {
+                self.st.recognitions.push(e.clone());
+                self.obs.evaluated(job.ready_s, &job.truth, e);
+            }
             self.event_at(
                 job.ready_s,
                 Event::RecognitionReady {
@@ -93,6 +107,8 @@ impl Run<'_, '_> {
                 job,
                 capture_s,
                 detections,
+                evaluation,
+                recognition_wall_s,
             }));
         }
     }

@@ -4,7 +4,8 @@
 //! Job: watch a cell run ([`crate::cycle::Observer`]) and keep, decimated where a viewer needs
 //! no more: every servo tick (joint states are decimated by the writers), every part's state and
 //! pose every [`SCENE_FRAME_S`] from the first pile pour on, each capture's depth image and a
-//! quarter of its point cloud, each recognition result with its best grasp candidates, each
+//! quarter of its point cloud, each recognition result with its best grasp candidates and, for
+//! evaluation, the true poses at its trigger and each detection's error, each
 //! motion's tool path as planned and as executed, and the event log. Nothing is kept unless a
 //! run is watched by a recorder.
 //!
@@ -16,7 +17,7 @@ use crate::cycle::{CycleEvent, Event, EventLog, Observer, PickRecord, Recognised
 use crate::execution::Tick;
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
-use crate::sensor::{Camera, Capture};
+use crate::sensor::{Camera, Capture, RecognitionReport, TruthAtTrigger};
 use crate::trajectory::Motion;
 
 /// Period of the part-pose snapshots [s].
@@ -26,6 +27,18 @@ pub const SCENE_FRAME_S: f64 = 0.1;
 pub const CLOUD_EVERY_PX: usize = 2;
 /// Most grasp candidates a [`RecognitionRecord`] keeps.
 pub const RECORDED_CANDIDATES: usize = 20;
+
+/// The ground truth at a capture's trigger, shown when its recognition result arrived: the true
+/// poses beside the detections (evaluation only).
+#[derive(Debug, Clone)]
+pub struct TruthRecord {
+    /// When the result arrived [s].
+    pub t_s: f64,
+    /// When the capture was triggered [s].
+    pub trigger_s: f64,
+    /// The parts the capture showed: index and `world_from_part` at the trigger.
+    pub parts: Vec<(usize, Isometry3<f64>)>,
+}
 
 /// Every part's state and pose at one time.
 #[derive(Debug, Clone)]
@@ -70,6 +83,9 @@ pub struct RecognitionRecord {
     pub t_s: f64,
     /// Recognised parts: estimated `world_from_part` and the visible fraction.
     pub detections: Vec<(Isometry3<f64>, f64)>,
+    /// Per detection, against the truth at the trigger (evaluation only): its position [m] and
+    /// rotation [rad] error from the nearest part, and whether that is within 2 mm and 5 deg.
+    pub detection_errors: Vec<Option<(f64, f64, bool)>>,
     /// The best feasible grasps, best first (at most [`RECORDED_CANDIDATES`]): the tool at the
     /// grasp and the score.
     pub candidates: Vec<(Isometry3<f64>, f64)>,
@@ -90,6 +106,8 @@ pub struct Recording {
     pub tool_paths: Vec<ToolPath>,
     /// Every recognition result with the grasp candidates.
     pub recognitions: Vec<RecognitionRecord>,
+    /// The truth at each recognition result's trigger.
+    pub truths: Vec<TruthRecord>,
     /// The cycle's events in time order.
     pub events: Vec<CycleEvent>,
     /// The run's picks.
@@ -110,6 +128,10 @@ pub struct Recorder<'a> {
     captures: Vec<CaptureImage>,
     tool_paths: Vec<ToolPath>,
     recognitions: Vec<RecognitionRecord>,
+    truths: Vec<TruthRecord>,
+    /// The last evaluation (its result time and the per-detection matches), for the detections
+    /// that follow it.
+    last_matches: Option<(f64, Vec<Option<crate::sensor::TruthMatch>>)>,
     events: EventLog,
 }
 
@@ -125,6 +147,8 @@ impl<'a> Recorder<'a> {
             captures: Vec::new(),
             tool_paths: Vec::new(),
             recognitions: Vec::new(),
+            truths: Vec::new(),
+            last_matches: None,
             events: EventLog::default(),
         }
     }
@@ -137,6 +161,7 @@ impl<'a> Recorder<'a> {
             captures: self.captures,
             tool_paths: self.tool_paths,
             recognitions: self.recognitions,
+            truths: self.truths,
             events: self.events.into_sorted(),
             records: result.records.clone(),
             camera: self.camera,
@@ -185,9 +210,32 @@ impl Observer for Recorder<'_> {
         });
     }
 
+    fn evaluated(&mut self, t_s: f64, truth: &TruthAtTrigger, report: &RecognitionReport) {
+        self.truths.push(TruthRecord {
+            t_s,
+            trigger_s: truth.t_s,
+            parts: (0..truth.free.len())
+                .filter(|&i| truth.free[i] && truth.visible_px[i] > 0)
+                .map(|i| (i, truth.world_from_part[i]))
+                .collect(),
+        });
+        self.last_matches = Some((t_s, report.matches.clone()));
+    }
+
     fn recognised(&mut self, r: &Recognised<'_>) {
         let ranked = &r.ranked[..r.ranked.len().min(RECORDED_CANDIDATES)];
+        let matches = self
+            .last_matches
+            .as_ref()
+            .filter(|(t, m)| *t == r.t_s && m.len() == r.detections.len());
         self.recognitions.push(RecognitionRecord {
+            detection_errors: (0..r.detections.len())
+                .map(|k| {
+                    matches
+                        .and_then(|(_, m)| m[k])
+                        .map(|m| (m.position_error_m, m.rotation_error_rad, m.correct))
+                })
+                .collect(),
             t_s: r.t_s,
             detections: r
                 .detections

@@ -11,8 +11,11 @@
 //! - `/parts` (`foxglove.SceneUpdate`, 10 Hz): all parts as one entity, a cube per part;
 //! - `/camera/calibration` (`foxglove.CameraCalibration`), `/camera/depth` (`foxglove.RawImage`,
 //!   16UC1, mm) and `/camera/points` (`foxglove.PointCloud`, world frame) at each trigger time;
-//! - `/recognition` (`foxglove.SceneUpdate`): detections and ranked grasp candidates (the chosen
-//!   one green and labelled) when each result arrived;
+//! - `/recognition` (`foxglove.SceneUpdate`): detections (cyan, red and labelled when more than
+//!   2 mm or 5 deg from every part) and ranked grasp candidates (the chosen one green and
+//!   labelled) when each result arrived;
+//! - `/recognition/truth_at_trigger` (`foxglove.SceneUpdate`): the true poses, at the trigger, of
+//!   the parts the capture showed (evaluation only), when the result arrived;
 //! - `/paths` (`foxglove.SceneUpdate`): every motion's tool path, planned and executed;
 //! - `/log` (`foxglove.Log`) and `/cycle/events` (`binpick.CycleEvent`): the cycle's events;
 //! - `/cycle/takt` (`binpick.Takt`): the takt of every placed pick.
@@ -223,7 +226,7 @@ pub fn write_mcap_file(
 }
 
 /// The topics, in the order their channels are declared: (topic, schema name, JSON Schema).
-const TOPICS: [(&str, &str, &str); 14] = [
+const TOPICS: [(&str, &str, &str); 15] = [
     ("/cell", "foxglove.SceneUpdate", SCENE_SCHEMA),
     ("/robot/geometry", "foxglove.SceneUpdate", SCENE_SCHEMA),
     ("/tf", "foxglove.FrameTransforms", TRANSFORMS_SCHEMA),
@@ -233,6 +236,7 @@ const TOPICS: [(&str, &str, &str); 14] = [
     ("/camera/depth", "foxglove.RawImage", IMAGE_SCHEMA),
     ("/camera/points", "foxglove.PointCloud", POINTS_SCHEMA),
     ("/recognition", "foxglove.SceneUpdate", SCENE_SCHEMA),
+    ("/recognition/truth_at_trigger", "foxglove.SceneUpdate", SCENE_SCHEMA),
     ("/paths", "foxglove.SceneUpdate", SCENE_SCHEMA),
     ("/log", "foxglove.Log", LOG_SCHEMA),
     ("/cycle/events", "binpick.CycleEvent", EVENT_SCHEMA),
@@ -492,13 +496,35 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
     let size = nalgebra::Vector3::from(result.part_size_m);
     // Arrows point along their pose's +x: turn +x to -z (down onto the grasp point).
     let down = nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
+    for t in &result.truths {
+        let mut truth = Entity::new("true poses at the trigger");
+        truth.cubes = t
+            .parts
+            .iter()
+            .map(|(_, p)| json!({"pose": pose(p), "size": xyz(&size), "color": rgba([0.25, 0.85, 0.25], 0.25)}))
+            .collect();
+        m.push(
+            t.t_s,
+            "/recognition/truth_at_trigger",
+            &scene_update(t.t_s, vec![truth]),
+        )?;
+    }
     for r in &result.recognitions {
         let mut detections = Entity::new("detections");
-        detections.cubes = r
-            .detections
-            .iter()
-            .map(|(p, _)| json!({"pose": pose(p), "size": xyz(&size), "color": rgba([0.0, 0.8, 1.0], 0.35)}))
-            .collect();
+        for ((p, _), e) in r.detections.iter().zip(&r.detection_errors) {
+            let wrong = matches!(e, Some((_, _, false)));
+            let colour = if wrong { [1.0, 0.15, 0.15] } else { [0.0, 0.8, 1.0] };
+            detections
+                .cubes
+                .push(json!({"pose": pose(p), "size": xyz(&size), "color": rgba(colour, 0.35)}));
+            if let Some((dp, dr, false)) = e {
+                detections.texts.push(json!({
+                    "pose": pose(p), "billboard": true, "font_size": 12.0, "scale_invariant": true,
+                    "color": rgba(colour, 1.0),
+                    "text": format!("wrong: {:.1} mm / {:.1} deg off", dp * 1e3, dr.to_degrees()),
+                }));
+            }
+        }
         let mut candidates = Entity::new("grasp candidates");
         for (k, (p, score)) in r.candidates.iter().enumerate() {
             let chosen = r.chosen == Some(k);

@@ -8,8 +8,12 @@
 //! - `world/arm/<link>`: each link's `world_from_link` over time (50 Hz), its collision primitives
 //!   (static) under `world/arm/<link>/geometry`;
 //! - `world/parts`: all parts as one batch of boxes (10 Hz), coloured by state;
-//! - `world/recognition/detections` and `world/recognition/candidates` (arrows down to the grasp
-//!   points, best first, the chosen one green and labelled) when each result arrived;
+//! - `world/recognition/detections` (the poses the recognition computed: cyan when within 2 mm
+//!   and 5 deg of a part, red and labelled with the error when not) and
+//!   `world/recognition/candidates` (arrows down to the grasp points, best first, the chosen one
+//!   green and labelled) when each result arrived;
+//! - `world/recognition/truth_at_trigger`: the true poses, at the trigger, of the parts the
+//!   capture showed (evaluation only), when the result arrived;
 //! - `world/paths/planned`, `world/paths/executed`: each motion's tool path at its start;
 //! - `joints/position`, `joints/velocity`, `joints/tracking_error` (six series each, 100 Hz),
 //!   `joints/torque/J<i>` (the applied torque beside +/- the joint's limit and the torque the
@@ -424,6 +428,20 @@ fn log_sensing(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
         )?;
     }
     let half = Vector3::from(result.part_size_m) / 2.0;
+    for t in &result.truths {
+        rec.log(
+            t.t_s,
+            "world/recognition/truth_at_trigger",
+            &rerun::Boxes3D::from_centers_and_half_sizes(
+                t.parts.iter().map(|(_, p)| v3(&p.translation.vector)),
+                t.parts.iter().map(|_| v3(&half)),
+            )
+            .with_quaternions(t.parts.iter().map(|(_, p)| quat(p)))
+            .with_labels(t.parts.iter().map(|(i, _)| format!("part {i} at the trigger")))
+            .with_show_labels(false)
+            .with_colors(t.parts.iter().map(|_| rerun::Color::from_rgb(60, 220, 60))),
+        )?;
+    }
     for r in &result.recognitions {
         rec.log(
             r.t_s,
@@ -433,9 +451,20 @@ fn log_sensing(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
                 r.detections.iter().map(|_| v3(&half)),
             )
             .with_quaternions(r.detections.iter().map(|(p, _)| quat(p)))
-            .with_labels(r.detections.iter().map(|(_, v)| format!("{:.0} % visible", 100.0 * v)))
+            .with_labels(r.detections.iter().zip(&r.detection_errors).map(|((_, v), e)| match e {
+                Some((dp, dr, false)) => format!(
+                    "wrong: {:.1} mm / {:.1} deg off, {:.0} % visible",
+                    dp * 1e3,
+                    dr.to_degrees(),
+                    100.0 * v
+                ),
+                _ => format!("{:.0} % visible", 100.0 * v),
+            }))
             .with_show_labels(false)
-            .with_colors(r.detections.iter().map(|_| rerun::Color::from_rgb(0, 200, 255))),
+            .with_colors(r.detection_errors.iter().map(|e| match e {
+                Some((_, _, false)) => rerun::Color::from_rgb(255, 40, 40),
+                _ => rerun::Color::from_rgb(0, 200, 255),
+            })),
         )?;
         let chosen = |k: usize| r.chosen == Some(k);
         rec.log(

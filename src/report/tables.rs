@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 22] = [
+pub const PICKS_CSV_HEADER: [&str; 28] = [
     "pick",
     "outcome",
     "detail",
@@ -65,6 +65,12 @@ pub const PICKS_CSV_HEADER: [&str; 22] = [
     "peak_demand_joint",
     "saturated_s",
     "suction_speed_factor",
+    "sealed",
+    "detections",
+    "correct_detections",
+    "believed_pose_error_mm",
+    "believed_pose_error_deg",
+    "believed_pose_correct",
 ];
 
 /// One row of `picks.csv`.
@@ -92,6 +98,12 @@ struct PickRow<'a> {
     peak_demand_joint: usize,
     saturated_s: Fixed<6>,
     suction_speed_factor: Fixed<4>,
+    sealed: Option<bool>,
+    detections: Option<usize>,
+    correct_detections: Option<usize>,
+    believed_pose_error_mm: Fixed<6>,
+    believed_pose_error_deg: Fixed<6>,
+    believed_pose_correct: Option<bool>,
 }
 
 /// `picks.csv`: one row per pick (and per capture that found nothing to pick), SI units in
@@ -122,6 +134,12 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             peak_demand_joint: r.peak_demand_joint,
             saturated_s: Fixed::of(r.saturated_s),
             suction_speed_factor: Fixed::of(r.suction_speed_factor),
+            sealed: r.sealed,
+            detections: r.recognition.map(|x| x.0),
+            correct_detections: r.recognition.map(|x| x.1),
+            believed_pose_error_mm: Fixed(r.aimed_at.map(|m| m.position_error_m * 1e3)),
+            believed_pose_error_deg: Fixed(r.aimed_at.map(|m| m.rotation_error_rad.to_degrees())),
+            believed_pose_correct: r.aimed_at.map(|m| m.correct),
         }),
     )
 }

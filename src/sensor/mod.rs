@@ -11,10 +11,10 @@
 //! angles and at random. A capture needs an exposure window in which the arm stays out of the view
 //! frustum over the pick tray (else it is spoiled and repeated); a part that moves more than
 //! [`STILL_MOTION_M`] during the exposure is blurred and not recognised (the others are). The
-//! recognition result is ready `latency_s` after the trigger. Recognition (simplified, stated in the README): a part counts as
-//! detected when at least `detect_min_visible_fraction` of the pixels it would cover, unoccluded,
-//! show it in the capture; its pose then comes with Gaussian noise. The ground-truth body per
-//! pixel is used only for that visibility count, never to reveal a hidden part.
+//! recognition result is ready `latency_s` after the trigger. Recognition ([`Sensor::result`]) runs
+//! on the image as exposed: the pixels of a part that moved during the exposure come back empty
+//! (a blurred part gives no usable depth); by default from that image and the part's model alone
+//! ([`cloud`]), or, as the explicit what-if, by the oracle ([`recognition`]).
 //!
 //! Units: m, s, px. Frames: `world_from_camera` in the optical convention (x right, y down, z
 //! along the view); depth is the z coordinate in the camera frame; points are in the world frame.
@@ -32,12 +32,15 @@ use serde::Serialize;
 
 pub use camera::Camera;
 pub use capture::{Background, Capture, capture, capture_over};
-pub use cloud::{CloudDetection, CloudModel};
+pub use cloud::{CloudDetection, CloudModel, Symmetry};
 pub use heightmap::HeightMap;
-pub use recognition::{Detection, RecognitionReport, TruthAtTrigger, evaluate, ser_pose, top_layer};
+pub use recognition::{
+    CORRECT_WITHIN_M, CORRECT_WITHIN_RAD, Detection, RecognitionReport, RecognitionSummary, RecognitionTotals,
+    TruthAtTrigger, TruthMatch, evaluate, ser_pose, top_layer,
+};
 
-use crate::config::SensorConfig;
-use crate::physics::{PartState, TrayVolume, ViewVolume, World};
+use crate::config::{RecognitionMode, SensorConfig, Workpiece};
+use crate::physics::{PartState, Tag, TrayVolume, ViewVolume, World};
 
 /// The camera's view frustum over the pick tray: the pyramid from the optical centre to the tray's
 /// outer rim at floor level. The arm must be outside it to expose.
@@ -91,12 +94,42 @@ pub struct CaptureJob {
     /// plus its turn times its bounding radius (a 15 cm strip turning about its centre moves its
     /// ends).
     moved_m: Vec<f64>,
+    /// The blurred parts' pixels have been emptied from `capture` (once the exposure ended).
+    blur_applied: bool,
 }
 
 impl CaptureJob {
     /// Parts that moved more than [`STILL_MOTION_M`] during the exposure: blurred, not recognised.
     pub fn blurred(&self) -> usize {
         self.moved_m.iter().filter(|m| **m > STILL_MOTION_M).count()
+    }
+
+    /// Whether part `i` moved more than [`STILL_MOTION_M`] during the exposure.
+    fn is_blurred(&self, i: usize) -> bool {
+        self.moved_m.get(i).is_some_and(|m| *m > STILL_MOTION_M)
+    }
+
+    /// Empties the pixels of the parts blurred during the exposure (no return), once: the image
+    /// as the sensor delivers it. Plant simulation: the ground-truth tag per pixel says which
+    /// pixels a moving part smeared; nothing downstream reads the tags.
+    fn apply_blur(&mut self) {
+        if self.blur_applied {
+            return;
+        }
+        self.blur_applied = true;
+        if self.blurred() == 0 {
+            return;
+        }
+        let c = &mut self.capture;
+        for k in 0..c.depth_m.len() {
+            if let Some(Tag::Part(i)) = c.truth[k]
+                && self.moved_m.get(i as usize).is_some_and(|m| *m > STILL_MOTION_M)
+            {
+                c.depth_m[k] = 0.0;
+                c.points_world[k] = [f32::NAN; 3];
+                c.truth[k] = None;
+            }
+        }
     }
 }
 
@@ -114,6 +147,8 @@ pub struct Sensor {
     pub frustum: ViewFrustum,
     /// What every pixel sees of the fixed cell (shared by the clones).
     background: std::sync::Arc<Background>,
+    /// The fixed pick tray (the cloud recognition's background model).
+    pub pick_tray: TrayVolume,
     /// Trigger to recognition result [s].
     pub latency_s: f64,
     /// Exposure window [s].
@@ -124,6 +159,12 @@ pub struct Sensor {
     pub pose_noise_m: f64,
     /// Pose noise, rotation sigma [rad].
     pub pose_noise_rad: f64,
+    /// Cloud-based recognition or the oracle.
+    pub recognition: RecognitionMode,
+    /// The workpiece as the cloud-based recognition sees it (shared by the clones).
+    model: std::sync::Arc<CloudModel>,
+    /// The workpiece's symmetries, for evaluation.
+    pub symmetry: std::sync::Arc<Symmetry>,
     /// Run seed.
     pub seed: u64,
     /// Captures triggered so far (spoiled ones included).
@@ -133,18 +174,22 @@ pub struct Sensor {
 }
 
 impl Sensor {
-    /// The sensor of a cell over `world`'s pick tray.
-    pub fn new(cfg: &SensorConfig, world: &World, seed: u64) -> Option<Self> {
+    /// The sensor of a cell over `world`'s pick tray, recognising `workpiece`.
+    pub fn new(cfg: &SensorConfig, world: &World, seed: u64, workpiece: &Workpiece) -> Option<Self> {
         let camera = Camera::from_config(cfg)?;
         Some(Sensor {
             frustum: ViewFrustum::over_tray(world.pick_tray(), &camera)?,
             background: std::sync::Arc::new(Background::new(world, &camera)),
+            pick_tray: *world.pick_tray(),
             camera,
             latency_s: cfg.latency_s,
             exposure_s: cfg.exposure_s,
             detect_min_visible_fraction: cfg.detect_min_visible_fraction,
             pose_noise_m: cfg.pose_noise_m,
             pose_noise_rad: cfg.pose_noise_deg.to_radians(),
+            recognition: cfg.recognition,
+            model: std::sync::Arc::new(CloudModel::new(workpiece)),
+            symmetry: std::sync::Arc::new(Symmetry::of(workpiece)),
             seed,
             triggered: 0,
             spoiled: 0,
@@ -166,6 +211,7 @@ impl Sensor {
             spoiled: None,
             truth,
             moved_m: vec![0.0; world.part_count()],
+            blur_applied: false,
         })
     }
 
@@ -196,13 +242,36 @@ impl Sensor {
     }
 
     /// The recognition result of a job, once `ready_s` has come (`now_s`) and if it was not
-    /// spoiled: the recognised parts less those blurred by moving during the exposure. Reads
-    /// nothing of the world: what the picture showed at the trigger.
-    pub fn result(&self, job: &CaptureJob, now_s: f64) -> Option<Vec<Detection>> {
-        (job.spoiled.is_none() && now_s + 1e-9 >= job.ready_s).then(|| {
-            let mut d = self.recognize_oracle(&job.truth);
-            d.retain(|d| job.moved_m.get(d.truth_part).is_none_or(|m| *m <= STILL_MOTION_M));
-            d
+    /// spoiled: the image as exposed (blurred parts emptied, see [`CaptureJob::apply_blur`]),
+    /// recognised by the cell's recognition. Reads nothing of the world: what the picture showed
+    /// at the trigger.
+    pub fn result(&self, job: &mut CaptureJob, now_s: f64) -> Option<Vec<Detection>> {
+        if job.spoiled.is_some() || now_s + 1e-9 < job.ready_s {
+            return None;
+        }
+        job.apply_blur();
+        Some(match self.recognition {
+            RecognitionMode::Cloud => self.recognize_cloud(&job.capture),
+            RecognitionMode::Oracle => self
+                .oracle_parts(&job.truth)
+                .into_iter()
+                .filter(|(i, _)| !job.is_blurred(*i))
+                .map(|(_, d)| d)
+                .collect(),
         })
+    }
+
+    /// Recognition from the capture, the camera, the fixed pick tray and the part's model alone:
+    /// the signature admits nothing else.
+    pub fn recognize_cloud(&self, capture: &Capture) -> Vec<Detection> {
+        cloud::recognize(capture, &self.camera, &self.pick_tray, &self.model)
+            .into_iter()
+            .map(|d| Detection {
+                world_from_part: d.world_from_part,
+                visible_fraction: d.visible_fraction,
+                score: d.score,
+                face_up: Some(d.face_up),
+            })
+            .collect()
     }
 }

@@ -1,5 +1,10 @@
-//! Recognition: which parts a capture shows and where, and the evaluation of that against the
-//! ground truth.
+//! Recognition: the two ways a capture becomes detections, and the evaluation of detections
+//! against the ground truth.
+//!
+//! The cell's default recognition works from the capture alone ([`super::cloud`]); the oracle
+//! here is the explicit what-if of perfect recognition (`sensor.recognition = "oracle"`). A
+//! [`Detection`] carries nothing of the ground truth: which part it is and whether it is right
+//! are the evaluation's business ([`evaluate`], [`TruthMatch`]).
 //!
 //! Ground truth is snapshotted at the trigger ([`TruthAtTrigger`]): which parts the capture
 //! showed, how much of each, where every part was at that instant, and the pile's top layer.
@@ -10,7 +15,9 @@
 //! `detect_min_visible_fraction` of the pixels it would cover, unoccluded, show it in the
 //! capture; its pose at the trigger then comes with Gaussian noise. The ground-truth body per
 //! pixel is used only for that visibility count, never to reveal a hidden part. Evaluation
-//! ([`evaluate`]) compares detections with the snapshot: the top layer, recall, pose errors.
+//! ([`evaluate`]) matches each detection with the nearest part in the snapshot (the part's
+//! symmetries allowed) and counts it correct within 2 mm and 5 deg; recall is over the top layer,
+//! precision over the detections.
 //!
 //! Units: m, rad, px. Frames: world. Randomness: the `recognition` stream of the run seed,
 //! positioned by the capture number.
@@ -19,8 +26,10 @@ use nalgebra::{Isometry3, Point3, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 use super::capture::gaussian;
+use super::cloud::Symmetry;
 use super::{Capture, Sensor};
 use crate::physics::{PartState, RayHit, Tag, World};
+use crate::stats::{median_sorted, percentile_sorted, sorted};
 
 /// Ground truth at a capture's trigger, for evaluation and for the oracle recognition only: the
 /// cell's decisions never read it.
@@ -79,6 +88,11 @@ impl Sensor {
     /// The oracle recognition: the parts the capture showed enough of, at their poses at the
     /// trigger with Gaussian noise (see the module header). Reads the snapshot, not the world.
     pub fn recognize_oracle(&self, truth: &TruthAtTrigger) -> Vec<Detection> {
+        self.oracle_parts(truth).into_iter().map(|(_, d)| d).collect()
+    }
+
+    /// The oracle's detections with the part each is (the oracle alone knows it).
+    pub(super) fn oracle_parts(&self, truth: &TruthAtTrigger) -> Vec<(usize, Detection)> {
         let mut rng = crate::rng::stream(self.seed, "recognition");
         rng.set_word_pos(truth.capture_id as u128 * 1_000_000);
         let mut out = Vec::new();
@@ -102,11 +116,15 @@ impl Sensor {
                 (truth.translation.vector + dp).into(),
                 UnitQuaternion::from_scaled_axis(dr) * truth.rotation,
             );
-            out.push(Detection {
-                world_from_part: pose,
-                visible_fraction: fraction.min(1.0),
-                truth_part: i,
-            });
+            out.push((
+                i,
+                Detection {
+                    world_from_part: pose,
+                    visible_fraction: fraction.min(1.0),
+                    score: 1.0,
+                    face_up: None,
+                },
+            ));
         }
         out
     }
@@ -143,16 +161,37 @@ impl Sensor {
     }
 }
 
-/// A recognised part.
+/// A recognised part, as the grasp selector sees it: what the recognition computed, nothing of
+/// the ground truth (which part it is, whether it is right: see [`evaluate`]).
 #[derive(Debug, Clone, Serialize)]
 pub struct Detection {
-    /// Estimated `world_from_part` (truth plus recognition noise).
+    /// Estimated `world_from_part`.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
     pub world_from_part: Isometry3<f64>,
-    /// Fraction of its unoccluded image the capture showed.
+    /// Estimated fraction of its unoccluded image the capture showed.
     pub visible_fraction: f64,
-    /// Which part this is, for evaluation only: the grasp selector never reads it.
-    pub truth_part: usize,
+    /// Verification score in [0, 1] (the oracle's detections: 1).
+    pub score: f64,
+    /// The model face recognised on top (cloud recognition; index into [`super::CloudModel::faces`]).
+    pub face_up: Option<usize>,
+}
+
+/// A detection counts as correct within this position error of a part [m] (issue 15's definition).
+pub const CORRECT_WITHIN_M: f64 = 0.002;
+/// ... and within this rotation error, the part's symmetries allowed [rad] (5 deg).
+pub const CORRECT_WITHIN_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+
+/// A detection matched with the part it is nearest to at its capture's trigger (evaluation only).
+#[derive(Debug, Clone, Copy, Serialize)]
+pub struct TruthMatch {
+    /// The part.
+    pub part: usize,
+    /// Distance of the detection's origin from the part's at the trigger [m].
+    pub position_error_m: f64,
+    /// Rotation from the part to the detection, the least over the part's symmetries [rad].
+    pub rotation_error_rad: f64,
+    /// Within [`CORRECT_WITHIN_M`] and [`CORRECT_WITHIN_RAD`].
+    pub correct: bool,
 }
 
 /// Serialises a pose as `{xyz_m, quat_wxyz}`.
@@ -162,23 +201,32 @@ pub fn ser_pose<S: serde::Serializer>(p: &Isometry3<f64>, s: S) -> Result<S::Ok,
     v.serialize(s)
 }
 
-/// Evaluation against ground truth: which parts are in the pile's top layer, recall, pose error.
+/// One capture's recognition against the ground truth at its trigger.
 #[derive(Debug, Clone, Serialize)]
 pub struct RecognitionReport {
-    /// Parts in the pick tray.
+    /// The capture.
+    pub capture_id: u64,
+    /// Parts free in the pick tray at the trigger.
     pub parts: usize,
     /// Parts in the top layer (at least two thirds of their footprint uncovered from straight above).
     pub top_layer: usize,
-    /// Top-layer parts detected.
-    pub top_layer_detected: usize,
+    /// Top-layer parts found by a correct detection.
+    pub top_layer_found: usize,
     /// Detections in all.
     pub detected: usize,
-    /// top_layer_detected / top_layer.
-    pub top_layer_recall: f64,
-    /// Mean and max position error of detections [m].
-    pub position_error_m: (f64, f64),
-    /// Mean and max rotation error of detections [rad].
-    pub rotation_error_rad: (f64, f64),
+    /// Correct detections (within [`CORRECT_WITHIN_M`] and [`CORRECT_WITHIN_RAD`] of a part).
+    pub correct: usize,
+    /// top_layer_found / top_layer (1 for an empty top layer).
+    pub recall: f64,
+    /// correct / detected (1 without detections).
+    pub precision: f64,
+    /// Position error of the correct detections: median and max [m] (NaN without).
+    pub position_error_m: [f64; 2],
+    /// Rotation error of the correct detections: median and max [rad] (NaN without).
+    pub rotation_error_rad: [f64; 2],
+    /// Per detection, in order: its nearest part (none if no part is free).
+    #[serde(skip)]
+    pub matches: Vec<Option<TruthMatch>>,
 }
 
 /// Parts whose footprint is at least two thirds uncovered seen from straight above (arm ignored):
@@ -214,33 +262,147 @@ pub fn top_layer(world: &World) -> Vec<usize> {
         .collect()
 }
 
-/// Scores detections against the ground truth at their capture's trigger.
-pub fn evaluate(truth: &TruthAtTrigger, detections: &[Detection]) -> RecognitionReport {
+/// Scores detections against the ground truth at their capture's trigger: each is matched with
+/// the free part nearest to it (position, then 1 mm per 6 deg of rotation), and is correct within
+/// 2 mm and 5 deg of it, the part's symmetries allowed.
+pub fn evaluate(truth: &TruthAtTrigger, detections: &[Detection], symmetry: &Symmetry) -> RecognitionReport {
+    let matches: Vec<Option<TruthMatch>> = detections
+        .iter()
+        .map(|d| {
+            (0..truth.free.len())
+                .filter(|&i| truth.free[i])
+                .map(|i| {
+                    let (dp, dr) = symmetry.pose_error(&truth.world_from_part[i], &d.world_from_part);
+                    TruthMatch {
+                        part: i,
+                        position_error_m: dp,
+                        rotation_error_rad: dr,
+                        correct: dp <= CORRECT_WITHIN_M && dr <= CORRECT_WITHIN_RAD,
+                    }
+                })
+                .min_by(|a, b| {
+                    let cost = |m: &TruthMatch| m.position_error_m + m.rotation_error_rad * 0.01;
+                    cost(a).total_cmp(&cost(b))
+                })
+        })
+        .collect();
+    let right: Vec<&TruthMatch> = matches.iter().flatten().filter(|m| m.correct).collect();
+    let found: std::collections::BTreeSet<usize> = right.iter().map(|m| m.part).collect();
     let top = &truth.top_layer;
-    let found: std::collections::BTreeSet<usize> = detections.iter().map(|d| d.truth_part).collect();
     let top_found = top.iter().filter(|i| found.contains(i)).count();
-    let (mut sp, mut mp, mut sr, mut mr) = (0.0, 0.0f64, 0.0, 0.0f64);
-    for d in detections {
-        let truth = truth.world_from_part[d.truth_part];
-        let ep = (truth.translation.vector - d.world_from_part.translation.vector).norm();
-        let er = truth.rotation.angle_to(&d.world_from_part.rotation);
-        sp += ep;
-        sr += er;
-        mp = mp.max(ep);
-        mr = mr.max(er);
-    }
-    let n = detections.len().max(1) as f64;
+    let median_max = |f: fn(&TruthMatch) -> f64| {
+        let v = sorted(&right.iter().map(|m| f(m)).collect::<Vec<f64>>());
+        [median_sorted(&v), v.last().copied().unwrap_or(f64::NAN)]
+    };
     RecognitionReport {
+        capture_id: truth.capture_id,
         parts: truth.free.iter().filter(|f| **f).count(),
         top_layer: top.len(),
-        top_layer_detected: top_found,
+        top_layer_found: top_found,
         detected: detections.len(),
-        top_layer_recall: if top.is_empty() {
+        correct: right.len(),
+        recall: if top.is_empty() {
             1.0
         } else {
             top_found as f64 / top.len() as f64
         },
-        position_error_m: (sp / n, mp),
-        rotation_error_rad: (sr / n, mr),
+        precision: if detections.is_empty() {
+            1.0
+        } else {
+            right.len() as f64 / detections.len() as f64
+        },
+        position_error_m: median_max(|m| m.position_error_m),
+        rotation_error_rad: median_max(|m| m.rotation_error_rad),
+        matches,
     }
+}
+
+/// Recognition over many captures: recall and precision pooled over the captures, pose errors of
+/// every correct detection.
+#[derive(Debug, Clone, Default, PartialEq, Serialize, serde::Deserialize)]
+pub struct RecognitionTotals {
+    /// Captures evaluated.
+    pub captures: usize,
+    /// Top-layer parts, summed over the captures.
+    pub top_layer: usize,
+    /// Of those, found by a correct detection.
+    pub top_layer_found: usize,
+    /// Detections.
+    pub detected: usize,
+    /// Correct detections.
+    pub correct: usize,
+    /// Position errors of the correct detections [m].
+    pub position_errors_m: Vec<f64>,
+    /// Rotation errors of the correct detections [rad].
+    pub rotation_errors_rad: Vec<f64>,
+}
+
+impl RecognitionTotals {
+    /// Adds a capture's report.
+    pub fn add(&mut self, r: &RecognitionReport) {
+        self.captures += 1;
+        self.top_layer += r.top_layer;
+        self.top_layer_found += r.top_layer_found;
+        self.detected += r.detected;
+        self.correct += r.correct;
+        for m in r.matches.iter().flatten().filter(|m| m.correct) {
+            self.position_errors_m.push(m.position_error_m);
+            self.rotation_errors_rad.push(m.rotation_error_rad);
+        }
+    }
+
+    /// Adds another total (captures of another run).
+    pub fn merge(&mut self, o: &RecognitionTotals) {
+        self.captures += o.captures;
+        self.top_layer += o.top_layer;
+        self.top_layer_found += o.top_layer_found;
+        self.detected += o.detected;
+        self.correct += o.correct;
+        self.position_errors_m.extend_from_slice(&o.position_errors_m);
+        self.rotation_errors_rad.extend_from_slice(&o.rotation_errors_rad);
+    }
+
+    /// The summary figures.
+    pub fn summary(&self) -> RecognitionSummary {
+        let ratio = |a: usize, b: usize| if b == 0 { f64::NAN } else { a as f64 / b as f64 };
+        let pos = sorted(&self.position_errors_m);
+        let rot = sorted(&self.rotation_errors_rad);
+        RecognitionSummary {
+            captures: self.captures,
+            top_layer: self.top_layer,
+            top_layer_found: self.top_layer_found,
+            detected: self.detected,
+            correct: self.correct,
+            recall: ratio(self.top_layer_found, self.top_layer),
+            precision: ratio(self.correct, self.detected),
+            position_error_mm: [median_sorted(&pos) * 1e3, percentile_sorted(&pos, 0.95) * 1e3],
+            rotation_error_deg: [
+                median_sorted(&rot).to_degrees(),
+                percentile_sorted(&rot, 0.95).to_degrees(),
+            ],
+        }
+    }
+}
+
+/// Recognition figures over many captures (what `summary.json` and the batch table report).
+#[derive(Debug, Clone, Copy, PartialEq, Serialize)]
+pub struct RecognitionSummary {
+    /// Captures evaluated.
+    pub captures: usize,
+    /// Top-layer parts, summed over the captures.
+    pub top_layer: usize,
+    /// Of those, found by a correct detection.
+    pub top_layer_found: usize,
+    /// Detections.
+    pub detected: usize,
+    /// Correct detections.
+    pub correct: usize,
+    /// top_layer_found / top_layer.
+    pub recall: f64,
+    /// correct / detected.
+    pub precision: f64,
+    /// Position error of the correct detections, median and p95 [mm].
+    pub position_error_mm: [f64; 2],
+    /// Rotation error of the correct detections, median and p95 [deg].
+    pub rotation_error_deg: [f64; 2],
 }

@@ -21,7 +21,8 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
     );
     assert!(o.status.success(), "{}", stderr(&o));
     let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
-    assert!(v["recognition"]["top_layer_recall"].as_f64().unwrap() >= 0.9);
+    assert!(v["recognition"]["recall"].as_f64().unwrap() >= 0.9, "{v}");
+    assert!(v["recognition"]["precision"].as_f64().unwrap() >= 0.99, "{v}");
     assert!(v["grasp"]["chosen"].is_object(), "no grasp chosen: {v}");
     let dir = out.join("sense-B-seed2");
     // 16-bit PNG in millimetres: the tray floor is about 1000 mm from the camera.

@@ -137,6 +137,7 @@ fn run_mcap_holds_what_the_run_did() {
             "/parts",
             "/paths",
             "/recognition",
+            "/recognition/truth_at_trigger",
             "/robot/geometry",
             "/robot/joint_states",
             "/tf"
@@ -273,6 +274,10 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(count["/camera/calibration"], captures);
     let ready = events.iter().filter(|e| e["kind"] == "recognition_ready").count();
     assert_eq!(count["/recognition"], ready, "a recognition message per result");
+    assert_eq!(
+        count["/recognition/truth_at_trigger"], ready,
+        "the true poses at the trigger beside every result"
+    );
     let grasps = events.iter().filter(|e| e["kind"] == "grasp_chosen").count();
     assert_eq!(chosen, grasps, "the chosen candidate is marked once per chosen grasp");
     assert_eq!(count["/cell"], 1);
@@ -304,6 +309,7 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(rows("/world/cloud"), captures);
     assert_eq!(rows("/world/recognition/detections"), ready);
     assert_eq!(rows("/world/recognition/candidates"), ready);
+    assert_eq!(rows("/world/recognition/truth_at_trigger"), ready);
     assert_eq!(
         rows("/world/parts"),
         count["/parts"],
@@ -401,7 +407,7 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let summary = mcap::read::Summary::read(&bytes)
         .unwrap()
         .expect("finished: a summary section");
-    assert_eq!(summary.channels.len(), 14);
+    assert_eq!(summary.channels.len(), 15);
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1);

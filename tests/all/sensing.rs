@@ -6,8 +6,19 @@ use binpick::grasp::GraspSelector;
 use binpick::physics::pile::PileOptions;
 use binpick::physics::{PartShape, Tag, World};
 use binpick::robot::{JointVector, RobotModel, tool_down_pose};
-use binpick::sensor::{CaptureProblem, HeightMap, Sensor, TruthAtTrigger, evaluate};
+use binpick::sensor::{CaptureProblem, Detection, HeightMap, Sensor, TruthAtTrigger, evaluate};
 use nalgebra::{Isometry3, Vector3};
+
+/// The parts the detections correctly found (within 2 mm and 5 deg), by the evaluation.
+fn found_parts(sensor: &Sensor, truth: &TruthAtTrigger, detections: &[Detection]) -> Vec<usize> {
+    evaluate(truth, detections, &sensor.symmetry)
+        .matches
+        .iter()
+        .flatten()
+        .filter(|m| m.correct)
+        .map(|m| m.part)
+        .collect()
+}
 
 fn cell(workpiece: &str, seed: u64) -> (World, LoadedScene, LoadedWorkpiece, RobotModel) {
     let scene = LoadedScene::embedded_default().unwrap();
@@ -28,30 +39,25 @@ fn park_over_tray(w: &mut World) {
 
 #[test]
 fn the_arm_hides_what_is_under_it() {
-    let (mut w, scene, _, _) = cell("F", 4);
-    let sensor = Sensor::new(&scene.scene.sensor, &w, 4).unwrap();
+    let (mut w, scene, wp, _) = cell("F", 4);
+    let sensor = Sensor::new(&scene.scene.sensor, &w, 4, &wp.workpiece).unwrap();
     let clear = binpick::sensor::capture(&w, &sensor.camera, 4, 0);
-    let seen_clear: Vec<usize> = sensor
-        .recognize_oracle(&TruthAtTrigger::take(&w, &sensor, &clear))
-        .iter()
-        .map(|d| d.truth_part)
-        .collect();
+    let clear_truth = TruthAtTrigger::take(&w, &sensor, &clear);
+    let seen_clear = found_parts(&sensor, &clear_truth, &sensor.recognize_cloud(&clear));
     park_over_tray(&mut w);
     let blocked = binpick::sensor::capture(&w, &sensor.camera, 4, 1);
-    let seen_blocked: Vec<usize> = sensor
-        .recognize_oracle(&TruthAtTrigger::take(&w, &sensor, &blocked))
+    let blocked_truth = TruthAtTrigger::take(&w, &sensor, &blocked);
+    let seen_blocked = found_parts(&sensor, &blocked_truth, &sensor.recognize_cloud(&blocked));
+    // Parts found with the arm away that the arm hides entirely (none of their pixels shows)
+    // are not found under it.
+    let hidden: Vec<usize> = seen_clear
         .iter()
-        .map(|d| d.truth_part)
+        .copied()
+        .filter(|&i| blocked_truth.visible_px[i] == 0)
         .collect();
-    // Parts right under the tool (within 2 cm of its axis) are seen with the arm away and not under it.
-    let axis = w.world_from_tool().translation.vector;
-    let under: Vec<usize> = (0..w.part_count())
-        .filter(|&i| (w.part_pose(i).translation.vector - axis).xy().norm() < 0.02)
-        .filter(|i| seen_clear.contains(i))
-        .collect();
-    assert!(!under.is_empty(), "no visible part under the tool to test with");
-    for i in &under {
-        assert!(!seen_blocked.contains(i), "part {i} under the arm was detected");
+    assert!(!hidden.is_empty(), "the arm hides no found part to test with");
+    for i in &hidden {
+        assert!(!seen_blocked.contains(i), "part {i} hidden by the arm was detected");
     }
     assert!(seen_blocked.len() < seen_clear.len());
     assert!(blocked.valid_count() > 0 && clear.valid_count() > 0);
@@ -59,8 +65,8 @@ fn the_arm_hides_what_is_under_it() {
 
 #[test]
 fn capture_is_refused_or_spoiled_with_the_arm_in_view_and_ready_exactly_after_latency() {
-    let (mut w, scene, _, _) = cell("B", 2);
-    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 2).unwrap();
+    let (mut w, scene, wp, _) = cell("B", 2);
+    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 2, &wp.workpiece).unwrap();
     let home = w.joints();
     // In view: refused.
     park_over_tray(&mut w);
@@ -94,7 +100,7 @@ fn capture_is_refused_or_spoiled_with_the_arm_in_view_and_ready_exactly_after_la
         "{spoiled:?}"
     );
     assert_eq!(sensor.spoiled, 1);
-    assert!(sensor.result(&job, w.time_s()).is_none());
+    assert!(sensor.result(&mut job, w.time_s()).is_none());
     // Arm away, a clean capture: no result before latency_s, a result at exactly latency_s.
     w.place_arm(&home);
     let trigger = w.time_s();
@@ -104,7 +110,7 @@ fn capture_is_refused_or_spoiled_with_the_arm_in_view_and_ready_exactly_after_la
     while first_ready.is_none() {
         w.step().unwrap();
         assert!(sensor.watch(&mut job, &w).is_none());
-        if sensor.result(&job, w.time_s()).is_some() {
+        if sensor.result(&mut job, w.time_s()).is_some() {
             first_ready = Some(w.time_s());
         }
     }
@@ -147,21 +153,19 @@ fn approach_collides(
 }
 
 #[test]
-fn every_workpiece_top_layer_recall_at_least_90_percent_and_chosen_grasps_are_reachable_and_clear() {
+fn cloud_recognition_finds_the_top_layer_and_chosen_grasps_are_reachable_and_clear() {
     for name in ["A", "B", "C", "D", "E", "F"] {
+        let (mut top, mut found, mut detected, mut correct) = (0, 0, 0, 0);
         for seed in [1, 2] {
             let (mut w, scene, wp, robot) = cell(name, seed);
-            let mut sensor = Sensor::new(&scene.scene.sensor, &w, seed).unwrap();
-            let job = sensor.trigger(&w).unwrap();
+            let mut sensor = Sensor::new(&scene.scene.sensor, &w, seed, &wp.workpiece).unwrap();
+            let mut job = sensor.trigger(&w).unwrap();
             w.run_for(sensor.latency_s).unwrap();
-            let detections = sensor.result(&job, w.time_s()).expect("ready");
-            let report = evaluate(&job.truth, &detections);
+            let detections = sensor.result(&mut job, w.time_s()).expect("ready");
+            let report = evaluate(&job.truth, &detections, &sensor.symmetry);
             assert!(report.top_layer > 0, "{name}: empty top layer");
-            assert!(
-                report.top_layer_recall >= 0.9,
-                "{name} seed {seed}: recall {:.3} ({report:?})",
-                report.top_layer_recall
-            );
+            (top, found) = (top + report.top_layer, found + report.top_layer_found);
+            (detected, correct) = (detected + report.detected, correct + report.correct);
             let hm = HeightMap::from_capture(&job.capture, w.pick_tray(), 0.002);
             let selector = GraspSelector::new(&scene.scene, &robot, &wp.workpiece);
             let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
@@ -175,7 +179,11 @@ fn every_workpiece_top_layer_recall_at_least_90_percent_and_chosen_grasps_are_re
                 }
                 let reached = robot.world_from_tool(&JointVector::from(g.q_grasp));
                 assert!((reached.translation.vector - g.world_from_tool.translation.vector).norm() < 1e-6);
-                let target = detections[g.detection].truth_part;
+                // The part the detection is, by the evaluation (a wrong detection has none to
+                // spare the cup's last millimetres for).
+                let target = report.matches[g.detection]
+                    .filter(|m| m.correct)
+                    .map_or(usize::MAX, |m| m.part);
                 if let Some(hit) = approach_collides(
                     &w,
                     &robot,
@@ -192,8 +200,16 @@ fn every_workpiece_top_layer_recall_at_least_90_percent_and_chosen_grasps_are_re
             }
             assert!(best.score.total.is_finite());
         }
+        let (recall, precision) = (found as f64 / top as f64, correct as f64 / detected.max(1) as f64);
+        assert!(recall >= RECALL_MIN, "{name}: top-layer recall {found} / {top}");
+        assert!(precision >= PRECISION_MIN, "{name}: precision {correct} / {detected}");
     }
 }
+
+/// The cloud recognition's floor on the pooled top-layer recall of seeds 1 and 2.
+const RECALL_MIN: f64 = 0.9;
+/// ... and on its precision.
+const PRECISION_MIN: f64 = 0.99;
 
 /// The sensor's fast capture (the fixed cell's hits cached, rays cast only where something that
 /// moves can be) gives the same image as casting every ray into the whole world: with the arm
@@ -201,8 +217,8 @@ fn every_workpiece_top_layer_recall_at_least_90_percent_and_chosen_grasps_are_re
 #[test]
 fn cached_background_captures_equal_full_ray_casts() {
     for (name, seed) in [("E", 3), ("C", 2)] {
-        let (mut w, scene, _, _) = cell(name, seed);
-        let sensor = Sensor::new(&scene.scene.sensor, &w, seed).unwrap();
+        let (mut w, scene, wp, _) = cell(name, seed);
+        let sensor = Sensor::new(&scene.scene.sensor, &w, seed, &wp.workpiece).unwrap();
         let bg = binpick::sensor::Background::new(&w, &sensor.camera);
         for pose in 0..2 {
             if pose == 1 {
@@ -225,41 +241,40 @@ fn cached_background_captures_equal_full_ray_casts() {
 /// turning about its centre during the exposure is blurred although its centre stays put.
 #[test]
 fn recognition_reports_the_trigger_and_blurs_a_turning_strip() {
-    let (mut w, scene, _, _) = cell("C", 3);
-    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 3).unwrap();
-    let job = sensor.trigger(&w).unwrap();
-    let before = sensor.result(&job, job.ready_s).expect("ready");
-    let d = before.first().expect("a detection").clone();
-    let at_trigger = w.part_pose(d.truth_part);
+    let (mut w, scene, wp, _) = cell("C", 3);
+    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 3, &wp.workpiece).unwrap();
+    let mut job = sensor.trigger(&w).unwrap();
+    let before = sensor.result(&mut job.clone(), job.ready_s).expect("ready");
+    let i = found_parts(&sensor, &job.truth, &before)[0];
+    let at_trigger = w.part_pose(i);
     // After the exposure, the part is moved 3 cm; the result is read later.
     w.run_for(scene.scene.sensor.exposure_s + 0.01).unwrap();
     let moved = Isometry3::from_parts(
         (at_trigger.translation.vector + Vector3::new(0.03, 0.0, 0.0)).into(),
         at_trigger.rotation,
     );
-    w.set_part_pose(d.truth_part, &moved);
-    let after = sensor.result(&job, job.ready_s).expect("ready");
-    let same = after
-        .iter()
-        .find(|x| x.truth_part == d.truth_part)
-        .expect("still reported");
-    let noise = 4.0 * scene.scene.sensor.pose_noise_m * 3f64.sqrt();
-    assert!((same.world_from_part.translation.vector - at_trigger.translation.vector).norm() < noise);
-    // Negative control: the part really is elsewhere now.
-    assert!((same.world_from_part.translation.vector - moved.translation.vector).norm() > 0.02);
+    w.set_part_pose(i, &moved);
+    let ready_s = job.ready_s;
+    let after = sensor.result(&mut job, ready_s).expect("ready");
+    let near = |p: &Isometry3<f64>| {
+        after
+            .iter()
+            .map(|d| (d.world_from_part.translation.vector - p.translation.vector).norm())
+            .fold(f64::INFINITY, f64::min)
+    };
+    assert!(
+        near(&at_trigger) < binpick::sensor::CORRECT_WITHIN_M,
+        "not reported where it was"
+    );
+    // Negative control: the part really is elsewhere now, and nothing is reported there.
+    assert!(near(&moved) > 0.02);
 
     // A strip turning 0.05 rad about its own centre during the exposure: its centre does not
-    // move, its ends move 3.7 mm. Blurred.
-    let (mut w, scene, _, _) = cell("C", 3);
-    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 3).unwrap();
+    // move, its ends move 3.7 mm. Blurred: its pixels come back empty and it is not recognised.
+    let (mut w, scene, wp, _) = cell("C", 3);
+    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 3, &wp.workpiece).unwrap();
     let mut job = sensor.trigger(&w).unwrap();
     let blurred_still = job.blurred();
-    let i = sensor
-        .result(&job, job.ready_s)
-        .expect("ready")
-        .first()
-        .expect("a detection")
-        .truth_part;
     let p = w.part_pose(i);
     let turned = Isometry3::from_parts(
         p.translation,
@@ -274,6 +289,22 @@ fn recognition_reports_the_trigger_and_blurs_a_turning_strip() {
         "centre moved {centre_moved}"
     );
     assert!(job.blurred() > blurred_still, "a turning strip is not blurred");
-    let seen = sensor.result(&job, job.ready_s).expect("ready");
-    assert!(seen.iter().all(|d| d.truth_part != i), "a blurred strip is recognised");
+    let ready_s = job.ready_s;
+    let seen = sensor.result(&mut job, ready_s).expect("ready");
+    assert!(
+        !found_parts(&sensor, &job.truth, &seen).contains(&i),
+        "a blurred strip is recognised"
+    );
+    // Negative control: the same capture without the turn finds it.
+    assert!(found_parts(&sensor, &job.truth, &before).contains(&i));
+}
+
+/// The recognition the cell uses takes the capture, the camera, the fixed pick tray and the
+/// part's model, and nothing else: its signature admits no physics world and no ground truth.
+#[test]
+fn cloud_recognition_cannot_reach_the_world() {
+    use binpick::geometry::TrayVolume;
+    use binpick::sensor::{Camera, Capture, CloudDetection, CloudModel, cloud};
+    let _pure: fn(&Capture, &Camera, &TrayVolume, &CloudModel) -> Vec<CloudDetection> = cloud::recognize;
+    let _cell: fn(&Sensor, &Capture) -> Vec<Detection> = Sensor::recognize_cloud;
 }
