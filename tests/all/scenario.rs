@@ -207,6 +207,49 @@ fn scenario_f() {
     scenario("F");
 }
 
+/// Misrecognition is an outcome: with the oracle's pose noise raised to 5 mm / 4 deg (a case
+/// built to fail), grasps on wrong detections fail and are named `misrecognised`, with the
+/// believed pose's error in the record; with the cell's default recognition the same picks name
+/// none, and every pick's believed pose is scored.
+#[test]
+fn misrecognition_is_a_named_outcome() {
+    let robot_scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&robot_scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("B").unwrap();
+    let opts = RunOptions {
+        picks: 8,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+    };
+    let mut bad = robot_scene.clone();
+    bad.scene.sensor.recognition = binpick::config::RecognitionMode::Oracle;
+    bad.scene.sensor.pose_noise_m = 0.005;
+    bad.scene.sensor.pose_noise_deg = 4.0;
+    let r = binpick::cycle::run(&bad, &robot, &wp, &opts, &mut ()).unwrap();
+    let named: Vec<_> = r.records.iter().filter(|p| p.outcome.misrecognised()).collect();
+    assert!(
+        !named.is_empty(),
+        "no misrecognised grasp: {:?}",
+        r.records.iter().map(|p| p.outcome.detail()).collect::<Vec<_>>()
+    );
+    assert_eq!(r.summary.misrecognised, named.len());
+    for p in &named {
+        let m = p.aimed_at.expect("a misrecognised pick has its believed pose scored");
+        assert!(!m.correct && p.sealed == Some(false), "{p:?}");
+    }
+    assert!(r.summary.recognition.precision < 0.5, "{:?}", r.summary.recognition);
+
+    let good = binpick::cycle::run(&robot_scene, &robot, &wp, &opts, &mut ()).unwrap();
+    assert_eq!(good.summary.misrecognised, 0, "{:?}", good.records);
+    assert!(
+        good.records
+            .iter()
+            .filter(|p| p.outcome.set_out())
+            .all(|p| p.aimed_at.is_some())
+    );
+}
+
 #[test]
 fn deterministic_runs_repeat_byte_for_byte() {
     let ws = Workspace::new();
