@@ -211,20 +211,20 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         "  recognition      {} ({:.1} ms): {} detected, {} correct (precision {:.1} %); top layer {} / {} found (recall {:.1} %); {} parts in the tray",
         loaded.scene.sensor.recognition.name(),
         sensed.recognition_wall_s * 1e3,
-        report.detected,
-        report.correct,
-        report.precision * 100.0,
-        report.top_layer_found,
-        report.top_layer,
-        report.recall * 100.0,
+        report.figures.detected,
+        report.figures.correct,
+        report.figures.precision * 100.0,
+        report.figures.top_layer_found,
+        report.figures.top_layer,
+        report.figures.recall * 100.0,
         report.parts,
     );
     println!(
-        "  pose error       of the correct ones: position median {:.2} / max {:.2} mm, rotation median {:.2} / max {:.2} deg",
-        report.position_error_m[0] * 1e3,
-        report.position_error_m[1] * 1e3,
-        report.rotation_error_rad[0].to_degrees(),
-        report.rotation_error_rad[1].to_degrees()
+        "  pose error       of the correct ones: position median {:.2} / p95 {:.2} mm, rotation median {:.2} / p95 {:.2} deg",
+        report.figures.position_error_mm[0],
+        report.figures.position_error_mm[1],
+        report.figures.rotation_error_deg[0],
+        report.figures.rotation_error_deg[1]
     );
     match chosen {
         Some(g) => {

@@ -330,7 +330,10 @@ impl Run<'_, '_> {
                 return Ok((records, EndReason::NoPathOutOfView));
             };
             let mut rec = PickRecord::new(index, result.capture_s, result.job.ready_s);
-            rec.recognition = result.evaluation.as_ref().map(|e| (e.detected, e.correct));
+            rec.recognition = result
+                .evaluation
+                .as_ref()
+                .map(|e| (e.figures.detected, e.figures.correct));
             let prepared = match result.detections.as_deref() {
                 None | Some([]) => {
                     self.obs.recognised(&Recognised {

@@ -208,22 +208,9 @@ pub struct RecognitionReport {
     pub capture_id: u64,
     /// Parts free in the pick tray at the trigger.
     pub parts: usize,
-    /// Parts in the top layer (at least two thirds of their footprint uncovered from straight above).
-    pub top_layer: usize,
-    /// Top-layer parts found by a correct detection.
-    pub top_layer_found: usize,
-    /// Detections in all.
-    pub detected: usize,
-    /// Correct detections (within [`CORRECT_WITHIN_M`] and [`CORRECT_WITHIN_RAD`] of a part).
-    pub correct: usize,
-    /// top_layer_found / top_layer (1 for an empty top layer).
-    pub recall: f64,
-    /// correct / detected (1 without detections).
-    pub precision: f64,
-    /// Position error of the correct detections: median and max [m] (NaN without).
-    pub position_error_m: [f64; 2],
-    /// Rotation error of the correct detections: median and max [rad] (NaN without).
-    pub rotation_error_rad: [f64; 2],
+    /// Recall, precision and pose errors of this capture's detections.
+    #[serde(flatten)]
+    pub figures: RecognitionSummary,
     /// Per detection, in order: its nearest part (none if no part is free).
     #[serde(skip)]
     pub matches: Vec<Option<TruthMatch>>,
@@ -288,31 +275,19 @@ pub fn evaluate(truth: &TruthAtTrigger, detections: &[Detection], symmetry: &Sym
         .collect();
     let right: Vec<&TruthMatch> = matches.iter().flatten().filter(|m| m.correct).collect();
     let found: std::collections::BTreeSet<usize> = right.iter().map(|m| m.part).collect();
-    let top = &truth.top_layer;
-    let top_found = top.iter().filter(|i| found.contains(i)).count();
-    let median_max = |f: fn(&TruthMatch) -> f64| {
-        let v = sorted(&right.iter().map(|m| f(m)).collect::<Vec<f64>>());
-        [median_sorted(&v), v.last().copied().unwrap_or(f64::NAN)]
+    let totals = RecognitionTotals {
+        captures: 1,
+        top_layer: truth.top_layer.len(),
+        top_layer_found: truth.top_layer.iter().filter(|i| found.contains(i)).count(),
+        detected: detections.len(),
+        correct: right.len(),
+        position_errors_m: right.iter().map(|m| m.position_error_m).collect(),
+        rotation_errors_rad: right.iter().map(|m| m.rotation_error_rad).collect(),
     };
     RecognitionReport {
         capture_id: truth.capture_id,
         parts: truth.free.iter().filter(|f| **f).count(),
-        top_layer: top.len(),
-        top_layer_found: top_found,
-        detected: detections.len(),
-        correct: right.len(),
-        recall: if top.is_empty() {
-            1.0
-        } else {
-            top_found as f64 / top.len() as f64
-        },
-        precision: if detections.is_empty() {
-            1.0
-        } else {
-            right.len() as f64 / detections.len() as f64
-        },
-        position_error_m: median_max(|m| m.position_error_m),
-        rotation_error_rad: median_max(|m| m.rotation_error_rad),
+        figures: totals.summary(),
         matches,
     }
 }
@@ -340,11 +315,12 @@ pub struct RecognitionTotals {
 impl RecognitionTotals {
     /// Adds a capture's report.
     pub fn add(&mut self, r: &RecognitionReport) {
+        let f = &r.figures;
         self.captures += 1;
-        self.top_layer += r.top_layer;
-        self.top_layer_found += r.top_layer_found;
-        self.detected += r.detected;
-        self.correct += r.correct;
+        self.top_layer += f.top_layer;
+        self.top_layer_found += f.top_layer_found;
+        self.detected += f.detected;
+        self.correct += f.correct;
         for m in r.matches.iter().flatten().filter(|m| m.correct) {
             self.position_errors_m.push(m.position_error_m);
             self.rotation_errors_rad.push(m.rotation_error_rad);
@@ -397,9 +373,9 @@ pub struct RecognitionSummary {
     pub detected: usize,
     /// Correct detections.
     pub correct: usize,
-    /// top_layer_found / top_layer.
+    /// top_layer_found / top_layer (NaN for an empty top layer).
     pub recall: f64,
-    /// correct / detected.
+    /// correct / detected (NaN without detections).
     pub precision: f64,
     /// Position error of the correct detections, median and p95 [mm].
     pub position_error_mm: [f64; 2],

@@ -163,9 +163,10 @@ fn cloud_recognition_finds_the_top_layer_and_chosen_grasps_are_reachable_and_cle
             w.run_for(sensor.latency_s).unwrap();
             let detections = sensor.result(&mut job, w.time_s()).expect("ready");
             let report = evaluate(&job.truth, &detections, &sensor.symmetry);
-            assert!(report.top_layer > 0, "{name}: empty top layer");
-            (top, found) = (top + report.top_layer, found + report.top_layer_found);
-            (detected, correct) = (detected + report.detected, correct + report.correct);
+            let f = &report.figures;
+            assert!(f.top_layer > 0, "{name}: empty top layer");
+            (top, found) = (top + f.top_layer, found + f.top_layer_found);
+            (detected, correct) = (detected + f.detected, correct + f.correct);
             let hm = HeightMap::from_capture(&job.capture, w.pick_tray(), 0.002);
             let selector = GraspSelector::new(&scene.scene, &robot, &wp.workpiece);
             let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
