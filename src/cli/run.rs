@@ -133,7 +133,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
     println!(
         "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \
          defines it) mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} intervals (reference {}); excluding \
-         tray refills {:.3} s; Pick {:.3} s, Place {:.3} s; waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
+         tray refills {:.3} s; Pick {:.3} s, Place {:.3} s (motion floor {:.3} s); waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
          stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), refills {}; \
          peak torque demand {:.0} % of a limit, saturated {:.3} s, max tracking error {:.3} deg; \
          {:.1} s simulated in {:.2} s wall ({:.0}x real time)",
@@ -149,6 +149,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
         s.takt_excl_refills.mean_s,
         s.mean_pick_s,
         s.mean_place_s,
+        s.mean_pick_s + s.mean_place_s,
         s.sensor_stalls.0,
         s.sensor_stalls.1,
         s.compute_stalls.0,
