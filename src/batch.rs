@@ -190,6 +190,7 @@ mod tests {
             compute_waits: (0, 0.0),
             faults: [0, 0, 0, 0, 0],
             refills: 0,
+            agitations: 1,
             grasps: (takts.len() + 1, takts.len() + 1),
             misrecognised: 0,
             recognition: recognition_fixture(),

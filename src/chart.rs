@@ -1,7 +1,7 @@
 //! Report stage: the cycle's time chart as SVG.
 //!
 //! Job: draw one lane per stage of the cell cycle (sensor, recognition, grasp selection, planning,
-//! pick, place, stall) with a box for every interval in which that stage is busy, plus vertical
+//! pick, place, stall, agitation) with a box for every interval in which that stage is busy, plus vertical
 //! markers for events (a part released, a fault), over a window of simulation time, like the time
 //! chart of a bin-picking paper. All times are seconds of simulation time. The output is
 //! deterministic: the same input gives a byte-identical document (fixed decimals, no hash maps).
@@ -11,7 +11,7 @@ use std::fmt::Write;
 pub use crate::cycle::Stage as Lane;
 
 /// Every lane, top to bottom.
-pub const LANES: [Lane; 7] = [
+pub const LANES: [Lane; 8] = [
     Lane::Sensor,
     Lane::Recognition,
     Lane::Grasp,
@@ -19,10 +19,11 @@ pub const LANES: [Lane; 7] = [
     Lane::Pick,
     Lane::Place,
     Lane::Stall,
+    Lane::Agitation,
 ];
 
 /// Label shown at the left of a lane ("sensor", "recognition", "grasp selection", "planning",
-/// "Pick", "Place", "stall").
+/// "Pick", "Place", "stall", "agitation").
 pub fn lane_label(lane: Lane) -> &'static str {
     match lane {
         Lane::Sensor => "sensor",
@@ -32,6 +33,7 @@ pub fn lane_label(lane: Lane) -> &'static str {
         Lane::Pick => "Pick",
         Lane::Place => "Place",
         Lane::Stall => "stall",
+        Lane::Agitation => "agitation",
     }
 }
 
@@ -44,6 +46,7 @@ fn lane_colour(lane: Lane) -> &'static str {
         Lane::Pick => "#59a14f",
         Lane::Place => "#edc948",
         Lane::Stall => "#b07aa1",
+        Lane::Agitation => "#9c755f",
     }
 }
 
@@ -381,8 +384,8 @@ mod tests {
                 assert!(!svg.contains("NaN") && !svg.contains("inf"), "{t0} {t1}");
                 assert_eq!(
                     svg.matches("text-anchor=\"end\">").count(),
-                    8,
-                    "all 7 lanes and the axis caption"
+                    LANES.len() + 1,
+                    "all lanes and the axis caption"
                 );
             }
         }

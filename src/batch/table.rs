@@ -50,6 +50,9 @@ pub struct RunEntry {
     pub faults: [usize; 5],
     /// Refills of the pick tray.
     pub refills: usize,
+    /// Agitations of the pick tray.
+    #[serde(default)]
+    pub agitations: usize,
     /// Grasps attempted (the cup reached the part) and sealed.
     #[serde(default)]
     pub grasps: (usize, usize),
@@ -110,6 +113,7 @@ impl RunEntry {
                 s.parts_lost,
             ],
             refills: s.refills,
+            agitations: s.agitations,
             grasps: s.grasps,
             misrecognised: s.misrecognised,
             recognition: {
@@ -171,6 +175,8 @@ pub struct Row {
     pub parts_lost: usize,
     /// Refills.
     pub refills: usize,
+    /// Agitations.
+    pub agitations: usize,
     /// Grasps attempted (the cup reached the part) and sealed, all runs.
     pub grasps: (usize, usize),
     /// sealed / attempted.
@@ -243,6 +249,7 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                 grasp_failures: fault(3),
                 parts_lost: fault(4),
                 refills: es.iter().map(|e| e.refills).sum(),
+                agitations: es.iter().map(|e| e.agitations).sum(),
                 grasps,
                 grasp_success_rate: if grasps.0 == 0 {
                     f64::NAN
@@ -281,13 +288,13 @@ pub fn markdown(rows: &[Row]) -> String {
     let mut md = String::from(
         "| part | runs | placed / attempts | success | takt mean [s] | p95 | min | max | reference [s] \
          | takt excl. tray refills [s] | Pick [s] | Place [s] | motion floor [s] | compute grasp/Pick/Place [ms] | sensor waits (mean s) \
-         | compute waits (mean s) | stops | collisions | drops | grasps sealed | grasp fails (misrecognised) | lost | refills \
+         | compute waits (mean s) | stops | collisions | drops | grasps sealed | grasp fails (misrecognised) | lost | agitations | refills \
          | recognition recall / precision | pose error med mm / deg | peak torque demand | saturated [s] | max tracking error [deg] |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         md += &format!(
-            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} % | {} ({}) | {} | {} | {} % / {} % | {} / {} | {} % | {} | {} |\n",
+            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} % | {} ({}) | {} | {} | {} | {} % / {} % | {} / {} | {} % | {} | {} |\n",
             r.workpiece,
             r.runs,
             r.placed,
@@ -316,6 +323,7 @@ pub fn markdown(rows: &[Row]) -> String {
             r.grasp_failures,
             r.misrecognised,
             r.parts_lost,
+            r.agitations,
             r.refills,
             num(100.0 * r.recognition.recall, 1),
             num(100.0 * r.recognition.precision, 1),
@@ -330,7 +338,7 @@ pub fn markdown(rows: &[Row]) -> String {
 }
 
 /// The columns of `takt.csv`.
-pub const TAKT_CSV_HEADER: [&str; 41] = [
+pub const TAKT_CSV_HEADER: [&str; 42] = [
     "workpiece",
     "runs",
     "attempts",
@@ -358,6 +366,7 @@ pub const TAKT_CSV_HEADER: [&str; 41] = [
     "drops",
     "grasp_failures",
     "parts_lost",
+    "agitations",
     "refills",
     "grasps_attempted",
     "grasps_sealed",
@@ -404,6 +413,7 @@ struct CsvRow<'a> {
     drops: usize,
     grasp_failures: usize,
     parts_lost: usize,
+    agitations: usize,
     refills: usize,
     grasps_attempted: usize,
     grasps_sealed: usize,
@@ -452,6 +462,7 @@ pub fn csv(rows: &[Row]) -> String {
             drops: r.drops,
             grasp_failures: r.grasp_failures,
             parts_lost: r.parts_lost,
+            agitations: r.agitations,
             refills: r.refills,
             grasps_attempted: r.grasps.0,
             grasps_sealed: r.grasps.1,

@@ -134,7 +134,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
         "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \
          defines it) mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} intervals (reference {}); excluding \
          tray refills {:.3} s; Pick {:.3} s, Place {:.3} s (motion floor {:.3} s); waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
-         stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), refills {}; \
+         stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), agitations {}, refills {}; \
          peak torque demand {:.0} % of a limit, saturated {:.3} s, max tracking error {:.3} deg; \
          {:.1} s simulated in {:.2} s wall ({:.0}x real time)",
         s.placed,
@@ -160,6 +160,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
         s.parts_lost,
         s.captures.0,
         s.captures.1,
+        s.agitations,
         s.refills,
         100.0 * s.peak_demand_ratio.iter().cloned().fold(0.0, f64::max),
         s.saturated_s,

@@ -19,10 +19,12 @@
 use std::fmt;
 use std::path::{Path, PathBuf};
 
+pub mod agitation;
 pub mod model_error;
 pub mod scene;
 pub mod workpiece;
 
+pub use agitation::AgitationConfig;
 pub use model_error::ModelErrorConfig;
 pub use scene::*;
 pub use workpiece::*;

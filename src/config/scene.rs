@@ -48,6 +48,9 @@ pub struct Scene {
     /// How far the simulated plant is from the controller's model (on by default).
     #[serde(default)]
     pub model_error: super::ModelErrorConfig,
+    /// How the pick tray is shaken when nothing in it can be picked (absent: never).
+    #[serde(default)]
+    pub agitation: super::AgitationConfig,
 }
 
 /// The arm: its URDF, where it stands, and the drive data a URDF cannot hold.
@@ -717,6 +720,7 @@ impl Scene {
         c.non_negative("cycle.vacuum_lead_s", self.cycle.vacuum_lead_s);
         c.within("cycle.torque_margin", self.cycle.torque_margin, 0.0, 0.5);
         self.model_error.check(&mut c);
+        self.agitation.check(&mut c);
         if self.cycle.vacuum_lead_s > self.gripper.vacuum_build_up_s {
             c.fail(
                 "cycle.vacuum_lead_s",

@@ -35,6 +35,8 @@ pub enum Stage {
     Place,
     /// The cell waits (for the sensor, for compute, a fault reset, a refill).
     Stall,
+    /// The pick tray vibrates to loosen the pile, then the pile settles.
+    Agitation,
 }
 
 /// How a grasp failure's detail starts when the chosen detection was wrong: `grasp_failed:
@@ -275,6 +277,8 @@ pub enum Event {
     SlotSkipped(usize),
     /// The pick tray was exchanged for a full one (pile number).
     Refill(u64),
+    /// The pick tray was agitated (the how-manieth in a row).
+    Agitation(u32),
     /// The full place tray was exchanged for an empty one.
     PlaceTrayExchange,
     /// A pick ended.
@@ -305,6 +309,7 @@ impl Event {
             Event::PartLetGo => "part_let_go",
             Event::SlotSkipped(_) => "slot_skipped",
             Event::Refill(_) => "refill",
+            Event::Agitation(_) => "agitation",
             Event::PlaceTrayExchange => "place_tray_exchange",
             Event::Outcome(_) => "outcome",
             Event::MotionStartMismatch(_) => "motion_start_mismatch",
@@ -381,6 +386,7 @@ impl fmt::Display for Event {
             Event::PartLetGo => f.write_str("the part stays in the pick tray"),
             Event::SlotSkipped(slot) => write!(f, "slot {slot}"),
             Event::Refill(pile) => write!(f, "pile {pile}"),
+            Event::Agitation(k) => write!(f, "the pick tray shaken (number {k} in a row)"),
             Event::Outcome(o) => write!(f, "{}: {}", o.name(), o.detail()),
             Event::MotionStartMismatch(jump_rad) => write!(f, "{jump_rad:.4} rad"),
             Event::PickStart | Event::PlaceStart | Event::Released | Event::PlaceTrayExchange => Ok(()),

@@ -292,6 +292,7 @@ pub fn run(
         parts_lost: st.parts_lost,
         captures: (st.sensor.triggered, st.sensor.spoiled),
         refills: st.trays.refills,
+        agitations: st.trays.agitations,
         place_tray_exchanges: st.trays.exchanges,
         peak_demand_ratio: st.run_peak_demand_ratio,
     };

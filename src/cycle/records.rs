@@ -154,6 +154,8 @@ pub struct RunSummary {
     pub captures: (u64, u64),
     /// Pick-tray refills.
     pub refills: usize,
+    /// Pick-tray agitations.
+    pub agitations: usize,
     /// Place-tray exchanges.
     pub place_tray_exchanges: usize,
     /// Largest |demanded torque| / limit over the run, per joint (before saturation).
@@ -209,6 +211,8 @@ pub struct RunCounts {
     pub captures: (u64, u64),
     /// Pick-tray refills.
     pub refills: usize,
+    /// Pick-tray agitations.
+    pub agitations: usize,
     /// Place-tray exchanges.
     pub place_tray_exchanges: usize,
     /// Largest |demanded torque| / limit per joint over the run.
@@ -272,6 +276,7 @@ pub fn summarise(
         parts_lost: counts.parts_lost,
         captures: counts.captures,
         refills: counts.refills,
+        agitations: counts.agitations,
         place_tray_exchanges: counts.place_tray_exchanges,
         peak_demand_ratio: counts.peak_demand_ratio,
         saturated_s: records.iter().map(|r| r.saturated_s).sum(),

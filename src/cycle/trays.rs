@@ -1,9 +1,12 @@
 //! Cycle step 5, the trays' policies: which slot the next part goes to, what happens when the
 //! pick tray has nothing to pick, and when the place tray is full.
 //!
-//! Job: count captures in a row that gave nothing to pick; after `empty_after_captures` of them
-//! follow the cell file's `on_empty` policy: end the run, or exchange the pick tray for a full
-//! one (`refill_s`, a new seeded pile) unless a refilled tray gave nothing either. Fill the place
+//! Job: when a capture gives nothing to pick, shake the pick tray (the cell file's
+//! `[agitation]`, up to `max_tries` times in a row) and look again; without agitation, count
+//! captures in a row that gave nothing to pick. When the agitations are used up (or after
+//! `empty_after_captures` empty captures without agitation) follow the cell file's `on_empty`
+//! policy: end the run, or exchange the pick tray for a full one (`refill_s`, a new seeded pile)
+//! unless a refilled tray gave nothing either. Fill the place
 //! tray's slots in order; when they are used up, exchange it for an empty one
 //! (`place_tray_exchange_s`). Keep the bookkeeping the takt needs: the last release, and whether
 //! a refill happened since.
@@ -29,6 +32,10 @@ pub struct TrayState {
     pub empty_in_row: u32,
     /// Pick-tray refills.
     pub refills: usize,
+    /// Agitations of the pick tray, in all.
+    pub agitations: usize,
+    /// Agitations since the last pick attempt (or pour).
+    pub agitations_in_row: u32,
     /// Place-tray exchanges.
     pub exchanges: usize,
     /// A pick-tray refill happened since the last release.
@@ -45,6 +52,8 @@ impl Default for TrayState {
             attempts_since_fill: 0,
             empty_in_row: 0,
             refills: 0,
+            agitations: 0,
+            agitations_in_row: 0,
             exchanges: 0,
             refilled_since_release: false,
             last_release_s: None,
@@ -56,6 +65,7 @@ impl TrayState {
     /// A pick was attempted: the pile is not empty.
     pub fn attempted(&mut self) {
         self.empty_in_row = 0;
+        self.agitations_in_row = 0;
         self.attempts_since_fill += 1;
     }
 }
@@ -65,12 +75,27 @@ impl Run<'_, '_> {
     /// Returns why the run ends, if it does.
     pub(super) fn nothing_to_pick(&mut self) -> Result<Option<EndReason>, CycleError> {
         let policy = &self.cell.scene.cycle;
+        let max_tries = self.cell.scene.agitation.max_tries;
         let trays = &mut self.st.trays;
-        trays.empty_in_row += 1;
-        if trays.empty_in_row < policy.empty_after_captures {
-            return Ok(None);
+        if max_tries > 0 {
+            // A vibrating tray: shake at once (a second look at a still pile shows the same
+            // pile); when the tries are used up, the pile is stuck: follow the policy now.
+            if trays.agitations_in_row < max_tries {
+                trays.agitations_in_row += 1;
+                trays.agitations += 1;
+                let k = trays.agitations_in_row;
+                self.agitate(k)?;
+                return Ok(None);
+            }
+        } else {
+            trays.empty_in_row += 1;
+            if trays.empty_in_row < policy.empty_after_captures {
+                return Ok(None);
+            }
         }
+        let trays = &mut self.st.trays;
         trays.empty_in_row = 0;
+        trays.agitations_in_row = 0;
         match policy.on_empty {
             OnEmpty::End => Ok(Some(EndReason::TrayEmpty)),
             OnEmpty::Refill if trays.attempts_since_fill == 0 && trays.fills > 1 => {
@@ -87,6 +112,30 @@ impl Run<'_, '_> {
                 Ok(None)
             }
         }
+    }
+
+    /// Shakes the pick tray (the cell file's `[agitation]`): the tray's body is driven through
+    /// the vibration step by step, the parts ride it, then the pile settles with the tray at
+    /// rest. The arm stands still out of the sensor's view meanwhile.
+    fn agitate(&mut self, k: u32) -> Result<(), CycleError> {
+        let a = self.cell.scene.agitation;
+        let t0 = self.st.world.time_s();
+        self.event(Event::Agitation(k));
+        let tray = self.st.world.pick_tray().world_from_tray.rotation;
+        while self.st.world.time_s() + 1e-9 < t0 + a.duration_s {
+            let t_next = self.st.world.time_s() + self.st.world.dt_s() - t0;
+            let offset = tray * nalgebra::Vector3::from(a.offset_m(t_next));
+            self.st.world.set_pick_tray_offset(offset);
+            self.step()?;
+        }
+        self.st.world.set_pick_tray_offset(nalgebra::Vector3::zeros());
+        self.step()?;
+        self.span(Stage::Agitation, t0, self.st.world.time_s(), "agitation");
+        let settled = self.st.world.time_s();
+        self.idle_until(settled + a.settle_s)?;
+        self.span(Stage::Stall, settled, self.st.world.time_s(), "pile settling");
+        self.st.arm.free_s = self.st.world.time_s();
+        Ok(())
     }
 
     /// Takes the parts left in the pick tray out and pours pile number `fill`.

@@ -219,6 +219,12 @@ pub struct World {
     /// Joint positions the arm reaches at the end of the next step [rad].
     q_target: JointVector,
     link_bodies: Vec<RigidBodyHandle>,
+    /// The pick tray's floor and walls hang on this body: fixed at the world origin, kinematic
+    /// while the tray is agitated ([`World::set_pick_tray_offset`]).
+    pick_tray_body: RigidBodyHandle,
+    /// The pick tray's offset from its rest pose after the last step, and at the end of the next
+    /// one [m, world].
+    pick_tray_offset_m: (Vector3<f64>, Vector3<f64>),
     /// The parts, in insertion order.
     parts: Vec<PartBody>,
     /// The shape every part of this world has.
@@ -298,6 +304,8 @@ impl World {
             q: JointVector::from(scene.robot.home_rad()),
             q_target: JointVector::from(scene.robot.home_rad()),
             link_bodies: Vec::new(),
+            pick_tray_body: RigidBodyHandle::invalid(),
+            pick_tray_offset_m: (Vector3::zeros(), Vector3::zeros()),
             parts: Vec::new(),
             part_shape,
             env_names: Vec::new(),
@@ -313,12 +321,16 @@ impl World {
                 .collect(),
         };
         // The cell's fixed boxes: table, trays, obstacles (one geometry for physics and planning).
+        // The pick tray's hang on a body of their own (fixed, at the world origin) that an
+        // agitation moves.
+        w.pick_tray_body = w.bodies.insert(RigidBodyBuilder::fixed());
         for (role, b) in crate::geometry::cell_boxes(scene) {
             let name = match role {
                 crate::geometry::BoxRole::Obstacle => format!("obstacle {:?}", b.name),
                 _ => b.name.clone(),
             };
-            w.add_env_box(&name, b.world_from_box(), b.half_m);
+            let parent = (role == crate::geometry::BoxRole::PickTray).then_some(w.pick_tray_body);
+            w.add_env_box(&name, b.world_from_box(), b.half_m, parent);
         }
         w.set_solver(Solver::Tuned);
         w.add_arm(scene);
@@ -328,7 +340,13 @@ impl World {
         w
     }
 
-    fn add_env_box(&mut self, name: &str, world_from_box: Isometry3<f64>, half: Vector3<f64>) {
+    fn add_env_box(
+        &mut self,
+        name: &str,
+        world_from_box: Isometry3<f64>,
+        half: Vector3<f64>,
+        parent: Option<RigidBodyHandle>,
+    ) {
         let idx = self.env_names.len() as u32;
         self.env_names.push(name.to_string());
         let c = ColliderBuilder::cuboid(sim(half.x), sim(half.y), sim(half.z))
@@ -336,7 +354,33 @@ impl World {
             .collision_groups(InteractionGroups::new(ENV, Group::ALL, InteractionTestMode::And))
             .friction(0.5)
             .user_data(Tag::Env(idx).encode());
-        self.colliders.insert(c);
+        match parent {
+            // Parented at the world origin: the box's pose relative to its body is its world pose.
+            Some(body) => {
+                self.colliders.insert_with_parent(c, body, &mut self.bodies);
+            }
+            None => {
+                self.colliders.insert(c);
+            }
+        }
+    }
+
+    /// Sets the pick tray's offset from its rest pose at the end of the next step [m, world]:
+    /// the tray's body sweeps there during the step, pushing the parts it carries (an
+    /// agitation). A zero offset after a zero offset puts the tray back to rest, fixed, exactly
+    /// where it was built (what the sensor's cached background shows).
+    pub fn set_pick_tray_offset(&mut self, offset_m: Vector3<f64>) {
+        self.pick_tray_offset_m.1 = offset_m;
+        let moving = self.pick_tray_offset_m.0 != Vector3::zeros() || offset_m != Vector3::zeros();
+        let body = &mut self.bodies[self.pick_tray_body];
+        if moving && body.is_fixed() {
+            body.set_body_type(RigidBodyType::KinematicPositionBased, true);
+        }
+    }
+
+    /// Whether the pick tray is away from its rest pose or moving (an agitation under way).
+    pub fn pick_tray_moving(&self) -> bool {
+        !self.bodies[self.pick_tray_body].is_fixed()
     }
 
     fn add_arm(&mut self, scene: &Scene) {
@@ -494,6 +538,12 @@ impl World {
             for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
                 self.bodies[*h].set_next_kinematic_position(to_pose(&world_from_links[i]));
             }
+            if !self.bodies[self.pick_tray_body].is_fixed() {
+                let (from, to) = self.pick_tray_offset_m;
+                let at = from + (to - from) * (k as f64 / n as f64);
+                let pose = to_pose(&Isometry3::translation(at.x, at.y, at.z));
+                self.bodies[self.pick_tray_body].set_next_kinematic_position(pose);
+            }
             let world_from_tool_next = world_from_links[DOF] * self.robot.flange_from_tool;
             self.update_gripper(&world_from_tool_next);
             self.pipeline_step();
@@ -503,6 +553,7 @@ impl World {
         self.params.dt = dt;
         self.steps += 1;
         self.substeps += n as u64;
+        self.settle_pick_tray();
         self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
         self.rest_placed_parts();
         let events = self.health.check(self);
@@ -510,6 +561,18 @@ impl World {
             Ok(())
         } else {
             Err(HealthError { events })
+        }
+    }
+
+    /// After a step: the tray's offset is where the step took it; back at rest with no motion
+    /// asked for, its body is fixed again, exactly at its built pose.
+    fn settle_pick_tray(&mut self) {
+        let (_, to) = self.pick_tray_offset_m;
+        self.pick_tray_offset_m.0 = to;
+        let body = &mut self.bodies[self.pick_tray_body];
+        if to == Vector3::zeros() && !body.is_fixed() {
+            body.set_body_type(RigidBodyType::Fixed, true);
+            body.set_position(Pose::IDENTITY, true);
         }
     }
 

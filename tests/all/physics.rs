@@ -363,3 +363,53 @@ fn the_health_monitor_stops_on_a_stray_part_and_on_nan() {
     assert!(matches!(e.first(), Some(HealthEvent::NonFinite { .. })), "{e:?}");
     assert!(e.to_string().contains("part 0 has a non-finite"), "{e}");
 }
+
+/// Agitation: the pick tray driven through the cell file's vibration moves the pile (parts turn
+/// over and shift), loses none, and comes back to rest exactly where it was built: a capture with
+/// the sensor's cached background (the fixed cell's hits, cast before the shake) equals a full
+/// ray cast afterwards. Negative control: the same time without the shake moves nothing.
+#[test]
+fn an_agitated_tray_shakes_the_pile_and_returns_exactly_to_rest() {
+    let moved_after = |shake: bool| {
+        let (mut w, scene, wp) = world("A");
+        w.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, 3))
+            .unwrap();
+        let camera = binpick::sensor::Camera::from_config(&scene.scene.sensor).unwrap();
+        let background = binpick::sensor::Background::new(&w, &camera);
+        let before: Vec<Isometry3<f64>> = (0..w.part_count()).map(|i| w.part_pose(i)).collect();
+        let a = scene.scene.agitation;
+        assert!(a.max_tries > 0, "the default cell agitates");
+        let tray = w.pick_tray().world_from_tray.rotation;
+        let t0 = w.time_s();
+        let mut peak_offset_m = 0.0f64;
+        while w.time_s() < t0 + a.duration_s + a.settle_s {
+            let t = w.time_s() + w.dt_s() - t0;
+            let offset = if shake {
+                tray * Vector3::from(a.offset_m(t))
+            } else {
+                Vector3::zeros()
+            };
+            peak_offset_m = peak_offset_m.max(offset.norm());
+            w.set_pick_tray_offset(offset);
+            w.step().unwrap();
+        }
+        assert!(!w.pick_tray_moving(), "the tray is back at rest, fixed");
+        assert_eq!(w.parts_in_pick_tray().len(), w.part_count(), "a part left the tray");
+        let full = binpick::sensor::capture(&w, &camera, 3, 0);
+        let cached = binpick::sensor::capture_over(&w, &camera, 3, 0, Some(&background));
+        assert_eq!(full.depth_m, cached.depth_m, "the tray is not back where it was built");
+        let turned = (0..w.part_count())
+            .filter(|&i| before[i].rotation.angle_to(&w.part_pose(i).rotation) > 0.5)
+            .count();
+        let shifted = (0..w.part_count())
+            .filter(|&i| (before[i].translation.vector - w.part_pose(i).translation.vector).norm() > 0.002)
+            .count();
+        (peak_offset_m, turned, shifted)
+    };
+    let (peak, turned, shifted) = moved_after(true);
+    assert!(peak > 0.002, "peak offset {peak}");
+    assert!(shifted >= 10, "only {shifted} parts shifted by the shake");
+    assert!(turned >= 1, "no part turned over");
+    let (_, still_turned, still_shifted) = moved_after(false);
+    assert_eq!((still_turned, still_shifted), (0, 0), "a still tray moved the pile");
+}

@@ -1,0 +1,91 @@
+//! The cell file's `[agitation]` section: how the pick tray is shaken when nothing in it can be
+//! picked, before the tray is exchanged for a full one.
+//!
+//! Job: flexible feeders and vibrating trays loosen a pile that shows no graspable face (relays
+//! lying pins-up, cans on their sides) in well under a second, where an exchange takes an operator
+//! or a tray handler seconds. The pick tray is driven through a sinusoidal vibration of
+//! `amplitude_m` (per axis, tray frame; phase-shifted by a quarter period between x and y so the
+//! floor moves in an ellipse) at `frequency_hz` for `duration_s`, then the pile settles for
+//! `settle_s`; the cell looks again. After `max_tries` agitations in a row that gave nothing to
+//! pick, the cycle's `on_empty` policy follows (refill or end). `max_tries = 0` switches
+//! agitation off (a tray without a vibrating base).
+//!
+//! Units: m, Hz, s. Frames: the pick tray's (x along `inner_size_m[0]`, z up).
+
+use serde::{Deserialize, Serialize};
+
+use super::Checker;
+
+/// The pick tray's vibration.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AgitationConfig {
+    /// Agitations in a row (without a pick between) before the `on_empty` policy; 0: none.
+    pub max_tries: u32,
+    /// Vibration amplitude along the tray's x, y and z [m].
+    pub amplitude_m: [f64; 3],
+    /// Vibration frequency [Hz].
+    pub frequency_hz: f64,
+    /// How long the tray vibrates [s].
+    pub duration_s: f64,
+    /// How long the pile is left to settle afterwards, the tray at rest [s].
+    pub settle_s: f64,
+}
+
+impl Default for AgitationConfig {
+    /// No agitation (a cell file without the section: a tray without a vibrating base).
+    fn default() -> Self {
+        AgitationConfig {
+            max_tries: 0,
+            amplitude_m: [0.0; 3],
+            frequency_hz: 1.0,
+            duration_s: 0.0,
+            settle_s: 0.0,
+        }
+    }
+}
+
+/// Largest amplitude accepted [m]: strokes bigger than this are not a vibrating base's
+const MAX_AMPLITUDE_M: f64 = 0.02;
+/// Highest frequency accepted [Hz]: the physics step (2 ms) samples a period in 10 steps.
+const MAX_FREQUENCY_HZ: f64 = 50.0;
+
+impl AgitationConfig {
+    /// Checks the ranges; an agitation that is on needs a stroke, a frequency and a duration.
+    pub(super) fn check(&self, c: &mut Checker) {
+        for (i, a) in self.amplitude_m.iter().enumerate() {
+            c.within(&format!("agitation.amplitude_m[{i}]"), *a, 0.0, MAX_AMPLITUDE_M);
+        }
+        c.within("agitation.frequency_hz", self.frequency_hz, 0.1, MAX_FREQUENCY_HZ);
+        c.within("agitation.duration_s", self.duration_s, 0.0, 10.0);
+        c.within("agitation.settle_s", self.settle_s, 0.0, 10.0);
+        if self.max_tries > 0 {
+            if self.amplitude_m.iter().all(|a| *a == 0.0) {
+                c.fail(
+                    "agitation.amplitude_m",
+                    "all zero while max_tries > 0: the tray would not move",
+                );
+            }
+            if self.duration_s <= 0.0 {
+                c.fail(
+                    "agitation.duration_s",
+                    format!("must be positive while max_tries > 0, got {}", self.duration_s),
+                );
+            }
+        }
+    }
+
+    /// The tray's offset from its rest pose at `t_s` into the vibration, in the tray frame [m]:
+    /// x and y a quarter period apart, z in phase with x; ramped in and out over a period each
+    /// end so the stroke starts and ends at rest.
+    pub fn offset_m(&self, t_s: f64) -> [f64; 3] {
+        if t_s <= 0.0 || t_s >= self.duration_s {
+            return [0.0; 3];
+        }
+        let period = 1.0 / self.frequency_hz;
+        let ramp = (t_s / period).min((self.duration_s - t_s) / period).clamp(0.0, 1.0);
+        let w = std::f64::consts::TAU * self.frequency_hz * t_s;
+        let [ax, ay, az] = self.amplitude_m;
+        [ramp * ax * w.sin(), ramp * ay * w.cos(), ramp * az * w.sin()]
+    }
+}
