@@ -1,0 +1,80 @@
+//! Rendering of the workpiece model by ray casting: the entry distance of a ray into the model's
+//! boxes and cylinders, in the part frame [m].
+
+use nalgebra::{Point3, Vector3};
+
+use super::CloudModel;
+use crate::config::{Axis, Piece};
+
+/// Nearest entry distance of a ray (part frame, unit direction) into the model's pieces.
+pub(crate) fn ray_model(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    model
+        .pieces
+        .iter()
+        .filter_map(|p| ray_piece(p, &o.coords, d))
+        .min_by(|a, b| a.total_cmp(b))
+}
+
+/// Entry distance of a ray into a box or cylinder (part frame); `None` if it misses or starts inside.
+pub(super) fn ray_piece(piece: &Piece, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    match *piece {
+        Piece::Box { center_m, half_m } => {
+            let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+            for a in 0..3 {
+                let (p, q) = (o[a] - center_m[a], d[a]);
+                if q.abs() < 1e-12 {
+                    if p.abs() > half_m[a] {
+                        return None;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((-half_m[a] - p) / q, (half_m[a] - p) / q);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+            (t0 <= t1 && t0 > 0.0).then_some(t0)
+        }
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            half_length_m,
+            axis,
+        } => {
+            let k = match axis {
+                Axis::X => 0,
+                Axis::Y => 1,
+                Axis::Z => 2,
+            };
+            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+            let p = o - center_m;
+            // Slab along the axis.
+            let (mut t0, mut t1) = if d[k].abs() < 1e-12 {
+                if p[k].abs() > half_length_m {
+                    return None;
+                }
+                (f64::NEG_INFINITY, f64::INFINITY)
+            } else {
+                let (ta, tb) = ((-half_length_m - p[k]) / d[k], (half_length_m - p[k]) / d[k]);
+                (ta.min(tb), ta.max(tb))
+            };
+            // Infinite cylinder.
+            let a = d[i] * d[i] + d[j] * d[j];
+            let b = p[i] * d[i] + p[j] * d[j];
+            let c = p[i] * p[i] + p[j] * p[j] - radius_m * radius_m;
+            if a < 1e-12 {
+                if c > 0.0 {
+                    return None;
+                }
+            } else {
+                let disc = b * b - a * c;
+                if disc < 0.0 {
+                    return None;
+                }
+                let s = disc.sqrt();
+                t0 = t0.max((-b - s) / a);
+                t1 = t1.min((-b + s) / a);
+            }
+            (t0 <= t1 && t0 > 0.0).then_some(t0)
+        }
+    }
+}
