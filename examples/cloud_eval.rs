@@ -81,7 +81,7 @@ fn main() -> anyhow::Result<()> {
                     right_parts.insert(i);
                     pos.push(dp * 1e3);
                     rot.push(dr.to_degrees());
-                } else if let Some((_, (dp, dr))) = best {
+                } else if let Some((bi, (dp, dr))) = best {
                     if dp <= RIGHT_M {
                         wrong_rot += 1;
                         wrong_rot_deg.push(dr.to_degrees());
@@ -97,6 +97,31 @@ fn main() -> anyhow::Result<()> {
                             dp * 1e3,
                             dr.to_degrees()
                         );
+                        if std::env::var_os("CLOUD_EVAL_POSES").is_some() {
+                            let show = |p: &nalgebra::Isometry3<f64>| {
+                                let t = p.translation.vector * 1e3;
+                                let (r, q, y) = p.rotation.euler_angles();
+                                format!(
+                                    "({:.1} {:.1} {:.1}) rpy ({:.0} {:.0} {:.0})",
+                                    t.x,
+                                    t.y,
+                                    t.z,
+                                    r.to_degrees(),
+                                    q.to_degrees(),
+                                    y.to_degrees()
+                                )
+                            };
+                            eprintln!("    found {}", show(&d.world_from_part));
+                            eprintln!("    truth {}", show(&world.part_pose(bi)));
+                            for &j in &parts {
+                                let p = world.part_pose(j);
+                                if j != bi
+                                    && (p.translation.vector - d.world_from_part.translation.vector).norm() < 0.03
+                                {
+                                    eprintln!("    other {}", show(&p));
+                                }
+                            }
+                        }
                     }
                 }
             }

@@ -39,13 +39,21 @@ pub const NORMAL_TOL_RAD: f64 = 0.6;
 /// A neighbour measured this far behind a patch's plane shows the ray passed the face [m].
 pub const BEHIND_TOL_M: f64 = 0.0015;
 /// Rendered and measured depth agree within this [m].
-pub const AGREE_TOL_M: f64 = 0.002;
+pub const AGREE_TOL_M: f64 = 0.001;
 /// Smallest patch considered [px].
 pub const MIN_PATCH_PX: usize = 8;
 /// A silhouette fit may violate its constraints by this much (plane error) [m].
 pub const FIT_VIOLATION_M: f64 = 0.0006;
 /// A silhouette fit whose feasible interval is wider than this does not pin the part down [m].
 pub const FIT_AMBIGUITY_M: f64 = 0.0025;
+/// A silhouette fit whose consistent yaws span more than this does not pin the yaw down [rad].
+pub const YAW_SPAN_MAX_RAD: f64 = 8.0 * std::f64::consts::PI / 180.0;
+/// Two hypotheses closer than this (and [`SAME_POSE_RAD`]) are the same [m].
+pub const SAME_POSE_M: f64 = 0.002;
+/// Two hypotheses closer than this (and [`SAME_POSE_M`]) are the same [rad].
+pub const SAME_POSE_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+/// A hypothesis reaching this far under the tray floor is impossible [m].
+pub const UNDER_FLOOR_M: f64 = 0.001;
 /// Lowest verification score kept.
 pub const MIN_SCORE: f64 = 0.8;
 
@@ -61,6 +69,8 @@ pub struct CloudModel {
     half_size_m: Vector3<f64>,
     /// Whether a half turn about a face's normal can change the part (compounds: leads, bases).
     half_turn_matters: bool,
+    /// The turns that leave the part looking the same (two hypotheses differing by one are one).
+    symmetry: Symmetry,
 }
 
 impl CloudModel {
@@ -84,7 +94,25 @@ impl CloudModel {
             pieces: w.pieces().into_iter().map(|(_, p)| p).collect(),
             half_size_m: Vector3::from(w.size_m) / 2.0,
             half_turn_matters: w.shape.kind == ShapeKind::Compound,
+            symmetry: Symmetry::of(w),
         }
+    }
+
+    /// Lowest point of the model at `pose` along the world direction `up` [m, along `up`].
+    fn lowest_along(&self, pose: &Isometry3<f64>, up: &Vector3<f64>) -> f64 {
+        let d = pose.rotation.inverse() * -up;
+        let t = pose.translation.vector.dot(up);
+        self.pieces
+            .iter()
+            .map(|p| t - render::support(p, &d))
+            .fold(f64::INFINITY, f64::min)
+    }
+
+    /// Whether two poses of the part look alike (within [`SAME_POSE_M`] and [`SAME_POSE_RAD`],
+    /// up to its symmetries).
+    fn same_pose(&self, a: &Isometry3<f64>, b: &Isometry3<f64>) -> bool {
+        let (dp, dr) = self.symmetry.pose_error(a, b);
+        dp <= SAME_POSE_M && dr <= SAME_POSE_RAD
     }
 
     /// Smallest edge of the bounding box [m].
@@ -150,6 +178,8 @@ struct Cloud<'a> {
     normal: Vec<Vector3<f64>>,
     /// Height above the tray floor [m].
     height: Vec<f64>,
+    /// The tray floor: a point and the upward normal (world).
+    floor: Plane,
 }
 
 /// A patch's plane, its in-plane basis (e1, e2), the in-plane points of its pixels' rays (inside)
@@ -223,6 +253,10 @@ impl<'a> Cloud<'a> {
             fg,
             normal: vec![Vector3::zeros(); w * h],
             height,
+            floor: Plane {
+                point: tray.world_from_tray.translation.vector,
+                normal: tray.world_from_tray.rotation * Vector3::z(),
+            },
         };
         cloud.normals();
         cloud
@@ -389,8 +423,8 @@ impl<'a> Cloud<'a> {
         let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
         let n = plane.normal;
         let theta0 = min_area_theta(&inside);
-        // (evidence, detection): the hypothesis the image supports most.
-        let mut best: Option<(i64, CloudDetection)> = None;
+        // (evidence, detection) of every hypothesis the image supports.
+        let mut verified: Vec<(i64, CloudDetection)> = Vec::new();
         for (fi, face) in model.faces.iter().enumerate() {
             // A box's faces of equal extents look alike: the first stands for them.
             let twin = |g: &Face| {
@@ -412,8 +446,10 @@ impl<'a> Cloud<'a> {
                 let square = (face.extent_m[0] - face.extent_m[1]).abs() < 1e-9;
                 for k in 0..if square { 1 } else { 2 } {
                     let t0 = theta0 + k as f64 * std::f64::consts::FRAC_PI_2;
-                    if let Some((c, t)) = fit_rect(&inside, &outside, face.extent_m, t0) {
-                        fits.push((c, t));
+                    if let Some(f) = fit_rect(&inside, &outside, face.extent_m, t0)
+                        && f.yaw_span_rad <= YAW_SPAN_MAX_RAD
+                    {
+                        fits.push((f.center, f.yaw_rad));
                     }
                 }
             }
@@ -428,11 +464,16 @@ impl<'a> Cloud<'a> {
                     let u = e1 * t.cos() + e2 * t.sin();
                     let center = plane.point + e1 * c[0] + e2 * c[1];
                     let pose = pose_from_face(face, &center, &n, &u);
+                    if model.lowest_along(&pose, &self.floor.normal)
+                        < self.floor.point.dot(&self.floor.normal) - UNDER_FLOOR_M
+                    {
+                        continue;
+                    }
                     let Some((score, visible, evidence)) = self.verify(model, &pose) else {
                         continue;
                     };
-                    if score >= MIN_SCORE && best.as_ref().is_none_or(|b| evidence > b.0) {
-                        best = Some((
+                    if score >= MIN_SCORE {
+                        verified.push((
                             evidence,
                             CloudDetection {
                                 world_from_part: pose,
@@ -445,7 +486,16 @@ impl<'a> Cloud<'a> {
                 }
             }
         }
-        best.map(|b| b.1)
+        // The image must prefer one pose: a different one as well supported (a relay's pins not
+        // seen: on its back or not?) leaves the patch unrecognised.
+        let (evidence, best) = verified.iter().max_by_key(|v| v.0)?;
+        if verified
+            .iter()
+            .any(|(e, d)| e >= evidence && !model.same_pose(&d.world_from_part, &best.world_from_part))
+        {
+            return None;
+        }
+        Some(best.clone())
     }
 
     /// Renders the model at `pose` into the image and compares with the measured depth: (score,

@@ -57,77 +57,136 @@ pub(super) fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
     hull
 }
 
-/// Feasible centre intervals of a rectangle of extents `ext` at yaw `theta` holding every inside
-/// point and no outside point, per rotated axis: ([lo, hi]; 2).
-pub(super) fn rect_intervals(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta: f64) -> [[f64; 2]; 2] {
-    let (c, s) = (theta.cos(), theta.sin());
-    let rot = |p: &[f64; 2]| [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
-    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-    for p in inside {
-        let q = rot(p);
-        for a in 0..2 {
-            lo[a] = lo[a].min(q[a]);
-            hi[a] = hi[a].max(q[a]);
-        }
-    }
-    let mut iv = [
-        [hi[0] - ext[0] / 2.0, lo[0] + ext[0] / 2.0],
-        [hi[1] - ext[1] / 2.0, lo[1] + ext[1] / 2.0],
-    ];
-    for p in outside {
-        let q = rot(p);
-        for a in 0..2 {
-            let b = 1 - a;
-            if q[b] < lo[b] || q[b] > hi[b] {
-                continue;
-            }
-            if q[a] > hi[a] {
-                iv[a][1] = iv[a][1].min(q[a] - ext[a] / 2.0);
-            } else if q[a] < lo[a] {
-                iv[a][0] = iv[a][0].max(q[a] + ext[a] / 2.0);
-            }
-        }
-    }
-    iv
+/// A rectangle's silhouette fit: the mean of the placements consistent with the silhouette.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct RectFit {
+    /// Centre in the plane basis [m].
+    pub center: [f64; 2],
+    /// Yaw of the rectangle's first axis in the plane basis [rad].
+    pub yaw_rad: f64,
+    /// Width of the range of consistent yaws [rad] (the scan's whole width if it reaches an end).
+    pub yaw_span_rad: f64,
 }
 
-/// Silhouette fit of a rectangle of extents `ext`: every pose consistent with the silhouette is
-/// equally likely, so the estimate is their mean: yaws within 10 degrees of `theta0` weighted by
-/// the area of their feasible centres (softened by [`FIT_VIOLATION_M`] if none is feasible), the
-/// centre the middle of the feasible intervals at that yaw. `None` if infeasible or ambiguous.
-/// Returns (centre in the plane basis, yaw).
-pub(super) fn fit_rect(
-    inside: &[[f64; 2]],
-    outside: &[[f64; 2]],
-    ext: [f64; 2],
-    theta0: f64,
-) -> Option<([f64; 2], f64)> {
-    let step = 0.25f64.to_radians();
-    let widths: Vec<[f64; 2]> = (-40..=40)
-        .map(|k| {
-            let iv = rect_intervals(inside, outside, ext, theta0 + k as f64 * step);
-            [iv[0][1] - iv[0][0], iv[1][1] - iv[1][0]]
-        })
-        .collect();
-    // Strictly consistent yaws if there are any, else those within the plane's error.
-    let mean_k = [0.02 * FIT_VIOLATION_M, FIT_VIOLATION_M].iter().find_map(|soft| {
-        let (mut sw, mut sk) = (0.0, 0.0);
-        for (k, w) in (-40..=40).zip(&widths) {
-            let wgt = (w[0] + soft).max(0.0) * (w[1] + soft).max(0.0);
-            sw += wgt;
-            sk += wgt * k as f64;
+/// Yaw step of the rectangle fit's scan [rad] and its half width in steps.
+const YAW_STEP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+const YAW_STEPS: i32 = 20;
+/// Grid of candidate centres of the rectangle fit [m].
+const CELL_M: f64 = 0.0001;
+/// ... coarser if the centres' box would need more cells than this per axis.
+const MAX_CELLS: usize = 40;
+
+/// Silhouette fit of a rectangle of extents `ext`: the placements consistent with the silhouette,
+/// yaws within 10 degrees of `theta0` in [`YAW_STEP_RAD`] steps; the estimate is the middle of
+/// the consistent yaws (off by at most half their span) and the mean of the consistent centres. At each yaw,
+/// the centres on a [`CELL_M`] grid that put every inside point in the rectangle and every outside
+/// point out of it (exactly, corners included), within a tolerance: strict, else the plane's
+/// error [`FIT_VIOLATION_M`]. `None` if nothing is consistent or the centres are not pinned down
+/// (spread wider than [`FIT_AMBIGUITY_M`]).
+pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta0: f64) -> Option<RectFit> {
+    let half = [ext[0] / 2.0, ext[1] / 2.0];
+    for tol in [0.1 * FIT_VIOLATION_M, FIT_VIOLATION_M] {
+        // (weight, weighted sum of centres (plane basis), range of consistent yaw steps).
+        let (mut wsum, mut csum) = (0.0, [0.0; 2]);
+        let (mut k0, mut k1) = (i32::MAX, i32::MIN);
+        let mut ambiguous = false;
+        let mut grid: Vec<bool> = Vec::new();
+        for k in -YAW_STEPS..=YAW_STEPS {
+            let t = theta0 + k as f64 * YAW_STEP_RAD;
+            let (c, s) = (t.cos(), t.sin());
+            let rot = |p: &[f64; 2]| [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+            for p in inside {
+                let q = rot(p);
+                for a in 0..2 {
+                    lo[a] = lo[a].min(q[a]);
+                    hi[a] = hi[a].max(q[a]);
+                }
+            }
+            // Centres holding every inside point.
+            let blo = [hi[0] - half[0] - tol, hi[1] - half[1] - tol];
+            let bhi = [lo[0] + half[0] + tol, lo[1] + half[1] + tol];
+            if blo[0] > bhi[0] || blo[1] > bhi[1] {
+                continue;
+            }
+            let cell = [
+                ((bhi[0] - blo[0]) / MAX_CELLS as f64).max(CELL_M),
+                ((bhi[1] - blo[1]) / MAX_CELLS as f64).max(CELL_M),
+            ];
+            let n = [
+                ((bhi[0] - blo[0]) / cell[0]) as usize + 1,
+                ((bhi[1] - blo[1]) / cell[1]) as usize + 1,
+            ];
+            grid.clear();
+            grid.resize(n[0] * n[1], true);
+            // Less the centres that would hold an outside point.
+            for p in outside {
+                let q = rot(p);
+                let mut range = [[0usize; 2]; 2];
+                let mut hit = true;
+                for a in 0..2 {
+                    let (l, h) = (q[a] - half[a] + tol, q[a] + half[a] - tol);
+                    let il = ((l - blo[a]) / cell[a]).ceil().max(0.0);
+                    let ih = ((h - blo[a]) / cell[a]).floor().min((n[a] - 1) as f64);
+                    if il > ih {
+                        hit = false;
+                        break;
+                    }
+                    range[a] = [il as usize, ih as usize];
+                }
+                if hit {
+                    for j in range[1][0]..=range[1][1] {
+                        grid[j * n[0] + range[0][0]..=j * n[0] + range[0][1]].fill(false);
+                    }
+                }
+            }
+            let (mut cnt, mut m) = (0usize, [0.0; 2]);
+            let (mut glo, mut ghi) = ([usize::MAX; 2], [0usize; 2]);
+            for j in 0..n[1] {
+                for i in 0..n[0] {
+                    if grid[j * n[0] + i] {
+                        cnt += 1;
+                        m[0] += i as f64;
+                        m[1] += j as f64;
+                        glo = [glo[0].min(i), glo[1].min(j)];
+                        ghi = [ghi[0].max(i), ghi[1].max(j)];
+                    }
+                }
+            }
+            if cnt == 0 {
+                continue;
+            }
+            if ((ghi[0] - glo[0]) as f64 * cell[0]).max((ghi[1] - glo[1]) as f64 * cell[1]) > FIT_AMBIGUITY_M {
+                ambiguous = true;
+            }
+            let mr = [
+                blo[0] + m[0] / cnt as f64 * cell[0],
+                blo[1] + m[1] / cnt as f64 * cell[1],
+            ];
+            let w = cnt as f64 * cell[0] * cell[1];
+            wsum += w;
+            csum[0] += w * (c * mr[0] - s * mr[1]);
+            csum[1] += w * (s * mr[0] + c * mr[1]);
+            k0 = k0.min(k);
+            k1 = k1.max(k);
         }
-        (sw > 0.0).then(|| sk / sw)
-    })?;
-    let t = theta0 + mean_k * step;
-    let iv = rect_intervals(inside, outside, ext, t);
-    let widths = [iv[0][1] - iv[0][0], iv[1][1] - iv[1][0]];
-    if widths.iter().any(|w| *w < -FIT_VIOLATION_M || *w > FIT_AMBIGUITY_M) {
-        return None;
+        if wsum > 0.0 {
+            if ambiguous {
+                return None;
+            }
+            let span = if k0 == -YAW_STEPS || k1 == YAW_STEPS {
+                2 * YAW_STEPS
+            } else {
+                k1 - k0
+            };
+            return Some(RectFit {
+                center: [csum[0] / wsum, csum[1] / wsum],
+                yaw_rad: theta0 + (k0 + k1) as f64 / 2.0 * YAW_STEP_RAD,
+                yaw_span_rad: span as f64 * YAW_STEP_RAD,
+            });
+        }
     }
-    let m = [(iv[0][0] + iv[0][1]) / 2.0, (iv[1][0] + iv[1][1]) / 2.0];
-    let (c, s) = (t.cos(), t.sin());
-    Some(([c * m[0] - s * m[1], s * m[0] + c * m[1]], t))
+    None
 }
 
 /// Silhouette fit of a disc of radius `r`: the mean of the centres holding every inside point and

@@ -78,3 +78,26 @@ pub(super) fn ray_piece(piece: &Piece, o: &Vector3<f64>, d: &Vector3<f64>) -> Op
         }
     }
 }
+
+/// Support of a piece along the part-frame unit direction `d`: the largest `p . d` over its points [m].
+pub(super) fn support(piece: &Piece, d: &Vector3<f64>) -> f64 {
+    match *piece {
+        Piece::Box { center_m, half_m } => {
+            center_m.dot(d) + half_m.x * d.x.abs() + half_m.y * d.y.abs() + half_m.z * d.z.abs()
+        }
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            half_length_m,
+            axis,
+        } => {
+            let a = match axis {
+                Axis::X => Vector3::x(),
+                Axis::Y => Vector3::y(),
+                Axis::Z => Vector3::z(),
+            };
+            let along = a.dot(d);
+            center_m.dot(d) + half_length_m * along.abs() + radius_m * (1.0 - along * along).max(0.0).sqrt()
+        }
+    }
+}
