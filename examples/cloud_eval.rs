@@ -125,6 +125,16 @@ fn main() -> anyhow::Result<()> {
                     }
                 }
             }
+            if std::env::var_os("CLOUD_EVAL_MISSED").is_some() {
+                for &i in top.iter().filter(|i| !right_parts.contains(i)) {
+                    let r = world.part_pose(i).rotation;
+                    let tilt = [nalgebra::Vector3::x(), nalgebra::Vector3::y(), nalgebra::Vector3::z()]
+                        .iter()
+                        .map(|a| (r * a).z.abs().clamp(0.0, 1.0).acos().to_degrees())
+                        .fold(f64::INFINITY, f64::min);
+                    eprintln!("{name} seed {seed}: missed, tilt {tilt:.0} deg");
+                }
+            }
             top_n += top.len();
             top_found += top.iter().filter(|i| right_parts.contains(i)).count();
         }

@@ -7,12 +7,56 @@ use super::CloudModel;
 use crate::config::{Axis, Piece};
 
 /// Nearest entry distance of a ray (part frame, unit direction) into the model's pieces.
+#[cfg(test)]
 pub(crate) fn ray_model(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
     model
         .pieces
         .iter()
         .filter_map(|p| ray_piece(p, &o.coords, d))
         .min_by(|a, b| a.total_cmp(b))
+}
+
+/// As [`ray_model`], and whether the ray only grazes a thin piece (a lead): it passes it farther
+/// from its axis than [`THIN_CORE`] of its radius, where a pose a fraction of a millimetre off
+/// decides whether it hits.
+pub(super) fn ray_model_graze(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<(f64, bool)> {
+    let (t, k) = model
+        .pieces
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| ray_piece(p, &o.coords, d).map(|t| (t, k)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))?;
+    let graze = match model.pieces[k] {
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            axis,
+            ..
+        } if model.lead[k] => {
+            let a = axis_vec(axis);
+            let p = o.coords - center_m;
+            let (p, q) = (p - a * p.dot(&a), d - a * d.dot(&a));
+            let dist = if q.norm() > 1e-9 {
+                p.cross(&q).norm() / q.norm()
+            } else {
+                p.norm()
+            };
+            dist > THIN_CORE * radius_m
+        }
+        _ => false,
+    };
+    Some((t, graze))
+}
+
+/// A ray passing a lead within this fraction of its radius from its axis surely meets it.
+const THIN_CORE: f64 = 0.5;
+
+fn axis_vec(axis: Axis) -> Vector3<f64> {
+    match axis {
+        Axis::X => Vector3::x(),
+        Axis::Y => Vector3::y(),
+        Axis::Z => Vector3::z(),
+    }
 }
 
 /// Entry distance of a ray into a box or cylinder (part frame); `None` if it misses or starts inside.
