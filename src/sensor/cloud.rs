@@ -430,6 +430,25 @@ impl<'a> Cloud<'a> {
         let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
         let n = plane.normal;
         let theta0 = min_area_theta(&inside);
+        // The fits need only the inside points' convex hull; a face smaller than the patch's
+        // bounding rectangle (at `theta0`) by more than a pixel cannot be it.
+        let hull = convex_hull(&inside);
+        let dims = {
+            let (c, s) = (theta0.cos(), theta0.sin());
+            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+            for p in &hull {
+                let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+                for a in 0..2 {
+                    lo[a] = lo[a].min(q[a]);
+                    hi[a] = hi[a].max(q[a]);
+                }
+            }
+            let d = [hi[0] - lo[0], hi[1] - lo[1]];
+            [d[0].max(d[1]), d[0].min(d[1])]
+        };
+        let pixel_m = self
+            .camera
+            .pixel_size_at_m((plane.point - self.origin).dot(&self.optical));
         // (evidence, detection) of every hypothesis the image supports.
         let mut verified: Vec<(i64, CloudDetection)> = Vec::new();
         for (fi, face) in model.faces.iter().enumerate() {
@@ -441,9 +460,16 @@ impl<'a> Cloud<'a> {
             if !model.half_turn_matters && model.faces[..fi].iter().any(twin) {
                 continue;
             }
+            let ext = [
+                face.extent_m[0].max(face.extent_m[1]),
+                face.extent_m[0].min(face.extent_m[1]),
+            ];
+            if dims[0] > ext[0] + pixel_m || dims[1] > ext[1] + pixel_m {
+                continue;
+            }
             let mut fits = Vec::new();
             if face.disc {
-                if let Some(c) = fit_disc(&inside, &outside, face.extent_m[0] / 2.0) {
+                if let Some(c) = fit_disc(&hull, &outside, face.extent_m[0] / 2.0) {
                     // Any yaw looks the same: the face's first axis along the world x in the plane.
                     let x = Vector3::x() - n * n.x;
                     let x = if x.norm() > 1e-6 { x.normalize() } else { e1 };
@@ -453,7 +479,7 @@ impl<'a> Cloud<'a> {
                 let square = (face.extent_m[0] - face.extent_m[1]).abs() < 1e-9;
                 for k in 0..if square { 1 } else { 2 } {
                     let t0 = theta0 + k as f64 * std::f64::consts::FRAC_PI_2;
-                    if let Some(f) = fit_rect(&inside, &outside, face.extent_m, t0)
+                    if let Some(f) = fit_rect(&hull, &outside, face.extent_m, t0)
                         && f.yaw_span_rad <= YAW_SPAN_MAX_RAD
                     {
                         fits.push((f.center, f.yaw_rad));
@@ -566,7 +592,7 @@ mod fit;
 mod render;
 mod symmetry;
 
-use fit::{fit_disc, fit_rect, min_area_theta};
+use fit::{convex_hull, fit_disc, fit_rect, min_area_theta};
 #[cfg(test)]
 use render::ray_model;
 pub use symmetry::Symmetry;

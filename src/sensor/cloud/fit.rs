@@ -81,7 +81,7 @@ const MAX_CELLS: usize = 40;
 /// the consistent yaws (off by at most half their span) and the mean of the consistent centres. At each yaw,
 /// the centres on a [`CELL_M`] grid that put every inside point in the rectangle and every outside
 /// point out of it (exactly, corners included), within a tolerance: strict, else the plane's
-/// error [`FIT_VIOLATION_M`]. `None` if nothing is consistent or the centres are not pinned down
+/// error [`FIT_VIOLATION_M`]. `inside` may be just its convex hull. `None` if nothing is consistent or the centres are not pinned down
 /// (spread wider than [`FIT_AMBIGUITY_M`]).
 pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta0: f64) -> Option<RectFit> {
     let half = [ext[0] / 2.0, ext[1] / 2.0];
@@ -90,7 +90,7 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
         let (mut wsum, mut csum) = (0.0, [0.0; 2]);
         let (mut k0, mut k1) = (i32::MAX, i32::MIN);
         let mut ambiguous = false;
-        let mut grid: Vec<bool> = Vec::new();
+        let mut grid: Vec<i32> = Vec::new();
         for k in -YAW_STEPS..=YAW_STEPS {
             let t = theta0 + k as f64 * YAW_STEP_RAD;
             let (c, s) = (t.cos(), t.sin());
@@ -117,9 +117,11 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
                 ((bhi[0] - blo[0]) / cell[0]) as usize + 1,
                 ((bhi[1] - blo[1]) / cell[1]) as usize + 1,
             ];
+            // Less the centres that would hold an outside point: each excludes a box of
+            // centres, summed in a difference array (one more row and column).
+            let w = n[0] + 1;
             grid.clear();
-            grid.resize(n[0] * n[1], true);
-            // Less the centres that would hold an outside point.
+            grid.resize(w * (n[1] + 1), 0);
             for p in outside {
                 let q = rot(p);
                 let mut range = [[0usize; 2]; 2];
@@ -132,19 +134,29 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
                         hit = false;
                         break;
                     }
-                    range[a] = [il as usize, ih as usize];
+                    range[a] = [il as usize, ih as usize + 1];
                 }
                 if hit {
-                    for j in range[1][0]..=range[1][1] {
-                        grid[j * n[0] + range[0][0]..=j * n[0] + range[0][1]].fill(false);
-                    }
+                    let ([i0, i1], [j0, j1]) = (range[0], range[1]);
+                    grid[j0 * w + i0] += 1;
+                    grid[j0 * w + i1] -= 1;
+                    grid[j1 * w + i0] -= 1;
+                    grid[j1 * w + i1] += 1;
+                }
+            }
+            for j in 0..n[1] {
+                for i in 0..n[0] {
+                    let up = if j > 0 { grid[(j - 1) * w + i] } else { 0 };
+                    let left = if i > 0 { grid[j * w + i - 1] } else { 0 };
+                    let diag = if i > 0 && j > 0 { grid[(j - 1) * w + i - 1] } else { 0 };
+                    grid[j * w + i] += up + left - diag;
                 }
             }
             let (mut cnt, mut m) = (0usize, [0.0; 2]);
             let (mut glo, mut ghi) = ([usize::MAX; 2], [0usize; 2]);
             for j in 0..n[1] {
                 for i in 0..n[0] {
-                    if grid[j * n[0] + i] {
+                    if grid[j * (n[0] + 1) + i] == 0 {
                         cnt += 1;
                         m[0] += i as f64;
                         m[1] += j as f64;
@@ -189,7 +201,7 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
     None
 }
 
-/// Silhouette fit of a disc of radius `r`: the mean of the centres holding every inside point and
+/// Silhouette fit of a disc of radius `r` (`inside` may be just its convex hull): the mean of the centres holding every inside point and
 /// no outside point (within half [`FIT_VIOLATION_M`]), on a 0.1 mm grid around the centroid. `None` if infeasible
 /// or ambiguous (the feasible centres spread wider than [`FIT_AMBIGUITY_M`]).
 pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Option<[f64; 2]> {
