@@ -243,3 +243,41 @@ fn symmetries_of_the_workpieces() {
     assert_eq!(count("D"), 0);
     assert_eq!(count("F"), 8);
 }
+
+/// Pixels without a return (dropouts, or a blurred part the cycle invalidated: depth 0, point
+/// NaN) say nothing: a block with a hole in its face is still found; a part entirely
+/// invalidated is not found, and its neighbour still is.
+#[test]
+fn holes_say_nothing() {
+    let cell = cell();
+    let w = workpiece("B");
+    let m = CloudModel::new(&w);
+    let pose = resting(&cell, &w, 0.02, 0.01, 0.0, yaw(30.0));
+    let mut cap = synthetic(&cell, &[(&m, pose)]);
+    let (u, v, _) = cell.camera.project(&Point3::from(pose.translation.vector)).unwrap();
+    let (u, v) = (u as usize, v as usize);
+    for dv in 0..4 {
+        for du in 0..4 {
+            let i = (v + dv - 2) * cap.width_px + u + du - 2;
+            cap.depth_m[i] = 0.0;
+            cap.points_world[i] = [f32::NAN; 3];
+        }
+    }
+    let found = recognize(&cap, &cell.camera, &cell.tray, &m);
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_found(&w, &found, &pose, 0.0008, 2.0);
+    // A second block, blurred: every pixel it shows invalidated.
+    let blurred = resting(&cell, &w, -0.04, 0.01, 0.0, yaw(10.0));
+    let both = synthetic(&cell, &[(&m, pose), (&m, blurred)]);
+    let alone = synthetic(&cell, &[(&m, pose)]);
+    let mut cap = both.clone();
+    for i in 0..cap.depth_m.len() {
+        if (both.depth_m[i] - alone.depth_m[i]).abs() > 1e-4 {
+            cap.depth_m[i] = 0.0;
+            cap.points_world[i] = [f32::NAN; 3];
+        }
+    }
+    let found = recognize(&cap, &cell.camera, &cell.tray, &m);
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_found(&w, &found, &pose, 0.0008, 2.0);
+}
