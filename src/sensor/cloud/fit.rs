@@ -89,7 +89,6 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
         // (weight, weighted sum of centres (plane basis), range of consistent yaw steps).
         let (mut wsum, mut csum) = (0.0, [0.0; 2]);
         let (mut k0, mut k1) = (i32::MAX, i32::MIN);
-        let mut ambiguous = false;
         let mut grid: Vec<i32> = Vec::new();
         for k in -YAW_STEPS..=YAW_STEPS {
             let t = theta0 + k as f64 * YAW_STEP_RAD;
@@ -169,7 +168,8 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
                 continue;
             }
             if ((ghi[0] - glo[0]) as f64 * cell[0]).max((ghi[1] - glo[1]) as f64 * cell[1]) > FIT_AMBIGUITY_M {
-                ambiguous = true;
+                // Consistent but not pinned down: no fit (the looser tolerance only adds more).
+                return None;
             }
             let mr = [
                 blo[0] + m[0] / cnt as f64 * cell[0],
@@ -183,9 +183,6 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
             k1 = k1.max(k);
         }
         if wsum > 0.0 {
-            if ambiguous {
-                return None;
-            }
             let span = if k0 == -YAW_STEPS || k1 == YAW_STEPS {
                 2 * YAW_STEPS
             } else {
@@ -202,7 +199,7 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
 }
 
 /// Silhouette fit of a disc of radius `r` (`inside` may be just its convex hull): the mean of the centres holding every inside point and
-/// no outside point (within half [`FIT_VIOLATION_M`]), on a 0.1 mm grid around the centroid. `None` if infeasible
+/// no outside point (within half [`FIT_VIOLATION_M`]), on a 0.2 mm grid around the centroid. `None` if infeasible
 /// or ambiguous (the feasible centres spread wider than [`FIT_AMBIGUITY_M`]).
 pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Option<[f64; 2]> {
     let n = inside.len() as f64;
@@ -216,11 +213,11 @@ pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Opt
         let b = outside.iter().map(|p| d(p) - r).fold(f64::INFINITY, f64::min);
         a.min(b)
     };
-    let step = 0.0001;
+    let step = 0.0002;
     let (mut sum, mut cnt) = ([0.0; 2], 0.0);
     let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-    for i in -20..=20 {
-        for j in -20..=20 {
+    for i in -10..=10 {
+        for j in -10..=10 {
             let c = [c0[0] + i as f64 * step, c0[1] + j as f64 * step];
             if room(c) >= -FIT_VIOLATION_M / 2.0 {
                 for a in 0..2 {

@@ -281,3 +281,24 @@ fn holes_say_nothing() {
     assert_eq!(found.len(), 1, "{found:?}");
     assert_found(&w, &found, &pose, 0.0008, 2.0);
 }
+
+/// Same capture, same detections, bit for bit (patches are recognised in parallel).
+#[test]
+fn recognition_is_deterministic() {
+    let cell = cell();
+    let w = workpiece("A");
+    let m = CloudModel::new(&w);
+    let parts: Vec<(&CloudModel, Isometry3<f64>)> = (0..4)
+        .map(|k| {
+            (
+                &m,
+                resting(&cell, &w, -0.06 + 0.035 * k as f64, 0.01, 0.0, yaw(17.0 * k as f64)),
+            )
+        })
+        .collect();
+    let cap = synthetic(&cell, &parts);
+    let a = recognize(&cap, &cell.camera, &cell.tray, &m);
+    let b = recognize(&cap, &cell.camera, &cell.tray, &m);
+    assert!(!a.is_empty());
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
+}
