@@ -162,27 +162,13 @@ pub struct CloudDetection {
 /// Recognises parts in a capture from the capture, the camera, the pick tray's geometry and the
 /// workpiece model only (no physics world, no ground truth). Best first.
 pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &CloudModel) -> Vec<CloudDetection> {
-    let t0 = std::time::Instant::now();
     let cloud = Cloud::new(capture, camera, tray);
-    let t1 = t0.elapsed();
     let patches = cloud.segment();
-    let t2 = t0.elapsed();
-    let sizes: usize = patches.iter().map(|p| p.pixels.len()).sum();
     // Patches in parallel, collected in their order: deterministic.
     let mut found: Vec<CloudDetection> = patches
         .par_iter()
         .filter_map(|patch| cloud.best_hypothesis(patch, model))
         .collect();
-    if std::env::var_os("CLOUD_TIMING").is_some() {
-        eprintln!(
-            "new {:?} seg {:?} hyp {:?} patches {} px {}",
-            t1,
-            t2 - t1,
-            t0.elapsed() - t2,
-            patches.len(),
-            sizes
-        );
-    }
     found.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut kept: Vec<CloudDetection> = Vec::new();
     let radius = 0.5 * model.min_size_m();
@@ -457,11 +443,7 @@ impl<'a> Cloud<'a> {
 
     /// The best verified hypothesis for a patch, if any.
     fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> Option<CloudDetection> {
-        let ts = std::time::Instant::now();
         let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
-        if std::env::var_os("CLOUD_TIMING2").is_some() {
-            eprintln!("  sil {:?} n {} out {}", ts.elapsed(), inside.len(), outside.len());
-        }
         let n = plane.normal;
         let theta0 = min_area_theta(&inside);
         // The fits need only the inside points' convex hull; a face smaller than the patch's
