@@ -2,7 +2,7 @@
 //! each workpiece: per workpiece A-F over seeds 1-8, a settled pile, one capture, recognition from
 //! the capture alone, then against the ground truth (evaluation only): recall of the top layer,
 //! precision (a detection is right within 2 mm and 5 deg of a part, with the part's symmetries),
-//! pose errors of the right ones (median and p95), compute time per capture (median).
+//! pose errors of the right ones (median and p95), compute time per capture (median and max).
 //!
 //! Run: `cargo run --release --example cloud_eval [-- A C --seeds 4]`
 
@@ -46,7 +46,7 @@ fn main() -> anyhow::Result<()> {
     let camera = Camera::from_config(&scene.scene.sensor).ok_or_else(|| anyhow::anyhow!("degenerate camera"))?;
     let tray = binpick::geometry::TrayVolume::new(&scene.scene.pick_tray);
     println!(
-        "wp  top  found  recall%  det  right  prec%   pos_med/p95_mm   rot_med/p95_deg   ms_med  (seeds 1..={seeds})"
+        "wp  top  found  recall%  det  right  prec%   pos_med/p95_mm   rot_med/p95_deg   ms_med/max  (seeds 1..={seeds})"
     );
     for name in &names {
         let wp = LoadedWorkpiece::resolve(name)?;
@@ -81,7 +81,7 @@ fn main() -> anyhow::Result<()> {
                     right_parts.insert(i);
                     pos.push(dp * 1e3);
                     rot.push(dr.to_degrees());
-                } else if let Some((_, (dp, dr))) = best {
+                } else if let Some((bi, (dp, dr))) = best {
                     if dp <= RIGHT_M {
                         wrong_rot += 1;
                         wrong_rot_deg.push(dr.to_degrees());
@@ -97,7 +97,42 @@ fn main() -> anyhow::Result<()> {
                             dp * 1e3,
                             dr.to_degrees()
                         );
+                        if std::env::var_os("CLOUD_EVAL_POSES").is_some() {
+                            let show = |p: &nalgebra::Isometry3<f64>| {
+                                let t = p.translation.vector * 1e3;
+                                let (r, q, y) = p.rotation.euler_angles();
+                                format!(
+                                    "({:.1} {:.1} {:.1}) rpy ({:.0} {:.0} {:.0})",
+                                    t.x,
+                                    t.y,
+                                    t.z,
+                                    r.to_degrees(),
+                                    q.to_degrees(),
+                                    y.to_degrees()
+                                )
+                            };
+                            eprintln!("    found {}", show(&d.world_from_part));
+                            eprintln!("    truth {}", show(&world.part_pose(bi)));
+                            for &j in &parts {
+                                let p = world.part_pose(j);
+                                if j != bi
+                                    && (p.translation.vector - d.world_from_part.translation.vector).norm() < 0.03
+                                {
+                                    eprintln!("    other {}", show(&p));
+                                }
+                            }
+                        }
                     }
+                }
+            }
+            if std::env::var_os("CLOUD_EVAL_MISSED").is_some() {
+                for &i in top.iter().filter(|i| !right_parts.contains(i)) {
+                    let r = world.part_pose(i).rotation;
+                    let tilt = [nalgebra::Vector3::x(), nalgebra::Vector3::y(), nalgebra::Vector3::z()]
+                        .iter()
+                        .map(|a| (r * a).z.abs().clamp(0.0, 1.0).acos().to_degrees())
+                        .fold(f64::INFINITY, f64::min);
+                    eprintln!("{name} seed {seed}: missed, tilt {tilt:.0} deg");
                 }
             }
             top_n += top.len();
@@ -106,10 +141,11 @@ fn main() -> anyhow::Result<()> {
         let (pm, pp) = (quantile(&mut pos, 0.5), quantile(&mut pos, 0.95));
         let (rm, rp) = (quantile(&mut rot, 0.5), quantile(&mut rot, 0.95));
         println!(
-            "{name:<3} {top_n:>4} {top_found:>6} {:>8.1} {det_n:>4} {right_n:>6} {:>6.1}   {pm:>6.2} / {pp:>5.2}    {rm:>6.2} / {rp:>5.2}    {:>6.1}",
+            "{name:<3} {top_n:>4} {top_found:>6} {:>8.1} {det_n:>4} {right_n:>6} {:>6.1}   {pm:>6.2} / {pp:>5.2}    {rm:>6.2} / {rp:>5.2}    {:>5.1} / {:>5.1}",
             100.0 * top_found as f64 / top_n.max(1) as f64,
             100.0 * right_n as f64 / det_n.max(1) as f64,
-            quantile(&mut ms, 0.5)
+            quantile(&mut ms, 0.5),
+            quantile(&mut ms, 1.0)
         );
         println!(
             "      wrong: {wrong_rot} by rotation only (median {:.1} deg), {wrong_pos} by position",

@@ -110,9 +110,9 @@ fn assert_found(w: &Workpiece, found: &[CloudDetection], truth: &Isometry3<f64>,
 fn a_part_alone_is_found_at_its_pose() {
     let cell = cell();
     for (name, r) in [
-        ("F", yaw(20.0)),
+        ("F", yaw(25.0)),
         ("B", yaw(-35.0)),
-        ("E", yaw(10.0)),
+        ("E", yaw(13.0)),
         ("C", yaw(5.0)),
         ("A", yaw(70.0)),
         ("D", yaw(0.0)),
@@ -146,8 +146,8 @@ fn two_touching_parts_at_different_heights_are_both_found() {
     let cell = cell();
     let w = workpiece("F");
     let m = CloudModel::new(&w);
-    let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(15.0));
-    let b = resting(&cell, &w, 0.0102, 0.001, 0.002, yaw(-10.0));
+    let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(26.0));
+    let b = resting(&cell, &w, 0.0102, 0.001, 0.002, yaw(20.0));
     let found = recognize(&synthetic(&cell, &[(&m, a), (&m, b)]), &cell.camera, &cell.tray, &m);
     assert_eq!(found.len(), 2, "{found:?}");
     assert_found(&w, &found, &a, 0.0008, 5.0);
@@ -169,19 +169,58 @@ fn a_half_covered_part_is_found() {
         &mc,
     );
     assert_found(&wc, &found, &strip, 0.0008, 2.0);
-    // A block covering half of an F: one edge of each axis still in view pins it down.
+    // A block covering half of an F: the visible half leaves its yaw open by more than
+    // YAW_SPAN_MAX_RAD at most yaws; whatever is reported must be right.
     let wf = workpiece("F");
     let mf = CloudModel::new(&wf);
-    let part = resting(&cell, &wf, 0.02, 0.03, 0.0, yaw(25.0));
-    let cover = resting(&cell, &wb, 0.02 + 0.019, 0.03, 0.0055, yaw(25.0));
-    let found = recognize(
-        &synthetic(&cell, &[(&mf, part), (&mb, cover)]),
-        &cell.camera,
-        &cell.tray,
-        &mf,
-    );
-    assert_found(&wf, &found, &part, 0.0008, 5.0);
-    assert!(found.iter().all(|d| d.visible_fraction < 0.95), "{found:?}");
+    let sym = Symmetry::of(&wf);
+    for y in [0.0, 11.0, 26.0, 40.0] {
+        let part = resting(&cell, &wf, 0.02, 0.03, 0.0, yaw(y));
+        let cover = resting(&cell, &wb, 0.02 + 0.019, 0.03, 0.0055, yaw(y));
+        let found = recognize(
+            &synthetic(&cell, &[(&mf, part), (&mb, cover)]),
+            &cell.camera,
+            &cell.tray,
+            &mf,
+        );
+        for d in &found {
+            let (dp, dr) = sym.pose_error(&part, &d.world_from_part);
+            assert!(dp <= 0.002 && dr <= SAME_POSE_RAD, "yaw {y}: {found:?}");
+            assert!(d.visible_fraction < 0.95, "{found:?}");
+        }
+    }
+}
+
+/// A square 7 px face turned along the pixel grid: its silhouette leaves the yaw open by more
+/// than 8 degrees, so nothing is reported rather than a guess.
+#[test]
+fn an_open_yaw_is_not_guessed() {
+    let cell = cell();
+    let w = workpiece("F");
+    let m = CloudModel::new(&w);
+    let pose = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(10.0));
+    assert!(recognize(&synthetic(&cell, &[(&m, pose)]), &cell.camera, &cell.tray, &m).is_empty());
+}
+
+/// A relay lying on its back on another part, its pins not seen: on its back or on its face
+/// look alike, so the patch is left unrecognised; on the tray floor, the floor decides.
+#[test]
+fn a_relay_on_its_back_is_told_apart_or_left() {
+    let cell = cell();
+    let w = workpiece("A");
+    let m = CloudModel::new(&w);
+    let sym = Symmetry::of(&w);
+    for (lift, y) in [(0.0, 30.0), (0.0, 63.0), (0.004, 30.0), (0.004, 63.0)] {
+        let back = resting(&cell, &w, -0.03, 0.01, lift, yaw(y) * roll(180.0));
+        let found = recognize(&synthetic(&cell, &[(&m, back)]), &cell.camera, &cell.tray, &m);
+        for d in &found {
+            let (dp, dr) = sym.pose_error(&back, &d.world_from_part);
+            assert!(dp <= 0.0008 && dr.to_degrees() <= 2.0, "lift {lift} yaw {y}: {found:?}");
+        }
+        if lift == 0.0 {
+            assert_eq!(found.len(), 1, "on the floor, yaw {y}: {found:?}");
+        }
+    }
 }
 
 #[test]
@@ -203,4 +242,63 @@ fn symmetries_of_the_workpieces() {
     assert_eq!(count("C"), 4);
     assert_eq!(count("D"), 0);
     assert_eq!(count("F"), 8);
+}
+
+/// Pixels without a return (dropouts, or a blurred part the cycle invalidated: depth 0, point
+/// NaN) say nothing: a block with a hole in its face is still found; a part entirely
+/// invalidated is not found, and its neighbour still is.
+#[test]
+fn holes_say_nothing() {
+    let cell = cell();
+    let w = workpiece("B");
+    let m = CloudModel::new(&w);
+    let pose = resting(&cell, &w, 0.02, 0.01, 0.0, yaw(30.0));
+    let mut cap = synthetic(&cell, &[(&m, pose)]);
+    let (u, v, _) = cell.camera.project(&Point3::from(pose.translation.vector)).unwrap();
+    let (u, v) = (u as usize, v as usize);
+    for dv in 0..4 {
+        for du in 0..4 {
+            let i = (v + dv - 2) * cap.width_px + u + du - 2;
+            cap.depth_m[i] = 0.0;
+            cap.points_world[i] = [f32::NAN; 3];
+        }
+    }
+    let found = recognize(&cap, &cell.camera, &cell.tray, &m);
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_found(&w, &found, &pose, 0.0008, 2.0);
+    // A second block, blurred: every pixel it shows invalidated.
+    let blurred = resting(&cell, &w, -0.04, 0.01, 0.0, yaw(10.0));
+    let both = synthetic(&cell, &[(&m, pose), (&m, blurred)]);
+    let alone = synthetic(&cell, &[(&m, pose)]);
+    let mut cap = both.clone();
+    for i in 0..cap.depth_m.len() {
+        if (both.depth_m[i] - alone.depth_m[i]).abs() > 1e-4 {
+            cap.depth_m[i] = 0.0;
+            cap.points_world[i] = [f32::NAN; 3];
+        }
+    }
+    let found = recognize(&cap, &cell.camera, &cell.tray, &m);
+    assert_eq!(found.len(), 1, "{found:?}");
+    assert_found(&w, &found, &pose, 0.0008, 2.0);
+}
+
+/// Same capture, same detections, bit for bit (patches are recognised in parallel).
+#[test]
+fn recognition_is_deterministic() {
+    let cell = cell();
+    let w = workpiece("A");
+    let m = CloudModel::new(&w);
+    let parts: Vec<(&CloudModel, Isometry3<f64>)> = (0..4)
+        .map(|k| {
+            (
+                &m,
+                resting(&cell, &w, -0.06 + 0.035 * k as f64, 0.01, 0.0, yaw(17.0 * k as f64)),
+            )
+        })
+        .collect();
+    let cap = synthetic(&cell, &parts);
+    let a = recognize(&cap, &cell.camera, &cell.tray, &m);
+    let b = recognize(&cap, &cell.camera, &cell.tray, &m);
+    assert!(!a.is_empty());
+    assert_eq!(format!("{a:?}"), format!("{b:?}"));
 }

@@ -1,0 +1,234 @@
+//! Silhouette fits in a patch's plane: the minimum-area rectangle's yaw, and the placements of a
+//! face's rectangle or disc that hold every inside point and no outside point. Coordinates are
+//! in the plane's basis [m]; yaws [rad].
+
+use super::{FIT_AMBIGUITY_M, FIT_VIOLATION_M};
+
+/// Yaw of the minimum-area rectangle around the points (rotating calipers on the convex hull)
+/// [rad], in (-pi/2, pi/2].
+pub(super) fn min_area_theta(pts: &[[f64; 2]]) -> f64 {
+    let hull = convex_hull(pts);
+    let mut best = (f64::INFINITY, 0.0);
+    for k in 0..hull.len() {
+        let (a, b) = (hull[k], hull[(k + 1) % hull.len()]);
+        let t = (b[1] - a[1]).atan2(b[0] - a[0]);
+        let (c, s) = (t.cos(), t.sin());
+        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+        for p in &hull {
+            let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+            for a in 0..2 {
+                lo[a] = lo[a].min(q[a]);
+                hi[a] = hi[a].max(q[a]);
+            }
+        }
+        let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
+        if area < best.0 - 1e-15 {
+            best = (area, t);
+        }
+    }
+    best.1
+}
+
+/// Convex hull (Andrew's monotone chain), counter-clockwise.
+pub(super) fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = pts.to_vec();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// A rectangle's silhouette fit: the mean of the placements consistent with the silhouette.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct RectFit {
+    /// Centre in the plane basis [m].
+    pub center: [f64; 2],
+    /// Yaw of the rectangle's first axis in the plane basis [rad].
+    pub yaw_rad: f64,
+    /// Width of the range of consistent yaws [rad] (the scan's whole width if it reaches an end).
+    pub yaw_span_rad: f64,
+}
+
+/// Yaw step of the rectangle fit's scan [rad] and its half width in steps.
+const YAW_STEP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+const YAW_STEPS: i32 = 20;
+/// Grid of candidate centres of the rectangle fit [m].
+const CELL_M: f64 = 0.0001;
+/// ... coarser if the centres' box would need more cells than this per axis.
+const MAX_CELLS: usize = 40;
+
+/// Silhouette fit of a rectangle of extents `ext`: the placements consistent with the silhouette,
+/// yaws within 10 degrees of `theta0` in [`YAW_STEP_RAD`] steps; the estimate is the middle of
+/// the consistent yaws (off by at most half their span) and the mean of the consistent centres. At each yaw,
+/// the centres on a [`CELL_M`] grid that put every inside point in the rectangle and every outside
+/// point out of it (exactly, corners included), within a tolerance: strict, else the plane's
+/// error [`FIT_VIOLATION_M`]. `inside` may be just its convex hull. `None` if nothing is consistent or the centres are not pinned down
+/// (spread wider than [`FIT_AMBIGUITY_M`]).
+pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2], theta0: f64) -> Option<RectFit> {
+    let half = [ext[0] / 2.0, ext[1] / 2.0];
+    for tol in [0.1 * FIT_VIOLATION_M, FIT_VIOLATION_M] {
+        // (weight, weighted sum of centres (plane basis), range of consistent yaw steps).
+        let (mut wsum, mut csum) = (0.0, [0.0; 2]);
+        let (mut k0, mut k1) = (i32::MAX, i32::MIN);
+        let mut grid: Vec<i32> = Vec::new();
+        for k in -YAW_STEPS..=YAW_STEPS {
+            let t = theta0 + k as f64 * YAW_STEP_RAD;
+            let (c, s) = (t.cos(), t.sin());
+            let rot = |p: &[f64; 2]| [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+            for p in inside {
+                let q = rot(p);
+                for a in 0..2 {
+                    lo[a] = lo[a].min(q[a]);
+                    hi[a] = hi[a].max(q[a]);
+                }
+            }
+            // Centres holding every inside point.
+            let blo = [hi[0] - half[0] - tol, hi[1] - half[1] - tol];
+            let bhi = [lo[0] + half[0] + tol, lo[1] + half[1] + tol];
+            if blo[0] > bhi[0] || blo[1] > bhi[1] {
+                continue;
+            }
+            let cell = [
+                ((bhi[0] - blo[0]) / MAX_CELLS as f64).max(CELL_M),
+                ((bhi[1] - blo[1]) / MAX_CELLS as f64).max(CELL_M),
+            ];
+            let n = [
+                ((bhi[0] - blo[0]) / cell[0]) as usize + 1,
+                ((bhi[1] - blo[1]) / cell[1]) as usize + 1,
+            ];
+            // Less the centres that would hold an outside point: each excludes a box of
+            // centres, summed in a difference array (one more row and column).
+            let w = n[0] + 1;
+            grid.clear();
+            grid.resize(w * (n[1] + 1), 0);
+            for p in outside {
+                let q = rot(p);
+                let mut range = [[0usize; 2]; 2];
+                let mut hit = true;
+                for a in 0..2 {
+                    let (l, h) = (q[a] - half[a] + tol, q[a] + half[a] - tol);
+                    let il = ((l - blo[a]) / cell[a]).ceil().max(0.0);
+                    let ih = ((h - blo[a]) / cell[a]).floor().min((n[a] - 1) as f64);
+                    if il > ih {
+                        hit = false;
+                        break;
+                    }
+                    range[a] = [il as usize, ih as usize + 1];
+                }
+                if hit {
+                    let ([i0, i1], [j0, j1]) = (range[0], range[1]);
+                    grid[j0 * w + i0] += 1;
+                    grid[j0 * w + i1] -= 1;
+                    grid[j1 * w + i0] -= 1;
+                    grid[j1 * w + i1] += 1;
+                }
+            }
+            for j in 0..n[1] {
+                for i in 0..n[0] {
+                    let up = if j > 0 { grid[(j - 1) * w + i] } else { 0 };
+                    let left = if i > 0 { grid[j * w + i - 1] } else { 0 };
+                    let diag = if i > 0 && j > 0 { grid[(j - 1) * w + i - 1] } else { 0 };
+                    grid[j * w + i] += up + left - diag;
+                }
+            }
+            let (mut cnt, mut m) = (0usize, [0.0; 2]);
+            let (mut glo, mut ghi) = ([usize::MAX; 2], [0usize; 2]);
+            for j in 0..n[1] {
+                for i in 0..n[0] {
+                    if grid[j * (n[0] + 1) + i] == 0 {
+                        cnt += 1;
+                        m[0] += i as f64;
+                        m[1] += j as f64;
+                        glo = [glo[0].min(i), glo[1].min(j)];
+                        ghi = [ghi[0].max(i), ghi[1].max(j)];
+                    }
+                }
+            }
+            if cnt == 0 {
+                continue;
+            }
+            if ((ghi[0] - glo[0]) as f64 * cell[0]).max((ghi[1] - glo[1]) as f64 * cell[1]) > FIT_AMBIGUITY_M {
+                // Consistent but not pinned down: no fit (the looser tolerance only adds more).
+                return None;
+            }
+            let mr = [
+                blo[0] + m[0] / cnt as f64 * cell[0],
+                blo[1] + m[1] / cnt as f64 * cell[1],
+            ];
+            let w = cnt as f64 * cell[0] * cell[1];
+            wsum += w;
+            csum[0] += w * (c * mr[0] - s * mr[1]);
+            csum[1] += w * (s * mr[0] + c * mr[1]);
+            k0 = k0.min(k);
+            k1 = k1.max(k);
+        }
+        if wsum > 0.0 {
+            let span = if k0 == -YAW_STEPS || k1 == YAW_STEPS {
+                2 * YAW_STEPS
+            } else {
+                k1 - k0
+            };
+            return Some(RectFit {
+                center: [csum[0] / wsum, csum[1] / wsum],
+                yaw_rad: theta0 + (k0 + k1) as f64 / 2.0 * YAW_STEP_RAD,
+                yaw_span_rad: span as f64 * YAW_STEP_RAD,
+            });
+        }
+    }
+    None
+}
+
+/// Silhouette fit of a disc of radius `r` (`inside` may be just its convex hull): the mean of the centres holding every inside point and
+/// no outside point (within half [`FIT_VIOLATION_M`]), on a 0.2 mm grid around the centroid. `None` if infeasible
+/// or ambiguous (the feasible centres spread wider than [`FIT_AMBIGUITY_M`]).
+pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Option<[f64; 2]> {
+    let n = inside.len() as f64;
+    let c0 = [
+        inside.iter().map(|p| p[0]).sum::<f64>() / n,
+        inside.iter().map(|p| p[1]).sum::<f64>() / n,
+    ];
+    let room = |c: [f64; 2]| {
+        let d = |p: &[f64; 2]| ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2)).sqrt();
+        let a = inside.iter().map(|p| r - d(p)).fold(f64::INFINITY, f64::min);
+        let b = outside.iter().map(|p| d(p) - r).fold(f64::INFINITY, f64::min);
+        a.min(b)
+    };
+    let step = 0.0002;
+    let (mut sum, mut cnt) = ([0.0; 2], 0.0);
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for i in -10..=10 {
+        for j in -10..=10 {
+            let c = [c0[0] + i as f64 * step, c0[1] + j as f64 * step];
+            if room(c) >= -FIT_VIOLATION_M / 2.0 {
+                for a in 0..2 {
+                    sum[a] += c[a];
+                    lo[a] = lo[a].min(c[a]);
+                    hi[a] = hi[a].max(c[a]);
+                }
+                cnt += 1.0;
+            }
+        }
+    }
+    let spread = (hi[0] - lo[0]).max(hi[1] - lo[1]);
+    (cnt > 0.0 && spread <= FIT_AMBIGUITY_M).then(|| [sum[0] / cnt, sum[1] / cnt])
+}

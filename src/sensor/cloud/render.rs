@@ -1,0 +1,147 @@
+//! Rendering of the workpiece model by ray casting: the entry distance of a ray into the model's
+//! boxes and cylinders, in the part frame [m].
+
+use nalgebra::{Point3, Vector3};
+
+use super::CloudModel;
+use crate::config::{Axis, Piece};
+
+/// Nearest entry distance of a ray (part frame, unit direction) into the model's pieces.
+#[cfg(test)]
+pub(crate) fn ray_model(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    model
+        .pieces
+        .iter()
+        .filter_map(|p| ray_piece(p, &o.coords, d))
+        .min_by(|a, b| a.total_cmp(b))
+}
+
+/// As [`ray_model`], and whether the ray only grazes a thin piece (a lead): it passes it farther
+/// from its axis than [`THIN_CORE`] of its radius, where a pose a fraction of a millimetre off
+/// decides whether it hits.
+pub(super) fn ray_model_graze(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<(f64, bool)> {
+    let (t, k) = model
+        .pieces
+        .iter()
+        .enumerate()
+        .filter_map(|(k, p)| ray_piece(p, &o.coords, d).map(|t| (t, k)))
+        .min_by(|a, b| a.0.total_cmp(&b.0))?;
+    let graze = match model.pieces[k] {
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            axis,
+            ..
+        } if model.lead[k] => {
+            let a = axis_vec(axis);
+            let p = o.coords - center_m;
+            let (p, q) = (p - a * p.dot(&a), d - a * d.dot(&a));
+            let dist = if q.norm() > 1e-9 {
+                p.cross(&q).norm() / q.norm()
+            } else {
+                p.norm()
+            };
+            dist > THIN_CORE * radius_m
+        }
+        _ => false,
+    };
+    Some((t, graze))
+}
+
+/// A ray passing a lead within this fraction of its radius from its axis surely meets it.
+const THIN_CORE: f64 = 0.5;
+
+fn axis_vec(axis: Axis) -> Vector3<f64> {
+    match axis {
+        Axis::X => Vector3::x(),
+        Axis::Y => Vector3::y(),
+        Axis::Z => Vector3::z(),
+    }
+}
+
+/// Entry distance of a ray into a box or cylinder (part frame); `None` if it misses or starts inside.
+pub(super) fn ray_piece(piece: &Piece, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    match *piece {
+        Piece::Box { center_m, half_m } => {
+            let (mut t0, mut t1) = (f64::NEG_INFINITY, f64::INFINITY);
+            for a in 0..3 {
+                let (p, q) = (o[a] - center_m[a], d[a]);
+                if q.abs() < 1e-12 {
+                    if p.abs() > half_m[a] {
+                        return None;
+                    }
+                    continue;
+                }
+                let (ta, tb) = ((-half_m[a] - p) / q, (half_m[a] - p) / q);
+                t0 = t0.max(ta.min(tb));
+                t1 = t1.min(ta.max(tb));
+            }
+            (t0 <= t1 && t0 > 0.0).then_some(t0)
+        }
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            half_length_m,
+            axis,
+        } => {
+            let k = match axis {
+                Axis::X => 0,
+                Axis::Y => 1,
+                Axis::Z => 2,
+            };
+            let (i, j) = ((k + 1) % 3, (k + 2) % 3);
+            let p = o - center_m;
+            // Slab along the axis.
+            let (mut t0, mut t1) = if d[k].abs() < 1e-12 {
+                if p[k].abs() > half_length_m {
+                    return None;
+                }
+                (f64::NEG_INFINITY, f64::INFINITY)
+            } else {
+                let (ta, tb) = ((-half_length_m - p[k]) / d[k], (half_length_m - p[k]) / d[k]);
+                (ta.min(tb), ta.max(tb))
+            };
+            // Infinite cylinder.
+            let a = d[i] * d[i] + d[j] * d[j];
+            let b = p[i] * d[i] + p[j] * d[j];
+            let c = p[i] * p[i] + p[j] * p[j] - radius_m * radius_m;
+            if a < 1e-12 {
+                if c > 0.0 {
+                    return None;
+                }
+            } else {
+                let disc = b * b - a * c;
+                if disc < 0.0 {
+                    return None;
+                }
+                let s = disc.sqrt();
+                t0 = t0.max((-b - s) / a);
+                t1 = t1.min((-b + s) / a);
+            }
+            (t0 <= t1 && t0 > 0.0).then_some(t0)
+        }
+    }
+}
+
+/// Support of a piece along the part-frame unit direction `d`: the largest `p . d` over its points [m].
+pub(super) fn support(piece: &Piece, d: &Vector3<f64>) -> f64 {
+    match *piece {
+        Piece::Box { center_m, half_m } => {
+            center_m.dot(d) + half_m.x * d.x.abs() + half_m.y * d.y.abs() + half_m.z * d.z.abs()
+        }
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            half_length_m,
+            axis,
+        } => {
+            let a = match axis {
+                Axis::X => Vector3::x(),
+                Axis::Y => Vector3::y(),
+                Axis::Z => Vector3::z(),
+            };
+            let along = a.dot(d);
+            center_m.dot(d) + half_length_m * along.abs() + radius_m * (1.0 - along * along).max(0.0).sqrt()
+        }
+    }
+}
