@@ -191,6 +191,7 @@ mod tests {
             faults: [0, 0, 0, 0, 0],
             refills: 0,
             agitations: 1,
+            blind_picks: (0, 0),
             grasps: (takts.len() + 1, takts.len() + 1),
             misrecognised: 0,
             recognition: recognition_fixture(),

@@ -59,6 +59,9 @@ pub struct RunEntry {
     /// Grasp failures on a wrong detection.
     #[serde(default)]
     pub misrecognised: usize,
+    /// Blind picks: attempted, placed.
+    #[serde(default)]
+    pub blind_picks: (usize, usize),
     /// Recognition of the results the run used, against the truth at each trigger.
     #[serde(default)]
     pub recognition: RecognitionTotals,
@@ -116,6 +119,7 @@ impl RunEntry {
             agitations: s.agitations,
             grasps: s.grasps,
             misrecognised: s.misrecognised,
+            blind_picks: s.blind_picks,
             recognition: {
                 let mut t = RecognitionTotals::default();
                 s.recognition_per_capture.iter().for_each(|c| t.add(c));
@@ -183,6 +187,10 @@ pub struct Row {
     pub grasp_success_rate: f64,
     /// Grasp failures on a wrong detection.
     pub misrecognised: usize,
+    /// Blind picks: attempted, placed.
+    pub blind_picks: (usize, usize),
+    /// Picks set out per recognition result they came from.
+    pub picks_per_capture: f64,
     /// Recognition over every result the runs used, against the truth at each trigger.
     pub recognition: RecognitionSummary,
     /// Largest |demanded torque| / limit over every joint and run (before saturation).
@@ -216,6 +224,9 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                 (n, if n == 0 { 0.0 } else { t / n as f64 })
             };
             let fault = |i: usize| es.iter().map(|e| e.faults[i]).sum();
+            let blind_picks = es
+                .iter()
+                .fold((0, 0), |(a, b), e| (a + e.blind_picks.0, b + e.blind_picks.1));
             let grasps = es.iter().fold((0, 0), |(a, b), e| (a + e.grasps.0, b + e.grasps.1));
             let compute = |i: usize| {
                 if set_out == 0 {
@@ -257,6 +268,12 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                     grasps.1 as f64 / grasps.0 as f64
                 },
                 misrecognised: es.iter().map(|e| e.misrecognised).sum(),
+                blind_picks,
+                picks_per_capture: if set_out > blind_picks.0 {
+                    set_out as f64 / (set_out - blind_picks.0) as f64
+                } else {
+                    f64::NAN
+                },
                 recognition: {
                     let mut t = RecognitionTotals::default();
                     es.iter().for_each(|e| t.merge(&e.recognition));
@@ -288,13 +305,13 @@ pub fn markdown(rows: &[Row]) -> String {
     let mut md = String::from(
         "| part | runs | placed / attempts | success | takt mean [s] | p95 | min | max | reference [s] \
          | takt excl. tray refills [s] | Pick [s] | Place [s] | motion floor [s] | compute grasp/Pick/Place [ms] | sensor waits (mean s) \
-         | compute waits (mean s) | stops | collisions | drops | grasps sealed | grasp fails (misrecognised) | lost | agitations | refills \
+         | compute waits (mean s) | stops | collisions | drops | grasps sealed | grasp fails (misrecognised) | picks / capture | blind picks placed | lost | agitations | refills \
          | recognition recall / precision | pose error med mm / deg | peak torque demand | saturated [s] | max tracking error [deg] |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         md += &format!(
-            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} % | {} ({}) | {} | {} | {} | {} % / {} % | {} / {} | {} % | {} | {} |\n",
+            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} % | {} ({}) | {} | {}/{} | {} | {} | {} | {} % / {} % | {} / {} | {} % | {} | {} |\n",
             r.workpiece,
             r.runs,
             r.placed,
@@ -322,6 +339,9 @@ pub fn markdown(rows: &[Row]) -> String {
             num(100.0 * r.grasp_success_rate, 1),
             r.grasp_failures,
             r.misrecognised,
+            num(r.picks_per_capture, 2),
+            r.blind_picks.1,
+            r.blind_picks.0,
             r.parts_lost,
             r.agitations,
             r.refills,
@@ -338,7 +358,7 @@ pub fn markdown(rows: &[Row]) -> String {
 }
 
 /// The columns of `takt.csv`.
-pub const TAKT_CSV_HEADER: [&str; 42] = [
+pub const TAKT_CSV_HEADER: [&str; 45] = [
     "workpiece",
     "runs",
     "attempts",
@@ -371,6 +391,9 @@ pub const TAKT_CSV_HEADER: [&str; 42] = [
     "grasps_attempted",
     "grasps_sealed",
     "misrecognised",
+    "picks_per_capture",
+    "blind_picks",
+    "blind_picks_placed",
     "recognition_recall",
     "recognition_precision",
     "pose_error_median_mm",
@@ -418,6 +441,9 @@ struct CsvRow<'a> {
     grasps_attempted: usize,
     grasps_sealed: usize,
     misrecognised: usize,
+    picks_per_capture: Fixed<6>,
+    blind_picks: usize,
+    blind_picks_placed: usize,
     recognition_recall: Fixed<6>,
     recognition_precision: Fixed<6>,
     pose_error_median_mm: Fixed<6>,
@@ -467,6 +493,9 @@ pub fn csv(rows: &[Row]) -> String {
             grasps_attempted: r.grasps.0,
             grasps_sealed: r.grasps.1,
             misrecognised: r.misrecognised,
+            picks_per_capture: Fixed::of(r.picks_per_capture),
+            blind_picks: r.blind_picks.0,
+            blind_picks_placed: r.blind_picks.1,
             recognition_recall: Fixed::of(r.recognition.recall),
             recognition_precision: Fixed::of(r.recognition.precision),
             pose_error_median_mm: Fixed::of(r.recognition.position_error_mm[0]),

@@ -331,6 +331,15 @@ pub struct CycleConfig {
     /// model error and the servo's feedback.
     #[serde(default = "default_torque_margin")]
     pub torque_margin: f64,
+    /// Most picks from one recognition result (1: a capture per pick). A later pick takes only
+    /// a part recognised clear of every earlier pick's footprint and the tool's swept column
+    /// (README: several picks per capture); the seal check tells whether it was still there.
+    #[serde(default = "default_max_picks_per_capture")]
+    pub max_picks_per_capture: u32,
+}
+
+fn default_max_picks_per_capture() -> u32 {
+    1
 }
 
 /// The default torque margin: 15 % was the smallest of 0 / 5 / 10 / 15 % at which no pick of
@@ -713,6 +722,12 @@ impl Scene {
             c.fail("cycle.empty_after_captures", "must be at least 1, got 0".to_string());
         }
         c.non_negative("cycle.refill_s", self.cycle.refill_s);
+        if !(1..=10).contains(&self.cycle.max_picks_per_capture) {
+            c.fail(
+                "cycle.max_picks_per_capture",
+                format!("must be within [1, 10], got {}", self.cycle.max_picks_per_capture),
+            );
+        }
         c.non_negative("cycle.place_tray_exchange_s", self.cycle.place_tray_exchange_s);
         c.non_negative("cycle.approach_above_rim_m", self.cycle.approach_above_rim_m);
         c.positive("cycle.line_speed_m_s", self.cycle.line_speed_m_s);

@@ -178,6 +178,12 @@ pub struct CellState {
     pub run_peak_demand_ratio: [f64; crate::robot::DOF],
     /// Every recognition result used, evaluated against the truth at its trigger (evaluation only).
     pub recognitions: Vec<RecognitionReport>,
+    /// The result the next pick comes from without a new capture (several picks per capture).
+    pub reuse: Option<SensedResult>,
+    /// No capture is triggered while set: the next pick comes from `reuse`.
+    pub hold_trigger: bool,
+    /// Centres of the parts picked (or tried) from the result in hand [m, world].
+    pub picked_from_result: Vec<nalgebra::Vector3<f64>>,
 }
 
 /// A running cycle: the constant cell, its state, and who watches.
@@ -271,6 +277,9 @@ impl<'a> Cell<'a> {
             parts_lost: 0,
             run_peak_demand_ratio: [0.0; crate::robot::DOF],
             recognitions: Vec::new(),
+            reuse: None,
+            hold_trigger: false,
+            picked_from_result: Vec::new(),
         })
     }
 }
@@ -315,7 +324,36 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
     Ok((run.st, sensed))
 }
 
+/// A later pick from the same result takes only a part whose centre is this much farther from
+/// every earlier pick's than both parts' bounding radii (or the tool's, whichever is larger) [m].
+pub const BLIND_PICK_MARGIN_M: f64 = 0.005;
+
 impl Run<'_, '_> {
+    /// The result with the detections a later pick may take without a new capture, if any and
+    /// if the cell file allows another pick from it: each recognised clear of every earlier
+    /// pick from the result (centres at least two bounding radii, or the tool's radius plus the
+    /// part's, plus [`BLIND_PICK_MARGIN_M`] apart horizontally), so neither the parts lifted nor
+    /// the tool's column over them touched it. A real cell can decide this from its recognition
+    /// alone; whether the part is still there the seal check tells.
+    fn later_picks(&self, result: &SensedResult) -> Option<SensedResult> {
+        let used = &self.st.picked_from_result;
+        if used.len() >= self.cell.scene.cycle.max_picks_per_capture as usize {
+            return None;
+        }
+        let r_part = self.cell.shape.bounding_radius_m;
+        let reach_m = r_part + r_part.max(self.cell.scene.gripper.body_diameter_m / 2.0) + BLIND_PICK_MARGIN_M;
+        let keep: Vec<bool> = result
+            .detections
+            .as_deref()?
+            .iter()
+            .map(|d| {
+                let c = d.world_from_part.translation.vector;
+                used.iter().all(|u| (c - u).xy().norm() >= reach_m)
+            })
+            .collect();
+        keep.iter().any(|k| *k).then(|| result.keeping(&keep))
+    }
+
     /// The pick loop: until the asked-for attempts are made (every pick is one, a re-capture
     /// too) or the run ends otherwise.
     fn picks(&mut self) -> Result<(Vec<PickRecord>, EndReason), CycleError> {
@@ -327,10 +365,27 @@ impl Run<'_, '_> {
             }
             let index = records.len();
             self.st.pick = Some(index);
-            let Some(result) = self.next_result()? else {
-                return Ok((records, EndReason::NoPathOutOfView));
+            // The next pick comes from the result in hand (several picks per capture) or from a
+            // new capture.
+            let (result, blind) = match self.st.reuse.take() {
+                Some(r) => (r, true),
+                None => {
+                    self.st.picked_from_result.clear();
+                    let Some(r) = self.next_result()? else {
+                        return Ok((records, EndReason::NoPathOutOfView));
+                    };
+                    (r, false)
+                }
+            };
+            self.st.hold_trigger = false;
+            // Compute for a blind pick starts when the arm is done with the previous one.
+            let compute_from_s = if blind {
+                self.st.world.time_s()
+            } else {
+                result.job.ready_s
             };
             let mut rec = PickRecord::new(index, result.capture_s, result.job.ready_s);
+            rec.blind = blind;
             rec.recognition = result
                 .evaluation
                 .as_ref()
@@ -345,10 +400,17 @@ impl Run<'_, '_> {
                     });
                     Err(None)
                 }
-                Some(dets) => self.prepare(dets, &result.job).map_err(Some),
+                Some(dets) => self.prepare(dets, &result.job, compute_from_s).map_err(Some),
             };
             let (prep, wall_s) = match prepared {
                 Ok(p) => p,
+                Err(_) if blind => {
+                    // Nothing graspable left in this result: the cell decides so (charged at the
+                    // grasp selection's budget) and captures again; no pick was attempted.
+                    let t = self.st.world.time_s() + self.cell.budgets_s[0];
+                    self.idle_until(t)?;
+                    continue;
+                }
                 Err(why) => {
                     rec.outcome = why.map_or(Outcome::NothingDetected, Outcome::NothingGraspable);
                     self.event(Event::Outcome(rec.outcome.clone()));
@@ -370,7 +432,23 @@ impl Run<'_, '_> {
             } else {
                 wall_s
             };
-            self.pick_and_place(&prep, charged, result.job.ready_s, &mut rec)?;
+            // Several picks per capture: whether the next pick can come from this result is
+            // decided now, before the Place (whose exit from the view would trigger a capture).
+            let chosen = result
+                .detections
+                .as_deref()
+                .map(|d| d[prep.grasp.detection].world_from_part);
+            if let Some(c) = chosen {
+                self.st.picked_from_result.push(c.translation.vector);
+            }
+            let next = self.later_picks(&result);
+            self.st.hold_trigger = next.is_some();
+            self.pick_and_place(&prep, charged, compute_from_s, &mut rec)?;
+            let undisturbed = matches!(rec.outcome, Outcome::Placed | Outcome::GraspFailed(_));
+            match next {
+                Some(n) if undisturbed => self.st.reuse = Some(n),
+                _ => self.st.hold_trigger = false,
+            }
             records.push(rec);
         }
         Ok((records, EndReason::PicksDone))

@@ -118,6 +118,7 @@ impl Run<'_, '_> {
         &mut self,
         detections: &[Detection],
         job: &CaptureJob,
+        t_s: f64,
     ) -> Result<(Prepared, [f64; 3]), String> {
         let cell = self.cell;
         let robot = cell.robot;
@@ -132,7 +133,7 @@ impl Run<'_, '_> {
         };
         let choice = sense_and_grasp(&ctx, &job.capture, detections, &slot, &q_now, &self.st.failed_spots);
         self.obs.recognised(&Recognised {
-            t_s: job.ready_s,
+            t_s,
             detections,
             ranked: &choice.plan.ranked,
             chosen: choice.chosen.as_ref().map(|c| c.rank),

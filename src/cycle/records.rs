@@ -66,6 +66,8 @@ pub struct PickRecord {
     pub saturated_s: f64,
     /// Time scaling of the held-part Place transfer for the cup's holding force (1: none).
     pub suction_speed_factor: f64,
+    /// A later pick from a result an earlier pick used (no capture of its own).
+    pub blind: bool,
     /// Whether the cup sealed on a part, once it reached the grasp (`None`: it never got there).
     pub sealed: Option<bool>,
     /// The recognition result this pick used: detections and correct ones (evaluation only).
@@ -100,6 +102,7 @@ impl PickRecord {
             peak_demand_joint: 0,
             saturated_s: 0.0,
             suction_speed_factor: 1.0,
+            blind: false,
             sealed: None,
             recognition: None,
             aimed_at: None,
@@ -166,6 +169,10 @@ pub struct RunSummary {
     pub max_tracking_error_deg: f64,
     /// Grasps attempted (the cup reached the part) and sealed.
     pub grasps: (usize, usize),
+    /// Blind picks (a later pick from a result an earlier pick used): attempted and placed.
+    pub blind_picks: (usize, usize),
+    /// Picks the arm set out to make per recognition result they came from.
+    pub picks_per_capture: f64,
     /// Grasp failures on a detection that was wrong (more than 2 mm or 5 deg from every part).
     pub misrecognised: usize,
     /// Recognition over the run's results, against the truth at each trigger.
@@ -286,6 +293,22 @@ pub fn summarise(
             records.iter().filter(|r| r.sealed == Some(true)).count(),
         ),
         misrecognised: count(Outcome::misrecognised),
+        blind_picks: (
+            records.iter().filter(|r| r.blind).count(),
+            records
+                .iter()
+                .filter(|r| r.blind && r.outcome == Outcome::Placed)
+                .count(),
+        ),
+        picks_per_capture: {
+            let set_out = records.iter().filter(|r| r.outcome.set_out()).count();
+            let blind = records.iter().filter(|r| r.blind).count();
+            if set_out > blind {
+                set_out as f64 / (set_out - blind) as f64
+            } else {
+                f64::NAN
+            }
+        },
         recognition: {
             let mut t = RecognitionTotals::default();
             recognitions.iter().for_each(|r| t.add(r));

@@ -33,10 +33,44 @@ pub struct SensedResult {
     pub recognition_wall_s: f64,
 }
 
+impl SensedResult {
+    /// The same result with only the detections `keep` says (their evaluation kept in step).
+    pub fn keeping(&self, keep: &[bool]) -> SensedResult {
+        let pick = |i: usize| keep.get(i).copied().unwrap_or(false);
+        SensedResult {
+            job: self.job.clone(),
+            capture_s: self.capture_s,
+            detections: self.detections.as_ref().map(|d| {
+                d.iter()
+                    .enumerate()
+                    .filter(|(i, _)| pick(*i))
+                    .map(|(_, x)| x.clone())
+                    .collect()
+            }),
+            evaluation: self.evaluation.as_ref().map(|e| {
+                let mut e = e.clone();
+                e.matches = e
+                    .matches
+                    .iter()
+                    .enumerate()
+                    .filter(|(i, _)| pick(*i))
+                    .map(|(_, m)| *m)
+                    .collect();
+                e
+            }),
+            recognition_wall_s: self.recognition_wall_s,
+        }
+    }
+}
+
 impl Run<'_, '_> {
     /// Triggers a capture if none is pending (or the pending one was spoiled and the sensor has
     /// finished exposing it) and the arm is out of view.
     pub(super) fn maybe_trigger(&mut self) {
+        if self.st.hold_trigger {
+            // The next pick comes from the result in hand: a capture now would be spoiled.
+            return;
+        }
         if let Some(j) = &self.st.pending
             && (j.spoiled.is_none() || self.st.world.time_s() + 1e-9 < j.exposure_end_s)
         {

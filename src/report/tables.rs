@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 28] = [
+pub const PICKS_CSV_HEADER: [&str; 29] = [
     "pick",
     "outcome",
     "detail",
@@ -65,6 +65,7 @@ pub const PICKS_CSV_HEADER: [&str; 28] = [
     "peak_demand_joint",
     "saturated_s",
     "suction_speed_factor",
+    "blind",
     "sealed",
     "detections",
     "correct_detections",
@@ -98,6 +99,7 @@ struct PickRow<'a> {
     peak_demand_joint: usize,
     saturated_s: Fixed<6>,
     suction_speed_factor: Fixed<4>,
+    blind: bool,
     sealed: Option<bool>,
     detections: Option<usize>,
     correct_detections: Option<usize>,
@@ -134,6 +136,7 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             peak_demand_joint: r.peak_demand_joint,
             saturated_s: Fixed::of(r.saturated_s),
             suction_speed_factor: Fixed::of(r.suction_speed_factor),
+            blind: r.blind,
             sealed: r.sealed,
             detections: r.recognition.map(|x| x.0),
             correct_detections: r.recognition.map(|x| x.1),

@@ -250,6 +250,40 @@ fn misrecognition_is_a_named_outcome() {
     );
 }
 
+/// Several picks per capture: with `max_picks_per_capture = 3` later picks come from a result an
+/// earlier pick used (no capture of their own, no wait for the sensor), only on parts recognised
+/// clear of the earlier picks, with no fault; with 1 (the negative control) there are none.
+#[test]
+fn several_picks_per_capture() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("E").unwrap();
+    let opts = RunOptions {
+        picks: 10,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+    };
+    let mut multi = scene.clone();
+    multi.scene.cycle.max_picks_per_capture = 3;
+    let r = binpick::cycle::run(&multi, &robot, &wp, &opts, &mut ()).unwrap();
+    let s = &r.summary;
+    assert!(s.blind_picks.0 >= 2, "{:?}", s.blind_picks);
+    assert_eq!((s.collisions, s.protective_stops), (0, 0));
+    assert!(s.picks_per_capture > 1.2, "{}", s.picks_per_capture);
+    for w in r.records.windows(2) {
+        if w[1].blind {
+            // From the same result: its capture, no wait for the sensor.
+            assert_eq!(w[1].capture_s, w[0].capture_s);
+            assert_eq!(w[1].stall_sensor_s, 0.0);
+        }
+    }
+    assert!((s.captures.0 as usize) < r.records.len());
+    let one = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap();
+    assert_eq!(one.summary.blind_picks, (0, 0));
+    assert!(one.records.iter().all(|p| !p.blind));
+}
+
 #[test]
 fn deterministic_runs_repeat_byte_for_byte() {
     let ws = Workspace::new();
