@@ -128,6 +128,10 @@ pub struct GripperConfig {
     pub inertia_kg_m2: [f64; 3],
 }
 
+fn default_max_yaw_ambiguity_deg() -> f64 {
+    crate::sensor::cloud::YAW_SPAN_MAX_RAD.to_degrees()
+}
+
 /// How the sensor's captures are turned into recognised parts.
 #[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
 #[serde(rename_all = "snake_case")]
@@ -196,6 +200,10 @@ pub struct SensorConfig {
     /// their poses at the trigger plus `pose_noise_*`).
     #[serde(default)]
     pub recognition: RecognitionMode,
+    /// Cloud recognition: a face whose outline leaves its yaw open by more than this is not
+    /// reported [deg] (default 8: precision first; half of it is the largest yaw error reported).
+    #[serde(default = "default_max_yaw_ambiguity_deg")]
+    pub max_yaw_ambiguity_deg: f64,
     /// Oracle recognition: a part counts as detected when at least this fraction of its camera-facing surface is visible.
     pub detect_min_visible_fraction: f64,
     /// Oracle recognition pose noise, position standard deviation [m]; also the recognition
@@ -650,6 +658,7 @@ impl Scene {
         );
         c.non_negative("sensor.pose_noise_m", s.pose_noise_m);
         c.non_negative("sensor.pose_noise_deg", s.pose_noise_deg);
+        c.within("sensor.max_yaw_ambiguity_deg", s.max_yaw_ambiguity_deg, 0.0, 90.0);
         if s.position_m
             .iter()
             .chain(&s.look_at_m)

@@ -15,7 +15,8 @@
 //! holding every inside point and no outside point, yaws scanned around the patch's minimum-area
 //! rectangle; the estimate is the middle of the consistent yaws and the mean of the consistent
 //! centres; a face whose centre is not pinned down (both edges of an axis hidden) or whose yaw is
-//! open by more than [`YAW_SPAN_MAX_RAD`] is no hypothesis; (6) a hypothesis reaching under the
+//! open by more than the model's `yaw_span_max_rad` (the cell file's
+//! `sensor.max_yaw_ambiguity_deg`, [`YAW_SPAN_MAX_RAD`] by default) is no hypothesis; (6) a hypothesis reaching under the
 //! tray floor is impossible; the others are rendered by ray casting the model into the depth
 //! image and compared: agreeing within [`AGREE_TOL_M`] (3 sigma of the depth noise), measured in
 //! front (occluded, allowed) or measured behind (a contradiction, unless the ray only grazes a
@@ -63,7 +64,8 @@ pub const MIN_PATCH_PX: usize = 8;
 pub const FIT_VIOLATION_M: f64 = 0.0006;
 /// A silhouette fit whose feasible interval is wider than this does not pin the part down [m].
 pub const FIT_AMBIGUITY_M: f64 = 0.0025;
-/// A silhouette fit whose consistent yaws span more than this does not pin the yaw down [rad].
+/// A silhouette fit whose consistent yaws span more than this does not pin the yaw down [rad]
+/// (the default; precision first: half of it is the largest yaw error reported).
 pub const YAW_SPAN_MAX_RAD: f64 = 8.0 * std::f64::consts::PI / 180.0;
 /// Two hypotheses closer than this (and [`SAME_POSE_RAD`]) are the same [m].
 pub const SAME_POSE_M: f64 = 0.002;
@@ -94,6 +96,8 @@ pub struct CloudModel {
     half_turn_matters: bool,
     /// The turns that leave the part looking the same (two hypotheses differing by one are one).
     symmetry: Symmetry,
+    /// A face whose outline leaves its yaw open by more than this is no hypothesis [rad].
+    pub yaw_span_max_rad: f64,
 }
 
 impl CloudModel {
@@ -119,6 +123,7 @@ impl CloudModel {
             half_size_m: Vector3::from(w.size_m) / 2.0,
             half_turn_matters: w.shape.kind == ShapeKind::Compound,
             symmetry: Symmetry::of(w),
+            yaw_span_max_rad: YAW_SPAN_MAX_RAD,
         }
     }
 
@@ -496,7 +501,7 @@ impl<'a> Cloud<'a> {
                 for k in 0..if square { 1 } else { 2 } {
                     let t0 = theta0 + k as f64 * std::f64::consts::FRAC_PI_2;
                     if let Some(f) = fit_rect(&hull, &outside, face.extent_m, t0)
-                        && f.yaw_span_rad <= YAW_SPAN_MAX_RAD
+                        && f.yaw_span_rad <= model.yaw_span_max_rad
                     {
                         fits.push((f.center, f.yaw_rad));
                     }

@@ -188,7 +188,11 @@ impl Sensor {
             pose_noise_m: cfg.pose_noise_m,
             pose_noise_rad: cfg.pose_noise_deg.to_radians(),
             recognition: cfg.recognition,
-            model: std::sync::Arc::new(CloudModel::new(workpiece)),
+            model: std::sync::Arc::new({
+                let mut m = CloudModel::new(workpiece);
+                m.yaw_span_max_rad = cfg.max_yaw_ambiguity_deg.to_radians();
+                m
+            }),
             symmetry: std::sync::Arc::new(Symmetry::of(workpiece)),
             seed,
             triggered: 0,
