@@ -279,6 +279,9 @@ pub enum Event {
     Refill(u64),
     /// The pick tray was agitated (the how-manieth in a row).
     Agitation(u32),
+    /// A later pick looks for a part in a result an earlier pick used (how many picks it has
+    /// served so far): no capture of its own.
+    ResultReused(usize),
     /// The full place tray was exchanged for an empty one.
     PlaceTrayExchange,
     /// A pick ended.
@@ -310,6 +313,7 @@ impl Event {
             Event::SlotSkipped(_) => "slot_skipped",
             Event::Refill(_) => "refill",
             Event::Agitation(_) => "agitation",
+            Event::ResultReused(_) => "result_reused",
             Event::PlaceTrayExchange => "place_tray_exchange",
             Event::Outcome(_) => "outcome",
             Event::MotionStartMismatch(_) => "motion_start_mismatch",
@@ -387,6 +391,7 @@ impl fmt::Display for Event {
             Event::SlotSkipped(slot) => write!(f, "slot {slot}"),
             Event::Refill(pile) => write!(f, "pile {pile}"),
             Event::Agitation(k) => write!(f, "the pick tray shaken (number {k} in a row)"),
+            Event::ResultReused(n) => write!(f, "a later pick from the result {n} pick(s) used, no new capture"),
             Event::Outcome(o) => write!(f, "{}: {}", o.name(), o.detail()),
             Event::MotionStartMismatch(jump_rad) => write!(f, "{jump_rad:.4} rad"),
             Event::PickStart | Event::PlaceStart | Event::Released | Event::PlaceTrayExchange => Ok(()),

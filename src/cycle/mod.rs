@@ -378,6 +378,9 @@ impl Run<'_, '_> {
                 }
             };
             self.st.hold_trigger = false;
+            if blind {
+                self.event(Event::ResultReused(self.st.picked_from_result.len()));
+            }
             // Compute for a blind pick starts when the arm is done with the previous one.
             let compute_from_s = if blind {
                 self.st.world.time_s()

@@ -273,7 +273,12 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(count["/camera/points"], captures);
     assert_eq!(count["/camera/calibration"], captures);
     let ready = events.iter().filter(|e| e["kind"] == "recognition_ready").count();
-    assert_eq!(count["/recognition"], ready, "a recognition message per result");
+    let reused = events.iter().filter(|e| e["kind"] == "result_reused").count();
+    assert_eq!(
+        count["/recognition"],
+        ready + reused,
+        "a recognition message per result and per later pick from it"
+    );
     assert_eq!(
         count["/recognition/truth_at_trigger"], ready,
         "the true poses at the trigger beside every result"
@@ -307,8 +312,8 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(rows("/cycle/takt"), takts);
     assert_eq!(rows("/world/camera/depth"), captures);
     assert_eq!(rows("/world/cloud"), captures);
-    assert_eq!(rows("/world/recognition/detections"), ready);
-    assert_eq!(rows("/world/recognition/candidates"), ready);
+    assert_eq!(rows("/world/recognition/detections"), ready + reused);
+    assert_eq!(rows("/world/recognition/candidates"), ready + reused);
     assert_eq!(rows("/world/recognition/truth_at_trigger"), ready);
     assert_eq!(
         rows("/world/parts"),

@@ -250,7 +250,7 @@ fn misrecognition_is_a_named_outcome() {
     );
 }
 
-/// Several picks per capture: with `max_picks_per_capture = 3` later picks come from a result an
+/// Several picks per capture: with `max_picks_per_capture = 3` (the default cell's) later picks come from a result an
 /// earlier pick used (no capture of their own, no wait for the sensor), only on parts recognised
 /// clear of the earlier picks, with no fault; with 1 (the negative control) there are none.
 #[test]
@@ -279,7 +279,9 @@ fn several_picks_per_capture() {
         }
     }
     assert!((s.captures.0 as usize) < r.records.len());
-    let one = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap();
+    let mut single = scene.clone();
+    single.scene.cycle.max_picks_per_capture = 1;
+    let one = binpick::cycle::run(&single, &robot, &wp, &opts, &mut ()).unwrap();
     assert_eq!(one.summary.blind_picks, (0, 0));
     assert!(one.records.iter().all(|p| !p.blind));
 }
