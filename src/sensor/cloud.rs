@@ -23,15 +23,20 @@
 //! lead); score = agree / (agree + contradict), evidence = agree - 3 contradict; (7) per patch
 //! the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no different
 //! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much,
-//! then non-maximum suppression by centre distance.
+//! then non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
+//! lying on its curved side (`lying`): per patch no flat face explains, a cylinder of known
+//! radius fitted to the points around it, kept if its axis's standard error is within
+//! `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks which end is the base, the
+//! turn about the axis and the station along it, reported only if the other way round and the
+//! station moved either way have `lying::PIN_MARGIN_PX` less evidence ([`CloudDetection::curved_side_up`]).
 //!
 //! Precision first: a pose the image does not pin down is not reported. Limits (issue 15):
 //! - a flat-lying E or F shows one 7 px face and no side (its sides are past the sensor's
 //!   grazing dropout): its yaw is open by 5-20 degrees in most cases, so most are not reported;
 //! - a relay (A) on its back whose 1 mm pins no pixel hit looks like one on its face: it is
 //!   reported only where the floor or a pixel on a pin decides;
-//! - a can (D) lying on its side is not modelled (only flat faces are matched); a first try is
-//!   on branch wip-cloud2-lying;
+//! - a can (D) lying on its side is found when its axis fits within 4 degrees (standard error)
+//!   and both its base end and its station are decided; about 6 in 400 are off by 5-7 degrees;
 //! - mesh workpieces have no faces in [`CloudModel`]: nothing is recognised (flat faces found on
 //!   the mesh would give them candidates; not done).
 //!
