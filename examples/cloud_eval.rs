@@ -4,7 +4,8 @@
 //! precision (a detection is right within 2 mm and 5 deg of a part, with the part's symmetries),
 //! pose errors of the right ones (median and p95), compute time per capture (median and max).
 //!
-//! Run: `cargo run --release --example cloud_eval [-- A C --seeds 4]`
+//! Run: `cargo run --release --example cloud_eval [-- A C --seeds 4 --yaw-deg 12]` (`--yaw-deg`: the
+//! yaw ambiguity accepted, as `sensor.max_yaw_ambiguity_deg`; default the library's 8 degrees).
 
 use std::time::Instant;
 
@@ -30,10 +31,13 @@ fn main() -> anyhow::Result<()> {
     let args: Vec<String> = std::env::args().skip(1).collect();
     let mut names: Vec<String> = Vec::new();
     let mut seeds = 8u64;
+    let mut yaw_deg: Option<f64> = None;
     let mut it = args.iter();
     while let Some(a) = it.next() {
         if a == "--seeds" {
             seeds = it.next().and_then(|s| s.parse().ok()).unwrap_or(8);
+        } else if a == "--yaw-deg" {
+            yaw_deg = it.next().and_then(|s| s.parse().ok());
         } else {
             names.push(a.clone());
         }
@@ -50,7 +54,10 @@ fn main() -> anyhow::Result<()> {
     );
     for name in &names {
         let wp = LoadedWorkpiece::resolve(name)?;
-        let model = CloudModel::new(&wp.workpiece);
+        let mut model = CloudModel::new(&wp.workpiece);
+        if let Some(y) = yaw_deg {
+            model.yaw_span_max_rad = y.to_radians();
+        }
         let sym = Symmetry::of(&wp.workpiece);
         let (mut top_n, mut top_found, mut det_n, mut right_n) = (0, 0, 0, 0);
         let (mut pos, mut rot, mut ms) = (Vec::new(), Vec::new(), Vec::new());
@@ -97,6 +104,11 @@ fn main() -> anyhow::Result<()> {
                             dp * 1e3,
                             dr.to_degrees()
                         );
+                        if std::env::var_os("CLOUD_EVAL_AXES").is_some() {
+                            let z = nalgebra::Vector3::z();
+                            let (a, b) = (d.world_from_part.rotation * z, world.part_pose(bi).rotation * z);
+                            eprintln!("    z found {:.3?} truth {:.3?}", a.as_slice(), b.as_slice());
+                        }
                         if std::env::var_os("CLOUD_EVAL_POSES").is_some() {
                             let show = |p: &nalgebra::Isometry3<f64>| {
                                 let t = p.translation.vector * 1e3;

@@ -23,15 +23,20 @@
 //! lead); score = agree / (agree + contradict), evidence = agree - 3 contradict; (7) per patch
 //! the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no different
 //! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much,
-//! then non-maximum suppression by centre distance.
+//! then non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
+//! lying on its curved side (`lying`): per patch no flat face explains, a cylinder of known
+//! radius fitted to the points around it, kept if its axis's standard error is within
+//! `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks which end is the base, the
+//! turn about the axis and the station along it, reported only if the other way round and the
+//! station moved either way have `lying::PIN_MARGIN_PX` less evidence ([`CloudDetection::curved_side_up`]).
 //!
 //! Precision first: a pose the image does not pin down is not reported. Limits (issue 15):
 //! - a flat-lying E or F shows one 7 px face and no side (its sides are past the sensor's
 //!   grazing dropout): its yaw is open by 5-20 degrees in most cases, so most are not reported;
 //! - a relay (A) on its back whose 1 mm pins no pixel hit looks like one on its face: it is
 //!   reported only where the floor or a pixel on a pin decides;
-//! - a can (D) lying on its side is not modelled (only flat faces are matched); a first try is
-//!   on branch wip-cloud2-lying;
+//! - a can (D) lying on its side is found when its axis fits within 4 degrees (standard error)
+//!   and both its base end and its station are decided; about 6 in 400 are off by 5-7 degrees;
 //! - mesh workpieces have no faces in [`CloudModel`]: nothing is recognised (flat faces found on
 //!   the mesh would give them candidates; not done).
 //!
@@ -79,6 +84,8 @@ pub const UNDER_FLOOR_M: f64 = 0.001;
 pub const TIE_MARGIN_PX: i64 = 0;
 /// Lowest verification score kept.
 pub const MIN_SCORE: f64 = 0.8;
+/// A patch with a flat-face hypothesis verified this well is not tried as a lying part's top.
+pub const LYING_SKIP_SCORE: f64 = 0.95;
 
 /// The workpiece as recognition sees it: its flat body faces (to match patches) and all its
 /// pieces, leads included (to render hypotheses).
@@ -96,6 +103,8 @@ pub struct CloudModel {
     half_turn_matters: bool,
     /// The turns that leave the part looking the same (two hypotheses differing by one are one).
     symmetry: Symmetry,
+    /// Its body has a cylinder it can lie on: hypotheses on the curved side are tried.
+    round_side: bool,
     /// A face whose outline leaves its yaw open by more than this is no hypothesis [rad].
     pub yaw_span_max_rad: f64,
 }
@@ -124,7 +133,19 @@ impl CloudModel {
             half_turn_matters: w.shape.kind == ShapeKind::Compound,
             symmetry: Symmetry::of(w),
             yaw_span_max_rad: YAW_SPAN_MAX_RAD,
+            round_side: w
+                .pieces()
+                .iter()
+                .any(|(r, p)| *r == PartRole::Body && matches!(p, Piece::Cylinder { .. })),
         }
+    }
+
+    /// The face whose outward normal at `pose` is turned most toward `to_camera` (world).
+    fn face_nearest_up(&self, pose: &Isometry3<f64>, to_camera: &Vector3<f64>) -> usize {
+        let up = pose.rotation.inverse() * to_camera.normalize();
+        (0..self.faces.len())
+            .max_by(|&a, &b| self.faces[a].normal.dot(&up).total_cmp(&self.faces[b].normal.dot(&up)))
+            .unwrap_or(0)
     }
 
     /// Lowest point of the model at `pose` along the world direction `up` [m, along `up`].
@@ -162,6 +183,9 @@ pub struct CloudDetection {
     pub score: f64,
     /// Agreeing pixels over the pixels the part would cover unoccluded.
     pub visible_fraction: f64,
+    /// The part lies on its body cylinder's curved side (a can on its side): no flat face is
+    /// up, and `face_up` is only the flat face turned most toward the camera (not a suction face).
+    pub curved_side_up: bool,
 }
 
 /// Recognises parts in a capture from the capture, the camera, the pick tray's geometry and the
@@ -170,10 +194,19 @@ pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &
     let cloud = Cloud::new(capture, camera, tray);
     let patches = cloud.segment();
     // Patches in parallel, collected in their order: deterministic.
-    let mut found: Vec<CloudDetection> = patches
+    let per_patch: Vec<(Option<CloudDetection>, Vec<lying::AxisFit>)> = patches
         .par_iter()
-        .filter_map(|patch| cloud.best_hypothesis(patch, model))
+        .map(|patch| cloud.best_hypothesis(patch, model))
         .collect();
+    let mut found: Vec<CloudDetection> = Vec::new();
+    let mut fits = Vec::new();
+    for (d, f) in per_patch {
+        found.extend(d);
+        fits.extend(f);
+    }
+    // Parts lying on their curved side: each distinct axis once.
+    let fits = lying::distinct(fits, 2.0 * model.half_size_m.max());
+    found.extend(cloud.lying_detections(model, &fits));
     found.sort_by(|a, b| b.score.total_cmp(&a.score));
     let mut kept: Vec<CloudDetection> = Vec::new();
     let radius = 0.5 * model.min_size_m();
@@ -447,7 +480,7 @@ impl<'a> Cloud<'a> {
     }
 
     /// The best verified hypothesis for a patch, if any.
-    fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> Option<CloudDetection> {
+    fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> (Option<CloudDetection>, Vec<lying::AxisFit>) {
         let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
         let n = plane.normal;
         let theta0 = min_area_theta(&inside);
@@ -518,38 +551,59 @@ impl<'a> Cloud<'a> {
                     let u = e1 * t.cos() + e2 * t.sin();
                     let center = plane.point + e1 * c[0] + e2 * c[1];
                     let pose = pose_from_face(face, &center, &n, &u);
-                    if model.lowest_along(&pose, &self.floor.normal)
-                        < self.floor.point.dot(&self.floor.normal) - UNDER_FLOOR_M
-                    {
-                        continue;
-                    }
-                    let Some((score, visible, evidence)) = self.verify(model, &pose) else {
-                        continue;
-                    };
-                    if score >= MIN_SCORE {
-                        verified.push((
-                            evidence,
-                            CloudDetection {
-                                world_from_part: pose,
-                                face_up: fi,
-                                score,
-                                visible_fraction: visible,
-                            },
-                        ));
+                    if let Some(d) = self.check(model, &pose, Some(fi)) {
+                        verified.push(d);
                     }
                 }
             }
         }
+        // A patch a flat face explains is no lying part's top.
+        let flat = verified.iter().any(|v| v.1.score >= LYING_SKIP_SCORE);
+        let fits = if model.round_side && !flat {
+            let (c, s) = (theta0.cos(), theta0.sin());
+            self.lying_fits(patch, model, &plane, [e1 * c + e2 * s, e2 * c - e1 * s])
+        } else {
+            Vec::new()
+        };
         // The image must prefer one pose: a different one as well supported (a relay's pins not
         // seen: on its back or not?) leaves the patch unrecognised.
-        let (evidence, best) = verified.iter().max_by_key(|v| v.0)?;
+        let Some((evidence, best)) = verified.iter().max_by_key(|v| v.0) else {
+            return (None, fits);
+        };
         if verified
             .iter()
             .any(|(e, d)| *e >= evidence - TIE_MARGIN_PX && !model.same_pose(&d.world_from_part, &best.world_from_part))
         {
+            return (None, fits);
+        }
+        (Some(best.clone()), fits)
+    }
+
+    /// A hypothesis checked: physically possible (not under the tray floor) and verified by
+    /// rendering; (evidence, detection). `face_up` `None`: lying on its curved side.
+    fn check(
+        &self,
+        model: &CloudModel,
+        pose: &Isometry3<f64>,
+        face_up: Option<usize>,
+    ) -> Option<(i64, CloudDetection)> {
+        if model.lowest_along(pose, &self.floor.normal) < self.floor.point.dot(&self.floor.normal) - UNDER_FLOOR_M {
             return None;
         }
-        Some(best.clone())
+        let (score, visible, evidence) = self.verify(model, pose)?;
+        (score >= MIN_SCORE).then(|| {
+            (
+                evidence,
+                CloudDetection {
+                    world_from_part: *pose,
+                    face_up: face_up
+                        .unwrap_or_else(|| model.face_nearest_up(pose, &(self.origin - pose.translation.vector))),
+                    score,
+                    visible_fraction: visible,
+                    curved_side_up: face_up.is_none(),
+                },
+            )
+        })
     }
 
     /// Renders the model at `pose` into the image and compares with the measured depth: (score,
@@ -610,6 +664,7 @@ fn pose_from_face(face: &Face, center: &Vector3<f64>, n: &Vector3<f64>, u: &Vect
 }
 
 mod fit;
+mod lying;
 mod render;
 mod symmetry;
 

@@ -1,0 +1,368 @@
+//! A part lying on its body cylinder's curved side (D's can on its side): the cylinder's axis
+//! fitted to the measured points around a patch (known radius, Gauss-Newton on the points'
+//! distances to the axis, the points on the cylinder re-selected as it converges), with the
+//! axis direction's standard error; and the poses along that axis to verify (either way round,
+//! a few turns about the axis for a base that is not round, stations along the axis).
+//!
+//! Units: m, rad. Frames: world; the fit's basis (`axis`, and two directions across it).
+
+use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuaternion, Vector3, Vector4};
+use rayon::prelude::*;
+
+use super::CloudModel;
+use super::render::support;
+use crate::config::{Axis, Piece};
+
+/// A point this close to the cylinder's surface is on it [m] (the fit starts looser).
+const ON_SURFACE_M: f64 = 0.0008;
+/// Length left out at each end of the points along the axis (a base that is not round) [m].
+const END_TRIM_M: f64 = 0.0015;
+/// Points farther along the axis than the part's half length and this from the start are not
+/// on it [m].
+const ALONG_MARGIN_M: f64 = 0.001;
+/// Fewest points for a fit.
+const MIN_POINTS: usize = 12;
+/// Gauss-Newton iterations of the fit.
+const ITERATIONS: usize = 10;
+/// Turns about the axis tried [rad] (a quarter turn in these steps: D's base is square).
+pub(super) const ROLL_STEP_RAD: f64 = 15.0 * std::f64::consts::PI / 180.0;
+
+/// The body cylinder of a model: centre, unit axis, radius (part frame) [m].
+pub(super) fn body_cylinder(model: &CloudModel) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+    model.pieces.iter().zip(&model.lead).find_map(|(p, lead)| match *p {
+        Piece::Cylinder {
+            center_m,
+            radius_m,
+            axis,
+            ..
+        } if !lead => Some((
+            center_m,
+            match axis {
+                Axis::X => Vector3::x(),
+                Axis::Y => Vector3::y(),
+                Axis::Z => Vector3::z(),
+            },
+            radius_m,
+        )),
+        _ => None,
+    })
+}
+
+/// A cylinder's axis fitted to measured points.
+#[derive(Debug, Clone, Copy)]
+pub(super) struct AxisFit {
+    /// A point on the axis (world) [m].
+    pub point: Vector3<f64>,
+    /// The axis direction (unit, world).
+    pub axis: Vector3<f64>,
+    /// Standard error of the axis direction [rad] (both turns across it, root sum of squares).
+    pub sigma_rad: f64,
+    /// RMS distance of the points on the surface to it [m].
+    pub rms_m: f64,
+    /// Range along the axis of the points on (or near) the surface, from `point` [m].
+    pub along_m: [f64; 2],
+    /// Points on the surface used.
+    pub count: usize,
+    /// The normal of the patch on top (world, toward the camera).
+    pub up: Vector3<f64>,
+}
+
+/// The fits of different axes (one lying part makes several patches): the fits in order of
+/// points used (then given order), less those whose axis is within 3 degrees of and passes
+/// within 1.5 mm of a kept one's point, that point within the part's length [m].
+pub(super) fn distinct(mut fits: Vec<AxisFit>, length_m: f64) -> Vec<AxisFit> {
+    fits.sort_by_key(|f| std::cmp::Reverse(f.count));
+    let mut kept: Vec<AxisFit> = Vec::new();
+    for f in fits {
+        let same = kept.iter().any(|k| {
+            let q = f.point - k.point;
+            k.axis.dot(&f.axis).abs() > SAME_AXIS_RAD.cos()
+                && (q - k.axis * q.dot(&k.axis)).norm() < SAME_AXIS_M
+                && q.dot(&k.axis).abs() < length_m
+        });
+        if !same {
+            kept.push(f);
+        }
+    }
+    kept
+}
+
+/// Two axes closer than these are one [rad], [m].
+const SAME_AXIS_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
+const SAME_AXIS_M: f64 = 0.0015;
+
+/// Fits a cylinder of radius `r` to the points `around` (world), starting from the axis `u0`
+/// through `p0` (both world). `None` if too few points stay on it.
+pub(super) fn fit_axis(
+    around: &[Vector3<f64>],
+    p0: &Vector3<f64>,
+    u0: &Vector3<f64>,
+    r: f64,
+    half_length_m: f64,
+) -> Option<AxisFit> {
+    let (mut a, mut u) = (*p0, u0.normalize());
+    let basis = |u: &Vector3<f64>| {
+        let t = if u.z.abs() < 0.9 { Vector3::z() } else { Vector3::x() };
+        let v = u.cross(&t).normalize();
+        (v, u.cross(&v))
+    };
+    let mut last = None;
+    for it in 0..ITERATIONS {
+        let tol = if it < 3 { 2.0 * ON_SURFACE_M } else { ON_SURFACE_M };
+        let (v, w) = basis(&u);
+        // The points on the surface, the ends trimmed.
+        let on: Vec<(f64, Vector3<f64>)> = around
+            .iter()
+            .filter_map(|p| {
+                let q = p - a;
+                let s = q.dot(&u);
+                let d = (q - u * s).norm();
+                ((d - r).abs() < tol && s.abs() < half_length_m + ALONG_MARGIN_M).then_some((s, q))
+            })
+            .collect();
+        if on.len() < MIN_POINTS {
+            return None;
+        }
+        let (s0, s1) = on
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(lo, hi), (s, _)| (lo.min(*s), hi.max(*s)));
+        let (mut jtj, mut jtr, mut sse, mut n) = (Matrix4::zeros(), Vector4::zeros(), 0.0, 0usize);
+        for (s, q) in &on {
+            if *s < s0 + END_TRIM_M || *s > s1 - END_TRIM_M {
+                continue;
+            }
+            let perp = q - u * *s;
+            let d = perp.norm().max(1e-9);
+            let e = perp / d;
+            let res = d - r;
+            // Parameters: axis point moved along v, w; axis turned toward v, w (about `a`).
+            let j = Vector4::new(-e.dot(&v), -e.dot(&w), -s * e.dot(&v), -s * e.dot(&w));
+            jtj += j * j.transpose();
+            jtr += j * res;
+            sse += res * res;
+            n += 1;
+        }
+        if n < MIN_POINTS {
+            return None;
+        }
+        let inv = jtj.try_inverse()?;
+        let step = -inv * jtr;
+        let rms = (sse / n as f64).sqrt();
+        // Noise of a point's distance to the axis: at least the sensor's at 1 m (0.3 mm) scaled
+        // down, at most what remains.
+        let sigma = (sse / (n.saturating_sub(4).max(1)) as f64).sqrt().max(0.0001);
+        let sigma_rad = sigma * (inv[(2, 2)] + inv[(3, 3)]).sqrt();
+        a += v * step[0] + w * step[1];
+        u = (u + v * step[2] + w * step[3]).normalize();
+        last = Some(AxisFit {
+            point: a,
+            axis: u,
+            sigma_rad,
+            rms_m: rms,
+            along_m: [s0, s1],
+            count: n,
+            up: Vector3::zeros(),
+        });
+        if step.norm() < 1e-7 && it >= 4 {
+            break;
+        }
+    }
+    let mut fit = last?;
+    // Keep the axis point where `p0` projects onto it.
+    fit.point += fit.axis * (p0 - fit.point).dot(&fit.axis);
+    let shift = (p0 - fit.point).dot(&fit.axis);
+    fit.along_m = [fit.along_m[0] - shift, fit.along_m[1] - shift];
+    Some(fit)
+}
+
+/// The part's extent along its body cylinder's axis, from its origin [m].
+pub(super) fn extent_along(model: &CloudModel, a_part: &Vector3<f64>) -> [f64; 2] {
+    let lo = -model
+        .pieces
+        .iter()
+        .map(|p| support(p, &-a_part))
+        .fold(f64::MIN, f64::max);
+    let hi = model.pieces.iter().map(|p| support(p, a_part)).fold(f64::MIN, f64::max);
+    [lo, hi]
+}
+
+/// `world_from_part` with the body cylinder (part frame `c_part`, `a_part`) on the world axis
+/// through `axis_p` along `axis_w`, the part origin's station at `axis_p`, turned by `roll_rad`
+/// about the axis from `up` (world, across the axis).
+pub(super) fn pose_on_axis(
+    c_part: &Vector3<f64>,
+    a_part: &Vector3<f64>,
+    axis_p: &Vector3<f64>,
+    axis_w: &Vector3<f64>,
+    up: &Vector3<f64>,
+    roll_rad: f64,
+) -> Isometry3<f64> {
+    let b_part = if a_part.x.abs() < 0.9 {
+        Vector3::x()
+    } else {
+        Vector3::y()
+    };
+    let b_part = (b_part - a_part * a_part.dot(&b_part)).normalize();
+    let up = (up - axis_w * axis_w.dot(up)).normalize();
+    let b_w = up * roll_rad.cos() + axis_w.cross(&up) * roll_rad.sin();
+    let world = Matrix3::from_columns(&[*axis_w, b_w, axis_w.cross(&b_w)]);
+    let part = Matrix3::from_columns(&[*a_part, b_part, a_part.cross(&b_part)]);
+    let rot = UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(world * part.transpose()));
+    let t = axis_p - rot * (c_part - a_part * a_part.dot(c_part));
+    Isometry3::from_parts(Translation3::from(t), rot)
+}
+
+/// Largest standard error of a lying part's fitted axis reported [rad] (precision first: the
+/// error bar is 5 degrees).
+pub const AXIS_SIGMA_MAX_RAD: f64 = 4.0 * std::f64::consts::PI / 180.0;
+/// Largest RMS distance of the points to the fitted cylinder [m].
+const FIT_RMS_MAX_M: f64 = 0.0003;
+/// The station along the axis must be pinned: moved by this either way [m] ...
+const STATION_PROBE_M: f64 = 0.0015;
+/// ... the evidence must drop by at least this [px]; and the part the other way round must
+/// have this much less.
+pub const PIN_MARGIN_PX: i64 = 3;
+/// Step of the station scan along the axis [m] and its half width in steps.
+const STATION_STEP_M: f64 = 0.0005;
+const STATION_STEPS: i32 = 3;
+
+impl super::Cloud<'_> {
+    /// The foreground pixels within `k` pixels (chessboard distance) of `pixels`, sorted.
+    fn dilate(&self, pixels: &[usize], k: i64) -> Vec<usize> {
+        let mut out: Vec<usize> = pixels
+            .iter()
+            .flat_map(|&i| (-k..=k).flat_map(move |dv| (-k..=k).filter_map(move |du| self.neighbour(i, du, dv))))
+            .filter(|&j| self.fg[j])
+            .collect();
+        out.sort_unstable();
+        out.dedup();
+        out
+    }
+
+    /// The axes of the part lying on its body cylinder's side that fit the points around `patch`
+    /// (its plane `plane`, `axes` the in-plane directions to start from), their standard error
+    /// within [`AXIS_SIGMA_MAX_RAD`] and the patch on top of them.
+    pub(super) fn lying_fits(
+        &self,
+        patch: &super::Patch,
+        model: &CloudModel,
+        plane: &super::Plane,
+        axes: [Vector3<f64>; 2],
+    ) -> Vec<AxisFit> {
+        let Some((_, a_part, r)) = body_cylinder(model) else {
+            return Vec::new();
+        };
+        let n = plane.normal;
+        let m = patch.pixels.len() as f64;
+        let p0 = patch.pixels.iter().map(|&i| self.pts[i]).sum::<Vector3<f64>>() / m;
+        let around: Vec<Vector3<f64>> = self.dilate(&patch.pixels, 4).into_iter().map(|i| self.pts[i]).collect();
+        let ext = extent_along(model, &a_part);
+        let mut out: Vec<AxisFit> = Vec::new();
+        for u0 in axes {
+            let Some(mut fit) = fit_axis(&around, &(p0 - n * r), &u0, r, (ext[1] - ext[0]) / 2.0) else {
+                continue;
+            };
+            // The patch must be the cylinder's top: its centroid above the axis by about r.
+            let q = p0 - fit.point;
+            let lift = (q - fit.axis * q.dot(&fit.axis)).dot(&n);
+            if fit.sigma_rad > AXIS_SIGMA_MAX_RAD || fit.rms_m > FIT_RMS_MAX_M || lift < 0.5 * r {
+                continue;
+            }
+            // Both starts may lead to the same axis.
+            if out.iter().any(|t| t.axis.dot(&fit.axis).abs() > 0.9998) {
+                continue;
+            }
+            fit.up = n;
+            out.push(fit);
+        }
+        out
+    }
+
+    /// The best verified pose on each distinct axis (see [`distinct`]), if pinned down.
+    pub(super) fn lying_detections(&self, model: &CloudModel, fits: &[AxisFit]) -> Vec<super::CloudDetection> {
+        let Some((c_part, a_part, _)) = body_cylinder(model) else {
+            return Vec::new();
+        };
+        let ext = extent_along(model, &a_part);
+        fits.par_iter()
+            .filter_map(|f| self.lying_along(model, f, &f.up, &c_part, &a_part, ext).map(|d| d.1))
+            .collect()
+    }
+
+    /// The pose along a fitted axis: which way round, turn and station by verification, kept
+    /// only if pinned down.
+    fn lying_along(
+        &self,
+        model: &CloudModel,
+        fit: &AxisFit,
+        n: &Vector3<f64>,
+        c_part: &Vector3<f64>,
+        a_part: &Vector3<f64>,
+        ext: [f64; 2],
+    ) -> Option<(i64, super::CloudDetection)> {
+        let [s0, s1] = fit.along_m;
+        let pose = |sign: f64, roll: f64, s: f64| {
+            pose_on_axis(c_part, a_part, &(fit.point + fit.axis * s), &(fit.axis * sign), n, roll)
+        };
+        let evidence = |p: &Isometry3<f64>| self.check(model, p, None);
+        // Per way round: the best (evidence, roll, station) over the stations with one end at
+        // the points' ends, and the middle.
+        // Per way round: the turn about the axis at the middle station (it shows at the base),
+        // then the best station of the three (one end at the points' ends, or the middle).
+        let mid = |sign: f64| {
+            let (e0, e1) = if sign > 0.0 {
+                (ext[0], ext[1])
+            } else {
+                (-ext[1], -ext[0])
+            };
+            ((s0 + s1 - e0 - e1) / 2.0, s0 - e0, s1 - e1)
+        };
+        let mut per_sign = Vec::new();
+        for sign in [1.0, -1.0] {
+            let (m, a, b) = mid(sign);
+            let mut turn: Option<(i64, f64)> = None;
+            for k in 0..6 {
+                let roll = k as f64 * ROLL_STEP_RAD;
+                if let Some((e, _)) = evidence(&pose(sign, roll, m))
+                    && turn.is_none_or(|t| e > t.0)
+                {
+                    turn = Some((e, roll));
+                }
+            }
+            let Some((_, roll)) = turn else { continue };
+            let mut top: Option<(i64, f64)> = None;
+            for s in [m, a, b] {
+                if let Some((e, _)) = evidence(&pose(sign, roll, s))
+                    && top.is_none_or(|t| e > t.0)
+                {
+                    top = Some((e, s));
+                }
+            }
+            // The station scan: the middle of the best evidence's run.
+            if let Some((_, s)) = top {
+                let scan: Vec<i64> = (-STATION_STEPS..=STATION_STEPS)
+                    .map(|k| evidence(&pose(sign, roll, s + k as f64 * STATION_STEP_M)).map_or(i64::MIN, |d| d.0))
+                    .collect();
+                let emax = *scan.iter().max().unwrap_or(&i64::MIN);
+                let ks: Vec<i32> = (-STATION_STEPS..=STATION_STEPS)
+                    .filter(|k| scan[(k + STATION_STEPS) as usize] == emax)
+                    .collect();
+                if emax > i64::MIN {
+                    let kmid = (ks[0] + ks[ks.len() - 1]) as f64 / 2.0;
+                    per_sign.push((emax, sign, roll, s + kmid * STATION_STEP_M));
+                }
+            }
+        }
+        let &(emax, sign, roll, s) = per_sign.iter().max_by_key(|v| v.0)?;
+        if per_sign.iter().any(|v| v.1 != sign && v.0 > emax - PIN_MARGIN_PX) {
+            return None;
+        }
+        let best = evidence(&pose(sign, roll, s))?;
+        for probe in [-STATION_PROBE_M, STATION_PROBE_M] {
+            if evidence(&pose(sign, roll, s + probe)).is_some_and(|d| d.0 > best.0 - PIN_MARGIN_PX) {
+                return None;
+            }
+        }
+        Some(best)
+    }
+}
