@@ -211,13 +211,13 @@ fn cloud_recognition_finds_the_top_layer_and_chosen_grasps_are_reachable_and_cle
 /// The cloud recognition's floors on the pooled top-layer recall and the precision of seeds 1
 /// and 2, per workpiece A..F: regression guards a little below what it reaches. Issue 15's
 /// targets (recall 90 %, precision 99 %) are not all reached: flat E and F parts show a 7 px top
-/// face whose outline leaves the yaw open, and D's cans lying on their side are not modelled;
-/// the README states both.
+/// face whose outline leaves the yaw open, and D's lying cans come out 5-7 deg off in yaw now and
+/// then; the README states both.
 const FLOORS: [(f64, f64); 6] = [
     (0.85, 0.90),
     (0.90, 0.99),
     (0.90, 0.95),
-    (0.18, 0.95),
+    (0.75, 0.95),
     (0.20, 0.95),
     (0.15, 0.90),
 ];
