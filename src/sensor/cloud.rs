@@ -488,15 +488,7 @@ impl<'a> Cloud<'a> {
         // bounding rectangle (at `theta0`) by more than a pixel cannot be it.
         let hull = convex_hull(&inside);
         let dims = {
-            let (c, s) = (theta0.cos(), theta0.sin());
-            let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-            for p in &hull {
-                let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
-                for a in 0..2 {
-                    lo[a] = lo[a].min(q[a]);
-                    hi[a] = hi[a].max(q[a]);
-                }
-            }
+            let (lo, hi) = fit::bounds_at(&hull, theta0);
             let d = [hi[0] - lo[0], hi[1] - lo[1]];
             [d[0].max(d[1]), d[0].min(d[1])]
         };

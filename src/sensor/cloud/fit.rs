@@ -12,21 +12,28 @@ pub(super) fn min_area_theta(pts: &[[f64; 2]]) -> f64 {
     for k in 0..hull.len() {
         let (a, b) = (hull[k], hull[(k + 1) % hull.len()]);
         let t = (b[1] - a[1]).atan2(b[0] - a[0]);
-        let (c, s) = (t.cos(), t.sin());
-        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-        for p in &hull {
-            let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
-            for a in 0..2 {
-                lo[a] = lo[a].min(q[a]);
-                hi[a] = hi[a].max(q[a]);
-            }
-        }
+        let (lo, hi) = bounds_at(&hull, t);
         let area = (hi[0] - lo[0]) * (hi[1] - lo[1]);
         if area < best.0 - 1e-15 {
             best = (area, t);
         }
     }
     best.1
+}
+
+/// The bounds of the points in the frame turned by `theta` [rad]: lowest and highest coordinate
+/// along each of its two axes [m].
+pub(super) fn bounds_at(pts: &[[f64; 2]], theta: f64) -> ([f64; 2], [f64; 2]) {
+    let (c, s) = (theta.cos(), theta.sin());
+    let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
+    for p in pts {
+        let q = [c * p[0] + s * p[1], -s * p[0] + c * p[1]];
+        for a in 0..2 {
+            lo[a] = lo[a].min(q[a]);
+            hi[a] = hi[a].max(q[a]);
+        }
+    }
+    (lo, hi)
 }
 
 /// Convex hull (Andrew's monotone chain), counter-clockwise.
