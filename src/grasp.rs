@@ -40,32 +40,6 @@ pub struct Face {
     pub disc: bool,
 }
 
-fn axis_vec(a: Axis) -> Vector3<f64> {
-    match a {
-        Axis::X => Vector3::x(),
-        Axis::Y => Vector3::y(),
-        Axis::Z => Vector3::z(),
-    }
-}
-
-/// How far a piece reaches along unit direction `n` from the part origin [m].
-fn support(piece: &Piece, n: &Vector3<f64>) -> f64 {
-    match piece {
-        Piece::Box { center_m, half_m } => {
-            center_m.dot(n) + half_m.iter().zip(n.iter()).map(|(h, v)| h * v.abs()).sum::<f64>()
-        }
-        Piece::Cylinder {
-            center_m,
-            radius_m,
-            half_length_m,
-            axis,
-        } => {
-            let a = axis_vec(*axis).dot(n).abs();
-            center_m.dot(n) + half_length_m * a + radius_m * (1.0 - a * a).max(0.0).sqrt()
-        }
-    }
-}
-
 /// The centre of a piece in the part frame [m].
 fn piece_center(piece: &Piece) -> Vector3<f64> {
     match piece {
@@ -86,7 +60,7 @@ pub fn body_faces(w: &Workpiece) -> Vec<Face> {
         }
         for f in piece_faces(piece) {
             let blocked = pieces.iter().enumerate().any(|(j, (_, other))| {
-                let beyond = support(other, &f.normal) - f.center.dot(&f.normal) > 1e-4;
+                let beyond = other.support_m(&f.normal) - f.center.dot(&f.normal) > 1e-4;
                 let offset = piece_center(other) - f.center;
                 let in_plane = (offset - f.normal * offset.dot(&f.normal)).norm();
                 j != k && beyond && in_plane <= 0.5 * f.extent_m[0].max(f.extent_m[1])
@@ -126,7 +100,7 @@ fn piece_faces(piece: &Piece) -> Vec<Face> {
             half_length_m: h,
             axis,
         } => {
-            let a = axis_vec(axis);
+            let a = axis.unit();
             let along = if axis == Axis::X { Vector3::y() } else { Vector3::x() };
             for s in [-1.0, 1.0] {
                 faces.push(Face {

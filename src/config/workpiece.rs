@@ -97,6 +97,17 @@ pub enum Axis {
     Z,
 }
 
+impl Axis {
+    /// The unit vector of this axis in the part frame.
+    pub fn unit(self) -> Vector3<f64> {
+        match self {
+            Axis::X => Vector3::x(),
+            Axis::Y => Vector3::y(),
+            Axis::Z => Vector3::z(),
+        }
+    }
+}
+
 /// One primitive of a compound shape.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -159,6 +170,27 @@ pub enum Piece {
         /// Axis.
         axis: Axis,
     },
+}
+
+impl Piece {
+    /// How far the piece reaches along the part-frame unit direction `n` from the part origin:
+    /// the largest `p . n` over its points [m].
+    pub fn support_m(&self, n: &Vector3<f64>) -> f64 {
+        match self {
+            Piece::Box { center_m, half_m } => {
+                center_m.dot(n) + half_m.iter().zip(n.iter()).map(|(h, v)| h * v.abs()).sum::<f64>()
+            }
+            Piece::Cylinder {
+                center_m,
+                radius_m,
+                half_length_m,
+                axis,
+            } => {
+                let a = axis.unit().dot(n).abs();
+                center_m.dot(n) + half_length_m * a + radius_m * (1.0 - a * a).max(0.0).sqrt()
+            }
+        }
+    }
 }
 
 impl Workpiece {

@@ -154,7 +154,7 @@ impl CloudModel {
         let t = pose.translation.vector.dot(up);
         self.pieces
             .iter()
-            .map(|p| t - render::support(p, &d))
+            .map(|p| t - p.support_m(&d))
             .fold(f64::INFINITY, f64::min)
     }
 

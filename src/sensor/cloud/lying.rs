@@ -10,8 +10,7 @@ use nalgebra::{Isometry3, Matrix3, Matrix4, Rotation3, Translation3, UnitQuatern
 use rayon::prelude::*;
 
 use super::CloudModel;
-use super::render::support;
-use crate::config::{Axis, Piece};
+use crate::config::Piece;
 
 /// A point this close to the cylinder's surface is on it [m] (the fit starts looser).
 const ON_SURFACE_M: f64 = 0.0008;
@@ -35,15 +34,7 @@ pub(super) fn body_cylinder(model: &CloudModel) -> Option<(Vector3<f64>, Vector3
             radius_m,
             axis,
             ..
-        } if !lead => Some((
-            center_m,
-            match axis {
-                Axis::X => Vector3::x(),
-                Axis::Y => Vector3::y(),
-                Axis::Z => Vector3::z(),
-            },
-            radius_m,
-        )),
+        } if !lead => Some((center_m, axis.unit(), radius_m)),
         _ => None,
     })
 }
@@ -180,9 +171,13 @@ pub(super) fn extent_along(model: &CloudModel, a_part: &Vector3<f64>) -> [f64; 2
     let lo = -model
         .pieces
         .iter()
-        .map(|p| support(p, &-a_part))
+        .map(|p| p.support_m(&-a_part))
         .fold(f64::MIN, f64::max);
-    let hi = model.pieces.iter().map(|p| support(p, a_part)).fold(f64::MIN, f64::max);
+    let hi = model
+        .pieces
+        .iter()
+        .map(|p| p.support_m(a_part))
+        .fold(f64::MIN, f64::max);
     [lo, hi]
 }
 

@@ -33,7 +33,7 @@ pub(super) fn ray_model_graze(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f
             axis,
             ..
         } if model.lead[k] => {
-            let a = axis_vec(axis);
+            let a = axis.unit();
             let p = o.coords - center_m;
             let (p, q) = (p - a * p.dot(&a), d - a * d.dot(&a));
             let dist = if q.norm() > 1e-9 {
@@ -50,14 +50,6 @@ pub(super) fn ray_model_graze(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f
 
 /// A ray passing a lead within this fraction of its radius from its axis surely meets it.
 const THIN_CORE: f64 = 0.5;
-
-fn axis_vec(axis: Axis) -> Vector3<f64> {
-    match axis {
-        Axis::X => Vector3::x(),
-        Axis::Y => Vector3::y(),
-        Axis::Z => Vector3::z(),
-    }
-}
 
 /// Entry distance of a ray into a box or cylinder (part frame); `None` if it misses or starts inside.
 pub(super) fn ray_piece(piece: &Piece, o: &Vector3<f64>, d: &Vector3<f64>) -> Option<f64> {
@@ -119,29 +111,6 @@ pub(super) fn ray_piece(piece: &Piece, o: &Vector3<f64>, d: &Vector3<f64>) -> Op
                 t1 = t1.min((-b + s) / a);
             }
             (t0 <= t1 && t0 > 0.0).then_some(t0)
-        }
-    }
-}
-
-/// Support of a piece along the part-frame unit direction `d`: the largest `p . d` over its points [m].
-pub(super) fn support(piece: &Piece, d: &Vector3<f64>) -> f64 {
-    match *piece {
-        Piece::Box { center_m, half_m } => {
-            center_m.dot(d) + half_m.x * d.x.abs() + half_m.y * d.y.abs() + half_m.z * d.z.abs()
-        }
-        Piece::Cylinder {
-            center_m,
-            radius_m,
-            half_length_m,
-            axis,
-        } => {
-            let a = match axis {
-                Axis::X => Vector3::x(),
-                Axis::Y => Vector3::y(),
-                Axis::Z => Vector3::z(),
-            };
-            let along = a.dot(d);
-            center_m.dot(d) + half_length_m * along.abs() + radius_m * (1.0 - along * along).max(0.0).sqrt()
         }
     }
 }
