@@ -192,6 +192,7 @@ mod tests {
             refills: 0,
             agitations: 1,
             blind_picks: (0, 0),
+            results_used: takts.len() + 1,
             grasps: (takts.len() + 1, takts.len() + 1),
             misrecognised: 0,
             recognition: recognition_fixture(),

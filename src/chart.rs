@@ -1,7 +1,7 @@
 //! Report stage: the cycle's time chart as SVG.
 //!
 //! Job: draw one lane per stage of the cell cycle (sensor, recognition, grasp selection, planning,
-//! pick, place, stall, agitation) with a box for every interval in which that stage is busy, plus vertical
+//! waiting pose, pick, blind pick, place, stall, agitation) with a box for every interval in which that stage is busy, plus vertical
 //! markers for events (a part released, a fault), over a window of simulation time, like the time
 //! chart of a bin-picking paper. All times are seconds of simulation time. The output is
 //! deterministic: the same input gives a byte-identical document (fixed decimals, no hash maps).
@@ -11,26 +11,30 @@ use std::fmt::Write;
 pub use crate::cycle::Stage as Lane;
 
 /// Every lane, top to bottom.
-pub const LANES: [Lane; 8] = [
+pub const LANES: [Lane; 10] = [
     Lane::Sensor,
     Lane::Recognition,
     Lane::Grasp,
     Lane::Planning,
+    Lane::WaitingPose,
     Lane::Pick,
+    Lane::BlindPick,
     Lane::Place,
     Lane::Stall,
     Lane::Agitation,
 ];
 
 /// Label shown at the left of a lane ("sensor", "recognition", "grasp selection", "planning",
-/// "Pick", "Place", "stall", "agitation").
+/// "waiting pose", "Pick", "blind Pick", "Place", "stall", "agitation").
 pub fn lane_label(lane: Lane) -> &'static str {
     match lane {
         Lane::Sensor => "sensor",
         Lane::Recognition => "recognition",
         Lane::Grasp => "grasp selection",
         Lane::Planning => "planning",
+        Lane::WaitingPose => "waiting pose",
         Lane::Pick => "Pick",
+        Lane::BlindPick => "blind Pick",
         Lane::Place => "Place",
         Lane::Stall => "stall",
         Lane::Agitation => "agitation",
@@ -43,7 +47,9 @@ fn lane_colour(lane: Lane) -> &'static str {
         Lane::Recognition => "#f28e2b",
         Lane::Grasp => "#e15759",
         Lane::Planning => "#76b7b2",
+        Lane::WaitingPose => "#bab0ac",
         Lane::Pick => "#59a14f",
+        Lane::BlindPick => "#8cd17d",
         Lane::Place => "#edc948",
         Lane::Stall => "#b07aa1",
         Lane::Agitation => "#9c755f",

@@ -62,6 +62,9 @@ pub struct RunEntry {
     /// Blind picks: attempted, placed.
     #[serde(default)]
     pub blind_picks: (usize, usize),
+    /// Recognition results the picks set out came from.
+    #[serde(default)]
+    pub results_used: usize,
     /// Recognition of the results the run used, against the truth at each trigger.
     #[serde(default)]
     pub recognition: RecognitionTotals,
@@ -120,6 +123,7 @@ impl RunEntry {
             grasps: s.grasps,
             misrecognised: s.misrecognised,
             blind_picks: s.blind_picks,
+            results_used: s.results_used,
             recognition: {
                 let mut t = RecognitionTotals::default();
                 s.recognition_per_capture.iter().for_each(|c| t.add(c));
@@ -269,8 +273,8 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                 },
                 misrecognised: es.iter().map(|e| e.misrecognised).sum(),
                 blind_picks,
-                picks_per_capture: if set_out > blind_picks.0 {
-                    set_out as f64 / (set_out - blind_picks.0) as f64
+                picks_per_capture: if es.iter().any(|e| e.results_used > 0) {
+                    set_out as f64 / es.iter().map(|e| e.results_used).sum::<usize>() as f64
                 } else {
                     f64::NAN
                 },

@@ -344,6 +344,13 @@ pub struct CycleConfig {
     /// (README: several picks per capture); the seal check tells whether it was still there.
     #[serde(default = "default_max_picks_per_capture")]
     pub max_picks_per_capture: u32,
+    /// Where the arm waits when it has nothing to do but wait for a recognition result: the
+    /// cup's position [m, world], the tool pointing straight down. It must lie outside the
+    /// sensor's view, so a capture exposes while the arm waits there (checked when a run
+    /// starts); from there only the last stretch of the Pick depends on the result. Absent: the
+    /// arm waits where its last motion ended.
+    #[serde(default)]
+    pub waiting_tool_m: Option<[f64; 3]>,
 }
 
 fn default_max_picks_per_capture() -> u32 {
@@ -736,6 +743,9 @@ impl Scene {
                 "cycle.max_picks_per_capture",
                 format!("must be within [1, 10], got {}", self.cycle.max_picks_per_capture),
             );
+        }
+        if let Some(w) = &self.cycle.waiting_tool_m {
+            c.finite_all("cycle.waiting_tool_m", w);
         }
         c.non_negative("cycle.place_tray_exchange_s", self.cycle.place_tray_exchange_s);
         c.non_negative("cycle.approach_above_rim_m", self.cycle.approach_above_rim_m);

@@ -31,6 +31,11 @@ pub enum Stage {
     Planning,
     /// The arm moves to a part and picks it.
     Pick,
+    /// A Pick from a recognition result older than the last pick (the pile has changed since
+    /// its capture; several picks per capture).
+    BlindPick,
+    /// The arm moves to the cell's waiting pose and waits there for a recognition result.
+    WaitingPose,
     /// The arm carries the part to the place tray and releases it.
     Place,
     /// The cell waits (for the sensor, for compute, a fault reset, a refill).
@@ -279,9 +284,15 @@ pub enum Event {
     Refill(u64),
     /// The pick tray was agitated (the how-manieth in a row).
     Agitation(u32),
-    /// A later pick looks for a part in a result an earlier pick used (how many picks it has
-    /// served so far): no capture of its own.
-    ResultReused(usize),
+    /// A pick looks for a part in a recognition result: how many picks the result has served
+    /// before, and how many picks went into the pile after its capture (the parts near them
+    /// are left out).
+    ResultUsed {
+        /// Picks from this result before.
+        taken: usize,
+        /// Picks into the pile since its capture.
+        since_capture: usize,
+    },
     /// The full place tray was exchanged for an empty one.
     PlaceTrayExchange,
     /// A pick ended.
@@ -313,7 +324,7 @@ impl Event {
             Event::SlotSkipped(_) => "slot_skipped",
             Event::Refill(_) => "refill",
             Event::Agitation(_) => "agitation",
-            Event::ResultReused(_) => "result_reused",
+            Event::ResultUsed { .. } => "result_used",
             Event::PlaceTrayExchange => "place_tray_exchange",
             Event::Outcome(_) => "outcome",
             Event::MotionStartMismatch(_) => "motion_start_mismatch",
@@ -391,7 +402,10 @@ impl fmt::Display for Event {
             Event::SlotSkipped(slot) => write!(f, "slot {slot}"),
             Event::Refill(pile) => write!(f, "pile {pile}"),
             Event::Agitation(k) => write!(f, "the pick tray shaken (number {k} in a row)"),
-            Event::ResultReused(n) => write!(f, "a later pick from the result {n} pick(s) used, no new capture"),
+            Event::ResultUsed { taken, since_capture } => write!(
+                f,
+                "{taken} pick(s) from this result before, {since_capture} into the pile since its capture"
+            ),
             Event::Outcome(o) => write!(f, "{}: {}", o.name(), o.detail()),
             Event::MotionStartMismatch(jump_rad) => write!(f, "{jump_rad:.4} rad"),
             Event::PickStart | Event::PlaceStart | Event::Released | Event::PlaceTrayExchange => Ok(()),

@@ -137,6 +137,8 @@ pub struct Cell<'a> {
     pub workpiece: crate::config::Workpiece,
     /// Run options.
     pub opts: RunOptions,
+    /// The waiting pose's joints (`cycle.waiting_tool_m`), if the cell file sets one.
+    pub waiting_q: Option<crate::robot::JointVector>,
 }
 
 /// The arm as the cycle knows it between motions.
@@ -178,12 +180,32 @@ pub struct CellState {
     pub run_peak_demand_ratio: [f64; crate::robot::DOF],
     /// Every recognition result used, evaluated against the truth at its trigger (evaluation only).
     pub recognitions: Vec<RecognitionReport>,
-    /// The result the next pick comes from without a new capture (several picks per capture).
-    pub reuse: Option<SensedResult>,
-    /// No capture is triggered while set: the next pick comes from `reuse`.
-    pub hold_trigger: bool,
-    /// Centres of the parts picked (or tried) from the result in hand [m, world].
-    pub picked_from_result: Vec<nalgebra::Vector3<f64>>,
+    /// The newest recognition result and how many picks came from it (several picks per
+    /// capture).
+    pub in_hand: Option<InHand>,
+    /// When and where each pick went into the pile since the last pour or agitation [s, m
+    /// world]: a result is only picked from clear of the picks made after its trigger.
+    pub pick_spots: Vec<(f64, Vector3<f64>)>,
+    /// When compute for the next pick may start [s]: the start of the last Place that went as
+    /// planned (the arm's remaining motion and where it ends are known then), else when the
+    /// last pick ended.
+    pub compute_from_s: f64,
+    /// The joint position the last Place's retreat was planned to end at (the next Pick is
+    /// planned from it when its compute starts before the retreat ends).
+    pub planned_end_q: Option<crate::robot::JointVector>,
+    /// Recognition results taken into hand so far.
+    pub results_collected: usize,
+    /// Until when the arm's planned motion keeps it out of the view [s] (infinite: no motion
+    /// into the view is planned). A capture is triggered only if its exposure ends before.
+    pub view_free_until_s: f64,
+}
+
+/// A recognition result in hand.
+pub struct InHand {
+    /// The result.
+    pub result: SensedResult,
+    /// Picks that came from it so far.
+    pub taken: usize,
 }
 
 /// A running cycle: the constant cell, its state, and who watches.
@@ -226,6 +248,19 @@ impl<'a> Cell<'a> {
         if slots.is_empty() {
             return Err(CycleError::Setup("no place slot for this workpiece".into()));
         }
+        let waiting_q = match s.cycle.waiting_tool_m {
+            None => None,
+            Some(w) => {
+                let home = crate::robot::JointVector::from(s.robot.home_rad());
+                let pose = crate::robot::tool_down_pose(Vector3::from(w), 0.0);
+                let q = robot.ik_tool_nearest(&pose, &home).map_err(|e| {
+                    CycleError::Setup(format!(
+                        "cycle.waiting_tool_m = {w:?}: the tool cannot point down there ({e})"
+                    ))
+                })?;
+                Some(q.q)
+            }
+        };
         Ok(Cell {
             robot,
             plant: robot.with_model_error(&s.model_error, opts.seed),
@@ -248,6 +283,7 @@ impl<'a> Cell<'a> {
             pile_count: wp.pile_count as usize,
             workpiece: wp.clone(),
             opts,
+            waiting_q,
         })
     }
 
@@ -259,6 +295,17 @@ impl<'a> Cell<'a> {
         })?;
         let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed, &self.workpiece)
             .ok_or_else(|| CycleError::Setup("degenerate sensor pose".into()))?;
+        if let Some(q) = &self.waiting_q {
+            // The waiting pose must leave the view free: checked on a scratch world.
+            let mut scratch = World::new(self.scene, self.robot, self.shape.clone());
+            scratch.place_arm(q);
+            if let Some(what) = sensor.frustum.arm_inside(&scratch) {
+                return Err(CycleError::Setup(format!(
+                    "cycle.waiting_tool_m = {:?}: the arm's {what} is in the sensor's view there",
+                    self.scene.cycle.waiting_tool_m.unwrap_or_default()
+                )));
+            }
+        }
         Ok(CellState {
             arm: ArmState {
                 servo: crate::execution::ServoState::at_rest(world.joints()),
@@ -277,9 +324,12 @@ impl<'a> Cell<'a> {
             parts_lost: 0,
             run_peak_demand_ratio: [0.0; crate::robot::DOF],
             recognitions: Vec::new(),
-            reuse: None,
-            hold_trigger: false,
-            picked_from_result: Vec::new(),
+            in_hand: None,
+            pick_spots: Vec::new(),
+            compute_from_s: 0.0,
+            planned_end_q: None,
+            results_collected: 0,
+            view_free_until_s: f64::INFINITY,
         })
     }
 }
@@ -329,29 +379,66 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
 pub const BLIND_PICK_MARGIN_M: f64 = 0.005;
 
 impl Run<'_, '_> {
-    /// The result with the detections a later pick may take without a new capture, if any and
-    /// if the cell file allows another pick from it: each recognised clear of every earlier
-    /// pick from the result (centres at least two bounding radii, or the tool's radius plus the
-    /// part's, plus [`BLIND_PICK_MARGIN_M`] apart horizontally), so neither the parts lifted nor
-    /// the tool's column over them touched it. A real cell can decide this from its recognition
-    /// alone; whether the part is still there the seal check tells.
-    fn later_picks(&self, result: &SensedResult) -> Option<SensedResult> {
-        let used = &self.st.picked_from_result;
-        if used.len() >= self.cell.scene.cycle.max_picks_per_capture as usize {
+    /// The result in hand with only the detections the next pick may take, and the number of
+    /// picks made since its trigger (0: the image shows the pile as it is). `None` if the cell
+    /// file allows no more picks from it, or (when picks were made since its trigger) none of its
+    /// detections is clear of them: each taken must be recognised clear of every pick made after
+    /// the trigger (centres at least two bounding radii, or the tool's radius plus the part's,
+    /// plus [`BLIND_PICK_MARGIN_M`] apart horizontally), so neither the parts lifted nor the
+    /// tool's column over them touched it. A real cell can decide this from its recognition and
+    /// its own picks alone; whether the part is still there the seal check tells.
+    fn usable(&self) -> Option<(SensedResult, usize)> {
+        let h = self.st.in_hand.as_ref()?;
+        if h.taken >= self.cell.scene.cycle.max_picks_per_capture as usize {
             return None;
+        }
+        let since: Vec<Vector3<f64>> = self
+            .st
+            .pick_spots
+            .iter()
+            .filter(|(t, _)| *t >= h.result.capture_s)
+            .map(|(_, c)| *c)
+            .collect();
+        if since.is_empty() {
+            return Some((
+                h.result
+                    .keeping(&vec![true; h.result.detections.as_ref().map_or(0, Vec::len)]),
+                0,
+            ));
         }
         let r_part = self.cell.shape.bounding_radius_m;
         let reach_m = r_part + r_part.max(self.cell.scene.gripper.body_diameter_m / 2.0) + BLIND_PICK_MARGIN_M;
-        let keep: Vec<bool> = result
+        let keep: Vec<bool> = h
+            .result
             .detections
             .as_deref()?
             .iter()
             .map(|d| {
                 let c = d.world_from_part.translation.vector;
-                used.iter().all(|u| (c - u).xy().norm() >= reach_m)
+                since.iter().all(|u| (c - u).xy().norm() >= reach_m)
             })
             .collect();
-        keep.iter().any(|k| *k).then(|| result.keeping(&keep))
+        keep.iter().any(|k| *k).then(|| (h.result.keeping(&keep), since.len()))
+    }
+
+    /// The result the next pick comes from: the newest one that has arrived, if it still has
+    /// a part to offer ([`Run::usable`]); else the pending capture's, awaited at the waiting
+    /// pose; else a new capture's. Returns the result, the picks taken from it before and the
+    /// picks made since its trigger; `None` if the arm cannot leave the view.
+    fn result_for_pick(&mut self) -> Result<Option<(SensedResult, usize, usize)>, CycleError> {
+        loop {
+            self.collect_ready();
+            if let Some((r, since)) = self.usable() {
+                let taken = self.st.in_hand.as_ref().map_or(0, |h| h.taken);
+                return Ok(Some((r, taken, since)));
+            }
+            // Nothing to take from the result in hand: wait for the next one.
+            self.st.in_hand = None;
+            let Some(r) = self.next_result()? else {
+                return Ok(None);
+            };
+            self.st.in_hand = Some(InHand { result: r, taken: 0 });
+        }
     }
 
     /// The pick loop: until the asked-for attempts are made (every pick is one, a re-capture
@@ -365,30 +452,21 @@ impl Run<'_, '_> {
             }
             let index = records.len();
             self.st.pick = Some(index);
-            // The next pick comes from the result in hand (several picks per capture) or from a
-            // new capture.
-            let (result, blind) = match self.st.reuse.take() {
-                Some(r) => (r, true),
-                None => {
-                    self.st.picked_from_result.clear();
-                    let Some(r) = self.next_result()? else {
-                        return Ok((records, EndReason::NoPathOutOfView));
-                    };
-                    (r, false)
-                }
+            let Some((result, taken, since)) = self.result_for_pick()? else {
+                return Ok((records, EndReason::NoPathOutOfView));
             };
-            self.st.hold_trigger = false;
-            if blind {
-                self.event(Event::ResultReused(self.st.picked_from_result.len()));
-            }
-            // Compute for a blind pick starts when the arm is done with the previous one.
-            let compute_from_s = if blind {
-                self.st.world.time_s()
-            } else {
-                result.job.ready_s
-            };
+            let blind = since > 0;
+            self.event(Event::ResultUsed {
+                taken,
+                since_capture: since,
+            });
+            // Compute starts when both the result and the arm's motion up to the next pick are
+            // known: the result's arrival, or the start of the last Place if it went as planned.
+            let compute_from_s = result.job.ready_s.max(self.st.compute_from_s);
             let mut rec = PickRecord::new(index, result.capture_s, result.job.ready_s);
             rec.blind = blind;
+            rec.from_result = taken;
+            rec.picks_since_capture = since;
             rec.recognition = result
                 .evaluation
                 .as_ref()
@@ -407,20 +485,25 @@ impl Run<'_, '_> {
             };
             let (prep, wall_s) = match prepared {
                 Ok(p) => p,
-                Err(_) if blind => {
-                    // Nothing graspable left in this result: the cell decides so (charged at the
-                    // grasp selection's budget) and captures again; no pick was attempted.
-                    let t = self.st.world.time_s() + self.cell.budgets_s[0];
+                Err(_) if blind || taken > 0 => {
+                    // Nothing graspable among the parts clear of the picks since the capture: the
+                    // cell decides so (charged at the grasp selection's budget) and takes the next
+                    // result; no pick was attempted.
+                    self.st.in_hand = None;
+                    let t = self.st.world.time_s().max(compute_from_s) + self.cell.budgets_s[0];
                     self.idle_until(t)?;
+                    self.st.compute_from_s = self.st.world.time_s();
                     continue;
                 }
                 Err(why) => {
+                    self.st.in_hand = None;
                     rec.outcome = why.map_or(Outcome::NothingDetected, Outcome::NothingGraspable);
                     self.event(Event::Outcome(rec.outcome.clone()));
                     records.push(rec);
                     if let Some(end) = self.nothing_to_pick()? {
                         return Ok((records, end));
                     }
+                    self.st.compute_from_s = self.st.world.time_s();
                     continue;
                 }
             };
@@ -435,22 +518,18 @@ impl Run<'_, '_> {
             } else {
                 wall_s
             };
-            // Several picks per capture: whether the next pick can come from this result is
-            // decided now, before the Place (whose exit from the view would trigger a capture).
+            if let Some(h) = self.st.in_hand.as_mut() {
+                h.taken += 1;
+            }
             let chosen = result
                 .detections
                 .as_deref()
-                .map(|d| d[prep.grasp.detection].world_from_part);
-            if let Some(c) = chosen {
-                self.st.picked_from_result.push(c.translation.vector);
-            }
-            let next = self.later_picks(&result);
-            self.st.hold_trigger = next.is_some();
-            self.pick_and_place(&prep, charged, compute_from_s, &mut rec)?;
-            let undisturbed = matches!(rec.outcome, Outcome::Placed | Outcome::GraspFailed(_));
-            match next {
-                Some(n) if undisturbed => self.st.reuse = Some(n),
-                _ => self.st.hold_trigger = false,
+                .map(|d| d[prep.grasp.detection].world_from_part.translation.vector);
+            self.pick_and_place(&prep, charged, compute_from_s, chosen, &mut rec)?;
+            if !matches!(rec.outcome, Outcome::Placed | Outcome::GraspFailed(_)) {
+                // The pile may have been disturbed anywhere: no result from before counts.
+                self.st.in_hand = None;
+                self.st.pending = None;
             }
             records.push(rec);
         }

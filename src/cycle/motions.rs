@@ -124,7 +124,11 @@ impl Run<'_, '_> {
         let robot = cell.robot;
         let wall = Instant::now();
         let slot = cell.slots[self.st.trays.next_slot % cell.slots.len()];
-        let q_now = self.st.world.joints();
+        // Compute that starts before the last motion ends plans from where it was planned to end.
+        let q_now = match self.st.planned_end_q {
+            Some(q) if t_s < self.st.arm.free_s - 1e-9 => q,
+            _ => self.st.world.joints(),
+        };
         let ctx = GraspContext {
             scene: cell.scene,
             robot,

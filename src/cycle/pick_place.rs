@@ -20,13 +20,15 @@ use crate::robot::JointVector;
 use crate::trajectory::Motion;
 
 impl Run<'_, '_> {
-    /// The pick of `prep`, whose recognition result arrived at `ready_s`, with `charged` compute
-    /// (grasp selection, Pick and Place motion generation [s]): stalls, motions, outcome.
+    /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute
+    /// (grasp selection, Pick and Place motion generation [s]), aimed at the part recognised at
+    /// `aimed_m` [m, world]: stalls, motions, outcome.
     pub(super) fn pick_and_place(
         &mut self,
         prep: &Prepared,
         charged: [f64; 3],
         ready_s: f64,
+        aimed_m: Option<nalgebra::Vector3<f64>>,
         rec: &mut PickRecord,
     ) -> Result<(), CycleError> {
         [rec.grasp_compute_s, rec.pick_compute_s, rec.place_compute_s] = charged;
@@ -102,7 +104,16 @@ impl Run<'_, '_> {
             self.event_at(t_s, event);
         }
         self.idle_until(pick_ready.max(self.st.world.time_s()))?;
-        let outcome = self.motions(prep, rec, place_ready)?;
+        let outcome = self.motions(prep, rec, place_ready, aimed_m)?;
+        self.st.view_free_until_s = f64::INFINITY;
+        // Compute for the next pick may start with this Place if it went as planned.
+        self.st.compute_from_s = match (&outcome, self.st.planned_end_q) {
+            (Outcome::Placed, Some(_)) => self.st.compute_from_s,
+            _ => {
+                self.st.planned_end_q = None;
+                self.st.world.time_s()
+            }
+        };
         if outcome != Outcome::Placed && self.st.world.held_part().is_some() {
             // A pick that ended with the part still on the cup (no Place motion): let it go where
             // the arm is, over the pick tray, before anything else moves.
@@ -150,9 +161,17 @@ impl Run<'_, '_> {
     }
 
     /// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat).
-    fn motions(&mut self, prep: &Prepared, rec: &mut PickRecord, place_ready: f64) -> Result<Outcome, CycleError> {
+    fn motions(
+        &mut self,
+        prep: &Prepared,
+        rec: &mut PickRecord,
+        place_ready: f64,
+        aimed_m: Option<nalgebra::Vector3<f64>>,
+    ) -> Result<Outcome, CycleError> {
         let hand = self.cell.hand;
         let t_pick = self.st.world.time_s();
+        self.st.planned_end_q = None;
+        let pick_lane = if rec.blind { Stage::BlindPick } else { Stage::Pick };
         self.event(Event::PickStart);
         self.st.arm.max_error_rad = 0.0;
         self.st.arm.peak_demand_ratio = [0.0; crate::robot::DOF];
@@ -164,7 +183,7 @@ impl Run<'_, '_> {
         self.st.gripper_events.clear();
         let pick_done = |run: &mut Self, rec: &mut PickRecord| {
             rec.pick_s = run.st.world.time_s() - t_pick;
-            run.span(Stage::Pick, t_pick, run.st.world.time_s(), "Pick");
+            run.span(pick_lane, t_pick, run.st.world.time_s(), "Pick");
             run.st.arm.free_s = run.st.world.time_s();
         };
         if let Played::Failed(o) = self.play_with(pick_transfer, &hand, false, None, false)? {
@@ -176,6 +195,10 @@ impl Run<'_, '_> {
         let descent = &prep.descent;
         let vacuum_at = (descent.duration_s() - lead).max(0.0);
         let t_descent = self.st.world.time_s();
+        // From here on the pile is touched: results captured before do not show it.
+        if let Some(c) = aimed_m {
+            self.st.pick_spots.push((t_descent, c));
+        }
         if let Played::Failed(o) = self.play_with(descent, &hand, false, Some(vacuum_at), true)? {
             pick_done(self, rec);
             return Ok(o);
@@ -245,6 +268,12 @@ impl Run<'_, '_> {
         };
         rec.suction_speed_factor = *k;
         let t_place = self.st.world.time_s();
+        // The controller knows from now where the arm ends: the next pick's compute may start.
+        self.st.planned_end_q = Some(up.end_q());
+        self.st.compute_from_s = t_place;
+        // The next Pick may follow the Place at once: no exposure may run past its end.
+        self.st.view_free_until_s =
+            t_place + transfer.duration_s() + down.duration_s() + self.st.world.gripper().release_s + up.duration_s();
         self.event(Event::PlaceStart);
         let place_done = |run: &mut Self, rec: &mut PickRecord| {
             rec.place_s = run.st.world.time_s() - t_place;

@@ -66,8 +66,13 @@ pub struct PickRecord {
     pub saturated_s: f64,
     /// Time scaling of the held-part Place transfer for the cup's holding force (1: none).
     pub suction_speed_factor: f64,
-    /// A later pick from a result an earlier pick used (no capture of its own).
+    /// A blind pick: picks went into the pile after its result's capture (the image no longer
+    /// shows the pile as it is; the part was taken clear of them).
     pub blind: bool,
+    /// Picks that came from the same result before this one (0: the first from it).
+    pub from_result: usize,
+    /// Picks that went into the pile after its result's capture, before this one.
+    pub picks_since_capture: usize,
     /// Whether the cup sealed on a part, once it reached the grasp (`None`: it never got there).
     pub sealed: Option<bool>,
     /// The recognition result this pick used: detections and correct ones (evaluation only).
@@ -103,6 +108,8 @@ impl PickRecord {
             saturated_s: 0.0,
             suction_speed_factor: 1.0,
             blind: false,
+            from_result: 0,
+            picks_since_capture: 0,
             sealed: None,
             recognition: None,
             aimed_at: None,
@@ -169,8 +176,10 @@ pub struct RunSummary {
     pub max_tracking_error_deg: f64,
     /// Grasps attempted (the cup reached the part) and sealed.
     pub grasps: (usize, usize),
-    /// Blind picks (a later pick from a result an earlier pick used): attempted and placed.
+    /// Blind picks (picks went into the pile after the result's capture): attempted and placed.
     pub blind_picks: (usize, usize),
+    /// Recognition results the picks the arm set out to make came from.
+    pub results_used: usize,
     /// Picks the arm set out to make per recognition result they came from.
     pub picks_per_capture: f64,
     /// Grasp failures on a detection that was wrong (more than 2 mm or 5 deg from every part).
@@ -300,11 +309,18 @@ pub fn summarise(
                 .filter(|r| r.blind && r.outcome == Outcome::Placed)
                 .count(),
         ),
+        results_used: records
+            .iter()
+            .filter(|r| r.outcome.set_out() && r.from_result == 0)
+            .count(),
         picks_per_capture: {
             let set_out = records.iter().filter(|r| r.outcome.set_out()).count();
-            let blind = records.iter().filter(|r| r.blind).count();
-            if set_out > blind {
-                set_out as f64 / (set_out - blind) as f64
+            let used = records
+                .iter()
+                .filter(|r| r.outcome.set_out() && r.from_result == 0)
+                .count();
+            if used > 0 {
+                set_out as f64 / used as f64
             } else {
                 f64::NAN
             }

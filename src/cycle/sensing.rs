@@ -16,7 +16,7 @@ use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
 use crate::sensor::{CaptureJob, Detection, RecognitionReport, evaluate};
-use crate::trajectory::{CORRIDOR_CHECK_DT_S, accelerate_in_corridor};
+use crate::trajectory::{CORRIDOR_CHECK_DT_S, Motion, accelerate_in_corridor};
 
 /// A recognition result to pick from.
 pub struct SensedResult {
@@ -64,11 +64,13 @@ impl SensedResult {
 }
 
 impl Run<'_, '_> {
-    /// Triggers a capture if none is pending (or the pending one was spoiled and the sensor has
-    /// finished exposing it) and the arm is out of view.
+    /// Takes a result that has arrived into hand, then triggers a capture if none is pending
+    /// (or the pending one was spoiled and the sensor has finished exposing it), the arm is out
+    /// of view and its plan keeps it out for the exposure.
     pub(super) fn maybe_trigger(&mut self) {
-        if self.st.hold_trigger {
-            // The next pick comes from the result in hand: a capture now would be spoiled.
+        self.collect_ready();
+        if self.st.world.time_s() + self.st.sensor.exposure_s > self.st.view_free_until_s + 1e-9 {
+            // The arm's plan takes it into the view before the exposure would end.
             return;
         }
         if let Some(j) = &self.st.pending
@@ -83,10 +85,18 @@ impl Run<'_, '_> {
         }
     }
 
-    /// A recognition result to pick from: triggers a capture if none is pending (moving the arm
-    /// out of view first if needed) and waits for it. `None` if the arm cannot leave the view.
+    /// A new recognition result to pick from: triggers a capture if none is pending (moving the
+    /// arm out of view first if needed), goes to the waiting pose and waits for it; a result
+    /// that arrives meanwhile is the one. `None` if the arm cannot leave the view.
     pub(super) fn next_result(&mut self) -> Result<Option<SensedResult>, CycleError> {
+        let collected = self.st.results_collected;
+        let mut waiting_tried = false;
         loop {
+            // A result that arrived is the one; a capture now would only be spoiled by the Pick.
+            self.collect_ready();
+            if self.st.results_collected != collected {
+                return Ok(self.st.in_hand.take().map(|h| h.result));
+            }
             self.maybe_trigger();
             if self.st.pending.is_none() {
                 if !self.move_out_of_view()? {
@@ -96,6 +106,7 @@ impl Run<'_, '_> {
                 if self.st.pending.is_none() {
                     return Ok(None);
                 }
+                continue;
             }
             let (exposure_end_s, ready_s, spoiled) = match &self.st.pending {
                 Some(j) => (j.exposure_end_s, j.ready_s, j.spoiled.is_some()),
@@ -105,46 +116,131 @@ impl Run<'_, '_> {
                 self.idle_until(exposure_end_s)?;
                 continue;
             }
-            let capture_s = exposure_end_s - self.st.sensor.exposure_s;
+            if ready_s > self.st.world.time_s() && !waiting_tried {
+                waiting_tried = true;
+                if self.go_to_waiting_pose()? {
+                    // Look again: a result may have arrived, or the way there crossed the view
+                    // during the exposure.
+                    continue;
+                }
+            }
             // A spoiled exposure is known when it ends: expose again right away.
             self.idle_until(exposure_end_s)?;
             if self.st.pending.as_ref().is_some_and(|j| j.spoiled.is_some()) {
                 continue;
             }
             self.idle_until(ready_s)?;
-            let Some(mut job) = self.st.pending.take() else {
-                continue;
-            };
-            if job.spoiled.is_some() {
-                continue;
-            }
-            self.span(Stage::Sensor, capture_s, job.exposure_end_s, "exposure");
-            self.span(Stage::Recognition, job.exposure_end_s, job.ready_s, "recognition");
-            let wall = std::time::Instant::now();
-            let detections = self.st.sensor.result(&mut job, self.st.world.time_s());
-            let recognition_wall_s = wall.elapsed().as_secs_f64();
-            let evaluation = detections
-                .as_ref()
-                .map(|d| evaluate(&job.truth, d, &self.st.sensor.symmetry));
-            if let Some(e) = &evaluation {
-                self.st.recognitions.push(e.clone());
-                self.obs.evaluated(job.ready_s, &job.truth, e);
-            }
-            self.event_at(
-                job.ready_s,
-                Event::RecognitionReady {
-                    detected: detections.as_ref().map_or(0, Vec::len),
-                    blurred: job.blurred(),
-                },
-            );
-            return Ok(Some(SensedResult {
-                job,
-                capture_s,
-                detections,
-                evaluation,
-                recognition_wall_s,
-            }));
         }
+    }
+
+    /// Takes the pending capture's result into hand if it has arrived by now (a newer result
+    /// replaces the one in hand).
+    pub(super) fn collect_ready(&mut self) {
+        let now = self.st.world.time_s();
+        if !self
+            .st
+            .pending
+            .as_ref()
+            .is_some_and(|j| j.spoiled.is_none() && j.ready_s <= now + 1e-9)
+        {
+            return;
+        }
+        if let Some(job) = self.st.pending.take() {
+            let capture_s = job.exposure_end_s - self.st.sensor.exposure_s;
+            let result = self.finish(job, capture_s);
+            self.st.in_hand = Some(super::InHand { result, taken: 0 });
+            self.st.results_collected += 1;
+        }
+    }
+
+    /// The recognition result of a capture whose result time has come: recognised from the
+    /// image as exposed, evaluated against the truth at its trigger (evaluation only), reported.
+    fn finish(&mut self, mut job: CaptureJob, capture_s: f64) -> SensedResult {
+        self.span(Stage::Sensor, capture_s, job.exposure_end_s, "exposure");
+        self.span(Stage::Recognition, job.exposure_end_s, job.ready_s, "recognition");
+        let wall = std::time::Instant::now();
+        let detections = self.st.sensor.result(&mut job, self.st.world.time_s());
+        let recognition_wall_s = wall.elapsed().as_secs_f64();
+        let evaluation = detections
+            .as_ref()
+            .map(|d| evaluate(&job.truth, d, &self.st.sensor.symmetry));
+        if let Some(e) = &evaluation {
+            self.st.recognitions.push(e.clone());
+            self.obs.evaluated(job.ready_s, &job.truth, e);
+        }
+        self.event_at(
+            job.ready_s,
+            Event::RecognitionReady {
+                detected: detections.as_ref().map_or(0, Vec::len),
+                blurred: job.blurred(),
+            },
+        );
+        SensedResult {
+            job,
+            capture_s,
+            detections,
+            evaluation,
+            recognition_wall_s,
+        }
+    }
+
+    /// While a result is pending and the arm has nothing else to do: to the cell's waiting
+    /// pose (`cycle.waiting_tool_m`, outside the view), so that only the last stretch of the
+    /// Pick waits for the result. Nothing happens without a waiting pose or when the arm is
+    /// there already. Returns whether the arm moved.
+    fn go_to_waiting_pose(&mut self) -> Result<bool, CycleError> {
+        let Some(q_wait) = self.cell.waiting_q else {
+            return Ok(false);
+        };
+        let q_now = self.st.world.joints();
+        if (q_wait - q_now).amax() < 0.01 {
+            return Ok(false);
+        }
+        let (robot, scene) = (self.cell.robot, self.cell.scene);
+        let free = CollisionModel::new(
+            robot,
+            RobotSpheres::new(robot, scene, None),
+            Environment::from_scene(scene),
+        );
+        let mut rng = crate::rng::stream(self.cell.opts.seed.wrapping_add(self.st.world.steps()), "planner-wait");
+        let Ok(p) = free.plan(&q_now, &q_wait, &PlanOptions::default(), &mut rng) else {
+            // No path: the arm waits where it is.
+            return Ok(false);
+        };
+        let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+        let hand = self.cell.hand;
+        let (_, acc, _) = accelerate_in_corridor(
+            &self.cell.accel_robot,
+            &robot.dynamics(&hand),
+            &via,
+            &free,
+            CORRIDOR_CHECK_DT_S,
+        );
+        let t = self.st.world.time_s();
+        // The controller knows from now where the arm ends: a result arriving on the way is
+        // planned from there.
+        self.st.planned_end_q = Some(acc.trajectory.at(acc.trajectory.duration_s()).q);
+        self.st.compute_from_s = t;
+        // A result arriving on the way sends the arm into the view from there; a capture
+        // triggered on the way has its result long after.
+        let end_s = t + acc.trajectory.duration_s();
+        if self
+            .st
+            .pending
+            .as_ref()
+            .is_some_and(|j| j.spoiled.is_none() && j.ready_s <= end_s)
+        {
+            self.st.view_free_until_s = end_s;
+        }
+        let played = self.play(&acc.trajectory, &hand, true)?;
+        self.st.view_free_until_s = f64::INFINITY;
+        self.span(Stage::WaitingPose, t, self.st.world.time_s(), "to the waiting pose");
+        self.st.arm.free_s = self.st.world.time_s();
+        if !matches!(played, super::execute::Played::Done) {
+            self.st.planned_end_q = None;
+            self.st.compute_from_s = self.st.world.time_s();
+        }
+        Ok(true)
     }
 
     /// Moves the arm home when it is in the camera's view and nothing is pending.
@@ -192,6 +288,8 @@ impl Run<'_, '_> {
         let played = self.play(&acc.trajectory, &hand, true)?;
         self.span(Stage::Place, t, self.st.world.time_s(), "out of view");
         self.st.arm.free_s = self.st.world.time_s();
+        self.st.planned_end_q = None;
+        self.st.compute_from_s = self.st.world.time_s();
         Ok(matches!(played, super::execute::Played::Done))
     }
 }

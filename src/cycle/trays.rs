@@ -119,6 +119,7 @@ impl Run<'_, '_> {
     /// rest. The arm stands still out of the sensor's view meanwhile.
     fn agitate(&mut self, k: u32) -> Result<(), CycleError> {
         let a = self.cell.scene.agitation;
+        self.forget_pile();
         let t0 = self.st.world.time_s();
         self.event(Event::Agitation(k));
         let tray = self.st.world.pick_tray().world_from_tray.rotation;
@@ -135,11 +136,22 @@ impl Run<'_, '_> {
         self.idle_until(settled + a.settle_s)?;
         self.span(Stage::Stall, settled, self.st.world.time_s(), "pile settling");
         self.st.arm.free_s = self.st.world.time_s();
+        self.st.compute_from_s = self.st.world.time_s();
         Ok(())
+    }
+
+    /// The pile is about to change as a whole: no result from before counts, no capture under
+    /// way either.
+    fn forget_pile(&mut self) {
+        self.st.in_hand = None;
+        self.st.pending = None;
+        self.st.pick_spots.clear();
+        self.st.planned_end_q = None;
     }
 
     /// Takes the parts left in the pick tray out and pours pile number `fill`.
     fn refill(&mut self, fill: u64) -> Result<(), CycleError> {
+        self.forget_pile();
         for i in self.st.world.parts_in_state(PartState::Free) {
             self.st.world.remove_part(i);
         }
@@ -158,6 +170,7 @@ impl Run<'_, '_> {
             .build_pile_observed(&PileOptions::new(self.cell.pile_count, seed), &mut |w| obs.stepped(w))?;
         self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
         self.st.arm.free_s = self.st.world.time_s();
+        self.st.compute_from_s = self.st.world.time_s();
         Ok(())
     }
 

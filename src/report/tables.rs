@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 29] = [
+pub const PICKS_CSV_HEADER: [&str; 31] = [
     "pick",
     "outcome",
     "detail",
@@ -66,6 +66,8 @@ pub const PICKS_CSV_HEADER: [&str; 29] = [
     "saturated_s",
     "suction_speed_factor",
     "blind",
+    "from_result",
+    "picks_since_capture",
     "sealed",
     "detections",
     "correct_detections",
@@ -100,6 +102,8 @@ struct PickRow<'a> {
     saturated_s: Fixed<6>,
     suction_speed_factor: Fixed<4>,
     blind: bool,
+    from_result: usize,
+    picks_since_capture: usize,
     sealed: Option<bool>,
     detections: Option<usize>,
     correct_detections: Option<usize>,
@@ -137,6 +141,8 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             saturated_s: Fixed::of(r.saturated_s),
             suction_speed_factor: Fixed::of(r.suction_speed_factor),
             blind: r.blind,
+            from_result: r.from_result,
+            picks_since_capture: r.picks_since_capture,
             sealed: r.sealed,
             detections: r.recognition.map(|x| x.0),
             correct_detections: r.recognition.map(|x| x.1),

@@ -273,11 +273,10 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(count["/camera/points"], captures);
     assert_eq!(count["/camera/calibration"], captures);
     let ready = events.iter().filter(|e| e["kind"] == "recognition_ready").count();
-    let reused = events.iter().filter(|e| e["kind"] == "result_reused").count();
+    let used = events.iter().filter(|e| e["kind"] == "result_used").count();
     assert_eq!(
-        count["/recognition"],
-        ready + reused,
-        "a recognition message per result and per later pick from it"
+        count["/recognition"], used,
+        "a recognition message per pick's look into a result"
     );
     assert_eq!(
         count["/recognition/truth_at_trigger"], ready,
@@ -312,8 +311,8 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(rows("/cycle/takt"), takts);
     assert_eq!(rows("/world/camera/depth"), captures);
     assert_eq!(rows("/world/cloud"), captures);
-    assert_eq!(rows("/world/recognition/detections"), ready + reused);
-    assert_eq!(rows("/world/recognition/candidates"), ready + reused);
+    assert_eq!(rows("/world/recognition/detections"), used);
+    assert_eq!(rows("/world/recognition/candidates"), used);
     assert_eq!(rows("/world/recognition/truth_at_trigger"), ready);
     assert_eq!(
         rows("/world/parts"),

@@ -319,3 +319,99 @@ fn cloud_recognition_cannot_reach_the_world() {
     let _pure: fn(&Capture, &Camera, &TrayVolume, &CloudModel) -> Vec<CloudDetection> = cloud::recognize;
     let _cell: fn(&Sensor, &Capture) -> Vec<Detection> = Sensor::recognize_cloud;
 }
+
+/// What the trigger check needs of a run: every physics step's time and whether the arm (or the
+/// held part) was in the sensor's view, judged here with the sensor's own frustum on the world
+/// as stepped, and the captures, results and spoiled exposures from the events.
+#[derive(Default)]
+struct TriggerWatch {
+    frustum: Option<binpick::sensor::ViewFrustum>,
+    cfg: Option<(binpick::config::SensorConfig, binpick::config::Workpiece)>,
+    steps: Vec<(f64, bool)>,
+    captures: Vec<f64>,
+    ready: Vec<f64>,
+    spoiled: Vec<f64>,
+}
+
+impl binpick::cycle::Observer for TriggerWatch {
+    fn stepped(&mut self, world: &World) {
+        if self.frustum.is_none() {
+            let (cfg, wp) = self.cfg.as_ref().unwrap();
+            self.frustum = Some(Sensor::new(cfg, world, 0, wp).unwrap().frustum.clone());
+        }
+        let inside = self.frustum.as_ref().unwrap().arm_inside(world).is_some();
+        self.steps.push((world.time_s(), inside));
+    }
+    fn event(&mut self, t_s: f64, _pick: Option<usize>, event: &binpick::cycle::Event) {
+        match event {
+            binpick::cycle::Event::Capture(_) => self.captures.push(t_s),
+            binpick::cycle::Event::RecognitionReady { .. } => self.ready.push(t_s),
+            binpick::cycle::Event::CaptureSpoiled(_) => self.spoiled.push(t_s),
+            _ => {}
+        }
+    }
+}
+
+/// The captures of `w` that could have fired a step earlier: at the step before, the arm was out
+/// of the view, no earlier capture was pending (triggered, its result not yet in, and not spoiled
+/// with its exposure over), and the arm stayed out of the view for a whole exposure from there.
+fn late_captures(w: &TriggerWatch, captures: &[f64], exposure_s: f64) -> Vec<f64> {
+    let mut late = Vec::new();
+    for (k, &t) in captures.iter().enumerate().skip(1) {
+        let Some(i) = w.steps.iter().position(|(ts, _)| *ts >= t - 1e-9) else {
+            continue;
+        };
+        let (t_prev, in_view) = w.steps[i - 1];
+        let prev = captures[k - 1];
+        let prev_ready = w.ready.iter().copied().find(|r| *r >= prev - 1e-9);
+        let prev_spoiled = w
+            .spoiled
+            .iter()
+            .any(|s| *s >= prev - 1e-9 && *s <= prev + exposure_s + 1e-9);
+        let pending = if prev_spoiled {
+            t_prev < prev + exposure_s - 1e-9
+        } else {
+            prev_ready.is_none_or(|r| t_prev < r - 1e-9)
+        };
+        let enters = w.steps[i - 1..]
+            .iter()
+            .take_while(|(ts, _)| *ts <= t_prev + exposure_s + 1e-9)
+            .any(|(_, v)| *v);
+        if !in_view && !pending && !enters {
+            late.push(t);
+        }
+    }
+    late
+}
+
+/// The trigger fires at the earliest moment a capture can be exposed: for every capture of a
+/// steady run, at the physics step before it the arm was in the view, the previous capture was
+/// still pending, or the arm entered the view within an exposure from there (checked on the
+/// world as stepped, with the frustum, not the cycle's own bookkeeping). Negative control: the
+/// same captures 50 ms later are found late.
+#[test]
+fn the_capture_fires_at_the_earliest_moment() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("E").unwrap();
+    let opts = binpick::cycle::RunOptions {
+        picks: 8,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+    };
+    let mut watch = TriggerWatch {
+        cfg: Some((scene.scene.sensor.clone(), wp.workpiece.clone())),
+        ..Default::default()
+    };
+    let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut watch).unwrap();
+    assert_eq!((r.summary.agitations, r.summary.refills), (0, 0), "a steady run");
+    assert!(watch.captures.len() >= 5, "{:?}", watch.captures);
+    let exposure_s = scene.scene.sensor.exposure_s;
+    assert_eq!(late_captures(&watch, &watch.captures, exposure_s), Vec::<f64>::new());
+    let delayed: Vec<f64> = watch.captures.iter().map(|t| t + 0.05).collect();
+    assert!(
+        !late_captures(&watch, &delayed, exposure_s).is_empty(),
+        "negative control: captures 50 ms late must be found"
+    );
+}
