@@ -17,10 +17,10 @@
 //!
 //! Units: m, s, N, Pa. Frames: `world_from_tool` (z axis out of the cup), `tool_from_part`.
 
-use nalgebra::{Isometry3, Matrix3, Vector3};
+use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 use rapier3d::prelude::{ActiveCollisionTypes, RigidBodyType};
 
-use super::{PartState, Tag, World, sim_point, to_pose};
+use super::{PartState, SIM_UNITS_PER_M, Tag, World, sim_point, to_pose};
 use crate::config::GripperConfig;
 use crate::robot::Payload;
 
@@ -32,6 +32,8 @@ const PROBE_BACK_M: f64 = 0.01;
 const SAME_FACE_RAD: f64 = 0.087;
 /// The cup must touch: the face may be at most this far beyond the lip [m].
 const TOUCH_GAP_M: f64 = 0.0008;
+/// The bellows take up at most this much overlap of the part with the tray at the seal [m].
+const BELLOWS_TAKE_UP_M: f64 = 0.001;
 
 /// Why a grasp failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -446,13 +448,54 @@ impl World {
     }
 
     fn attach(&mut self, seal: Seal) -> Isometry3<f64> {
+        let (body, collider) = (self.parts[seal.part].body, self.parts[seal.part].collider);
+        // The bellows: the cup seals on the part as it rests. A part the kinematic cup pressed
+        // into the tray by the contact solver's tolerance (a few tenths of a millimetre) is held
+        // where it rests, out of that overlap, not frozen into the tray (a real bellows takes
+        // the overtravel up). Deeper overlaps are left alone: the health monitor reports them.
+        if let Some(out_m) = self.env_overlap_exit_m(collider)
+            && out_m.norm() <= BELLOWS_TAKE_UP_M
+        {
+            let pose = self.part_pose(seal.part);
+            let lifted = Isometry3::from_parts(Translation3::from(pose.translation.vector + out_m), pose.rotation);
+            self.bodies[body].set_position(to_pose(&lifted), true);
+        }
         let p = &mut self.parts[seal.part];
         p.state = PartState::Held;
-        let (body, collider) = (p.body, p.collider);
         self.bodies[body].set_body_type(RigidBodyType::KinematicPositionBased, true);
         self.colliders[collider]
             .set_active_collision_types(ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED);
         self.world_from_tool().inverse() * self.part_pose(seal.part)
+    }
+
+    /// The shortest move [m, world] that takes `collider` out of its deepest overlap with the
+    /// cell (trays, table, obstacles), from the last step's contacts; `None` if it overlaps
+    /// nothing.
+    fn env_overlap_exit_m(&self, collider: rapier3d::geometry::ColliderHandle) -> Option<Vector3<f64>> {
+        let mut best: Option<(f64, Vector3<f64>)> = None;
+        for pair in self.narrow_phase.contact_pairs_with(collider) {
+            let (other, sign) = if pair.collider1 == collider {
+                (pair.collider2, -1.0)
+            } else {
+                (pair.collider1, 1.0)
+            };
+            if !matches!(self.tag_of(other), Some(Tag::Env(_))) {
+                continue;
+            }
+            for m in pair.manifolds() {
+                let depth_m = m
+                    .points
+                    .iter()
+                    .map(|p| -(p.dist as f64) / SIM_UNITS_PER_M)
+                    .fold(0.0, f64::max);
+                let n = m.data.normal;
+                let normal = Vector3::new(n.x as f64, n.y as f64, n.z as f64);
+                if depth_m > 0.0 && best.as_ref().is_none_or(|(d, _)| depth_m > *d) {
+                    best = Some((depth_m, normal * (sign * depth_m)));
+                }
+            }
+        }
+        best.map(|(_, v)| v)
     }
 
     fn detach(&mut self, part: usize) {

@@ -413,3 +413,38 @@ fn an_agitated_tray_shakes_the_pile_and_returns_exactly_to_rest() {
     let (_, still_turned, still_shifted) = moved_after(false);
     assert_eq!((still_turned, still_shifted), (0, 0), "a still tray moved the pile");
 }
+
+/// The bellows take up what the kinematic cup pressed the part into the tray floor at the seal:
+/// a cup that ends 0.8 mm below a lying part's top face seals, and the held part does not sit in
+/// the floor (no collision while the vacuum builds up and the tool lifts; without the take-up this
+/// case reported the held part 0.53 mm in the floor, as the cycle did). Negative control: a cup
+/// driven 3 mm into the part squeezes it deeper than the bellows take up, and the health monitor
+/// reports the collision.
+#[test]
+fn the_bellows_take_up_the_cups_overtravel_at_the_seal() {
+    for (press_m, ok) in [(0.0008, true), (0.003, false)] {
+        let (mut w, _, _) = world("E");
+        // Lying on its 10 x 10 mm face.
+        let flat = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2);
+        lone_part(&mut w, 0.005, (0.0, 0.0), flat);
+        let top = w.part_pose(0).translation.vector + Vector3::z() * 0.0025;
+        let tool = tool_down_pose(top - Vector3::z() * press_m, 0.0);
+        let above = Isometry3::from_parts(
+            Translation3::from(tool.translation.vector + Vector3::z() * 0.04),
+            tool.rotation,
+        );
+        w.place_tool(&above).unwrap();
+        let outcome = w.move_tool_line(&tool, 0.3).and_then(|_| {
+            w.vacuum_on();
+            w.run_for(w.gripper().build_up_s + 0.01)?;
+            w.move_tool_line(&above, 0.3)
+        });
+        if ok {
+            outcome.unwrap_or_else(|e| panic!("pressed {press_m} m: {e}"));
+            assert_eq!(w.held_part(), Some(0));
+        } else {
+            let e = outcome.expect_err("a cup 3 mm into the part must be reported");
+            assert!(e.to_string().contains("penetrat"), "{e}");
+        }
+    }
+}
