@@ -45,9 +45,10 @@ pub const CORRIDOR_BEND_BUDGET_M: f64 = 0.0002;
 const START_SHARE: f64 = 0.5;
 /// The bisection's iterations at most (each one trajectory and its torques).
 const SEARCH_ITERATIONS: usize = 30;
-/// An acceleration at or above this share of the specification counts as at the specification:
-/// the search does not raise it further, and a fold cannot help J1.
-const AT_SPEC: f64 = 0.999;
+/// An acceleration at or above this share of the top of its bracket ([`accel_top_rad_s2`]: the
+/// cap, or without one the torque ceiling) counts as at the top: the search does not raise it
+/// further, and a fold cannot help J1.
+const AT_TOP: f64 = 0.999;
 /// After a stop is inserted, the search restarts from the accelerations just found, with this
 /// share of them as the lower bracket (a stop changes little).
 const WARM_LOWER_SHARE: f64 = 0.8;
@@ -99,6 +100,41 @@ pub fn default_limits(
     }
 }
 
+/// Per joint, the top of the acceleration search's bracket along the path through `via`
+/// [rad/s^2].
+///
+/// With a cap ([`RobotModel::accel_cap_rad_s2`], `robot.drives.accel_cap = "spec"`), the cap.
+/// Without one, the torque's own ceiling: the joint's torque limit over its smallest diagonal
+/// inertia (armature and payload included) at the path's via points, the acceleration at which
+/// its own inertia alone would take the whole limit where the path is lightest for it. Gravity,
+/// friction and the joint's inertia where it accelerates (blends sit at the via points, the
+/// heaviest of them counts) take their share too, so its torque binds below the ceiling; a
+/// joint that reaches it unbound (its acceleration sets no blend, or the other joints' coupling
+/// works for it) is not what holds the motion back and is not raised further.
+pub fn accel_top_rad_s2(robot: &RobotModel, dynamics: &DynamicsModel, via: &[JointVector]) -> JointVector {
+    if let Some(cap) = robot.accel_cap_rad_s2() {
+        return cap;
+    }
+    let mut lightest = JointVector::repeat(f64::INFINITY);
+    for q in via {
+        let m = dynamics.mass_matrix(q);
+        for i in 0..DOF {
+            lightest[i] = lightest[i].min(m[(i, i)]);
+        }
+    }
+    let limit = robot.torque_limit_nm();
+    // The mass matrix is positive definite: its diagonal is positive; the floor keeps a
+    // degenerate model's bracket finite.
+    JointVector::from_fn(|i, _| limit[i] / lightest[i].max(MIN_INERTIA_KG_M2))
+}
+
+/// Without stretches and without a cap, [`check_corridor`] bounds a motion's accelerations by
+/// their largest value at this many samples per chord.
+const FALLBACK_SAMPLES_PER_CHORD: f64 = 10.0;
+
+/// Floor of the diagonal inertia [`accel_top_rad_s2`] divides by [kg m^2].
+const MIN_INERTIA_KG_M2: f64 = 1e-6;
+
 /// Result of the acceleration search.
 #[derive(Debug, Clone)]
 pub struct Accelerated {
@@ -114,9 +150,11 @@ pub struct Accelerated {
 
 /// The reference system's §4.2: speed fixed at the top; accelerations start at 50 % of the
 /// specification; torques every `dt_s` (the reference: [`TORQUE_DT_S`]); each joint's
-/// acceleration is bisected until its peak torque is within `threshold` (a fraction of the
-/// limit; the reference: [`TORQUE_THRESHOLD`]) below its limit, none above. Returns the
-/// fastest try whose torques all stay within their limits (the last try if none does).
+/// acceleration is bisected, between zero and the top of its bracket ([`accel_top_rad_s2`]: the
+/// specification with `accel_cap = "spec"`, the torque's ceiling without a cap), until its peak
+/// torque is within `threshold` (a fraction of the limit; the reference: [`TORQUE_THRESHOLD`])
+/// below its limit, none above, or it is at the top. Returns the fastest try whose torques all
+/// stay within their limits (the last try if none does).
 pub fn optimise_accelerations(
     robot: &RobotModel,
     dynamics: &DynamicsModel,
@@ -124,16 +162,8 @@ pub fn optimise_accelerations(
     dt_s: f64,
     threshold: f64,
 ) -> Accelerated {
-    let spec = robot.max_accel_rad_s2();
-    search_accelerations(
-        robot,
-        dynamics,
-        via,
-        dt_s,
-        threshold,
-        spec * START_SHARE,
-        JointVector::zeros(),
-    )
+    let start = robot.max_accel_rad_s2() * START_SHARE;
+    search_accelerations(robot, dynamics, via, dt_s, threshold, start, JointVector::zeros())
 }
 
 /// The bisection of [`optimise_accelerations`] from a given start and lower bracket (a warm
@@ -147,10 +177,10 @@ fn search_accelerations(
     start: JointVector,
     lower: JointVector,
 ) -> Accelerated {
-    let spec = robot.max_accel_rad_s2();
-    let mut lo = lower;
-    let mut hi = spec;
-    let mut scale = start;
+    let top = accel_top_rad_s2(robot, dynamics, via);
+    let mut lo = lower.inf(&top);
+    let mut hi = top;
+    let mut scale = start.inf(&top);
     let vel = robot.max_vel_rad_s();
     let mut best: Option<Accelerated> = None;
     for it in 1..=SEARCH_ITERATIONS {
@@ -179,7 +209,7 @@ fn search_accelerations(
             if r > 1.0 {
                 hi[i] = scale[i];
                 settled = false;
-            } else if r < 1.0 - threshold && scale[i] < spec[i] * AT_SPEC {
+            } else if r < 1.0 - threshold && scale[i] < top[i] * AT_TOP {
                 lo[i] = scale[i];
                 settled = false;
             } else {
@@ -241,8 +271,8 @@ pub fn correct_path(
     let mut best = accelerated.clone();
     let (mut folds, mut tried) = (0, 0);
     // Folding lowers J1's inertia, which only pays when J1's acceleration is held down by its
-    // torque, not by its specification.
-    if best.limits.accel_rad_s2[0] >= AT_SPEC * robot.joints[0].max_accel_rad_s2 {
+    // torque, not by its cap (or, without a cap, its ceiling).
+    if best.limits.accel_rad_s2[0] >= AT_TOP * accel_top_rad_s2(robot, dynamics, via)[0] {
         return Corrected {
             via: current,
             accelerated: best,
@@ -352,8 +382,10 @@ pub fn chord_deviation_rad(accel_rad_s2: &JointVector, dt_s: f64) -> JointVector
 /// most `dt_s` long and short enough that their deviation, summed over the joints with the model's
 /// lever bounds, is within [`CORRIDOR_BEND_BUDGET_M`], and each chord is certified with the margin
 /// raised by its deviation (every point of the robot is then clear by the margin). Without them,
-/// chords every `dt_s` with the margin raised by the deviation the robot's specification
-/// accelerations allow (valid for motions within them).
+/// chords every `dt_s` with the margin raised by the deviation the robot's acceleration cap
+/// allows (valid for motions within it); with no cap ([`RobotModel::accel_cap_rad_s2`]), by the
+/// largest acceleration the motion itself shows, sampled ten times per chord (a motion whose
+/// acceleration peaks sharply between those samples is not covered).
 pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Motion, dt_s: f64) -> Result<(), f64> {
     let mut stats = crate::planning::PlanStats::default();
     let lever = &model.spheres.lever_m;
@@ -362,10 +394,15 @@ pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Mot
         (0..DOF).map(|i| lever[i] * dev[i]).sum()
     };
     let Some(stretches) = motion.stretches() else {
-        let spec = model.robot.max_accel_rad_s2();
+        let bound = model.robot.accel_cap_rad_s2().unwrap_or_else(|| {
+            motion
+                .sampled(dt_s / FALLBACK_SAMPLES_PER_CHORD)
+                .iter()
+                .fold(JointVector::zeros(), |m, s| m.sup(&s.qdd.abs()))
+        });
         let samples = motion.sampled(dt_s);
         for w in samples.windows(2) {
-            let extra = sweep_m(&spec, w[1].t_s - w[0].t_s);
+            let extra = sweep_m(&bound, w[1].t_s - w[0].t_s);
             if !model.certify_edge_with_margin(&w[0].q, &w[1].q, model.margin_m + extra, &mut stats) {
                 return Err(w[0].t_s);
             }

@@ -86,7 +86,7 @@ impl ArcPath {
 pub struct Shares {
     /// Of each torque limit.
     pub torque: f64,
-    /// Of each specification acceleration.
+    /// Of each acceleration cap (none without a cap: [`RobotModel::accel_cap_rad_s2`]).
     pub accel: f64,
     /// Of each speed limit.
     pub speed: f64,
@@ -108,7 +108,10 @@ impl Shares {
 }
 
 /// The robot's limits along an [`ArcPath`] as TOPP-RA constraints: per joint, the speed limit,
-/// the specification acceleration and the torque limit, each times its [`Shares`] share.
+/// the acceleration cap if the robot has one ([`RobotModel::accel_cap_rad_s2`]: the
+/// specification accelerations with `robot.drives.accel_cap = "spec"`; without it there are no
+/// acceleration rows, the torque alone binds) and the torque limit, each times its [`Shares`]
+/// share.
 ///
 /// Torques are linear in (u, x): tau = a u + b x + c, with a = M q', b = M q'' + C(q, q') q',
 /// c = gravity + Coulomb friction (the joints' friction parameters); viscous friction (linear in
@@ -122,7 +125,7 @@ pub struct RobotPathConstraints<'a> {
     shares: Shares,
     torque_limit_nm: JointVector,
     vel_limit_rad_s: JointVector,
-    accel_limit_rad_s2: JointVector,
+    accel_limit_rad_s2: Option<JointVector>,
 }
 
 impl<'a> RobotPathConstraints<'a> {
@@ -135,7 +138,7 @@ impl<'a> RobotPathConstraints<'a> {
             shares,
             torque_limit_nm: robot.torque_limit_nm(),
             vel_limit_rad_s: robot.max_vel_rad_s(),
-            accel_limit_rad_s2: robot.max_accel_rad_s2(),
+            accel_limit_rad_s2: robot.accel_cap_rad_s2(),
         }
     }
 }
@@ -174,12 +177,10 @@ impl PathConstraints for RobotPathConstraints<'_> {
             let cap = shares.torque * self.torque_limit_nm[i] - viscous;
             rows.push(StageRow::new(a[i], b[i], cap - c));
             rows.push(StageRow::new(-a[i], -b[i], cap + c));
-            rows.push(StageRow::new(qp[i], qpp[i], shares.accel * self.accel_limit_rad_s2[i]));
-            rows.push(StageRow::new(
-                -qp[i],
-                -qpp[i],
-                shares.accel * self.accel_limit_rad_s2[i],
-            ));
+            if let Some(cap) = &self.accel_limit_rad_s2 {
+                rows.push(StageRow::new(qp[i], qpp[i], shares.accel * cap[i]));
+                rows.push(StageRow::new(-qp[i], -qpp[i], shares.accel * cap[i]));
+            }
         }
         if xmax.is_finite() {
             rows.push(StageRow::new(0.0, 1.0, xmax));
@@ -189,7 +190,7 @@ impl PathConstraints for RobotPathConstraints<'_> {
 }
 
 /// A path retimed by TOPP-RA: the arc-length path of a trajectory and the time-optimal s(t)
-/// under speed, acceleration and torque limits.
+/// under speed and torque limits (and the acceleration cap, if any).
 #[derive(Debug, Clone)]
 pub struct Retimed {
     path: ArcPath,
@@ -225,7 +226,7 @@ impl Motion for Retimed {
 }
 
 /// TOPP-RA on `path`'s geometry: the time-optimal retiming under the joint speed limits, the
-/// specification accelerations and the torque limits with `dynamics` (payload included), at
+/// acceleration cap if the robot has one, and the torque limits with `dynamics` (payload included), at
 /// `shares` of each, on `grid` stages ([`RobotPathConstraints`] solved by [`time_optimal`]).
 /// Returns `None` if the path cannot be followed even slowly (a static overload).
 pub fn toppra(
