@@ -67,8 +67,11 @@ impl ArcPath {
         let p = self.path.sample(t);
         let speed = p.qd.norm();
         if speed < 1e-9 {
-            // At rest (the ends): the path leaves along the first blend's acceleration, straight.
-            let dir = p.qdd.try_normalize(1e-12).unwrap_or_else(JointVector::zeros);
+            // At rest (the ends): the path leaves along the first blend's acceleration and arrives
+            // against the last one's (a deceleration), straight. The tangent points along the
+            // path at both ends: a torque row with it reversed would take gravity's sign wrong.
+            let along = if t < 0.5 * self.path.duration_s { p.qdd } else { -p.qdd };
+            let dir = along.try_normalize(1e-12).unwrap_or_else(JointVector::zeros);
             return (p.q, dir * self.length, JointVector::zeros());
         }
         let sdot = speed / self.length;
@@ -114,7 +117,9 @@ impl Shares {
 /// share.
 ///
 /// Torques are linear in (u, x): tau = a u + b x + c, with a = M q', b = M q'' + C(q, q') q',
-/// c = gravity + Coulomb friction (the joints' friction parameters); viscous friction (linear in
+/// c = gravity + Coulomb friction (the joints' friction parameters; at the ends, at rest, full
+/// Coulomb friction against whichever way the drive pushes, as in the torque check of the
+/// accelerator); viscous friction (linear in
 /// s', not in s'^2) is bounded by its value at the stage's top speed and taken from the torque
 /// margin, which keeps the result feasible (slightly conservative).
 #[derive(Debug, Clone)]
@@ -168,13 +173,20 @@ impl PathConstraints for RobotPathConstraints<'_> {
             }
         }
         let sdot_max = xmax.sqrt();
+        // The path starts and ends at rest, where friction is at its worst
+        // ([`DynamicsModel::drive_torque_bound_nm`]): the drive breaks away against full Coulomb
+        // friction in the direction it accelerates (arriving, against the motion), not helped by
+        // it. Without an acceleration cap nothing else holds the last stage's deceleration.
+        let at_rest = s <= 0.0 || s >= self.end_s();
         for i in 0..DOF {
             let j = &self.robot.joints[i];
-            let coulomb = j.coulomb_nm * qp[i].signum() * if qp[i].abs() > 1e-9 { 1.0 } else { 0.0 };
+            let moving = qp[i].abs() > 1e-9 && !at_rest;
+            let coulomb = j.coulomb_nm * qp[i].signum() * if moving { 1.0 } else { 0.0 };
+            let breakaway = if at_rest { j.coulomb_nm } else { 0.0 };
             let viscous = j.viscous_nm_s_per_rad * qp[i].abs() * if sdot_max.is_finite() { sdot_max } else { 0.0 };
             let c = g[i] + coulomb;
             // With Shares::EXECUTE, 2 % of the limit is kept back for what happens between grid points.
-            let cap = shares.torque * self.torque_limit_nm[i] - viscous;
+            let cap = shares.torque * self.torque_limit_nm[i] - viscous - breakaway;
             rows.push(StageRow::new(a[i], b[i], cap - c));
             rows.push(StageRow::new(-a[i], -b[i], cap + c));
             if let Some(cap) = &self.accel_limit_rad_s2 {
