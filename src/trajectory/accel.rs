@@ -508,3 +508,140 @@ pub fn optimal_duration(
     }
     Some(total)
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robot::{AccelCap, Payload};
+
+    /// J1 turns 180 deg with the tool 25 cm above the table at 55 cm reach, the hand holding a
+    /// 30 g part: the reference's kind of motion, free space.
+    fn j1_half_turn(robot: &RobotModel) -> Vec<JointVector> {
+        let scene = crate::config::LoadedScene::embedded_default().expect("embedded default scene");
+        let home = JointVector::from(scene.scene.robot.home_rad());
+        let at = |y: f64| {
+            robot
+                .ik_tool_nearest(
+                    &crate::robot::tool_down_pose(nalgebra::Vector3::new(0.0, y, 0.25), 0.0),
+                    &home,
+                )
+                .expect("reachable")
+                .q
+        };
+        vec![at(0.55), at(-0.55)]
+    }
+
+    fn held_dynamics(robot: &RobotModel) -> DynamicsModel {
+        let scene = crate::config::LoadedScene::embedded_default().expect("embedded default scene");
+        let hand = Payload::from_gripper(&scene.scene.gripper);
+        robot.dynamics(&hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector)))
+    }
+
+    #[test]
+    fn the_brackets_top_is_the_cap_or_the_torques_ceiling() {
+        let robot = crate::robot::test_support::default_robot();
+        let capped = robot.with_accel_cap(AccelCap::Spec);
+        let free = robot.with_accel_cap(AccelCap::TorqueOnly);
+        let dynamics = held_dynamics(&robot);
+        let via = j1_half_turn(&robot);
+        assert_eq!(accel_top_rad_s2(&capped, &dynamics, &via), robot.max_accel_rad_s2());
+        let top = accel_top_rad_s2(&free, &dynamics, &via);
+        let limit = robot.torque_limit_nm();
+        for i in 0..DOF {
+            // The torque limit spent on the lightest via point's own inertia alone.
+            let lightest = via
+                .iter()
+                .map(|q| dynamics.mass_matrix(q)[(i, i)])
+                .fold(f64::INFINITY, f64::min);
+            assert!((top[i] - limit[i] / lightest).abs() <= 1e-9 * top[i], "J{}", i + 1);
+            // At that acceleration the joint's own inertia alone takes its whole limit.
+            assert!(lightest * top[i] >= limit[i] * (1.0 - 1e-12));
+        }
+        // J1 over this reach is lighter than the worst posture the specification assumes.
+        assert!(top[0] > robot.joints[0].max_accel_rad_s2, "{top}");
+    }
+
+    /// Issue 16: where the specification cap held J1 back, the search without it goes above the
+    /// cap, its peak torque lands within the threshold below the limit, and the motion is faster;
+    /// the negative control: 10 % more acceleration than found exceeds a torque limit.
+    #[test]
+    fn without_the_cap_the_search_goes_above_it_until_the_torque_binds() {
+        let robot = crate::robot::test_support::default_robot();
+        let capped = robot.with_accel_cap(AccelCap::Spec);
+        let free = robot.with_accel_cap(AccelCap::TorqueOnly);
+        let dynamics = held_dynamics(&robot);
+        let via = j1_half_turn(&robot);
+        let spec = robot.max_accel_rad_s2();
+        let before = optimise_accelerations(&capped, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        assert!(
+            before.limits.accel_rad_s2[0] >= AT_TOP * spec[0] && before.torques.peak_ratio[0] < 1.0 - TORQUE_THRESHOLD,
+            "the cap should bind J1 here: {} of spec, torque {:.3}",
+            before.limits.accel_rad_s2[0] / spec[0],
+            before.torques.peak_ratio[0]
+        );
+        let after = optimise_accelerations(&free, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        assert!(
+            after.limits.accel_rad_s2[0] > 1.1 * spec[0],
+            "{}",
+            after.limits.accel_rad_s2
+        );
+        assert!(
+            after.torques.peak_ratio.iter().all(|r| *r <= 1.0),
+            "{:?}",
+            after.torques.peak_ratio
+        );
+        assert!(
+            after.torques.peak_ratio[0] >= 1.0 - TORQUE_THRESHOLD,
+            "J1 not bound by its torque: {:.3}",
+            after.torques.peak_ratio[0]
+        );
+        assert!(after.trajectory.duration_s < before.trajectory.duration_s);
+        // Re-evaluated here, sample by sample, with the drive bound.
+        let limit = robot.torque_limit_nm();
+        let mut worst = 0.0f64;
+        for s in after.trajectory.samples(TORQUE_DT_S / 2.0) {
+            let tau = dynamics.drive_torque_bound_nm(&s.q, &s.qd, &s.qdd);
+            worst = worst.max((0..DOF).map(|i| tau[i] / limit[i]).fold(0.0, f64::max));
+        }
+        assert!(worst <= 1.0 + 1e-3, "{worst}");
+        // Negative control: 10 % above what was found, a torque limit is exceeded.
+        let over = Trajectory::through(
+            &via,
+            &MotionLimits {
+                vel_rad_s: after.limits.vel_rad_s,
+                accel_rad_s2: after.limits.accel_rad_s2 * 1.1,
+            },
+        );
+        let t = torques(&dynamics, &robot, &over.samples(TORQUE_DT_S), TORQUE_DT_S);
+        assert!(t.peak_ratio.iter().any(|r| *r > 1.0), "{:?}", t.peak_ratio);
+    }
+
+    /// Without a cap TOPP-RA has no acceleration rows, only speed and torque: the bound is no
+    /// slower than with the caps.
+    #[test]
+    fn the_bound_without_caps_has_no_acceleration_rows_and_is_no_slower() {
+        let robot = crate::robot::test_support::default_robot();
+        let capped = robot.with_accel_cap(AccelCap::Spec);
+        let free = robot.with_accel_cap(AccelCap::TorqueOnly);
+        let dynamics = held_dynamics(&robot);
+        let via = j1_half_turn(&robot);
+        let acc = optimise_accelerations(&free, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        let arc = super::super::ArcPath::new(&acc.trajectory);
+        let rows = |r: &RobotModel| {
+            use super::super::PathConstraints;
+            super::super::RobotPathConstraints::new(r, &dynamics, &arc, Shares::BOUND)
+                .rows(0.5)
+                .len()
+        };
+        assert_eq!(rows(&capped), rows(&free) + 2 * DOF);
+        let with = optimal_duration(&capped, &dynamics, &via, &acc.limits, 300).expect("feasible");
+        let without = optimal_duration(&free, &dynamics, &via, &acc.limits, 300).expect("feasible");
+        assert!(without <= with, "{without} vs {with}");
+        // The accelerator without the cap is faster than the bound that keeps to it.
+        assert!(
+            acc.trajectory.duration_s < with,
+            "{} vs {with}",
+            acc.trajectory.duration_s
+        );
+    }
+}
