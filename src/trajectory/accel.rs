@@ -32,11 +32,14 @@ pub const TORQUE_THRESHOLD: f64 = 0.05;
 /// specification accelerations (`max_accel_deg_s2`) that is, per joint J1..J6:
 /// 0.63, 1.00, 2.40, 3.93, 5.45, 3.27 mrad (not "below 1 mrad": only J1 and J2 are), and
 /// summed over the joints with the planner's lever bounds several millimetres of robot motion,
-/// more than the collision model's 2 mm margin. So chords at this spacing are not enough by
-/// themselves: [`check_corridor`] certifies the straight stretches of a trajectory (segments,
-/// blends from and to rest) as they are, and cuts each bent blend into chords short enough that
-/// their deviation is at most [`CORRIDOR_BEND_BUDGET_M`] of robot motion, each certified with the
-/// margin raised by its own deviation bound: the blended trajectory itself keeps the margin.
+/// more than the collision model's 2 mm margin; without the caps (`accel_cap = "none"`, the
+/// default) the search goes above those accelerations where the torque allows (J1 up to about
+/// 2.5 times on the reference paths), and the deviations grow with them. So chords at this
+/// spacing are not enough by themselves: [`check_corridor`] certifies the straight stretches of
+/// a trajectory (segments, blends from and to rest) as they are, and cuts each bent blend into
+/// chords short enough that their deviation, from the blend's own accelerations whatever they
+/// are, is at most [`CORRIDOR_BEND_BUDGET_M`] of robot motion, each certified with the margin
+/// raised by its own deviation bound: the blended trajectory itself keeps the margin.
 pub const CORRIDOR_CHECK_DT_S: f64 = 0.01;
 /// Largest deviation of robot motion [m] between a bent blend and the chords [`check_corridor`]
 /// certifies in its place (each chord's own bound is added to the margin it is certified with).
