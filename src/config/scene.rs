@@ -925,3 +925,36 @@ impl Scene {
         }
     }
 }
+
+#[cfg(test)]
+mod accel_cap_tests {
+    use super::*;
+
+    /// The default cell with its `accel_cap` line replaced by `line` (empty: left out).
+    fn scene_with(line: &str) -> Result<Scene, crate::config::ConfigError> {
+        let text = crate::config::embedded::DEFAULT_SCENE.replace("accel_cap = \"none\"", line);
+        crate::config::parse_toml::<Scene>("cell.toml", &text)
+    }
+
+    #[test]
+    fn the_acceleration_cap_is_optional_strict_and_none_by_default() {
+        assert_eq!(scene_with("").unwrap().robot.drives.accel_cap, AccelCap::TorqueOnly);
+        assert_eq!(
+            scene_with("accel_cap = \"none\"").unwrap().robot.drives.accel_cap,
+            AccelCap::TorqueOnly
+        );
+        assert_eq!(
+            scene_with("accel_cap = \"spec\"").unwrap().robot.drives.accel_cap,
+            AccelCap::Spec
+        );
+        let e = scene_with("accel_cap = \"fast\"").unwrap_err().to_string();
+        assert!(
+            e.contains("robot.drives.accel_cap") && e.contains("`none` or `spec`"),
+            "{e}"
+        );
+        for cap in [AccelCap::TorqueOnly, AccelCap::Spec] {
+            assert_eq!(cap.name().parse::<AccelCap>(), Ok(cap));
+        }
+        assert!("fast".parse::<AccelCap>().is_err());
+    }
+}
