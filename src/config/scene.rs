@@ -83,11 +83,51 @@ pub struct DrivesConfig {
     pub viscous_friction_nm_s_per_rad: [f64; 6],
     /// Coulomb friction is smoothed as tanh(qd / this) [deg/s].
     pub coulomb_smoothing_deg_s: f64,
-    /// Specification (maximum) joint acceleration per joint [deg/s^2].
+    /// Specification acceleration per joint [deg/s^2]: the controller's default parameters stay
+    /// within it, and it caps every planned motion when `accel_cap` is `spec`.
     pub max_accel_deg_s2: [f64; 6],
+    /// What binds a planned motion's joint accelerations besides the torque limits: `none` (the
+    /// default) lets the torque alone bind; `spec` caps each joint at `max_accel_deg_s2` too.
+    #[serde(default)]
+    pub accel_cap: AccelCap,
     /// Overrides the URDF effort limits when present [N m].
     #[serde(default)]
     pub torque_limit_nm: Option<[f64; 6]>,
+}
+
+/// Whether the specification accelerations cap the planned motions
+/// (`robot.drives.accel_cap`).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+pub enum AccelCap {
+    /// No cap: the motion accelerator raises each joint's acceleration until its torque binds,
+    /// and the time-optimal bound has torque and speed rows only.
+    #[default]
+    #[serde(rename = "none")]
+    TorqueOnly,
+    /// Each joint's acceleration is capped at its specification acceleration as well.
+    #[serde(rename = "spec")]
+    Spec,
+}
+
+impl AccelCap {
+    /// The name in the cell file and on the command line.
+    pub fn name(self) -> &'static str {
+        match self {
+            AccelCap::TorqueOnly => "none",
+            AccelCap::Spec => "spec",
+        }
+    }
+}
+
+impl std::str::FromStr for AccelCap {
+    type Err = String;
+    fn from_str(s: &str) -> Result<Self, String> {
+        match s {
+            "none" => Ok(AccelCap::TorqueOnly),
+            "spec" => Ok(AccelCap::Spec),
+            _ => Err(format!("unknown acceleration cap `{s}` (none or spec)")),
+        }
+    }
 }
 
 /// Kinds of hand.
@@ -893,5 +933,38 @@ impl Scene {
                 ),
             );
         }
+    }
+}
+
+#[cfg(test)]
+mod accel_cap_tests {
+    use super::*;
+
+    /// The default cell with its `accel_cap` line replaced by `line` (empty: left out).
+    fn scene_with(line: &str) -> Result<Scene, crate::config::ConfigError> {
+        let text = crate::config::embedded::DEFAULT_SCENE.replace("accel_cap = \"none\"", line);
+        crate::config::parse_toml::<Scene>("cell.toml", &text)
+    }
+
+    #[test]
+    fn the_acceleration_cap_is_optional_strict_and_none_by_default() {
+        assert_eq!(scene_with("").unwrap().robot.drives.accel_cap, AccelCap::TorqueOnly);
+        assert_eq!(
+            scene_with("accel_cap = \"none\"").unwrap().robot.drives.accel_cap,
+            AccelCap::TorqueOnly
+        );
+        assert_eq!(
+            scene_with("accel_cap = \"spec\"").unwrap().robot.drives.accel_cap,
+            AccelCap::Spec
+        );
+        let e = scene_with("accel_cap = \"fast\"").unwrap_err().to_string();
+        assert!(
+            e.contains("robot.drives.accel_cap") && e.contains("`none` or `spec`"),
+            "{e}"
+        );
+        for cap in [AccelCap::TorqueOnly, AccelCap::Spec] {
+            assert_eq!(cap.name().parse::<AccelCap>(), Ok(cap));
+        }
+        assert!("fast".parse::<AccelCap>().is_err());
     }
 }

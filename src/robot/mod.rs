@@ -21,6 +21,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
 
+pub use crate::config::AccelCap;
 use crate::config::{Checker, ConfigError, GripperConfig, Problem, RobotConfig};
 
 pub use dynamics::{DynamicsModel, Payload};
@@ -56,7 +57,8 @@ pub struct Joint {
     pub upper_rad: f64,
     /// Maximum speed [rad/s].
     pub max_vel_rad_s: f64,
-    /// Specification acceleration [rad/s^2].
+    /// Specification acceleration [rad/s^2]: the controller's default parameters stay within
+    /// it; it caps planned motions only when the robot's [`AccelCap`] is `Spec`.
     pub max_accel_rad_s2: f64,
     /// Peak torque limit [N m].
     pub torque_limit_nm: f64,
@@ -145,6 +147,8 @@ pub struct RobotModel {
     pub gravity_base_m_s2: Vector3<f64>,
     /// Coulomb friction smoothing speed: friction = coulomb * tanh(qd / this) [rad/s].
     pub coulomb_smoothing_rad_s: f64,
+    /// Whether the specification accelerations cap planned motions (`robot.drives.accel_cap`).
+    pub accel_cap: AccelCap,
     /// Parameters of the closed-form inverse kinematics, derived from the joint origins.
     pub ik_geometry: ik::IkGeometry,
 }
@@ -546,6 +550,7 @@ impl RobotModel {
             flange_from_tool: gripper.flange_from_tool(),
             gravity_base_m_s2: world_from_base.rotation.inverse() * gravity_world,
             coulomb_smoothing_rad_s: d.coulomb_smoothing_deg_s.to_radians(),
+            accel_cap: d.accel_cap,
             ik_geometry,
         })
     }
@@ -565,9 +570,28 @@ impl RobotModel {
         JointVector::from_fn(|i, _| self.joints[i].max_vel_rad_s)
     }
 
-    /// Specification accelerations [rad/s^2].
+    /// Specification accelerations [rad/s^2] (a cap on planned motions only with
+    /// [`AccelCap::Spec`]: see [`Self::accel_cap_rad_s2`]).
     pub fn max_accel_rad_s2(&self) -> JointVector {
         JointVector::from_fn(|i, _| self.joints[i].max_accel_rad_s2)
+    }
+
+    /// The acceleration cap planned motions keep to besides the torque limits [rad/s^2]: the
+    /// specification accelerations with [`AccelCap::Spec`], none (the torque alone binds) with
+    /// [`AccelCap::TorqueOnly`].
+    pub fn accel_cap_rad_s2(&self) -> Option<JointVector> {
+        match self.accel_cap {
+            AccelCap::Spec => Some(self.max_accel_rad_s2()),
+            AccelCap::TorqueOnly => None,
+        }
+    }
+
+    /// The arm with its planned motions capped (or not) by the specification accelerations
+    /// (the cell file's `robot.drives.accel_cap` overridden).
+    pub fn with_accel_cap(&self, cap: AccelCap) -> RobotModel {
+        let mut r = self.clone();
+        r.accel_cap = cap;
+        r
     }
 
     /// Torque limits [N m].

@@ -32,11 +32,14 @@ pub const TORQUE_THRESHOLD: f64 = 0.05;
 /// specification accelerations (`max_accel_deg_s2`) that is, per joint J1..J6:
 /// 0.63, 1.00, 2.40, 3.93, 5.45, 3.27 mrad (not "below 1 mrad": only J1 and J2 are), and
 /// summed over the joints with the planner's lever bounds several millimetres of robot motion,
-/// more than the collision model's 2 mm margin. So chords at this spacing are not enough by
-/// themselves: [`check_corridor`] certifies the straight stretches of a trajectory (segments,
-/// blends from and to rest) as they are, and cuts each bent blend into chords short enough that
-/// their deviation is at most [`CORRIDOR_BEND_BUDGET_M`] of robot motion, each certified with the
-/// margin raised by its own deviation bound: the blended trajectory itself keeps the margin.
+/// more than the collision model's 2 mm margin; without the caps (`accel_cap = "none"`, the
+/// default) the search goes above those accelerations where the torque allows (J1 up to about
+/// 2.5 times on the reference paths), and the deviations grow with them. So chords at this
+/// spacing are not enough by themselves: [`check_corridor`] certifies the straight stretches of
+/// a trajectory (segments, blends from and to rest) as they are, and cuts each bent blend into
+/// chords short enough that their deviation, from the blend's own accelerations whatever they
+/// are, is at most [`CORRIDOR_BEND_BUDGET_M`] of robot motion, each certified with the margin
+/// raised by its own deviation bound: the blended trajectory itself keeps the margin.
 pub const CORRIDOR_CHECK_DT_S: f64 = 0.01;
 /// Largest deviation of robot motion [m] between a bent blend and the chords [`check_corridor`]
 /// certifies in its place (each chord's own bound is added to the margin it is certified with).
@@ -45,9 +48,10 @@ pub const CORRIDOR_BEND_BUDGET_M: f64 = 0.0002;
 const START_SHARE: f64 = 0.5;
 /// The bisection's iterations at most (each one trajectory and its torques).
 const SEARCH_ITERATIONS: usize = 30;
-/// An acceleration at or above this share of the specification counts as at the specification:
-/// the search does not raise it further, and a fold cannot help J1.
-const AT_SPEC: f64 = 0.999;
+/// An acceleration at or above this share of the top of its bracket ([`accel_top_rad_s2`]: the
+/// cap, or without one the torque ceiling) counts as at the top: the search does not raise it
+/// further, and a fold cannot help J1.
+const AT_TOP: f64 = 0.999;
 /// After a stop is inserted, the search restarts from the accelerations just found, with this
 /// share of them as the lower bracket (a stop changes little).
 const WARM_LOWER_SHARE: f64 = 0.8;
@@ -99,6 +103,41 @@ pub fn default_limits(
     }
 }
 
+/// Per joint, the top of the acceleration search's bracket along the path through `via`
+/// [rad/s^2].
+///
+/// With a cap ([`RobotModel::accel_cap_rad_s2`], `robot.drives.accel_cap = "spec"`), the cap.
+/// Without one, the torque's own ceiling: the joint's torque limit over its smallest diagonal
+/// inertia (armature and payload included) at the path's via points, the acceleration at which
+/// its own inertia alone would take the whole limit where the path is lightest for it. Gravity,
+/// friction and the joint's inertia where it accelerates (blends sit at the via points, the
+/// heaviest of them counts) take their share too, so its torque binds below the ceiling; a
+/// joint that reaches it unbound (its acceleration sets no blend, or the other joints' coupling
+/// works for it) is not what holds the motion back and is not raised further.
+pub fn accel_top_rad_s2(robot: &RobotModel, dynamics: &DynamicsModel, via: &[JointVector]) -> JointVector {
+    if let Some(cap) = robot.accel_cap_rad_s2() {
+        return cap;
+    }
+    let mut lightest = JointVector::repeat(f64::INFINITY);
+    for q in via {
+        let m = dynamics.mass_matrix(q);
+        for i in 0..DOF {
+            lightest[i] = lightest[i].min(m[(i, i)]);
+        }
+    }
+    let limit = robot.torque_limit_nm();
+    // The mass matrix is positive definite: its diagonal is positive; the floor keeps a
+    // degenerate model's bracket finite.
+    JointVector::from_fn(|i, _| limit[i] / lightest[i].max(MIN_INERTIA_KG_M2))
+}
+
+/// Without stretches and without a cap, [`check_corridor`] bounds a motion's accelerations by
+/// their largest value at this many samples per chord.
+const FALLBACK_SAMPLES_PER_CHORD: f64 = 10.0;
+
+/// Floor of the diagonal inertia [`accel_top_rad_s2`] divides by [kg m^2].
+const MIN_INERTIA_KG_M2: f64 = 1e-6;
+
 /// Result of the acceleration search.
 #[derive(Debug, Clone)]
 pub struct Accelerated {
@@ -114,9 +153,11 @@ pub struct Accelerated {
 
 /// The reference system's §4.2: speed fixed at the top; accelerations start at 50 % of the
 /// specification; torques every `dt_s` (the reference: [`TORQUE_DT_S`]); each joint's
-/// acceleration is bisected until its peak torque is within `threshold` (a fraction of the
-/// limit; the reference: [`TORQUE_THRESHOLD`]) below its limit, none above. Returns the
-/// fastest try whose torques all stay within their limits (the last try if none does).
+/// acceleration is bisected, between zero and the top of its bracket ([`accel_top_rad_s2`]: the
+/// specification with `accel_cap = "spec"`, the torque's ceiling without a cap), until its peak
+/// torque is within `threshold` (a fraction of the limit; the reference: [`TORQUE_THRESHOLD`])
+/// below its limit, none above, or it is at the top. Returns the fastest try whose torques all
+/// stay within their limits (the last try if none does).
 pub fn optimise_accelerations(
     robot: &RobotModel,
     dynamics: &DynamicsModel,
@@ -124,16 +165,8 @@ pub fn optimise_accelerations(
     dt_s: f64,
     threshold: f64,
 ) -> Accelerated {
-    let spec = robot.max_accel_rad_s2();
-    search_accelerations(
-        robot,
-        dynamics,
-        via,
-        dt_s,
-        threshold,
-        spec * START_SHARE,
-        JointVector::zeros(),
-    )
+    let start = robot.max_accel_rad_s2() * START_SHARE;
+    search_accelerations(robot, dynamics, via, dt_s, threshold, start, JointVector::zeros())
 }
 
 /// The bisection of [`optimise_accelerations`] from a given start and lower bracket (a warm
@@ -147,10 +180,10 @@ fn search_accelerations(
     start: JointVector,
     lower: JointVector,
 ) -> Accelerated {
-    let spec = robot.max_accel_rad_s2();
-    let mut lo = lower;
-    let mut hi = spec;
-    let mut scale = start;
+    let top = accel_top_rad_s2(robot, dynamics, via);
+    let mut lo = lower.inf(&top);
+    let mut hi = top;
+    let mut scale = start.inf(&top);
     let vel = robot.max_vel_rad_s();
     let mut best: Option<Accelerated> = None;
     for it in 1..=SEARCH_ITERATIONS {
@@ -179,7 +212,7 @@ fn search_accelerations(
             if r > 1.0 {
                 hi[i] = scale[i];
                 settled = false;
-            } else if r < 1.0 - threshold && scale[i] < spec[i] * AT_SPEC {
+            } else if r < 1.0 - threshold && scale[i] < top[i] * AT_TOP {
                 lo[i] = scale[i];
                 settled = false;
             } else {
@@ -241,8 +274,8 @@ pub fn correct_path(
     let mut best = accelerated.clone();
     let (mut folds, mut tried) = (0, 0);
     // Folding lowers J1's inertia, which only pays when J1's acceleration is held down by its
-    // torque, not by its specification.
-    if best.limits.accel_rad_s2[0] >= AT_SPEC * robot.joints[0].max_accel_rad_s2 {
+    // torque, not by its cap (or, without a cap, its ceiling).
+    if best.limits.accel_rad_s2[0] >= AT_TOP * accel_top_rad_s2(robot, dynamics, via)[0] {
         return Corrected {
             via: current,
             accelerated: best,
@@ -352,8 +385,10 @@ pub fn chord_deviation_rad(accel_rad_s2: &JointVector, dt_s: f64) -> JointVector
 /// most `dt_s` long and short enough that their deviation, summed over the joints with the model's
 /// lever bounds, is within [`CORRIDOR_BEND_BUDGET_M`], and each chord is certified with the margin
 /// raised by its deviation (every point of the robot is then clear by the margin). Without them,
-/// chords every `dt_s` with the margin raised by the deviation the robot's specification
-/// accelerations allow (valid for motions within them).
+/// chords every `dt_s` with the margin raised by the deviation the robot's acceleration cap
+/// allows (valid for motions within it); with no cap ([`RobotModel::accel_cap_rad_s2`]), by the
+/// largest acceleration the motion itself shows, sampled ten times per chord (a motion whose
+/// acceleration peaks sharply between those samples is not covered).
 pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Motion, dt_s: f64) -> Result<(), f64> {
     let mut stats = crate::planning::PlanStats::default();
     let lever = &model.spheres.lever_m;
@@ -362,10 +397,15 @@ pub fn check_corridor(model: &crate::planning::CollisionModel, motion: &impl Mot
         (0..DOF).map(|i| lever[i] * dev[i]).sum()
     };
     let Some(stretches) = motion.stretches() else {
-        let spec = model.robot.max_accel_rad_s2();
+        let bound = model.robot.accel_cap_rad_s2().unwrap_or_else(|| {
+            motion
+                .sampled(dt_s / FALLBACK_SAMPLES_PER_CHORD)
+                .iter()
+                .fold(JointVector::zeros(), |m, s| m.sup(&s.qdd.abs()))
+        });
         let samples = motion.sampled(dt_s);
         for w in samples.windows(2) {
-            let extra = sweep_m(&spec, w[1].t_s - w[0].t_s);
+            let extra = sweep_m(&bound, w[1].t_s - w[0].t_s);
             if !model.certify_edge_with_margin(&w[0].q, &w[1].q, model.margin_m + extra, &mut stats) {
                 return Err(w[0].t_s);
             }
@@ -470,4 +510,141 @@ pub fn optimal_duration(
         }
     }
     Some(total)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robot::{AccelCap, Payload};
+
+    /// J1 turns 180 deg with the tool 25 cm above the table at 55 cm reach, the hand holding a
+    /// 30 g part: the reference's kind of motion, free space.
+    fn j1_half_turn(robot: &RobotModel) -> Vec<JointVector> {
+        let scene = crate::config::LoadedScene::embedded_default().expect("embedded default scene");
+        let home = JointVector::from(scene.scene.robot.home_rad());
+        let at = |y: f64| {
+            robot
+                .ik_tool_nearest(
+                    &crate::robot::tool_down_pose(nalgebra::Vector3::new(0.0, y, 0.25), 0.0),
+                    &home,
+                )
+                .expect("reachable")
+                .q
+        };
+        vec![at(0.55), at(-0.55)]
+    }
+
+    fn held_dynamics(robot: &RobotModel) -> DynamicsModel {
+        let scene = crate::config::LoadedScene::embedded_default().expect("embedded default scene");
+        let hand = Payload::from_gripper(&scene.scene.gripper);
+        robot.dynamics(&hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector)))
+    }
+
+    #[test]
+    fn the_brackets_top_is_the_cap_or_the_torques_ceiling() {
+        let robot = crate::robot::test_support::default_robot();
+        let capped = robot.with_accel_cap(AccelCap::Spec);
+        let free = robot.with_accel_cap(AccelCap::TorqueOnly);
+        let dynamics = held_dynamics(&robot);
+        let via = j1_half_turn(&robot);
+        assert_eq!(accel_top_rad_s2(&capped, &dynamics, &via), robot.max_accel_rad_s2());
+        let top = accel_top_rad_s2(&free, &dynamics, &via);
+        let limit = robot.torque_limit_nm();
+        for i in 0..DOF {
+            // The torque limit spent on the lightest via point's own inertia alone.
+            let lightest = via
+                .iter()
+                .map(|q| dynamics.mass_matrix(q)[(i, i)])
+                .fold(f64::INFINITY, f64::min);
+            assert!((top[i] - limit[i] / lightest).abs() <= 1e-9 * top[i], "J{}", i + 1);
+            // At that acceleration the joint's own inertia alone takes its whole limit.
+            assert!(lightest * top[i] >= limit[i] * (1.0 - 1e-12));
+        }
+        // J1 over this reach is lighter than the worst posture the specification assumes.
+        assert!(top[0] > robot.joints[0].max_accel_rad_s2, "{top}");
+    }
+
+    /// Issue 16: where the specification cap held J1 back, the search without it goes above the
+    /// cap, its peak torque lands within the threshold below the limit, and the motion is faster;
+    /// the negative control: 10 % more acceleration than found exceeds a torque limit.
+    #[test]
+    fn without_the_cap_the_search_goes_above_it_until_the_torque_binds() {
+        let robot = crate::robot::test_support::default_robot();
+        let capped = robot.with_accel_cap(AccelCap::Spec);
+        let free = robot.with_accel_cap(AccelCap::TorqueOnly);
+        let dynamics = held_dynamics(&robot);
+        let via = j1_half_turn(&robot);
+        let spec = robot.max_accel_rad_s2();
+        let before = optimise_accelerations(&capped, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        assert!(
+            before.limits.accel_rad_s2[0] >= AT_TOP * spec[0] && before.torques.peak_ratio[0] < 1.0 - TORQUE_THRESHOLD,
+            "the cap should bind J1 here: {} of spec, torque {:.3}",
+            before.limits.accel_rad_s2[0] / spec[0],
+            before.torques.peak_ratio[0]
+        );
+        let after = optimise_accelerations(&free, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        assert!(
+            after.limits.accel_rad_s2[0] > 1.1 * spec[0],
+            "{}",
+            after.limits.accel_rad_s2
+        );
+        assert!(
+            after.torques.peak_ratio.iter().all(|r| *r <= 1.0),
+            "{:?}",
+            after.torques.peak_ratio
+        );
+        assert!(
+            after.torques.peak_ratio[0] >= 1.0 - TORQUE_THRESHOLD,
+            "J1 not bound by its torque: {:.3}",
+            after.torques.peak_ratio[0]
+        );
+        assert!(after.trajectory.duration_s < before.trajectory.duration_s);
+        // Re-evaluated here, sample by sample, with the drive bound.
+        let limit = robot.torque_limit_nm();
+        let mut worst = 0.0f64;
+        for s in after.trajectory.samples(TORQUE_DT_S / 2.0) {
+            let tau = dynamics.drive_torque_bound_nm(&s.q, &s.qd, &s.qdd);
+            worst = worst.max((0..DOF).map(|i| tau[i] / limit[i]).fold(0.0, f64::max));
+        }
+        assert!(worst <= 1.0 + 1e-3, "{worst}");
+        // Negative control: 10 % above what was found, a torque limit is exceeded.
+        let over = Trajectory::through(
+            &via,
+            &MotionLimits {
+                vel_rad_s: after.limits.vel_rad_s,
+                accel_rad_s2: after.limits.accel_rad_s2 * 1.1,
+            },
+        );
+        let t = torques(&dynamics, &robot, &over.samples(TORQUE_DT_S), TORQUE_DT_S);
+        assert!(t.peak_ratio.iter().any(|r| *r > 1.0), "{:?}", t.peak_ratio);
+    }
+
+    /// Without a cap TOPP-RA has no acceleration rows, only speed and torque: the bound is no
+    /// slower than with the caps.
+    #[test]
+    fn the_bound_without_caps_has_no_acceleration_rows_and_is_no_slower() {
+        let robot = crate::robot::test_support::default_robot();
+        let capped = robot.with_accel_cap(AccelCap::Spec);
+        let free = robot.with_accel_cap(AccelCap::TorqueOnly);
+        let dynamics = held_dynamics(&robot);
+        let via = j1_half_turn(&robot);
+        let acc = optimise_accelerations(&free, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        let arc = super::super::ArcPath::new(&acc.trajectory);
+        let rows = |r: &RobotModel| {
+            use super::super::PathConstraints;
+            super::super::RobotPathConstraints::new(r, &dynamics, &arc, Shares::BOUND)
+                .rows(0.5)
+                .len()
+        };
+        assert_eq!(rows(&capped), rows(&free) + 2 * DOF);
+        let with = optimal_duration(&capped, &dynamics, &via, &acc.limits, 300).expect("feasible");
+        let without = optimal_duration(&free, &dynamics, &via, &acc.limits, 300).expect("feasible");
+        assert!(without <= with, "{without} vs {with}");
+        // The accelerator without the cap is faster than the bound that keeps to it.
+        assert!(
+            acc.trajectory.duration_s < with,
+            "{} vs {with}",
+            acc.trajectory.duration_s
+        );
+    }
 }

@@ -35,8 +35,8 @@ mod torque;
 
 pub use accel::{
     Accelerated, CORRIDOR_BEND_BUDGET_M, CORRIDOR_CHECK_DT_S, Corrected, TORQUE_DT_S, TORQUE_THRESHOLD,
-    accelerate_in_corridor, check_corridor, chord_deviation_rad, correct_path, default_limits, optimal_duration,
-    optimise_accelerations,
+    accel_top_rad_s2, accelerate_in_corridor, check_corridor, chord_deviation_rad, correct_path, default_limits,
+    optimal_duration, optimise_accelerations,
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
 pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, straight_line};

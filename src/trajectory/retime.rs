@@ -67,8 +67,11 @@ impl ArcPath {
         let p = self.path.sample(t);
         let speed = p.qd.norm();
         if speed < 1e-9 {
-            // At rest (the ends): the path leaves along the first blend's acceleration, straight.
-            let dir = p.qdd.try_normalize(1e-12).unwrap_or_else(JointVector::zeros);
+            // At rest (the ends): the path leaves along the first blend's acceleration and arrives
+            // against the last one's (a deceleration), straight. The tangent points along the
+            // path at both ends: a torque row with it reversed would take gravity's sign wrong.
+            let along = if t < 0.5 * self.path.duration_s { p.qdd } else { -p.qdd };
+            let dir = along.try_normalize(1e-12).unwrap_or_else(JointVector::zeros);
             return (p.q, dir * self.length, JointVector::zeros());
         }
         let sdot = speed / self.length;
@@ -86,7 +89,7 @@ impl ArcPath {
 pub struct Shares {
     /// Of each torque limit.
     pub torque: f64,
-    /// Of each specification acceleration.
+    /// Of each acceleration cap (none without a cap: [`RobotModel::accel_cap_rad_s2`]).
     pub accel: f64,
     /// Of each speed limit.
     pub speed: f64,
@@ -108,10 +111,15 @@ impl Shares {
 }
 
 /// The robot's limits along an [`ArcPath`] as TOPP-RA constraints: per joint, the speed limit,
-/// the specification acceleration and the torque limit, each times its [`Shares`] share.
+/// the acceleration cap if the robot has one ([`RobotModel::accel_cap_rad_s2`]: the
+/// specification accelerations with `robot.drives.accel_cap = "spec"`; without it there are no
+/// acceleration rows, the torque alone binds) and the torque limit, each times its [`Shares`]
+/// share.
 ///
 /// Torques are linear in (u, x): tau = a u + b x + c, with a = M q', b = M q'' + C(q, q') q',
-/// c = gravity + Coulomb friction (the joints' friction parameters); viscous friction (linear in
+/// c = gravity + Coulomb friction (the joints' friction parameters; at the ends, at rest, full
+/// Coulomb friction against whichever way the drive pushes, as in the torque check of the
+/// accelerator); viscous friction (linear in
 /// s', not in s'^2) is bounded by its value at the stage's top speed and taken from the torque
 /// margin, which keeps the result feasible (slightly conservative).
 #[derive(Debug, Clone)]
@@ -122,7 +130,7 @@ pub struct RobotPathConstraints<'a> {
     shares: Shares,
     torque_limit_nm: JointVector,
     vel_limit_rad_s: JointVector,
-    accel_limit_rad_s2: JointVector,
+    accel_limit_rad_s2: Option<JointVector>,
 }
 
 impl<'a> RobotPathConstraints<'a> {
@@ -135,7 +143,7 @@ impl<'a> RobotPathConstraints<'a> {
             shares,
             torque_limit_nm: robot.torque_limit_nm(),
             vel_limit_rad_s: robot.max_vel_rad_s(),
-            accel_limit_rad_s2: robot.max_accel_rad_s2(),
+            accel_limit_rad_s2: robot.accel_cap_rad_s2(),
         }
     }
 }
@@ -165,21 +173,26 @@ impl PathConstraints for RobotPathConstraints<'_> {
             }
         }
         let sdot_max = xmax.sqrt();
+        // The path starts and ends at rest, where friction is at its worst
+        // ([`DynamicsModel::drive_torque_bound_nm`]): the drive breaks away against full Coulomb
+        // friction in the direction it accelerates (arriving, against the motion), not helped by
+        // it. Without an acceleration cap nothing else holds the last stage's deceleration.
+        let at_rest = s <= 0.0 || s >= self.end_s();
         for i in 0..DOF {
             let j = &self.robot.joints[i];
-            let coulomb = j.coulomb_nm * qp[i].signum() * if qp[i].abs() > 1e-9 { 1.0 } else { 0.0 };
+            let moving = qp[i].abs() > 1e-9 && !at_rest;
+            let coulomb = j.coulomb_nm * qp[i].signum() * if moving { 1.0 } else { 0.0 };
+            let breakaway = if at_rest { j.coulomb_nm } else { 0.0 };
             let viscous = j.viscous_nm_s_per_rad * qp[i].abs() * if sdot_max.is_finite() { sdot_max } else { 0.0 };
             let c = g[i] + coulomb;
             // With Shares::EXECUTE, 2 % of the limit is kept back for what happens between grid points.
-            let cap = shares.torque * self.torque_limit_nm[i] - viscous;
+            let cap = shares.torque * self.torque_limit_nm[i] - viscous - breakaway;
             rows.push(StageRow::new(a[i], b[i], cap - c));
             rows.push(StageRow::new(-a[i], -b[i], cap + c));
-            rows.push(StageRow::new(qp[i], qpp[i], shares.accel * self.accel_limit_rad_s2[i]));
-            rows.push(StageRow::new(
-                -qp[i],
-                -qpp[i],
-                shares.accel * self.accel_limit_rad_s2[i],
-            ));
+            if let Some(cap) = &self.accel_limit_rad_s2 {
+                rows.push(StageRow::new(qp[i], qpp[i], shares.accel * cap[i]));
+                rows.push(StageRow::new(-qp[i], -qpp[i], shares.accel * cap[i]));
+            }
         }
         if xmax.is_finite() {
             rows.push(StageRow::new(0.0, 1.0, xmax));
@@ -189,7 +202,7 @@ impl PathConstraints for RobotPathConstraints<'_> {
 }
 
 /// A path retimed by TOPP-RA: the arc-length path of a trajectory and the time-optimal s(t)
-/// under speed, acceleration and torque limits.
+/// under speed and torque limits (and the acceleration cap, if any).
 #[derive(Debug, Clone)]
 pub struct Retimed {
     path: ArcPath,
@@ -225,7 +238,7 @@ impl Motion for Retimed {
 }
 
 /// TOPP-RA on `path`'s geometry: the time-optimal retiming under the joint speed limits, the
-/// specification accelerations and the torque limits with `dynamics` (payload included), at
+/// acceleration cap if the robot has one, and the torque limits with `dynamics` (payload included), at
 /// `shares` of each, on `grid` stages ([`RobotPathConstraints`] solved by [`time_optimal`]).
 /// Returns `None` if the path cannot be followed even slowly (a static overload).
 pub fn toppra(

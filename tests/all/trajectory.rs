@@ -1,11 +1,12 @@
 //! Trajectories on planned paths: the accelerated motion re-checked at 1 kHz with torques from an
 //! independent code path (Lagrange's equations by finite differences of the kinetic and potential
-//! energy), and its position, speed and acceleration limits.
+//! energy), and its position, speed and acceleration limits, with the specification
+//! accelerations as caps (`accel_cap = "spec"`) and without (the default: the torque binds).
 
 use crate::support::planned_fig5_paths;
 use binpick::config::LoadedScene;
 use binpick::reference::fig5_cases;
-use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
+use binpick::robot::{AccelCap, DOF, DynamicsModel, JointVector, Payload, RobotModel};
 use binpick::trajectory::{
     Motion, Shares, TORQUE_DT_S, TORQUE_THRESHOLD, Trajectory, correct_path, default_limits, optimise_accelerations,
     toppra,
@@ -37,15 +38,18 @@ fn lagrange_torques(d: &DynamicsModel, traj: &impl Motion, t: f64) -> JointVecto
 #[test]
 fn accelerated_motions_stay_within_torque_speed_and_position_limits_in_an_independent_check() {
     let scene = LoadedScene::embedded_default().unwrap();
-    let robot = RobotModel::from_scene(&scene).unwrap();
+    let cell_robot = RobotModel::from_scene(&scene).unwrap();
     let hand = Payload::from_gripper(&scene.scene.gripper);
-    let held = hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector));
-    let limit = robot.torque_limit_nm();
-    for (case, via) in planned_fig5_paths(&scene, &robot) {
-        for payload in [hand, held] {
+    let held = hand.combined(&Payload::point(0.03, cell_robot.flange_from_tool.translation.vector));
+    let limit = cell_robot.torque_limit_nm();
+    let capped = cell_robot.with_accel_cap(AccelCap::Spec);
+    let free = cell_robot.with_accel_cap(AccelCap::TorqueOnly);
+    for (case, via) in planned_fig5_paths(&scene, &cell_robot) {
+        let via = via.as_slice();
+        for (robot, payload) in [(&capped, hand), (&free, hand), (&capped, held), (&free, held)] {
             let dynamics = robot.dynamics(&payload);
-            let fast = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
-            let slow = Trajectory::through(&via, &default_limits(&robot, &hand, 5.0, 20_000));
+            let fast = optimise_accelerations(robot, &dynamics, via, TORQUE_DT_S, TORQUE_THRESHOLD);
+            let slow = Trajectory::through(via, &default_limits(robot, &hand, 5.0, 20_000));
             assert!(
                 fast.trajectory.duration_s < slow.duration_s,
                 "{}: optimised {} s not faster than default {} s",
@@ -69,11 +73,10 @@ fn accelerated_motions_stay_within_torque_speed_and_position_limits_in_an_indepe
                         "speed limit J{} at {t}",
                         i + 1
                     );
-                    assert!(
-                        s.qdd[i].abs() <= robot.joints[i].max_accel_rad_s2 + 1e-9,
-                        "acceleration limit J{} at {t}",
-                        i + 1
-                    );
+                    // Without a cap only the torque binds (checked below).
+                    if let Some(cap) = robot.accel_cap_rad_s2() {
+                        assert!(s.qdd[i].abs() <= cap[i] + 1e-9, "acceleration cap J{} at {t}", i + 1);
+                    }
                 }
                 let tau = lagrange_torques(&dynamics, &fast.trajectory, t);
                 let rnea = dynamics.inverse_dynamics(&s.q, &s.qd, &s.qdd);
@@ -109,7 +112,8 @@ fn accelerated_motions_stay_within_torque_speed_and_position_limits_in_an_indepe
     }
 }
 
-/// Checks a motion at 1 kHz: limits of position, speed, acceleration, and torque by Lagrange.
+/// Checks a motion at 1 kHz: limits of position, speed, acceleration (the robot's cap, if any),
+/// and torque by Lagrange.
 fn check_at_1khz(
     name: &str,
     robot: &RobotModel,
@@ -131,12 +135,14 @@ fn check_at_1khz(
                 i + 1,
                 s.qd[i]
             );
-            assert!(
-                s.qdd[i].abs() <= robot.joints[i].max_accel_rad_s2 * accel_tolerance + 1e-9,
-                "{name}: acceleration J{} at {t}: {:.4} of the limit",
-                i + 1,
-                s.qdd[i].abs() / robot.joints[i].max_accel_rad_s2
-            );
+            if let Some(cap) = robot.accel_cap_rad_s2() {
+                assert!(
+                    s.qdd[i].abs() <= cap[i] * accel_tolerance + 1e-9,
+                    "{name}: acceleration J{} at {t}: {:.4} of the cap",
+                    i + 1,
+                    s.qdd[i].abs() / cap[i]
+                );
+            }
         }
         let tau = lagrange_torques(dynamics, m, t);
         for i in 0..DOF {
@@ -152,17 +158,27 @@ fn check_at_1khz(
 #[test]
 fn time_optimal_retiming_respects_every_limit_and_bounds_the_accelerator() {
     let scene = LoadedScene::embedded_default().unwrap();
-    let robot = RobotModel::from_scene(&scene).unwrap();
+    let cell_robot = RobotModel::from_scene(&scene).unwrap();
     let hand = Payload::from_gripper(&scene.scene.gripper);
-    let dynamics = robot.dynamics(&hand.combined(&Payload::point(0.03, robot.flange_from_tool.translation.vector)));
-    for (case, via) in planned_fig5_paths(&scene, &robot) {
-        let fast = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
-        let optimal = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::BOUND).expect("feasible");
-        let executable = toppra(&robot, &dynamics, &fast.trajectory, 600, Shares::EXECUTE).expect("feasible");
+    let dynamics =
+        cell_robot.dynamics(&hand.combined(&Payload::point(0.03, cell_robot.flange_from_tool.translation.vector)));
+    let (capped, free) = (
+        cell_robot.with_accel_cap(AccelCap::Spec),
+        cell_robot.with_accel_cap(AccelCap::TorqueOnly),
+    );
+    let paths = planned_fig5_paths(&scene, &cell_robot);
+    for ((case, via), robot) in paths.iter().flat_map(|p| [(p, &capped), (p, &free)]) {
+        let fast = optimise_accelerations(robot, &dynamics, via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        let optimal = toppra(robot, &dynamics, &fast.trajectory, 600, Shares::BOUND).expect("feasible");
+        let executable = toppra(robot, &dynamics, &fast.trajectory, 600, Shares::EXECUTE).expect("feasible");
         // Same path, same ends.
         assert!((optimal.at(optimal.duration_s()).q - via[via.len() - 1]).amax() < 1e-9);
         assert!((optimal.at(0.0).q - via[0]).amax() < 1e-9);
-        // The bound is a bound (up to its grid) and the accelerator is within 5 % of it.
+        // The bound is a bound (up to its grid) and the accelerator is within 5 % of it with the
+        // caps (measured: +0.5, +4.0, -0.1 %). Without them, within 7 %: the bound then moves the
+        // path speed with the posture as the torque allows, which one acceleration per joint for
+        // the whole motion cannot (measured: +0.8, +6.2 % on "reach over a bar", +2.8 %).
+        let within = if robot.accel_cap_rad_s2().is_some() { 1.05 } else { 1.07 };
         assert!(
             optimal.duration_s() <= fast.trajectory.duration_s * 1.005,
             "{}: optimal {} vs {}",
@@ -171,13 +187,14 @@ fn time_optimal_retiming_respects_every_limit_and_bounds_the_accelerator() {
             fast.trajectory.duration_s
         );
         assert!(
-            fast.trajectory.duration_s <= optimal.duration_s() * 1.05,
-            "{}: accelerator {} more than 5 % above the bound {}",
+            fast.trajectory.duration_s <= optimal.duration_s() * within,
+            "{} (cap {}): accelerator {} more than {within} x the bound {}",
             case.name,
+            robot.accel_cap.name(),
             fast.trajectory.duration_s,
             optimal.duration_s()
         );
-        check_at_1khz(&case.name, &robot, &dynamics, &executable, 1.0);
+        check_at_1khz(&case.name, robot, &dynamics, &executable, 1.0);
         assert!(executable.duration_s() <= optimal.duration_s() * 1.05);
         binpick::trajectory::check_corridor(&case.model, &fast.trajectory, 0.001).unwrap_or_else(|t| {
             panic!(
@@ -215,7 +232,7 @@ fn path_correction_folds_the_arm_when_j1_is_torque_limited_and_stays_certified()
     let via = vec![a, b];
     let acc = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
     assert!(
-        acc.limits.accel_rad_s2[0] < 0.9 * robot.joints[0].max_accel_rad_s2,
+        acc.limits.accel_rad_s2[0] < 0.9 * binpick::trajectory::accel_top_rad_s2(&robot, &dynamics, &via)[0],
         "J1 should be torque-limited"
     );
     // Without a collision model the fold that lowers J1's inertia is kept and pays.
@@ -298,17 +315,23 @@ fn the_generic_retiming_takes_the_robots_constraints_and_more() {
 
 /// Issue 14: the chord bound that `CORRIDOR_CHECK_DT_S` documents holds on real accelerated
 /// trajectories. Measured densely (every 0.1 ms), each joint's deviation from the chord between
-/// samples 10 ms apart stays within a dt^2 / 8 of the trajectory's own accelerations, and within
-/// the documented per-joint numbers for the specification accelerations. The negative control:
-/// the bound is not loose (half of it is exceeded somewhere), and the old claim, "below 1 mrad",
-/// does not hold.
+/// samples 10 ms apart stays within a dt^2 / 8 of the trajectory's own accelerations, and, with
+/// the specification caps, within the documented per-joint numbers for them. Without the caps
+/// (issue 16) the accelerations go above the specification somewhere, so only the trajectory's
+/// own bound holds, and it does. The negative control: the bound is not loose (half of it is
+/// exceeded somewhere), and the old claim, "below 1 mrad", does not hold.
 #[test]
 fn blends_deviate_from_their_chords_within_the_stated_bound() {
     use binpick::trajectory::{CORRIDOR_CHECK_DT_S, chord_deviation_rad};
     let scene = LoadedScene::embedded_default().unwrap();
-    let robot = RobotModel::from_scene(&scene).unwrap();
-    let dynamics = robot.dynamics(&Payload::from_gripper(&scene.scene.gripper));
+    let cell_robot = RobotModel::from_scene(&scene).unwrap();
+    let dynamics = cell_robot.dynamics(&Payload::from_gripper(&scene.scene.gripper));
     let dt = CORRIDOR_CHECK_DT_S;
+    let (capped, free) = (
+        cell_robot.with_accel_cap(AccelCap::Spec),
+        cell_robot.with_accel_cap(AccelCap::TorqueOnly),
+    );
+    let robot = &capped;
     // The numbers the documentation states [mrad], J1..J6.
     let stated = [0.63, 1.00, 2.40, 3.93, 5.45, 3.27];
     let spec = chord_deviation_rad(&robot.max_accel_rad_s2(), dt);
@@ -320,9 +343,10 @@ fn blends_deviate_from_their_chords_within_the_stated_bound() {
             spec[i] * 1e3
         );
     }
-    let (mut tightest, mut worst_mrad) = (0.0f64, 0.0f64);
-    for (case, via) in planned_fig5_paths(&scene, &robot) {
-        let acc = optimise_accelerations(&robot, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+    let (mut tightest, mut worst_mrad, mut above_spec) = (0.0f64, 0.0f64, 0.0f64);
+    let paths = planned_fig5_paths(&scene, robot);
+    for ((case, via), robot) in paths.iter().flat_map(|p| [(p, &capped), (p, &free)]) {
+        let acc = optimise_accelerations(robot, &dynamics, via, TORQUE_DT_S, TORQUE_THRESHOLD);
         let traj = &acc.trajectory;
         let bound = chord_deviation_rad(&acc.limits.accel_rad_s2, dt);
         let samples = traj.sampled(dt);
@@ -336,8 +360,9 @@ fn blends_deviate_from_their_chords_within_the_stated_bound() {
             }
         }
         for i in 0..DOF {
+            let within_spec = robot.accel_cap_rad_s2().is_none() || worst[i] <= spec[i] * (1.0 + 1e-9) + 1e-12;
             assert!(
-                worst[i] <= bound[i] * (1.0 + 1e-9) + 1e-12 && worst[i] <= spec[i] * (1.0 + 1e-9) + 1e-12,
+                worst[i] <= bound[i] * (1.0 + 1e-9) + 1e-12 && within_spec,
                 "{}: J{} deviates {:.3} mrad from its chord, bound {:.3}",
                 case.name,
                 i + 1,
@@ -347,7 +372,97 @@ fn blends_deviate_from_their_chords_within_the_stated_bound() {
             tightest = tightest.max(worst[i] / bound[i]);
         }
         worst_mrad = worst_mrad.max(worst.amax() * 1e3);
+        if robot.accel_cap_rad_s2().is_none() {
+            above_spec = above_spec.max((0..DOF).map(|i| worst[i] / spec[i]).fold(0.0, f64::max));
+        }
     }
+    // Without the caps some joint strays further from its chord than the specification allows.
+    assert!(above_spec > 1.0, "never beyond the specification's bound: {above_spec}");
     assert!(tightest > 0.5, "the bound is never approached: {tightest}");
     assert!(worst_mrad > 1.0, "no joint strays 1 mrad from its chord: {worst_mrad}");
+}
+
+/// Issue 16 on the reference's five acceleration cases (`bench accel`'s paths, J1 turning
+/// 180 deg, the hand with a 30 g part): with the specification caps some joint sits at its cap
+/// with torque to spare; without them the search takes that joint above its cap, the motion is
+/// faster, and re-checked at 1 kHz by Lagrange's equations every torque stays within its limit.
+/// The negative control: the same path at 1.1 times the accelerations found exceeds a limit.
+#[test]
+fn without_the_caps_the_reference_cases_go_above_them_within_the_torque_limits() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let cell_robot = RobotModel::from_scene(&scene).unwrap();
+    let (capped, free) = (
+        cell_robot.with_accel_cap(AccelCap::Spec),
+        cell_robot.with_accel_cap(AccelCap::TorqueOnly),
+    );
+    let hand = Payload::from_gripper(&scene.scene.gripper);
+    let dynamics = cell_robot.dynamics(&hand.combined(&Payload::point(
+        binpick::reference::ACCEL_PART_KG,
+        cell_robot.flange_from_tool.translation.vector,
+    )));
+    let spec = cell_robot.max_accel_rad_s2();
+    for (k, case) in binpick::reference::accel_cases(&scene.scene, &cell_robot)
+        .unwrap()
+        .into_iter()
+        .enumerate()
+    {
+        let mut rng = binpick::rng::stream(k as u64, "planner");
+        let plan = case
+            .model
+            .plan(
+                &case.start,
+                &case.goal,
+                &binpick::planning::PlanOptions::default(),
+                &mut rng,
+            )
+            .unwrap();
+        let via: Vec<JointVector> = plan.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+        let before = optimise_accelerations(&capped, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        let after = optimise_accelerations(&free, &dynamics, &via, TORQUE_DT_S, TORQUE_THRESHOLD);
+        // The cap bound a joint that had torque to spare ...
+        let held_back: Vec<usize> = (0..DOF)
+            .filter(|&i| before.limits.accel_rad_s2[i] >= 0.999 * spec[i] && before.torques.peak_ratio[i] < 0.95)
+            .collect();
+        assert!(!held_back.is_empty(), "{}: no joint held back by its cap", case.name);
+        // ... and without it goes above the cap, and the motion is faster.
+        assert!(
+            held_back.iter().any(|&i| after.limits.accel_rad_s2[i] > spec[i] * 1.05),
+            "{}: {:?} not above the cap: {}",
+            case.name,
+            held_back,
+            after.limits.accel_rad_s2
+        );
+        assert!(
+            after.trajectory.duration_s < before.trajectory.duration_s * 0.99,
+            "{}: {} s uncapped vs {} s capped",
+            case.name,
+            after.trajectory.duration_s,
+            before.trajectory.duration_s
+        );
+        let worst = check_at_1khz(case.name, &free, &dynamics, &after.trajectory, 1.0);
+        assert!(
+            worst.iter().any(|w| *w >= 0.9),
+            "{}: no joint near its torque limit: {worst:?}",
+            case.name
+        );
+        // Negative control: 10 % more acceleration than found exceeds a torque limit (Lagrange).
+        let over = Trajectory::through(
+            &via,
+            &binpick::trajectory::MotionLimits {
+                vel_rad_s: after.limits.vel_rad_s,
+                accel_rad_s2: after.limits.accel_rad_s2 * 1.1,
+            },
+        );
+        let limit = free.torque_limit_nm();
+        let n = (over.duration_s / 0.001).ceil() as usize;
+        let exceeded = (0..=n).any(|j| {
+            let tau = lagrange_torques(&dynamics, &over, (j as f64 * 0.001).min(over.duration_s));
+            (0..DOF).any(|i| tau[i].abs() > limit[i])
+        });
+        assert!(
+            exceeded,
+            "{}: 1.1 x the accelerations found stays within the limits",
+            case.name
+        );
+    }
 }
