@@ -186,7 +186,10 @@ pub fn execute_from(
         mut qd,
         error_integral: mut integral,
     } = state;
-    let n = (motion.duration_s() / servo.dt_s).ceil() as usize;
+    // A duration a rounding error above a whole number of ticks ends on that tick, not one
+    // past its end (where the target is the end at rest: a motion that ends moving would see a
+    // step in its target velocity).
+    let n = (motion.duration_s() / servo.dt_s - 1e-6).ceil().max(0.0) as usize;
     // After the motion, hold its end until every joint is in position (or give up after 0.3 s).
     let hold = if settle { (0.3 / servo.dt_s).ceil() as usize } else { 0 };
     let mut ticks = Vec::with_capacity(n + hold + 1);
@@ -198,7 +201,7 @@ pub fn execute_from(
         let t = k as f64 * servo.dt_s;
         // Past the end the target is the end at rest (the trajectory's last sample still
         // carries the final blend's deceleration).
-        let d = if t > motion.duration_s() {
+        let d = if t > motion.duration_s() + 1e-9 {
             let end = motion.at(motion.duration_s());
             crate::trajectory::Sample {
                 qd: JointVector::zeros(),

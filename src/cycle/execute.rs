@@ -146,7 +146,9 @@ impl Run<'_, '_> {
         let mut dropped = None;
         let mut k = per_step;
         let mut played = 0;
-        while k < run.ticks.len() + per_step {
+        // Until the last tick is played, once (a motion that ends moving must not stand still
+        // for a step at its end).
+        while k < run.ticks.len() - 1 + per_step {
             let end = k.min(run.ticks.len() - 1);
             self.st.world.set_joint_target(&run.ticks[end].q);
             if vacuum_at_s.is_some_and(|t| run.ticks[end].t_s + 1e-9 >= t) {

@@ -25,7 +25,8 @@ use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
 use crate::robot::{JointVector, Payload};
 use crate::sensor::{CaptureJob, Detection};
 use crate::trajectory::{
-    CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Trajectory, accelerate_in_corridor, limit_tool_force, straight_line,
+    CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, Overlapped, TORQUE_DT_S, Trajectory, accelerate_in_corridor,
+    check_corridor, limit_tool_force, peak_tool_specific_force, straight_line, torques,
 };
 
 /// Fraction of the cup's holding force a held-part motion may use.
@@ -48,9 +49,13 @@ pub fn above_place(grasp: &GraspCandidate) -> Isometry3<f64> {
     )
 }
 
-/// The Place motion after the lift: transfer, descent, retreat, and the transfer's time scaling
-/// for the cup's holding force.
-pub(super) type PlaceMotion = (Trajectory, LineMotion, LineMotion, f64);
+/// The Place motion after the lift: transfer, descent, retreat, the transfer's time scaling for
+/// the cup's holding force, and the lift and the transfer overlapped when that is clear, within
+/// the torques and within the holding force.
+pub(super) type PlaceMotion = (Trajectory, LineMotion, LineMotion, f64, Option<Overlapped>);
+
+/// The shares of the lift the Place transfer may overlap, tried largest first.
+pub const LIFT_OVERLAP_SHARES: [f64; 3] = [0.6, 0.4, 0.2];
 
 /// The motions of one pick, generated from one recognition result.
 pub(super) struct Prepared {
@@ -224,7 +229,33 @@ impl Run<'_, '_> {
             let up = cell
                 .line(&q_release, &release_pose, &above_place, &hand, None)
                 .ok_or("place retreat: no joint path along the line")?;
-            Ok::<_, String>((transfer, down, up, k))
+            // The transfer starts while the part still rises, as early as the corridor from
+            // there on is clear, the torques stay within the accelerator's share and the cup's
+            // holding force suffices.
+            let blend = lift.as_ref().and_then(|lift| {
+                LIFT_OVERLAP_SHARES.iter().find_map(|share| {
+                    // On the physics step's grid: the lift's head ends moving, and a last step
+                    // shorter than the others would show the cup a jump in acceleration.
+                    let dt = cell.scene.sim.physics_dt_s;
+                    let start_s = (lift.duration_s() * (1.0 - share) / dt).round() * dt;
+                    let o = Overlapped::new(lift.clone(), transfer.clone(), start_s);
+                    let rest = o.rest();
+                    let samples = o.sampled(TORQUE_DT_S);
+                    let ok = peak_tool_specific_force(robot, &o, TORQUE_DT_S) <= max_force
+                        && torques(
+                            &cell.accel_robot.dynamics(&held),
+                            &cell.accel_robot,
+                            &samples,
+                            TORQUE_DT_S,
+                        )
+                        .peak_ratio
+                        .iter()
+                        .all(|r| *r <= 1.0)
+                        && check_corridor(&holding, &rest, CORRIDOR_CHECK_DT_S).is_ok();
+                    ok.then_some(o)
+                })
+            });
+            Ok::<_, String>((transfer, down, up, k, blend))
         })();
         let place_s = wall.elapsed().as_secs_f64();
         let (Some(descent), Some(lift)) = (descent, lift) else {

@@ -62,7 +62,7 @@ impl Run<'_, '_> {
             },
         };
         let place_planned = match &prep.place {
-            Ok((t, descent, retreat, _)) => Planned::Place {
+            Ok((t, descent, retreat, _, _)) => Planned::Place {
                 lift_s: prep.lift.duration_s(),
                 transfer_s: t.duration_s(),
                 descent_s: descent.duration_s(),
@@ -249,7 +249,18 @@ impl Run<'_, '_> {
             });
         }
         let held = prep.held;
-        if let Played::Failed(o) = self.play_with(&prep.lift, &held, true, None, false)? {
+        // The lift and the Place transfer overlapped, if they could be and the Place is ready
+        // when the transfer would start: the Pick ends where the transfer starts.
+        let now = self.st.world.time_s();
+        let blend = match &prep.place {
+            Ok((_, _, _, _, Some(b))) if place_ready <= now + b.start_s() + 1e-9 => Some(b),
+            _ => None,
+        };
+        let lifted = match blend {
+            Some(b) => self.play_with(&b.head(), &held, true, None, false)?,
+            None => self.play_with(&prep.lift, &held, true, None, false)?,
+        };
+        if let Played::Failed(o) = lifted {
             pick_done(self, rec);
             return Ok(o);
         }
@@ -262,7 +273,7 @@ impl Run<'_, '_> {
             self.idle_until(place_ready)?;
             self.st.arm.servo.qd = JointVector::zeros();
         }
-        let (transfer, down, up, k) = match &prep.place {
+        let (transfer, down, up, k, _) = match &prep.place {
             Ok(p) => p,
             Err(e) => return Ok(Outcome::NoMotion(e.clone())),
         };
@@ -280,7 +291,11 @@ impl Run<'_, '_> {
             run.span(Stage::Place, t_place, run.st.world.time_s(), "Place");
             run.st.arm.free_s = run.st.world.time_s();
         };
-        if let Played::Failed(o) = self.play_with(transfer, &held, true, None, false)? {
+        let carried = match blend {
+            Some(b) => self.play_with(&b.rest(), &held, true, None, false)?,
+            None => self.play_with(transfer, &held, true, None, false)?,
+        };
+        if let Played::Failed(o) = carried {
             place_done(self, rec);
             return Ok(o);
         }

@@ -29,6 +29,7 @@
 mod accel;
 mod blend;
 mod line;
+mod overlap;
 mod retime;
 mod toppra;
 mod torque;
@@ -40,6 +41,7 @@ pub use accel::{
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
 pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, straight_line};
+pub use overlap::Overlapped;
 pub use retime::{ArcPath, Retimed, RobotPathConstraints, Shares, toppra};
 pub use toppra::{PathConstraints, PathPoint, PathTiming, StageRow, time_optimal};
 pub use torque::{TorqueProfile, torques};

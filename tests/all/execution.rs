@@ -20,8 +20,8 @@ fn optimised_motions_execute_within_tolerance_and_an_overload_trips_a_protective
         // Planned within the cell's torque margin, as the cycle plans (with the caps lifted, a
         // motion at the full limit leaves the feedback no headroom).
         let planner = robot.with_torque_share(1.0 - binpick::config::DEFAULT_TORQUE_MARGIN);
-        let motion = optimise_accelerations(&planner, &planner.dynamics(&held), &via, TORQUE_DT_S, TORQUE_THRESHOLD)
-            .trajectory;
+        let motion =
+            optimise_accelerations(&planner, &planner.dynamics(&held), &via, TORQUE_DT_S, TORQUE_THRESHOLD).trajectory;
         // The controller knows the part, and then does not.
         for model in [robot.dynamics(&held), robot.dynamics(&hand)] {
             let run = execute(&robot, &model, &plant, &servo, &motion);
