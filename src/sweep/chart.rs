@@ -74,7 +74,7 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
     let cols = panels.len().clamp(1, 3);
     let prow = panels.len().div_ceil(cols);
     let (pw, ph) = (if panels.len() == 1 { 640.0 } else { 400.0 }, 300.0);
-    let (left, top, gap_x, gap_y) = (90.0, 96.0, 110.0, 110.0);
+    let (left, top, gap_x, gap_y) = (90.0, 96.0, 150.0, 110.0);
     let width = left + cols as f64 * (pw + gap_x);
     let height = top + prow as f64 * (ph + gap_y);
     let title = format!(
@@ -85,21 +85,29 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
         spec.picks
     );
     let mut svg = open(width, height, &title);
-    // One takt axis for every panel.
-    let vals = rows.iter().flat_map(|r| {
-        [
-            r.takt_p5_s,
-            r.row.takt.p95_s,
-            r.row.takt.mean_s,
-            r.row.reference_takt_s.unwrap_or(f64::NAN),
-        ]
-    });
-    let (lo, hi) = vals
-        .filter(|v| v.is_finite())
-        .fold((f64::INFINITY, f64::NEG_INFINITY), |(a, b), v| (a.min(v), b.max(v)));
-    let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
-    let pad = ((hi - lo) * 0.05).max(0.05);
-    let (yt, y_lo, y_hi) = ticks((lo - pad).max(0.0), hi + pad, 6.0);
+    // One takt axis for every panel, from 0 to well above the means and the references: the
+    // p95 of a run with tray refills is several times its mean, and would flatten the lines, so
+    // a band reaching above the axis is clipped and the note says how far it goes.
+    let finite_max = |it: &mut dyn Iterator<Item = f64>| it.filter(|v| v.is_finite()).fold(f64::NAN, f64::max);
+    let mean_top = finite_max(
+        &mut rows
+            .iter()
+            .flat_map(|r| [r.row.takt.mean_s, r.row.reference_takt_s.unwrap_or(f64::NAN)]),
+    );
+    let p95_top = finite_max(&mut rows.iter().map(|r| r.row.takt.p95_s));
+    let y_top = if mean_top.is_finite() {
+        (mean_top * 1.6).min(p95_top.max(mean_top) * 1.05)
+    } else {
+        1.0
+    };
+    let (yt, y_lo, y_hi) = ticks(0.0, y_top, 6.0);
+    if p95_top > y_hi {
+        let _ = writeln!(
+            svg,
+            r#"<text x="{:.1}" y="78" class="note">bands above the axis are clipped: the p95 reaches {p95_top:.1} s (intervals spanning a tray refill or a re-capture)</text>"#,
+            left
+        );
+    }
     let (x_lo, x_hi) = match &numeric {
         Some(n) => {
             let (a, b) = n
@@ -125,7 +133,7 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
     }
     let _ = writeln!(
         svg,
-        r##"<rect x="{lx:.1}" y="46" width="22" height="12" fill="#999" fill-opacity="0.25"/><text x="{:.1}" y="56" class="note">takt p5–p95</text><circle cx="{:.1}" cy="52" r="3.5" fill="#999"/><text x="{:.1}" y="56" class="note">takt mean</text><path d="M{:.1} 52 l6 -6 l6 6 l-6 6 z" fill="#999" stroke="#222"/><text x="{:.1}" y="56" class="note">reference takt (right edge)</text>"##,
+        r##"<rect x="{lx:.1}" y="46" width="22" height="12" fill="#999" fill-opacity="0.25"/><text x="{:.1}" y="56" class="note">takt p5–p95</text><circle cx="{:.1}" cy="52" r="3.5" fill="#999"/><text x="{:.1}" y="56" class="note">takt mean</text><path d="M{:.1} 52 l6 -6 l6 6 l-6 6 z" fill="#111"/><text x="{:.1}" y="56" class="note">reference takt (right edge)</text>"##,
         lx + 27.0,
         lx + 120.0,
         lx + 128.0,
@@ -142,7 +150,11 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
             x_range: (x_lo, x_hi),
             y_range: (y_lo, y_hi),
         };
-        let _ = writeln!(svg, r#"<g class="panel">"#);
+        let _ = writeln!(
+            svg,
+            r#"<g class="panel"><defs><clipPath id="plot{p}"><rect x="{:.1}" y="{:.1}" width="{:.1}" height="{:.1}"/></clipPath></defs>"#,
+            plot.x0, plot.y0, plot.w, plot.h
+        );
         if !rest.is_empty() {
             let name = spec.keys[1..]
                 .iter()
@@ -214,7 +226,7 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
             } else if let Some((x, y5, y95)) = band.first() {
                 let _ = writeln!(
                     svg,
-                    r#"<rect x="{:.1}" y="{y95:.1}" width="8" height="{:.1}" fill="{col}" fill-opacity="0.25"/>"#,
+                    r#"<rect x="{:.1}" y="{y95:.1}" width="8" height="{:.1}" fill="{col}" fill-opacity="0.25" clip-path="url(#plot{p})"/>"#,
                     x - 4.0,
                     (y5 - y95).max(1.0)
                 );
@@ -228,7 +240,7 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
                 let d: Vec<String> = line.iter().map(|(x, y, _)| format!("{x:.1},{y:.1}")).collect();
                 let _ = writeln!(
                     svg,
-                    r#"<polyline points="{}" fill="none" stroke="{col}" stroke-width="2.5"/>"#,
+                    r#"<polyline points="{}" fill="none" stroke="{col}" stroke-width="2.5" clip-path="url(#plot{p})"/>"#,
                     d.join(" ")
                 );
             }
@@ -244,19 +256,33 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
                     100.0 * r.row.success_rate
                 );
             }
-            if let Some(reference) = crate::reference::reference_takt(w) {
-                let y = plot.y(reference);
-                let x = plot.x0 + plot.w + 4.0;
-                let _ = writeln!(
-                    svg,
-                    r##"<path d="M{x:.1} {y:.1} l6 -6 l6 6 l-6 6 z" fill="{col}" stroke="#222"><title>{} reference takt {reference:.1} s</title></path><text x="{:.1}" y="{:.1}" class="note">{}</text>"##,
-                    escape(w),
-                    x + 15.0,
-                    y + 4.0,
-                    escape(w)
-                );
-            }
             svg += "</g>\n";
+        }
+        // The reference's takt: one mark per distinct value at the right edge, naming its workpieces.
+        let mut marks: Vec<(f64, Vec<&str>)> = Vec::new();
+        for w in &spec.workpieces {
+            if let Some(r) = crate::reference::reference_takt(w) {
+                match marks.iter_mut().find(|(v, _)| (v - r).abs() < 1e-9) {
+                    Some((_, names)) => names.push(w),
+                    None => marks.push((r, vec![w])),
+                }
+            }
+        }
+        marks.sort_by(|a, b| a.0.total_cmp(&b.0));
+        let mut last_y = f64::INFINITY;
+        for (r, names) in &marks {
+            let y = plot.y(*r);
+            let x = plot.x0 + plot.w + 4.0;
+            // Labels of close values are pushed apart (higher values drawn higher).
+            let ty = (y + 4.0).min(last_y - 13.0);
+            last_y = ty;
+            let _ = writeln!(
+                svg,
+                r##"<g class="reference"><path d="M{x:.1} {y:.1} l6 -6 l6 6 l-6 6 z" fill="#111"><title>reference takt {r:.1} s: {}</title></path><text x="{:.1}" y="{ty:.1}" class="note">ref {} {r:.1} s</text></g>"##,
+                escape(&names.join(", ")),
+                x + 15.0,
+                escape(&names.join(" "))
+            );
         }
         svg += "</g>\n";
     }
