@@ -259,6 +259,12 @@ pub fn parse_sets(texts: &[String]) -> Result<Vec<SetArg>, SweepError> {
     let mut sets: Vec<SetArg> = Vec::new();
     for t in texts {
         let s = parse_set(t)?;
+        if s.target == Target::Workpiece && s.path == [Segment::Key("name".into())] {
+            return Err(input(format!(
+                "--set {}: a workpiece's name labels its rows and runs; sweep its other keys",
+                s.key
+            )));
+        }
         if let Some(first) = sets.iter().find(|x| x.target == s.target && x.path == s.path) {
             return Err(input(format!(
                 "--set {}: the same key is set twice (also as {}); give all its values in one list",
@@ -418,6 +424,8 @@ mod tests {
         }
         let e = parse_sets(&["k=1,2".into(), "k=3".into()]).unwrap_err().to_string();
         assert!(e.contains("set twice"), "{e}");
+        let e = parse_sets(&["workpiece.name=X".into()]).unwrap_err().to_string();
+        assert!(e.contains("labels its rows"), "{e}");
     }
 
     #[test]

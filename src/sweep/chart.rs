@@ -220,7 +220,7 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
                 }
                 let _ = writeln!(
                     svg,
-                    r#"<path d="{}Z" fill="{col}" fill-opacity="0.15" stroke="none"/>"#,
+                    r#"<path d="{}Z" fill="{col}" fill-opacity="0.1" stroke="none" clip-path="url(#plot{p})"/>"#,
                     d
                 );
             } else if let Some((x, y5, y95)) = band.first() {
