@@ -36,7 +36,12 @@ fn bad_sweeps_are_refused_naming_the_key_and_the_value() {
     // A value of the wrong type.
     refused(
         &["--set", "sensor.latency_s=0.3,fast"],
-        &["sweep variant 2: sensor.latency_s=fast", "sensor.latency_s", "invalid type", "\"fast\""],
+        &[
+            "sweep variant 2: sensor.latency_s=fast",
+            "sensor.latency_s",
+            "invalid type",
+            "\"fast\"",
+        ],
     );
     refused(
         &["--set", "cycle.max_picks_per_capture=2.5"],
@@ -47,7 +52,10 @@ fn bad_sweeps_are_refused_naming_the_key_and_the_value() {
         &["--set", "sensor.latency_s="],
         &["--set sensor.latency_s: the list of values is empty"],
     );
-    refused(&["--set", "sensor.latency_s=0.3,,1.1"], &["sensor.latency_s", "an empty value"]);
+    refused(
+        &["--set", "sensor.latency_s=0.3,,1.1"],
+        &["sensor.latency_s", "an empty value"],
+    );
     // A range with a zero step.
     refused(
         &["--set", "gripper.cup_diameter_m=0.004:0.012:0"],
@@ -57,10 +65,16 @@ fn bad_sweeps_are_refused_naming_the_key_and_the_value() {
     // a latency out of range.
     refused(
         &["--workpieces", "A", "--set", "gripper.cup_diameter_m=0.006,0.04"],
-        &["sweep variant 2: gripper.cup_diameter_m=0.04", "no face the suction cup fits on"],
+        &[
+            "sweep variant 2: gripper.cup_diameter_m=0.04",
+            "no face the suction cup fits on",
+        ],
     );
     refused(
-        &["--set", "place_tray.tray.center_m=[0.40, -0.22, 0.006],[1.2, -0.22, 0.006]"],
+        &[
+            "--set",
+            "place_tray.tray.center_m=[0.40, -0.22, 0.006],[1.2, -0.22, 0.006]",
+        ],
         &[
             "sweep variant 2: place_tray.tray.center_m=[1.2, -0.22, 0.006]",
             "place_tray.tray is out of the arm's reach",
@@ -88,7 +102,9 @@ fn parse_xml(doc: &str) -> Vec<(String, String)> {
     let check_entities = |s: &str| {
         for (i, _) in s.match_indices('&') {
             let rest = &s[i..];
-            let end = rest.find(';').unwrap_or_else(|| panic!("unterminated entity at {rest:.20}"));
+            let end = rest
+                .find(';')
+                .unwrap_or_else(|| panic!("unterminated entity at {rest:.20}"));
             let ent = &rest[1..end];
             assert!(
                 ["amp", "lt", "gt", "quot", "apos"].contains(&ent) || ent.starts_with('#'),
@@ -103,7 +119,10 @@ fn parse_xml(doc: &str) -> Vec<(String, String)> {
     while let Some(open) = rest.find('<') {
         let text = &rest[..open];
         check_entities(text);
-        assert!(!stack.is_empty() || text.trim().is_empty(), "text outside the root: {text:.40}");
+        assert!(
+            !stack.is_empty() || text.trim().is_empty(),
+            "text outside the root: {text:.40}"
+        );
         rest = &rest[open..];
         if let Some(r) = rest.strip_prefix("<!--") {
             rest = &r[r.find("-->").expect("comment closes") + 3..];
@@ -149,7 +168,9 @@ fn parse_xml(doc: &str) -> Vec<(String, String)> {
         let mut attrs = tag[name.len()..].trim();
         let attr_text = attrs.to_string();
         while !attrs.is_empty() {
-            let eq = attrs.find('=').unwrap_or_else(|| panic!("attribute without a value in <{tag}>"));
+            let eq = attrs
+                .find('=')
+                .unwrap_or_else(|| panic!("attribute without a value in <{tag}>"));
             let q = attrs[eq + 1..].chars().next().expect("a quoted value");
             assert!(q == '"' || q == '\'', "unquoted attribute in <{tag}>");
             let v_end = attrs[eq + 2..].find(q).expect("the value's quote closes") + eq + 2;
@@ -230,7 +251,11 @@ fn shards_merge_into_the_whole_sweep_and_a_variant_runs_as_batch_does() {
     let whole_dir = Path::new(&whole).join(name);
     let merged_dir = Path::new(&merged).join(name);
     let csv = read(&whole_dir.join("sweep.csv"));
-    assert_eq!(read(&merged_dir.join("sweep.csv")), csv, "merged shards differ from the whole sweep");
+    assert_eq!(
+        read(&merged_dir.join("sweep.csv")),
+        csv,
+        "merged shards differ from the whole sweep"
+    );
     assert_eq!(read(&merged_dir.join("sweep.md")), read(&whole_dir.join("sweep.md")));
     assert_eq!(csv.lines().count(), 1 + 4 * 2, "{csv}");
     assert!(csv.starts_with("variant,sensor.latency_s,cycle.max_picks_per_capture,workpiece,runs,"));
@@ -238,7 +263,10 @@ fn shards_merge_into_the_whole_sweep_and_a_variant_runs_as_batch_does() {
     for v in 1..=4 {
         for f in ["scene.toml", "viper_s650.urdf", "workpiece-E.toml", "workpiece-F.toml"] {
             assert!(whole_dir.join(format!("variant-{v}/{f}")).is_file(), "variant-{v}/{f}");
-            assert!(merged_dir.join(format!("variant-{v}/{f}")).is_file(), "merge: variant-{v}/{f}");
+            assert!(
+                merged_dir.join(format!("variant-{v}/{f}")).is_file(),
+                "merge: variant-{v}/{f}"
+            );
         }
     }
     assert!(read(&whole_dir.join("variant-3/scene.toml")).contains("latency_s = 1.1"));
@@ -271,17 +299,26 @@ fn shards_merge_into_the_whole_sweep_and_a_variant_runs_as_batch_does() {
     let svg = read(&whole_dir.join("sweep.svg"));
     let tags = parse_xml(&svg);
     assert_eq!(tags[0].0, "svg");
-    let panels = tags.iter().filter(|(n, a)| n == "g" && a.contains("class=\"panel\"")).count();
+    let panels = tags
+        .iter()
+        .filter(|(n, a)| n == "g" && a.contains("class=\"panel\""))
+        .count();
     assert_eq!(panels, 2, "two values of the second key: two small multiples");
     assert_eq!(series(&tags), ["E", "F", "E", "F"]);
     for label in ["sensor.latency_s [s]", "takt [s]", "cycle.max_picks_per_capture = 1"] {
-        assert!(svg.contains(&format!(">{label}<")), "sweep.svg lacks the label {label:?}");
+        assert!(
+            svg.contains(&format!(">{label}<")),
+            "sweep.svg lacks the label {label:?}"
+        );
     }
     let svg = read(&batch_dir.join("takt.svg"));
     let tags = parse_xml(&svg);
     assert_eq!(series(&tags), ["E", "F"]);
     for label in ["takt [s]", "success [%]", "workpiece"] {
-        assert!(svg.contains(&format!(">{label}<")), "takt.svg lacks the label {label:?}");
+        assert!(
+            svg.contains(&format!(">{label}<")),
+            "takt.svg lacks the label {label:?}"
+        );
     }
 }
 
