@@ -13,6 +13,7 @@ use serde_json::json;
 
 use super::{InputError, Interrupted, check_picks, stop_on_ctrl_c};
 use binpick::batch::{parse_seeds, parse_shard};
+use binpick::config::{ShapeKind, Source};
 use binpick::cycle::EndReason;
 use binpick::sweep::{Resolved, SweepError, SweepFile, SweepRuns, SweepSpec};
 
@@ -161,7 +162,26 @@ fn write_variants(dir: &binpick::report::RunDir, resolved: &Resolved) -> Result<
         dir.write(&format!("{sub}/scene.toml"), header + &toml::to_string(&scene)?)?;
         dir.write(&format!("{sub}/{urdf_name}"), &v.scene.urdf_text)?;
         for wp in &v.workpieces {
-            dir.write_workpiece(wp, &format!("{sub}/workpiece-{}.toml", wp.workpiece.name))?;
+            // A mesh goes beside the variant's workpiece file, which names it by its bare name.
+            let mut wp = wp.clone();
+            if let (ShapeKind::Mesh, Source::File(p), Some(mesh)) = (
+                wp.workpiece.shape.kind,
+                &wp.source,
+                wp.workpiece.shape.mesh_file.clone(),
+            ) {
+                let from = p.parent().unwrap_or(Path::new(".")).join(&mesh);
+                let name = Path::new(&mesh)
+                    .file_name()
+                    .map(|n| n.to_string_lossy().into_owned())
+                    .unwrap_or(mesh);
+                dir.write(
+                    &format!("{sub}/{name}"),
+                    std::fs::read(&from).with_context(|| from.display().to_string())?,
+                )?;
+                wp.workpiece.shape.mesh_file = Some(name);
+                wp.source = Source::Embedded;
+            }
+            dir.write_workpiece(&wp, &format!("{sub}/workpiece-{}.toml", wp.workpiece.name))?;
         }
     }
     Ok(())

@@ -335,3 +335,51 @@ fn the_xml_check_catches_what_a_browser_refuses() {
         assert!(std::panic::catch_unwind(|| parse_xml(bad)).is_err(), "{bad}");
     }
 }
+
+/// A workpiece given as a file with a mesh: each variant's folder holds the mesh beside the
+/// variant's workpiece file, so `binpick check` (and a re-run) finds it.
+#[test]
+fn a_mesh_workpiece_goes_beside_each_variant() {
+    let tmp = tempfile::tempdir().unwrap();
+    let mut obj = String::new();
+    for z in [-0.005, 0.005] {
+        for (x, y) in [(-0.015, -0.01), (0.015, -0.01), (0.015, 0.01), (-0.015, 0.01)] {
+            obj += &format!("v {x} {y} {z}\n");
+        }
+    }
+    for f in [
+        "1 3 2", "1 4 3", "5 6 7", "5 7 8", "1 2 6", "1 6 5", "2 3 7", "2 7 6", "3 4 8", "3 8 7", "4 1 5", "4 5 8",
+    ] {
+        obj += &format!("f {f}\n");
+    }
+    std::fs::write(tmp.path().join("box.obj"), obj).unwrap();
+    std::fs::write(
+        tmp.path().join("M.toml"),
+        "name = \"M\"\nkind = \"a box as a mesh\"\nsize_m = [0.03, 0.02, 0.01]\nmass_kg = 0.005\nfriction = 0.4\n\
+         restitution = 0.1\npile_count = 10\n\n[shape]\nkind = \"mesh\"\nmesh_file = \"box.obj\"\n\n[grasp]\n\
+         yaw_symmetry_deg = 180.0\nplace_yaw_deg = 0.0\nface_margin_m = 0.0005\n",
+    )
+    .unwrap();
+    let wp = tmp.path().join("M.toml");
+    let out = tmp.path().join("runs");
+    run_ok(&[
+        "sweep",
+        "--workpieces",
+        wp.to_str().unwrap(),
+        "--set",
+        "workpiece.friction=0.4,0.5",
+        "--picks",
+        "1",
+        "--deterministic",
+        "--out",
+        out.to_str().unwrap(),
+    ]);
+    let dir = out.join("sweep-workpiece.friction-M-seeds1-picks1-det");
+    for v in [1, 2] {
+        let sub = dir.join(format!("variant-{v}"));
+        assert!(sub.join("box.obj").is_file(), "variant-{v}/box.obj");
+        let o = crate::support::binpick_in(&sub, &["check", "workpiece-M.toml", "scene.toml"]);
+        assert_eq!(o.status.code(), Some(0), "variant-{v}: {}", stderr(&o));
+    }
+    assert!(read(&dir.join("variant-2/workpiece-M.toml")).contains("friction = 0.5"));
+}
