@@ -82,7 +82,7 @@ pub fn markdown(spec: &SweepSpec, rows: &[SweepRow]) -> String {
         md += &format!(" `{k}` |");
     }
     md += " part | placed / attempts | success | takt mean [s] | p5 | p95 | reference [s] | motion floor [s] \
-           | grasps sealed | sensor waits (mean s) | picks / capture | faults |\n|---:|";
+           | grasps sealed / attempted | sensor waits (mean s) | picks / capture | faults |\n|---:|";
     md += &"---|".repeat(spec.keys.len());
     md += "---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n";
     for r in rows {
@@ -93,7 +93,7 @@ pub fn markdown(spec: &SweepSpec, rows: &[SweepRow]) -> String {
         }
         let faults = w.protective_stops + w.collisions + w.drops + w.parts_lost;
         md += &format!(
-            " {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} % | {} ({}) | {} | {} |\n",
+            " {} | {}/{} | {} % | {} | {} | {} | {} | {} | {}/{} | {} ({}) | {} | {} |\n",
             w.workpiece,
             w.placed,
             w.attempts,
@@ -103,7 +103,8 @@ pub fn markdown(spec: &SweepSpec, rows: &[SweepRow]) -> String {
             num(w.takt.p95_s, 3),
             w.reference_takt_s.map_or("-".into(), |t| num(t, 1)),
             num(w.motion_floor_s, 3),
-            num(100.0 * w.grasp_success_rate, 1),
+            w.grasps.1,
+            w.grasps.0,
             w.sensor_waits.0,
             num(w.sensor_waits.1, 3),
             num(w.picks_per_capture, 2),
