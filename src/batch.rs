@@ -9,6 +9,7 @@
 //!
 //! Units: s, counts. Rows are in workpiece order as given.
 
+pub mod chart;
 pub mod runner;
 pub mod table;
 

@@ -23,7 +23,7 @@
 //! 11. [`record`]: the run written to Rerun (`.rrd`) and MCAP files.
 //! 12. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
 //!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG); [`batch`]:
-//!     takt-time tables over many runs.
+//!     takt-time tables over many runs; [`sweep`]: the same over variants of the cell.
 //!
 //! Beside the flow: [`mod@reference`] (the reference system's cases and tables), [`stats`]
 //! (statistics), [`rng`] (named seeded random streams), [`bench`] (the benchmarks).
@@ -49,4 +49,5 @@ pub mod rng;
 pub mod robot;
 pub mod sensor;
 pub mod stats;
+pub mod sweep;
 pub mod trajectory;

@@ -55,9 +55,12 @@ enum Command {
     /// The takt-time table: cell runs of several workpieces and seeds in parallel, one row per
     /// workpiece (the reference system's Table 5, from the simulation).
     Batch(cli::batch::BatchArgs),
-    /// Joins the results of a batch's shards (`batch --shard K/N`) into the one table.
+    /// What-if sweeps: the takt table over variants of the cell and workpiece files
+    /// (`--set KEY=V1,V2,...`), one row per variant and workpiece, with a chart.
+    Sweep(cli::sweep::SweepArgs),
+    /// Joins the results of a batch's or a sweep's shards (`--shard K/N`) into the one table.
     Merge {
-        /// The shards' folders (each holding a takt.json).
+        /// The shards' folders (each holding a takt.json, or a sweep.json).
         #[arg(required = true)]
         dirs: Vec<PathBuf>,
         /// Folder the merged batch folder is written into.
@@ -107,6 +110,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Sense(a) => cli::pile::sense(&a),
         Command::Run(a) => cli::run::run(&a),
         Command::Batch(a) => cli::batch::batch(&a),
+        Command::Sweep(a) => cli::sweep::sweep(&a),
         Command::Merge { dirs, out, json } => cli::batch::merge(&dirs, &out, json),
         Command::Bench { command } => cli::bench::run(command),
     }

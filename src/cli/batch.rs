@@ -165,6 +165,13 @@ fn write_batch(
     dir.write_json("takt.json", &json!({"batch": file, "table": rows}))?;
     dir.write("takt.csv", binpick::batch::csv(&rows))?;
     dir.write("takt.md", &md)?;
+    dir.write(
+        "takt.svg",
+        binpick::batch::chart::takt_svg(
+            &format!("takt per workpiece: {}", file.spec.name()),
+            &binpick::batch::chart::takt_bars(&rows, &file.runs),
+        ),
+    )?;
     let dest = dir.finish()?;
     let done = || -> Result<()> {
         if file.runs.iter().any(|r| r.ended == EndReason::Interrupted.text()) {
@@ -211,6 +218,9 @@ fn write_batch(
 
 /// `binpick merge`: the shards of one batch into its table.
 pub fn merge(dirs: &[PathBuf], out: &Path, json: bool) -> Result<()> {
+    if dirs.first().is_some_and(|d| d.join("sweep.json").is_file()) {
+        return super::sweep::merge(dirs, out, json);
+    }
     let mut files = Vec::new();
     for d in dirs {
         let path = d.join("takt.json");

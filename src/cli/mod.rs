@@ -12,6 +12,7 @@ pub mod check;
 pub mod pile;
 pub mod robot;
 pub mod run;
+pub mod sweep;
 
 use std::path::Path;
 

@@ -204,6 +204,55 @@ pub fn parse_toml<T: serde::de::DeserializeOwned>(file: &str, text: &str) -> Res
     })
 }
 
+/// Deserialises strict TOML already parsed into a tree into `T`, reporting the key path of a bad
+/// or unknown key (no line numbers: the tree may not come from one file's text).
+pub fn from_toml_table<T: serde::de::DeserializeOwned>(file: &str, table: toml::Table) -> Result<T, ConfigError> {
+    serde_path_to_error::deserialize(table).map_err(|e| {
+        let path = e.path().to_string();
+        let key = if path == "." { String::new() } else { path };
+        ConfigError::one(file, &key, e.into_inner().message().trim().to_string())
+    })
+}
+
+/// The text of a scene argument: the file's, or the embedded default cell's when `path` is `None`.
+pub fn scene_text(path: Option<&Path>) -> Result<(String, Source, String), ConfigError> {
+    match path {
+        Some(p) => {
+            let label = p.display().to_string();
+            let text = read_text(&label, p)?;
+            Ok((label, Source::File(p.to_path_buf()), text))
+        }
+        None => Ok((
+            "embedded:default".into(),
+            Source::Embedded,
+            embedded::DEFAULT_SCENE.to_string(),
+        )),
+    }
+}
+
+/// The text of a workpiece argument as [`LoadedWorkpiece::resolve`] reads it: a path (contains
+/// `/` or ends in `.toml`) from disk, a bare name (A ... F) the embedded file.
+pub fn workpiece_text(arg: &str) -> Result<(String, Source, String), ConfigError> {
+    if arg.contains('/') || arg.ends_with(".toml") {
+        let p = Path::new(arg);
+        let label = p.display().to_string();
+        let text = read_text(&label, p)?;
+        return Ok((label, Source::File(p.to_path_buf()), text));
+    }
+    match embedded::WORKPIECES.iter().find(|(n, _)| n.eq_ignore_ascii_case(arg)) {
+        Some((n, text)) => Ok((
+            format!("embedded:workpieces/{n}.toml"),
+            Source::Embedded,
+            text.to_string(),
+        )),
+        None => Err(ConfigError::one(
+            "--workpiece",
+            "",
+            format!("names no built-in workpiece (A, B, C, D, E, F) and is not a .toml path, got {arg:?}"),
+        )),
+    }
+}
+
 /// Where a scene came from, to resolve the paths inside it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Source {
@@ -273,6 +322,19 @@ impl LoadedScene {
     /// Parses and validates scene text; resolves and reads the URDF it names.
     pub fn from_text(label: &str, source: Source, text: &str) -> Result<Self, ConfigError> {
         let scene: Scene = parse_toml(label, text)?;
+        Self::from_scene(label, source, scene)
+    }
+
+    /// Deserialises and validates a scene from its parsed TOML tree (e.g. a cell file with keys
+    /// changed by `binpick sweep --set`), exactly as [`Self::from_text`] would the same file:
+    /// an unknown key or a value of the wrong type is refused naming the key.
+    pub fn from_table(label: &str, source: Source, table: toml::Table) -> Result<Self, ConfigError> {
+        let scene: Scene = from_toml_table(label, table)?;
+        Self::from_scene(label, source, scene)
+    }
+
+    /// Validates a parsed scene and resolves and reads the URDF it names.
+    fn from_scene(label: &str, source: Source, scene: Scene) -> Result<Self, ConfigError> {
         scene.validate(label)?;
         let (urdf_label, urdf_text) = match &source {
             Source::Embedded => match embedded::file(&scene.robot.urdf) {
@@ -350,6 +412,18 @@ impl LoadedWorkpiece {
     /// Parses and validates workpiece text.
     pub fn from_text(label: &str, source: Source, text: &str) -> Result<Self, ConfigError> {
         let workpiece: Workpiece = parse_toml(label, text)?;
+        Self::from_workpiece(label, source, workpiece)
+    }
+
+    /// Deserialises and validates a workpiece from its parsed TOML tree, as [`Self::from_text`]
+    /// would the same file.
+    pub fn from_table(label: &str, source: Source, table: toml::Table) -> Result<Self, ConfigError> {
+        let workpiece: Workpiece = from_toml_table(label, table)?;
+        Self::from_workpiece(label, source, workpiece)
+    }
+
+    /// Validates a parsed workpiece (and that its mesh file exists).
+    fn from_workpiece(label: &str, source: Source, workpiece: Workpiece) -> Result<Self, ConfigError> {
         workpiece.validate(label)?;
         if let (ShapeKind::Mesh, Source::File(p), Some(f)) = (workpiece.shape.kind, &source, &workpiece.shape.mesh_file)
         {

@@ -13,4 +13,5 @@ mod recording;
 mod scenario;
 mod sensing;
 mod support;
+mod sweep;
 mod trajectory;
