@@ -56,6 +56,10 @@ pub(super) type PlaceMotion = (Trajectory, LineMotion, LineMotion, f64, Option<O
 
 /// The shares of the lift the Place transfer may overlap, tried largest first.
 pub const LIFT_OVERLAP_SHARES: [f64; 3] = [0.6, 0.4, 0.2];
+/// An overlap's torques stay within this share of the accelerator's limits (its own motions end
+/// up within 5 % below them; the overlap's peak comes where two motions accelerate at once, and
+/// at 100 % the servo's feedback on top once demanded 101 % of J1's limit on F).
+pub const LIFT_OVERLAP_TORQUE_SHARE: f64 = 0.9;
 
 /// The motions of one pick, generated from one recognition result.
 pub(super) struct Prepared {
@@ -250,7 +254,7 @@ impl Run<'_, '_> {
                         )
                         .peak_ratio
                         .iter()
-                        .all(|r| *r <= 1.0)
+                        .all(|r| *r <= LIFT_OVERLAP_TORQUE_SHARE)
                         && check_corridor(&holding, &rest, CORRIDOR_CHECK_DT_S).is_ok();
                     ok.then_some(o)
                 })
