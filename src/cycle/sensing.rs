@@ -16,7 +16,7 @@ use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
 use crate::sensor::{CaptureJob, Detection, RecognitionReport, evaluate};
-use crate::trajectory::{CORRIDOR_CHECK_DT_S, Motion, accelerate_in_corridor};
+use crate::trajectory::{CORRIDOR_CHECK_DT_S, Motion, Trajectory, accelerate_in_corridor};
 
 /// A recognition result to pick from.
 pub struct SensedResult {
@@ -196,34 +196,22 @@ impl Run<'_, '_> {
         if (q_wait - q_now).amax() < 0.01 {
             return Ok(false);
         }
-        let (robot, scene) = (self.cell.robot, self.cell.scene);
-        let free = CollisionModel::new(
-            robot,
-            RobotSpheres::new(robot, scene, None),
-            Environment::from_scene(scene),
-        );
+        let free = self.cell.free_model();
         let mut rng = crate::rng::stream(self.cell.opts.seed.wrapping_add(self.st.world.steps()), "planner-wait");
         let Ok(p) = free.plan(&q_now, &q_wait, &PlanOptions::default(), &mut rng) else {
             // No path: the arm waits where it is.
             return Ok(false);
         };
-        let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
         let hand = self.cell.hand;
-        let (_, acc, _) = accelerate_in_corridor(
-            &self.cell.accel_robot,
-            &robot.dynamics(&hand),
-            &via,
-            &free,
-            CORRIDOR_CHECK_DT_S,
-        );
+        let acc = self.cell.accelerate_free(&p.waypoints, &free);
         let t = self.st.world.time_s();
         // The controller knows from now where the arm ends: a result arriving on the way is
         // planned from there.
-        self.st.planned_end_q = Some(acc.trajectory.at(acc.trajectory.duration_s()).q);
+        self.st.planned_end_q = Some(acc.at(acc.duration_s()).q);
         self.st.compute_from_s = t;
         // A result arriving on the way sends the arm into the view from there; a capture
         // triggered on the way has its result long after.
-        let end_s = t + acc.trajectory.duration_s();
+        let end_s = t + acc.duration_s();
         if self
             .st
             .pending
@@ -232,7 +220,7 @@ impl Run<'_, '_> {
         {
             self.st.view_free_until_s = end_s;
         }
-        let played = self.play(&acc.trajectory, &hand, true)?;
+        let played = self.play(&acc, &hand, true)?;
         self.st.view_free_until_s = f64::INFINITY;
         self.span(Stage::WaitingPose, t, self.st.world.time_s(), "to the waiting pose");
         self.st.arm.free_s = self.st.world.time_s();
@@ -248,13 +236,9 @@ impl Run<'_, '_> {
         if self.st.sensor.frustum.arm_inside(&self.st.world).is_none() {
             return Ok(true);
         }
-        let (robot, scene) = (self.cell.robot, self.cell.scene);
+        let scene = self.cell.scene;
         let home = JointVector::from(scene.robot.home_rad());
-        let free = CollisionModel::new(
-            robot,
-            RobotSpheres::new(robot, scene, None),
-            Environment::from_scene(scene),
-        );
+        let free = self.cell.free_model();
         let mut rng = crate::rng::stream(self.cell.opts.seed.wrapping_add(self.st.world.steps()), "planner-home");
         let t = self.st.world.time_s();
         let mut plan = free.plan(&self.st.world.joints(), &home, &PlanOptions::default(), &mut rng);
@@ -276,20 +260,39 @@ impl Run<'_, '_> {
             self.event(Event::Fault(Fault::NoPathOutOfView));
             return Ok(false);
         };
-        let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
         let hand = self.cell.hand;
-        let (_, acc, _) = accelerate_in_corridor(
-            &self.cell.accel_robot,
-            &robot.dynamics(&hand),
-            &via,
-            &free,
-            CORRIDOR_CHECK_DT_S,
-        );
-        let played = self.play(&acc.trajectory, &hand, true)?;
+        let acc = self.cell.accelerate_free(&p.waypoints, &free);
+        let played = self.play(&acc, &hand, true)?;
         self.span(Stage::Place, t, self.st.world.time_s(), "out of view");
         self.st.arm.free_s = self.st.world.time_s();
         self.st.planned_end_q = None;
         self.st.compute_from_s = self.st.world.time_s();
         Ok(matches!(played, super::execute::Played::Done))
+    }
+}
+
+impl super::Cell<'_> {
+    /// The planning model of the cell without the pile, with the bare hand: for the arm's moves
+    /// above the trays (out of the view, to the waiting pose).
+    fn free_model(&self) -> CollisionModel {
+        CollisionModel::new(
+            self.robot,
+            RobotSpheres::new(self.robot, self.scene, None),
+            Environment::from_scene(self.scene),
+        )
+    }
+
+    /// A path planned in `model`, accelerated with the bare hand inside its certified corridor.
+    fn accelerate_free(&self, waypoints: &[[f64; crate::robot::DOF]], model: &CollisionModel) -> Trajectory {
+        let via: Vec<JointVector> = waypoints.iter().map(|q| JointVector::from(*q)).collect();
+        accelerate_in_corridor(
+            &self.accel_robot,
+            &self.robot.dynamics(&self.hand),
+            &via,
+            model,
+            CORRIDOR_CHECK_DT_S,
+        )
+        .1
+        .trajectory
     }
 }
