@@ -148,8 +148,8 @@ pub fn parse_shard(text: &str) -> Result<(usize, usize), BatchError> {
     Ok((k, n))
 }
 
-/// The runs of shard `k` of `n`: every n-th run from the (k-1)-th.
-pub fn shard(jobs: &[(String, u64)], k: usize, n: usize) -> Vec<(String, u64)> {
+/// The runs of shard `k` of `n`: every n-th run from the (k-1)-th (batches and sweeps).
+pub fn shard<T: Clone>(jobs: &[T], k: usize, n: usize) -> Vec<T> {
     jobs.iter()
         .enumerate()
         .filter(|(i, _)| i % n == k - 1)

@@ -362,13 +362,7 @@ impl SweepSpec {
 }
 
 /// The runs of shard `k` of `n`: every n-th run from the (k-1)-th, as for batches.
-pub fn shard(jobs: &[(usize, String, u64)], k: usize, n: usize) -> Vec<(usize, String, u64)> {
-    jobs.iter()
-        .enumerate()
-        .filter(|(i, _)| i % n == k - 1)
-        .map(|(_, j)| j.clone())
-        .collect()
-}
+pub use crate::batch::shard;
 
 #[cfg(test)]
 mod tests {

@@ -15,9 +15,9 @@ use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::cycle::EndReason;
 use binpick::robot::RobotModel;
 
-/// Arguments of `binpick batch`.
+/// Which runs a batch or a sweep makes, and how: the arguments both commands share.
 #[derive(Args)]
-pub struct BatchArgs {
+pub struct RunsArgs {
     /// Workpieces, comma-separated: A ... F (embedded) or paths to workpiece files.
     #[arg(long, default_value = "A,B,C,D,E,F")]
     pub workpieces: String,
@@ -30,12 +30,61 @@ pub struct BatchArgs {
     /// Runs in parallel (default: the machine's cores).
     #[arg(long)]
     pub jobs: Option<usize>,
-    /// Run only the K-th of N disjoint slices of the batch (1-based), e.g. 2/4.
+    /// Run only the K-th of N disjoint slices of the runs (1-based), e.g. 2/4.
     #[arg(long)]
     pub shard: Option<String>,
     /// Charge the cell file's fixed compute budgets instead of measured wall time.
     #[arg(long)]
     pub deterministic: bool,
+}
+
+/// [`RunsArgs`] checked: seeds, shard (k of n), threads and workpiece names.
+pub struct Runs {
+    /// Seeds.
+    pub seeds: Vec<u64>,
+    /// This shard, k of n (1 of 1: all).
+    pub shard: (usize, usize),
+    /// Runs in parallel.
+    pub threads: usize,
+    /// Workpiece names or paths, as given.
+    pub workpieces: Vec<String>,
+}
+
+impl RunsArgs {
+    /// The arguments checked; a bad one is an input error naming the option.
+    pub fn checked(&self) -> Result<Runs> {
+        check_picks(self.picks)?;
+        let seeds = parse_seeds(&self.seeds).map_err(|e| InputError(e.to_string()))?;
+        let shard = match &self.shard {
+            Some(t) => parse_shard(t).map_err(|e| InputError(e.to_string()))?,
+            None => (1, 1),
+        };
+        let threads = match self.jobs {
+            Some(0) => return Err(InputError("--jobs must be at least 1, got 0".into()).into()),
+            Some(j) => j,
+            None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        };
+        let mut workpieces = Vec::new();
+        for name in self.workpieces.split(',').map(str::trim) {
+            if name.is_empty() {
+                return Err(InputError(format!("--workpieces: empty name in {:?}", self.workpieces)).into());
+            }
+            workpieces.push(name.to_string());
+        }
+        Ok(Runs {
+            seeds,
+            shard,
+            threads,
+            workpieces,
+        })
+    }
+}
+
+/// Arguments of `binpick batch`.
+#[derive(Args)]
+pub struct BatchArgs {
+    #[command(flatten)]
+    pub runs: RunsArgs,
     /// Record every run: `run-<workpiece>-seed<seed>.rrd` and `.mcap` in the batch folder.
     #[arg(long)]
     pub record: bool,
@@ -58,28 +107,20 @@ pub struct BatchArgs {
 
 /// `binpick batch`: every (workpiece, seed) run of the batch (or of one shard), in parallel.
 pub fn batch(a: &BatchArgs) -> Result<()> {
-    check_picks(a.picks)?;
+    let Runs {
+        seeds,
+        shard: (k, n),
+        threads: jobs,
+        workpieces: names,
+    } = a.runs.checked()?;
     let formats = a.skip.formats(a.record);
-    let seeds = parse_seeds(&a.seeds).map_err(|e| InputError(e.to_string()))?;
-    let (k, n) = match &a.shard {
-        Some(t) => parse_shard(t).map_err(|e| InputError(e.to_string()))?,
-        None => (1, 1),
-    };
-    let jobs = match a.jobs {
-        Some(0) => return Err(InputError("--jobs must be at least 1, got 0".into()).into()),
-        Some(j) => j,
-        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
-    };
     // Every input is loaded and checked before anything runs or is written.
     let mut loaded = LoadedScene::load(a.scene.as_deref())?;
     super::override_recognition(&mut loaded, a.recognition);
     let robot = RobotModel::from_scene(&loaded)?;
     robot.check_scene_reach(&loaded.label, &loaded.scene)?;
     let mut workpieces: Vec<LoadedWorkpiece> = Vec::new();
-    for name in a.workpieces.split(',').map(str::trim) {
-        if name.is_empty() {
-            return Err(InputError(format!("--workpieces: empty name in {:?}", a.workpieces)).into());
-        }
+    for name in &names {
         let wp = LoadedWorkpiece::resolve(name)?;
         wp.workpiece.check_fits_scene(&wp.label, &loaded.scene)?;
         binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
@@ -91,8 +132,8 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     let spec = BatchSpec {
         workpieces: workpieces.iter().map(|w| w.workpiece.name.clone()).collect(),
         seeds,
-        picks: a.picks,
-        deterministic: a.deterministic,
+        picks: a.runs.picks,
+        deterministic: a.runs.deterministic,
     };
     let mine = shard(&spec.jobs(), k, n);
     let bar = indicatif::ProgressBar::new(mine.len() as u64);
@@ -134,7 +175,7 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     let wall_s = wall.elapsed().as_secs_f64();
     let run_wall_s: f64 = runs.iter().filter_map(|r| r.wall_s).sum();
     let mut runs = runs;
-    if a.deterministic {
+    if a.runs.deterministic {
         // Wall times are measurements, not results: a deterministic takt.json repeats byte for byte.
         runs.iter_mut().for_each(|r| r.wall_s = None);
     }

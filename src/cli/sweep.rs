@@ -11,8 +11,7 @@ use anyhow::{Context, Result};
 use clap::Args;
 use serde_json::json;
 
-use super::{InputError, Interrupted, check_picks, stop_on_ctrl_c};
-use binpick::batch::{parse_seeds, parse_shard};
+use super::{InputError, Interrupted, stop_on_ctrl_c};
 use binpick::config::{ShapeKind, Source};
 use binpick::cycle::EndReason;
 use binpick::sweep::{Resolved, SweepError, SweepFile, SweepRuns, SweepSpec};
@@ -26,24 +25,8 @@ pub struct SweepArgs {
     /// Repeat for more keys: the variants are the product of the lists.
     #[arg(long = "set", value_name = "KEY=V1,V2,...", required = true)]
     pub sets: Vec<String>,
-    /// Workpieces, comma-separated: A ... F (embedded) or paths to workpiece files.
-    #[arg(long, default_value = "A,B,C,D,E,F")]
-    pub workpieces: String,
-    /// Picks per run (the first of each run follows the initial sensing and has no takt).
-    #[arg(long, default_value_t = 21)]
-    pub picks: usize,
-    /// Seeds: 1-3, or 1,2,5.
-    #[arg(long, default_value = "1")]
-    pub seeds: String,
-    /// Runs in parallel (default: the machine's cores).
-    #[arg(long)]
-    pub jobs: Option<usize>,
-    /// Run only the K-th of N disjoint slices of the sweep's runs (1-based), e.g. 2/4.
-    #[arg(long)]
-    pub shard: Option<String>,
-    /// Charge the cell file's fixed compute budgets instead of measured wall time.
-    #[arg(long)]
-    pub deterministic: bool,
+    #[command(flatten)]
+    pub runs: super::batch::RunsArgs,
     /// Scene file the variants start from (default: the embedded default cell).
     #[arg(long)]
     pub scene: Option<PathBuf>,
@@ -65,25 +48,13 @@ fn input_error(e: SweepError) -> anyhow::Error {
 
 /// `binpick sweep`.
 pub fn sweep(a: &SweepArgs) -> Result<()> {
-    check_picks(a.picks)?;
-    let seeds = parse_seeds(&a.seeds).map_err(|e| InputError(e.to_string()))?;
-    let (k, n) = match &a.shard {
-        Some(t) => parse_shard(t).map_err(|e| InputError(e.to_string()))?,
-        None => (1, 1),
-    };
-    let threads = match a.jobs {
-        Some(0) => return Err(InputError("--jobs must be at least 1, got 0".into()).into()),
-        Some(j) => j,
-        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
-    };
+    let super::batch::Runs {
+        seeds,
+        shard: (k, n),
+        threads,
+        workpieces: names,
+    } = a.runs.checked()?;
     let sets = binpick::sweep::parse_sets(&a.sets).map_err(input_error)?;
-    let mut names = Vec::new();
-    for name in a.workpieces.split(',').map(str::trim) {
-        if name.is_empty() {
-            return Err(InputError(format!("--workpieces: empty name in {:?}", a.workpieces)).into());
-        }
-        names.push(name.to_string());
-    }
     // Every variant is resolved and checked before anything runs or is written.
     let values = binpick::sweep::variants(&sets);
     let resolved = binpick::sweep::resolve(a.scene.as_deref(), &names, &sets, &values).map_err(input_error)?;
@@ -100,8 +71,8 @@ pub fn sweep(a: &SweepArgs) -> Result<()> {
             .map(|w| w.workpiece.name.clone())
             .collect(),
         seeds,
-        picks: a.picks,
-        deterministic: a.deterministic,
+        picks: a.runs.picks,
+        deterministic: a.runs.deterministic,
     };
     let mine = binpick::sweep::shard(&spec.jobs(), k, n);
     let name = if n > 1 {
@@ -128,7 +99,7 @@ pub fn sweep(a: &SweepArgs) -> Result<()> {
     bar.finish_and_clear();
     let mut runs = result?;
     let wall_s = wall.elapsed().as_secs_f64();
-    if a.deterministic {
+    if a.runs.deterministic {
         // Wall times are measurements, not results: a deterministic sweep.json repeats byte for byte.
         runs.iter_mut().for_each(|r| r.run.wall_s = None);
     }
