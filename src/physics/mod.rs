@@ -394,10 +394,9 @@ impl World {
             let body = self.bodies.insert(builder.pose(to_pose(&world_from_links[i])));
             for s in &link.shapes {
                 let (shape, local) = match s.primitive {
-                    LinkPrimitive::Box { half_extents_m: h } => (
-                        SharedShape::cuboid(h.x as f32, h.y as f32, h.z as f32),
-                        Isometry3::identity(),
-                    ),
+                    LinkPrimitive::Box { half_extents_m: h } => {
+                        (SharedShape::cuboid(sim(h.x), sim(h.y), sim(h.z)), Isometry3::identity())
+                    }
                     // rapier's cylinders and capsules run along +y; the URDF's along +z.
                     LinkPrimitive::Cylinder {
                         radius_m,

@@ -448,3 +448,92 @@ fn the_bellows_take_up_the_cups_overtravel_at_the_seal() {
         }
     }
 }
+
+/// The arm's link boxes are in the world at their full size: a small volume just inside a box
+/// corner that no other shape of the arm covers finds the link there (checked against the robot
+/// model's primitives, in metres, by code independent of the physics' unit conversion), and the
+/// same volume just outside the corner finds nothing (negative control). Until issue 18 the boxes
+/// were built in metres in the millimetre world, a thousand times too small.
+#[test]
+fn the_arms_link_boxes_are_full_size_in_the_world() {
+    use binpick::physics::ViewVolume;
+    use binpick::robot::Primitive;
+    let (w, scene, _) = world("E");
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let q = binpick::robot::JointVector::from(scene.scene.robot.home_rad());
+    let world_from_links = robot.world_from_links(&q);
+    // Whether the world point p [m] is inside any primitive of the arm model other than `except`.
+    let inside_other = |p: &Vector3<f64>, except: (usize, usize)| {
+        robot.links.iter().enumerate().any(|(i, link)| {
+            link.shapes.iter().enumerate().any(|(k, s)| {
+                if (i, k) == except {
+                    return false;
+                }
+                let l = (world_from_links[i] * s.link_from_shape).inverse_transform_point(&(*p).into());
+                match s.primitive {
+                    Primitive::Box { half_extents_m: h } => l.x.abs() <= h.x && l.y.abs() <= h.y && l.z.abs() <= h.z,
+                    Primitive::Cylinder {
+                        radius_m,
+                        half_length_m,
+                    } => l.x.hypot(l.y) <= radius_m && l.z.abs() <= half_length_m,
+                    Primitive::Sphere { radius_m } => l.coords.norm() <= radius_m,
+                    Primitive::Capsule {
+                        radius_m,
+                        half_length_m,
+                    } => l.x.hypot(l.y).hypot((l.z.abs() - half_length_m).max(0.0)) <= radius_m,
+                }
+            })
+        })
+    };
+    let cube = |c: &Vector3<f64>| {
+        let e = 0.002;
+        let pts: Vec<Vector3<f64>> = (0..8)
+            .map(|k| {
+                c + Vector3::new(
+                    if k & 1 == 0 { -e } else { e },
+                    if k & 2 == 0 { -e } else { e },
+                    if k & 4 == 0 { -e } else { e },
+                )
+            })
+            .collect();
+        ViewVolume::hull(&pts).unwrap()
+    };
+    let mut boxes = 0;
+    for (i, link) in robot.links.iter().enumerate().skip(1) {
+        for (k, s) in link.shapes.iter().enumerate() {
+            let Primitive::Box { half_extents_m: h } = s.primitive else {
+                continue;
+            };
+            let world_from_shape = world_from_links[i] * s.link_from_shape;
+            // A corner of the box no other shape covers (inside at 0.9, outside at 1.1 of it).
+            let corner = (0..8)
+                .map(|c| {
+                    Vector3::new(
+                        if c & 1 == 0 { -h.x } else { h.x },
+                        if c & 2 == 0 { -h.y } else { h.y },
+                        if c & 4 == 0 { -h.z } else { h.z },
+                    )
+                })
+                .find(|c| {
+                    let inner = (world_from_shape * nalgebra::Point3::from(c * 0.9)).coords;
+                    let outer = (world_from_shape * nalgebra::Point3::from(c * 1.1)).coords;
+                    !inside_other(&inner, (i, k)) && !inside_other(&outer, (i, k))
+                })
+                .unwrap_or_else(|| panic!("link {i}: every corner of box {k} is covered by another shape"));
+            let inner = (world_from_shape * nalgebra::Point3::from(corner * 0.9)).coords;
+            let outer = (world_from_shape * nalgebra::Point3::from(corner * 1.1)).coords;
+            let found = w.robot_inside(&cube(&inner));
+            assert!(
+                found.is_some(),
+                "link {i} box {k}: nothing of the arm just inside its corner"
+            );
+            assert_eq!(
+                w.robot_inside(&cube(&outer)),
+                None,
+                "link {i} box {k}: something just outside its corner"
+            );
+            boxes += 1;
+        }
+    }
+    assert!(boxes >= 3, "the arm model has {boxes} boxes");
+}
