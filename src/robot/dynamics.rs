@@ -205,8 +205,21 @@ impl DynamicsModel {
     /// value alone the servo demanded up to 121 % of the limit at motion starts). A joint that
     /// does not accelerate is held by its static friction, which the drive need not overcome.
     pub fn drive_torque_bound_nm(&self, q: &JointVector, qd: &JointVector, qdd: &JointVector) -> JointVector {
+        self.drive_torques_and_bound_nm(q, qd, qdd).1
+    }
+
+    /// The drive torques [`DynamicsModel::inverse_dynamics`] gives and their bound
+    /// [`DynamicsModel::drive_torque_bound_nm`], from one Newton-Euler pass: bit-identical to the
+    /// two calls [N m].
+    pub fn drive_torques_and_bound_nm(
+        &self,
+        q: &JointVector,
+        qd: &JointVector,
+        qdd: &JointVector,
+    ) -> (JointVector, JointVector) {
         let rigid = self.inverse_dynamics_terms(q, qd, qdd, Terms::NO_FRICTION);
-        JointVector::from_fn(|i, _| {
+        let all = JointVector::from_fn(|i, _| rigid[i] + self.friction_nm(i, qd[i]));
+        let bound = JointVector::from_fn(|i, _| {
             let modelled = (rigid[i] + self.friction_nm(i, qd[i])).abs();
             if qd[i].abs() > 3.0 * self.coulomb_smoothing_rad_s || qdd[i].abs() < BREAKAWAY_MIN_ACCEL_RAD_S2 {
                 modelled
@@ -214,7 +227,8 @@ impl DynamicsModel {
                 let breakaway = rigid[i] + self.viscous[i] * qd[i] + self.coulomb[i] * qdd[i].signum();
                 modelled.max(breakaway.abs())
             }
-        })
+        });
+        (all, bound)
     }
 
     /// Slope of the friction torque with joint velocity at `qd` [N m s/rad]: the viscous
@@ -494,6 +508,32 @@ mod tests {
         assert!(within(g[1], -66.5, 0.02), "payload J2 {}", g[1]);
         assert!(within(g[2], -26.8, 0.02), "payload J3 {}", g[2]);
         assert!(within(g[4], -6.5, 0.02), "payload J5 {}", g[4]);
+    }
+
+    #[test]
+    fn one_pass_torques_and_bound_equal_the_two_calls_bit_for_bit() {
+        let r = default_robot();
+        let d = r.dynamics(&Payload::none());
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let mut friction_seen = false;
+        for _ in 0..500 {
+            let q = random_q(&r, &mut rng);
+            let qd = JointVector::from_fn(|_, _| rng.random_range(-3.0..3.0));
+            let qdd = JointVector::from_fn(|_, _| rng.random_range(-30.0..30.0));
+            let (tau, bound) = d.drive_torques_and_bound_nm(&q, &qd, &qdd);
+            let (tau_ref, bound_ref) = (
+                d.inverse_dynamics(&q, &qd, &qdd),
+                d.drive_torque_bound_nm(&q, &qd, &qdd),
+            );
+            for i in 0..DOF {
+                assert_eq!(tau[i].to_bits(), tau_ref[i].to_bits(), "joint {i}");
+                assert_eq!(bound[i].to_bits(), bound_ref[i].to_bits(), "joint {i}");
+            }
+            // Negative control: the torques without friction are told apart.
+            let rigid = d.inverse_dynamics_terms(&q, &qd, &qdd, Terms::NO_FRICTION);
+            friction_seen |= (0..DOF).any(|i| rigid[i].to_bits() != tau[i].to_bits());
+        }
+        assert!(friction_seen);
     }
 
     #[test]

@@ -93,8 +93,19 @@ impl Capture {
 
 /// Box-Muller standard normal from two uniforms.
 pub(super) fn gaussian(rng: &mut ChaCha8Rng) -> f64 {
+    let (u1, u2) = gaussian_uniforms(rng);
+    gaussian_from(u1, u2)
+}
+
+/// The two uniforms [`gaussian`] draws, in its order.
+fn gaussian_uniforms(rng: &mut ChaCha8Rng) -> (f64, f64) {
     let u1: f64 = rng.random::<f64>().max(1e-300);
     let u2: f64 = rng.random();
+    (u1, u2)
+}
+
+/// Box-Muller's transform of [`gaussian_uniforms`].
+fn gaussian_from(u1: f64, u2: f64) -> f64 {
     (-2.0 * u1.ln()).sqrt() * (std::f64::consts::TAU * u2).cos()
 }
 
@@ -169,6 +180,7 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
         }
         mask
     });
+    let cos_grazing = camera.dropout_grazing_rad.cos();
     /// One image row: depths, points, what each ray hit.
     type Row = (Vec<f32>, Vec<[f32; 3]>, Vec<Option<Tag>>);
     let rows: Vec<Row> = (0..h)
@@ -186,7 +198,10 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
             });
             for u in 0..w {
                 let dir = camera.pixel_dir(u, v);
-                let (noise, drop_draw) = (gaussian(&mut rng), rng.random::<f64>());
+                // The noise's two uniforms are drawn for every pixel (rows start at fixed stream
+                // positions), its Box-Muller transform only for the pixels that report a depth.
+                let (u1, u2) = gaussian_uniforms(&mut rng);
+                let drop_draw = rng.random::<f64>();
                 let _ = rng.random::<u64>();
                 let hit = match (background, &mask) {
                     (Some(bg), Some(mask)) if !mask[v * w + u] => bg.hits[v * w + u],
@@ -206,13 +221,12 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                     continue;
                 };
                 let z = range * dir.dot(&optical);
-                let incidence = (-dir.dot(&normal)).clamp(-1.0, 1.0).acos();
-                if range < camera.min_range_m
-                    || incidence > camera.dropout_grazing_rad
-                    || drop_draw < camera.dropout_probability
-                {
+                // Incidence beyond the grazing angle, compared as cosines (acos is decreasing).
+                let cos_incidence = (-dir.dot(&normal)).clamp(-1.0, 1.0);
+                if range < camera.min_range_m || cos_incidence < cos_grazing || drop_draw < camera.dropout_probability {
                     continue;
                 }
+                let noise = gaussian_from(u1, u2);
                 let zn = z + noise * camera.depth_noise_at_1m_m * z * z;
                 let p = origin + dir * (zn / dir.dot(&optical));
                 depth[u] = zn as f32;

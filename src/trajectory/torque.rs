@@ -31,11 +31,11 @@ pub fn torques(dynamics: &DynamicsModel, robot: &RobotModel, samples: &[Sample],
     let mut peak = [0.0f64; DOF];
     let mut energy = 0.0;
     for s in samples {
-        let bound = dynamics.drive_torque_bound_nm(&s.q, &s.qd, &s.qdd);
+        let (tau, bound) = dynamics.drive_torques_and_bound_nm(&s.q, &s.qd, &s.qdd);
         for i in 0..DOF {
             peak[i] = peak[i].max(bound[i]);
         }
-        energy += dynamics.inverse_dynamics(&s.q, &s.qd, &s.qdd).norm_squared() * dt_s;
+        energy += tau.norm_squared() * dt_s;
     }
     TorqueProfile {
         peak_nm: peak,
