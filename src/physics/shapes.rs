@@ -269,9 +269,34 @@ mod tests {
         }
     }
 
+    /// A temporary folder for these tests, removed when dropped (no dev-dependency: see
+    /// `tests/all/support.rs`).
+    struct TestDir(std::path::PathBuf);
+
+    impl TestDir {
+        fn new() -> Self {
+            use std::sync::atomic::{AtomicUsize, Ordering};
+            static NEXT: AtomicUsize = AtomicUsize::new(0);
+            let n = NEXT.fetch_add(1, Ordering::Relaxed);
+            let p = std::env::temp_dir().join(format!("binpick-unit-{}-{n}", std::process::id()));
+            let _ = std::fs::remove_dir_all(&p);
+            std::fs::create_dir(&p).unwrap();
+            TestDir(p)
+        }
+        fn path(&self) -> &std::path::Path {
+            &self.0
+        }
+    }
+
+    impl Drop for TestDir {
+        fn drop(&mut self) {
+            let _ = std::fs::remove_dir_all(&self.0);
+        }
+    }
+
     #[test]
     fn mesh_workpiece_is_convex_decomposed() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = TestDir::new();
         // An L-shaped bracket, 20 x 20 x 5 mm with a 10 x 10 notch, as OBJ (mm units).
         let obj = "v 0 0 0\nv 20 0 0\nv 20 10 0\nv 10 10 0\nv 10 20 0\nv 0 20 0\n\
                    v 0 0 5\nv 20 0 5\nv 20 10 5\nv 10 10 5\nv 10 20 5\nv 0 20 5\n\
@@ -303,7 +328,7 @@ mod tests {
 
     #[test]
     fn bad_mesh_is_a_clear_error() {
-        let dir = tempfile::tempdir().unwrap();
+        let dir = TestDir::new();
         std::fs::write(dir.path().join("x.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
         let e = load_mesh(&dir.path().join("x.obj"), 1.0).unwrap_err().to_string();
         assert!(e.contains("x.obj: cannot load mesh"), "{e}");

@@ -36,16 +36,50 @@ pub fn stderr(o: &Output) -> String {
     String::from_utf8_lossy(&o.stderr).into_owned()
 }
 
+/// A temporary folder, removed with everything in it when dropped. Written here rather than
+/// taken from a crate: a dev-dependency would change the features of crates the release build
+/// shares (tempfile turns on rustix's `fs`, which rebuilds rerun's chain), and the README's test
+/// command reuses the release build's dependencies as they are.
+pub struct TempDir(PathBuf);
+
+impl TempDir {
+    /// The folder's path.
+    pub fn path(&self) -> &Path {
+        &self.0
+    }
+}
+
+impl Drop for TempDir {
+    fn drop(&mut self) {
+        let _ = std::fs::remove_dir_all(&self.0);
+    }
+}
+
+/// A new empty folder under the system's temporary folder, unique to this process and call.
+pub fn tempdir() -> std::io::Result<TempDir> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    static NEXT: AtomicUsize = AtomicUsize::new(0);
+    loop {
+        let n = NEXT.fetch_add(1, Ordering::Relaxed);
+        let p = std::env::temp_dir().join(format!("binpick-test-{}-{n}", std::process::id()));
+        match std::fs::create_dir(&p) {
+            Ok(()) => return Ok(TempDir(p)),
+            Err(e) if e.kind() == std::io::ErrorKind::AlreadyExists => continue,
+            Err(e) => return Err(e),
+        }
+    }
+}
+
 /// A temporary folder holding the shipped scene, URDF and workpieces, to edit copies of.
 pub struct Workspace {
     /// Keeps the folder alive.
-    pub dir: tempfile::TempDir,
+    pub dir: TempDir,
 }
 
 impl Workspace {
     /// Copies `scenes/` and `workpieces/` into a new temporary folder.
     pub fn new() -> Self {
-        let dir = tempfile::tempdir().expect("tempdir");
+        let dir = tempdir().expect("tempdir");
         for sub in ["scenes", "workpieces"] {
             std::fs::create_dir_all(dir.path().join(sub)).unwrap();
             for e in std::fs::read_dir(repo().join(sub)).unwrap() {

@@ -11,7 +11,7 @@ use crate::support::{binpick, stderr};
 /// Runs `binpick sweep ARGS --out OUT` and asserts exit 2, no panic, every fragment in stderr,
 /// and nothing written under `out`.
 fn refused(args: &[&str], expected: &[&str]) {
-    let out = tempfile::tempdir().unwrap();
+    let out = crate::support::tempdir().unwrap();
     let dest = out.path().join("runs");
     let mut all = vec!["sweep"];
     all.extend_from_slice(args);
@@ -215,7 +215,7 @@ fn run_ok(args: &[&str]) {
 
 #[test]
 fn shards_merge_into_the_whole_sweep_and_a_variant_runs_as_batch_does() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = crate::support::tempdir().unwrap();
     let out = |s: &str| tmp.path().join(s).to_str().unwrap().to_string();
     let sweep = [
         "sweep",
@@ -340,7 +340,7 @@ fn the_xml_check_catches_what_a_browser_refuses() {
 /// variant's workpiece file, so `binpick check` (and a re-run) finds it.
 #[test]
 fn a_mesh_workpiece_goes_beside_each_variant() {
-    let tmp = tempfile::tempdir().unwrap();
+    let tmp = crate::support::tempdir().unwrap();
     let mut obj = String::new();
     for z in [-0.005, 0.005] {
         for (x, y) in [(-0.015, -0.01), (0.015, -0.01), (0.015, 0.01), (-0.015, 0.01)] {
