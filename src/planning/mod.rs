@@ -5,7 +5,8 @@
 //!
 //! 1. [`model`]: the cell's collision model: the arm covered by spheres, the cell's boxes and the
 //!    pile's height-map columns; clearance (a lower bound), free configurations, certified edges
-//!    (conservative advancement) and discrete edge checks.
+//!    (conservative advancement) and discrete edge checks; [`pile`]: the pile's columns and the
+//!    max-pooled pyramid that finds the nearest one.
 //! 2. [`search`]: generic sampling-based search that knows nothing of robots: RRT, RRT-Connect
 //!    and shortcutting over a configuration-space trait and an edge-validity trait, with the
 //!    joint-box space of any dimension.
@@ -16,6 +17,7 @@
 //! Units: m, rad, s. Frames: joint space; the world for the cell and the escape's tool lines.
 
 pub mod model;
+pub mod pile;
 pub mod planner;
 pub mod search;
 

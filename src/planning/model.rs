@@ -24,10 +24,10 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
+pub use super::pile::PileColumns;
 use super::search::PlanStats;
 use crate::config::Scene;
 use crate::robot::{DOF, JointVector, Primitive, RobotModel};
-use crate::sensor::HeightMap;
 
 /// A sphere [m].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -175,55 +175,6 @@ fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
     outside + q.max().min(0.0)
 }
 
-/// The pile as the sensor saw it: height-map columns, with a disc around the grasp cut out.
-///
-/// A NaN column is not pile: it lies outside the tray's inner walls (the walls are boxes of the
-/// cell). Cells the sensor did not see inside the walls must come filled as occupied
-/// ([`HeightMap::unseen_filled`], which [`crate::pipeline::pile_map`] applies): a hole in the map
-/// is not free space. Max-pooling keeps a filled cell's height, so no column is lower than any of
-/// its cells, seen or filled.
-#[derive(Debug, Clone)]
-pub struct PileColumns {
-    /// The height map (heights above the tray floor), max-pooled to planning cells.
-    pub map: HeightMap,
-    /// Tray-frame disc (x, y, radius) whose columns are ignored (the part to be grasped) [m].
-    pub cut_out: Option<(f64, f64, f64)>,
-    /// Highest column above the tray floor [m].
-    pub max_height_m: f64,
-}
-
-impl PileColumns {
-    /// Columns from a capture's height map, max-pooled by `pool` cells per side (conservative).
-    pub fn new(map: &HeightMap, pool: usize, cut_out: Option<(f64, f64, f64)>) -> Self {
-        let pool = pool.max(1);
-        let (nx, ny) = (map.nx.div_ceil(pool), map.ny.div_ceil(pool));
-        let mut heights = vec![f64::NAN; nx * ny];
-        for j in 0..map.ny {
-            for i in 0..map.nx {
-                let h = map.height_m[j * map.nx + i];
-                let c = &mut heights[(j / pool) * nx + i / pool];
-                if h.is_finite() && (c.is_nan() || h > *c) {
-                    *c = h;
-                }
-            }
-        }
-        let max_height_m = heights.iter().cloned().filter(|h| h.is_finite()).fold(0.0, f64::max);
-        let map = HeightMap {
-            world_from_tray: map.world_from_tray,
-            cell_m: map.cell_m * pool as f64,
-            nx,
-            ny,
-            origin_xy_m: map.origin_xy_m,
-            height_m: heights,
-        };
-        PileColumns {
-            map,
-            cut_out,
-            max_height_m,
-        }
-    }
-}
-
 /// Everything the robot must not touch.
 #[derive(Debug, Clone)]
 pub struct Environment {
@@ -257,42 +208,10 @@ impl Environment {
                 best = (d, Some(EnvPart::Box(k)));
             }
         }
-        if let Some(p) = &self.pile {
-            let m = &p.map;
-            let l = m.world_from_tray.inverse_transform_point(&Point3::from(*c)).coords;
-            // Columns within reach of the sphere (plus the horizon) only.
-            let reach = r + best.0.max(0.0);
-            let i0 = (((l.x - reach - m.origin_xy_m[0]) / m.cell_m).floor().max(0.0)) as usize;
-            let j0 = (((l.y - reach - m.origin_xy_m[1]) / m.cell_m).floor().max(0.0)) as usize;
-            let i1 = (((l.x + reach - m.origin_xy_m[0]) / m.cell_m).floor()) as isize;
-            let j1 = (((l.y + reach - m.origin_xy_m[1]) / m.cell_m).floor()) as isize;
-            if i1 >= 0 && j1 >= 0 && l.z - r < p.max_height_m + best.0 {
-                for j in j0..=(j1 as usize).min(m.ny.saturating_sub(1)) {
-                    for i in i0..=(i1 as usize).min(m.nx.saturating_sub(1)) {
-                        let h = m.height_m[j * m.nx + i];
-                        if !h.is_finite() || h <= 0.001 {
-                            continue;
-                        }
-                        let cx = m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m;
-                        let cy = m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m;
-                        if let Some((gx, gy, gr)) = p.cut_out
-                            && (cx - gx).hypot(cy - gy) < gr
-                        {
-                            continue;
-                        }
-                        // Column box from the floor to h, in the tray frame.
-                        let q = Vector3::new(
-                            (l.x - cx).abs() - m.cell_m / 2.0,
-                            (l.y - cy).abs() - m.cell_m / 2.0,
-                            (l.z - h / 2.0).abs() - h / 2.0,
-                        );
-                        let d = q.sup(&Vector3::zeros()).norm() + q.max().min(0.0) - r;
-                        if d < best.0 {
-                            best = (d, Some(EnvPart::Pile));
-                        }
-                    }
-                }
-            }
+        if let Some(p) = &self.pile
+            && let Some(d) = p.sphere_distance(c, r, best.0)
+        {
+            best = (d, Some(EnvPart::Pile));
         }
         best
     }
