@@ -167,7 +167,9 @@ pub struct EnvBox {
     pub half_m: Vector3<f64>,
 }
 
-/// Signed distance from a point to a box (negative inside) [m].
+/// Signed distance from a point to a box (negative inside) [m]: the plain formula, the reference
+/// [`box_distance_below`] is tested against.
+#[cfg(test)]
 fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
     let l = b.world_from_box.inverse_transform_point(&Point3::from(*p_world)).coords;
     let q = l.abs() - b.half_m;
@@ -198,32 +200,74 @@ impl Environment {
         Environment { boxes, pile: None }
     }
 
-    /// Signed distance from a sphere to the environment, capped at `horizon` [m], and what is
-    /// nearest (`None` when nothing is nearer than the horizon).
-    fn sphere_distance(&self, c: &Vector3<f64>, r: f64, horizon: f64) -> (f64, Option<EnvPart>) {
-        let mut best = (horizon, None);
+    /// The environment near a link's bounding sphere (world centre `c`, radius `r`) given the best
+    /// clearance so far `best` [m]: whether anything is nearer than `best` (the link's spheres must
+    /// then be examined), and which boxes, and whether the pile, could be nearer than `best` to any
+    /// sphere inside the bounding sphere (the others cannot: a sphere inside it is no nearer to
+    /// anything than the bounding sphere is, up to [`BOUND_SLACK_M`]).
+    fn near_link(&self, c: &Vector3<f64>, r: f64, best: f64) -> NearLink {
+        let thr = best + BOUND_SLACK_M;
+        let mut near = NearLink {
+            open: false,
+            boxes: 0,
+            all_boxes: self.boxes.len() > 64,
+            pile: false,
+        };
         for (k, b) in self.boxes.iter().enumerate() {
-            let d = point_box_distance(c, b) - r;
-            if d < best.0 {
-                best = (d, Some(EnvPart::Box(k)));
+            if let Some(d) = box_distance_below(c, r, b, thr) {
+                near.open |= d < best;
+                if k < 64 {
+                    near.boxes |= 1 << k;
+                }
             }
         }
         if let Some(p) = &self.pile
-            && let Some(d) = p.sphere_distance(c, r, best.0)
+            && let Some(d) = p.sphere_distance(c, r, thr)
         {
-            best = (d, Some(EnvPart::Pile));
+            near.open |= d < best;
+            near.pile = true;
         }
-        best
+        near
     }
 }
 
-/// A part of the environment: one of its boxes or the pile.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum EnvPart {
-    /// `Environment::boxes[k]`.
-    Box(usize),
-    /// The pile's columns.
-    Pile,
+/// Slack on lower bounds [m]: far above the rounding of distances of a few metres, far below
+/// anything the planner resolves. Work is skipped only when a bound exceeds the best distance by
+/// this much, so rounding never skips a distance that would have been the nearest.
+const BOUND_SLACK_M: f64 = 1e-9;
+
+/// What of the environment is near a link ([`Environment::near_link`]).
+#[derive(Debug, Clone, Copy)]
+struct NearLink {
+    /// Something is nearer than the best so far: examine the link's spheres.
+    open: bool,
+    /// Bit k: box k may be nearer than the best so far.
+    boxes: u64,
+    /// More than 64 boxes: examine them all.
+    all_boxes: bool,
+    /// The pile may be nearer than the best so far.
+    pile: bool,
+}
+
+impl NearLink {
+    fn box_near(&self, k: usize) -> bool {
+        self.all_boxes || (k < 64 && self.boxes & (1 << k) != 0)
+    }
+}
+
+/// [`point_box_distance`] minus `r`, the same number, when it may be below `thr`; `None` when it
+/// is surely not (the sphere is outside the box by more than `thr + r`: no square root taken).
+#[inline]
+fn box_distance_below(p_world: &Vector3<f64>, r: f64, b: &EnvBox, thr: f64) -> Option<f64> {
+    let l = b.world_from_box.inverse_transform_point(&Point3::from(*p_world)).coords;
+    let q = l.abs() - b.half_m;
+    let o = q.sup(&Vector3::zeros());
+    let o2 = o.x * o.x + o.y * o.y + o.z * o.z;
+    let t = thr + r;
+    if o2 > 0.0 && (t <= 0.0 || o2 >= t * t) {
+        return None;
+    }
+    Some(o.norm() + q.max().min(0.0) - r)
 }
 
 /// What is nearest to the arm at a clearance query (named by [`CollisionModel::describe`]).
@@ -246,6 +290,9 @@ pub enum Nearest {
     /// Two links of the robot (a pair of [`SELF_PAIRS`]).
     Links(usize, usize),
 }
+
+/// Sphere centres kept on the stack in [`CollisionModel::nearest`] (more go to the heap).
+const STACK_SPHERES: usize = 128;
 
 /// Link pairs checked for self-collision: every pair that can meet over the joint ranges, on the
 /// exact shapes (URDF primitives; link 6 with the flange, the hand, and the envelope of any
@@ -316,45 +363,73 @@ impl CollisionModel {
         let base_from_links = self.robot.base_from_links(q);
         let base = self.robot.world_from_base;
         let mut best = (self.horizon_m, Nearest::Nothing);
-        // Sphere centres in the world, link after link; link `li`'s from `first[li]` on.
+        // Sphere centres in the world, link after link; link `li`'s from `first[li]` on; and the
+        // centres of the links' bounding spheres.
         let links = &self.spheres.links;
-        let mut centers: Vec<Vector3<f64>> = Vec::with_capacity(links.iter().map(Vec::len).sum());
+        let bounds = &self.spheres.bounds;
+        let total: usize = links.iter().map(Vec::len).sum();
+        let mut on_stack = [Vector3::zeros(); STACK_SPHERES];
+        let mut on_heap = Vec::new();
+        let centers: &mut [Vector3<f64>] = if total <= STACK_SPHERES {
+            &mut on_stack[..total]
+        } else {
+            on_heap.resize(total, Vector3::zeros());
+            &mut on_heap
+        };
+        let mut bound_centers = [Vector3::zeros(); DOF + 1];
         let mut first = [0usize; DOF + 2];
         for (li, spheres) in links.iter().enumerate() {
             let world_from_link = base * base_from_links[li].to_isometry();
-            first[li] = centers.len();
-            centers.extend(
-                spheres
-                    .iter()
-                    .map(|s| (world_from_link * Point3::from(s.center_m)).coords),
-            );
+            first[li + 1] = first[li] + spheres.len();
+            let mine = &mut centers[first[li]..first[li + 1]];
+            for (c, s) in mine.iter_mut().zip(spheres) {
+                *c = (world_from_link * Point3::from(s.center_m)).coords;
+            }
+            let b = &bounds[li];
+            bound_centers[li] = (world_from_link * Point3::from(b.center_m)).coords;
             // The base stands on the table: it is not checked against the environment.
-            if li > 0 {
-                let b = &self.spheres.bounds[li];
-                let bc = (world_from_link * Point3::from(b.center_m)).coords;
-                let (db, _) = self.env.sphere_distance(&bc, b.radius_m, best.0);
-                if db < best.0 {
-                    for (p, s) in centers[first[li]..].iter().zip(spheres) {
-                        let (d, part) = self.env.sphere_distance(p, s.radius_m, best.0);
-                        if d < best.0 {
-                            best = (
-                                d,
-                                match part {
-                                    Some(EnvPart::Box(k)) => Nearest::Box { link: li, k },
-                                    Some(EnvPart::Pile) => Nearest::Pile { link: li },
-                                    None => Nearest::Nothing,
-                                },
-                            );
-                        }
+            if li == 0 {
+                continue;
+            }
+            let near = self.env.near_link(&bound_centers[li], b.radius_m, best.0);
+            if !near.open {
+                continue;
+            }
+            for (p, s) in mine.iter().zip(spheres) {
+                for (k, bx) in self.env.boxes.iter().enumerate() {
+                    if near.box_near(k)
+                        && let Some(d) = box_distance_below(p, s.radius_m, bx, best.0 + BOUND_SLACK_M)
+                        && d < best.0
+                    {
+                        best = (d, Nearest::Box { link: li, k });
                     }
+                }
+                if near.pile
+                    && let Some(pile) = &self.env.pile
+                    && let Some(d) = pile.sphere_distance(p, s.radius_m, best.0)
+                {
+                    best = (d, Nearest::Pile { link: li });
                 }
             }
         }
-        first[links.len()] = centers.len();
-        let on = |li: usize| &centers[first[li]..first[li + 1]];
+        let centers = &*centers;
         for (a, b) in SELF_PAIRS {
-            for (pa, sa) in on(a).iter().zip(&links[a]) {
-                for (pb, sb) in on(b).iter().zip(&links[b]) {
+            // Bounding spheres first: a pair, or a sphere of `a`, no nearer than the best is skipped.
+            let (ba, bb) = (&bounds[a], &bounds[b]);
+            let cb = &bound_centers[b];
+            if (bound_centers[a] - cb).norm() - ba.radius_m - bb.radius_m >= best.0 + BOUND_SLACK_M {
+                continue;
+            }
+            for (pa, sa) in centers[first[a]..first[a + 1]].iter().zip(&links[a]) {
+                if (pa - cb).norm() - sa.radius_m - bb.radius_m >= best.0 + BOUND_SLACK_M {
+                    continue;
+                }
+                for (pb, sb) in centers[first[b]..first[b + 1]].iter().zip(&links[b]) {
+                    let t = best.0 + sa.radius_m + sb.radius_m + BOUND_SLACK_M;
+                    let dd = (pa - pb).norm_squared();
+                    if t <= 0.0 || dd >= t * t {
+                        continue;
+                    }
                     let d = (pa - pb).norm() - sa.radius_m - sb.radius_m;
                     if d < best.0 {
                         best = (d, Nearest::Links(a, b));
@@ -463,6 +538,47 @@ mod tests {
             let p = Vector3::new(0.015, 0.0, z);
             assert!(c.iter().any(|sp| (p - sp.center_m).norm() <= sp.radius_m + 1e-12));
         }
+    }
+
+    /// The pruned box distance gives the plain formula's number bit for bit whenever it may be
+    /// below the threshold, and declines only when the plain number is not below it. The negative
+    /// control: a prefilter that forgets the sphere's radius declines distances below the
+    /// threshold, which the check catches.
+    #[test]
+    fn box_distance_below_is_the_plain_distance_or_surely_not_below() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let b = EnvBox {
+            name: "b".into(),
+            world_from_box: Isometry3::new(Vector3::new(0.3, -0.2, 0.1), Vector3::new(0.2, -0.4, 1.1)),
+            half_m: Vector3::new(0.1, 0.02, 0.05),
+        };
+        let (mut given, mut declined, mut missed) = (0, 0, 0);
+        for _ in 0..20_000 {
+            let p = Vector3::new(0.3, -0.2, 0.1) + Vector3::from_fn(|_, _| rng.random_range(-0.2..0.2));
+            let r = rng.random_range(0.0..0.08);
+            let thr = rng.random_range(-0.05..0.2);
+            let plain = point_box_distance(&p, &b) - r;
+            match box_distance_below(&p, r, &b, thr) {
+                Some(d) => {
+                    assert_eq!(d.to_bits(), plain.to_bits(), "{p:?} {r} {thr}");
+                    given += 1;
+                }
+                None => {
+                    assert!(plain >= thr, "{p:?} {r} {thr}: {plain} declined");
+                    declined += 1;
+                }
+            }
+            // A prefilter that forgets the radius (declines when the centre is thr outside).
+            if box_distance_below(&p, 0.0, &b, thr).is_none() && plain < thr {
+                missed += 1;
+            }
+        }
+        assert!(given > 2000 && declined > 2000, "{given} given, {declined} declined");
+        assert!(
+            missed > 100,
+            "the control: forgetting the radius must decline distances below: {missed}"
+        );
     }
 
     #[test]
