@@ -472,6 +472,22 @@ impl CollisionModel {
         margin_m: f64,
         stats: &mut PlanStats,
     ) -> bool {
+        let d0 = self.nearest(a, stats).0;
+        let d1 = self.nearest(b, stats).0;
+        self.certify_edge_from(a, d0, b, d1, margin_m, stats)
+    }
+
+    /// As [`CollisionModel::certify_edge_with_margin`], with the clearances of the ends already
+    /// known (`d0` at `a`, `d1` at `b`, as [`CollisionModel::nearest`] gives them) [m].
+    pub fn certify_edge_from(
+        &self,
+        a: &JointVector,
+        d0: f64,
+        b: &JointVector,
+        d1: f64,
+        margin_m: f64,
+        stats: &mut PlanStats,
+    ) -> bool {
         stats.edges += 1;
         let sweep: f64 = (0..DOF).map(|i| self.spheres.lever_m[i] * (b[i] - a[i]).abs()).sum();
         let at = |t: f64| a + (b - a) * t;
@@ -482,8 +498,6 @@ impl CollisionModel {
                 (d - margin_m) / sweep
             }
         };
-        let d0 = self.nearest(a, stats).0;
-        let d1 = self.nearest(b, stats).0;
         if d0 <= margin_m || d1 <= margin_m {
             return false;
         }
