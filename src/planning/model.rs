@@ -12,11 +12,12 @@
 //! inside the tray occupied, never free ([`PileColumns`]). The link pairs of [`SELF_PAIRS`]
 //! are checked against each other.
 //!
-//! Edge certification (conservative advancement, as in the collision-detection seed): with
-//! clearance d at a configuration and an upper bound R_i on how far any robot point moves per
-//! radian of joint i, the edge is safe for every parameter step dt with sum_i R_i |dq_i| dt < d.
-//! Endpoints are checked first, then midpoints in bisection order, each certifying the interval
-//! its clearance allows: coarse far from obstacles, fine near them.
+//! Queries skip only what a bound proves no nearer than the best distance so far (per link, the
+//! boxes and the pile its bounding sphere comes within reach of; self pairs by their bounding
+//! spheres), so they return the same number as examining everything. With the clearance, a query
+//! can also give how far each link reaches from each joint's axis ([`AxisReach`]), which the
+//! edge certification ([`super::certify`]: conservative advancement) bounds the motion with.
+//! `lever_m` keeps the configuration-independent bound per joint (the corridor checks use it).
 //!
 //! Units: m, rad. Frames: sphere centres in their link frame (the hand and a held part in the
 //! flange link's frame), boxes by `world_from_box`, pile columns in the tray frame of the height
@@ -24,6 +25,7 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
+use super::certify::AxisReach;
 pub use super::pile::PileColumns;
 use super::search::PlanStats;
 use crate::config::Scene;
@@ -73,6 +75,9 @@ pub struct RobotSpheres {
     pub bounds: Vec<Sphere>,
     /// Upper bound on how far any robot point moves per radian of each joint [m/rad].
     pub lever_m: [f64; DOF],
+    /// Per link k (base first) and joint j < k: upper bound on the distance of link k's sphere
+    /// points from joint j's axis in every configuration (0 for j >= k) [m].
+    pub chain_lever_m: Vec<[f64; DOF]>,
 }
 
 impl RobotSpheres {
@@ -152,7 +157,35 @@ impl RobotSpheres {
                 .fold(0.0, f64::max);
             *lever = chain + reach;
         }
-        RobotSpheres { links, bounds, lever_m }
+        // Joint j's axis passes through link j + 1's origin; link k's origin is the chain of
+        // joint origins j + 1 .. k - 1 away from it; its sphere points at most `far` from that.
+        let chain_lever_m = links
+            .iter()
+            .enumerate()
+            .map(|(k, spheres)| {
+                let far = spheres
+                    .iter()
+                    .map(|s| s.center_m.norm() + s.radius_m)
+                    .fold(0.0, f64::max);
+                std::array::from_fn(|j| {
+                    if j < k {
+                        robot.joints[(j + 1)..k]
+                            .iter()
+                            .map(|jt| jt.origin_pos_m.norm())
+                            .sum::<f64>()
+                            + far
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        RobotSpheres {
+            links,
+            bounds,
+            lever_m,
+            chain_lever_m,
+        }
     }
 }
 
@@ -360,6 +393,25 @@ impl CollisionModel {
     /// edge checks, which never need the name ([`CollisionModel::describe`] gives it).
     pub fn nearest(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest) {
         stats.clearance_checks += 1;
+        self.nearest_inner(q, None)
+    }
+
+    /// As [`CollisionModel::nearest`], the clearance only, with how far each link reaches from
+    /// each joint's axis at `q` (what the edge certification bounds the motion with).
+    pub fn nearest_reach(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, AxisReach) {
+        let (d, _, reach) = self.nearest_named_reach(q, stats);
+        (d, reach)
+    }
+
+    /// [`CollisionModel::nearest`] and [`CollisionModel::nearest_reach`] in one query.
+    pub fn nearest_named_reach(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest, AxisReach) {
+        stats.clearance_checks += 1;
+        let mut reach = AxisReach::zero();
+        let (d, nearest) = self.nearest_inner(q, Some(&mut reach));
+        (d, nearest, reach)
+    }
+
+    fn nearest_inner(&self, q: &JointVector, reach: Option<&mut AxisReach>) -> (f64, Nearest) {
         let base_from_links = self.robot.base_from_links(q);
         let base = self.robot.world_from_base;
         let mut best = (self.horizon_m, Nearest::Nothing);
@@ -378,8 +430,10 @@ impl CollisionModel {
         };
         let mut bound_centers = [Vector3::zeros(); DOF + 1];
         let mut first = [0usize; DOF + 2];
+        let mut world_from_links = [Isometry3::identity(); DOF + 1];
         for (li, spheres) in links.iter().enumerate() {
             let world_from_link = base * base_from_links[li].to_isometry();
+            world_from_links[li] = world_from_link;
             first[li + 1] = first[li] + spheres.len();
             let mine = &mut centers[first[li]..first[li + 1]];
             for (c, s) in mine.iter_mut().zip(spheres) {
@@ -413,6 +467,21 @@ impl CollisionModel {
             }
         }
         let centers = &*centers;
+        if let Some(reach) = reach {
+            // Joint i turns about its axis through link i + 1's origin.
+            let axes: [(Vector3<f64>, Vector3<f64>); DOF] = std::array::from_fn(|i| {
+                let f = &world_from_links[i + 1];
+                (f.translation.vector, f.rotation * self.robot.joints[i].axis)
+            });
+            for (k, spheres) in links.iter().enumerate().skip(1) {
+                let row = &mut reach.reach_m[k];
+                for (c, s) in centers[first[k]..first[k + 1]].iter().zip(spheres) {
+                    for (i, (o, w)) in axes.iter().enumerate().take(k) {
+                        row[i] = row[i].max((c - o).cross(w).norm() + s.radius_m);
+                    }
+                }
+            }
+        }
         for (a, b) in SELF_PAIRS {
             // Bounding spheres first: a pair, or a sphere of `a`, no nearer than the best is skipped.
             let (ba, bb) = (&bounds[a], &bounds[b]);
@@ -454,70 +523,6 @@ impl CollisionModel {
     /// Whether `q` is within limits and clear by the margin.
     pub fn free(&self, q: &JointVector, stats: &mut PlanStats) -> bool {
         self.robot.within_limits(q, 0.0) && self.nearest(q, stats).0 > self.margin_m
-    }
-
-    /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
-    /// every configuration on it is clear by the margin.
-    pub fn certify_edge(&self, a: &JointVector, b: &JointVector, stats: &mut PlanStats) -> bool {
-        self.certify_edge_with_margin(a, b, self.margin_m, stats)
-    }
-
-    /// As [`CollisionModel::certify_edge`], with every configuration on the edge required clear by
-    /// `margin_m` instead of the model's margin (a corridor check raises it by how far the motion
-    /// may stray from the edge).
-    pub fn certify_edge_with_margin(
-        &self,
-        a: &JointVector,
-        b: &JointVector,
-        margin_m: f64,
-        stats: &mut PlanStats,
-    ) -> bool {
-        let d0 = self.nearest(a, stats).0;
-        let d1 = self.nearest(b, stats).0;
-        self.certify_edge_from(a, d0, b, d1, margin_m, stats)
-    }
-
-    /// As [`CollisionModel::certify_edge_with_margin`], with the clearances of the ends already
-    /// known (`d0` at `a`, `d1` at `b`, as [`CollisionModel::nearest`] gives them) [m].
-    pub fn certify_edge_from(
-        &self,
-        a: &JointVector,
-        d0: f64,
-        b: &JointVector,
-        d1: f64,
-        margin_m: f64,
-        stats: &mut PlanStats,
-    ) -> bool {
-        stats.edges += 1;
-        let sweep: f64 = (0..DOF).map(|i| self.spheres.lever_m[i] * (b[i] - a[i]).abs()).sum();
-        let at = |t: f64| a + (b - a) * t;
-        let cover = |d: f64| {
-            if sweep <= 0.0 {
-                f64::INFINITY
-            } else {
-                (d - margin_m) / sweep
-            }
-        };
-        if d0 <= margin_m || d1 <= margin_m {
-            return false;
-        }
-        // Uncovered intervals, processed breadth-first: midpoints spread out over the edge.
-        let mut queue = std::collections::VecDeque::from([(cover(d0), 1.0 - cover(d1))]);
-        while let Some((lo, hi)) = queue.pop_front() {
-            if lo >= hi {
-                continue;
-            }
-            let mid = 0.5 * (lo + hi);
-            let d = self.nearest(&at(mid), stats).0;
-            // A certified step must make progress: below a micrometre of motion, call it a collision.
-            let c = cover(d);
-            if d <= margin_m || c * sweep < 1e-6 {
-                return false;
-            }
-            queue.push_back((lo, mid - c));
-            queue.push_back((mid + c, hi));
-        }
-        true
     }
 
     /// The baseline's edge check: configurations every `step_rad` (max-norm), not certified.

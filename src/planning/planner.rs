@@ -22,6 +22,7 @@ use nalgebra::{Isometry3, Translation3, Vector3};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
+use super::certify::AxisReach;
 use super::model::CollisionModel;
 use super::search::{self, Budget, ConfigSpace, EdgeValidity, JointBox, PlanStats, Search};
 use crate::robot::{DOF, JointVector};
@@ -118,7 +119,7 @@ pub struct CertifiedEdges<'a> {
 /// What [`CertifiedEdges`] remembers, keyed by the configurations' bits.
 #[derive(Debug, Default)]
 struct Memo {
-    clearance_m: HashMap<[u64; DOF], f64>,
+    clearance_m: HashMap<[u64; DOF], (f64, AxisReach)>,
     verdicts: HashMap<([u64; DOF], [u64; DOF]), bool>,
 }
 
@@ -135,20 +136,22 @@ impl<'a> CertifiedEdges<'a> {
         }
     }
 
-    /// Remembers `d` as the clearance at `q`, as [`CollisionModel::nearest`] gave it [m].
-    pub fn remember(&self, q: &JointVector, d: f64) {
-        self.memo.borrow_mut().clearance_m.insert(bits(q), d);
+    /// Remembers the clearance and axis reach at `q`, as [`CollisionModel::nearest_reach`] gave
+    /// them.
+    pub fn remember(&self, q: &JointVector, end: (f64, AxisReach)) {
+        self.memo.borrow_mut().clearance_m.insert(bits(q), end);
     }
 
-    /// The clearance at `q` ([`CollisionModel::nearest`]), computed once per configuration [m].
-    fn clearance_m(&self, q: &JointVector, stats: &mut PlanStats) -> f64 {
+    /// The clearance and axis reach at `q` ([`CollisionModel::nearest_reach`]), computed once per
+    /// configuration.
+    fn clearance_m(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, AxisReach) {
         let key = bits(q);
-        if let Some(d) = self.memo.borrow().clearance_m.get(&key) {
-            return *d;
+        if let Some(end) = self.memo.borrow().clearance_m.get(&key) {
+            return *end;
         }
-        let d = self.model.nearest(q, stats).0;
-        self.memo.borrow_mut().clearance_m.insert(key, d);
-        d
+        let end = self.model.nearest_reach(q, stats);
+        self.memo.borrow_mut().clearance_m.insert(key, end);
+        end
     }
 }
 
@@ -158,9 +161,11 @@ impl EdgeValidity<JointVector> for CertifiedEdges<'_> {
         if let Some(v) = self.memo.borrow().verdicts.get(&key) {
             return *v;
         }
-        let d0 = self.clearance_m(a, stats);
-        let d1 = self.clearance_m(b, stats);
-        let v = self.model.certify_edge_from(a, d0, b, d1, self.model.margin_m, stats);
+        let end_a = self.clearance_m(a, stats);
+        let end_b = self.clearance_m(b, stats);
+        let v = self
+            .model
+            .certify_edge_from(a, end_a, b, end_b, self.model.margin_m, stats);
         self.memo.borrow_mut().verdicts.insert(key, v);
         v
     }
@@ -201,7 +206,7 @@ impl CollisionModel {
     ) -> Result<Plan, PlanError> {
         let t0 = Instant::now();
         let mut stats = PlanStats::default();
-        let (ds, ns) = self.nearest(start, &mut stats);
+        let (ds, ns, reach_s) = self.nearest_named_reach(start, &mut stats);
         if !self.robot.within_limits(start, 1e-9) || ds <= self.margin_m {
             return Err(PlanError::StartInCollision(format!(
                 "clearance {:.1} mm between {}",
@@ -209,7 +214,7 @@ impl CollisionModel {
                 self.describe(ns)
             )));
         }
-        let (dg, ng) = self.nearest(goal, &mut stats);
+        let (dg, ng, reach_g) = self.nearest_named_reach(goal, &mut stats);
         if !self.robot.within_limits(goal, 1e-9) || dg <= self.margin_m {
             return Err(PlanError::GoalInCollision(format!(
                 "clearance {:.1} mm between {}",
@@ -226,8 +231,8 @@ impl CollisionModel {
         let found = match opts.algorithm {
             Algorithm::Ours => {
                 let edges = CertifiedEdges::new(self);
-                edges.remember(start, ds);
-                edges.remember(goal, dg);
+                edges.remember(start, (ds, reach_s));
+                edges.remember(goal, (dg, reach_g));
                 let search = Search {
                     space: &space,
                     edges: &edges,
