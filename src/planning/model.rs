@@ -337,6 +337,16 @@ pub enum Nearest {
     Links(usize, usize),
 }
 
+/// The arm posed at one configuration ([`CollisionModel::nearest`]'s first step).
+struct Posed {
+    /// `world_from_link` per link, base first.
+    world_from_links: [Isometry3<f64>; DOF + 1],
+    /// Centres of the links' bounding spheres in the world.
+    bound_centers: [Vector3<f64>; DOF + 1],
+    /// Link `li`'s sphere centres are `centers[first[li]..first[li + 1]]`.
+    first: [usize; DOF + 2],
+}
+
 /// Sphere centres kept on the stack in [`CollisionModel::nearest`] (more go to the heap).
 const STACK_SPHERES: usize = 128;
 
@@ -425,13 +435,7 @@ impl CollisionModel {
     }
 
     fn nearest_inner(&self, q: &JointVector, reach: Option<&mut AxisReach>) -> (f64, Nearest) {
-        let base_from_links = self.robot.base_from_links(q);
-        let base = self.robot.world_from_base;
-        let mut best = (self.horizon_m, Nearest::Nothing);
-        // Sphere centres in the world, link after link; link `li`'s from `first[li]` on; and the
-        // centres of the links' bounding spheres.
         let links = &self.spheres.links;
-        let bounds = &self.spheres.bounds;
         let total: usize = links.iter().map(Vec::len).sum();
         let mut on_stack = [Vector3::zeros(); STACK_SPHERES];
         let mut on_heap = Vec::new();
@@ -441,28 +445,48 @@ impl CollisionModel {
             on_heap.resize(total, Vector3::zeros());
             &mut on_heap
         };
-        let mut bound_centers = [Vector3::zeros(); DOF + 1];
-        let mut first = [0usize; DOF + 2];
-        let mut world_from_links = [Isometry3::identity(); DOF + 1];
-        for (li, spheres) in links.iter().enumerate() {
+        let posed = self.pose(q, centers);
+        let centers = &*centers;
+        let best = self.nearest_env(&posed, centers, (self.horizon_m, Nearest::Nothing));
+        if let Some(reach) = reach {
+            self.axis_reach(&posed, centers, reach);
+        }
+        self.nearest_self(&posed, centers, best)
+    }
+
+    /// The link frames, sphere centres (into `centers`, link after link) and bounding-sphere
+    /// centres at `q`, in the world.
+    fn pose(&self, q: &JointVector, centers: &mut [Vector3<f64>]) -> Posed {
+        let base_from_links = self.robot.base_from_links(q);
+        let base = self.robot.world_from_base;
+        let mut posed = Posed {
+            world_from_links: [Isometry3::identity(); DOF + 1],
+            bound_centers: [Vector3::zeros(); DOF + 1],
+            first: [0; DOF + 2],
+        };
+        for (li, spheres) in self.spheres.links.iter().enumerate() {
             let world_from_link = base * base_from_links[li].to_isometry();
-            world_from_links[li] = world_from_link;
-            first[li + 1] = first[li] + spheres.len();
-            let mine = &mut centers[first[li]..first[li + 1]];
-            for (c, s) in mine.iter_mut().zip(spheres) {
+            posed.world_from_links[li] = world_from_link;
+            posed.first[li + 1] = posed.first[li] + spheres.len();
+            for (c, s) in centers[posed.first[li]..posed.first[li + 1]].iter_mut().zip(spheres) {
                 *c = (world_from_link * Point3::from(s.center_m)).coords;
             }
-            let b = &bounds[li];
-            bound_centers[li] = (world_from_link * Point3::from(b.center_m)).coords;
-            // The base stands on the table: it is not checked against the environment.
-            if li == 0 {
-                continue;
-            }
-            let near = self.env.near_link(&bound_centers[li], b.radius_m, best.0);
+            posed.bound_centers[li] = (world_from_link * Point3::from(self.spheres.bounds[li].center_m)).coords;
+        }
+        posed
+    }
+
+    /// The nearest of the environment to the links' spheres, if nearer than `best`.
+    fn nearest_env(&self, posed: &Posed, centers: &[Vector3<f64>], mut best: (f64, Nearest)) -> (f64, Nearest) {
+        // The base stands on the table: it is not checked against the environment.
+        for (li, spheres) in self.spheres.links.iter().enumerate().skip(1) {
+            let near = self
+                .env
+                .near_link(&posed.bound_centers[li], self.spheres.bounds[li].radius_m, best.0);
             if !near.open {
                 continue;
             }
-            for (p, s) in mine.iter().zip(spheres) {
+            for (p, s) in centers[posed.first[li]..posed.first[li + 1]].iter().zip(spheres) {
                 for (k, bx) in self.env.boxes.iter().enumerate() {
                     if near.box_near(k)
                         && let Some(d) = box_distance_below(p, s.radius_m, bx, best.0)
@@ -479,27 +503,34 @@ impl CollisionModel {
                 }
             }
         }
-        let centers = &*centers;
-        if let Some(reach) = reach {
-            // Joint i turns about its axis through link i + 1's origin.
-            let axes: [(Vector3<f64>, Vector3<f64>); DOF] = std::array::from_fn(|i| {
-                let f = &world_from_links[i + 1];
-                (f.translation.vector, f.rotation * self.robot.joints[i].axis)
-            });
-            for (k, spheres) in links.iter().enumerate().skip(1) {
-                let row = &mut reach.reach_m[k];
-                for (c, s) in centers[first[k]..first[k + 1]].iter().zip(spheres) {
-                    for (i, (o, w)) in axes.iter().enumerate().take(k) {
-                        row[i] = row[i].max((c - o).cross(w).norm() + s.radius_m);
-                    }
+        best
+    }
+
+    /// How far each link's spheres reach from each joint's axis.
+    fn axis_reach(&self, posed: &Posed, centers: &[Vector3<f64>], reach: &mut AxisReach) {
+        // Joint i turns about its axis through link i + 1's origin.
+        let axes: [(Vector3<f64>, Vector3<f64>); DOF] = std::array::from_fn(|i| {
+            let f = &posed.world_from_links[i + 1];
+            (f.translation.vector, f.rotation * self.robot.joints[i].axis)
+        });
+        for (k, spheres) in self.spheres.links.iter().enumerate().skip(1) {
+            let row = &mut reach.reach_m[k];
+            for (c, s) in centers[posed.first[k]..posed.first[k + 1]].iter().zip(spheres) {
+                for (i, (o, w)) in axes.iter().enumerate().take(k) {
+                    row[i] = row[i].max((c - o).cross(w).norm() + s.radius_m);
                 }
             }
         }
+    }
+
+    /// The nearest self pair, if nearer than `best`.
+    fn nearest_self(&self, posed: &Posed, centers: &[Vector3<f64>], mut best: (f64, Nearest)) -> (f64, Nearest) {
+        let (links, bounds, first) = (&self.spheres.links, &self.spheres.bounds, &posed.first);
         for (a, b) in SELF_PAIRS {
             // Bounding spheres first: a pair, or a sphere of `a`, no nearer than the best is skipped.
             let (ba, bb) = (&bounds[a], &bounds[b]);
-            let cb = &bound_centers[b];
-            if (bound_centers[a] - cb).norm() - ba.radius_m - bb.radius_m >= best.0 + BOUND_SLACK_M {
+            let cb = &posed.bound_centers[b];
+            if (posed.bound_centers[a] - cb).norm() - ba.radius_m - bb.radius_m >= best.0 + BOUND_SLACK_M {
                 continue;
             }
             for (pa, sa) in centers[first[a]..first[a + 1]].iter().zip(&links[a]) {
