@@ -12,11 +12,12 @@
 //! inside the tray occupied, never free ([`PileColumns`]). The link pairs of [`SELF_PAIRS`]
 //! are checked against each other.
 //!
-//! Edge certification (conservative advancement, as in the collision-detection seed): with
-//! clearance d at a configuration and an upper bound R_i on how far any robot point moves per
-//! radian of joint i, the edge is safe for every parameter step dt with sum_i R_i |dq_i| dt < d.
-//! Endpoints are checked first, then midpoints in bisection order, each certifying the interval
-//! its clearance allows: coarse far from obstacles, fine near them.
+//! Queries skip only what a bound proves no nearer than the best distance so far (per link, the
+//! boxes and the pile its bounding sphere comes within reach of; self pairs by their bounding
+//! spheres), so they return the same number as examining everything. With the clearance, a query
+//! can also give how far each link reaches from each joint's axis ([`AxisReach`]), which the
+//! edge certification ([`super::certify`]: conservative advancement) bounds the motion with.
+//! `lever_m` keeps the configuration-independent bound per joint (the corridor checks use it).
 //!
 //! Units: m, rad. Frames: sphere centres in their link frame (the hand and a held part in the
 //! flange link's frame), boxes by `world_from_box`, pile columns in the tray frame of the height
@@ -24,10 +25,11 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
+use super::certify::AxisReach;
+pub use super::pile::PileColumns;
 use super::search::PlanStats;
 use crate::config::Scene;
 use crate::robot::{DOF, JointVector, Primitive, RobotModel};
-use crate::sensor::HeightMap;
 
 /// A sphere [m].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -73,6 +75,9 @@ pub struct RobotSpheres {
     pub bounds: Vec<Sphere>,
     /// Upper bound on how far any robot point moves per radian of each joint [m/rad].
     pub lever_m: [f64; DOF],
+    /// Per link k (base first) and joint j < k: upper bound on the distance of link k's sphere
+    /// points from joint j's axis in every configuration (0 for j >= k) [m].
+    pub chain_lever_m: Vec<[f64; DOF]>,
 }
 
 impl RobotSpheres {
@@ -152,7 +157,35 @@ impl RobotSpheres {
                 .fold(0.0, f64::max);
             *lever = chain + reach;
         }
-        RobotSpheres { links, bounds, lever_m }
+        // Joint j's axis passes through link j + 1's origin; link k's origin is the chain of
+        // joint origins j + 1 .. k - 1 away from it; its sphere points at most `far` from that.
+        let chain_lever_m = links
+            .iter()
+            .enumerate()
+            .map(|(k, spheres)| {
+                let far = spheres
+                    .iter()
+                    .map(|s| s.center_m.norm() + s.radius_m)
+                    .fold(0.0, f64::max);
+                std::array::from_fn(|j| {
+                    if j < k {
+                        robot.joints[(j + 1)..k]
+                            .iter()
+                            .map(|jt| jt.origin_pos_m.norm())
+                            .sum::<f64>()
+                            + far
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        RobotSpheres {
+            links,
+            bounds,
+            lever_m,
+            chain_lever_m,
+        }
     }
 }
 
@@ -167,61 +200,14 @@ pub struct EnvBox {
     pub half_m: Vector3<f64>,
 }
 
-/// Signed distance from a point to a box (negative inside) [m].
+/// Signed distance from a point to a box (negative inside) [m]: the plain formula, the reference
+/// [`box_distance_below`] is tested against.
+#[cfg(test)]
 fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
     let l = b.world_from_box.inverse_transform_point(&Point3::from(*p_world)).coords;
     let q = l.abs() - b.half_m;
     let outside = q.sup(&Vector3::zeros()).norm();
     outside + q.max().min(0.0)
-}
-
-/// The pile as the sensor saw it: height-map columns, with a disc around the grasp cut out.
-///
-/// A NaN column is not pile: it lies outside the tray's inner walls (the walls are boxes of the
-/// cell). Cells the sensor did not see inside the walls must come filled as occupied
-/// ([`HeightMap::unseen_filled`], which [`crate::pipeline::pile_map`] applies): a hole in the map
-/// is not free space. Max-pooling keeps a filled cell's height, so no column is lower than any of
-/// its cells, seen or filled.
-#[derive(Debug, Clone)]
-pub struct PileColumns {
-    /// The height map (heights above the tray floor), max-pooled to planning cells.
-    pub map: HeightMap,
-    /// Tray-frame disc (x, y, radius) whose columns are ignored (the part to be grasped) [m].
-    pub cut_out: Option<(f64, f64, f64)>,
-    /// Highest column above the tray floor [m].
-    pub max_height_m: f64,
-}
-
-impl PileColumns {
-    /// Columns from a capture's height map, max-pooled by `pool` cells per side (conservative).
-    pub fn new(map: &HeightMap, pool: usize, cut_out: Option<(f64, f64, f64)>) -> Self {
-        let pool = pool.max(1);
-        let (nx, ny) = (map.nx.div_ceil(pool), map.ny.div_ceil(pool));
-        let mut heights = vec![f64::NAN; nx * ny];
-        for j in 0..map.ny {
-            for i in 0..map.nx {
-                let h = map.height_m[j * map.nx + i];
-                let c = &mut heights[(j / pool) * nx + i / pool];
-                if h.is_finite() && (c.is_nan() || h > *c) {
-                    *c = h;
-                }
-            }
-        }
-        let max_height_m = heights.iter().cloned().filter(|h| h.is_finite()).fold(0.0, f64::max);
-        let map = HeightMap {
-            world_from_tray: map.world_from_tray,
-            cell_m: map.cell_m * pool as f64,
-            nx,
-            ny,
-            origin_xy_m: map.origin_xy_m,
-            height_m: heights,
-        };
-        PileColumns {
-            map,
-            cut_out,
-            max_height_m,
-        }
-    }
 }
 
 /// Everything the robot must not touch.
@@ -247,64 +233,87 @@ impl Environment {
         Environment { boxes, pile: None }
     }
 
-    /// Signed distance from a sphere to the environment, capped at `horizon` [m], and what is
-    /// nearest (`None` when nothing is nearer than the horizon).
-    fn sphere_distance(&self, c: &Vector3<f64>, r: f64, horizon: f64) -> (f64, Option<EnvPart>) {
-        let mut best = (horizon, None);
+    /// The environment near a link's bounding sphere (world centre `c`, radius `r`) given the best
+    /// clearance so far `best` [m]: whether anything is nearer than `best` (the link's spheres must
+    /// then be examined), and which boxes, and whether the pile, could be nearer than `best` to any
+    /// sphere inside the bounding sphere (the others cannot: a sphere inside it is no nearer to
+    /// anything than the bounding sphere is, up to [`BOUND_SLACK_M`]).
+    fn near_link(&self, c: &Vector3<f64>, r: f64, best: f64) -> NearLink {
+        let thr = best + BOUND_SLACK_M;
+        let mut near = NearLink {
+            open: false,
+            boxes: 0,
+            all_boxes: self.boxes.len() > 64,
+            pile: false,
+        };
         for (k, b) in self.boxes.iter().enumerate() {
-            let d = point_box_distance(c, b) - r;
-            if d < best.0 {
-                best = (d, Some(EnvPart::Box(k)));
-            }
-        }
-        if let Some(p) = &self.pile {
-            let m = &p.map;
-            let l = m.world_from_tray.inverse_transform_point(&Point3::from(*c)).coords;
-            // Columns within reach of the sphere (plus the horizon) only.
-            let reach = r + best.0.max(0.0);
-            let i0 = (((l.x - reach - m.origin_xy_m[0]) / m.cell_m).floor().max(0.0)) as usize;
-            let j0 = (((l.y - reach - m.origin_xy_m[1]) / m.cell_m).floor().max(0.0)) as usize;
-            let i1 = (((l.x + reach - m.origin_xy_m[0]) / m.cell_m).floor()) as isize;
-            let j1 = (((l.y + reach - m.origin_xy_m[1]) / m.cell_m).floor()) as isize;
-            if i1 >= 0 && j1 >= 0 && l.z - r < p.max_height_m + best.0 {
-                for j in j0..=(j1 as usize).min(m.ny.saturating_sub(1)) {
-                    for i in i0..=(i1 as usize).min(m.nx.saturating_sub(1)) {
-                        let h = m.height_m[j * m.nx + i];
-                        if !h.is_finite() || h <= 0.001 {
-                            continue;
-                        }
-                        let cx = m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m;
-                        let cy = m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m;
-                        if let Some((gx, gy, gr)) = p.cut_out
-                            && (cx - gx).hypot(cy - gy) < gr
-                        {
-                            continue;
-                        }
-                        // Column box from the floor to h, in the tray frame.
-                        let q = Vector3::new(
-                            (l.x - cx).abs() - m.cell_m / 2.0,
-                            (l.y - cy).abs() - m.cell_m / 2.0,
-                            (l.z - h / 2.0).abs() - h / 2.0,
-                        );
-                        let d = q.sup(&Vector3::zeros()).norm() + q.max().min(0.0) - r;
-                        if d < best.0 {
-                            best = (d, Some(EnvPart::Pile));
-                        }
-                    }
+            if let Some(d) = box_distance_below(c, r, b, thr) {
+                near.open |= d < best;
+                if k < 64 {
+                    near.boxes |= 1 << k;
                 }
             }
         }
-        best
+        if let Some(p) = &self.pile
+            && let Some(d) = p.sphere_distance(c, r, thr)
+        {
+            near.open |= d < best;
+            near.pile = true;
+        }
+        near
     }
 }
 
-/// A part of the environment: one of its boxes or the pile.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
-enum EnvPart {
-    /// `Environment::boxes[k]`.
-    Box(usize),
-    /// The pile's columns.
-    Pile,
+/// Slack on lower bounds [m]: far above the rounding of distances of a few metres, far below
+/// anything the planner resolves. Work is skipped only when a bound exceeds the best distance by
+/// this much, so rounding never skips a distance that would have been the nearest.
+const BOUND_SLACK_M: f64 = 1e-9;
+
+/// What of the environment is near a link ([`Environment::near_link`]).
+#[derive(Debug, Clone, Copy)]
+struct NearLink {
+    /// Something is nearer than the best so far: examine the link's spheres.
+    open: bool,
+    /// Bit k: box k may be nearer than the best so far.
+    boxes: u64,
+    /// More than 64 boxes: examine them all.
+    all_boxes: bool,
+    /// The pile may be nearer than the best so far.
+    pile: bool,
+}
+
+impl NearLink {
+    fn box_near(&self, k: usize) -> bool {
+        self.all_boxes || (k < 64 && self.boxes & (1 << k) != 0)
+    }
+}
+
+/// [`point_box_distance`] minus `r`, the same number, when it may be below `thr`; `None` when it
+/// surely is not (by [`BOUND_SLACK_M`]): the sphere is beyond the ball around the box by `thr`
+/// (no rotation, no square root), or outside the box by more than `thr + r` (no square root).
+/// A box that is not turned is not rotated into (the same numbers: the identity leaves them).
+#[inline]
+fn box_distance_below(p_world: &Vector3<f64>, r: f64, b: &EnvBox, thr: f64) -> Option<f64> {
+    let t = thr + r + BOUND_SLACK_M;
+    let rel = p_world - b.world_from_box.translation.vector;
+    // The box lies within |he| <= |he|_1 of its centre.
+    let ball = t + b.half_m.x + b.half_m.y + b.half_m.z;
+    if ball <= 0.0 || rel.norm_squared() >= ball * ball {
+        return None;
+    }
+    let rot = &b.world_from_box.rotation;
+    let l = if (rot.w, rot.i, rot.j, rot.k) == (1.0, 0.0, 0.0, 0.0) {
+        rel
+    } else {
+        rot.inverse_transform_vector(&rel)
+    };
+    let q = l.abs() - b.half_m;
+    let o = q.sup(&Vector3::zeros());
+    let o2 = o.x * o.x + o.y * o.y + o.z * o.z;
+    if o2 > 0.0 && (t <= 0.0 || o2 >= t * t) {
+        return None;
+    }
+    Some(o.norm() + q.max().min(0.0) - r)
 }
 
 /// What is nearest to the arm at a clearance query (named by [`CollisionModel::describe`]).
@@ -327,6 +336,19 @@ pub enum Nearest {
     /// Two links of the robot (a pair of [`SELF_PAIRS`]).
     Links(usize, usize),
 }
+
+/// The arm posed at one configuration ([`CollisionModel::nearest`]'s first step).
+struct Posed {
+    /// `world_from_link` per link, base first.
+    world_from_links: [Isometry3<f64>; DOF + 1],
+    /// Centres of the links' bounding spheres in the world.
+    bound_centers: [Vector3<f64>; DOF + 1],
+    /// Link `li`'s sphere centres are `centers[first[li]..first[li + 1]]`.
+    first: [usize; DOF + 2],
+}
+
+/// Sphere centres kept on the stack in [`CollisionModel::nearest`] (more go to the heap).
+const STACK_SPHERES: usize = 128;
 
 /// Link pairs checked for self-collision: every pair that can meet over the joint ranges, on the
 /// exact shapes (URDF primitives; link 6 with the flange, the hand, and the envelope of any
@@ -394,48 +416,133 @@ impl CollisionModel {
     /// edge checks, which never need the name ([`CollisionModel::describe`] gives it).
     pub fn nearest(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest) {
         stats.clearance_checks += 1;
+        self.nearest_inner(q, None)
+    }
+
+    /// As [`CollisionModel::nearest`], the clearance only, with how far each link reaches from
+    /// each joint's axis at `q` (what the edge certification bounds the motion with).
+    pub fn nearest_reach(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, AxisReach) {
+        let (d, _, reach) = self.nearest_named_reach(q, stats);
+        (d, reach)
+    }
+
+    /// [`CollisionModel::nearest`] and [`CollisionModel::nearest_reach`] in one query.
+    pub fn nearest_named_reach(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest, AxisReach) {
+        stats.clearance_checks += 1;
+        let mut reach = AxisReach::zero();
+        let (d, nearest) = self.nearest_inner(q, Some(&mut reach));
+        (d, nearest, reach)
+    }
+
+    fn nearest_inner(&self, q: &JointVector, reach: Option<&mut AxisReach>) -> (f64, Nearest) {
+        let links = &self.spheres.links;
+        let total: usize = links.iter().map(Vec::len).sum();
+        let mut on_stack = [Vector3::zeros(); STACK_SPHERES];
+        let mut on_heap = Vec::new();
+        let centers: &mut [Vector3<f64>] = if total <= STACK_SPHERES {
+            &mut on_stack[..total]
+        } else {
+            on_heap.resize(total, Vector3::zeros());
+            &mut on_heap
+        };
+        let posed = self.pose(q, centers);
+        let centers = &*centers;
+        let best = self.nearest_env(&posed, centers, (self.horizon_m, Nearest::Nothing));
+        if let Some(reach) = reach {
+            self.axis_reach(&posed, centers, reach);
+        }
+        self.nearest_self(&posed, centers, best)
+    }
+
+    /// The link frames, sphere centres (into `centers`, link after link) and bounding-sphere
+    /// centres at `q`, in the world.
+    fn pose(&self, q: &JointVector, centers: &mut [Vector3<f64>]) -> Posed {
         let base_from_links = self.robot.base_from_links(q);
         let base = self.robot.world_from_base;
-        let mut best = (self.horizon_m, Nearest::Nothing);
-        // Sphere centres in the world, link after link; link `li`'s from `first[li]` on.
-        let links = &self.spheres.links;
-        let mut centers: Vec<Vector3<f64>> = Vec::with_capacity(links.iter().map(Vec::len).sum());
-        let mut first = [0usize; DOF + 2];
-        for (li, spheres) in links.iter().enumerate() {
+        let mut posed = Posed {
+            world_from_links: [Isometry3::identity(); DOF + 1],
+            bound_centers: [Vector3::zeros(); DOF + 1],
+            first: [0; DOF + 2],
+        };
+        for (li, spheres) in self.spheres.links.iter().enumerate() {
             let world_from_link = base * base_from_links[li].to_isometry();
-            first[li] = centers.len();
-            centers.extend(
-                spheres
-                    .iter()
-                    .map(|s| (world_from_link * Point3::from(s.center_m)).coords),
-            );
-            // The base stands on the table: it is not checked against the environment.
-            if li > 0 {
-                let b = &self.spheres.bounds[li];
-                let bc = (world_from_link * Point3::from(b.center_m)).coords;
-                let (db, _) = self.env.sphere_distance(&bc, b.radius_m, best.0);
-                if db < best.0 {
-                    for (p, s) in centers[first[li]..].iter().zip(spheres) {
-                        let (d, part) = self.env.sphere_distance(p, s.radius_m, best.0);
-                        if d < best.0 {
-                            best = (
-                                d,
-                                match part {
-                                    Some(EnvPart::Box(k)) => Nearest::Box { link: li, k },
-                                    Some(EnvPart::Pile) => Nearest::Pile { link: li },
-                                    None => Nearest::Nothing,
-                                },
-                            );
-                        }
+            posed.world_from_links[li] = world_from_link;
+            posed.first[li + 1] = posed.first[li] + spheres.len();
+            for (c, s) in centers[posed.first[li]..posed.first[li + 1]].iter_mut().zip(spheres) {
+                *c = (world_from_link * Point3::from(s.center_m)).coords;
+            }
+            posed.bound_centers[li] = (world_from_link * Point3::from(self.spheres.bounds[li].center_m)).coords;
+        }
+        posed
+    }
+
+    /// The nearest of the environment to the links' spheres, if nearer than `best`.
+    fn nearest_env(&self, posed: &Posed, centers: &[Vector3<f64>], mut best: (f64, Nearest)) -> (f64, Nearest) {
+        // The base stands on the table: it is not checked against the environment.
+        for (li, spheres) in self.spheres.links.iter().enumerate().skip(1) {
+            let near = self
+                .env
+                .near_link(&posed.bound_centers[li], self.spheres.bounds[li].radius_m, best.0);
+            if !near.open {
+                continue;
+            }
+            for (p, s) in centers[posed.first[li]..posed.first[li + 1]].iter().zip(spheres) {
+                for (k, bx) in self.env.boxes.iter().enumerate() {
+                    if near.box_near(k)
+                        && let Some(d) = box_distance_below(p, s.radius_m, bx, best.0)
+                        && d < best.0
+                    {
+                        best = (d, Nearest::Box { link: li, k });
                     }
+                }
+                if near.pile
+                    && let Some(pile) = &self.env.pile
+                    && let Some(d) = pile.sphere_distance(p, s.radius_m, best.0)
+                {
+                    best = (d, Nearest::Pile { link: li });
                 }
             }
         }
-        first[links.len()] = centers.len();
-        let on = |li: usize| &centers[first[li]..first[li + 1]];
+        best
+    }
+
+    /// How far each link's spheres reach from each joint's axis.
+    fn axis_reach(&self, posed: &Posed, centers: &[Vector3<f64>], reach: &mut AxisReach) {
+        // Joint i turns about its axis through link i + 1's origin.
+        let axes: [(Vector3<f64>, Vector3<f64>); DOF] = std::array::from_fn(|i| {
+            let f = &posed.world_from_links[i + 1];
+            (f.translation.vector, f.rotation * self.robot.joints[i].axis)
+        });
+        for (k, spheres) in self.spheres.links.iter().enumerate().skip(1) {
+            let row = &mut reach.reach_m[k];
+            for (c, s) in centers[posed.first[k]..posed.first[k + 1]].iter().zip(spheres) {
+                for (i, (o, w)) in axes.iter().enumerate().take(k) {
+                    row[i] = row[i].max((c - o).cross(w).norm() + s.radius_m);
+                }
+            }
+        }
+    }
+
+    /// The nearest self pair, if nearer than `best`.
+    fn nearest_self(&self, posed: &Posed, centers: &[Vector3<f64>], mut best: (f64, Nearest)) -> (f64, Nearest) {
+        let (links, bounds, first) = (&self.spheres.links, &self.spheres.bounds, &posed.first);
         for (a, b) in SELF_PAIRS {
-            for (pa, sa) in on(a).iter().zip(&links[a]) {
-                for (pb, sb) in on(b).iter().zip(&links[b]) {
+            // Bounding spheres first: a pair, or a sphere of `a`, no nearer than the best is skipped.
+            let (ba, bb) = (&bounds[a], &bounds[b]);
+            let cb = &posed.bound_centers[b];
+            if (posed.bound_centers[a] - cb).norm() - ba.radius_m - bb.radius_m >= best.0 + BOUND_SLACK_M {
+                continue;
+            }
+            for (pa, sa) in centers[first[a]..first[a + 1]].iter().zip(&links[a]) {
+                if (pa - cb).norm() - sa.radius_m - bb.radius_m >= best.0 + BOUND_SLACK_M {
+                    continue;
+                }
+                for (pb, sb) in centers[first[b]..first[b + 1]].iter().zip(&links[b]) {
+                    let t = best.0 + sa.radius_m + sb.radius_m + BOUND_SLACK_M;
+                    let dd = (pa - pb).norm_squared();
+                    if t <= 0.0 || dd >= t * t {
+                        continue;
+                    }
                     let d = (pa - pb).norm() - sa.radius_m - sb.radius_m;
                     if d < best.0 {
                         best = (d, Nearest::Links(a, b));
@@ -460,56 +567,6 @@ impl CollisionModel {
     /// Whether `q` is within limits and clear by the margin.
     pub fn free(&self, q: &JointVector, stats: &mut PlanStats) -> bool {
         self.robot.within_limits(q, 0.0) && self.nearest(q, stats).0 > self.margin_m
-    }
-
-    /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
-    /// every configuration on it is clear by the margin.
-    pub fn certify_edge(&self, a: &JointVector, b: &JointVector, stats: &mut PlanStats) -> bool {
-        self.certify_edge_with_margin(a, b, self.margin_m, stats)
-    }
-
-    /// As [`CollisionModel::certify_edge`], with every configuration on the edge required clear by
-    /// `margin_m` instead of the model's margin (a corridor check raises it by how far the motion
-    /// may stray from the edge).
-    pub fn certify_edge_with_margin(
-        &self,
-        a: &JointVector,
-        b: &JointVector,
-        margin_m: f64,
-        stats: &mut PlanStats,
-    ) -> bool {
-        stats.edges += 1;
-        let sweep: f64 = (0..DOF).map(|i| self.spheres.lever_m[i] * (b[i] - a[i]).abs()).sum();
-        let at = |t: f64| a + (b - a) * t;
-        let cover = |d: f64| {
-            if sweep <= 0.0 {
-                f64::INFINITY
-            } else {
-                (d - margin_m) / sweep
-            }
-        };
-        let d0 = self.nearest(a, stats).0;
-        let d1 = self.nearest(b, stats).0;
-        if d0 <= margin_m || d1 <= margin_m {
-            return false;
-        }
-        // Uncovered intervals, processed breadth-first: midpoints spread out over the edge.
-        let mut queue = std::collections::VecDeque::from([(cover(d0), 1.0 - cover(d1))]);
-        while let Some((lo, hi)) = queue.pop_front() {
-            if lo >= hi {
-                continue;
-            }
-            let mid = 0.5 * (lo + hi);
-            let d = self.nearest(&at(mid), stats).0;
-            // A certified step must make progress: below a micrometre of motion, call it a collision.
-            let c = cover(d);
-            if d <= margin_m || c * sweep < 1e-6 {
-                return false;
-            }
-            queue.push_back((lo, mid - c));
-            queue.push_back((mid + c, hi));
-        }
-        true
     }
 
     /// The baseline's edge check: configurations every `step_rad` (max-norm), not certified.
@@ -544,6 +601,53 @@ mod tests {
             let p = Vector3::new(0.015, 0.0, z);
             assert!(c.iter().any(|sp| (p - sp.center_m).norm() <= sp.radius_m + 1e-12));
         }
+    }
+
+    /// The pruned box distance gives the plain formula's number bit for bit whenever it may be
+    /// below the threshold, and declines only when the plain number is not below it. The negative
+    /// control: a prefilter that forgets the sphere's radius declines distances below the
+    /// threshold, which the check catches.
+    #[test]
+    fn box_distance_below_is_the_plain_distance_or_surely_not_below() {
+        use rand::{RngExt, SeedableRng};
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
+        let turned = EnvBox {
+            name: "turned".into(),
+            world_from_box: Isometry3::new(Vector3::new(0.3, -0.2, 0.1), Vector3::new(0.2, -0.4, 1.1)),
+            half_m: Vector3::new(0.1, 0.02, 0.05),
+        };
+        let straight = EnvBox {
+            name: "straight".into(),
+            world_from_box: Isometry3::translation(0.3, -0.2, 0.1),
+            half_m: Vector3::new(0.1, 0.02, 0.0),
+        };
+        let (mut given, mut declined, mut missed) = (0, 0, 0);
+        for k in 0..40_000 {
+            let b = if k % 2 == 0 { &turned } else { &straight };
+            let p = Vector3::new(0.3, -0.2, 0.1) + Vector3::from_fn(|_, _| rng.random_range(-0.2..0.2));
+            let r = rng.random_range(0.0..0.08);
+            let thr = rng.random_range(-0.05..0.2);
+            let plain = point_box_distance(&p, b) - r;
+            match box_distance_below(&p, r, b, thr) {
+                Some(d) => {
+                    assert_eq!(d.to_bits(), plain.to_bits(), "{p:?} {r} {thr}");
+                    given += 1;
+                }
+                None => {
+                    assert!(plain >= thr, "{p:?} {r} {thr}: {plain} declined");
+                    declined += 1;
+                }
+            }
+            // A prefilter that forgets the radius (declines when the centre is thr outside).
+            if box_distance_below(&p, 0.0, b, thr).is_none() && plain < thr {
+                missed += 1;
+            }
+        }
+        assert!(given > 4000 && declined > 4000, "{given} given, {declined} declined");
+        assert!(
+            missed > 100,
+            "the control: forgetting the radius must decline distances below: {missed}"
+        );
     }
 
     #[test]

@@ -14,12 +14,15 @@
 //!
 //! Units: rad, s; tool moves in m. Frames: joint space; the escape's tool lines in the world.
 
+use std::cell::RefCell;
+use std::collections::HashMap;
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
+use super::certify::AxisReach;
 use super::model::CollisionModel;
 use super::search::{self, Budget, ConfigSpace, EdgeValidity, JointBox, PlanStats, Search};
 use crate::robot::{DOF, JointVector};
@@ -102,12 +105,69 @@ impl Default for PlanOptions {
 
 /// Certified edges (ours): conservative advancement, every configuration on the edge clear by the
 /// margin ([`CollisionModel::certify_edge`]).
-#[derive(Debug, Clone, Copy)]
-pub struct CertifiedEdges<'a>(pub &'a CollisionModel);
+///
+/// Within one query it remembers the clearance of every edge end and the verdict on every edge it
+/// certified: a waypoint or tree node is an end of many edges (the escape's steps, the joins,
+/// the tree's extensions, the shortcuts), and shortcutting retries edges already judged. Both are
+/// pure functions of the configurations, so remembering them changes no verdict, only the work.
+#[derive(Debug)]
+pub struct CertifiedEdges<'a> {
+    model: &'a CollisionModel,
+    memo: RefCell<Memo>,
+}
+
+/// What [`CertifiedEdges`] remembers, keyed by the configurations' bits.
+#[derive(Debug, Default)]
+struct Memo {
+    clearance_m: HashMap<[u64; DOF], (f64, AxisReach)>,
+    verdicts: HashMap<([u64; DOF], [u64; DOF]), bool>,
+}
+
+fn bits(q: &JointVector) -> [u64; DOF] {
+    std::array::from_fn(|i| q[i].to_bits())
+}
+
+impl<'a> CertifiedEdges<'a> {
+    /// Certified edges on `model`, nothing remembered yet.
+    pub fn new(model: &'a CollisionModel) -> Self {
+        CertifiedEdges {
+            model,
+            memo: RefCell::new(Memo::default()),
+        }
+    }
+
+    /// Remembers the clearance and axis reach at `q`, as [`CollisionModel::nearest_reach`] gave
+    /// them.
+    pub fn remember(&self, q: &JointVector, end: (f64, AxisReach)) {
+        self.memo.borrow_mut().clearance_m.insert(bits(q), end);
+    }
+
+    /// The clearance and axis reach at `q` ([`CollisionModel::nearest_reach`]), computed once per
+    /// configuration.
+    fn clearance_m(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, AxisReach) {
+        let key = bits(q);
+        if let Some(end) = self.memo.borrow().clearance_m.get(&key) {
+            return *end;
+        }
+        let end = self.model.nearest_reach(q, stats);
+        self.memo.borrow_mut().clearance_m.insert(key, end);
+        end
+    }
+}
 
 impl EdgeValidity<JointVector> for CertifiedEdges<'_> {
     fn valid(&self, a: &JointVector, b: &JointVector, stats: &mut PlanStats) -> bool {
-        self.0.certify_edge(a, b, stats)
+        let key = (bits(a), bits(b));
+        if let Some(v) = self.memo.borrow().verdicts.get(&key) {
+            return *v;
+        }
+        let end_a = self.clearance_m(a, stats);
+        let end_b = self.clearance_m(b, stats);
+        let v = self
+            .model
+            .certify_edge_from(a, end_a, b, end_b, self.model.margin_m, stats);
+        self.memo.borrow_mut().verdicts.insert(key, v);
+        v
     }
 }
 
@@ -146,7 +206,7 @@ impl CollisionModel {
     ) -> Result<Plan, PlanError> {
         let t0 = Instant::now();
         let mut stats = PlanStats::default();
-        let (ds, ns) = self.nearest(start, &mut stats);
+        let (ds, ns, reach_s) = self.nearest_named_reach(start, &mut stats);
         if !self.robot.within_limits(start, 1e-9) || ds <= self.margin_m {
             return Err(PlanError::StartInCollision(format!(
                 "clearance {:.1} mm between {}",
@@ -154,7 +214,7 @@ impl CollisionModel {
                 self.describe(ns)
             )));
         }
-        let (dg, ng) = self.nearest(goal, &mut stats);
+        let (dg, ng, reach_g) = self.nearest_named_reach(goal, &mut stats);
         if !self.robot.within_limits(goal, 1e-9) || dg <= self.margin_m {
             return Err(PlanError::GoalInCollision(format!(
                 "clearance {:.1} mm between {}",
@@ -170,7 +230,9 @@ impl CollisionModel {
         };
         let found = match opts.algorithm {
             Algorithm::Ours => {
-                let edges = CertifiedEdges(self);
+                let edges = CertifiedEdges::new(self);
+                edges.remember(start, (ds, reach_s));
+                edges.remember(goal, (dg, reach_g));
                 let search = Search {
                     space: &space,
                     edges: &edges,
@@ -209,6 +271,7 @@ impl CollisionModel {
 
     /// Ours: direct; else lift confined ends out along Cartesian lines and try to join the lines
     /// directly at rising heights; else RRT-Connect between the line ends; shortcut the result.
+    /// The lines are grown only as far as the joins tried so far need them.
     fn plan_ours(
         &self,
         search: &Search<'_, JointBox<DOF>, CertifiedEdges<'_>>,
@@ -221,21 +284,41 @@ impl CollisionModel {
         if edges.valid(start, goal, stats) {
             return Some((vec![*start, *goal], "direct"));
         }
-        let mut head = vec![*start];
-        head.extend(self.escape(start, stats));
-        let mut tail = vec![*goal];
-        tail.extend(self.escape(goal, stats));
-        let top = head.len().max(tail.len()) - 1;
-        for k in (2..=top).step_by(3).chain(std::iter::once(top)) {
-            let (i, j) = (k.min(head.len() - 1), k.min(tail.len() - 1));
-            if edges.valid(&head[i], &tail[j], stats) {
-                let path: Vec<JointVector> = head[..=i].iter().chain(tail[..=j].iter().rev()).copied().collect();
-                return Some((
-                    search::shortcut(edges, path, SHORTCUT_ROUNDS, rng, stats),
-                    "escape + direct",
-                ));
+        let mut head = Escape::new(self, start, edges, stats);
+        let mut tail = Escape::new(self, goal, edges, stats);
+        // Joins at k = 2, 5, 8, ... up to the longer line's last step, then at that step.
+        let join = |head: &Escape, tail: &Escape, k: usize, stats: &mut PlanStats| {
+            let (i, j) = (k.min(head.path.len() - 1), k.min(tail.path.len() - 1));
+            edges.valid(&head.path[i], &tail.path[j], stats).then(|| {
+                head.path[..=i]
+                    .iter()
+                    .chain(tail.path[..=j].iter().rev())
+                    .copied()
+                    .collect::<Vec<JointVector>>()
+            })
+        };
+        let mut k = 2;
+        let joined = loop {
+            head.grow_to(self, k + 1, edges, stats);
+            tail.grow_to(self, k + 1, edges, stats);
+            // A line still growing is longer than k, so k is within the longer line.
+            if head.done && tail.done && k > head.path.len().max(tail.path.len()) - 1 {
+                head.grow_to(self, usize::MAX, edges, stats);
+                tail.grow_to(self, usize::MAX, edges, stats);
+                break join(&head, &tail, head.path.len().max(tail.path.len()) - 1, stats);
             }
+            if let Some(path) = join(&head, &tail, k, stats) {
+                break Some(path);
+            }
+            k += 3;
+        };
+        if let Some(path) = joined {
+            return Some((
+                search::shortcut(edges, path, SHORTCUT_ROUNDS, rng, stats),
+                "escape + direct",
+            ));
         }
+        let (head, tail) = (head.path, tail.path);
         let (a, b) = (head[head.len() - 1], tail[tail.len() - 1]);
         let middle = search::rrt_connect(search, &a, &b, rng, stats)?;
         let mut path = head;
@@ -246,38 +329,75 @@ impl CollisionModel {
             "escape + rrt-connect",
         ))
     }
+}
 
-    /// A workspace-guided escape from a confined configuration: the tool moved along a straight
-    /// Cartesian line (up first; sideways if up is blocked within 3 cm) in 1 cm steps, each step a
-    /// certified edge, up to 25 cm. Returns the configurations after `q` along the line.
-    fn escape(&self, q: &JointVector, stats: &mut PlanStats) -> Vec<JointVector> {
-        let start = self.robot.world_from_tool(q);
-        let mut best = Vec::new();
+/// Longest escape line [steps of [`ESCAPE_STEP_M`]].
+const ESCAPE_STEPS: usize = 25;
+
+/// Tool travel per escape step [m].
+const ESCAPE_STEP_M: f64 = 0.01;
+
+/// Steps an escape line must make in a direction for it to be taken.
+const ESCAPE_MIN_STEPS: usize = 3;
+
+/// A workspace-guided escape from a confined configuration: the tool moved along a straight
+/// Cartesian line (up first; then along +x, -x, +y, -y if a line ends within
+/// [`ESCAPE_MIN_STEPS`] steps) in [`ESCAPE_STEP_M`] steps, each a certified edge, up to
+/// [`ESCAPE_STEPS`] steps; the first direction making [`ESCAPE_MIN_STEPS`] steps is taken, else
+/// the one going farthest (the first of equals). Grown on demand.
+struct Escape {
+    /// The configuration escaped from, then one per step taken.
+    path: Vec<JointVector>,
+    /// `world_from_tool` at the start.
+    start: Isometry3<f64>,
+    /// The direction taken [unit, world].
+    dir: Vector3<f64>,
+    /// The line has ended (blocked, no IK, too large a joint jump, or at full length).
+    done: bool,
+}
+
+impl Escape {
+    /// Chooses the direction out of `q`: grows each line in turn until one makes
+    /// [`ESCAPE_MIN_STEPS`] steps.
+    fn new(model: &CollisionModel, q: &JointVector, edges: &CertifiedEdges<'_>, stats: &mut PlanStats) -> Self {
+        let start = model.robot.world_from_tool(q);
+        let mut best: Option<Escape> = None;
         for dir in [Vector3::z(), Vector3::x(), -Vector3::x(), Vector3::y(), -Vector3::y()] {
-            let mut path = Vec::new();
-            let mut cur = *q;
-            for k in 1..=25 {
-                let pose = Isometry3::from_parts(
-                    Translation3::from(start.translation.vector + dir * (0.01 * k as f64)),
-                    start.rotation,
-                );
-                let Ok(sol) = self.robot.ik_tool_nearest(&pose, &cur) else {
-                    break;
-                };
-                if (sol.q - cur).amax() > 0.3 || !self.certify_edge(&cur, &sol.q, stats) {
-                    break;
-                }
-                cur = sol.q;
-                path.push(cur);
+            let mut line = Escape {
+                path: vec![*q],
+                start,
+                dir,
+                done: false,
+            };
+            line.grow_to(model, ESCAPE_MIN_STEPS + 1, edges, stats);
+            if line.path.len() > ESCAPE_MIN_STEPS {
+                return line;
             }
-            if path.len() >= 3 {
-                return path;
-            }
-            if path.len() > best.len() {
-                best = path;
+            if best.as_ref().is_none_or(|b| line.path.len() > b.path.len()) {
+                best = Some(line);
             }
         }
-        best
+        best.expect("five directions tried")
+    }
+
+    /// Grows the line until it holds `n` configurations or ends.
+    fn grow_to(&mut self, model: &CollisionModel, n: usize, edges: &CertifiedEdges<'_>, stats: &mut PlanStats) {
+        while !self.done && self.path.len() < n {
+            let k = self.path.len();
+            if k > ESCAPE_STEPS {
+                self.done = true;
+                break;
+            }
+            let cur = self.path[k - 1];
+            let pose = Isometry3::from_parts(
+                Translation3::from(self.start.translation.vector + self.dir * (ESCAPE_STEP_M * k as f64)),
+                self.start.rotation,
+            );
+            match model.robot.ik_tool_nearest(&pose, &cur) {
+                Ok(sol) if (sol.q - cur).amax() <= 0.3 && edges.valid(&cur, &sol.q, stats) => self.path.push(sol.q),
+                _ => self.done = true,
+            }
+        }
     }
 }
 

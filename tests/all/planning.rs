@@ -71,7 +71,7 @@ fn exact(model: &CollisionModel, scene: &LoadedScene) -> Exact {
         })
         .collect();
     if let Some(p) = &model.env.pile {
-        let m = &p.map;
+        let m = p.map();
         for j in 0..m.ny {
             for i in 0..m.nx {
                 let h = m.height_m[j * m.nx + i];
@@ -82,7 +82,7 @@ fn exact(model: &CollisionModel, scene: &LoadedScene) -> Exact {
                     m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m,
                     m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m,
                 );
-                if let Some((gx, gy, gr)) = p.cut_out
+                if let Some((gx, gy, gr)) = p.cut_out()
                     && (cx - gx).hypot(cy - gy) < gr
                 {
                     continue;

@@ -1,0 +1,259 @@
+//! Certified edges: conservative advancement along a straight joint-space edge, with a motion
+//! bound read off the arm's pose at each examined configuration.
+//!
+//! Job: decide whether every configuration of the edge a -> b is clear by a margin, examining as
+//! few configurations as the geometry allows. At a configuration with clearance d (a lower bound,
+//! [`CollisionModel::nearest`]), the edge is safe as far as no robot point can have moved
+//! d − margin. How far a point p of link k moves while the joints move by t·Δq:
+//!
+//! - Its speed is at most Σ_i |Δq_i| ρ_i(p), ρ_i the distance from joint i's axis (i < k).
+//! - ρ_i(p) does not change with joints ≤ i (they carry the axis and p together, or turn p about
+//!   the axis); joints j > i move p relative to the axis at most |Δq_j| λ_jk per unit of t, where
+//!   λ_jk bounds the distance of link k's points from joint j's axis in every configuration (the
+//!   chain's offsets from joint j to link k plus the farthest sphere point from link k's origin).
+//! - So over |t| ≤ τ around the configuration: displacement ≤ A τ + B τ² / 2, with
+//!   A = Σ_i |Δq_i| ρ_i(now) (read off the pose: [`AxisReach`]) and
+//!   B = Σ_i |Δq_i| Σ_{i<j<k} |Δq_j| λ_jk (fixed per edge).
+//!
+//! Both are taken as the largest over the links. A self pair's distance shrinks no faster: in the
+//! frame of the pair's lower link only the joints between them move the upper one, a subset of
+//! the same terms. Ends first, then midpoints of the uncovered intervals, breadth-first; each
+//! examined configuration covers τ on either side. An end within the margin, or a configuration
+//! between them clear by less than the margin plus 1 µm, rejects the edge. The verdict is that of any conservative bound: the edge is
+//! accepted when its clearance stays above the margin (by more than 1 µm) all along, rejected
+//! when it dips below it anywhere; only the cost depends on the bound.
+//!
+//! Units: m, rad; the edge parameter t in [0, 1]. Frames: the world (axes and sphere centres).
+
+use super::model::CollisionModel;
+use super::search::PlanStats;
+use crate::robot::{DOF, JointVector};
+
+/// A configuration clear by less than the margin plus this is a collision [m] (a certified step
+/// must make progress).
+const MIN_PROGRESS_M: f64 = 1e-6;
+
+/// How far each link's spheres reach from each joint's axis at one configuration: `reach_m[k][i]`
+/// is the largest distance from joint i's axis to a point of link k's spheres (0 for i ≥ k) [m].
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct AxisReach {
+    /// Per link (base first), per joint [m].
+    pub reach_m: [[f64; DOF]; DOF + 1],
+}
+
+impl AxisReach {
+    /// Nothing reaches anywhere (a robot without spheres).
+    pub fn zero() -> Self {
+        AxisReach {
+            reach_m: [[0.0; DOF]; DOF + 1],
+        }
+    }
+
+    /// A: the fastest any sphere point moves per unit of t when the joints move by `dq_abs` per
+    /// unit of t, here [m].
+    pub fn speed_m(&self, dq_abs: &[f64; DOF]) -> f64 {
+        self.reach_m
+            .iter()
+            .map(|r| (0..DOF).map(|i| dq_abs[i] * r[i]).sum::<f64>())
+            .fold(0.0, f64::max)
+    }
+}
+
+/// B: the bound on how fast the speed of a sphere point can grow per unit of t along an edge with
+/// joint motion `dq_abs` per unit of t, from the configuration-independent levers
+/// `chain_lever_m[k][j]` (largest distance of link k's points from joint j's axis) [m].
+pub fn speed_growth_m(chain_lever_m: &[[f64; DOF]], dq_abs: &[f64; DOF]) -> f64 {
+    chain_lever_m
+        .iter()
+        .enumerate()
+        .map(|(k, lever)| {
+            let upto = k.min(DOF);
+            (0..upto)
+                .map(|i| dq_abs[i] * ((i + 1)..upto).map(|j| dq_abs[j] * lever[j]).sum::<f64>())
+                .sum::<f64>()
+        })
+        .fold(0.0, f64::max)
+}
+
+/// The largest τ with `speed τ + growth τ² / 2 <= room` (room > 0) [units of t].
+fn cover(room_m: f64, speed_m: f64, growth_m: f64) -> f64 {
+    let den = speed_m + (speed_m * speed_m + 2.0 * growth_m * room_m).sqrt();
+    if den > 0.0 { 2.0 * room_m / den } else { f64::INFINITY }
+}
+
+impl CollisionModel {
+    /// Certifies the straight joint-space edge a -> b by conservative advancement: true only if
+    /// every configuration on it is clear by the margin.
+    pub fn certify_edge(&self, a: &JointVector, b: &JointVector, stats: &mut PlanStats) -> bool {
+        self.certify_edge_with_margin(a, b, self.margin_m, stats)
+    }
+
+    /// As [`CollisionModel::certify_edge`], with every configuration on the edge required clear by
+    /// `margin_m` instead of the model's margin (a corridor check raises it by how far the motion
+    /// may stray from the edge).
+    pub fn certify_edge_with_margin(
+        &self,
+        a: &JointVector,
+        b: &JointVector,
+        margin_m: f64,
+        stats: &mut PlanStats,
+    ) -> bool {
+        let end_a = self.nearest_reach(a, stats);
+        let end_b = self.nearest_reach(b, stats);
+        self.certify_edge_from(a, end_a, b, end_b, margin_m, stats)
+    }
+
+    /// As [`CollisionModel::certify_edge_with_margin`], with the clearance and axis reach of the
+    /// ends already known (as [`CollisionModel::nearest_reach`] gives them).
+    pub fn certify_edge_from(
+        &self,
+        a: &JointVector,
+        (d0, reach0): (f64, AxisReach),
+        b: &JointVector,
+        (d1, reach1): (f64, AxisReach),
+        margin_m: f64,
+        stats: &mut PlanStats,
+    ) -> bool {
+        stats.edges += 1;
+        if d0 <= margin_m || d1 <= margin_m {
+            return false;
+        }
+        let dq = b - a;
+        let dq_abs: [f64; DOF] = std::array::from_fn(|i| dq[i].abs());
+        let growth = speed_growth_m(&self.spheres.chain_lever_m, &dq_abs);
+        let covered = |d: f64, reach: &AxisReach| cover(d - margin_m, reach.speed_m(&dq_abs), growth);
+        // Uncovered intervals, processed breadth-first: midpoints spread out over the edge.
+        let mut queue = std::collections::VecDeque::from([(covered(d0, &reach0), 1.0 - covered(d1, &reach1))]);
+        while let Some((lo, hi)) = queue.pop_front() {
+            if lo >= hi {
+                continue;
+            }
+            let mid = 0.5 * (lo + hi);
+            let (d, reach) = self.nearest_reach(&(a + dq * mid), stats);
+            // A certified step must make progress: within a micrometre of the margin, a collision.
+            if d <= margin_m || d - margin_m < MIN_PROGRESS_M {
+                return false;
+            }
+            let c = covered(d, &reach);
+            queue.push_back((lo, mid - c));
+            queue.push_back((mid + c, hi));
+        }
+        true
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::LoadedScene;
+    use crate::planning::{Environment, RobotSpheres};
+    use crate::robot::RobotModel;
+    use nalgebra::{Isometry3, Point3, Vector3};
+    use rand::{RngExt, SeedableRng};
+    use rand_chacha::ChaCha8Rng;
+
+    /// The arm of the default cell holding a 12 x 5 x 3 cm part (the held part's spheres lie
+    /// off the J6 axis), its collision model over the cell.
+    fn model() -> CollisionModel {
+        let scene = LoadedScene::embedded_default().unwrap();
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let held = (
+            Isometry3::translation(0.02, 0.01, 0.015),
+            Vector3::new(0.06, 0.025, 0.015),
+        );
+        let spheres = RobotSpheres::new(&robot, &scene.scene, Some(held));
+        CollisionModel::new(&robot, spheres, Environment::from_scene(&scene.scene))
+    }
+
+    /// The largest excess, over random configurations and joint motions, of any sphere point's
+    /// displacement (centre and six surface points per sphere, 100 steps of t on either side)
+    /// over `bound(A, B, |t|)` [m].
+    fn worst_excess(model: &CollisionModel, seed: u64, bound: impl Fn(f64, f64, f64) -> f64) -> f64 {
+        let robot = &model.robot;
+        let mut rng = ChaCha8Rng::seed_from_u64(seed);
+        let box_ = model.joint_box();
+        let offsets: Vec<Vector3<f64>> = [
+            Vector3::zeros(),
+            Vector3::x(),
+            -Vector3::x(),
+            Vector3::y(),
+            -Vector3::y(),
+            Vector3::z(),
+            -Vector3::z(),
+        ]
+        .to_vec();
+        let mut worst = f64::NEG_INFINITY;
+        for _ in 0..300 {
+            let q0 = JointVector::from_fn(|i, _| rng.random_range(box_.lower_rad[i]..=box_.upper_rad[i]));
+            let dq = JointVector::from_fn(|_, _| rng.random_range(-1.0..1.0));
+            let dq_abs: [f64; DOF] = std::array::from_fn(|i| dq[i].abs());
+            let (_, reach) = model.nearest_reach(&q0, &mut PlanStats::default());
+            let a = reach.speed_m(&dq_abs);
+            let b = speed_growth_m(&model.spheres.chain_lever_m, &dq_abs);
+            let points = |q: &JointVector| -> Vec<Vector3<f64>> {
+                let frames = robot.world_from_links(q);
+                model
+                    .spheres
+                    .links
+                    .iter()
+                    .enumerate()
+                    .flat_map(|(k, ss)| {
+                        let f = frames[k];
+                        ss.iter()
+                            .flat_map(|s| {
+                                offsets
+                                    .iter()
+                                    .map(move |o| (f * Point3::from(s.center_m + o * s.radius_m)).coords)
+                            })
+                            .collect::<Vec<_>>()
+                    })
+                    .collect()
+            };
+            let p0 = points(&q0);
+            for step in -100..=100 {
+                let t = step as f64 / 100.0 * 0.8;
+                let pt = points(&(q0 + dq * t));
+                let moved = p0.iter().zip(&pt).map(|(a, b)| (a - b).norm()).fold(0.0, f64::max);
+                worst = worst.max(moved - bound(a, b, t.abs()));
+            }
+        }
+        worst
+    }
+
+    /// The motion bound holds for every sphere point: displacement over |t| <= 0.8 with joint
+    /// motions up to 1 rad per unit of t never exceeds A |t| + B t^2 / 2. The negative control:
+    /// the bound lowered by 20 % is exceeded (measured: by 9.8 mm; at 90 % it still holds), so
+    /// the check sees a bound that is too low, and this one is within 10-20 % of the motion.
+    #[test]
+    fn no_sphere_point_moves_farther_than_the_bound() {
+        let m = model();
+        let excess = worst_excess(&m, 1, |a, b, t| a * t + b * t * t / 2.0);
+        assert!(excess <= 1e-12, "a sphere point moved {excess} m beyond the bound");
+        let lowered = worst_excess(&m, 1, |a, b, t| 0.8 * (a * t + b * t * t / 2.0));
+        assert!(
+            lowered > 1e-3,
+            "the bound lowered by 20 % held ({lowered} m): the test is blind"
+        );
+    }
+
+    #[test]
+    fn cover_solves_the_quadratic_and_reduces_to_the_linear_bound() {
+        let (room, a, b) = (0.01, 0.7, 3.0);
+        let t = cover(room, a, b);
+        assert!((a * t + b * t * t / 2.0 - room).abs() < 1e-15);
+        assert!((cover(room, a, 0.0) - room / a).abs() < 1e-15);
+        assert_eq!(cover(room, 0.0, 0.0), f64::INFINITY);
+    }
+
+    #[test]
+    fn speed_growth_sums_each_joint_with_the_joints_beyond_it() {
+        // Two links beyond the base; link 2 moved by joints 0 and 1: B = |dq0| |dq1| lever[2][1].
+        let mut lever = vec![[0.0; DOF]; DOF + 1];
+        lever[2][0] = 5.0;
+        lever[2][1] = 0.5;
+        let mut dq = [0.0; DOF];
+        dq[0] = 2.0;
+        dq[1] = 3.0;
+        assert!((speed_growth_m(&lever[..3], &dq) - 2.0 * 3.0 * 0.5).abs() < 1e-15);
+    }
+}
