@@ -45,9 +45,12 @@ pub enum RecordError {
     /// The MCAP writer failed.
     #[error("mcap: {0}")]
     Mcap(#[from] ::mcap::McapError),
-    /// A message could not be serialised.
+    /// A message could not be serialised as JSON.
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
+    /// A message could not be encoded as protobuf, or its schema is missing.
+    #[error("protobuf: {0}")]
+    Encode(String),
     /// The Rerun SDK refused a stream, a log call or a flush.
     #[error("rerun: {0}")]
     Rerun(String),
