@@ -13,7 +13,8 @@
 //!   limit, the tracking errors (single precision);
 //! - `/parts` (`foxglove.SceneUpdate`, 10 Hz): all parts as one entity, a cube per part;
 //! - `/camera/calibration` (`foxglove.CameraCalibration`), `/camera/depth` (`foxglove.RawImage`,
-//!   16UC1, mm) and `/camera/points` (`foxglove.PointCloud`, world frame) at each trigger time;
+//!   16UC1, mm) and `/camera/points` (`foxglove.PointCloud`, world frame, float32 x, y, z on
+//!   the [`super::CLOUD_GRID_M`] grid) at each trigger time;
 //! - `/recognition` (`foxglove.SceneUpdate`): detections (cyan, red and labelled when more than
 //!   2 mm or 5 deg from every part) and ranked grasp candidates (the chosen one green and
 //!   labelled) when each result arrived;

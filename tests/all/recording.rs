@@ -24,6 +24,8 @@ struct RrdContents {
     blueprint_views: usize,
     /// Per joint (1-based): the rows of `joints/torque/J<i>` as [applied, +limit, -limit, demanded].
     torques: BTreeMap<usize, Vec<Vec<f64>>>,
+    /// The rows of `world/cloud`: each capture's points [m, world].
+    clouds: Vec<Vec<[f32; 3]>>,
 }
 
 fn read_rrd(path: &std::path::Path) -> RrdContents {
@@ -62,6 +64,11 @@ fn read_rrd(path: &std::path::Path) -> RrdContents {
                     let rows = c.torques.entry(j.parse().unwrap()).or_default();
                     for values in chunk.iter_slices::<f64>("Scalars:scalars".into()) {
                         rows.push(values.to_vec());
+                    }
+                }
+                if entity == "/world/cloud" {
+                    for points in chunk.iter_slices::<[f32; 3]>("Points3D:positions".into()) {
+                        c.clouds.push(points.to_vec());
                     }
                 }
                 if chunk.is_static() {
@@ -142,6 +149,12 @@ impl McapDecoder {
             (e, s) => Err(format!("message encoding {e} with schema encoding {s}")),
         }
     }
+}
+
+/// Whether `v` [m] lies on the recorded clouds' grid.
+fn on_cloud_grid(v: f32) -> bool {
+    let k = f64::from(v) / binpick::record::CLOUD_GRID_M;
+    (k - k.round()).abs() < 1e-3
 }
 
 #[test]
@@ -242,6 +255,7 @@ fn run_mcap_holds_what_the_run_did() {
     let mut mcap_torques: Vec<Vec<f64>> = Vec::new();
     let mut mcap_demands: Vec<Vec<f64>> = Vec::new();
     let mut joint_times = (Vec::new(), Vec::new());
+    let mut mcap_clouds: Vec<Vec<[f32; 3]>> = Vec::new();
     let mut last = 0u64;
     let mut parts_span = (u64::MAX, 0u64);
     let mut decoder = McapDecoder::default();
@@ -292,10 +306,12 @@ fn run_mcap_holds_what_the_run_did() {
                 .chunks(12)
                 .map(|p| std::array::from_fn(|k| f32::from_le_bytes(p[4 * k..4 * k + 4].try_into().unwrap())))
                 .collect();
-            // Points lie in the cell: above the table, below the camera.
+            // Points lie in the cell: above the table, below the camera; on the recorded grid.
             for p in &cloud {
                 assert!((-0.01..1.1).contains(&p[2]), "point at z {}", p[2]);
+                assert!(p.iter().all(|v| on_cloud_grid(*v)), "{p:?} off the grid");
             }
+            mcap_clouds.push(cloud);
         }
         if m.channel.topic == "/recognition" {
             let entities = v["entities"].as_array().unwrap();
@@ -410,6 +426,8 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(count["/cell"], 1);
     assert_eq!(count["/robot/geometry"], 1);
     assert_eq!(joint_times.0, joint_times.1, "servo states beside the joint states");
+    // Negative control of the grid check: a point off the grid is seen.
+    assert!(!on_cloud_grid(0.123_456_7));
 
     // The Rerun file, read with rerun's decoder: the same run.
     let rrd = read_rrd(&dir.join("run.rrd"));
@@ -435,6 +453,28 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(rows("/cycle/takt"), takts);
     assert_eq!(rows("/world/camera/depth"), captures);
     assert_eq!(rows("/world/cloud"), captures);
+    // The .rrd's sparse cloud: every 2nd point of the MCAP's each way, so about a quarter of
+    // them, and each one of the MCAP's points of the same capture (both on the same grid).
+    assert_eq!(rrd.clouds.len(), mcap_clouds.len());
+    for (sparse, cloud) in rrd.clouds.iter().zip(&mcap_clouds) {
+        let quarter = cloud.len() as f64 / 4.0;
+        assert!(
+            (sparse.len() as f64 - quarter).abs() <= 0.05 * quarter + 10.0,
+            "{} of {}",
+            sparse.len(),
+            cloud.len()
+        );
+        let key = |p: &[f32; 3]| p.map(f32::to_bits);
+        let all: std::collections::BTreeSet<[u32; 3]> = cloud.iter().map(key).collect();
+        assert!(
+            sparse.iter().all(|p| all.contains(&key(p))),
+            "a sparse point not in the cloud"
+        );
+        // Negative control: a point moved by one grid step is not found.
+        let mut moved = sparse[0];
+        moved[0] += binpick::record::CLOUD_GRID_M as f32;
+        assert!(!all.contains(&key(&moved)));
+    }
     assert_eq!(rows("/world/recognition/detections"), used);
     assert_eq!(rows("/world/recognition/candidates"), used);
     assert_eq!(rows("/world/recognition/truth_at_trigger"), ready);
