@@ -235,12 +235,14 @@ fn line(kind: fg::line_primitive::Type, points: &[Vector3<f64>], colour: [f32; 3
     }
 }
 
-/// A `foxglove.SceneEntity` named `id` at `t_s`, in `world` (change `frame_id` for another).
+/// A `foxglove.SceneEntity` named `id` at `t_s`, in `world` (change `frame_id` for another),
+/// shown until replaced (lifetime zero, written out as the JSON form of the schema requires it).
 fn entity(t_s: f64, id: impl Into<String>) -> fg::SceneEntity {
     fg::SceneEntity {
         timestamp: stamp(t_s),
         frame_id: "world".into(),
         id: id.into(),
+        lifetime: Some(fg::Duration::new(0, 0)),
         ..Default::default()
     }
 }
