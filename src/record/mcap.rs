@@ -6,11 +6,15 @@
 //! - `/robot/geometry` (`foxglove.SceneUpdate`, once): each link's collision primitives, locked to
 //!   the link's frame;
 //! - `/tf` (`foxglove.FrameTransforms`, 50 Hz): `world` -> each link, `world` -> `camera`;
-//! - `/robot/joint_states` (`binpick.JointState`, 100 Hz): positions, velocities, applied and
-//!   demanded torques beside each joint's limit, tracking errors;
+//! - `/robot/joint_states` (`foxglove.JointStates`, 100 Hz): per joint (named as in the URDF) its
+//!   position, velocity and applied torque (`effort`);
+//! - `/robot/servo` (`binpick.ServoState`, 100 Hz, at the same times): what `foxglove.JointStates`
+//!   has no field for: the torque the controller demanded before saturation, each joint's torque
+//!   limit, the tracking errors (single precision);
 //! - `/parts` (`foxglove.SceneUpdate`, 10 Hz): all parts as one entity, a cube per part;
 //! - `/camera/calibration` (`foxglove.CameraCalibration`), `/camera/depth` (`foxglove.RawImage`,
-//!   16UC1, mm) and `/camera/points` (`foxglove.PointCloud`, world frame) at each trigger time;
+//!   16UC1, mm) and `/camera/points` (`foxglove.PointCloud`, world frame, float32 x, y, z on
+//!   the [`super::CLOUD_GRID_M`] grid) at each trigger time;
 //! - `/recognition` (`foxglove.SceneUpdate`): detections (cyan, red and labelled when more than
 //!   2 mm or 5 deg from every part) and ranked grasp candidates (the chosen one green and
 //!   labelled) when each result arrived;
@@ -18,11 +22,13 @@
 //!   the parts the capture showed (evaluation only), when the result arrived;
 //! - `/paths` (`foxglove.SceneUpdate`): every motion's tool path, planned and executed;
 //! - `/log` (`foxglove.Log`) and `/cycle/events` (`binpick.CycleEvent`): the cycle's events;
-//! - `/cycle/takt` (`binpick.Takt`): the takt of every placed pick.
+//! - `/cycle/takt` (`binpick.Takt`): the takt of every placed pick;
+//! - `/cycle/properties` (`binpick.Properties`, once): the run's properties.
 //!
-//! Messages are JSON with JSON Schemas; log time is simulation time (ns); chunks are
-//! zstd-compressed; the file's metadata holds the run's properties. The writer is finished
-//! explicitly and its error reported.
+//! Encoding: the `foxglove.*` messages are protobuf, with the schemas (file descriptor sets) the
+//! `foxglove` crate carries; the few `binpick.*` messages are JSON with JSON Schemas. Log time is
+//! simulation time (ns); chunks are zstd-compressed; the file's metadata holds the run's
+//! properties. The writer is finished explicitly and its error reported.
 //!
 //! Units: s (ns as log time), rad, rad/s, N m, m (depth in mm). Frames: `world`, `camera` (optical:
 //! x right, y down, z forward), and one frame per link named after it.
@@ -30,7 +36,10 @@
 use std::collections::BTreeMap;
 use std::io::{Seek, Write};
 
-use serde_json::json;
+use foxglove::Encode;
+use foxglove::messages as fg;
+use nalgebra::{Isometry3, Vector3};
+use serde::Serialize;
 
 use super::Recording;
 use super::{
@@ -40,171 +49,210 @@ use super::{
 use crate::config::Scene;
 use crate::robot::{DOF, RobotModel};
 
-const LOG_SCHEMA: &str = r#"{"title":"foxglove.Log","type":"object","properties":{
-"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
-"level":{"type":"integer","description":"0 UNKNOWN, 1 DEBUG, 2 INFO, 3 WARNING, 4 ERROR, 5 FATAL"},
-"message":{"type":"string"},"name":{"type":"string"},"file":{"type":"string"},"line":{"type":"integer","minimum":0}}}"#;
-
-const TRANSFORMS_SCHEMA: &str = r#"{"title":"foxglove.FrameTransforms","type":"object","properties":{
-"transforms":{"type":"array","items":{"type":"object","properties":{
-"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
-"parent_frame_id":{"type":"string"},"child_frame_id":{"type":"string"},
-"translation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
-"rotation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}}}}}"#;
-
 const EVENT_SCHEMA: &str = r#"{"title":"binpick.CycleEvent","type":"object","properties":{
 "t_s":{"type":"number","description":"simulation time [s]"},
 "pick":{"type":["integer","null"]},"kind":{"type":"string"},"detail":{"type":"string"}}}"#;
 
-const JOINT_SCHEMA: &str = r#"{"title":"binpick.JointState","type":"object","properties":{
+const SERVO_SCHEMA: &str = r#"{"title":"binpick.ServoState","type":"object","properties":{
 "t_s":{"type":"number","description":"simulation time [s]"},
-"position_rad":{"type":"array","items":{"type":"number"}},
-"velocity_rad_s":{"type":"array","items":{"type":"number"}},
-"torque_nm":{"type":"array","items":{"type":"number"},"description":"applied (saturated) motor torque"},
-"torque_demand_nm":{"type":"array","items":{"type":"number"},"description":"torque the controller demanded, before saturation"},
-"torque_limit_nm":{"type":"array","items":{"type":"number"}},
-"tracking_error_rad":{"type":"array","items":{"type":"number"}}}}"#;
-
-const SCENE_SCHEMA: &str = r##"{"title":"foxglove.SceneUpdate","type":"object","properties":{
-"deletions":{"type":"array","items":{"type":"object"}},
-"entities":{"type":"array","items":{"type":"object","properties":{
-"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
-"frame_id":{"type":"string"},"id":{"type":"string"},
-"lifetime":{"type":"object","properties":{"sec":{"type":"integer"},"nsec":{"type":"integer"}}},
-"frame_locked":{"type":"boolean"},
-"cubes":{"type":"array","items":{"type":"object","properties":{
-"pose":{"type":"object","properties":{
-"position":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
-"orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}},
-"size":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
-"color":{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}}}}},
-"arrows":{"type":"array","items":{"type":"object","properties":{"pose":{"$ref":"#/$defs/pose"},
-"shaft_length":{"type":"number"},"shaft_diameter":{"type":"number"},"head_length":{"type":"number"},"head_diameter":{"type":"number"},
-"color":{"$ref":"#/$defs/color"}}}},
-"spheres":{"type":"array","items":{"type":"object","properties":{"pose":{"$ref":"#/$defs/pose"},"size":{"$ref":"#/$defs/vector3"},"color":{"$ref":"#/$defs/color"}}}},
-"cylinders":{"type":"array","items":{"type":"object","properties":{"pose":{"$ref":"#/$defs/pose"},"size":{"$ref":"#/$defs/vector3"},
-"bottom_scale":{"type":"number"},"top_scale":{"type":"number"},"color":{"$ref":"#/$defs/color"}}}},
-"texts":{"type":"array","items":{"type":"object","properties":{"pose":{"$ref":"#/$defs/pose"},"billboard":{"type":"boolean"},
-"font_size":{"type":"number"},"scale_invariant":{"type":"boolean"},"color":{"$ref":"#/$defs/color"},"text":{"type":"string"}}}},
-"lines":{"type":"array","items":{"type":"object","properties":{
-"type":{"type":"integer","description":"0 LINE_STRIP, 1 LINE_LOOP, 2 LINE_LIST"},
-"thickness":{"type":"number"},"scale_invariant":{"type":"boolean"},
-"points":{"type":"array","items":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}}},
-"color":{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}}}}}}}}}},
-"$defs":{"vector3":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
-"color":{"type":"object","properties":{"r":{"type":"number"},"g":{"type":"number"},"b":{"type":"number"},"a":{"type":"number"}}},
-"pose":{"type":"object","properties":{"position":{"$ref":"#/$defs/vector3"},
-"orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}}}}"##;
-
-const POINTS_SCHEMA: &str = r#"{"title":"foxglove.PointCloud","type":"object","properties":{
-"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
-"frame_id":{"type":"string"},
-"pose":{"type":"object","properties":{
-"position":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"}}},
-"orientation":{"type":"object","properties":{"x":{"type":"number"},"y":{"type":"number"},"z":{"type":"number"},"w":{"type":"number"}}}}},
-"point_stride":{"type":"integer","minimum":0},
-"fields":{"type":"array","items":{"type":"object","properties":{"name":{"type":"string"},"offset":{"type":"integer","minimum":0},
-"type":{"type":"integer","description":"7 FLOAT32"}}}},
-"data":{"type":"string","contentEncoding":"base64"}}}"#;
-
-const CALIBRATION_SCHEMA: &str = r#"{"title":"foxglove.CameraCalibration","type":"object","properties":{
-"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
-"frame_id":{"type":"string"},"width":{"type":"integer","minimum":0},"height":{"type":"integer","minimum":0},
-"distortion_model":{"type":"string"},"D":{"type":"array","items":{"type":"number"}},
-"K":{"type":"array","items":{"type":"number"},"minItems":9,"maxItems":9},
-"R":{"type":"array","items":{"type":"number"},"minItems":9,"maxItems":9},
-"P":{"type":"array","items":{"type":"number"},"minItems":12,"maxItems":12}}}"#;
-
-const IMAGE_SCHEMA: &str = r#"{"title":"foxglove.RawImage","type":"object","properties":{
-"timestamp":{"type":"object","properties":{"sec":{"type":"integer","minimum":0},"nsec":{"type":"integer","minimum":0,"maximum":999999999}}},
-"frame_id":{"type":"string"},"width":{"type":"integer","minimum":0},"height":{"type":"integer","minimum":0},
-"encoding":{"type":"string"},"step":{"type":"integer","minimum":0},
-"data":{"type":"string","contentEncoding":"base64"}}}"#;
+"torque_demand_nm":{"type":"array","items":{"type":"number"},"description":"torque the controller demanded, before saturation, per joint [N m]"},
+"torque_limit_nm":{"type":"array","items":{"type":"number"},"description":"each joint's torque limit [N m]"},
+"tracking_error_rad":{"type":"array","items":{"type":"number"},"description":"commanded minus measured position [rad]"}}}"#;
 
 const TAKT_SCHEMA: &str = r#"{"title":"binpick.Takt","type":"object","properties":{
 "t_s":{"type":"number","description":"release time [s]"},"pick":{"type":"integer"},
 "takt_s":{"type":"number"},"spans_refill":{"type":"boolean"}}}"#;
 
+const PROPERTIES_SCHEMA: &str =
+    r#"{"title":"binpick.Properties","type":"object","additionalProperties":{"type":"string"}}"#;
+
+/// A recorded topic; its index in [`TOPICS`] is its declaration order.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+enum Topic {
+    Cell,
+    RobotGeometry,
+    Tf,
+    JointStates,
+    Servo,
+    Parts,
+    Calibration,
+    Depth,
+    Points,
+    Recognition,
+    Truth,
+    Paths,
+    Log,
+    Events,
+    Takt,
+    Properties,
+}
+
+/// How a topic's messages are encoded: protobuf with a well-known Foxglove schema, or JSON with
+/// one of ours (name, JSON Schema).
+#[derive(Clone, Copy)]
+enum Encoding {
+    Protobuf(fn() -> Option<foxglove::Schema>),
+    Json(&'static str, &'static str),
+}
+
+/// The topics, in the order their channels are declared (the order of [`Topic`]).
+const TOPICS: [(Topic, &str, Encoding); 16] = [
+    (Topic::Cell, "/cell", Encoding::Protobuf(fg::SceneUpdate::get_schema)),
+    (
+        Topic::RobotGeometry,
+        "/robot/geometry",
+        Encoding::Protobuf(fg::SceneUpdate::get_schema),
+    ),
+    (Topic::Tf, "/tf", Encoding::Protobuf(fg::FrameTransforms::get_schema)),
+    (
+        Topic::JointStates,
+        "/robot/joint_states",
+        Encoding::Protobuf(fg::JointStates::get_schema),
+    ),
+    (
+        Topic::Servo,
+        "/robot/servo",
+        Encoding::Json("binpick.ServoState", SERVO_SCHEMA),
+    ),
+    (Topic::Parts, "/parts", Encoding::Protobuf(fg::SceneUpdate::get_schema)),
+    (
+        Topic::Calibration,
+        "/camera/calibration",
+        Encoding::Protobuf(fg::CameraCalibration::get_schema),
+    ),
+    (
+        Topic::Depth,
+        "/camera/depth",
+        Encoding::Protobuf(fg::RawImage::get_schema),
+    ),
+    (
+        Topic::Points,
+        "/camera/points",
+        Encoding::Protobuf(fg::PointCloud::get_schema),
+    ),
+    (
+        Topic::Recognition,
+        "/recognition",
+        Encoding::Protobuf(fg::SceneUpdate::get_schema),
+    ),
+    (
+        Topic::Truth,
+        "/recognition/truth_at_trigger",
+        Encoding::Protobuf(fg::SceneUpdate::get_schema),
+    ),
+    (Topic::Paths, "/paths", Encoding::Protobuf(fg::SceneUpdate::get_schema)),
+    (Topic::Log, "/log", Encoding::Protobuf(fg::Log::get_schema)),
+    (
+        Topic::Events,
+        "/cycle/events",
+        Encoding::Json("binpick.CycleEvent", EVENT_SCHEMA),
+    ),
+    (Topic::Takt, "/cycle/takt", Encoding::Json("binpick.Takt", TAKT_SCHEMA)),
+    // The run's properties (also the file's metadata), once at time 0.
+    (
+        Topic::Properties,
+        "/cycle/properties",
+        Encoding::Json("binpick.Properties", PROPERTIES_SCHEMA),
+    ),
+];
+
 fn nanos(t_s: f64) -> u64 {
     (t_s.max(0.0) * 1e9).round() as u64
 }
 
-fn stamp(t_s: f64) -> serde_json::Value {
+fn stamp(t_s: f64) -> Option<fg::Timestamp> {
     let ns = nanos(t_s);
-    json!({"sec": ns / 1_000_000_000, "nsec": ns % 1_000_000_000})
+    // u32 seconds: 136 years of simulated time.
+    Some(fg::Timestamp::new(
+        (ns / 1_000_000_000) as u32,
+        (ns % 1_000_000_000) as u32,
+    ))
 }
 
-fn xyz(v: &nalgebra::Vector3<f64>) -> serde_json::Value {
-    json!({"x": v.x, "y": v.y, "z": v.z})
+fn xyz(v: &Vector3<f64>) -> Option<fg::Vector3> {
+    Some(fg::Vector3 { x: v.x, y: v.y, z: v.z })
 }
 
-fn pose(p: &nalgebra::Isometry3<f64>) -> serde_json::Value {
+fn point(v: &Vector3<f64>) -> fg::Point3 {
+    fg::Point3 { x: v.x, y: v.y, z: v.z }
+}
+
+fn quaternion(p: &Isometry3<f64>) -> Option<fg::Quaternion> {
     let q = p.rotation.quaternion();
-    json!({"position": xyz(&p.translation.vector), "orientation": {"x": q.i, "y": q.j, "z": q.k, "w": q.w}})
-}
-
-fn rgba([r, g, b]: [f32; 3], a: f64) -> serde_json::Value {
-    json!({"r": r, "g": g, "b": b, "a": a})
-}
-
-/// A line strip (`type` 0) or a line list (`type` 2) of `points` in the entity's frame.
-fn line(kind: u8, points: &[nalgebra::Vector3<f64>], colour: [f32; 3]) -> serde_json::Value {
-    json!({
-        "type": kind, "thickness": 2.0, "scale_invariant": true,
-        "pose": pose(&nalgebra::Isometry3::identity()),
-        "points": points.iter().map(xyz).collect::<Vec<_>>(),
-        "color": rgba(colour, 1.0), "colors": [], "indices": [],
+    Some(fg::Quaternion {
+        x: q.i,
+        y: q.j,
+        z: q.k,
+        w: q.w,
     })
 }
 
-/// One `foxglove.SceneEntity`: primitives in one frame.
-#[derive(Default)]
-struct Entity {
-    id: String,
-    /// Frame the primitives' poses are in (`world` if empty).
-    frame_id: String,
-    /// Follow the frame as it moves (link geometry).
-    frame_locked: bool,
-    /// How long it is shown [ns] (0: until replaced).
-    lifetime_ns: u64,
-    cubes: Vec<serde_json::Value>,
-    spheres: Vec<serde_json::Value>,
-    cylinders: Vec<serde_json::Value>,
-    arrows: Vec<serde_json::Value>,
-    lines: Vec<serde_json::Value>,
-    texts: Vec<serde_json::Value>,
-}
-
-impl Entity {
-    fn new(id: impl Into<String>) -> Self {
-        Entity {
-            id: id.into(),
-            ..Entity::default()
-        }
-    }
-
-    fn json(self, t_s: f64) -> serde_json::Value {
-        let frame = if self.frame_id.is_empty() {
-            "world".to_string()
-        } else {
-            self.frame_id
-        };
-        json!({
-            "timestamp": stamp(t_s), "frame_id": frame, "id": self.id,
-            "lifetime": {"sec": self.lifetime_ns / 1_000_000_000, "nsec": self.lifetime_ns % 1_000_000_000},
-            "frame_locked": self.frame_locked, "metadata": [],
-            "arrows": self.arrows, "cubes": self.cubes, "spheres": self.spheres, "cylinders": self.cylinders,
-            "lines": self.lines, "triangles": [], "texts": self.texts, "models": [],
-        })
-    }
-}
-
-/// A `foxglove.SceneUpdate` of `entities` at `t_s`.
-fn scene_update(t_s: f64, entities: Vec<Entity>) -> serde_json::Value {
-    json!({
-        "deletions": [],
-        "entities": entities.into_iter().map(|e| e.json(t_s)).collect::<Vec<_>>(),
+fn pose(p: &Isometry3<f64>) -> Option<fg::Pose> {
+    Some(fg::Pose {
+        position: xyz(&p.translation.vector),
+        orientation: quaternion(p),
     })
+}
+
+fn rgba([r, g, b]: [f32; 3], a: f64) -> Option<fg::Color> {
+    Some(fg::Color {
+        r: r.into(),
+        g: g.into(),
+        b: b.into(),
+        a,
+    })
+}
+
+fn cube(p: &Isometry3<f64>, size_m: &Vector3<f64>, colour: [f32; 3], alpha: f64) -> fg::CubePrimitive {
+    fg::CubePrimitive {
+        pose: pose(p),
+        size: xyz(size_m),
+        color: rgba(colour, alpha),
+    }
+}
+
+fn text(p: &Isometry3<f64>, colour: [f32; 3], text: String) -> fg::TextPrimitive {
+    fg::TextPrimitive {
+        pose: pose(p),
+        billboard: true,
+        font_size: 12.0,
+        scale_invariant: true,
+        color: rgba(colour, 1.0),
+        text,
+    }
+}
+
+/// A line strip or a line list of `points` in the entity's frame.
+fn line(kind: fg::line_primitive::Type, points: &[Vector3<f64>], colour: [f32; 3]) -> fg::LinePrimitive {
+    fg::LinePrimitive {
+        r#type: kind as i32,
+        pose: pose(&Isometry3::identity()),
+        thickness: 2.0,
+        scale_invariant: true,
+        points: points.iter().map(point).collect(),
+        color: rgba(colour, 1.0),
+        ..Default::default()
+    }
+}
+
+/// A `foxglove.SceneEntity` named `id` at `t_s`, in `world` (change `frame_id` for another),
+/// shown until replaced (lifetime zero, written out as the JSON form of the schema requires it).
+fn entity(t_s: f64, id: impl Into<String>) -> fg::SceneEntity {
+    fg::SceneEntity {
+        timestamp: stamp(t_s),
+        frame_id: "world".into(),
+        id: id.into(),
+        lifetime: Some(fg::Duration::new(0, 0)),
+        ..Default::default()
+    }
+}
+
+/// A `foxglove.SceneUpdate` of `entities`.
+fn scene_update(entities: Vec<fg::SceneEntity>) -> fg::SceneUpdate {
+    fg::SceneUpdate {
+        deletions: Vec::new(),
+        entities,
+    }
 }
 
 /// Writes the recording of `result` to a new file at `path` (see [`write_mcap`]): first to
@@ -225,40 +273,25 @@ pub fn write_mcap_file(
     Ok(())
 }
 
-/// The topics, in the order their channels are declared: (topic, schema name, JSON Schema).
-const TOPICS: [(&str, &str, &str); 15] = [
-    ("/cell", "foxglove.SceneUpdate", SCENE_SCHEMA),
-    ("/robot/geometry", "foxglove.SceneUpdate", SCENE_SCHEMA),
-    ("/tf", "foxglove.FrameTransforms", TRANSFORMS_SCHEMA),
-    ("/robot/joint_states", "binpick.JointState", JOINT_SCHEMA),
-    ("/parts", "foxglove.SceneUpdate", SCENE_SCHEMA),
-    ("/camera/calibration", "foxglove.CameraCalibration", CALIBRATION_SCHEMA),
-    ("/camera/depth", "foxglove.RawImage", IMAGE_SCHEMA),
-    ("/camera/points", "foxglove.PointCloud", POINTS_SCHEMA),
-    ("/recognition", "foxglove.SceneUpdate", SCENE_SCHEMA),
-    ("/recognition/truth_at_trigger", "foxglove.SceneUpdate", SCENE_SCHEMA),
-    ("/paths", "foxglove.SceneUpdate", SCENE_SCHEMA),
-    ("/log", "foxglove.Log", LOG_SCHEMA),
-    ("/cycle/events", "binpick.CycleEvent", EVENT_SCHEMA),
-    ("/cycle/takt", "binpick.Takt", TAKT_SCHEMA),
-    // The run's properties (also the file's metadata), once at time 0.
-    ("/cycle/properties", "binpick.Properties", PROPERTIES_SCHEMA),
-];
-
-const PROPERTIES_SCHEMA: &str =
-    r#"{"title":"binpick.Properties","type":"object","additionalProperties":{"type":"string"}}"#;
-
-/// Messages of one recording before they are merged in log-time order: (log time ns, topic
-/// index into [`TOPICS`], JSON).
-struct Messages(Vec<(u64, usize, Vec<u8>)>);
+/// Messages of one recording before they are merged in log-time order: (log time ns, topic,
+/// encoded message).
+#[derive(Default)]
+struct Messages(Vec<(u64, Topic, Vec<u8>)>);
 
 impl Messages {
-    fn push(&mut self, t_s: f64, topic: &str, message: &serde_json::Value) -> Result<(), RecordError> {
-        let k = TOPICS
-            .iter()
-            .position(|(t, _, _)| *t == topic)
-            .expect("a declared topic");
-        self.0.push((nanos(t_s), k, serde_json::to_vec(message)?));
+    /// A well-known Foxglove message, protobuf-encoded.
+    fn proto(&mut self, t_s: f64, topic: Topic, message: &impl Encode) -> Result<(), RecordError> {
+        let mut data = Vec::with_capacity(message.encoded_len().unwrap_or(0));
+        message
+            .encode(&mut data)
+            .map_err(|e| RecordError::Encode(e.to_string()))?;
+        self.0.push((nanos(t_s), topic, data));
+        Ok(())
+    }
+
+    /// One of our messages, JSON-encoded.
+    fn json(&mut self, t_s: f64, topic: Topic, message: &impl Serialize) -> Result<(), RecordError> {
+        self.0.push((nanos(t_s), topic, serde_json::to_vec(message)?));
         Ok(())
     }
 }
@@ -271,7 +304,7 @@ pub fn write_mcap<W: Write + Seek>(
     scene: &Scene,
     info: &RunInfo,
 ) -> Result<(), RecordError> {
-    let mut m = Messages(Vec::new());
+    let mut m = Messages::default();
     cell_messages(&mut m, result, scene)?;
     arm_messages(&mut m, result, robot)?;
     part_messages(&mut m, result)?;
@@ -279,7 +312,7 @@ pub fn write_mcap<W: Write + Seek>(
     path_messages(&mut m, result)?;
     event_messages(&mut m, result)?;
     let properties: BTreeMap<String, String> = info.properties().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
-    m.push(0.0, "/cycle/properties", &json!(properties))?;
+    m.json(0.0, Topic::Properties, &properties)?;
 
     let mut w = mcap::WriteOptions::new()
         .compression(Some(mcap::Compression::Zstd))
@@ -287,19 +320,29 @@ pub fn write_mcap<W: Write + Seek>(
         .create(out)?;
     let none = BTreeMap::new();
     let mut channels = Vec::new();
-    for (topic, name, schema) in TOPICS {
-        let s = w.add_schema(name, "jsonschema", schema.as_bytes())?;
-        channels.push(w.add_channel(s, topic, "json", &none)?);
+    for (k, (topic, name, encoding)) in TOPICS.iter().enumerate() {
+        debug_assert_eq!(*topic as usize, k, "TOPICS in the order of Topic");
+        let (schema, message_encoding) = match encoding {
+            Encoding::Protobuf(schema) => {
+                let s = schema().ok_or_else(|| RecordError::Encode(format!("no schema for {name}")))?;
+                (w.add_schema(&s.name, &s.encoding, &s.data)?, "protobuf")
+            }
+            Encoding::Json(schema_name, schema) => {
+                (w.add_schema(schema_name, "jsonschema", schema.as_bytes())?, "json")
+            }
+        };
+        channels.push(w.add_channel(schema, name, message_encoding, &none)?);
     }
     // Messages go in log-time order (stable: same-time messages keep their order).
     m.0.sort_by_key(|(t, _, _)| *t);
-    let mut sequence = vec![0u32; TOPICS.len()];
-    for (time, k, data) in &m.0 {
-        sequence[*k] += 1;
+    let mut sequence = [0u32; TOPICS.len()];
+    for (time, topic, data) in &m.0 {
+        let k = *topic as usize;
+        sequence[k] += 1;
         w.write_to_known_channel(
             &mcap::records::MessageHeader {
-                channel_id: channels[*k],
-                sequence: sequence[*k],
+                channel_id: channels[k],
+                sequence: sequence[k],
                 log_time: *time,
                 publish_time: *time,
             },
@@ -318,25 +361,40 @@ pub fn write_mcap<W: Write + Seek>(
 
 /// `/cell`: table, trays and obstacles as grey cubes, the camera's frustum out to the pick tray.
 fn cell_messages(m: &mut Messages, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
-    let mut cell = Entity::new("cell");
+    let mut cell = entity(0.0, "cell");
     for (_, b) in crate::geometry::cell_boxes(scene) {
-        cell.cubes.push(json!({
-            "pose": pose(&b.world_from_box()), "size": xyz(&(2.0 * b.half_m)), "color": rgba([0.6, 0.6, 0.6], 1.0),
-        }));
+        cell.cubes
+            .push(cube(&b.world_from_box(), &(2.0 * b.half_m), [0.6, 0.6, 0.6], 1.0));
     }
     let c = &result.camera;
-    let range_m = (nalgebra::Vector3::from(scene.pick_tray.center_m) - c.world_from_camera.translation.vector).norm();
+    let range_m = (Vector3::from(scene.pick_tray.center_m) - c.world_from_camera.translation.vector).norm();
     let [apex, a, b, cc, d] = frustum_corners(c, range_m);
     cell.lines.push(line(
-        2,
+        fg::line_primitive::Type::LineList,
         &[apex, a, apex, b, apex, cc, apex, d, a, b, b, cc, cc, d, d, a],
         [0.9, 0.9, 0.2],
     ));
-    m.push(0.0, "/cell", &scene_update(0.0, vec![cell]))
+    m.proto(0.0, Topic::Cell, &scene_update(vec![cell]))
 }
 
-/// `/robot/geometry` once (each link's primitives locked to its frame), `/tf` at 50 Hz and
-/// `/robot/joint_states` at 100 Hz.
+/// The torque the controller demanded, the limits and the tracking errors (what
+/// `foxglove.JointStates` has no field for).
+/// Single precision: these are plotted, and shorter numbers keep the file small.
+#[derive(Serialize)]
+struct ServoState {
+    t_s: f64,
+    torque_demand_nm: [f32; DOF],
+    torque_limit_nm: [f32; DOF],
+    tracking_error_rad: [f32; DOF],
+}
+
+/// A joint vector in single precision.
+fn single(v: &crate::robot::JointVector) -> [f32; DOF] {
+    std::array::from_fn(|j| v[j] as f32)
+}
+
+/// `/robot/geometry` once (each link's primitives locked to its frame), `/tf` at 50 Hz,
+/// `/robot/joint_states` and `/robot/servo` at 100 Hz.
 fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
     use crate::robot::Primitive;
     let name = |i: usize| {
@@ -346,131 +404,165 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
             .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
     };
     let colour = [0.9, 0.78, 0.24];
+    let diameters = |r: f64, length_m: f64| xyz(&Vector3::new(2.0 * r, 2.0 * r, length_m));
     let mut links = Vec::new();
     for (i, link) in robot.links.iter().enumerate().take(DOF + 1) {
-        let mut e = Entity::new(format!("link {}", name(i)));
+        let mut e = entity(0.0, format!("link {}", name(i)));
         e.frame_id = name(i);
         e.frame_locked = true;
         for s in &link.shapes {
             let at = &s.link_from_shape;
+            let cylinder = |radius_m: f64, half_length_m: f64| fg::CylinderPrimitive {
+                pose: pose(at),
+                size: diameters(radius_m, 2.0 * half_length_m),
+                bottom_scale: 1.0,
+                top_scale: 1.0,
+                color: rgba(colour, 1.0),
+            };
+            let sphere = |p: &Isometry3<f64>, radius_m: f64| fg::SpherePrimitive {
+                pose: pose(p),
+                size: diameters(radius_m, 2.0 * radius_m),
+                color: rgba(colour, 1.0),
+            };
             match &s.primitive {
-                Primitive::Box { half_extents_m } => e.cubes.push(json!({
-                    "pose": pose(at), "size": xyz(&(2.0 * half_extents_m)), "color": rgba(colour, 1.0),
-                })),
+                Primitive::Box { half_extents_m } => e.cubes.push(cube(at, &(2.0 * half_extents_m), colour, 1.0)),
                 Primitive::Cylinder {
                     radius_m,
                     half_length_m,
-                } => e.cylinders.push(json!({
-                    "pose": pose(at), "bottom_scale": 1.0, "top_scale": 1.0, "color": rgba(colour, 1.0),
-                    "size": {"x": 2.0 * radius_m, "y": 2.0 * radius_m, "z": 2.0 * half_length_m},
-                })),
-                Primitive::Sphere { radius_m } => e.spheres.push(json!({
-                    "pose": pose(at), "color": rgba(colour, 1.0),
-                    "size": {"x": 2.0 * radius_m, "y": 2.0 * radius_m, "z": 2.0 * radius_m},
-                })),
+                } => e.cylinders.push(cylinder(*radius_m, *half_length_m)),
+                Primitive::Sphere { radius_m } => e.spheres.push(sphere(at, *radius_m)),
                 Primitive::Capsule {
                     radius_m,
                     half_length_m,
                 } => {
                     // A cylinder and two end spheres.
-                    e.cylinders.push(json!({
-                        "pose": pose(at), "bottom_scale": 1.0, "top_scale": 1.0, "color": rgba(colour, 1.0),
-                        "size": {"x": 2.0 * radius_m, "y": 2.0 * radius_m, "z": 2.0 * half_length_m},
-                    }));
+                    e.cylinders.push(cylinder(*radius_m, *half_length_m));
                     for end in [-half_length_m, *half_length_m] {
-                        let p = at * nalgebra::Translation3::new(0.0, 0.0, end);
-                        e.spheres.push(json!({
-                            "pose": pose(&p), "color": rgba(colour, 1.0),
-                            "size": {"x": 2.0 * radius_m, "y": 2.0 * radius_m, "z": 2.0 * radius_m},
-                        }));
+                        e.spheres
+                            .push(sphere(&(at * nalgebra::Translation3::new(0.0, 0.0, end)), *radius_m));
                     }
                 }
             }
         }
         links.push(e);
     }
-    m.push(0.0, "/robot/geometry", &scene_update(0.0, links))?;
+    m.proto(0.0, Topic::RobotGeometry, &scene_update(links))?;
     let limit = robot.torque_limit_nm();
-    let transform = |t_s: f64, child: &str, p: &nalgebra::Isometry3<f64>| {
-        let q = p.rotation.quaternion();
-        json!({
-            "timestamp": stamp(t_s), "parent_frame_id": "world", "child_frame_id": child,
-            "translation": xyz(&p.translation.vector),
-            "rotation": {"x": q.i, "y": q.j, "z": q.k, "w": q.w},
+    let joint_names: Vec<String> = (0..DOF)
+        .map(|j| {
+            robot
+                .joints
+                .get(j)
+                .map_or_else(|| format!("joint_{}", j + 1), |jt| jt.name.clone())
         })
-    };
+        .collect();
     for t in result.trace.iter().step_by(JOINT_STATE_EVERY) {
-        m.push(
+        let joints = (0..DOF)
+            .map(|j| fg::JointState {
+                name: joint_names[j].clone(),
+                position: Some(t.q[j]),
+                velocity: Some(t.qd[j]),
+                acceleration: None,
+                effort: Some(t.tau_nm[j]),
+            })
+            .collect();
+        m.proto(
             t.t_s,
-            "/robot/joint_states",
-            &json!({
-                "t_s": t.t_s,
-                "position_rad": t.q.as_slice(),
-                "velocity_rad_s": t.qd.as_slice(),
-                "torque_nm": t.tau_nm.as_slice(),
-                "torque_demand_nm": t.demand_nm.as_slice(),
-                "torque_limit_nm": limit.as_slice(),
-                "tracking_error_rad": t.error_rad.as_slice(),
-            }),
+            Topic::JointStates,
+            &fg::JointStates {
+                timestamp: stamp(t.t_s),
+                joints,
+            },
+        )?;
+        m.json(
+            t.t_s,
+            Topic::Servo,
+            &ServoState {
+                t_s: t.t_s,
+                torque_demand_nm: single(&t.demand_nm),
+                torque_limit_nm: single(&limit),
+                tracking_error_rad: single(&t.error_rad),
+            },
         )?;
     }
+    let transform = |t_s: f64, child: String, p: &Isometry3<f64>| fg::FrameTransform {
+        timestamp: stamp(t_s),
+        parent_frame_id: "world".into(),
+        child_frame_id: child,
+        translation: xyz(&p.translation.vector),
+        rotation: quaternion(p),
+    };
     for (t_s, q) in arm_samples(result) {
-        let world_from_links = robot.world_from_links(&q);
-        let mut transforms: Vec<serde_json::Value> = world_from_links
+        let mut transforms: Vec<fg::FrameTransform> = robot
+            .world_from_links(&q)
             .iter()
             .enumerate()
             .take(DOF + 1)
-            .map(|(i, f)| transform(t_s, &name(i), f))
+            .map(|(i, f)| transform(t_s, name(i), f))
             .collect();
-        transforms.push(transform(t_s, "camera", &result.camera.world_from_camera));
-        m.push(t_s, "/tf", &json!({ "transforms": transforms }))?;
+        transforms.push(transform(t_s, "camera".into(), &result.camera.world_from_camera));
+        m.proto(t_s, Topic::Tf, &fg::FrameTransforms { transforms })?;
     }
     Ok(())
 }
 
 /// `/parts`: all parts as one entity, a cube per part (its bounding box), coloured by state.
 fn part_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
-    let size = nalgebra::Vector3::from(result.part_size_m);
+    let size = Vector3::from(result.part_size_m);
     for f in &result.scene_frames {
-        let mut e = Entity::new("parts");
+        let mut e = entity(f.t_s, "parts");
         e.cubes = f
             .parts
             .iter()
             .filter(|(state, _)| *state != crate::physics::PartState::Removed)
-            .map(|(state, p)| json!({"pose": pose(p), "size": xyz(&size), "color": rgba(part_rgb(*state), 1.0)}))
+            .map(|(state, p)| cube(p, &size, part_rgb(*state), 1.0))
             .collect();
-        m.push(f.t_s, "/parts", &scene_update(f.t_s, vec![e]))?;
+        m.proto(f.t_s, Topic::Parts, &scene_update(vec![e]))?;
     }
     Ok(())
 }
 
-/// `/camera/*` at each trigger time; `/recognition` when each result arrived.
+/// `/camera/*` at each trigger time; `/recognition` and `/recognition/truth_at_trigger` when each
+/// result arrived.
 fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
-    use base64::Engine;
-    let b64 = |bytes: &[u8]| base64::engine::general_purpose::STANDARD.encode(bytes);
     let c = &result.camera;
+    let float32 = |name: &str, offset: u32| fg::PackedElementField {
+        name: name.into(),
+        offset,
+        r#type: fg::packed_element_field::NumericType::Float32 as i32,
+    };
     for cap in &result.captures {
         let t = cap.t_s;
-        m.push(
+        m.proto(
             t,
-            "/camera/calibration",
-            &json!({
-                "timestamp": stamp(t), "frame_id": "camera", "width": c.width_px, "height": c.height_px,
-                "distortion_model": "plumb_bob", "D": [0.0, 0.0, 0.0, 0.0, 0.0],
-                "K": [c.fx_px, 0.0, c.cx_px, 0.0, c.fy_px, c.cy_px, 0.0, 0.0, 1.0],
-                "R": [1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
-                "P": [c.fx_px, 0.0, c.cx_px, 0.0, 0.0, c.fy_px, c.cy_px, 0.0, 0.0, 0.0, 1.0, 0.0],
-            }),
+            Topic::Calibration,
+            &fg::CameraCalibration {
+                timestamp: stamp(t),
+                frame_id: "camera".into(),
+                width: c.width_px as u32,
+                height: c.height_px as u32,
+                distortion_model: "plumb_bob".into(),
+                d: vec![0.0; 5],
+                k: vec![c.fx_px, 0.0, c.cx_px, 0.0, c.fy_px, c.cy_px, 0.0, 0.0, 1.0],
+                r: vec![1.0, 0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 1.0],
+                p: vec![
+                    c.fx_px, 0.0, c.cx_px, 0.0, 0.0, c.fy_px, c.cy_px, 0.0, 0.0, 0.0, 1.0, 0.0,
+                ],
+            },
         )?;
         let depth: Vec<u8> = cap.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect();
-        m.push(
+        m.proto(
             t,
-            "/camera/depth",
-            &json!({
-                "timestamp": stamp(t), "frame_id": "camera",
-                "width": cap.size_px.0, "height": cap.size_px.1, "encoding": "16UC1",
-                "step": 2 * cap.size_px.0, "data": b64(&depth),
-            }),
+            Topic::Depth,
+            &fg::RawImage {
+                timestamp: stamp(t),
+                frame_id: "camera".into(),
+                width: cap.size_px.0 as u32,
+                height: cap.size_px.1 as u32,
+                encoding: "16UC1".into(),
+                step: 2 * cap.size_px.0 as u32,
+                data: depth.into(),
+            },
         )?;
         let points: Vec<u8> = cap
             .points_world_m
@@ -478,75 +570,62 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
             .flatten()
             .flat_map(|v| v.to_le_bytes())
             .collect();
-        m.push(
+        m.proto(
             t,
-            "/camera/points",
-            &json!({
-                "timestamp": stamp(t), "frame_id": "world", "pose": pose(&nalgebra::Isometry3::identity()),
-                "point_stride": 12,
-                "fields": [
-                    {"name": "x", "offset": 0, "type": 7},
-                    {"name": "y", "offset": 4, "type": 7},
-                    {"name": "z", "offset": 8, "type": 7},
-                ],
-                "data": b64(&points),
-            }),
+            Topic::Points,
+            &fg::PointCloud {
+                timestamp: stamp(t),
+                frame_id: "world".into(),
+                pose: pose(&Isometry3::identity()),
+                point_stride: 12,
+                fields: vec![float32("x", 0), float32("y", 4), float32("z", 8)],
+                data: points.into(),
+            },
         )?;
     }
-    let size = nalgebra::Vector3::from(result.part_size_m);
+    let size = Vector3::from(result.part_size_m);
     // Arrows point along their pose's +x: turn +x to -z (down onto the grasp point).
-    let down = nalgebra::UnitQuaternion::from_axis_angle(&nalgebra::Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
+    let down = nalgebra::UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
     for t in &result.truths {
-        let mut truth = Entity::new("true poses at the trigger");
+        let mut truth = entity(t.t_s, "true poses at the trigger");
         truth.cubes = t
             .parts
             .iter()
-            .map(|(_, p)| json!({"pose": pose(p), "size": xyz(&size), "color": rgba([0.25, 0.85, 0.25], 0.25)}))
+            .map(|(_, p)| cube(p, &size, [0.25, 0.85, 0.25], 0.25))
             .collect();
-        m.push(
-            t.t_s,
-            "/recognition/truth_at_trigger",
-            &scene_update(t.t_s, vec![truth]),
-        )?;
+        m.proto(t.t_s, Topic::Truth, &scene_update(vec![truth]))?;
     }
     for r in &result.recognitions {
-        let mut detections = Entity::new("detections");
+        let mut detections = entity(r.t_s, "detections");
         for ((p, _), e) in r.detections.iter().zip(&r.detection_errors) {
             let wrong = matches!(e, Some((_, _, false)));
             let colour = if wrong { [1.0, 0.15, 0.15] } else { [0.0, 0.8, 1.0] };
-            detections
-                .cubes
-                .push(json!({"pose": pose(p), "size": xyz(&size), "color": rgba(colour, 0.35)}));
+            detections.cubes.push(cube(p, &size, colour, 0.35));
             if let Some((dp, dr, false)) = e {
-                detections.texts.push(json!({
-                    "pose": pose(p), "billboard": true, "font_size": 12.0, "scale_invariant": true,
-                    "color": rgba(colour, 1.0),
-                    "text": format!("wrong: {:.1} mm / {:.1} deg off", dp * 1e3, dr.to_degrees()),
-                }));
+                let label = format!("wrong: {:.1} mm / {:.1} deg off", dp * 1e3, dr.to_degrees());
+                detections.texts.push(text(p, colour, label));
             }
         }
-        let mut candidates = Entity::new("grasp candidates");
+        let mut candidates = entity(r.t_s, "grasp candidates");
         for (k, (p, score)) in r.candidates.iter().enumerate() {
             let chosen = r.chosen == Some(k);
-            let tip = p.translation.vector + nalgebra::Vector3::z() * CANDIDATE_ARROW_M;
-            let at = nalgebra::Isometry3::from_parts(nalgebra::Translation3::from(tip), down);
+            let tip = p.translation.vector + Vector3::z() * CANDIDATE_ARROW_M;
+            let at = Isometry3::from_parts(nalgebra::Translation3::from(tip), down);
             let colour = if chosen { [0.0, 0.9, 0.0] } else { [0.95, 0.8, 0.0] };
-            candidates.arrows.push(json!({
-                "pose": pose(&at), "shaft_length": 0.7 * CANDIDATE_ARROW_M, "shaft_diameter": 0.001,
-                "head_length": 0.3 * CANDIDATE_ARROW_M, "head_diameter": 0.003, "color": rgba(colour, 1.0),
-            }));
+            candidates.arrows.push(fg::ArrowPrimitive {
+                pose: pose(&at),
+                shaft_length: 0.7 * CANDIDATE_ARROW_M,
+                shaft_diameter: 0.001,
+                head_length: 0.3 * CANDIDATE_ARROW_M,
+                head_diameter: 0.003,
+                color: rgba(colour, 1.0),
+            });
             if chosen {
-                candidates.texts.push(json!({
-                    "pose": pose(&at), "billboard": true, "font_size": 12.0, "scale_invariant": true,
-                    "color": rgba(colour, 1.0), "text": format!("chosen: #{} score {score:.2}", k + 1),
-                }));
+                let label = format!("chosen: #{} score {score:.2}", k + 1);
+                candidates.texts.push(text(&at, colour, label));
             }
         }
-        m.push(
-            r.t_s,
-            "/recognition",
-            &scene_update(r.t_s, vec![detections, candidates]),
-        )?;
+        m.proto(r.t_s, Topic::Recognition, &scene_update(vec![detections, candidates]))?;
     }
     Ok(())
 }
@@ -555,38 +634,58 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
 /// duration plus a second.
 fn path_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
     for (k, p) in result.tool_paths.iter().enumerate() {
-        let mut e = Entity::new(format!("motion {k}"));
-        e.lifetime_ns = nanos(p.duration_s + 1.0);
+        let mut e = entity(p.t_s, format!("motion {k}"));
+        let shown_ns = nanos(p.duration_s + 1.0);
+        e.lifetime = Some(fg::Duration::new(
+            (shown_ns / 1_000_000_000) as i32,
+            (shown_ns % 1_000_000_000) as u32,
+        ));
+        let strip = fg::line_primitive::Type::LineStrip;
         e.lines = vec![
-            line(0, &p.planned_m, [0.2, 0.4, 1.0]),
-            line(0, &p.executed_m, [1.0, 0.5, 0.0]),
+            line(strip, &p.planned_m, [0.2, 0.4, 1.0]),
+            line(strip, &p.executed_m, [1.0, 0.5, 0.0]),
         ];
-        m.push(p.t_s, "/paths", &scene_update(p.t_s, vec![e]))?;
+        m.proto(p.t_s, Topic::Paths, &scene_update(vec![e]))?;
     }
     Ok(())
+}
+
+/// The takt of a placed pick, at its release.
+#[derive(Serialize)]
+struct Takt {
+    t_s: f64,
+    pick: usize,
+    takt_s: f64,
+    spans_refill: bool,
 }
 
 /// `/log` and `/cycle/events` for every cycle event; `/cycle/takt` at every placed pick's release.
 fn event_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
     for e in &result.events {
         let name = e.pick.map_or("cell".to_string(), |p| format!("pick {p}"));
-        m.push(
+        m.proto(
             e.t_s,
-            "/log",
-            &json!({
-                "timestamp": stamp(e.t_s), "level": event_level(e), "message": event_text(e),
-                "name": name, "file": "", "line": 0
-            }),
+            Topic::Log,
+            &fg::Log {
+                timestamp: stamp(e.t_s),
+                level: event_level(e).into(),
+                message: event_text(e),
+                name,
+                file: String::new(),
+                line: 0,
+            },
         )?;
-        m.push(e.t_s, "/cycle/events", &serde_json::to_value(e)?)?;
+        m.json(e.t_s, Topic::Events, e)?;
     }
     for r in &result.records {
-        if let (Some(release), Some(t)) = (r.release_s, r.takt_s) {
-            m.push(
-                release,
-                "/cycle/takt",
-                &json!({"t_s": release, "pick": r.index, "takt_s": t, "spans_refill": r.spans_refill}),
-            )?;
+        if let (Some(release), Some(takt_s)) = (r.release_s, r.takt_s) {
+            let takt = Takt {
+                t_s: release,
+                pick: r.index,
+                takt_s,
+                spans_refill: r.spans_refill,
+            };
+            m.json(release, Topic::Takt, &takt)?;
         }
     }
     Ok(())

@@ -8,7 +8,8 @@
 //! with the same content: the cell (table, trays, obstacles, the sensor's frustum), the arm (its
 //! collision primitives once, its link frames over time), all parts as one batched entity (bounding
 //! boxes coloured by state: in the pick tray, held, placed) from the first pile pour on, each
-//! capture (camera intrinsics and pose, depth image, point cloud) at its trigger time, each
+//! capture (camera intrinsics and pose, depth image, point cloud on a 0.25 mm grid; the .rrd's
+//! sparser, as its viewer draws the depth image in 3D) at its trigger time, each
 //! recognition result (detections, ranked grasp candidates with the chosen one marked) when it
 //! arrived, every motion's tool path as planned and as executed, the joint positions, velocities
 //! and torques beside each joint's torque limit, the cycle's events as log entries and the takt of
@@ -33,8 +34,8 @@ use crate::physics::PartState;
 use crate::robot::RobotModel;
 
 pub use self::collect::{
-    CLOUD_EVERY_PX, CaptureImage, RECORDED_CANDIDATES, RecognitionRecord, Recorder, Recording, SCENE_FRAME_S,
-    SceneFrame, ToolPath,
+    CLOUD_EVERY_PX, CLOUD_GRID_M, CaptureImage, RECORDED_CANDIDATES, RecognitionRecord, Recorder, Recording,
+    SCENE_FRAME_S, SPARSE_CLOUD_EVERY_PX, SceneFrame, ToolPath,
 };
 pub use self::mcap::{write_mcap, write_mcap_file};
 pub use self::rrd::write_rrd_file;
@@ -45,9 +46,12 @@ pub enum RecordError {
     /// The MCAP writer failed.
     #[error("mcap: {0}")]
     Mcap(#[from] ::mcap::McapError),
-    /// A message could not be serialised.
+    /// A message could not be serialised as JSON.
     #[error("json: {0}")]
     Json(#[from] serde_json::Error),
+    /// A message could not be encoded as protobuf, or its schema is missing.
+    #[error("protobuf: {0}")]
+    Encode(String),
     /// The Rerun SDK refused a stream, a log call or a flush.
     #[error("rerun: {0}")]
     Rerun(String),

@@ -4,7 +4,9 @@
 //! - `world/cell`: table, trays and obstacles as boxes (static);
 //! - `world/camera`: the camera's pose and pinhole intrinsics (static; the viewer draws its
 //!   frustum), `world/camera/depth` each depth image (mm) at its trigger time;
-//! - `world/cloud`: each capture's point cloud (world frame) at its trigger time;
+//! - `world/cloud`: each capture's sparse point cloud (world frame, every
+//!   [`super::SPARSE_CLOUD_EVERY_PX`]-th pixel each way: under the camera's pinhole the viewer
+//!   draws the depth image itself in 3D at every pixel) at its trigger time;
 //! - `world/arm/<link>`: each link's `world_from_link` over time (50 Hz), its collision primitives
 //!   (static) under `world/arm/<link>/geometry`;
 //! - `world/parts`: all parts as one batch of boxes (10 Hz), coloured by state;
@@ -424,7 +426,7 @@ fn log_sensing(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
         rec.log(
             c.t_s,
             "world/cloud",
-            &rerun::Points3D::new(c.points_world_m.iter().copied()).with_radii([0.0006]),
+            &rerun::Points3D::new(c.sparse_points_world_m.iter().copied()).with_radii([0.0009]),
         )?;
     }
     let half = Vector3::from(result.part_size_m) / 2.0;

@@ -1,6 +1,8 @@
 //! Recordings: `binpick run` writes `run.rrd` and `run.mcap`; each is read back with its format's
-//! own reader (the rerun decoder, the mcap crate's reader) and compared with what the run did
-//! (its events, captures, recognition results, placed picks, properties) and with each other.
+//! own reader (the rerun decoder; the mcap crate's reader, with the protobuf messages decoded by
+//! prost-reflect from the schemas the file carries, not by the writer's message types) and
+//! compared with what the run did (its events, captures, recognition results, placed picks,
+//! properties) and with each other.
 
 use std::collections::BTreeMap;
 
@@ -22,6 +24,8 @@ struct RrdContents {
     blueprint_views: usize,
     /// Per joint (1-based): the rows of `joints/torque/J<i>` as [applied, +limit, -limit, demanded].
     torques: BTreeMap<usize, Vec<Vec<f64>>>,
+    /// The rows of `world/cloud`: each capture's points [m, world].
+    clouds: Vec<Vec<[f32; 3]>>,
 }
 
 fn read_rrd(path: &std::path::Path) -> RrdContents {
@@ -62,6 +66,11 @@ fn read_rrd(path: &std::path::Path) -> RrdContents {
                         rows.push(values.to_vec());
                     }
                 }
+                if entity == "/world/cloud" {
+                    for points in chunk.iter_slices::<[f32; 3]>("Points3D:positions".into()) {
+                        c.clouds.push(points.to_vec());
+                    }
+                }
                 if chunk.is_static() {
                     *c.static_rows.entry(entity).or_default() += chunk.num_rows();
                 } else {
@@ -73,6 +82,79 @@ fn read_rrd(path: &std::path::Path) -> RrdContents {
         }
     }
     c
+}
+
+/// A protobuf field's value as JSON: bytes as base64, enums as their numbers.
+fn proto_value_json(v: &prost_reflect::Value) -> serde_json::Value {
+    use prost_reflect::Value as V;
+    use serde_json::json;
+    match v {
+        V::Bool(b) => json!(b),
+        V::I32(x) | V::EnumNumber(x) => json!(x),
+        V::I64(x) => json!(x),
+        V::U32(x) => json!(x),
+        V::U64(x) => json!(x),
+        V::F32(x) => json!(x),
+        V::F64(x) => json!(x),
+        V::String(x) => json!(x),
+        V::Bytes(b) => {
+            use base64::Engine;
+            json!(base64::engine::general_purpose::STANDARD.encode(b))
+        }
+        V::Message(m) => proto_json(m),
+        V::List(l) => l.iter().map(proto_value_json).collect(),
+        V::Map(_) => panic!("no map fields in the recorded schemas"),
+    }
+}
+
+/// A decoded protobuf message as JSON with the schema's own field names: every field the schema
+/// declares, at its default when unset, but fields with presence left out when unset.
+fn proto_json(m: &prost_reflect::DynamicMessage) -> serde_json::Value {
+    use prost_reflect::ReflectMessage;
+    let mut o = serde_json::Map::new();
+    for f in m.descriptor().fields() {
+        if f.supports_presence() && !m.has_field(&f) {
+            continue;
+        }
+        o.insert(f.name().to_string(), proto_value_json(&m.get_field(&f)));
+    }
+    serde_json::Value::Object(o)
+}
+
+/// Decodes MCAP messages by their channel's encoding: JSON as is, protobuf from the descriptor
+/// set in the channel's schema (the message named as the schema).
+#[derive(Default)]
+struct McapDecoder(BTreeMap<u16, prost_reflect::MessageDescriptor>);
+
+impl McapDecoder {
+    fn decode(&mut self, m: &mcap::Message) -> Result<serde_json::Value, String> {
+        let schema = m.channel.schema.as_ref().ok_or("no schema")?;
+        match (m.channel.message_encoding.as_str(), schema.encoding.as_str()) {
+            ("json", "jsonschema") => serde_json::from_slice(&m.data).map_err(|e| e.to_string()),
+            ("protobuf", "protobuf") => {
+                let desc = match self.0.entry(schema.id) {
+                    std::collections::btree_map::Entry::Occupied(e) => e.get().clone(),
+                    std::collections::btree_map::Entry::Vacant(e) => {
+                        let pool =
+                            prost_reflect::DescriptorPool::decode(&schema.data[..]).map_err(|e| e.to_string())?;
+                        let desc = pool
+                            .get_message_by_name(&schema.name)
+                            .ok_or(format!("{} is not in its descriptor set", schema.name))?;
+                        e.insert(desc).clone()
+                    }
+                };
+                let message = prost_reflect::DynamicMessage::decode(desc, &m.data[..]).map_err(|e| e.to_string())?;
+                Ok(proto_json(&message))
+            }
+            (e, s) => Err(format!("message encoding {e} with schema encoding {s}")),
+        }
+    }
+}
+
+/// Whether `v` [m] lies on the recorded clouds' grid.
+fn on_cloud_grid(v: f32) -> bool {
+    let k = f64::from(v) / binpick::record::CLOUD_GRID_M;
+    (k - k.round()).abs() < 1e-3
 }
 
 #[test]
@@ -110,11 +192,12 @@ fn run_mcap_holds_what_the_run_did() {
         schemas,
         [
             "binpick.CycleEvent",
-            "binpick.JointState",
             "binpick.Properties",
+            "binpick.ServoState",
             "binpick.Takt",
             "foxglove.CameraCalibration",
             "foxglove.FrameTransforms",
+            "foxglove.JointStates",
             "foxglove.Log",
             "foxglove.PointCloud",
             "foxglove.RawImage",
@@ -140,11 +223,25 @@ fn run_mcap_holds_what_the_run_did() {
             "/recognition/truth_at_trigger",
             "/robot/geometry",
             "/robot/joint_states",
+            "/robot/servo",
             "/tf"
         ]
     );
-    assert!(summary.schemas.values().all(|s| s.encoding == "jsonschema"));
-    assert!(summary.channels.values().all(|c| c.message_encoding == "json"));
+    // Foxglove's well-known schemas as protobuf (descriptor sets), ours as JSON.
+    for c in summary.channels.values() {
+        let schema = c.schema.as_ref().unwrap();
+        let (schema_encoding, message_encoding) = if schema.name.starts_with("foxglove.") {
+            ("protobuf", "protobuf")
+        } else {
+            ("jsonschema", "json")
+        };
+        assert_eq!(
+            (schema.encoding.as_str(), c.message_encoding.as_str()),
+            (schema_encoding, message_encoding),
+            "{}",
+            c.topic
+        );
+    }
     assert!(!summary.chunk_indexes.is_empty(), "chunked");
     assert!(summary.chunk_indexes.iter().all(|c| c.compression == "zstd"));
     let meta = mcap::read::metadata(&bytes, &summary.metadata_indexes[0]).unwrap();
@@ -157,14 +254,27 @@ fn run_mcap_holds_what_the_run_did() {
     let mut chosen = 0;
     let mut mcap_torques: Vec<Vec<f64>> = Vec::new();
     let mut mcap_demands: Vec<Vec<f64>> = Vec::new();
+    let mut joint_times = (Vec::new(), Vec::new());
+    let mut mcap_clouds: Vec<Vec<[f32; 3]>> = Vec::new();
     let mut last = 0u64;
     let mut parts_span = (u64::MAX, 0u64);
+    let mut decoder = McapDecoder::default();
+    let mut truncated_seen = false;
     for m in mcap::MessageStream::new(&bytes).unwrap() {
         let m = m.unwrap();
         assert!(m.log_time >= last, "log times go back on {}", m.channel.topic);
         last = m.log_time;
         *count.entry(m.channel.topic.clone()).or_default() += 1;
-        let v: serde_json::Value = serde_json::from_slice(&m.data).unwrap();
+        let v = decoder
+            .decode(&m)
+            .unwrap_or_else(|e| panic!("{} does not decode: {e}", m.channel.topic));
+        // Negative control: the decoder notices a message cut short.
+        if m.channel.topic == "/camera/depth" && !truncated_seen {
+            let mut cut = m.clone();
+            cut.data = std::borrow::Cow::Owned(m.data[..m.data.len() - 1].to_vec());
+            assert!(decoder.decode(&cut).is_err(), "a truncated RawImage decodes");
+            truncated_seen = true;
+        }
         if m.channel.topic == "/camera/depth" {
             use base64::Engine;
             let data = base64::engine::general_purpose::STANDARD
@@ -180,12 +290,28 @@ fn run_mcap_holds_what_the_run_did() {
                 .decode(v["data"].as_str().unwrap())
                 .unwrap();
             assert_eq!(v["point_stride"], 12);
+            assert_eq!(v["frame_id"], "world");
+            let fields: Vec<(&str, u64, u64)> = v["fields"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .map(|f| {
+                    let (name, offset, kind) = (&f["name"], &f["offset"], &f["type"]);
+                    (name.as_str().unwrap(), offset.as_u64().unwrap(), kind.as_u64().unwrap())
+                })
+                .collect();
+            assert_eq!(fields, [("x", 0, 7), ("y", 4, 7), ("z", 8, 7)], "float32 x, y, z");
             assert!(!data.is_empty() && data.len().is_multiple_of(12));
-            // Points lie in the cell: above the table, below the camera.
-            for p in data.chunks(12) {
-                let z = f32::from_le_bytes(p[8..12].try_into().unwrap());
-                assert!((-0.01..1.1).contains(&z), "point at z {z}");
+            let cloud: Vec<[f32; 3]> = data
+                .chunks(12)
+                .map(|p| std::array::from_fn(|k| f32::from_le_bytes(p[4 * k..4 * k + 4].try_into().unwrap())))
+                .collect();
+            // Points lie in the cell: above the table, below the camera; on the recorded grid.
+            for p in &cloud {
+                assert!((-0.01..1.1).contains(&p[2]), "point at z {}", p[2]);
+                assert!(p.iter().all(|v| on_cloud_grid(*v)), "{p:?} off the grid");
             }
+            mcap_clouds.push(cloud);
         }
         if m.channel.topic == "/recognition" {
             let entities = v["entities"].as_array().unwrap();
@@ -208,15 +334,27 @@ fn run_mcap_holds_what_the_run_did() {
             assert!(!v["entities"][0]["cubes"].as_array().unwrap().is_empty());
         }
         if m.channel.topic == "/robot/joint_states" {
-            let tau = v["torque_nm"].as_array().unwrap();
+            // foxglove.JointStates: the URDF's joints with position, velocity and applied torque.
+            let joints = v["joints"].as_array().unwrap();
+            let names: Vec<&str> = joints.iter().map(|j| j["name"].as_str().unwrap()).collect();
+            assert_eq!(
+                names,
+                ["joint_1", "joint_2", "joint_3", "joint_4", "joint_5", "joint_6"]
+            );
+            for j in joints {
+                assert!(["position", "velocity", "effort"].iter().all(|k| j[k].is_f64()), "{j}");
+            }
+            mcap_torques.push(joints.iter().map(|j| j["effort"].as_f64().unwrap()).collect());
+            joint_times.0.push(m.log_time);
+        }
+        if m.channel.topic == "/robot/servo" {
             let demand = v["torque_demand_nm"].as_array().unwrap();
             let limit = v["torque_limit_nm"].as_array().unwrap();
-            mcap_torques.push(tau.iter().map(|t| t.as_f64().unwrap()).collect());
             mcap_demands.push(demand.iter().map(|t| t.as_f64().unwrap()).collect());
             assert_eq!(
                 (
-                    tau.len(),
                     demand.len(),
+                    limit.len(),
                     v["tracking_error_rad"].as_array().unwrap().len()
                 ),
                 (6, 6, 6)
@@ -225,6 +363,7 @@ fn run_mcap_holds_what_the_run_did() {
             for (d, l) in demand.iter().zip(limit) {
                 assert!(d.as_f64().unwrap().abs() <= l.as_f64().unwrap());
             }
+            joint_times.1.push(m.log_time);
         }
     }
     // Every stage of the cycle is a log entry.
@@ -286,6 +425,9 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(chosen, grasps, "the chosen candidate is marked once per chosen grasp");
     assert_eq!(count["/cell"], 1);
     assert_eq!(count["/robot/geometry"], 1);
+    assert_eq!(joint_times.0, joint_times.1, "servo states beside the joint states");
+    // Negative control of the grid check: a point off the grid is seen.
+    assert!(!on_cloud_grid(0.123_456_7));
 
     // The Rerun file, read with rerun's decoder: the same run.
     let rrd = read_rrd(&dir.join("run.rrd"));
@@ -311,6 +453,28 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(rows("/cycle/takt"), takts);
     assert_eq!(rows("/world/camera/depth"), captures);
     assert_eq!(rows("/world/cloud"), captures);
+    // The .rrd's sparse cloud: every 2nd point of the MCAP's each way, so about a quarter of
+    // them, and each one of the MCAP's points of the same capture (both on the same grid).
+    assert_eq!(rrd.clouds.len(), mcap_clouds.len());
+    for (sparse, cloud) in rrd.clouds.iter().zip(&mcap_clouds) {
+        let quarter = cloud.len() as f64 / 4.0;
+        assert!(
+            (sparse.len() as f64 - quarter).abs() <= 0.05 * quarter + 10.0,
+            "{} of {}",
+            sparse.len(),
+            cloud.len()
+        );
+        let key = |p: &[f32; 3]| p.map(f32::to_bits);
+        let all: std::collections::BTreeSet<[u32; 3]> = cloud.iter().map(key).collect();
+        assert!(
+            sparse.iter().all(|p| all.contains(&key(p))),
+            "a sparse point not in the cloud"
+        );
+        // Negative control: a point moved by one grid step is not found.
+        let mut moved = sparse[0];
+        moved[0] += binpick::record::CLOUD_GRID_M as f32;
+        assert!(!all.contains(&key(&moved)));
+    }
     assert_eq!(rows("/world/recognition/detections"), used);
     assert_eq!(rows("/world/recognition/candidates"), used);
     assert_eq!(rows("/world/recognition/truth_at_trigger"), ready);
@@ -336,7 +500,9 @@ fn run_mcap_holds_what_the_run_did() {
         assert_eq!(rows.len(), mcap_torques.len());
         for ((row, mcap), demand) in rows.iter().zip(&mcap_torques).zip(&mcap_demands) {
             assert_eq!(row.len(), 4);
-            assert!((row[3] - demand[j - 1]).abs() <= 1e-9, "J{j} demand {row:?}");
+            // The MCAP's servo states are single precision.
+            let single = 1e-6 * row[3].abs().max(1.0);
+            assert!((row[3] - demand[j - 1]).abs() <= single, "J{j} demand {row:?}");
             assert!(
                 (row[0] - mcap[j - 1]).abs() <= 1e-9,
                 "J{j}: {} against {}",
@@ -411,7 +577,7 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let summary = mcap::read::Summary::read(&bytes)
         .unwrap()
         .expect("finished: a summary section");
-    assert_eq!(summary.channels.len(), 15);
+    assert_eq!(summary.channels.len(), 16);
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1);
