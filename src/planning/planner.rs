@@ -16,6 +16,7 @@
 
 use std::cell::RefCell;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Translation3, Vector3};
@@ -118,8 +119,31 @@ pub struct CertifiedEdges<'a> {
 /// What [`CertifiedEdges`] remembers, keyed by the configurations' bits.
 #[derive(Debug, Default)]
 struct Memo {
-    probes: HashMap<[u64; DOF], Probe>,
-    verdicts: HashMap<([u64; DOF], [u64; DOF]), bool>,
+    probes: HashMap<[u64; DOF], Probe, BuildHasherDefault<BitsHasher>>,
+    verdicts: HashMap<([u64; DOF], [u64; DOF]), bool, BuildHasherDefault<BitsHasher>>,
+}
+
+/// A fast, fixed (unseeded) hasher for configurations' bits: multiply and rotate per 8 bytes
+/// (as FxHash). The maps are only looked into, never iterated, so nothing depends on the order.
+#[derive(Debug, Default, Clone, Copy)]
+struct BitsHasher(u64);
+
+impl Hasher for BitsHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
 fn bits(q: &JointVector) -> [u64; DOF] {
