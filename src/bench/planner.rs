@@ -68,7 +68,9 @@ fn planner_row(
 }
 
 /// Runs the three Fig. 5 cases for `trials` seeds each with ours and the baselines (baselines
-/// get `baseline_trials`), and the bin-picking query set.
+/// get `baseline_trials`), and the bin-picking query set: 200 cases of one trial each, every
+/// planner on every query (the same queries, so the means compare; the baselines on none when
+/// `baseline_trials` is 0).
 pub fn planner_bench(
     scene: &crate::config::LoadedScene,
     robot: &RobotModel,
@@ -99,10 +101,12 @@ pub fn planner_bench(
         }
     }
     let queries = binpicking_queries(scene, robot, workpieces, 200)?;
-    for (alg, n) in [
-        (Algorithm::Ours, queries.len()),
-        (Algorithm::RrtConnect, baseline_trials.min(queries.len())),
-    ] {
+    for alg in [Algorithm::Ours, Algorithm::RrtConnect, Algorithm::Rrt] {
+        let n = if alg == Algorithm::Ours || baseline_trials > 0 {
+            queries.len()
+        } else {
+            0
+        };
         let opts = PlanOptions {
             algorithm: alg,
             ..PlanOptions::default()

@@ -25,6 +25,6 @@ pub mod planner;
 pub mod search;
 
 pub use certify::AxisReach;
-pub use model::{CollisionModel, EnvBox, Environment, Nearest, PileColumns, RobotSpheres, SELF_PAIRS, Sphere};
+pub use model::{CollisionModel, EnvBox, Environment, Nearest, PileColumns, Probe, RobotSpheres, SELF_PAIRS, Sphere};
 pub use planner::{Algorithm, CertifiedEdges, DiscreteEdges, Plan, PlanError, PlanOptions};
 pub use search::{Budget, ConfigSpace, EdgeValidity, JointBox, PlanStats, Search};

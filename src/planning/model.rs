@@ -347,6 +347,30 @@ struct Posed {
     first: [usize; DOF + 2],
 }
 
+/// What the edge certification needs at one configuration ([`CollisionModel::probe`]).
+#[derive(Debug, Clone, Copy)]
+pub struct Probe {
+    /// Clearance to the environment, capped at the horizon [m], and what is nearest.
+    pub env: (f64, Nearest),
+    /// Clearance of each pair of [`SELF_PAIRS`], capped at the horizon [m].
+    pub pairs_m: [f64; SELF_PAIRS.len()],
+    /// How far each link reaches from each joint's axis.
+    pub reach: AxisReach,
+}
+
+impl Probe {
+    /// The clearance and what is nearest, as [`CollisionModel::nearest`] gives them.
+    pub fn nearest(&self) -> (f64, Nearest) {
+        let mut best = self.env;
+        for (&d, &(a, b)) in self.pairs_m.iter().zip(&SELF_PAIRS) {
+            if d < best.0 {
+                best = (d, Nearest::Links(a, b));
+            }
+        }
+        best
+    }
+}
+
 /// Sphere centres kept on the stack in [`CollisionModel::nearest`] (more go to the heap).
 const STACK_SPHERES: usize = 128;
 
@@ -416,25 +440,33 @@ impl CollisionModel {
     /// edge checks, which never need the name ([`CollisionModel::describe`] gives it).
     pub fn nearest(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest) {
         stats.clearance_checks += 1;
-        self.nearest_inner(q, None)
+        self.nearest_inner(q)
     }
 
-    /// As [`CollisionModel::nearest`], the clearance only, with how far each link reaches from
-    /// each joint's axis at `q` (what the edge certification bounds the motion with).
-    pub fn nearest_reach(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, AxisReach) {
-        let (d, _, reach) = self.nearest_named_reach(q, stats);
-        (d, reach)
-    }
-
-    /// [`CollisionModel::nearest`] and [`CollisionModel::nearest_reach`] in one query.
-    pub fn nearest_named_reach(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest, AxisReach) {
+    /// What the edge certification needs at `q` ([`Probe`]): the clearance to the environment,
+    /// of each self pair, and how far each link reaches from each joint's axis.
+    pub fn probe(&self, q: &JointVector, stats: &mut PlanStats) -> Probe {
         stats.clearance_checks += 1;
+        let links = &self.spheres.links;
+        let total: usize = links.iter().map(Vec::len).sum();
+        let mut on_stack = [Vector3::zeros(); STACK_SPHERES];
+        let mut on_heap = Vec::new();
+        let centers: &mut [Vector3<f64>] = if total <= STACK_SPHERES {
+            &mut on_stack[..total]
+        } else {
+            on_heap.resize(total, Vector3::zeros());
+            &mut on_heap
+        };
+        let posed = self.pose(q, centers);
+        let centers = &*centers;
+        let env = self.nearest_env(&posed, centers, (self.horizon_m, Nearest::Nothing));
         let mut reach = AxisReach::zero();
-        let (d, nearest) = self.nearest_inner(q, Some(&mut reach));
-        (d, nearest, reach)
+        self.axis_reach(&posed, centers, &mut reach);
+        let pairs_m = std::array::from_fn(|p| self.pair_distance(&posed, centers, p));
+        Probe { env, pairs_m, reach }
     }
 
-    fn nearest_inner(&self, q: &JointVector, reach: Option<&mut AxisReach>) -> (f64, Nearest) {
+    fn nearest_inner(&self, q: &JointVector) -> (f64, Nearest) {
         let links = &self.spheres.links;
         let total: usize = links.iter().map(Vec::len).sum();
         let mut on_stack = [Vector3::zeros(); STACK_SPHERES];
@@ -448,9 +480,6 @@ impl CollisionModel {
         let posed = self.pose(q, centers);
         let centers = &*centers;
         let best = self.nearest_env(&posed, centers, (self.horizon_m, Nearest::Nothing));
-        if let Some(reach) = reach {
-            self.axis_reach(&posed, centers, reach);
-        }
         self.nearest_self(&posed, centers, best)
     }
 
@@ -521,6 +550,35 @@ impl CollisionModel {
                 }
             }
         }
+    }
+
+    /// The clearance of the `p`-th pair of [`SELF_PAIRS`], capped at the horizon [m].
+    fn pair_distance(&self, posed: &Posed, centers: &[Vector3<f64>], p: usize) -> f64 {
+        let (links, bounds, first) = (&self.spheres.links, &self.spheres.bounds, &posed.first);
+        let (a, b) = SELF_PAIRS[p];
+        let mut best = self.horizon_m;
+        let (ba, bb) = (&bounds[a], &bounds[b]);
+        let cb = &posed.bound_centers[b];
+        if (posed.bound_centers[a] - cb).norm() - ba.radius_m - bb.radius_m >= best + BOUND_SLACK_M {
+            return best;
+        }
+        for (pa, sa) in centers[first[a]..first[a + 1]].iter().zip(&links[a]) {
+            if (pa - cb).norm() - sa.radius_m - bb.radius_m >= best + BOUND_SLACK_M {
+                continue;
+            }
+            for (pb, sb) in centers[first[b]..first[b + 1]].iter().zip(&links[b]) {
+                let t = best + sa.radius_m + sb.radius_m + BOUND_SLACK_M;
+                let dd = (pa - pb).norm_squared();
+                if t <= 0.0 || dd >= t * t {
+                    continue;
+                }
+                let d = (pa - pb).norm() - sa.radius_m - sb.radius_m;
+                if d < best {
+                    best = d;
+                }
+            }
+        }
+        best
     }
 
     /// The nearest self pair, if nearer than `best`.

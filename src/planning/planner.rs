@@ -16,14 +16,14 @@
 
 use std::cell::RefCell;
 use std::collections::HashMap;
+use std::hash::{BuildHasherDefault, Hasher};
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Translation3, Vector3};
 use rand_chacha::ChaCha8Rng;
 use serde::Serialize;
 
-use super::certify::AxisReach;
-use super::model::CollisionModel;
+use super::model::{CollisionModel, Probe};
 use super::search::{self, Budget, ConfigSpace, EdgeValidity, JointBox, PlanStats, Search};
 use crate::robot::{DOF, JointVector};
 
@@ -119,8 +119,31 @@ pub struct CertifiedEdges<'a> {
 /// What [`CertifiedEdges`] remembers, keyed by the configurations' bits.
 #[derive(Debug, Default)]
 struct Memo {
-    clearance_m: HashMap<[u64; DOF], (f64, AxisReach)>,
-    verdicts: HashMap<([u64; DOF], [u64; DOF]), bool>,
+    probes: HashMap<[u64; DOF], Probe, BuildHasherDefault<BitsHasher>>,
+    verdicts: HashMap<([u64; DOF], [u64; DOF]), bool, BuildHasherDefault<BitsHasher>>,
+}
+
+/// A fast, fixed (unseeded) hasher for configurations' bits: multiply and rotate per 8 bytes
+/// (as FxHash). The maps are only looked into, never iterated, so nothing depends on the order.
+#[derive(Debug, Default, Clone, Copy)]
+struct BitsHasher(u64);
+
+impl Hasher for BitsHasher {
+    fn write(&mut self, bytes: &[u8]) {
+        for chunk in bytes.chunks(8) {
+            let mut word = [0u8; 8];
+            word[..chunk.len()].copy_from_slice(chunk);
+            self.write_u64(u64::from_le_bytes(word));
+        }
+    }
+
+    fn write_u64(&mut self, x: u64) {
+        self.0 = (self.0.rotate_left(5) ^ x).wrapping_mul(0x51_7c_c1_b7_27_22_0a_95);
+    }
+
+    fn finish(&self) -> u64 {
+        self.0
+    }
 }
 
 fn bits(q: &JointVector) -> [u64; DOF] {
@@ -136,22 +159,20 @@ impl<'a> CertifiedEdges<'a> {
         }
     }
 
-    /// Remembers the clearance and axis reach at `q`, as [`CollisionModel::nearest_reach`] gave
-    /// them.
-    pub fn remember(&self, q: &JointVector, end: (f64, AxisReach)) {
-        self.memo.borrow_mut().clearance_m.insert(bits(q), end);
+    /// Remembers `probe` as what [`CollisionModel::probe`] gave at `q`.
+    pub fn remember(&self, q: &JointVector, probe: Probe) {
+        self.memo.borrow_mut().probes.insert(bits(q), probe);
     }
 
-    /// The clearance and axis reach at `q` ([`CollisionModel::nearest_reach`]), computed once per
-    /// configuration.
-    fn clearance_m(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, AxisReach) {
+    /// [`CollisionModel::probe`] at `q`, computed once per configuration.
+    fn probe(&self, q: &JointVector, stats: &mut PlanStats) -> Probe {
         let key = bits(q);
-        if let Some(end) = self.memo.borrow().clearance_m.get(&key) {
-            return *end;
+        if let Some(probe) = self.memo.borrow().probes.get(&key) {
+            return *probe;
         }
-        let end = self.model.nearest_reach(q, stats);
-        self.memo.borrow_mut().clearance_m.insert(key, end);
-        end
+        let probe = self.model.probe(q, stats);
+        self.memo.borrow_mut().probes.insert(key, probe);
+        probe
     }
 }
 
@@ -161,11 +182,11 @@ impl EdgeValidity<JointVector> for CertifiedEdges<'_> {
         if let Some(v) = self.memo.borrow().verdicts.get(&key) {
             return *v;
         }
-        let end_a = self.clearance_m(a, stats);
-        let end_b = self.clearance_m(b, stats);
+        let end_a = self.probe(a, stats);
+        let end_b = self.probe(b, stats);
         let v = self
             .model
-            .certify_edge_from(a, end_a, b, end_b, self.model.margin_m, stats);
+            .certify_edge_from(a, &end_a, b, &end_b, self.model.margin_m, stats);
         self.memo.borrow_mut().verdicts.insert(key, v);
         v
     }
@@ -206,7 +227,17 @@ impl CollisionModel {
     ) -> Result<Plan, PlanError> {
         let t0 = Instant::now();
         let mut stats = PlanStats::default();
-        let (ds, ns, reach_s) = self.nearest_named_reach(start, &mut stats);
+        // Ours keeps the ends' probes for the edges; the baselines need the clearance only.
+        let ours = opts.algorithm == Algorithm::Ours;
+        let end = |q: &JointVector, stats: &mut PlanStats| {
+            if ours {
+                let p = self.probe(q, stats);
+                (p.nearest(), Some(p))
+            } else {
+                (self.nearest(q, stats), None)
+            }
+        };
+        let ((ds, ns), probe_s) = end(start, &mut stats);
         if !self.robot.within_limits(start, 1e-9) || ds <= self.margin_m {
             return Err(PlanError::StartInCollision(format!(
                 "clearance {:.1} mm between {}",
@@ -214,7 +245,7 @@ impl CollisionModel {
                 self.describe(ns)
             )));
         }
-        let (dg, ng, reach_g) = self.nearest_named_reach(goal, &mut stats);
+        let ((dg, ng), probe_g) = end(goal, &mut stats);
         if !self.robot.within_limits(goal, 1e-9) || dg <= self.margin_m {
             return Err(PlanError::GoalInCollision(format!(
                 "clearance {:.1} mm between {}",
@@ -231,8 +262,11 @@ impl CollisionModel {
         let found = match opts.algorithm {
             Algorithm::Ours => {
                 let edges = CertifiedEdges::new(self);
-                edges.remember(start, (ds, reach_s));
-                edges.remember(goal, (dg, reach_g));
+                for (q, p) in [(start, probe_s), (goal, probe_g)] {
+                    if let Some(p) = p {
+                        edges.remember(q, p);
+                    }
+                }
                 let search = Search {
                     space: &space,
                     edges: &edges,

@@ -511,3 +511,128 @@ fn the_direct_edge_of_each_reference_case_collides_deeply() {
     }
     println!("{}", report.join("\n"));
 }
+
+/// Not a check: a profiling and decision-diffing harness (`cargo test --release --test all profile_planner -- --ignored
+/// --nocapture`). Plans the bench's sets (Fig. 5 cases, seeds 1..=100; the bin-picking queries)
+/// `BINPICK_PROFILE_REPS` times (default 1) and prints per set the solved share, mean, p95 and
+/// max time, clearance checks per plan and time per check. `BINPICK_PROFILE_ALGS`: `rrtc` adds
+/// RRT-Connect, `all` RRT too (not on J3, where it fails); `BINPICK_PROFILE_WPS` (default
+/// `ABCDEF`) and `BINPICK_PROFILE_BIN` (default 200) choose the bin-picking queries (small sets run
+/// under valgrind). With `BINPICK_PROFILE_OUT`, one line per plan (set, query, algorithm, how,
+/// samples, checks, edges, waypoints, a hash of the waypoints, ms) goes to that file: two builds'
+/// files, time column aside, show whether a change altered any planning decision. Each plan
+/// has a 2 s budget (the bench's: 10 s).
+#[test]
+#[ignore]
+fn profile_planner() {
+    use std::fmt::Write as _;
+    let (scene, robot) = setup();
+    let reps: usize = std::env::var("BINPICK_PROFILE_REPS")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(1);
+    let algs: Vec<Algorithm> = match std::env::var("BINPICK_PROFILE_ALGS").as_deref() {
+        Ok("all") => vec![Algorithm::Ours, Algorithm::RrtConnect, Algorithm::Rrt],
+        Ok("rrtc") => vec![Algorithm::Ours, Algorithm::RrtConnect],
+        _ => vec![Algorithm::Ours],
+    };
+    let wp_names = std::env::var("BINPICK_PROFILE_WPS").unwrap_or_else(|_| "ABCDEF".into());
+    let n_bin: usize = std::env::var("BINPICK_PROFILE_BIN")
+        .ok()
+        .and_then(|s| s.parse().ok())
+        .unwrap_or(200);
+    let wps: Vec<LoadedWorkpiece> = wp_names
+        .chars()
+        .map(|n| LoadedWorkpiece::resolve(&n.to_string()).unwrap())
+        .collect();
+    let mut sets: Vec<(String, Vec<(PlannerCase, u64)>)> = Vec::new();
+    for case in fig5_cases(&scene.scene, &robot).unwrap() {
+        let name = case.name.clone();
+        sets.push((name, (0..100u64).map(|t| (clone_case(&case), 1 + t)).collect()));
+    }
+    let queries = binpicking_queries(&scene, &robot, &wps, n_bin).unwrap();
+    sets.push((
+        "bin picking".into(),
+        queries
+            .into_iter()
+            .enumerate()
+            .map(|(k, q)| (q, 1 + k as u64))
+            .collect(),
+    ));
+    let mut out = String::new();
+    for (set, cases) in &sets {
+        for alg in &algs {
+            if *alg == Algorithm::Rrt && set.starts_with("J3") {
+                continue;
+            }
+            let opts = PlanOptions {
+                algorithm: *alg,
+                budget_s: 2.0,
+                ..PlanOptions::default()
+            };
+            let mut times = Vec::new();
+            let mut checks = 0usize;
+            for rep in 0..reps {
+                for (k, (case, seed)) in cases.iter().enumerate() {
+                    let mut rng = binpick::rng::stream(*seed, "planner");
+                    let r = case.model.plan(&case.start, &case.goal, &opts, &mut rng);
+                    match &r {
+                        Ok(p) => {
+                            times.push(p.time_s * 1e3);
+                            checks += p.stats.clearance_checks;
+                            if rep == 0 {
+                                let h = p
+                                    .waypoints
+                                    .iter()
+                                    .flatten()
+                                    .fold(0u64, |h, x| h.rotate_left(5) ^ x.to_bits());
+                                let _ = writeln!(
+                                    out,
+                                    "{set}\t{k}\t{alg:?}\t{}\t{}\t{}\t{}\t{}\t{h:016x}\t{:.3}",
+                                    p.how,
+                                    p.stats.samples,
+                                    p.stats.clearance_checks,
+                                    p.stats.edges,
+                                    p.waypoints.len(),
+                                    p.time_s * 1e3
+                                );
+                            }
+                        }
+                        Err(e) => {
+                            if rep == 0 {
+                                let _ = writeln!(out, "{set}\t{k}\t{alg:?}\tfailed: {e}");
+                            }
+                        }
+                    }
+                }
+            }
+            times.sort_by(f64::total_cmp);
+            let n = times.len().max(1);
+            eprintln!(
+                "{set:<50} {alg:<12?} solved {}/{} mean {:.3} p95 {:.3} max {:.3} ms, {:.0} checks, {:.2} us/check",
+                times.len(),
+                cases.len() * reps,
+                times.iter().sum::<f64>() / n as f64,
+                times
+                    .get((n * 95).div_ceil(100).saturating_sub(1))
+                    .copied()
+                    .unwrap_or(0.0),
+                times.last().copied().unwrap_or(0.0),
+                checks as f64 / n as f64,
+                times.iter().sum::<f64>() * 1e3 / checks.max(1) as f64
+            );
+        }
+    }
+    if let Ok(path) = std::env::var("BINPICK_PROFILE_OUT") {
+        std::fs::write(path, out).unwrap();
+    }
+}
+
+fn clone_case(c: &PlannerCase) -> PlannerCase {
+    PlannerCase {
+        name: c.name.clone(),
+        model: c.model.clone(),
+        start: c.start,
+        goal: c.goal,
+    }
+}
