@@ -88,15 +88,14 @@ pub struct CaptureImage {
 /// The points of every `every_px`-th pixel of `c` in each direction that has a return, row-major,
 /// each coordinate rounded to the [`CLOUD_GRID_M`] grid [m, world].
 fn cloud_on_grid(c: &Capture, every_px: usize) -> Vec<[f32; 3]> {
-    let on_grid = |v: f32| ((f64::from(v) / CLOUD_GRID_M).round() * CLOUD_GRID_M) as f32;
+    let per_m = 1.0 / CLOUD_GRID_M;
+    let on_grid = |v: f32| ((f64::from(v) * per_m).round() * CLOUD_GRID_M) as f32;
     c.points_world
-        .iter()
-        .enumerate()
-        .filter(|(k, p)| {
-            let (u, v) = (k % c.width_px, k / c.width_px);
-            u % every_px == 0 && v % every_px == 0 && p[0].is_finite()
-        })
-        .map(|(_, p)| p.map(on_grid))
+        .chunks_exact(c.width_px.max(1))
+        .step_by(every_px)
+        .flat_map(|row| row.iter().step_by(every_px))
+        .filter(|p| p[0].is_finite())
+        .map(|p| p.map(on_grid))
         .collect()
 }
 
