@@ -391,6 +391,13 @@ pub struct CycleConfig {
     /// arm waits where its last motion ended.
     #[serde(default)]
     pub waiting_tool_m: Option<[f64; 3]>,
+    /// The straight lines overlap the transfers next to them: the Place transfer starts while
+    /// the part still rises, and the descents (the Pick's onto the part, the Place's into the
+    /// slot) start while the transfer before them ends, each by the largest share of the line
+    /// (60, 40 or 20 %) whose overlap is clear, within the torques and within the cup's holding
+    /// force. Absent: false (every motion from rest to rest).
+    #[serde(default)]
+    pub overlap_lines: bool,
 }
 
 fn default_max_picks_per_capture() -> u32 {

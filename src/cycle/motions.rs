@@ -25,8 +25,8 @@ use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
 use crate::robot::{JointVector, Payload};
 use crate::sensor::{CaptureJob, Detection};
 use crate::trajectory::{
-    CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, Overlapped, TORQUE_DT_S, Trajectory, accelerate_in_corridor,
-    check_corridor, limit_tool_force, peak_tool_specific_force, straight_line, torques,
+    CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, OverlapCheck, Overlapped, Trajectory, accelerate_in_corridor,
+    limit_tool_force, overlap_end, straight_line,
 };
 
 /// Fraction of the cup's holding force a held-part motion may use.
@@ -49,17 +49,44 @@ pub fn above_place(grasp: &GraspCandidate) -> Isometry3<f64> {
     )
 }
 
-/// The Place motion after the lift: transfer, descent, retreat, the transfer's time scaling for
-/// the cup's holding force, and the lift and the transfer overlapped when that is clear, within
-/// the torques and within the holding force.
-pub(super) type PlaceMotion = (Trajectory, LineMotion, LineMotion, f64, Option<Overlapped>);
+/// The Place motion after the lift.
+pub(super) struct PlaceMotion {
+    /// Transfer to above the slot, with the part.
+    pub transfer: Trajectory,
+    /// Straight descent to the release pose.
+    pub descent: LineMotion,
+    /// Straight retreat without the part.
+    pub retreat: LineMotion,
+    /// The transfer's time scaling for the cup's holding force (1: none).
+    pub suction_speed_factor: f64,
+    /// The lift and the transfer overlapped, when that is clear, within the torques and within
+    /// the holding force.
+    pub lift_blend: Option<Overlapped>,
+    /// The transfer and the descent overlapped, likewise.
+    pub descent_blend: Option<Overlapped<Trajectory, LineMotion>>,
+}
 
-/// The shares of the lift the Place transfer may overlap, tried largest first.
-pub const LIFT_OVERLAP_SHARES: [f64; 3] = [0.6, 0.4, 0.2];
-/// An overlap's torques stay within this share of the accelerator's limits (its own motions end
-/// up within 5 % below them; the overlap's peak comes where two motions accelerate at once, and
-/// at 100 % the servo's feedback on top once demanded 101 % of J1's limit on F).
-pub const LIFT_OVERLAP_TORQUE_SHARE: f64 = 0.9;
+impl PlaceMotion {
+    /// From the transfer's start to the end of the descent [s] (with the descent's overlap).
+    pub fn carry_s(&self) -> f64 {
+        match &self.descent_blend {
+            Some(d) => d.duration_s(),
+            None => self.transfer.duration_s() + self.descent.duration_s(),
+        }
+    }
+}
+
+/// The shares of a straight line (the lift, a descent) that may run while the transfer next to
+/// it moves, tried largest first (`cycle.overlap_lines`). The rest of the line runs alone: the
+/// lift's start straight up off the pile, a descent's end straight onto the face or into the
+/// slot.
+pub const LINE_OVERLAP_SHARES: [f64; 3] = [0.6, 0.4, 0.2];
+/// Where two motions run at once, each joint's torque stays within this share of the
+/// accelerator's limits, or within what the two motions alone demand there if that is more
+/// (the accelerator takes the transfers up to about 95-100 % of its limits on their own). At
+/// 100 % regardless of the motions alone, the servo's feedback on top once demanded 101 % of
+/// J1's limit on F.
+pub const OVERLAP_TORQUE_SHARE: f64 = 0.9;
 
 /// The motions of one pick, generated from one recognition result.
 pub(super) struct Prepared {
@@ -71,6 +98,9 @@ pub(super) struct Prepared {
     pub pick_transfer: Result<Trajectory, String>,
     /// Straight descent to the grasp.
     pub descent: LineMotion,
+    /// The transfer and the descent overlapped, when that is clear and within the torques
+    /// (`cycle.overlap_lines`).
+    pub pick_blend: Option<Overlapped<Trajectory, LineMotion>>,
     /// Straight lift with the part, generated while the Pick runs.
     pub lift: LineMotion,
     /// The Place motion (or why not), generated while the Pick runs.
@@ -117,6 +147,37 @@ impl Cell<'_> {
             &limits,
             max_force,
         )
+    }
+
+    /// `second` started while `first` ends ([`overlap_end`]): by the largest of
+    /// [`LINE_OVERLAP_SHARES`] of `line_s` (the lift's or the descent's duration) whose overlap
+    /// is clear in `model`, within [`OVERLAP_TORQUE_SHARE`] of the accelerator's torques (or
+    /// what the motions alone demand there) with `payload`, and within `max_force` with a part
+    /// held. None when the cell does not overlap lines (`cycle.overlap_lines`).
+    pub(super) fn overlap_end<A: Motion + Clone, B: Motion + Clone>(
+        &self,
+        first: &A,
+        second: &B,
+        line_s: f64,
+        payload: &Payload,
+        model: &CollisionModel,
+        max_force: Option<f64>,
+    ) -> Option<Overlapped<A, B>> {
+        if !self.scene.cycle.overlap_lines {
+            return None;
+        }
+        let check = OverlapCheck {
+            robot: self.robot,
+            accel_robot: &self.accel_robot,
+            dynamics: &self.accel_robot.dynamics(payload),
+            model,
+            max_force_m_s2: max_force,
+            torque_share: OVERLAP_TORQUE_SHARE,
+            // On the physics step's grid: the head ends moving, and a last step shorter than
+            // the others would show the cup a jump in acceleration.
+            grid_s: self.scene.sim.physics_dt_s,
+        };
+        overlap_end(first, second, line_s, &LINE_OVERLAP_SHARES, &check)
     }
 }
 
@@ -178,6 +239,11 @@ impl Run<'_, '_> {
             &hand,
             None,
         );
+        // The descent starts while the transfer ends, where the pile as seen allows.
+        let pick_blend = match (&pick_transfer, &descent) {
+            (Ok(t), Some(d)) => cell.overlap_end(t, d, d.duration_s(), &hand, &empty, None),
+            _ => None,
+        };
         let pick_s = wall.elapsed().as_secs_f64();
         // Place: with the part on the cup, its centre of mass where the recognition put it.
         let wall = Instant::now();
@@ -233,33 +299,23 @@ impl Run<'_, '_> {
             let up = cell
                 .line(&q_release, &release_pose, &above_place, &hand, None)
                 .ok_or("place retreat: no joint path along the line")?;
-            // The transfer starts while the part still rises, as early as the corridor from
-            // there on is clear, the torques stay within the accelerator's share and the cup's
-            // holding force suffices.
-            let blend = lift.as_ref().and_then(|lift| {
-                LIFT_OVERLAP_SHARES.iter().find_map(|share| {
-                    // On the physics step's grid: the lift's head ends moving, and a last step
-                    // shorter than the others would show the cup a jump in acceleration.
-                    let dt = cell.scene.sim.physics_dt_s;
-                    let start_s = (lift.duration_s() * (1.0 - share) / dt).round() * dt;
-                    let o = Overlapped::new(lift.clone(), transfer.clone(), start_s);
-                    let rest = o.rest();
-                    let samples = o.sampled(TORQUE_DT_S);
-                    let ok = peak_tool_specific_force(robot, &o, TORQUE_DT_S) <= max_force
-                        && torques(
-                            &cell.accel_robot.dynamics(&held),
-                            &cell.accel_robot,
-                            &samples,
-                            TORQUE_DT_S,
-                        )
-                        .peak_ratio
-                        .iter()
-                        .all(|r| *r <= LIFT_OVERLAP_TORQUE_SHARE)
-                        && check_corridor(&holding, &rest, CORRIDOR_CHECK_DT_S).is_ok();
-                    ok.then_some(o)
-                })
-            });
-            Ok::<_, String>((transfer, down, up, k, blend))
+            // The transfer starts while the part still rises, and the descent into the slot
+            // while the transfer ends, once the lift is over.
+            let blend = lift
+                .as_ref()
+                .and_then(|l| cell.overlap_end(l, &transfer, l.duration_s(), &held, &holding, Some(max_force)));
+            let lift_end_s = lift.as_ref().map_or(0.0, LineMotion::duration_s);
+            let descent_blend = cell
+                .overlap_end(&transfer, &down, down.duration_s(), &held, &holding, Some(max_force))
+                .filter(|d| blend.as_ref().is_none_or(|b| b.start_s() + d.start_s() >= lift_end_s));
+            Ok::<_, String>(PlaceMotion {
+                transfer,
+                descent: down,
+                retreat: up,
+                suction_speed_factor: k,
+                lift_blend: blend,
+                descent_blend,
+            })
         })();
         let place_s = wall.elapsed().as_secs_f64();
         let (Some(descent), Some(lift)) = (descent, lift) else {
@@ -271,6 +327,7 @@ impl Run<'_, '_> {
                 slot,
                 pick_transfer,
                 descent,
+                pick_blend,
                 lift,
                 place,
                 held,

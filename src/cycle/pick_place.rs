@@ -12,12 +12,12 @@
 
 use super::events::{Event, MISRECOGNISED, Outcome, Planned, Stage, StallCause};
 use super::execute::Played;
-use super::motions::Prepared;
+use super::motions::{PlaceMotion, Prepared};
 use super::records::PickRecord;
 use super::{CycleError, Run};
 use crate::physics::suction::GripperEvent;
 use crate::robot::JointVector;
-use crate::trajectory::Motion;
+use crate::trajectory::{Motion, Overlapped};
 
 impl Run<'_, '_> {
     /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute
@@ -62,11 +62,11 @@ impl Run<'_, '_> {
             },
         };
         let place_planned = match &prep.place {
-            Ok((t, descent, retreat, _, _)) => Planned::Place {
+            Ok(p) => Planned::Place {
                 lift_s: prep.lift.duration_s(),
-                transfer_s: t.duration_s(),
-                descent_s: descent.duration_s(),
-                retreat_s: retreat.duration_s(),
+                transfer_s: p.transfer.duration_s(),
+                descent_s: p.descent.duration_s(),
+                retreat_s: p.retreat.duration_s(),
                 compute_s: charged[2],
             },
             Err(e) => Planned::Failed {
@@ -186,20 +186,39 @@ impl Run<'_, '_> {
             run.span(pick_lane, t_pick, run.st.world.time_s(), "Pick");
             run.st.arm.free_s = run.st.world.time_s();
         };
-        if let Played::Failed(o) = self.play_with(pick_transfer, &hand, false, None, false)? {
+        // The transfer, then the descent (or the overlap's head, then its rest: the descent
+        // starts while the transfer ends).
+        let transferred = match &prep.pick_blend {
+            Some(b) => {
+                rec.overlap_s[1] = b.both().duration_s();
+                self.play_with(&b.head(), &hand, false, None, false)?
+            }
+            None => self.play_with(pick_transfer, &hand, false, None, false)?,
+        };
+        if let Played::Failed(o) = transferred {
             pick_done(self, rec);
             return Ok(o);
         }
         // The vacuum valve opens `vacuum_lead_s` before the cup reaches the face.
         let lead = self.cell.scene.cycle.vacuum_lead_s;
-        let descent = &prep.descent;
-        let vacuum_at = (descent.duration_s() - lead).max(0.0);
         let t_descent = self.st.world.time_s();
+        let vacuum_at;
         // From here on the pile is touched: results captured before do not show it.
         if let Some(c) = aimed_m {
             self.st.pick_spots.push((t_descent, c));
         }
-        if let Played::Failed(o) = self.play_with(descent, &hand, false, Some(vacuum_at), true)? {
+        let descended = match &prep.pick_blend {
+            Some(b) => {
+                let rest = b.rest();
+                vacuum_at = (rest.duration_s() - lead).max(0.0);
+                self.play_with(&rest, &hand, false, Some(vacuum_at), true)?
+            }
+            None => {
+                vacuum_at = (prep.descent.duration_s() - lead).max(0.0);
+                self.play_with(&prep.descent, &hand, false, Some(vacuum_at), true)?
+            }
+        };
+        if let Played::Failed(o) = descended {
             pick_done(self, rec);
             return Ok(o);
         }
@@ -253,11 +272,16 @@ impl Run<'_, '_> {
         // when the transfer would start: the Pick ends where the transfer starts.
         let now = self.st.world.time_s();
         let blend = match &prep.place {
-            Ok((_, _, _, _, Some(b))) if place_ready <= now + b.start_s() + 1e-9 => Some(b),
+            Ok(PlaceMotion {
+                lift_blend: Some(b), ..
+            }) if place_ready <= now + b.start_s() + 1e-9 => Some(b),
             _ => None,
         };
         let lifted = match blend {
-            Some(b) => self.play_with(&b.head(), &held, true, None, false)?,
+            Some(b) => {
+                rec.overlap_s[0] = b.both().duration_s();
+                self.play_with(&b.head(), &held, true, None, false)?
+            }
             None => self.play_with(&prep.lift, &held, true, None, false)?,
         };
         if let Played::Failed(o) = lifted {
@@ -273,33 +297,43 @@ impl Run<'_, '_> {
             self.idle_until(place_ready)?;
             self.st.arm.servo.qd = JointVector::zeros();
         }
-        let (transfer, down, up, k, _) = match &prep.place {
+        let place = match &prep.place {
             Ok(p) => p,
             Err(e) => return Ok(Outcome::NoMotion(e.clone())),
         };
-        rec.suction_speed_factor = *k;
+        let up = &place.retreat;
+        rec.suction_speed_factor = place.suction_speed_factor;
+        rec.overlap_s[2] = place.descent_blend.as_ref().map_or(0.0, |d| d.both().duration_s());
         let t_place = self.st.world.time_s();
         // The controller knows from now where the arm ends: the next pick's compute may start.
         self.st.planned_end_q = Some(up.end_q());
         self.st.compute_from_s = t_place;
         // The next Pick may follow the Place at once: no exposure may run past its end.
-        self.st.view_free_until_s =
-            t_place + transfer.duration_s() + down.duration_s() + self.st.world.gripper().release_s + up.duration_s();
+        self.st.view_free_until_s = t_place + place.carry_s() + self.st.world.gripper().release_s + up.duration_s();
         self.event(Event::PlaceStart);
         let place_done = |run: &mut Self, rec: &mut PickRecord| {
             rec.place_s = run.st.world.time_s() - t_place;
             run.span(Stage::Place, t_place, run.st.world.time_s(), "Place");
             run.st.arm.free_s = run.st.world.time_s();
         };
-        let carried = match blend {
-            Some(b) => self.play_with(&b.rest(), &held, true, None, false)?,
-            None => self.play_with(transfer, &held, true, None, false)?,
+        // The transfer (its start overlapping the lift's end, if so) and the descent (its
+        // start overlapping the transfer's end, if so), played as one motion when they overlap.
+        let carried = match (blend, &place.descent_blend) {
+            (Some(b), Some(d)) => {
+                let whole = Overlapped::new(b.first().clone(), d.clone(), b.start_s());
+                self.play(&whole.rest(), &held, true)?
+            }
+            (None, Some(d)) => self.play(d, &held, true)?,
+            (Some(b), None) => match self.play_with(&b.rest(), &held, true, None, false)? {
+                Played::Failed(o) => Played::Failed(o),
+                _ => self.play(&place.descent, &held, true)?,
+            },
+            (None, None) => match self.play_with(&place.transfer, &held, true, None, false)? {
+                Played::Failed(o) => Played::Failed(o),
+                _ => self.play(&place.descent, &held, true)?,
+            },
         };
         if let Played::Failed(o) = carried {
-            place_done(self, rec);
-            return Ok(o);
-        }
-        if let Played::Failed(o) = self.play(down, &held, true)? {
             place_done(self, rec);
             return Ok(o);
         }

@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 31] = [
+pub const PICKS_CSV_HEADER: [&str; 34] = [
     "pick",
     "outcome",
     "detail",
@@ -65,6 +65,9 @@ pub const PICKS_CSV_HEADER: [&str; 31] = [
     "peak_demand_joint",
     "saturated_s",
     "suction_speed_factor",
+    "lift_overlap_s",
+    "pick_descent_overlap_s",
+    "place_descent_overlap_s",
     "blind",
     "from_result",
     "picks_since_capture",
@@ -101,6 +104,9 @@ struct PickRow<'a> {
     peak_demand_joint: usize,
     saturated_s: Fixed<6>,
     suction_speed_factor: Fixed<4>,
+    lift_overlap_s: Fixed<6>,
+    pick_descent_overlap_s: Fixed<6>,
+    place_descent_overlap_s: Fixed<6>,
     blind: bool,
     from_result: usize,
     picks_since_capture: usize,
@@ -140,6 +146,9 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             peak_demand_joint: r.peak_demand_joint,
             saturated_s: Fixed::of(r.saturated_s),
             suction_speed_factor: Fixed::of(r.suction_speed_factor),
+            lift_overlap_s: Fixed::of(r.overlap_s[0]),
+            pick_descent_overlap_s: Fixed::of(r.overlap_s[1]),
+            place_descent_overlap_s: Fixed::of(r.overlap_s[2]),
             blind: r.blind,
             from_result: r.from_result,
             picks_since_capture: r.picks_since_capture,

@@ -41,7 +41,7 @@ pub use accel::{
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
 pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, straight_line};
-pub use overlap::Overlapped;
+pub use overlap::{OverlapCheck, Overlapped, overlap_end};
 pub use retime::{ArcPath, Retimed, RobotPathConstraints, Shares, toppra};
 pub use toppra::{PathConstraints, PathPoint, PathTiming, StageRow, time_optimal};
 pub use torque::{TorqueProfile, torques};

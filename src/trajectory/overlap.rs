@@ -3,28 +3,87 @@
 //!
 //! Job: the straight lift with the part and the Place transfer after it, the transfer started
 //! while the part is still rising, as one motion; or a window of it in time, so the lift's head
-//! and the overlapped rest can be played as the Pick's end and the Place's start. The second
+//! and the overlapped rest can be played as the Pick's end and the Place's start. Likewise a
+//! transfer and the straight descent after it, the descent started while the transfer ends. The second
 //! motion must start where the first ends, both at rest there; the sum then runs continuously in
-//! position, velocity and acceleration. Whether the overlap is clear, within the torque limits
-//! and within the cup's holding force is for the caller to check (`cycle::motions`).
+//! position, velocity and acceleration. [`overlap_end`] picks how far to overlap: the largest
+//! share of the line whose overlap is clear, within the torques and within the cup's holding
+//! force where both move (outside that stretch each motion is as checked on its own).
 //!
 //! Units: s, rad. Frames: joint space.
 
-use super::{LineMotion, Motion, Sample, Trajectory};
+use super::{CORRIDOR_CHECK_DT_S, LineMotion, Motion, Sample, TORQUE_DT_S, Trajectory};
+use super::{check_corridor, peak_tool_specific_force, torques};
+use crate::planning::CollisionModel;
+use crate::robot::{DynamicsModel, RobotModel};
+
+/// What an overlap must keep to where both motions move.
+pub struct OverlapCheck<'a> {
+    /// The robot the tool's force is computed with.
+    pub robot: &'a RobotModel,
+    /// The accelerator's robot: its torque limits (less the cell's margin) are the limits here.
+    pub accel_robot: &'a RobotModel,
+    /// The accelerator's dynamics with the payload the motions carry.
+    pub dynamics: &'a DynamicsModel,
+    /// The corridor must be clear in this model.
+    pub model: &'a CollisionModel,
+    /// With a part held: the largest specific force the cup may exert on it [m/s^2].
+    pub max_force_m_s2: Option<f64>,
+    /// Each joint's torque stays within this share of the accelerator's limits, or within what
+    /// either motion alone demands there if that is more.
+    pub torque_share: f64,
+    /// Start times are rounded to this grid [s] (the physics step).
+    pub grid_s: f64,
+}
+
+/// `second` started while `first` ends, by the largest of `shares` of `line_s` (the duration of
+/// the line among the two: the lift, or the descent) that passes `check` where both move; None
+/// when none passes.
+pub fn overlap_end<A: Motion + Clone, B: Motion + Clone>(
+    first: &A,
+    second: &B,
+    line_s: f64,
+    shares: &[f64],
+    check: &OverlapCheck<'_>,
+) -> Option<Overlapped<A, B>> {
+    let peak = |samples: &[Sample]| torques(check.dynamics, check.accel_robot, samples, TORQUE_DT_S).peak_ratio;
+    shares.iter().find_map(|share| {
+        let start_s = ((first.duration_s() - share * line_s) / check.grid_s).round() * check.grid_s;
+        if start_s <= 0.0 || start_s >= first.duration_s() {
+            return None;
+        }
+        let o = Overlapped::new(first.clone(), second.clone(), start_s);
+        let both = o.both();
+        let samples = both.sampled(TORQUE_DT_S);
+        let alone_first: Vec<Sample> = samples.iter().map(|x| first.at(start_s + x.t_s)).collect();
+        let alone_second: Vec<Sample> = samples.iter().map(|x| second.at(x.t_s)).collect();
+        let (p1, p2) = (peak(&alone_first), peak(&alone_second));
+        let ok = check
+            .max_force_m_s2
+            .is_none_or(|f| peak_tool_specific_force(check.robot, &both, TORQUE_DT_S) <= f)
+            && peak(&samples)
+                .iter()
+                .enumerate()
+                .all(|(i, r)| *r <= check.torque_share.max(p1[i]).max(p2[i]))
+            && check_corridor(check.model, &both, CORRIDOR_CHECK_DT_S).is_ok();
+        ok.then_some(o)
+    })
+}
 
 /// `second` started `start_s` into `first`, the two added, seen from `from_s` to `until_s`.
+/// By default a lift and the transfer after it; any two motions (an overlap among them).
 #[derive(Debug, Clone)]
-pub struct Overlapped {
-    first: LineMotion,
-    second: Trajectory,
+pub struct Overlapped<A = LineMotion, B = Trajectory> {
+    first: A,
+    second: B,
     start_s: f64,
     from_s: f64,
     until_s: f64,
 }
 
-impl Overlapped {
+impl<A: Motion + Clone, B: Motion + Clone> Overlapped<A, B> {
     /// The whole overlap: `second` starts `start_s` into `first` (0 ≤ `start_s` ≤ its duration).
-    pub fn new(first: LineMotion, second: Trajectory, start_s: f64) -> Self {
+    pub fn new(first: A, second: B, start_s: f64) -> Self {
         let start_s = start_s.clamp(0.0, first.duration_s());
         let until_s = (start_s + second.duration_s()).max(first.duration_s());
         Overlapped {
@@ -52,6 +111,22 @@ impl Overlapped {
         self.window(self.start_s, until_s)
     }
 
+    /// Where both move: from where the second starts to where the first ends (empty when the
+    /// second starts after the first has ended).
+    pub fn both(&self) -> Self {
+        self.window(self.start_s, self.first.duration_s().max(self.start_s))
+    }
+
+    /// The first motion.
+    pub fn first(&self) -> &A {
+        &self.first
+    }
+
+    /// The second motion.
+    pub fn second(&self) -> &B {
+        &self.second
+    }
+
     /// The same overlap seen from `from_s` to `until_s` (times from the first motion's start).
     pub fn window(&self, from_s: f64, until_s: f64) -> Self {
         Overlapped {
@@ -62,7 +137,7 @@ impl Overlapped {
     }
 }
 
-impl Motion for Overlapped {
+impl<A: Motion + Clone, B: Motion + Clone> Motion for Overlapped<A, B> {
     fn duration_s(&self) -> f64 {
         (self.until_s - self.from_s).max(0.0)
     }
@@ -81,7 +156,7 @@ impl Motion for Overlapped {
         };
         let origin = self.second.at(0.0).q;
         let (dq, qd, qdd) = if t_abs > self.start_s {
-            let b = self.second.at(t_abs - self.start_s);
+            let b = self.second.at((t_abs - self.start_s).min(self.second.duration_s()));
             (b.q - origin, b.qd, b.qdd)
         } else {
             (origin * 0.0, origin * 0.0, origin * 0.0)
@@ -143,5 +218,73 @@ mod tests {
         let t = 0.5 * (start_s + lift.duration_s());
         let sum = lift.at(t).qd + transfer.at(t - start_s).qd;
         assert!((o.at(t).qd - sum).amax() < 1e-9);
+        // Where both move: from the transfer's start to the lift's end.
+        let both = o.both();
+        assert!((both.duration_s() - (lift.duration_s() - start_s)).abs() < 1e-12);
+        assert!((both.at(0.0).q - o.at(start_s).q).amax() < 1e-12);
+    }
+
+    /// J1 swung out and back, the way back overlapping the way out: where both move their
+    /// accelerations add on J1 (both towards the way back). Accepted by a generous torque share;
+    /// refused when the share is below what the sum demands (the negative control); and a box
+    /// put where the accepted overlap's arm passes makes it take a smaller share or none.
+    #[test]
+    fn an_overlap_is_taken_only_within_the_torques_and_the_corridor() {
+        use crate::planning::{CollisionModel, EnvBox, Environment, PlanStats, RobotSpheres};
+        let scene = LoadedScene::embedded_default().unwrap();
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let hand = Payload::from_gripper(&scene.scene.gripper);
+        let dynamics = robot.dynamics(&hand);
+        let spheres = || RobotSpheres::new(&robot, &scene.scene, None);
+        let model = CollisionModel::new(&robot, spheres(), Environment::from_scene(&scene.scene));
+        let q0 = JointVector::from(scene.scene.robot.home_rad());
+        assert!(model.free(&q0, &mut PlanStats::default()));
+        let limits = MotionLimits {
+            vel_rad_s: JointVector::repeat(2.0),
+            accel_rad_s2: JointVector::repeat(8.0),
+        };
+        let q1 = q0 + JointVector::new(0.6, 0.0, 0.0, 0.0, 0.0, 0.0);
+        let out = Trajectory::through(&[q0, q1], &limits);
+        let back = Trajectory::through(&[q1, q0], &limits);
+        let shares = [0.6, 0.4, 0.2];
+        fn check<'a>(
+            robot: &'a RobotModel,
+            dynamics: &'a DynamicsModel,
+            share: f64,
+            model: &'a CollisionModel,
+        ) -> OverlapCheck<'a> {
+            OverlapCheck {
+                robot,
+                accel_robot: robot,
+                dynamics,
+                model,
+                max_force_m_s2: None,
+                torque_share: share,
+                grid_s: 0.002,
+            }
+        }
+        let check = |share: f64, model| check(&robot, &dynamics, share, model);
+        let line_s = back.duration_s();
+        let taken = overlap_end(&out, &back, line_s, &shares, &check(10.0, &model)).expect("a generous share");
+        let expect_s = ((out.duration_s() - 0.6 * line_s) / 0.002).round() * 0.002;
+        assert!((taken.start_s() - expect_s).abs() < 1e-12);
+        // J1's torque where both move is above each motion's alone: refused at any share below.
+        let samples = taken.both().sampled(TORQUE_DT_S);
+        let sum_peak = torques(&dynamics, &robot, &samples, TORQUE_DT_S).peak_ratio[0];
+        let out_peak = torques(&dynamics, &robot, &out.sampled(TORQUE_DT_S), TORQUE_DT_S).peak_ratio[0];
+        assert!(sum_peak > 1.2 * out_peak, "J1 {sum_peak} vs {out_peak} alone");
+        assert!(overlap_end(&out, &back, line_s, &shares[..1], &check(0.9 * sum_peak, &model)).is_none());
+        assert!(overlap_end(&out, &back, line_s, &shares[..1], &check(1.01 * sum_peak, &model)).is_some());
+        // A box around the tool where the taken overlap turns back.
+        let turn = taken.both().at(0.5 * taken.both().duration_s()).q;
+        let mut env = Environment::from_scene(&scene.scene);
+        env.boxes.push(EnvBox {
+            world_from_box: robot.world_from_tool(&turn),
+            half_m: Vector3::repeat(0.01),
+            name: "in the way".into(),
+        });
+        let blocked = CollisionModel::new(&robot, spheres(), env);
+        let other = overlap_end(&out, &back, line_s, &shares, &check(10.0, &blocked));
+        assert!(other.is_none_or(|o| o.start_s() > taken.start_s() + 1e-9));
     }
 }
