@@ -447,28 +447,26 @@ impl CollisionModel {
     /// of each self pair, and how far each link reaches from each joint's axis.
     pub fn probe(&self, q: &JointVector, stats: &mut PlanStats) -> Probe {
         stats.clearance_checks += 1;
-        let links = &self.spheres.links;
-        let total: usize = links.iter().map(Vec::len).sum();
-        let mut on_stack = [Vector3::zeros(); STACK_SPHERES];
-        let mut on_heap = Vec::new();
-        let centers: &mut [Vector3<f64>] = if total <= STACK_SPHERES {
-            &mut on_stack[..total]
-        } else {
-            on_heap.resize(total, Vector3::zeros());
-            &mut on_heap
-        };
-        let posed = self.pose(q, centers);
-        let centers = &*centers;
-        let env = self.nearest_env(&posed, centers, (self.horizon_m, Nearest::Nothing));
-        let mut reach = AxisReach::zero();
-        self.axis_reach(&posed, centers, &mut reach);
-        let pairs_m = std::array::from_fn(|p| self.pair_distance(&posed, centers, p));
-        Probe { env, pairs_m, reach }
+        self.posed(q, |posed, centers| {
+            let env = self.nearest_env(posed, centers, (self.horizon_m, Nearest::Nothing));
+            let mut reach = AxisReach::zero();
+            self.axis_reach(posed, centers, &mut reach);
+            let pairs_m = std::array::from_fn(|p| self.pair_distance(posed, centers, p));
+            Probe { env, pairs_m, reach }
+        })
     }
 
     fn nearest_inner(&self, q: &JointVector) -> (f64, Nearest) {
-        let links = &self.spheres.links;
-        let total: usize = links.iter().map(Vec::len).sum();
+        self.posed(q, |posed, centers| {
+            let best = self.nearest_env(posed, centers, (self.horizon_m, Nearest::Nothing));
+            self.nearest_self(posed, centers, best)
+        })
+    }
+
+    /// `f` of the arm posed at `q` ([`CollisionModel::pose`]), the sphere centres on the stack
+    /// when they fit in [`STACK_SPHERES`] (every clearance query poses the arm once).
+    fn posed<T>(&self, q: &JointVector, f: impl FnOnce(&Posed, &[Vector3<f64>]) -> T) -> T {
+        let total: usize = self.spheres.links.iter().map(Vec::len).sum();
         let mut on_stack = [Vector3::zeros(); STACK_SPHERES];
         let mut on_heap = Vec::new();
         let centers: &mut [Vector3<f64>] = if total <= STACK_SPHERES {
@@ -478,9 +476,7 @@ impl CollisionModel {
             &mut on_heap
         };
         let posed = self.pose(q, centers);
-        let centers = &*centers;
-        let best = self.nearest_env(&posed, centers, (self.horizon_m, Nearest::Nothing));
-        self.nearest_self(&posed, centers, best)
+        f(&posed, centers)
     }
 
     /// The link frames, sphere centres (into `centers`, link after link) and bounding-sphere

@@ -122,11 +122,6 @@ impl<A: Motion + Clone, B: Motion + Clone> Overlapped<A, B> {
         &self.first
     }
 
-    /// The second motion.
-    pub fn second(&self) -> &B {
-        &self.second
-    }
-
     /// The same overlap seen from `from_s` to `until_s` (times from the first motion's start).
     pub fn window(&self, from_s: f64, until_s: f64) -> Self {
         Overlapped {
