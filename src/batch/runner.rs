@@ -92,6 +92,8 @@ pub fn run_batch(
                     seed: *seed,
                     deterministic,
                     stop,
+                    // A recording plays the records; the table needs only the tally.
+                    keep_records: record.is_some(),
                 };
                 let formats = record.map_or(
                     Formats {

@@ -15,7 +15,7 @@
 use serde::{Deserialize, Serialize};
 
 use super::{BatchError, BatchSpec};
-use crate::cycle::{Outcome, RunResult, TaktStats};
+use crate::cycle::{RunResult, TaktStats};
 use crate::report::{Fixed, to_csv};
 use crate::sensor::{RecognitionSummary, RecognitionTotals};
 
@@ -87,48 +87,28 @@ pub struct RunEntry {
 impl RunEntry {
     /// From a finished run.
     pub fn from_run(r: &RunResult, wall_s: Option<f64>) -> Self {
-        let s = &r.summary;
-        let placed: Vec<_> = r.records.iter().filter(|p| p.outcome == Outcome::Placed).collect();
-        let set_out: Vec<_> = r.records.iter().filter(|p| p.outcome.set_out()).collect();
-        let sum = |f: fn(&crate::cycle::PickRecord) -> f64| set_out.iter().map(|p| f(p)).sum::<f64>();
+        let (s, t) = (&r.summary, &r.tally);
         RunEntry {
             workpiece: s.workpiece.clone(),
             seed: s.seed,
             attempts: s.attempts,
             placed: s.placed,
-            set_out: set_out.len(),
-            takts_s: crate::cycle::takts(&r.records),
-            takts_excl_refills_s: crate::cycle::takts_excl_refills(&r.records),
-            pick_s: placed.iter().map(|p| p.pick_s).collect(),
-            place_s: placed.iter().map(|p| p.place_s).collect(),
-            compute_sum_s: [
-                sum(|p| p.grasp_compute_s),
-                sum(|p| p.pick_compute_s),
-                sum(|p| p.place_compute_s),
-            ],
+            set_out: t.set_out,
+            takts_s: t.takts_s.clone(),
+            takts_excl_refills_s: t.takts_excl_refills_s.clone(),
+            pick_s: t.pick_s.clone(),
+            place_s: t.place_s.clone(),
+            compute_sum_s: t.compute_sum_s,
             sensor_waits: s.sensor_stalls,
             compute_waits: s.compute_stalls,
-            faults: [
-                s.protective_stops,
-                s.collisions,
-                s.drops,
-                r.records
-                    .iter()
-                    .filter(|p| matches!(p.outcome, Outcome::GraspFailed(_)))
-                    .count(),
-                s.parts_lost,
-            ],
+            faults: [s.protective_stops, s.collisions, s.drops, t.faults[3], s.parts_lost],
             refills: s.refills,
             agitations: s.agitations,
             grasps: s.grasps,
             misrecognised: s.misrecognised,
             blind_picks: s.blind_picks,
             results_used: s.results_used,
-            recognition: {
-                let mut t = RecognitionTotals::default();
-                s.recognition_per_capture.iter().for_each(|c| t.add(c));
-                t
-            },
+            recognition: t.recognition.clone(),
             peak_demand_ratio: s.peak_demand_ratio,
             saturated_s: s.saturated_s,
             max_tracking_error_deg: s.max_tracking_error_deg,

@@ -147,6 +147,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         seed,
         deterministic: true,
         stop: None,
+        keep_records: false,
     };
     let mut cell = Cell::new(&loaded, &robot, &wp, opts).context("setting up the cell")?;
     cell.pile_count = count;

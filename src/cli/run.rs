@@ -58,6 +58,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
         seed,
         deterministic,
         stop: Some(stop_on_ctrl_c()),
+        keep_records: true,
     };
     let camera = binpick::sensor::Camera::from_config(&loaded.scene.sensor)
         .ok_or_else(|| anyhow::anyhow!("the sensor's pose is degenerate"))?;

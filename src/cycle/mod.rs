@@ -59,7 +59,7 @@ pub use events::{
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use records::{
-    PickRecord, RunCounts, RunLabel, RunResult, RunSummary, TaktStats, summarise, takts, takts_excl_refills,
+    PickRecord, RunCounts, RunLabel, RunResult, RunSummary, RunTally, TaktStats, summarise, takts, takts_excl_refills,
 };
 pub use sensing::SensedResult;
 
@@ -101,6 +101,10 @@ pub struct RunOptions {
     /// Set (by a Ctrl-C handler) to end the run after the pick under way: the results so far are
     /// returned and the summary says `interrupted`.
     pub stop: Option<&'static std::sync::atomic::AtomicBool>,
+    /// Keep every pick's record and every recognition result's report in the result (`binpick
+    /// run` writes them, a recording plays them). Without, a run keeps only its [`RunTally`], so
+    /// its memory does not grow with its picks beyond the tally's samples.
+    pub keep_records: bool,
 }
 
 /// The constant parts of the cell: what does not change while it runs.
@@ -178,7 +182,11 @@ pub struct CellState {
     pub parts_lost: usize,
     /// Largest |demanded torque| / limit per joint over the run.
     pub run_peak_demand_ratio: [f64; crate::robot::DOF],
-    /// Every recognition result used, evaluated against the truth at its trigger (evaluation only).
+    /// The picks so far, and every recognition result evaluated against the truth at its
+    /// trigger (evaluation only), tallied.
+    pub tally: RunTally,
+    /// Every recognition result's report, without its per-detection matches, if the run keeps
+    /// its records (evaluation only).
     pub recognitions: Vec<RecognitionReport>,
     /// The newest recognition result and how many picks came from it (several picks per
     /// capture).
@@ -323,6 +331,7 @@ impl<'a> Cell<'a> {
             pick: None,
             parts_lost: 0,
             run_peak_demand_ratio: [0.0; crate::robot::DOF],
+            tally: RunTally::default(),
             recognitions: Vec::new(),
             in_hand: None,
             pick_spots: Vec::new(),
@@ -346,7 +355,7 @@ pub fn run(
     let st = cell.start(obs)?;
     let mut run = Run { cell: &cell, st, obs };
     let (records, ended) = run.picks()?;
-    let st = &run.st;
+    let st = &mut run.st;
     let counts = RunCounts {
         parts_lost: st.parts_lost,
         captures: (st.sensor.triggered, st.sensor.spoiled),
@@ -360,8 +369,19 @@ pub fn run(
         seed: opts.seed,
         deterministic: opts.deterministic,
     };
-    let summary = summarise(label, &records, counts, &st.recognitions, ended, st.world.time_s());
-    Ok(RunResult { records, summary })
+    let summary = summarise(
+        label,
+        &st.tally,
+        counts,
+        std::mem::take(&mut st.recognitions),
+        ended,
+        st.world.time_s(),
+    );
+    Ok(RunResult {
+        records,
+        tally: std::mem::take(&mut st.tally),
+        summary,
+    })
 }
 
 /// The first recognition result of a fresh cell: the world with its pile, the arm moved out of
@@ -441,16 +461,24 @@ impl Run<'_, '_> {
         }
     }
 
+    /// Tallies a finished pick, and keeps its record if the run keeps them.
+    fn keep(&mut self, records: &mut Vec<PickRecord>, rec: PickRecord) {
+        self.st.tally.add(&rec);
+        if self.cell.opts.keep_records {
+            records.push(rec);
+        }
+    }
+
     /// The pick loop: until the asked-for attempts are made (every pick is one, a re-capture
     /// too) or the run ends otherwise.
     fn picks(&mut self) -> Result<(Vec<PickRecord>, EndReason), CycleError> {
         let opts = self.cell.opts;
         let mut records: Vec<PickRecord> = Vec::new();
-        while records.len() < opts.picks {
+        while self.st.tally.attempts < opts.picks {
             if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
                 return Ok((records, EndReason::Interrupted));
             }
-            let index = records.len();
+            let index = self.st.tally.attempts;
             self.st.pick = Some(index);
             let Some((result, taken, since)) = self.result_for_pick()? else {
                 return Ok((records, EndReason::NoPathOutOfView));
@@ -499,7 +527,7 @@ impl Run<'_, '_> {
                     self.st.in_hand = None;
                     rec.outcome = why.map_or(Outcome::NothingDetected, Outcome::NothingGraspable);
                     self.event(Event::Outcome(rec.outcome.clone()));
-                    records.push(rec);
+                    self.keep(&mut records, rec);
                     if let Some(end) = self.nothing_to_pick()? {
                         return Ok((records, end));
                     }
@@ -531,7 +559,7 @@ impl Run<'_, '_> {
                 self.st.in_hand = None;
                 self.st.pending = None;
             }
-            records.push(rec);
+            self.keep(&mut records, rec);
         }
         Ok((records, EndReason::PicksDone))
     }

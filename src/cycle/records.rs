@@ -190,7 +190,7 @@ pub struct RunSummary {
     pub misrecognised: usize,
     /// Recognition over the run's results, against the truth at each trigger.
     pub recognition: RecognitionSummary,
-    /// Per recognition result.
+    /// Per recognition result (kept when the run keeps its records, else empty).
     pub recognition_per_capture: Vec<RecognitionReport>,
     /// Why the run ended.
     pub ended: EndReason,
@@ -201,8 +201,11 @@ pub struct RunSummary {
 /// Everything a run produced (what its watchers kept is theirs).
 #[derive(Debug, Clone)]
 pub struct RunResult {
-    /// Per pick.
+    /// Per pick, when the run was asked to keep them ([`crate::cycle::RunOptions::keep_records`];
+    /// empty otherwise).
     pub records: Vec<PickRecord>,
+    /// What the summary and a batch's table need of the picks, tallied as each pick ended.
+    pub tally: RunTally,
     /// Summary.
     pub summary: RunSummary,
 }
@@ -220,6 +223,121 @@ pub fn takts_excl_refills(records: &[PickRecord]) -> Vec<f64> {
         .filter(|r| !r.spans_refill)
         .filter_map(|r| r.takt_s)
         .collect()
+}
+
+/// What a run's summary needs of its picks and recognition results, taken as each one ends,
+/// so that a long run keeps a few numbers per pick (the samples of its exact medians and
+/// percentiles: takts, Pick and Place times, pose errors of correct detections), not its records.
+/// Sums run in pick order, as over the records.
+#[derive(Debug, Clone, Default)]
+pub struct RunTally {
+    /// Picks, re-captures included (attempts).
+    pub attempts: usize,
+    /// Picks placed.
+    pub placed: usize,
+    /// Picks the arm set out to make.
+    pub set_out: usize,
+    /// The takts [s] ([`takts`]).
+    pub takts_s: Vec<f64>,
+    /// The takts of intervals that span no refill [s] ([`takts_excl_refills`]).
+    pub takts_excl_refills_s: Vec<f64>,
+    /// Pick time of each placed pick [s].
+    pub pick_s: Vec<f64>,
+    /// Place time of each placed pick [s].
+    pub place_s: Vec<f64>,
+    /// Compute charged over the picks set out: grasp selection, Pick and Place motion [s].
+    pub compute_sum_s: [f64; 3],
+    /// Stalls waiting for the sensor: count and total [s] (placed picks with a takt).
+    pub sensor_stalls: (usize, f64),
+    /// Stalls waiting for compute: count and total [s].
+    pub compute_stalls: (usize, f64),
+    /// Protective stops, collisions, drops, grasp failures.
+    pub faults: [usize; 4],
+    /// Grasp failures on a wrong detection.
+    pub misrecognised: usize,
+    /// Time some joint was saturated [s].
+    pub saturated_s: f64,
+    /// Largest servo tracking error [deg].
+    pub max_tracking_error_deg: f64,
+    /// Grasps attempted and sealed.
+    pub grasps: (usize, usize),
+    /// Blind picks attempted and placed.
+    pub blind_picks: (usize, usize),
+    /// Recognition results the picks set out came from.
+    pub results_used: usize,
+    /// Recognition of the results, against the truth at each trigger.
+    pub recognition: RecognitionTotals,
+}
+
+impl RunTally {
+    /// Adds a finished pick.
+    pub fn add(&mut self, r: &PickRecord) {
+        self.attempts += 1;
+        let placed = r.outcome == Outcome::Placed;
+        if let Some(t) = r.takt_s {
+            self.takts_s.push(t);
+            if !r.spans_refill {
+                self.takts_excl_refills_s.push(t);
+            }
+            if placed {
+                for (stalls, s) in [
+                    (&mut self.sensor_stalls, r.stall_sensor_s),
+                    (&mut self.compute_stalls, r.stall_compute_s),
+                ] {
+                    if s > 1e-9 {
+                        stalls.0 += 1;
+                        stalls.1 += s;
+                    }
+                }
+            }
+        }
+        if placed {
+            self.placed += 1;
+            self.pick_s.push(r.pick_s);
+            self.place_s.push(r.place_s);
+        }
+        if r.outcome.set_out() {
+            self.set_out += 1;
+            self.compute_sum_s[0] += r.grasp_compute_s;
+            self.compute_sum_s[1] += r.pick_compute_s;
+            self.compute_sum_s[2] += r.place_compute_s;
+            if r.from_result == 0 {
+                self.results_used += 1;
+            }
+        }
+        let fault = match r.outcome {
+            Outcome::ProtectiveStop(_) => Some(0),
+            Outcome::Collision(_) => Some(1),
+            Outcome::Dropped(_) => Some(2),
+            Outcome::GraspFailed(_) => Some(3),
+            _ => None,
+        };
+        if let Some(k) = fault {
+            self.faults[k] += 1;
+        }
+        self.misrecognised += usize::from(r.outcome.misrecognised());
+        self.saturated_s += r.saturated_s;
+        self.max_tracking_error_deg = self.max_tracking_error_deg.max(r.max_tracking_error_deg);
+        if let Some(sealed) = r.sealed {
+            self.grasps.0 += 1;
+            self.grasps.1 += usize::from(sealed);
+        }
+        if r.blind {
+            self.blind_picks.0 += 1;
+            self.blind_picks.1 += usize::from(placed);
+        }
+    }
+
+    /// Mean compute charged per pick set out [s].
+    pub fn mean_compute_s(&self) -> [f64; 3] {
+        self.compute_sum_s.map(|s| {
+            if self.set_out == 0 {
+                f64::NAN
+            } else {
+                s / self.set_out as f64
+            }
+        })
+    }
 }
 
 /// Counts of a run that the records do not hold.
@@ -250,91 +368,57 @@ pub struct RunLabel {
     pub deterministic: bool,
 }
 
-/// The summary of a run from its records.
+/// The summary of a run from its tally; `per_capture`: the recognition reports kept, if any.
 pub fn summarise(
     label: RunLabel,
-    records: &[PickRecord],
+    tally: &RunTally,
     counts: RunCounts,
-    recognitions: &[RecognitionReport],
+    per_capture: Vec<RecognitionReport>,
     ended: EndReason,
     sim_time_s: f64,
 ) -> RunSummary {
-    let placed: Vec<&PickRecord> = records.iter().filter(|r| r.outcome == Outcome::Placed).collect();
-    let in_takt = || placed.iter().filter(|r| r.takt_s.is_some());
-    let set_out = || records.iter().filter(|r| r.outcome.set_out());
-    let stalls = |f: fn(&PickRecord) -> f64| {
-        let v: Vec<f64> = in_takt().map(|r| f(r)).filter(|s| *s > 1e-9).collect();
-        (v.len(), v.iter().sum())
-    };
-    let count = |f: fn(&Outcome) -> bool| records.iter().filter(|r| f(&r.outcome)).count();
+    let t = tally;
     RunSummary {
         reference_takt_s: crate::reference::reference_takt(&label.workpiece),
         workpiece: label.workpiece,
         seed: label.seed,
         deterministic: label.deterministic,
-        attempts: records.len(),
-        placed: placed.len(),
-        success_rate: if records.is_empty() {
+        attempts: t.attempts,
+        placed: t.placed,
+        success_rate: if t.attempts == 0 {
             f64::NAN
         } else {
-            placed.len() as f64 / records.len() as f64
+            t.placed as f64 / t.attempts as f64
         },
-        takt: TaktStats::of(&takts(records)),
-        takt_excl_refills: TaktStats::of(&takts_excl_refills(records)),
-        mean_pick_s: mean_of(placed.iter().map(|r| r.pick_s)),
-        mean_place_s: mean_of(placed.iter().map(|r| r.place_s)),
-        mean_compute_s: [
-            mean_of(set_out().map(|r| r.grasp_compute_s)),
-            mean_of(set_out().map(|r| r.pick_compute_s)),
-            mean_of(set_out().map(|r| r.place_compute_s)),
-        ],
-        sensor_stalls: stalls(|r| r.stall_sensor_s),
-        compute_stalls: stalls(|r| r.stall_compute_s),
-        protective_stops: count(|o| matches!(o, Outcome::ProtectiveStop(_))),
-        collisions: count(|o| matches!(o, Outcome::Collision(_))),
-        drops: count(|o| matches!(o, Outcome::Dropped(_))),
+        takt: TaktStats::of(&t.takts_s),
+        takt_excl_refills: TaktStats::of(&t.takts_excl_refills_s),
+        mean_pick_s: mean_of(t.pick_s.iter().copied()),
+        mean_place_s: mean_of(t.place_s.iter().copied()),
+        mean_compute_s: t.mean_compute_s(),
+        sensor_stalls: t.sensor_stalls,
+        compute_stalls: t.compute_stalls,
+        protective_stops: t.faults[0],
+        collisions: t.faults[1],
+        drops: t.faults[2],
         parts_lost: counts.parts_lost,
         captures: counts.captures,
         refills: counts.refills,
         agitations: counts.agitations,
         place_tray_exchanges: counts.place_tray_exchanges,
         peak_demand_ratio: counts.peak_demand_ratio,
-        saturated_s: records.iter().map(|r| r.saturated_s).sum(),
-        max_tracking_error_deg: records.iter().map(|r| r.max_tracking_error_deg).fold(0.0, f64::max),
-        grasps: (
-            records.iter().filter(|r| r.sealed.is_some()).count(),
-            records.iter().filter(|r| r.sealed == Some(true)).count(),
-        ),
-        misrecognised: count(Outcome::misrecognised),
-        blind_picks: (
-            records.iter().filter(|r| r.blind).count(),
-            records
-                .iter()
-                .filter(|r| r.blind && r.outcome == Outcome::Placed)
-                .count(),
-        ),
-        results_used: records
-            .iter()
-            .filter(|r| r.outcome.set_out() && r.from_result == 0)
-            .count(),
-        picks_per_capture: {
-            let set_out = records.iter().filter(|r| r.outcome.set_out()).count();
-            let used = records
-                .iter()
-                .filter(|r| r.outcome.set_out() && r.from_result == 0)
-                .count();
-            if used > 0 {
-                set_out as f64 / used as f64
-            } else {
-                f64::NAN
-            }
+        saturated_s: t.saturated_s,
+        max_tracking_error_deg: t.max_tracking_error_deg,
+        grasps: t.grasps,
+        misrecognised: t.misrecognised,
+        blind_picks: t.blind_picks,
+        results_used: t.results_used,
+        picks_per_capture: if t.results_used > 0 {
+            t.set_out as f64 / t.results_used as f64
+        } else {
+            f64::NAN
         },
-        recognition: {
-            let mut t = RecognitionTotals::default();
-            recognitions.iter().for_each(|r| t.add(r));
-            t.summary()
-        },
-        recognition_per_capture: recognitions.to_vec(),
+        recognition: t.recognition.summary(),
+        recognition_per_capture: per_capture,
         ended,
         sim_time_s,
     }

@@ -165,7 +165,13 @@ impl Run<'_, '_> {
             .as_ref()
             .map(|d| evaluate(&job.truth, d, &self.st.sensor.symmetry));
         if let Some(e) = &evaluation {
-            self.st.recognitions.push(e.clone());
+            self.st.tally.recognition.add(e);
+            if self.cell.opts.keep_records {
+                self.st.recognitions.push(RecognitionReport {
+                    matches: Vec::new(),
+                    ..e.clone()
+                });
+            }
             self.obs.evaluated(job.ready_s, &job.truth, e);
         }
         self.event_at(

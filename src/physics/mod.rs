@@ -631,8 +631,26 @@ impl World {
         Ok(())
     }
 
-    /// Adds a part at `world_from_part`, dynamic and awake.
+    /// Adds a part at `world_from_part`, dynamic and awake. A part taken out of the cell before
+    /// ([`World::remove_part`]) is put back in its place (the lowest index first), so a long run
+    /// keeps as many bodies as the trays ever held at once, not one per part ever poured: the
+    /// world's memory and every per-step walk over the parts stay bounded.
     pub fn add_part(&mut self, world_from_part: &Isometry3<f64>) -> usize {
+        if let Some(idx) = self.parts.iter().position(|p| p.state == PartState::Removed) {
+            let p = &mut self.parts[idx];
+            p.state = PartState::Free;
+            p.rest_ref = None;
+            let b = &mut self.bodies[p.body];
+            b.set_enabled(true);
+            b.set_body_type(RigidBodyType::Dynamic, false);
+            b.set_position(to_pose(world_from_part), false);
+            b.set_linvel(Vector::ZERO, false);
+            b.set_angvel(Vector::ZERO, false);
+            b.reset_forces(false);
+            b.reset_torques(false);
+            b.wake_up(true);
+            return idx;
+        }
         let idx = self.parts.len();
         let body = self.bodies.insert(
             RigidBodyBuilder::dynamic()
@@ -682,7 +700,8 @@ impl World {
     }
 
     /// Takes part `i` out of the cell: parked 10 m below the table (one spot per part, so parked
-    /// parts never touch), disabled, state [`PartState::Removed`]. Indices of other parts stay.
+    /// parts never touch), disabled, state [`PartState::Removed`]. Indices of other parts stay;
+    /// the next [`World::add_part`] takes this one's index and body.
     pub fn remove_part(&mut self, i: usize) {
         let Some(p) = self.parts.get_mut(i) else {
             return;

@@ -61,6 +61,7 @@ pub fn run_sweep(
                     seed: *seed,
                     deterministic: runs.deterministic,
                     stop: runs.stop,
+                    keep_records: false,
                 };
                 let t = std::time::Instant::now();
                 let result = crate::cycle::run(&variant.scene, &resolved.robots[variant.robot], wp, &opts, &mut ())

@@ -112,13 +112,48 @@ fn thin_parts_do_not_tunnel_through_the_tray_floor() {
     }
 }
 
+#[test]
+fn a_part_poured_after_one_was_taken_out_reuses_its_body_and_falls_like_a_new_one() {
+    let (mut w, _, _) = world("E");
+    let c = w.pick_tray().world_from_tray.translation.vector;
+    let drop = Isometry3::new(Vector3::new(c.x, c.y, c.z + 0.05), Vector3::new(0.4, 0.2, 0.0));
+    let fresh = w.add_part(&drop);
+    w.run_for(1.0).unwrap();
+    let rest = w.part_pose(fresh);
+    w.remove_part(fresh);
+    w.run_for(0.1).unwrap();
+    // Negative control: taken out, it is parked far below the table and no longer in the tray.
+    assert_eq!(w.part_state(fresh), binpick::physics::PartState::Removed);
+    assert!(!w.pick_tray().contains(&w.part_pose(fresh).translation.vector));
+    let again = w.add_part(&drop);
+    assert_eq!(
+        (again, w.part_count()),
+        (fresh, 1),
+        "the removed part's index and body are reused"
+    );
+    assert_eq!(w.part_state(again), binpick::physics::PartState::Free);
+    w.run_for(0.05).unwrap();
+    assert!(w.part_pose(again).translation.z < drop.translation.z - 1e-3, "it falls");
+    w.run_for(0.95).unwrap();
+    let now = w.part_pose(again);
+    assert!(w.pick_tray().contains(&now.translation.vector));
+    assert!(
+        (now.translation.vector - rest.translation.vector).norm() < 3e-4,
+        "rests where the first one did: {:?} against {:?}",
+        now.translation.vector,
+        rest.translation.vector
+    );
+    // A new part now gets a new index.
+    assert_eq!(w.add_part(&drop), 1);
+}
+
 /// A single part lying on the pick tray floor at `xy` (tray frame), settled; returns its top face centre.
 fn lone_part(w: &mut World, size_z: f64, xy: (f64, f64), rot: UnitQuaternion<f64>) -> Vector3<f64> {
     let tray = w.pick_tray().world_from_tray;
     let pose = tray * Isometry3::from_parts(Translation3::new(xy.0, xy.1, size_z / 2.0 + 0.0005), rot);
-    w.add_part(&pose);
+    let i = w.add_part(&pose);
     w.run_for(0.5).unwrap();
-    let p = w.part_pose(w.part_count() - 1);
+    let p = w.part_pose(i);
     p.translation.vector + p.rotation * Vector3::new(0.0, 0.0, size_z / 2.0)
 }
 

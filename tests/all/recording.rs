@@ -606,6 +606,7 @@ fn a_failed_write_is_reported_and_leaves_nothing() {
         seed: 1,
         deterministic: true,
         stop: None,
+        keep_records: true,
     };
     let result = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
     let r = recorder.finish(&result);

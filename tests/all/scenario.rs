@@ -93,6 +93,7 @@ fn run(workpiece: &str, picks: usize) -> (RunResult, Recording, RobotModel, Load
         seed: 1,
         deterministic: true,
         stop: None,
+        keep_records: true,
     };
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
     let rec = recorder.finish(&r);
@@ -221,6 +222,7 @@ fn misrecognition_is_a_named_outcome() {
         seed: 1,
         deterministic: true,
         stop: None,
+        keep_records: true,
     };
     let mut bad = robot_scene.clone();
     bad.scene.sensor.recognition = binpick::config::RecognitionMode::Oracle;
@@ -264,6 +266,7 @@ fn several_picks_per_capture() {
         seed: 1,
         deterministic: true,
         stop: None,
+        keep_records: true,
     };
     let mut multi = scene.clone();
     multi.scene.cycle.max_picks_per_capture = 3;
@@ -389,6 +392,7 @@ fn a_waiting_pose_in_the_view_is_refused() {
         seed: 1,
         deterministic: true,
         stop: None,
+        keep_records: true,
     };
     let mut bad = scene.clone();
     bad.scene.cycle.waiting_tool_m = Some([0.10, 0.45, 0.15]);
@@ -401,4 +405,53 @@ fn a_waiting_pose_in_the_view_is_refused() {
         "{msg}"
     );
     assert!(binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).is_ok());
+}
+
+/// A run that keeps no records (a batch's) tallies its picks as they end: its summary is the
+/// same as the one of the same run keeping them, and the tally agrees with the records,
+/// recounted here from them.
+#[test]
+fn a_run_without_records_summarises_the_same_as_one_with_them() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("D").unwrap();
+    let go = |keep_records| {
+        let opts = RunOptions {
+            picks: 8,
+            seed: 2,
+            deterministic: true,
+            stop: None,
+            keep_records,
+        };
+        binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap()
+    };
+    let (kept, lean) = (go(true), go(false));
+    assert!(lean.records.is_empty() && lean.summary.recognition_per_capture.is_empty());
+    assert_eq!(kept.records.len(), 8);
+    assert!(!kept.summary.recognition_per_capture.is_empty());
+    let json = |s: &binpick::cycle::RunSummary| {
+        let mut v = serde_json::to_value(s).unwrap();
+        v.as_object_mut().unwrap().remove("recognition_per_capture");
+        v.to_string()
+    };
+    assert_eq!(json(&kept.summary), json(&lean.summary));
+    let r = &kept.records;
+    let placed: Vec<_> = r
+        .iter()
+        .filter(|p| p.outcome == binpick::cycle::Outcome::Placed)
+        .collect();
+    let t = &lean.tally;
+    assert_eq!(t.takts_s, binpick::cycle::takts(r));
+    assert_eq!(t.pick_s, placed.iter().map(|p| p.pick_s).collect::<Vec<_>>());
+    assert_eq!(t.place_s, placed.iter().map(|p| p.place_s).collect::<Vec<_>>());
+    assert_eq!((t.attempts, t.placed), (r.len(), placed.len()));
+    assert_eq!(t.set_out, r.iter().filter(|p| p.outcome.set_out()).count());
+    assert_eq!(t.grasps.0, r.iter().filter(|p| p.sealed.is_some()).count());
+    let recounted: f64 = r.iter().filter(|p| p.outcome.set_out()).map(|p| p.pick_compute_s).sum();
+    assert!((t.compute_sum_s[1] - recounted).abs() < 1e-12);
+    assert_eq!(
+        t.recognition.captures,
+        kept.summary.recognition_per_capture.len(),
+        "every result evaluated is tallied"
+    );
 }

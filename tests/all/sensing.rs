@@ -399,6 +399,7 @@ fn the_capture_fires_at_the_earliest_moment() {
         seed: 1,
         deterministic: true,
         stop: None,
+        keep_records: true,
     };
     let mut watch = TriggerWatch {
         cfg: Some((scene.scene.sensor.clone(), wp.workpiece.clone())),
