@@ -72,6 +72,7 @@ use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthError, PartShape, World};
 use crate::robot::{Payload, RobotModel};
 use crate::sensor::{CaptureJob, RecognitionReport, Sensor};
+use crate::trajectory::{LineMotion, Motion};
 
 pub use crate::reference::reference_takt;
 
@@ -206,6 +207,32 @@ pub struct CellState {
     /// Until when the arm's planned motion keeps it out of the view [s] (infinite: no motion
     /// into the view is planned). A capture is triggered only if its exposure ends before.
     pub view_free_until_s: f64,
+    /// No capture is triggered before this [s]: a part let go over the pick tray is still
+    /// falling into the pile and would blur the image.
+    pub capture_hold_until_s: f64,
+    /// The next pick, prepared at the last release, whose Pick the last Place's retreat runs
+    /// into (the retreat has not been played yet).
+    prefetched: Option<Prefetched>,
+    /// The pick (record index), part and slot whose placement error is measured once the
+    /// retreat that runs into the next Pick has left the part.
+    late_placement: Option<(usize, usize, Isometry3<f64>)>,
+    /// A placement error measured late: record index, horizontal error [m], yaw error [rad].
+    placement_fix: Option<(usize, f64, f64)>,
+}
+
+/// The next pick, prepared at a release from the result in hand (see `Run::prefetch_next`).
+struct Prefetched {
+    /// The result it comes from, the picks taken from it before and made since its trigger.
+    result: SensedResult,
+    taken: usize,
+    since: usize,
+    /// When its compute started [s].
+    compute_from_s: f64,
+    /// Its motions (with the retreat overlapped) and the wall time of each stage [s].
+    prep: motions::Prepared,
+    wall_s: [f64; 3],
+    /// The retreat it overlaps, not played yet.
+    retreat: LineMotion,
 }
 
 /// A recognition result in hand.
@@ -339,6 +366,10 @@ impl<'a> Cell<'a> {
             planned_end_q: None,
             results_collected: 0,
             view_free_until_s: f64::INFINITY,
+            capture_hold_until_s: f64::NEG_INFINITY,
+            prefetched: None,
+            late_placement: None,
+            placement_fix: None,
         })
     }
 }
@@ -393,6 +424,13 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
     let sensed = run.next_result()?;
     Ok((run.st, sensed))
 }
+
+/// After the cell lets a part go over the pick tray (a pick that cannot be placed), no capture
+/// is triggered for this long [s]: the part drops a few centimetres, bounces and comes to rest in
+/// about 0.2 s; an exposure meanwhile sees the pile moving (a C strip let go 90 ms before a
+/// trigger blurred four detections, and the grasp on one of them pressed a part 2.6 mm into
+/// another).
+pub const LET_GO_SETTLE_S: f64 = 0.3;
 
 /// A later pick from the same result takes only a part whose centre is this much farther from
 /// every earlier pick's than both parts' bounding radii (or the tool's, whichever is larger) [m].
@@ -461,6 +499,105 @@ impl Run<'_, '_> {
         }
     }
 
+    /// At a release, with `up` the Place's retreat still to play: the next pick prepared now,
+    /// its Pick to start while the retreat ends. Taken only if the cell overlaps lines, the run
+    /// has another pick to make, a result in hand offers a part without waiting, that Pick
+    /// overlaps the retreat ([`motions::RetreatBlend`]), its compute is done before the overlap
+    /// would start, no exposure is still running then, and nothing else happens before it (this
+    /// part does not fill the place tray: its exchange would take the part away before its
+    /// placement error is measured, and could take time). Returns how long the retreat runs alone [s]; the
+    /// retreat is then played with that Pick. Otherwise the retreat is played as before; a next
+    /// pick prepared here is dropped and prepared again after it.
+    pub(super) fn prefetch_next(&mut self, up: &LineMotion) -> Option<f64> {
+        let cell = self.cell;
+        let opts = cell.opts;
+        let next = self.st.tally.attempts + 1;
+        if !cell.scene.cycle.overlap_lines
+            || next >= opts.picks
+            || opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed))
+            || self.st.trays.next_slot + 1 >= cell.slots.len()
+        {
+            return None;
+        }
+        self.collect_ready();
+        let (result, since) = self.usable()?;
+        let taken = self.st.in_hand.as_ref().map_or(0, |h| h.taken);
+        let compute_from_s = result.job.ready_s.max(self.st.compute_from_s);
+        // Planned from where the retreat ends.
+        self.st.arm.free_s = self.st.world.time_s() + up.duration_s();
+        let this = self.st.pick.replace(next);
+        let prepared = match result.detections.as_deref() {
+            Some(dets) if !dets.is_empty() => {
+                // This part is in the current slot: the next goes to the one after.
+                let slot = self.st.trays.next_slot + 1;
+                self.prepare(dets, &result.job, compute_from_s, slot, Some(up)).ok()
+            }
+            _ => None,
+        };
+        let now = self.st.world.time_s();
+        let taken_here = prepared.and_then(|(prep, wall_s)| {
+            let head_s = prep.retreat_blend.as_ref()?.motion.start_s();
+            let charged = if opts.deterministic { cell.budgets_s } else { wall_s };
+            let pick_ready = compute_from_s + charged[0] + charged[1];
+            let exposing = self
+                .st
+                .pending
+                .as_ref()
+                .is_some_and(|j| j.spoiled.is_none() && j.exposure_end_s > now + head_s + 1e-9);
+            (pick_ready <= now + head_s + 1e-9 && !exposing).then_some((prep, wall_s, head_s))
+        });
+        let Some((prep, wall_s, head_s)) = taken_here else {
+            self.st.pick = this;
+            return None;
+        };
+        self.event(Event::ResultUsed {
+            taken,
+            since_capture: since,
+        });
+        self.st.pick = this;
+        self.st.prefetched = Some(Prefetched {
+            result,
+            taken,
+            since,
+            compute_from_s,
+            prep,
+            wall_s,
+            retreat: up.clone(),
+        });
+        Some(head_s)
+    }
+
+    /// A retreat left for a next Pick that will not come (the run ends): played alone now.
+    fn play_held_retreat(&mut self) -> Result<(), CycleError> {
+        if let Some(p) = self.st.prefetched.take() {
+            let hand = self.cell.hand;
+            if let execute::Played::Failed(o) = self.play(&p.retreat, &hand, true)? {
+                self.event(Event::Outcome(o));
+            }
+            self.measure_late_placement();
+        }
+        Ok(())
+    }
+
+    /// The placement error of a part whose retreat ran into the next Pick, once the cup has
+    /// left it.
+    pub(super) fn measure_late_placement(&mut self) {
+        if let Some((index, part, slot)) = self.st.late_placement.take() {
+            let (d, yaw) = self.st.world.placement_error(part, &slot, self.cell.yaw_symmetry_rad);
+            self.st.placement_fix = Some((index, d, yaw));
+        }
+    }
+
+    /// Writes a placement error measured late into the kept record it belongs to.
+    fn apply_placement_fix(&mut self, records: &mut [PickRecord]) {
+        if let Some((i, d, yaw)) = self.st.placement_fix.take()
+            && let Some(r) = records.get_mut(i)
+        {
+            r.placement_error_mm = Some(d * 1e3);
+            r.yaw_error_deg = Some(yaw.to_degrees());
+        }
+    }
+
     /// Tallies a finished pick, and keeps its record if the run keeps them.
     fn keep(&mut self, records: &mut Vec<PickRecord>, rec: PickRecord) {
         self.st.tally.add(&rec);
@@ -476,21 +613,45 @@ impl Run<'_, '_> {
         let mut records: Vec<PickRecord> = Vec::new();
         while self.st.tally.attempts < opts.picks {
             if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
+                self.play_held_retreat()?;
+                self.apply_placement_fix(&mut records);
                 return Ok((records, EndReason::Interrupted));
             }
             let index = self.st.tally.attempts;
             self.st.pick = Some(index);
-            let Some((result, taken, since)) = self.result_for_pick()? else {
-                return Ok((records, EndReason::NoPathOutOfView));
+            let (result, taken, since, compute_from_s, prepared) = match self.st.prefetched.take() {
+                // Prepared at the last release, its Pick overlapping that Place's retreat.
+                Some(p) => (p.result, p.taken, p.since, p.compute_from_s, Ok((p.prep, p.wall_s))),
+                None => {
+                    let Some((result, taken, since)) = self.result_for_pick()? else {
+                        return Ok((records, EndReason::NoPathOutOfView));
+                    };
+                    self.event(Event::ResultUsed {
+                        taken,
+                        since_capture: since,
+                    });
+                    // Compute starts when both the result and the arm's motion up to the next
+                    // pick are known: the result's arrival, or the start of the last Place if it
+                    // went as planned.
+                    let compute_from_s = result.job.ready_s.max(self.st.compute_from_s);
+                    let prepared = match result.detections.as_deref() {
+                        None | Some([]) => {
+                            self.obs.recognised(&Recognised {
+                                t_s: result.job.ready_s,
+                                detections: &[],
+                                ranked: &[],
+                                chosen: None,
+                            });
+                            Err(None)
+                        }
+                        Some(dets) => self
+                            .prepare(dets, &result.job, compute_from_s, self.st.trays.next_slot, None)
+                            .map_err(Some),
+                    };
+                    (result, taken, since, compute_from_s, prepared)
+                }
             };
             let blind = since > 0;
-            self.event(Event::ResultUsed {
-                taken,
-                since_capture: since,
-            });
-            // Compute starts when both the result and the arm's motion up to the next pick are
-            // known: the result's arrival, or the start of the last Place if it went as planned.
-            let compute_from_s = result.job.ready_s.max(self.st.compute_from_s);
             let mut rec = PickRecord::new(index, result.capture_s, result.job.ready_s);
             rec.blind = blind;
             rec.from_result = taken;
@@ -499,18 +660,6 @@ impl Run<'_, '_> {
                 .evaluation
                 .as_ref()
                 .map(|e| (e.figures.detected, e.figures.correct));
-            let prepared = match result.detections.as_deref() {
-                None | Some([]) => {
-                    self.obs.recognised(&Recognised {
-                        t_s: result.job.ready_s,
-                        detections: &[],
-                        ranked: &[],
-                        chosen: None,
-                    });
-                    Err(None)
-                }
-                Some(dets) => self.prepare(dets, &result.job, compute_from_s).map_err(Some),
-            };
             let (prep, wall_s) = match prepared {
                 Ok(p) => p,
                 Err(_) if blind || taken > 0 => {
@@ -554,6 +703,7 @@ impl Run<'_, '_> {
                 .as_deref()
                 .map(|d| d[prep.grasp.detection].world_from_part.translation.vector);
             self.pick_and_place(&prep, charged, compute_from_s, chosen, &mut rec)?;
+            self.apply_placement_fix(&mut records);
             if !matches!(rec.outcome, Outcome::Placed | Outcome::GraspFailed(_)) {
                 // The pile may have been disturbed anywhere: no result from before counts.
                 self.st.in_hand = None;
@@ -561,6 +711,8 @@ impl Run<'_, '_> {
             }
             self.keep(&mut records, rec);
         }
+        self.play_held_retreat()?;
+        self.apply_placement_fix(&mut records);
         Ok((records, EndReason::PicksDone))
     }
 }

@@ -88,6 +88,19 @@ pub const LINE_OVERLAP_SHARES: [f64; 3] = [0.6, 0.4, 0.2];
 /// J1's limit on F.
 pub const OVERLAP_TORQUE_SHARE: f64 = 0.9;
 
+/// The last Place's retreat and this pick's Pick (its transfer, then its descent, overlapped or
+/// not) overlapped: the transfer starts while the cup still rises out of the place tray.
+pub(super) struct RetreatBlend {
+    /// The retreat, and the Pick started `motion.start_s()` into it.
+    pub motion: Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>,
+    /// When the Pick's descent starts, from the Pick's start [s].
+    pub descent_from_s: f64,
+}
+
+/// A placed part's box in the planning model grows by this on every side [m] (its placement
+/// error is a few tenths of a millimetre).
+pub const PLACED_PART_MARGIN_M: f64 = 0.002;
+
 /// The motions of one pick, generated from one recognition result.
 pub(super) struct Prepared {
     /// The grasp.
@@ -101,6 +114,9 @@ pub(super) struct Prepared {
     /// The transfer and the descent overlapped, when that is clear and within the torques
     /// (`cycle.overlap_lines`).
     pub pick_blend: Option<Overlapped<Trajectory, LineMotion>>,
+    /// The last Place's retreat overlapped with this Pick, when the Pick was generated before
+    /// the retreat started and the overlap is clear and within the torques.
+    pub retreat_blend: Option<RetreatBlend>,
     /// Straight lift with the part, generated while the Pick runs.
     pub lift: LineMotion,
     /// The Place motion (or why not), generated while the Pick runs.
@@ -182,18 +198,23 @@ impl Cell<'_> {
 }
 
 impl Run<'_, '_> {
-    /// Grasp selection and motion generation for one recognition result. Returns the motions
-    /// and the wall time of each stage [s], or why nothing can be picked.
+    /// Grasp selection and motion generation for one recognition result, from `t_s`, the part
+    /// to go to place slot `slot_index`; with `retreat` (the last Place's retreat, not started
+    /// yet, from the part released in the slot before `slot_index`), the Pick overlapped with it
+    /// where it can be. Returns the motions and the wall time of each stage [s], or why nothing
+    /// can be picked.
     pub(super) fn prepare(
         &mut self,
         detections: &[Detection],
         job: &CaptureJob,
         t_s: f64,
+        slot_index: usize,
+        retreat: Option<&LineMotion>,
     ) -> Result<(Prepared, [f64; 3]), String> {
         let cell = self.cell;
         let robot = cell.robot;
         let wall = Instant::now();
-        let slot = cell.slots[self.st.trays.next_slot % cell.slots.len()];
+        let slot = cell.slots[slot_index % cell.slots.len()];
         // Compute that starts before the last motion ends plans from where it was planned to end.
         let q_now = match self.st.planned_end_q {
             Some(q) if t_s < self.st.arm.free_s - 1e-9 => q,
@@ -242,6 +263,31 @@ impl Run<'_, '_> {
         // The descent starts while the transfer ends, where the pile as seen allows.
         let pick_blend = match (&pick_transfer, &descent) {
             (Ok(t), Some(d)) => cell.overlap_end(t, d, d.duration_s(), &hand, &empty, None),
+            _ => None,
+        };
+        // The transfer starts while the last retreat ends, where the cell, the pile as seen and
+        // the parts placed in this place tray allow (each where the cell put it: its slot, its
+        // box grown by [`PLACED_PART_MARGIN_M`]); the retreat ends before the descent starts.
+        let retreat_blend = match (retreat, &pick_transfer, &descent) {
+            (Some(r), Ok(t), Some(d)) => {
+                let (pick, descent_from_s) = match &pick_blend {
+                    Some(b) => (b.clone(), b.start_s()),
+                    None => (Overlapped::new(t.clone(), d.clone(), t.duration_s()), t.duration_s()),
+                };
+                let mut placed = empty.env.clone();
+                let filled = (slot_index % cell.slots.len()).min(cell.slots.len());
+                placed
+                    .boxes
+                    .extend(cell.slots[..filled].iter().map(|s| crate::planning::EnvBox {
+                        name: "placed part".into(),
+                        world_from_box: *s,
+                        half_m: cell.shape.half_extents_m.add_scalar(PLACED_PART_MARGIN_M),
+                    }));
+                let placed = CollisionModel::new(robot, RobotSpheres::new(robot, cell.scene, None), placed);
+                cell.overlap_end(r, &pick, r.duration_s(), &hand, &placed, None)
+                    .filter(|o| r.duration_s() - o.start_s() <= descent_from_s + 1e-9)
+                    .map(|motion| RetreatBlend { motion, descent_from_s })
+            }
             _ => None,
         };
         let pick_s = wall.elapsed().as_secs_f64();
@@ -328,6 +374,7 @@ impl Run<'_, '_> {
                 pick_transfer,
                 descent,
                 pick_blend,
+                retreat_blend,
                 lift,
                 place,
                 held,

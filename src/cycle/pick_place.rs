@@ -103,7 +103,10 @@ impl Run<'_, '_> {
         for (t_s, event) in stages {
             self.event_at(t_s, event);
         }
-        self.idle_until(pick_ready.max(self.st.world.time_s()))?;
+        // With the last retreat overlapped, the Pick was ready before the retreat's head ends.
+        if prep.retreat_blend.is_none() {
+            self.idle_until(pick_ready.max(self.st.world.time_s()))?;
+        }
         let outcome = self.motions(prep, rec, place_ready, aimed_m)?;
         self.st.view_free_until_s = f64::INFINITY;
         // Compute for the next pick may start with this Place if it went as planned.
@@ -122,6 +125,8 @@ impl Run<'_, '_> {
             self.idle_until(t)?;
             self.st.world.take_gripper_events();
             self.event(Event::PartLetGo);
+            // The part falls back into the pile: no capture until it has come to rest there.
+            self.st.capture_hold_until_s = self.st.world.time_s() + super::LET_GO_SETTLE_S;
             self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
         }
         if matches!(
@@ -169,13 +174,25 @@ impl Run<'_, '_> {
         aimed_m: Option<nalgebra::Vector3<f64>>,
     ) -> Result<Outcome, CycleError> {
         let hand = self.cell.hand;
+        self.st.arm.max_error_rad = 0.0;
+        self.st.arm.peak_demand_ratio = [0.0; crate::robot::DOF];
+        self.st.arm.saturated_s = 0.0;
+        // The last Place's retreat, alone up to where this Pick starts (that Place's end; its
+        // servo errors and torques count for this pick). A capture may start only if its
+        // exposure ends before the Pick does.
+        if let Some(rb) = &prep.retreat_blend {
+            self.st.view_free_until_s = self.st.world.time_s() + rb.motion.start_s();
+            let head = self.play_with(&rb.motion.head(), &hand, true, None, false)?;
+            self.st.view_free_until_s = f64::INFINITY;
+            self.measure_late_placement();
+            if let Played::Failed(o) = head {
+                return Ok(o);
+            }
+        }
         let t_pick = self.st.world.time_s();
         self.st.planned_end_q = None;
         let pick_lane = if rec.blind { Stage::BlindPick } else { Stage::Pick };
         self.event(Event::PickStart);
-        self.st.arm.max_error_rad = 0.0;
-        self.st.arm.peak_demand_ratio = [0.0; crate::robot::DOF];
-        self.st.arm.saturated_s = 0.0;
         let pick_transfer = match &prep.pick_transfer {
             Ok(t) => t,
             Err(e) => return Ok(Outcome::NoMotion(e.clone())),
@@ -188,12 +205,15 @@ impl Run<'_, '_> {
         };
         // The transfer, then the descent (or the overlap's head, then its rest: the descent
         // starts while the transfer ends).
-        let transferred = match &prep.pick_blend {
-            Some(b) => {
-                rec.overlap_s[1] = b.both().duration_s();
-                self.play_with(&b.head(), &hand, false, None, false)?
+        rec.overlap_s[1] = prep.pick_blend.as_ref().map_or(0.0, |b| b.both().duration_s());
+        let transferred = match (&prep.retreat_blend, &prep.pick_blend) {
+            (Some(rb), _) => {
+                rec.overlap_s[3] = rb.motion.both().duration_s();
+                let s = rb.motion.start_s();
+                self.play_with(&rb.motion.window(s, s + rb.descent_from_s), &hand, false, None, false)?
             }
-            None => self.play_with(pick_transfer, &hand, false, None, false)?,
+            (None, Some(b)) => self.play_with(&b.head(), &hand, false, None, false)?,
+            (None, None) => self.play_with(pick_transfer, &hand, false, None, false)?,
         };
         if let Played::Failed(o) = transferred {
             pick_done(self, rec);
@@ -207,13 +227,19 @@ impl Run<'_, '_> {
         if let Some(c) = aimed_m {
             self.st.pick_spots.push((t_descent, c));
         }
-        let descended = match &prep.pick_blend {
-            Some(b) => {
+        let descended = match (&prep.retreat_blend, &prep.pick_blend) {
+            (Some(rb), _) => {
+                let m = &rb.motion;
+                let rest = m.window(m.start_s() + rb.descent_from_s, m.duration_s());
+                vacuum_at = (rest.duration_s() - lead).max(0.0);
+                self.play_with(&rest, &hand, false, Some(vacuum_at), true)?
+            }
+            (None, Some(b)) => {
                 let rest = b.rest();
                 vacuum_at = (rest.duration_s() - lead).max(0.0);
                 self.play_with(&rest, &hand, false, Some(vacuum_at), true)?
             }
-            None => {
+            (None, None) => {
                 vacuum_at = (prep.descent.duration_s() - lead).max(0.0);
                 self.play_with(&prep.descent, &hand, false, Some(vacuum_at), true)?
             }
@@ -311,11 +337,15 @@ impl Run<'_, '_> {
         // The next Pick may follow the Place at once: no exposure may run past its end.
         self.st.view_free_until_s = t_place + place.carry_s() + self.st.world.gripper().release_s + up.duration_s();
         self.event(Event::PlaceStart);
-        let place_done = |run: &mut Self, rec: &mut PickRecord| {
-            rec.place_s = run.st.world.time_s() - t_place;
-            run.span(Stage::Place, t_place, run.st.world.time_s(), "Place");
-            run.st.arm.free_s = run.st.world.time_s();
+        // The Place ends `after_s` from now: 0, or the head of a retreat that runs into the
+        // next Pick (played with it).
+        let place_done_after = |run: &mut Self, rec: &mut PickRecord, after_s: f64| {
+            let end = run.st.world.time_s() + after_s;
+            rec.place_s = end - t_place;
+            run.span(Stage::Place, t_place, end, "Place");
+            run.st.arm.free_s = end;
         };
+        let place_done = |run: &mut Self, rec: &mut PickRecord| place_done_after(run, rec, 0.0);
         // The transfer (its start overlapping the lift's end, if so) and the descent (its
         // start overlapping the transfer's end, if so), played as one motion when they overlap.
         let carried = match (blend, &place.descent_blend) {
@@ -346,6 +376,15 @@ impl Run<'_, '_> {
         let release = self.st.world.time_s();
         self.event(Event::Released);
         self.obs.marker(release, &format!("release {}", rec.index));
+        if let Some(head_s) = self.prefetch_next(up) {
+            // The retreat runs into the next Pick, prepared now: its head alone ends this Place.
+            place_done_after(self, rec, head_s);
+            if let Some(i) = part {
+                self.st.late_placement = Some((rec.index, i, prep.slot));
+            }
+            rec.release_s = Some(release);
+            return Ok(Outcome::Placed);
+        }
         if let Played::Failed(o) = self.play(up, &hand, true)? {
             place_done(self, rec);
             return Ok(o);

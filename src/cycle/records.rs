@@ -67,8 +67,9 @@ pub struct PickRecord {
     /// Time scaling of the held-part Place transfer for the cup's holding force (1: none).
     pub suction_speed_factor: f64,
     /// How long two motions ran at once, as played [s]: the lift and the Place transfer, the
-    /// Pick transfer and its descent, the Place transfer and its descent (0: one after the other).
-    pub overlap_s: [f64; 3],
+    /// Pick transfer and its descent, the Place transfer and its descent, the last Place's
+    /// retreat and this Pick's transfer (0: one after the other).
+    pub overlap_s: [f64; 4],
     /// A blind pick: picks went into the pile after its result's capture (the image no longer
     /// shows the pile as it is; the part was taken clear of them).
     pub blind: bool,
@@ -110,7 +111,7 @@ impl PickRecord {
             peak_demand_joint: 0,
             saturated_s: 0.0,
             suction_speed_factor: 1.0,
-            overlap_s: [0.0; 3],
+            overlap_s: [0.0; 4],
             blind: false,
             from_result: 0,
             picks_since_capture: 0,

@@ -69,6 +69,10 @@ impl Run<'_, '_> {
     /// of view and its plan keeps it out for the exposure.
     pub(super) fn maybe_trigger(&mut self) {
         self.collect_ready();
+        if self.st.world.time_s() < self.st.capture_hold_until_s - 1e-9 {
+            // A part let go is still falling into the pile.
+            return;
+        }
         if self.st.world.time_s() + self.st.sensor.exposure_s > self.st.view_free_until_s + 1e-9 {
             // The arm's plan takes it into the view before the exposure would end.
             return;
@@ -96,6 +100,12 @@ impl Run<'_, '_> {
             self.collect_ready();
             if self.st.results_collected != collected {
                 return Ok(self.st.in_hand.take().map(|h| h.result));
+            }
+            if self.st.pending.as_ref().is_none_or(|j| j.spoiled.is_some())
+                && self.st.world.time_s() < self.st.capture_hold_until_s
+            {
+                let hold = self.st.capture_hold_until_s;
+                self.idle_until(hold)?;
             }
             self.maybe_trigger();
             if self.st.pending.is_none() {

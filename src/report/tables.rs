@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 34] = [
+pub const PICKS_CSV_HEADER: [&str; 35] = [
     "pick",
     "outcome",
     "detail",
@@ -68,6 +68,7 @@ pub const PICKS_CSV_HEADER: [&str; 34] = [
     "lift_overlap_s",
     "pick_descent_overlap_s",
     "place_descent_overlap_s",
+    "retreat_overlap_s",
     "blind",
     "from_result",
     "picks_since_capture",
@@ -107,6 +108,7 @@ struct PickRow<'a> {
     lift_overlap_s: Fixed<6>,
     pick_descent_overlap_s: Fixed<6>,
     place_descent_overlap_s: Fixed<6>,
+    retreat_overlap_s: Fixed<6>,
     blind: bool,
     from_result: usize,
     picks_since_capture: usize,
@@ -149,6 +151,7 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             lift_overlap_s: Fixed::of(r.overlap_s[0]),
             pick_descent_overlap_s: Fixed::of(r.overlap_s[1]),
             place_descent_overlap_s: Fixed::of(r.overlap_s[2]),
+            retreat_overlap_s: Fixed::of(r.overlap_s[3]),
             blind: r.blind,
             from_result: r.from_result,
             picks_since_capture: r.picks_since_capture,

@@ -455,3 +455,46 @@ fn a_run_without_records_summarises_the_same_as_one_with_them() {
         "every result evaluated is tallied"
     );
 }
+
+/// The retreat after a release runs into the next Pick when that Pick was ready in time: in a
+/// deterministic E run most picks after the first start while the last retreat ends, and the
+/// part released before each still gets its placement error (measured once the cup has left it).
+/// Negative control: the same run with `cycle.overlap_lines = false` overlaps none.
+#[test]
+fn the_retreat_runs_into_the_next_pick_when_it_is_ready() {
+    let robot_scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&robot_scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("E").unwrap();
+    let go = |overlap: bool| {
+        let mut scene = LoadedScene::embedded_default().unwrap();
+        scene.scene.cycle.overlap_lines = overlap;
+        let opts = RunOptions {
+            picks: 10,
+            seed: 1,
+            deterministic: true,
+            stop: None,
+            keep_records: true,
+        };
+        binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap()
+    };
+    let on = go(true);
+    let overlapped: Vec<usize> = on
+        .records
+        .iter()
+        .filter(|p| p.overlap_s[3] > 0.0)
+        .map(|p| p.index)
+        .collect();
+    assert!(
+        overlapped.len() >= 4,
+        "only picks {overlapped:?} overlapped the retreat"
+    );
+    for &i in &overlapped {
+        let before = &on.records[i - 1];
+        assert_eq!(before.outcome, binpick::cycle::Outcome::Placed, "pick {i}");
+        let err = before.placement_error_mm.expect("the placement error is measured late");
+        assert!(err < 3.0, "pick {}: placed {err} mm off", i - 1);
+    }
+    assert_eq!(on.summary.collisions + on.summary.protective_stops, 0);
+    let off = go(false);
+    assert!(off.records.iter().all(|p| p.overlap_s[3] == 0.0));
+}
