@@ -58,9 +58,7 @@ pub use events::{
     StallCause,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
-pub use records::{
-    PickRecord, RunCounts, RunLabel, RunResult, RunSummary, RunTally, TaktStats, summarise, takts, takts_excl_refills,
-};
+pub use records::{PickRecord, RunCounts, RunLabel, RunResult, RunSummary, RunTally, TaktStats, summarise, takts};
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
@@ -505,9 +503,9 @@ impl Run<'_, '_> {
     /// overlaps the retreat ([`motions::RetreatBlend`]), its compute is done before the overlap
     /// would start, no exposure is still running then, and nothing else happens before it (this
     /// part does not fill the place tray: its exchange would take the part away before its
-    /// placement error is measured, and could take time). Returns how long the retreat runs alone [s]; the
-    /// retreat is then played with that Pick. Otherwise the retreat is played as before; a next
-    /// pick prepared here is dropped and prepared again after it.
+    /// placement error is measured, and could take time). Returns how long the retreat runs
+    /// alone [s]; the retreat is then played with that Pick. Otherwise the retreat is played as
+    /// before; a next pick prepared here is dropped and prepared again after it.
     pub(super) fn prefetch_next(&mut self, up: &LineMotion) -> Option<f64> {
         let cell = self.cell;
         let opts = cell.opts;
@@ -546,15 +544,14 @@ impl Run<'_, '_> {
                 .is_some_and(|j| j.spoiled.is_none() && j.exposure_end_s > now + head_s + 1e-9);
             (pick_ready <= now + head_s + 1e-9 && !exposing).then_some((prep, wall_s, head_s))
         });
-        let Some((prep, wall_s, head_s)) = taken_here else {
-            self.st.pick = this;
-            return None;
-        };
-        self.event(Event::ResultUsed {
-            taken,
-            since_capture: since,
-        });
+        if taken_here.is_some() {
+            self.event(Event::ResultUsed {
+                taken,
+                since_capture: since,
+            });
+        }
         self.st.pick = this;
+        let (prep, wall_s, head_s) = taken_here?;
         self.st.prefetched = Some(Prefetched {
             result,
             taken,

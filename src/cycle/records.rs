@@ -217,15 +217,6 @@ pub fn takts(records: &[PickRecord]) -> Vec<f64> {
     records.iter().filter_map(|r| r.takt_s).collect()
 }
 
-/// The takts [s] of intervals that span no pick-tray refill.
-pub fn takts_excl_refills(records: &[PickRecord]) -> Vec<f64> {
-    records
-        .iter()
-        .filter(|r| !r.spans_refill)
-        .filter_map(|r| r.takt_s)
-        .collect()
-}
-
 /// What a run's summary needs of its picks and recognition results, taken as each one ends,
 /// so that a long run keeps a few numbers per pick (the samples of its exact medians and
 /// percentiles: takts, Pick and Place times, pose errors of correct detections), not its records.
@@ -240,7 +231,7 @@ pub struct RunTally {
     pub set_out: usize,
     /// The takts [s] ([`takts`]).
     pub takts_s: Vec<f64>,
-    /// The takts of intervals that span no refill [s] ([`takts_excl_refills`]).
+    /// The takts of intervals that span no pick-tray refill [s].
     pub takts_excl_refills_s: Vec<f64>,
     /// Pick time of each placed pick [s].
     pub pick_s: Vec<f64>,

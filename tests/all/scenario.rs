@@ -81,6 +81,17 @@ fn recheck_plant(plant: &RobotModel, hand: &Payload, part_kg: f64, trace: &[Tick
     (matched, checked)
 }
 
+/// Deterministic options: `picks` picks of seed `seed`, every record kept.
+fn deterministic(picks: usize, seed: u64) -> RunOptions {
+    RunOptions {
+        picks,
+        seed,
+        deterministic: true,
+        stop: None,
+        keep_records: true,
+    }
+}
+
 /// A deterministic run of seed 1, recorded: its result and what the recorder kept.
 fn run(workpiece: &str, picks: usize) -> (RunResult, Recording, RobotModel, LoadedScene, LoadedWorkpiece) {
     let scene = LoadedScene::embedded_default().unwrap();
@@ -88,13 +99,7 @@ fn run(workpiece: &str, picks: usize) -> (RunResult, Recording, RobotModel, Load
     let wp = LoadedWorkpiece::resolve(workpiece).unwrap();
     let camera = Camera::from_config(&scene.scene.sensor).unwrap();
     let mut recorder = Recorder::new(&robot, camera, wp.workpiece.size_m);
-    let opts = RunOptions {
-        picks,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: true,
-    };
+    let opts = deterministic(picks, 1);
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
     let rec = recorder.finish(&r);
     (r, rec, robot, scene, wp)
@@ -217,13 +222,7 @@ fn misrecognition_is_a_named_outcome() {
     let robot_scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&robot_scene).unwrap();
     let wp = LoadedWorkpiece::resolve("B").unwrap();
-    let opts = RunOptions {
-        picks: 8,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: true,
-    };
+    let opts = deterministic(8, 1);
     let mut bad = robot_scene.clone();
     bad.scene.sensor.recognition = binpick::config::RecognitionMode::Oracle;
     bad.scene.sensor.pose_noise_m = 0.005;
@@ -261,13 +260,7 @@ fn several_picks_per_capture() {
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("E").unwrap();
-    let opts = RunOptions {
-        picks: 10,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: true,
-    };
+    let opts = deterministic(10, 1);
     let mut multi = scene.clone();
     multi.scene.cycle.max_picks_per_capture = 3;
     let r = binpick::cycle::run(&multi, &robot, &wp, &opts, &mut ()).unwrap();
@@ -387,13 +380,7 @@ fn a_waiting_pose_in_the_view_is_refused() {
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("F").unwrap();
-    let opts = RunOptions {
-        picks: 1,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: true,
-    };
+    let opts = deterministic(1, 1);
     let mut bad = scene.clone();
     bad.scene.cycle.waiting_tool_m = Some([0.10, 0.45, 0.15]);
     let Err(err) = binpick::cycle::run(&bad, &robot, &wp, &opts, &mut ()) else {
@@ -417,11 +404,8 @@ fn a_run_without_records_summarises_the_same_as_one_with_them() {
     let wp = LoadedWorkpiece::resolve("D").unwrap();
     let go = |keep_records| {
         let opts = RunOptions {
-            picks: 8,
-            seed: 2,
-            deterministic: true,
-            stop: None,
             keep_records,
+            ..deterministic(8, 2)
         };
         binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap()
     };
@@ -468,13 +452,7 @@ fn the_retreat_runs_into_the_next_pick_when_it_is_ready() {
     let go = |overlap: bool| {
         let mut scene = LoadedScene::embedded_default().unwrap();
         scene.scene.cycle.overlap_lines = overlap;
-        let opts = RunOptions {
-            picks: 10,
-            seed: 1,
-            deterministic: true,
-            stop: None,
-            keep_records: true,
-        };
+        let opts = deterministic(10, 1);
         binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap()
     };
     let on = go(true);
