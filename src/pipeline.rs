@@ -7,7 +7,9 @@
 //! inner walls as the planner's obstacle columns (max-pooled, conservative; unseen cells occupied
 //! up to the highest seen cell around them, never free), with a disc around
 //! the grasp point cut out (the part to be picked); take the best-ranked grasp that is not at a
-//! spot where a grasp just failed and whose approach pose is clear in that planning scene.
+//! spot where a grasp just failed and whose approach pose is clear in that planning scene, both
+//! with the hand alone (where the Pick ends) and with the part on the cup as recognised (where
+//! the Place starts).
 //! Everything here comes from what the sensor measured: no ground truth.
 //!
 //! Units: m, rad. Frames: world; the pick tray frame for the height map and the cut-out.
@@ -43,6 +45,8 @@ pub struct GraspContext<'a> {
     pub selector: &'a GraspSelector,
     /// The pick tray's volume (height map extent).
     pub pick_tray: &'a TrayVolume,
+    /// Half extents of the part's bounding box [m] (the held part in the planner's model).
+    pub part_half_extents_m: Vector3<f64>,
 }
 
 /// The grasp chosen on one recognition result, with its planning scene.
@@ -121,7 +125,9 @@ pub fn pile_map(scene: &Scene, height_map: &HeightMap) -> HeightMap {
 
 /// Sense and grasp on one capture: the height map, the ranked grasps for the part to go to
 /// `world_from_slot` with the arm at `q_now`, and the best one not within
-/// [`FAILED_SPOT_RADIUS_M`] of a `failed_spots` entry whose approach pose is clear.
+/// [`FAILED_SPOT_RADIUS_M`] of a `failed_spots` entry whose approach pose is clear with the hand
+/// alone and with the part held (a part near a wall can hang into it when lifted: the Place
+/// would have nowhere to start from).
 pub fn sense_and_grasp(
     ctx: &GraspContext<'_>,
     capture: &Capture,
@@ -149,7 +155,13 @@ pub fn sense_and_grasp(
     {
         let env = planning_environment(ctx.scene, &pile, g);
         let model = CollisionModel::new(ctx.robot, RobotSpheres::new(ctx.robot, ctx.scene, None), env.clone());
-        if model.free(&JointVector::from(g.q_approach), &mut PlanStats::default()) {
+        let q_approach = JointVector::from(g.q_approach);
+        if !model.free(&q_approach, &mut PlanStats::default()) {
+            continue;
+        }
+        let tool_from_part = g.world_from_tool.inverse() * detections[g.detection].world_from_part;
+        let held = RobotSpheres::new(ctx.robot, ctx.scene, Some((tool_from_part, ctx.part_half_extents_m)));
+        if CollisionModel::new(ctx.robot, held, env.clone()).free(&q_approach, &mut PlanStats::default()) {
             chosen = Some(ChosenGrasp {
                 rank,
                 grasp: g.clone(),

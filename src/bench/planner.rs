@@ -160,6 +160,7 @@ pub fn binpicking_queries(
                 robot,
                 selector: &selector,
                 pick_tray: w.pick_tray(),
+                part_half_extents_m: shape.half_extents_m,
             };
             // The cycle's own grasp ranking and planning scenes; the poses of its motions.
             let choice = sense_and_grasp(&ctx, &c, &det, &slots[0], &w.joints(), &[]);

@@ -118,6 +118,7 @@ pub fn sense_bench(
             robot,
             selector: &selector,
             pick_tray: w.pick_tray(),
+            part_half_extents_m: shape.half_extents_m,
         };
         // The cycle's own sense-and-grasp: height map, candidates, IK, ranking, clear approach.
         let grasp = time_ms(&mut || {

@@ -163,6 +163,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         robot: &robot,
         selector: &cell.selector,
         pick_tray: world.pick_tray(),
+        part_half_extents_m: cell.shape.half_extents_m,
     };
     let choice = sense_and_grasp(&ctx, &job.capture, &detections, &cell.slots[0], &world.joints(), &[]);
     let grasp_ms = t1.elapsed().as_secs_f64() * 1e3;

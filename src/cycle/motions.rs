@@ -225,6 +225,7 @@ impl Run<'_, '_> {
             robot,
             selector: &cell.selector,
             pick_tray: self.st.world.pick_tray(),
+            part_half_extents_m: cell.shape.half_extents_m,
         };
         let choice = sense_and_grasp(&ctx, &job.capture, detections, &slot, &q_now, &self.st.failed_spots);
         self.obs.recognised(&Recognised {

@@ -129,9 +129,10 @@ impl Run<'_, '_> {
             self.st.capture_hold_until_s = self.st.world.time_s() + super::LET_GO_SETTLE_S;
             self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
         }
+        // No motion for it is a failure at that spot too: the same pile gives the same plan.
         if matches!(
             outcome,
-            Outcome::GraspFailed(_) | Outcome::Collision(_) | Outcome::ProtectiveStop(_)
+            Outcome::GraspFailed(_) | Outcome::Collision(_) | Outcome::ProtectiveStop(_) | Outcome::NoMotion(_)
         ) && rec.place_s == 0.0
         {
             self.st.failed_spots.push(prep.grasp.world_from_tool.translation.vector);
