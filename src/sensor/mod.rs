@@ -207,7 +207,7 @@ impl Sensor {
         }
         let capture = capture_over(world, &self.camera, self.seed, self.triggered, Some(&self.background));
         self.triggered += 1;
-        let truth = TruthAtTrigger::take(world, self, &capture);
+        let truth = TruthAtTrigger::take_with(world, self, &capture, self.recognition == RecognitionMode::Oracle);
         Ok(CaptureJob {
             exposure_end_s: world.time_s() + self.exposure_s,
             ready_s: world.time_s() + self.latency_s,
