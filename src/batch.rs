@@ -187,6 +187,7 @@ mod tests {
             pick_s: vec![1.0; takts.len() + 1],
             place_s: vec![1.0; takts.len() + 1],
             compute_sum_s: [0.05 * (takts.len() + 1) as f64, 0.0, 0.0],
+            result_to_motion_s: vec![0.05; takts.len() + 1],
             sensor_waits: (1, 0.2),
             compute_waits: (0, 0.0),
             faults: [0, 0, 0, 0, 0],

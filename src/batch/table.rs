@@ -42,6 +42,10 @@ pub struct RunEntry {
     pub place_s: Vec<f64>,
     /// Compute charged per pick set out, summed: grasp, Pick, Place [s].
     pub compute_sum_s: [f64; 3],
+    /// Compute between each pick's result and the motion it unblocks (grasp and Pick), per
+    /// pick set out [s].
+    #[serde(default)]
+    pub result_to_motion_s: Vec<f64>,
     /// Waits for the sensor in the takts: count and total [s].
     pub sensor_waits: (usize, f64),
     /// Waits for compute in the takts: count and total [s].
@@ -99,6 +103,7 @@ impl RunEntry {
             pick_s: t.pick_s.clone(),
             place_s: t.place_s.clone(),
             compute_sum_s: t.compute_sum_s,
+            result_to_motion_s: t.result_to_motion_s.clone(),
             sensor_waits: s.sensor_stalls,
             compute_waits: s.compute_stalls,
             faults: [s.protective_stops, s.collisions, s.drops, t.faults[3], s.parts_lost],
@@ -147,6 +152,8 @@ pub struct Row {
     pub motion_floor_s: f64,
     /// Mean compute per pick set out: grasp, Pick, Place [s].
     pub mean_compute_s: [f64; 3],
+    /// Median compute between a pick's result and the motion it unblocks (grasp and Pick) [s].
+    pub median_result_to_motion_s: f64,
     /// Waits for the sensor: count, mean [s].
     pub sensor_waits: (usize, f64),
     /// Waits for compute: count, mean [s].
@@ -236,6 +243,7 @@ pub fn table(order: &[String], entries: &[RunEntry]) -> Vec<Row> {
                 mean_place_s: crate::stats::mean(&cat(|e| &e.place_s)),
                 motion_floor_s: crate::stats::mean(&cat(|e| &e.pick_s)) + crate::stats::mean(&cat(|e| &e.place_s)),
                 mean_compute_s: [compute(0), compute(1), compute(2)],
+                median_result_to_motion_s: crate::stats::median_min_max(&cat(|e| &e.result_to_motion_s)).0,
                 sensor_waits: waits(|e| e.sensor_waits),
                 compute_waits: waits(|e| e.compute_waits),
                 protective_stops: fault(0),
@@ -288,14 +296,14 @@ fn num(v: f64, digits: usize) -> String {
 pub fn markdown(rows: &[Row]) -> String {
     let mut md = String::from(
         "| part | runs | placed / attempts | success | takt mean [s] | p95 | min | max | reference [s] \
-         | takt excl. tray refills [s] | Pick [s] | Place [s] | motion floor [s] | compute grasp/Pick/Place [ms] | sensor waits (mean s) \
+         | takt excl. tray refills [s] | Pick [s] | Place [s] | motion floor [s] | compute grasp/Pick/Place [ms] | result to motion median [ms] | sensor waits (mean s) \
          | compute waits (mean s) | stops | collisions | drops | grasps sealed | grasp fails (misrecognised) | picks / capture | blind picks placed | lost | agitations | refills \
          | recognition recall / precision | pose error med mm / deg | peak torque demand | saturated [s] | max tracking error [deg] |\n\
-         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
+         |---|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|---:|\n",
     );
     for r in rows {
         md += &format!(
-            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} ({}) | {} ({}) | {} | {} | {} | {} % | {} ({}) | {} | {}/{} | {} | {} | {} | {} % / {} % | {} / {} | {} % | {} | {} |\n",
+            "| {} | {} | {}/{} | {} % | {} | {} | {} | {} | {} | {} | {} | {} | {} | {}/{}/{} | {} | {} ({}) | {} ({}) | {} | {} | {} | {} % | {} ({}) | {} | {}/{} | {} | {} | {} | {} % / {} % | {} / {} | {} % | {} | {} |\n",
             r.workpiece,
             r.runs,
             r.placed,
@@ -313,6 +321,7 @@ pub fn markdown(rows: &[Row]) -> String {
             num(r.mean_compute_s[0] * 1e3, 1),
             num(r.mean_compute_s[1] * 1e3, 1),
             num(r.mean_compute_s[2] * 1e3, 1),
+            num(r.median_result_to_motion_s * 1e3, 1),
             r.sensor_waits.0,
             num(r.sensor_waits.1, 3),
             r.compute_waits.0,
@@ -342,7 +351,7 @@ pub fn markdown(rows: &[Row]) -> String {
 }
 
 /// The columns of `takt.csv`.
-pub const TAKT_CSV_HEADER: [&str; 45] = [
+pub const TAKT_CSV_HEADER: [&str; 46] = [
     "workpiece",
     "runs",
     "attempts",
@@ -361,6 +370,7 @@ pub const TAKT_CSV_HEADER: [&str; 45] = [
     "mean_grasp_compute_s",
     "mean_pick_compute_s",
     "mean_place_compute_s",
+    "median_result_to_motion_compute_s",
     "sensor_waits",
     "sensor_wait_mean_s",
     "compute_waits",
@@ -411,6 +421,7 @@ struct CsvRow<'a> {
     mean_grasp_compute_s: Fixed<6>,
     mean_pick_compute_s: Fixed<6>,
     mean_place_compute_s: Fixed<6>,
+    median_result_to_motion_compute_s: Fixed<6>,
     sensor_waits: usize,
     sensor_wait_mean_s: Fixed<6>,
     compute_waits: usize,
@@ -463,6 +474,7 @@ pub fn csv(rows: &[Row]) -> String {
             mean_grasp_compute_s: Fixed::of(r.mean_compute_s[0]),
             mean_pick_compute_s: Fixed::of(r.mean_compute_s[1]),
             mean_place_compute_s: Fixed::of(r.mean_compute_s[2]),
+            median_result_to_motion_compute_s: Fixed::of(r.median_result_to_motion_s),
             sensor_waits: r.sensor_waits.0,
             sensor_wait_mean_s: Fixed::of(r.sensor_waits.1),
             compute_waits: r.compute_waits.0,

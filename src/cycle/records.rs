@@ -239,6 +239,9 @@ pub struct RunTally {
     pub place_s: Vec<f64>,
     /// Compute charged over the picks set out: grasp selection, Pick and Place motion [s].
     pub compute_sum_s: [f64; 3],
+    /// Compute between each pick's result and the motion it unblocks (grasp selection and
+    /// Pick motion), per pick set out [s].
+    pub result_to_motion_s: Vec<f64>,
     /// Stalls waiting for the sensor: count and total [s] (placed picks with a takt).
     pub sensor_stalls: (usize, f64),
     /// Stalls waiting for compute: count and total [s].
@@ -293,6 +296,7 @@ impl RunTally {
             self.compute_sum_s[0] += r.grasp_compute_s;
             self.compute_sum_s[1] += r.pick_compute_s;
             self.compute_sum_s[2] += r.place_compute_s;
+            self.result_to_motion_s.push(r.grasp_compute_s + r.pick_compute_s);
             if r.from_result == 0 {
                 self.results_used += 1;
             }
