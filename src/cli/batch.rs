@@ -247,11 +247,17 @@ fn write_batch(
     );
     print!("{md}");
     println!(
-        "\ntakt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; grasps sealed / attempted; recognition against the truth at each trigger (correct = within 2 mm and 5 deg of a part; recall over the top layer); torque demand before saturation; {sim_s:.1} s simulated{}, {wall_s:.1} s wall on {jobs} threads",
+        "\ntakt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; grasps sealed / attempted; recognition against the truth at each trigger (correct = within 2 mm and 5 deg of a part; recall over the top layer); torque demand before saturation; {sim_s:.1} s simulated{}{}",
         run_wall_s.map_or(String::new(), |w| format!(
             " in {w:.1} s of run time ({:.0}x real time per core)",
             sim_s / w.max(1e-9)
-        ))
+        )),
+        // A merge of deterministic shards knows no wall time.
+        if wall_s.is_finite() {
+            format!(", {wall_s:.1} s wall on {jobs} threads")
+        } else {
+            String::new()
+        }
     );
     println!("wrote {}", dest.display());
     done()
