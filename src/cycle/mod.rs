@@ -208,6 +208,8 @@ pub struct CellState {
     /// No capture is triggered before this [s]: a part let go over the pick tray is still
     /// falling into the pile and would blur the image.
     pub capture_hold_until_s: f64,
+    /// Captures in a row taken for a pile in motion (at most [`sensing::MOTION_RECAPTURES`] are).
+    pub moving_in_a_row: usize,
     /// The next pick, prepared at the last release, whose Pick the last Place's retreat runs
     /// into (the retreat has not been played yet).
     prefetched: Option<Prefetched>,
@@ -365,6 +367,7 @@ impl<'a> Cell<'a> {
             results_collected: 0,
             view_free_until_s: f64::INFINITY,
             capture_hold_until_s: f64::NEG_INFINITY,
+            moving_in_a_row: 0,
             prefetched: None,
             late_placement: None,
             placement_fix: None,

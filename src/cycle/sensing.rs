@@ -4,7 +4,8 @@
 //! Job: keep one capture pending; trigger it at the first physics step at which the arm (and the
 //! held part) is outside the view frustum over the pick tray; repeat an exposure spoiled by the
 //! arm entering the view; hand over the recognition result when it arrives (`latency_s` after
-//! the trigger). When the arm stands in the view with nothing pending (at the start, after a
+//! the trigger), unless its image shows new holes over the tray (a pile in motion): then look
+//! again at once. When the arm stands in the view with nothing pending (at the start, after a
 //! fault), move it home first.
 //!
 //! Units: s, rad. Frames: world.
@@ -15,7 +16,12 @@ use super::events::{Event, Fault, Stage};
 use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
-use crate::sensor::{CaptureJob, Detection, RecognitionReport, evaluate};
+use crate::sensor::{CaptureJob, CaptureProblem, Detection, MOTION_HOLE_MIN_PX, RecognitionReport, evaluate};
+
+/// The most captures in a row the cell takes for a pile in motion and looks at again; the next
+/// one is picked from whatever it shows (a part that keeps sliding would otherwise hold the
+/// cell forever).
+pub const MOTION_RECAPTURES: usize = 2;
 use crate::trajectory::{CORRIDOR_CHECK_DT_S, Motion, Trajectory, accelerate_in_corridor};
 
 /// A recognition result to pick from.
@@ -158,6 +164,12 @@ impl Run<'_, '_> {
         if let Some(job) = self.st.pending.take() {
             let capture_s = job.exposure_end_s - self.st.sensor.exposure_s;
             let result = self.finish(job, capture_s);
+            if result.job.spoiled.is_some() {
+                // The image shows a pile in motion: neither it nor the result in hand (taken
+                // before the motion) is picked from; the next capture is taken at once.
+                self.st.in_hand = None;
+                return;
+            }
             self.st.in_hand = Some(super::InHand { result, taken: 0 });
             self.st.results_collected += 1;
         }
@@ -171,6 +183,23 @@ impl Run<'_, '_> {
         let wall = std::time::Instant::now();
         let detections = self.st.sensor.result(&mut job, self.st.world.time_s());
         let recognition_wall_s = wall.elapsed().as_secs_f64();
+        // New holes in the image: something moved during the exposure. Looked at again, up to
+        // [`MOTION_RECAPTURES`] times in a row; a hole that stays put is a steep face.
+        let new_holes = self.st.sensor.new_hole_px(&job.capture);
+        if new_holes >= MOTION_HOLE_MIN_PX && self.st.moving_in_a_row < MOTION_RECAPTURES {
+            self.st.moving_in_a_row += 1;
+            let problem = CaptureProblem::PileMoving(new_holes);
+            job.spoiled = Some(problem.clone());
+            self.event_at(job.ready_s, Event::CaptureSpoiled(problem));
+            return SensedResult {
+                job,
+                capture_s,
+                detections: None,
+                evaluation: None,
+                recognition_wall_s,
+            };
+        }
+        self.st.moving_in_a_row = 0;
         let evaluation = detections
             .as_ref()
             .map(|d| evaluate(&job.truth, d, &self.st.sensor.symmetry));

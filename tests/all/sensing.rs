@@ -469,3 +469,45 @@ fn a_part_that_would_hang_into_the_wall_when_lifted_is_not_chosen() {
     let (in_middle, _) = lone_block_grasp(0.0);
     assert!(in_middle.chosen.is_some(), "{}", in_middle.why_none());
 }
+
+/// A pile in motion as the cell can tell it from the image alone: a strip turning during the
+/// exposure leaves a hole over the tray floor (its pixels return nothing), at least
+/// `MOTION_HOLE_MIN_PX` pixels that were not holes in the last image looked at. Negative
+/// controls: the same pile standing still shows none; and the same image looked at twice shows
+/// no new hole the second time (a hole that stays put is a steep face, not motion).
+#[test]
+fn a_strip_moving_during_the_exposure_leaves_new_holes_and_a_still_pile_none() {
+    use binpick::sensor::MOTION_HOLE_MIN_PX;
+    let (mut w, scene, wp, _) = cell("C", 3);
+    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 3, &wp.workpiece).unwrap();
+    let mut still = sensor.trigger(&w).unwrap();
+    let ready_s = still.ready_s;
+    sensor.result(&mut still, ready_s).expect("ready");
+    let first = sensor.new_hole_px(&still.capture);
+    assert!(first < MOTION_HOLE_MIN_PX, "a still pile shows {first} hole pixels");
+    assert_eq!(
+        sensor.new_hole_px(&still.capture),
+        0,
+        "the same image again shows new holes"
+    );
+
+    let mut job = sensor.trigger(&w).unwrap();
+    let i = binpick::sensor::top_layer(&w)[0];
+    let p = w.part_pose(i);
+    let turned = Isometry3::from_parts(
+        p.translation,
+        nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.05) * p.rotation,
+    );
+    w.set_part_pose(i, &turned);
+    w.step().unwrap();
+    sensor.watch(&mut job, &w);
+    assert!(job.blurred() > 0, "the turning strip is not blurred");
+    let ready_s = job.ready_s;
+    sensor.result(&mut job, ready_s).expect("ready");
+    let moved = sensor.new_hole_px(&job.capture);
+    assert!(
+        moved >= MOTION_HOLE_MIN_PX,
+        "a turning strip leaves only {moved} new hole pixels"
+    );
+    assert_eq!(sensor.new_hole_px(&job.capture), 0, "the hole is new twice");
+}
