@@ -48,11 +48,33 @@ pub struct RayCaster<'w> {
     pipeline: QueryPipeline<'w>,
     /// The arm's cylinders the pipeline leaves out, cast in closed form.
     cylinders: Vec<ArmCylinder>,
+    /// The box around all of them (min, max corners) [m]: most rays miss it.
+    cylinders_box_m: (Vector3<f64>, Vector3<f64>),
 }
 
 impl RayCaster<'_> {
     /// The first hit of the ray from `origin` along the unit `dir` within `max_m` [m].
     pub fn cast(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, max_m: f64) -> Option<RayHit> {
+        self.cast_among(origin, dir, max_m, u64::MAX)
+    }
+
+    /// World-frame bounding boxes (min, max corners) [m] of the arm's cylinders this caster
+    /// intersects in closed form, in the order of [`RayCaster::cast_among`]'s bits.
+    pub fn arm_cylinder_boxes_m(&self) -> Vec<(Vector3<f64>, Vector3<f64>)> {
+        self.cylinders.iter().map(|c| c.aabb_m).collect()
+    }
+
+    /// As [`RayCaster::cast`], testing only the arm's cylinders whose bit is set in
+    /// `cylinder_bits` (bit k: the k-th of [`RayCaster::arm_cylinder_boxes_m`]): a caller that
+    /// knows the ray cannot meet a cylinder's box (a camera pixel outside the box's image)
+    /// leaves its bit clear. Beyond 64 cylinders all are tested.
+    pub fn cast_among(
+        &self,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        max_m: f64,
+        cylinder_bits: u64,
+    ) -> Option<RayHit> {
         let ray = Ray::new(sim_point(origin), sim_dir(dir));
         let mut best = self
             .pipeline
@@ -65,7 +87,14 @@ impl RayCaster<'_> {
                 })
             });
         let mut reach_m = best.map_or(max_m, |h| h.distance_m);
-        for c in &self.cylinders {
+        if self.cylinders.is_empty() || ray_box_entry(&self.cylinders_box_m, origin, dir, reach_m).is_none() {
+            return best;
+        }
+        let all = self.cylinders.len() > 64;
+        for (k, c) in self.cylinders.iter().enumerate() {
+            if !all && cylinder_bits & (1u64 << k) == 0 {
+                continue;
+            }
             if let Some((distance_m, normal)) = c.cast(origin, dir, reach_m) {
                 reach_m = distance_m;
                 best = Some(RayHit {
@@ -111,23 +140,8 @@ impl ArmCylinder {
     /// within `max_m`: its distance [m] and the outward surface normal (world frame; zero when
     /// the ray starts inside, at distance 0).
     pub(crate) fn cast(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, max_m: f64) -> Option<(f64, Vector3<f64>)> {
-        // Slab test on the bounding box first: most rays that reach here miss it.
-        let (lo, hi) = self.aabb_m;
-        let (mut t0, mut t1) = (0.0f64, max_m);
-        for i in 0..3 {
-            if dir[i].abs() < 1e-12 {
-                if origin[i] < lo[i] || origin[i] > hi[i] {
-                    return None;
-                }
-                continue;
-            }
-            let (a, b) = ((lo[i] - origin[i]) / dir[i], (hi[i] - origin[i]) / dir[i]);
-            t0 = t0.max(a.min(b));
-            t1 = t1.min(a.max(b));
-            if t0 > t1 {
-                return None;
-            }
-        }
+        // The bounding box first: most rays that reach here miss it.
+        ray_box_entry(&self.aabb_m, origin, dir, max_m)?;
         let inv = self.world_from_cylinder.inverse();
         let o = inv * nalgebra::Point3::from(*origin);
         let d = inv.rotation * dir;
@@ -168,6 +182,32 @@ impl ArmCylinder {
         }
         best.map(|(t, n)| (t, self.world_from_cylinder.rotation * n))
     }
+}
+
+/// Where the ray from `origin` along `dir` enters the box `(lo, hi)` [m], if within `max_m` (0
+/// when it starts inside): the slab test.
+fn ray_box_entry(
+    (lo, hi): &(Vector3<f64>, Vector3<f64>),
+    origin: &Vector3<f64>,
+    dir: &Vector3<f64>,
+    max_m: f64,
+) -> Option<f64> {
+    let (mut t0, mut t1) = (0.0f64, max_m);
+    for i in 0..3 {
+        if dir[i].abs() < 1e-12 {
+            if origin[i] < lo[i] || origin[i] > hi[i] {
+                return None;
+            }
+            continue;
+        }
+        let (a, b) = ((lo[i] - origin[i]) / dir[i], (hi[i] - origin[i]) / dir[i]);
+        t0 = t0.max(a.min(b));
+        t1 = t1.min(a.max(b));
+        if t0 > t1 {
+            return None;
+        }
+    }
+    Some(t0)
 }
 
 /// Whether a collider is one of the arm's cylinders (cast in closed form, see [`ArmCylinder`]).
@@ -213,6 +253,10 @@ impl World {
         } else {
             (filter.predicate(&ray_visible), Vec::new())
         };
+        let cylinders_box_m = cylinders.iter().fold(
+            (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)),
+            |(lo, hi), c| (lo.inf(&c.aabb_m.0), hi.sup(&c.aabb_m.1)),
+        );
         RayCaster {
             world: self,
             pipeline: self.broad_phase.as_query_pipeline(
@@ -222,6 +266,7 @@ impl World {
                 filter,
             ),
             cylinders,
+            cylinders_box_m,
         }
     }
 
@@ -272,6 +317,7 @@ impl World {
                 QueryFilter::default().predicate(&pred),
             ),
             cylinders: Vec::new(),
+            cylinders_box_m: (Vector3::zeros(), Vector3::zeros()),
         };
         caster.cast(origin, dir, max_m)
     }

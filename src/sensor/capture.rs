@@ -112,6 +112,35 @@ fn gaussian_from(u1: f64, u2: f64) -> f64 {
 /// Random numbers each pixel draws, whatever happens to it, so rows can be positioned exactly.
 const DRAWS_PER_PIXEL: u128 = 4;
 
+/// The pixels (u0, v0, u1, v1, inclusive) of `camera`'s image that the box `lo`..`hi` [m, world]
+/// may show, a pixel wider each side: the whole image if the box reaches behind the camera,
+/// `None` if it lies outside the image.
+fn image_rect(camera: &Camera, lo: &Vector3<f64>, hi: &Vector3<f64>) -> Option<(usize, usize, usize, usize)> {
+    let (w, h) = (camera.width_px, camera.height_px);
+    let mut box_px = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
+    for k in 0..8 {
+        let p = Point3::new(
+            if k & 1 == 0 { lo.x } else { hi.x },
+            if k & 2 == 0 { lo.y } else { hi.y },
+            if k & 4 == 0 { lo.z } else { hi.z },
+        );
+        match camera.project(&p) {
+            Some((x, y, _)) => box_px = (box_px.0.min(x), box_px.1.min(y), box_px.2.max(x), box_px.3.max(y)),
+            None => return Some((0, 0, w - 1, h - 1)),
+        }
+    }
+    if box_px.2 < -1.0 || box_px.3 < -1.0 || box_px.0 > w as f64 + 1.0 || box_px.1 > h as f64 + 1.0 {
+        return None;
+    }
+    let clamp = |x: f64, n: usize| x.clamp(0.0, (n - 1) as f64) as usize;
+    Some((
+        clamp(box_px.0.floor() - 1.0, w),
+        clamp(box_px.1.floor() - 1.0, h),
+        clamp(box_px.2.floor() + 1.0, w),
+        clamp(box_px.3.floor() + 1.0, h),
+    ))
+}
+
 /// Casts one ray per pixel into the world, in parallel over rows, with the noise model.
 pub fn capture(world: &World, camera: &Camera, seed: u64, id: u64) -> Capture {
     capture_over(world, camera, seed, id, None)
@@ -149,37 +178,32 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
     let mask: Option<Vec<bool>> = background.map(|_| {
         let mut mask = vec![false; w * h];
         for (lo, hi) in world.moving_view_boxes() {
-            let mut box_px = (f64::INFINITY, f64::INFINITY, f64::NEG_INFINITY, f64::NEG_INFINITY);
-            let mut behind = false;
-            for k in 0..8 {
-                let p = Point3::new(
-                    if k & 1 == 0 { lo.x } else { hi.x },
-                    if k & 2 == 0 { lo.y } else { hi.y },
-                    if k & 4 == 0 { lo.z } else { hi.z },
-                );
-                match camera.project(&p) {
-                    Some((x, y, _)) => {
-                        box_px = (box_px.0.min(x), box_px.1.min(y), box_px.2.max(x), box_px.3.max(y));
-                    }
-                    None => behind = true,
-                }
-            }
-            if behind {
-                mask.iter_mut().for_each(|m| *m = true);
-                break;
-            }
-            let clamp = |x: f64, n: usize| x.clamp(0.0, (n - 1) as f64) as usize;
-            if box_px.2 < -1.0 || box_px.3 < -1.0 || box_px.0 > w as f64 + 1.0 || box_px.1 > h as f64 + 1.0 {
+            let Some((u0, v0, u1, v1)) = image_rect(camera, &lo, &hi) else {
                 continue;
-            }
-            let (u0, v0) = (clamp(box_px.0.floor() - 1.0, w), clamp(box_px.1.floor() - 1.0, h));
-            let (u1, v1) = (clamp(box_px.2.floor() + 1.0, w), clamp(box_px.3.floor() + 1.0, h));
+            };
             for v in v0..=v1 {
                 mask[v * w + u0..=v * w + u1].iter_mut().for_each(|m| *m = true);
             }
         }
         mask
     });
+    // The arm's cylinders, cast in closed form: each pixel tests only those whose image box
+    // holds it.
+    let cylinder_rects: Vec<Option<(usize, usize, usize, usize)>> = world
+        .ray_caster(match background {
+            Some(_) => RayTargets::Moving,
+            None => RayTargets::All,
+        })
+        .arm_cylinder_boxes_m()
+        .iter()
+        .map(|(lo, hi)| image_rect(camera, lo, hi))
+        .collect();
+    let cylinder_bits = |u: usize, v: usize| {
+        cylinder_rects.iter().enumerate().fold(0u64, |bits, (k, r)| match r {
+            Some((u0, v0, u1, v1)) if (*u0..=*u1).contains(&u) && (*v0..=*v1).contains(&v) => bits | (1u64 << k),
+            _ => bits,
+        })
+    };
     let cos_grazing = camera.dropout_grazing_rad.cos();
     /// One image row: depths, points, what each ray hit.
     type Row = (Vec<f32>, Vec<[f32; 3]>, Vec<Option<Tag>>);
@@ -208,9 +232,9 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                     (Some(bg), _) => {
                         let behind = bg.hits[v * w + u];
                         let reach = behind.map_or(camera.max_range_m, |b| b.distance_m);
-                        rays.cast(&origin, &dir, reach).or(behind)
+                        rays.cast_among(&origin, &dir, reach, cylinder_bits(u, v)).or(behind)
                     }
-                    (None, _) => rays.cast(&origin, &dir, camera.max_range_m),
+                    (None, _) => rays.cast_among(&origin, &dir, camera.max_range_m, cylinder_bits(u, v)),
                 };
                 let Some(RayHit {
                     tag,
