@@ -17,12 +17,12 @@ use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
 use crate::sensor::{CaptureJob, CaptureProblem, Detection, MOTION_HOLE_MIN_PX, RecognitionReport, evaluate};
+use crate::trajectory::{CORRIDOR_CHECK_DT_S, Motion, Trajectory, accelerate_in_corridor};
 
 /// The most captures in a row the cell takes for a pile in motion and looks at again; the next
 /// one is picked from whatever it shows (a part that keeps sliding would otherwise hold the
 /// cell forever).
 pub const MOTION_RECAPTURES: usize = 2;
-use crate::trajectory::{CORRIDOR_CHECK_DT_S, Motion, Trajectory, accelerate_in_corridor};
 
 /// A recognition result to pick from.
 pub struct SensedResult {
@@ -188,6 +188,7 @@ impl Run<'_, '_> {
         let new_holes = self.st.sensor.new_hole_px(&job.capture);
         if new_holes >= MOTION_HOLE_MIN_PX && self.st.moving_in_a_row < MOTION_RECAPTURES {
             self.st.moving_in_a_row += 1;
+            self.st.sensor.spoiled += 1;
             let problem = CaptureProblem::PileMoving(new_holes);
             job.spoiled = Some(problem.clone());
             self.event_at(job.ready_s, Event::CaptureSpoiled(problem));

@@ -247,6 +247,26 @@ fn cached_background_captures_equal_full_ray_casts() {
     }
 }
 
+/// Turns part `i` 0.05 rad about its own centre during `job`'s exposure (one physics step) with
+/// the sensor watching: a C strip's ends move 3.7 mm, its centre stays put. Returns its pose
+/// before.
+fn turn_during_exposure(
+    w: &mut World,
+    sensor: &mut Sensor,
+    job: &mut binpick::sensor::CaptureJob,
+    i: usize,
+) -> Isometry3<f64> {
+    let p = w.part_pose(i);
+    let turned = Isometry3::from_parts(
+        p.translation,
+        nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.05) * p.rotation,
+    );
+    w.set_part_pose(i, &turned);
+    w.step().unwrap();
+    sensor.watch(job, w);
+    p
+}
+
 /// The recognition result is what the picture showed at the trigger: a part moved after the
 /// exposure is reported where it was (not where it is when the result is read); and a long part
 /// turning about its centre during the exposure is blurred although its centre stays put.
@@ -286,14 +306,7 @@ fn recognition_reports_the_trigger_and_blurs_a_turning_strip() {
     let mut sensor = Sensor::new(&scene.scene.sensor, &w, 3, &wp.workpiece).unwrap();
     let mut job = sensor.trigger(&w).unwrap();
     let blurred_still = job.blurred();
-    let p = w.part_pose(i);
-    let turned = Isometry3::from_parts(
-        p.translation,
-        nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.05) * p.rotation,
-    );
-    w.set_part_pose(i, &turned);
-    w.step().unwrap();
-    sensor.watch(&mut job, &w);
+    let p = turn_during_exposure(&mut w, &mut sensor, &mut job, i);
     let centre_moved = (w.part_pose(i).translation.vector - p.translation.vector).norm();
     assert!(
         centre_moved < binpick::sensor::STILL_MOTION_M,
@@ -493,14 +506,7 @@ fn a_strip_moving_during_the_exposure_leaves_new_holes_and_a_still_pile_none() {
 
     let mut job = sensor.trigger(&w).unwrap();
     let i = binpick::sensor::top_layer(&w)[0];
-    let p = w.part_pose(i);
-    let turned = Isometry3::from_parts(
-        p.translation,
-        nalgebra::UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.05) * p.rotation,
-    );
-    w.set_part_pose(i, &turned);
-    w.step().unwrap();
-    sensor.watch(&mut job, &w);
+    turn_during_exposure(&mut w, &mut sensor, &mut job, i);
     assert!(job.blurred() > 0, "the turning strip is not blurred");
     let ready_s = job.ready_s;
     sensor.result(&mut job, ready_s).expect("ready");
