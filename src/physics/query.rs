@@ -280,12 +280,12 @@ impl World {
             }
             for ch in b.colliders() {
                 let c = &self.colliders[*ch];
+                if !c.is_enabled() || !arm_cylinder(c) {
+                    continue;
+                }
                 let (Some(cyl), Some(tag)) = (c.shape().as_cylinder(), Tag::decode(c.user_data)) else {
                     continue;
                 };
-                if !c.is_enabled() || !tag.is_robot() {
-                    continue;
-                }
                 out.push(ArmCylinder::new(
                     super::to_isometry(c.position()),
                     cyl.half_height as f64 / SIM_UNITS_PER_M,
