@@ -374,6 +374,13 @@ pub struct CycleConfig {
     /// The vacuum is switched on this long before the descent ends, so it builds up while the
     /// cup closes the last millimetres [s] (0: at contact).
     pub vacuum_lead_s: f64,
+    /// The vacuum is switched off this long before the Place's descent ends, so it vents while
+    /// the cup brings the part down the last millimetres [s] (0: when the cup has stopped; at
+    /// most `gripper.release_s`). The holding force falls as the vacuum vents, and the physics
+    /// decides when the part comes off (README: the suction cup); the retreat starts no earlier
+    /// than `release_s` after the valve closed. Absent: 0.
+    #[serde(default)]
+    pub release_lead_s: f64,
     /// Fraction of each joint's torque limit every planned motion (accelerated transfers and
     /// straight lines) keeps back for what the controller's model does not know: the plant's
     /// model error and the servo's feedback.
@@ -799,6 +806,7 @@ impl Scene {
         c.positive("cycle.line_speed_m_s", self.cycle.line_speed_m_s);
         c.positive("cycle.line_accel_m_s2", self.cycle.line_accel_m_s2);
         c.non_negative("cycle.vacuum_lead_s", self.cycle.vacuum_lead_s);
+        c.non_negative("cycle.release_lead_s", self.cycle.release_lead_s);
         c.within("cycle.torque_margin", self.cycle.torque_margin, 0.0, 0.5);
         self.model_error.check(&mut c);
         self.agitation.check(&mut c);
@@ -808,6 +816,15 @@ impl Scene {
                 format!(
                     "must not exceed gripper.vacuum_build_up_s ({} s), got {}",
                     self.gripper.vacuum_build_up_s, self.cycle.vacuum_lead_s
+                ),
+            );
+        }
+        if self.cycle.release_lead_s > self.gripper.release_s {
+            c.fail(
+                "cycle.release_lead_s",
+                format!(
+                    "must not exceed gripper.release_s ({} s), got {}",
+                    self.gripper.release_s, self.cycle.release_lead_s
                 ),
             );
         }

@@ -29,6 +29,15 @@ pub(super) enum Played {
     Failed(Outcome),
 }
 
+/// A switch of the vacuum valve during a motion, at a time from the motion's start [s].
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Valve {
+    /// The valve opens: the vacuum builds up (the Pick's descent).
+    OpenAt(f64),
+    /// The valve closes: the vacuum vents and the part comes off (the Place's descent).
+    CloseAt(f64),
+}
+
 impl Run<'_, '_> {
     /// One physics step, watched. Parts that left their tray are taken out of the cell (lost);
     /// the first collision of the arm or part pressed into the tray is returned; a non-finite
@@ -104,14 +113,15 @@ impl Run<'_, '_> {
         self.play_with(motion, payload, trigger, None, true)
     }
 
-    /// As [`Run::play`], switching the vacuum on `vacuum_at_s` into the motion; with `settle`
-    /// false the next motion takes over at this one's end without waiting to be in position.
+    /// As [`Run::play`], switching the vacuum valve as `valve` says into the motion; with
+    /// `settle` false the next motion takes over at this one's end without waiting to be in
+    /// position.
     pub(super) fn play_with(
         &mut self,
         motion: &impl Motion,
         payload: &Payload,
         trigger: bool,
-        vacuum_at_s: Option<f64>,
+        valve: Option<Valve>,
         settle: bool,
     ) -> Result<Played, CycleError> {
         let robot = self.cell.robot;
@@ -151,8 +161,10 @@ impl Run<'_, '_> {
         while k < run.ticks.len() - 1 + per_step {
             let end = k.min(run.ticks.len() - 1);
             self.st.world.set_joint_target(&run.ticks[end].q);
-            if vacuum_at_s.is_some_and(|t| run.ticks[end].t_s + 1e-9 >= t) {
-                self.st.world.vacuum_on();
+            match valve {
+                Some(Valve::OpenAt(t)) if run.ticks[end].t_s + 1e-9 >= t => self.st.world.vacuum_on(),
+                Some(Valve::CloseAt(t)) if run.ticks[end].t_s + 1e-9 >= t => self.st.world.vacuum_off(),
+                _ => {}
             }
             played = end + 1;
             if let Some(what) = self.step()? {

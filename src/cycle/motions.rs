@@ -26,7 +26,7 @@ use crate::robot::{JointVector, Payload};
 use crate::sensor::{CaptureJob, Detection};
 use crate::trajectory::{
     CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, OverlapCheck, Overlapped, Trajectory, accelerate_in_corridor,
-    limit_tool_force, overlap_end, straight_line,
+    limit_tool_force, overlap_end, release_lead_s, straight_line,
 };
 
 /// Fraction of the cup's holding force a held-part motion may use.
@@ -37,6 +37,9 @@ pub const RELEASE_ABOVE_M: f64 = 0.003;
 /// The tilt a part may hang at on the cup, in standard deviations of the recognition's angular
 /// noise per axis (the tilt of two axes' Gaussian errors is Rayleigh: 3.5 sigma covers 99.8 %).
 pub const RELEASE_TILT_SIGMAS: f64 = 3.5;
+/// Time step of the release-lead check along the end of the Place's descent [s].
+const LEAD_CHECK_DT_S: f64 = 0.001;
+
 /// The Place transfer ends this far above the release pose [m].
 pub const PLACE_APPROACH_M: f64 = 0.03;
 
@@ -64,6 +67,10 @@ pub(super) struct PlaceMotion {
     pub lift_blend: Option<Overlapped>,
     /// The transfer and the descent overlapped, likewise.
     pub descent_blend: Option<Overlapped<Trajectory, LineMotion>>,
+    /// The vacuum valve closes this long before the descent ends [s]: at most the cell file's
+    /// `release_lead_s`, and no longer than keeps the part on the venting cup, by the
+    /// controller's model, until the cup stops ([`release_lead_s`]).
+    pub release_lead_s: f64,
 }
 
 impl PlaceMotion {
@@ -355,6 +362,13 @@ impl Run<'_, '_> {
             let descent_blend = cell
                 .overlap_end(&transfer, &down, down.duration_s(), &held, &holding, Some(max_force))
                 .filter(|d| blend.as_ref().is_none_or(|b| b.start_s() + d.start_s() >= lift_end_s));
+            // The valve closes before the cup stops, as long before as the venting cup, with
+            // the planning margin on what is left of its force, keeps the part until then.
+            let (max_lead_s, venting_s) = (cell.scene.cycle.release_lead_s, cell.scene.gripper.release_s);
+            let lead_s = match &descent_blend {
+                Some(d) => release_lead_s(robot, d, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
+                None => release_lead_s(robot, &down, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
+            };
             Ok::<_, String>(PlaceMotion {
                 transfer,
                 descent: down,
@@ -362,6 +376,7 @@ impl Run<'_, '_> {
                 suction_speed_factor: k,
                 lift_blend: blend,
                 descent_blend,
+                release_lead_s: lead_s,
             })
         })();
         let place_s = wall.elapsed().as_secs_f64();

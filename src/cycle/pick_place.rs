@@ -11,7 +11,7 @@
 //! Units: s, m, rad. Frames: world.
 
 use super::events::{Event, MISRECOGNISED, Outcome, Planned, Stage, StallCause};
-use super::execute::Played;
+use super::execute::{Played, Valve};
 use super::motions::{PlaceMotion, Prepared};
 use super::records::PickRecord;
 use super::{CycleError, Run};
@@ -233,16 +233,16 @@ impl Run<'_, '_> {
                 let m = &rb.motion;
                 let rest = m.window(m.start_s() + rb.descent_from_s, m.duration_s());
                 vacuum_at = (rest.duration_s() - lead).max(0.0);
-                self.play_with(&rest, &hand, false, Some(vacuum_at), true)?
+                self.play_with(&rest, &hand, false, Some(Valve::OpenAt(vacuum_at)), true)?
             }
             (None, Some(b)) => {
                 let rest = b.rest();
                 vacuum_at = (rest.duration_s() - lead).max(0.0);
-                self.play_with(&rest, &hand, false, Some(vacuum_at), true)?
+                self.play_with(&rest, &hand, false, Some(Valve::OpenAt(vacuum_at)), true)?
             }
             (None, None) => {
                 vacuum_at = (prep.descent.duration_s() - lead).max(0.0);
-                self.play_with(&prep.descent, &hand, false, Some(vacuum_at), true)?
+                self.play_with(&prep.descent, &hand, false, Some(Valve::OpenAt(vacuum_at)), true)?
             }
         };
         if let Played::Failed(o) = descended {
@@ -336,7 +336,10 @@ impl Run<'_, '_> {
         self.st.planned_end_q = Some(up.end_q());
         self.st.compute_from_s = t_place;
         // The next Pick may follow the Place at once: no exposure may run past its end.
-        self.st.view_free_until_s = t_place + place.carry_s() + self.st.world.gripper().release_s + up.duration_s();
+        let release_lead_s = place.release_lead_s;
+        rec.release_lead_s = release_lead_s;
+        let release_wait_s = (self.st.world.gripper().release_s - release_lead_s).max(0.0) + self.st.world.dt_s();
+        self.st.view_free_until_s = t_place + place.carry_s() + release_wait_s + up.duration_s();
         self.event(Event::PlaceStart);
         // The Place ends `after_s` from now: 0, or the head of a retreat that runs into the
         // next Pick (played with it).
@@ -349,33 +352,52 @@ impl Run<'_, '_> {
         let place_done = |run: &mut Self, rec: &mut PickRecord| place_done_after(run, rec, 0.0);
         // The transfer (its start overlapping the lift's end, if so) and the descent (its
         // start overlapping the transfer's end, if so), played as one motion when they overlap.
+        // The valve closes `release_lead_s` before the descent ends (the motion's end).
+        let part = self.st.world.held_part();
+        let close = |m: &dyn Fn() -> f64| Some(Valve::CloseAt((m() - release_lead_s).max(0.0)));
         let carried = match (blend, &place.descent_blend) {
             (Some(b), Some(d)) => {
-                let whole = Overlapped::new(b.first().clone(), d.clone(), b.start_s());
-                self.play(&whole.rest(), &held, true)?
+                let rest = Overlapped::new(b.first().clone(), d.clone(), b.start_s()).rest();
+                self.play_with(&rest, &held, true, close(&|| rest.duration_s()), true)?
             }
-            (None, Some(d)) => self.play(d, &held, true)?,
+            (None, Some(d)) => self.play_with(d, &held, true, close(&|| d.duration_s()), true)?,
             (Some(b), None) => match self.play_with(&b.rest(), &held, true, None, false)? {
                 Played::Failed(o) => Played::Failed(o),
-                _ => self.play(&place.descent, &held, true)?,
+                _ => {
+                    let d = &place.descent;
+                    self.play_with(d, &held, true, close(&|| d.duration_s()), true)?
+                }
             },
             (None, None) => match self.play_with(&place.transfer, &held, true, None, false)? {
                 Played::Failed(o) => Played::Failed(o),
-                _ => self.play(&place.descent, &held, true)?,
+                _ => {
+                    let d = &place.descent;
+                    self.play_with(d, &held, true, close(&|| d.duration_s()), true)?
+                }
             },
         };
         if let Played::Failed(o) = carried {
             place_done(self, rec);
             return Ok(o);
         }
-        let part = self.st.world.held_part();
+        // The part comes off as the vacuum vents: the arm stays until it has surely vented,
+        // `release_s` after the valve closed (the controller's timing, not what the part did).
         self.st.world.vacuum_off();
-        let t = self.st.world.time_s() + self.st.world.gripper().release_s + self.st.world.dt_s();
-        self.idle_until(t)?;
-        self.st.world.take_gripper_events();
-        self.st.gripper_events.clear();
-        let release = self.st.world.time_s();
-        self.event(Event::Released);
+        let closed_s = self
+            .st
+            .world
+            .gripper()
+            .valve_closed_since_s()
+            .unwrap_or(self.st.world.time_s());
+        self.idle_until(closed_s + self.st.world.gripper().release_s + self.st.world.dt_s())?;
+        let mut events = std::mem::take(&mut self.st.gripper_events);
+        events.extend(self.st.world.take_gripper_events());
+        let came_off_s = events.iter().find_map(|e| match e {
+            GripperEvent::Released { time_s, .. } => Some(*time_s),
+            _ => None,
+        });
+        let release = came_off_s.unwrap_or(self.st.world.time_s());
+        self.event_at(release, Event::Released);
         self.obs.marker(release, &format!("release {}", rec.index));
         if let Some(head_s) = self.prefetch_next(up) {
             // The retreat runs into the next Pick, prepared now: its head alone ends this Place.

@@ -70,6 +70,8 @@ pub struct PickRecord {
     /// Pick transfer and its descent, the Place transfer and its descent, the last Place's
     /// retreat and this Pick's transfer (0: one after the other).
     pub overlap_s: [f64; 4],
+    /// The vacuum valve closed this long before the Place's descent ended [s].
+    pub release_lead_s: f64,
     /// A blind pick: picks went into the pile after its result's capture (the image no longer
     /// shows the pile as it is; the part was taken clear of them).
     pub blind: bool,
@@ -112,6 +114,7 @@ impl PickRecord {
             saturated_s: 0.0,
             suction_speed_factor: 1.0,
             overlap_s: [0.0; 4],
+            release_lead_s: 0.0,
             blind: false,
             from_result: 0,
             picks_since_capture: 0,

@@ -4,12 +4,15 @@
 //! a part: the cup lip must sit on one flat face of one part that is large enough for the cup,
 //! touching it, with the tool axis within the allowed tilt of the face normal. The decision is
 //! made when the vacuum has built up (`vacuum_build_up_s` later). A sealed part then moves rigidly
-//! with the tool until the vacuum is switched off and `release_s` has passed, or until it slips.
+//! with the tool until it slips, or until the vacuum is switched off and has vented.
 //!
 //! Model (simplified, stated in the README): the seal is probed with rays along the tool axis at
 //! the cup centre and 16 points of the lip circle. Holding force = vacuum x cup area. A part slips
 //! when the force the cup must exert, m |a_tool - g|, amplified for peeling by (1 + 4 e / d)
 //! (e: centre-of-mass offset from the cup axis, d: cup diameter), exceeds the holding force.
+//! Once the valve closes, the holding force falls linearly to zero over `release_s`: the part
+//! comes off when the force it needs exceeds what is left (earlier for a heavy part or a cup
+//! still decelerating), and at the latest after `release_s`.
 //!
 //! The gripper itself ([`SuctionGripper`]) is a state machine (idle, building up, holding,
 //! releasing) that says what is due at a step ([`SuctionGripper::due`]); the world decides it
@@ -170,6 +173,9 @@ pub struct SuctionGripper {
     pub build_up_s: f64,
     /// Release time [s].
     pub release_s: f64,
+    /// When the valve was last commanded closed, while it stays closed [s] (the controller's
+    /// command, whatever the part did).
+    closed_since_s: Option<f64>,
     /// Current state.
     state: GripperState,
     /// Events not yet taken by the caller.
@@ -185,6 +191,9 @@ pub enum GripperDue {
     DecideSeal,
     /// A part is held: check that the cup still holds it against the tool's motion.
     CheckHold(Seal),
+    /// The vacuum is venting: the part comes off if it needs more than the holding force left,
+    /// this fraction of the full seal's.
+    CheckRelease(Seal, f64),
     /// The vacuum is off long enough: the part comes off the cup.
     Release(Seal),
 }
@@ -201,6 +210,7 @@ impl SuctionGripper {
             model,
             build_up_s: g.vacuum_build_up_s,
             release_s: g.release_s,
+            closed_since_s: None,
             state: GripperState::Idle,
             events: Vec::new(),
         }
@@ -213,6 +223,7 @@ impl SuctionGripper {
 
     /// Opens the vacuum valve at `now_s`: the seal is decided when the vacuum has built up.
     pub fn vacuum_on(&mut self, now_s: f64) {
+        self.closed_since_s = None;
         if self.state == GripperState::Idle {
             self.state = GripperState::BuildingUp { since_s: now_s };
         }
@@ -221,6 +232,7 @@ impl SuctionGripper {
     /// Closes the vacuum valve at `now_s`: a held part comes off after `release_s`; a vacuum
     /// still building up fails the grasp.
     pub fn vacuum_off(&mut self, now_s: f64) {
+        self.closed_since_s.get_or_insert(now_s);
         match self.state {
             GripperState::BuildingUp { .. } => {
                 self.state = GripperState::Idle;
@@ -250,7 +262,9 @@ impl SuctionGripper {
             GripperState::Releasing { since_s, seal, .. } if now_s + 1e-9 >= since_s + self.release_s => {
                 GripperDue::Release(seal)
             }
-            GripperState::Releasing { .. } => GripperDue::Nothing,
+            GripperState::Releasing { since_s, seal, .. } => {
+                GripperDue::CheckRelease(seal, 1.0 - (now_s - since_s) / self.release_s)
+            }
         }
     }
 
@@ -281,6 +295,12 @@ impl SuctionGripper {
     pub fn released(&mut self, now_s: f64, part: usize) {
         self.state = GripperState::Idle;
         self.events.push(GripperEvent::Released { time_s: now_s, part });
+    }
+
+    /// When the valve was commanded closed [s], while it stays closed (`None` after an open
+    /// command, and before the first close).
+    pub fn valve_closed_since_s(&self) -> Option<f64> {
+        self.closed_since_s
     }
 
     /// The part on the cup and where it sits on the tool, if any.
@@ -423,7 +443,8 @@ impl World {
         self.gripper.vacuum_on(self.time_s);
     }
 
-    /// Closes the vacuum valve: a held part comes off after `release_s`.
+    /// Closes the vacuum valve: a held part comes off as the vacuum vents, at the latest after
+    /// `release_s`.
     pub fn vacuum_off(&mut self) {
         self.gripper.vacuum_off(self.time_s);
     }
@@ -517,6 +538,16 @@ impl World {
         b.set_angvel(rapier3d::math::Vector::ZERO, true);
     }
 
+    /// The force the cup must exert on the sealed part against gravity and the tool's
+    /// acceleration now, amplified for peeling [N].
+    fn required_holding_n(&self, seal: &Seal) -> f64 {
+        let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
+        let specific_force = (self.tool_acceleration() - g).norm();
+        self.gripper
+            .model
+            .required_n(self.part_shape.mass_kg, specific_force, seal.com_offset_m)
+    }
+
     /// Runs the gripper's timers and moves the held part with the tool; called by `step` before
     /// the solver, with the tool pose at the end of the step.
     pub(super) fn update_gripper(&mut self, world_from_tool_next: &Isometry3<f64>) {
@@ -531,15 +562,16 @@ impl World {
                 Err(reason) => self.gripper.failed(now, reason),
             },
             GripperDue::CheckHold(seal) => {
-                let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
-                let specific_force = (self.tool_acceleration() - g).norm();
-                let required =
-                    self.gripper
-                        .model
-                        .required_n(self.part_shape.mass_kg, specific_force, seal.com_offset_m);
+                let required = self.required_holding_n(&seal);
                 if required > self.gripper.holding_n {
                     self.detach(seal.part);
                     self.gripper.slipped(now, seal.part, required);
+                }
+            }
+            GripperDue::CheckRelease(seal, left) => {
+                if self.required_holding_n(&seal) > left * self.gripper.holding_n {
+                    self.detach(seal.part);
+                    self.gripper.released(now, seal.part);
                 }
             }
             GripperDue::Release(seal) => {

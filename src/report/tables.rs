@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 35] = [
+pub const PICKS_CSV_HEADER: [&str; 36] = [
     "pick",
     "outcome",
     "detail",
@@ -69,6 +69,7 @@ pub const PICKS_CSV_HEADER: [&str; 35] = [
     "pick_descent_overlap_s",
     "place_descent_overlap_s",
     "retreat_overlap_s",
+    "release_lead_s",
     "blind",
     "from_result",
     "picks_since_capture",
@@ -109,6 +110,7 @@ struct PickRow<'a> {
     pick_descent_overlap_s: Fixed<6>,
     place_descent_overlap_s: Fixed<6>,
     retreat_overlap_s: Fixed<6>,
+    release_lead_s: Fixed<6>,
     blind: bool,
     from_result: usize,
     picks_since_capture: usize,
@@ -152,6 +154,7 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             pick_descent_overlap_s: Fixed::of(r.overlap_s[1]),
             place_descent_overlap_s: Fixed::of(r.overlap_s[2]),
             retreat_overlap_s: Fixed::of(r.overlap_s[3]),
+            release_lead_s: Fixed::of(r.release_lead_s),
             blind: r.blind,
             from_result: r.from_result,
             picks_since_capture: r.picks_since_capture,

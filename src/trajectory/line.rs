@@ -213,6 +213,48 @@ pub fn peak_tool_specific_force(robot: &RobotModel, motion: &impl Motion, dt_s: 
         .fold(crate::robot::GRAVITY_M_S2, f64::max)
 }
 
+/// The longest lead, at most `max_lead_s`, by which a suction cup's valve may close before
+/// `motion` ends [s] with the part predicted to stay on the cup until the cup stops. Once the
+/// valve closes the holding force falls linearly to zero over `release_s`; at every instant
+/// from then to the end the tool's specific force |a - g| (forward kinematics, second
+/// differences every `dt_s`) must stay within `max_specific_force_m_s2` (what the plans allow
+/// with the full seal) times the share of the force left. A multiple of `dt_s`; 0 if none fits.
+pub fn release_lead_s(
+    robot: &RobotModel,
+    motion: &impl Motion,
+    dt_s: f64,
+    max_lead_s: f64,
+    release_s: f64,
+    max_specific_force_m_s2: f64,
+) -> f64 {
+    if max_lead_s <= 0.0 || release_s <= 0.0 {
+        return 0.0;
+    }
+    let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
+    let end_s = motion.duration_s();
+    let n = (max_lead_s / dt_s + 1e-9).floor() as usize;
+    // Tool positions at end - k dt for k = -1 ..= n + 1 (the arm stands still after the end).
+    let pos: Vec<nalgebra::Vector3<f64>> = (0..n + 3)
+        .map(|i| {
+            let t = (end_s - (i as f64 - 1.0) * dt_s).clamp(0.0, end_s);
+            robot.world_from_tool(&motion.at(t).q).translation.vector
+        })
+        .collect();
+    // The specific force at end - k dt, k = 0 ..= n.
+    let force: Vec<f64> = (0..=n)
+        .map(|k| ((pos[k] - 2.0 * pos[k + 1] + pos[k + 2]) / (dt_s * dt_s) - g).norm())
+        .collect();
+    (0..=n)
+        .rev()
+        .find(|&lead| {
+            (0..=lead).all(|k| {
+                let vented = (lead - k) as f64 * dt_s / release_s;
+                force[k] <= max_specific_force_m_s2 * (1.0 - vented)
+            })
+        })
+        .map_or(0.0, |lead| lead as f64 * dt_s)
+}
+
 /// Slows a trajectory through `via` under `limits` uniformly in time (speeds x k, accelerations
 /// x k^2, which scales the profile's time by 1/k exactly) until the tool's peak specific force
 /// is at most `max_specific_force_m_s2`: a suction cup holds its part only up to a force. Returns
@@ -246,4 +288,49 @@ pub fn limit_tool_force(
         }
     }
     (at(lo), lo)
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::LoadedScene;
+    use crate::robot::{Payload, tool_down_pose};
+    use nalgebra::Vector3;
+
+    /// A 3 cm descent at 20 m/s^2: while it decelerates the cup must exert g + 20 m/s^2, most at
+    /// its stop, so the valve may close at most R (1 - (g + a) / F) before the stop (F the
+    /// specific force allowed at full vacuum, R the venting time); to a check step or two.
+    #[test]
+    fn the_valve_closes_before_the_stop_only_as_early_as_the_venting_cup_holds_the_part() {
+        let scene = LoadedScene::embedded_default().unwrap();
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let from = tool_down_pose(Vector3::new(0.10, 0.45, 0.08), 0.0);
+        let to = tool_down_pose(Vector3::new(0.10, 0.45, 0.05), 0.0);
+        let q0 = robot
+            .ik_tool_nearest(&from, &JointVector::from(scene.scene.robot.home_rad()))
+            .unwrap()
+            .q;
+        let dynamics = robot.dynamics(&Payload::from_gripper(&scene.scene.gripper));
+        let accel = 20.0;
+        let limits = LineLimits {
+            speed_m_s: 1.0,
+            accel_m_s2: accel,
+        };
+        let down = straight_line(&robot, &dynamics, &q0, &from, &to, &limits, None).unwrap();
+        let (dt, venting_s) = (0.001, 0.06);
+        let needed = crate::robot::GRAVITY_M_S2 + accel;
+        for allowed in [60.0, 120.0, 400.0] {
+            let expected = venting_s * (1.0 - needed / allowed);
+            let lead = release_lead_s(&robot, &down, dt, 0.06, venting_s, allowed);
+            assert!(
+                lead >= expected - dt - 1e-9 && lead <= expected + 2.0 * dt,
+                "allowed {allowed} m/s^2: lead {:.1} ms, expected {:.1} ms",
+                lead * 1e3,
+                expected * 1e3
+            );
+        }
+        // Never more than the cell allows, and none when even the stop needs all of the force.
+        assert_eq!(release_lead_s(&robot, &down, dt, 0.02, venting_s, 1e4), 0.02);
+        assert_eq!(release_lead_s(&robot, &down, dt, 0.06, venting_s, needed * 0.9), 0.0);
+    }
 }

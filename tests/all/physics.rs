@@ -223,6 +223,63 @@ fn suction_seals_on_a_flat_top_face_lifts_and_places_within_tolerance() {
     );
 }
 
+/// The cup holding `workpiece` lifted 5 cm off the tray, at rest; returns the world, the
+/// lifted tool pose, and the seal's required holding force at rest [N].
+fn held_and_lifted(workpiece: &str, size_z: f64) -> (World, Isometry3<f64>, f64) {
+    let (mut w, _, wp) = world(workpiece);
+    let top = lone_part(&mut w, size_z, (0.0, 0.0), UnitQuaternion::identity());
+    let ev = grasp_at(&mut w, tool_down_pose(top, 0.0));
+    let GripperEvent::Grasped { seal, .. } = ev else {
+        panic!("{ev:?}")
+    };
+    let lifted = tool_down_pose(top + Vector3::z() * 0.05, 0.0);
+    w.move_tool_line(&lifted, 0.5).unwrap();
+    w.run_for(0.05).unwrap();
+    let g = binpick::robot::GRAVITY_M_S2;
+    let required_n = w.gripper().model.required_n(wp.workpiece.mass_kg, g, seal.com_offset_m);
+    (w, lifted, required_n)
+}
+
+#[test]
+fn a_venting_cup_lets_the_part_go_when_it_needs_more_than_is_left_and_not_before() {
+    // The holding force falls linearly to zero over `release_s` once the valve closes: a part at
+    // rest comes off when its weight (peel included) exceeds what is left, at
+    // (1 - required / holding) of `release_s`, to a physics step.
+    let (mut w, _, required_n) = held_and_lifted("B", 0.020);
+    let (holding_n, release_s, dt) = (w.gripper().holding_n, w.gripper().release_s, w.dt_s());
+    let expected_s = (1.0 - required_n / holding_n) * release_s;
+    w.vacuum_off();
+    let closed_s = w.time_s();
+    w.run_for(release_s + 0.01).unwrap();
+    let events = w.take_gripper_events();
+    let [GripperEvent::Released { time_s, part: 0 }] = events[..] else {
+        panic!("{events:?}")
+    };
+    let after_s = time_s - closed_s;
+    assert!(
+        (after_s - expected_s).abs() <= dt + 1e-9,
+        "came off {:.1} ms after the valve closed, expected {:.1} ms",
+        after_s * 1e3,
+        expected_s * 1e3
+    );
+    assert!(w.held_part().is_none());
+
+    // Negative control: the arm retreats 10 mm upward (peak 23 m/s^2) 10 ms after the valve
+    // closed. The vacuum is not vented yet and the part goes up with the cup, what the cycle's
+    // wait for `release_s` before the retreat prevents.
+    let (mut w, lifted, _) = held_and_lifted("B", 0.020);
+    let z0 = w.part_pose(0).translation.z;
+    w.vacuum_off();
+    w.run_for(0.01).unwrap();
+    let up = Isometry3::from_parts(
+        Translation3::from(lifted.translation.vector + Vector3::z() * 0.01),
+        lifted.rotation,
+    );
+    w.move_tool_line(&up, 0.05).unwrap();
+    let risen_m = w.part_pose(0).translation.z - z0;
+    assert!(risen_m > 0.005, "the part rose {:.1} mm with the cup", risen_m * 1e3);
+}
+
 #[test]
 fn suction_fails_on_an_edge_on_a_small_face_and_when_tilted() {
     // Cup centred on the edge of B's 30 mm top face.
