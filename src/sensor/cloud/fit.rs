@@ -150,19 +150,19 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
                     grid[j1 * w + i1] += 1;
                 }
             }
-            for j in 0..n[1] {
-                for i in 0..n[0] {
-                    let up = if j > 0 { grid[(j - 1) * w + i] } else { 0 };
-                    let left = if i > 0 { grid[j * w + i - 1] } else { 0 };
-                    let diag = if i > 0 && j > 0 { grid[(j - 1) * w + i - 1] } else { 0 };
-                    grid[j * w + i] += up + left - diag;
-                }
-            }
+            // The prefix sums row by row (each row's running sum plus the row above, already
+            // summed), and the centres no outside point excludes (a zero) counted on the way.
             let (mut cnt, mut m) = (0usize, [0.0; 2]);
             let (mut glo, mut ghi) = ([usize::MAX; 2], [0usize; 2]);
             for j in 0..n[1] {
+                let (above, row) = grid.split_at_mut(j * w);
+                let above = if j > 0 { &above[(j - 1) * w..j * w] } else { &[][..] };
+                let mut run = 0;
                 for i in 0..n[0] {
-                    if grid[j * (n[0] + 1) + i] == 0 {
+                    run += row[i];
+                    let v = run + above.get(i).copied().unwrap_or(0);
+                    row[i] = v;
+                    if v == 0 {
                         cnt += 1;
                         m[0] += i as f64;
                         m[1] += j as f64;
