@@ -128,7 +128,9 @@ impl HealthMonitor {
     /// tray (free parts the pick tray, placed ones the place tray); each contact of the arm, its
     /// tool or the held part with the cell no deeper than [`HealthLimits::arm_collision_m`];
     /// each contact between parts or a part and the cell no deeper than
-    /// [`HealthLimits::deep_penetration_m`] (confirmed by the exact depth).
+    /// [`HealthLimits::deep_penetration_m`] (confirmed by the exact depth). A contact whose
+    /// bodies all sleep (or are fixed) is skipped: it was checked while they were awake and has
+    /// not changed since.
     pub fn check(&self, w: &World) -> Vec<HealthEvent> {
         let t = w.time_s;
         let mut events = Vec::new();
@@ -167,8 +169,16 @@ impl HealthMonitor {
                 });
             }
         }
+        // A pair whose bodies all sleep (or are fixed) has not moved since it was last checked
+        // awake: its contacts are as they were then.
+        let still = |c| {
+            w.colliders.get(c).and_then(|c| c.parent()).is_none_or(|b| {
+                let b = &w.bodies[b];
+                b.is_sleeping() || b.is_fixed()
+            })
+        };
         for pair in w.narrow_phase.contact_pairs() {
-            if !pair.has_any_active_contact() {
+            if !pair.has_any_active_contact() || (still(pair.collider1) && still(pair.collider2)) {
                 continue;
             }
             let (t1, t2) = (w.tag_of(pair.collider1), w.tag_of(pair.collider2));
