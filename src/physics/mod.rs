@@ -31,7 +31,7 @@ use crate::config::Scene;
 pub use crate::geometry::TrayVolume;
 use crate::robot::{DOF, JointVector, Primitive as LinkPrimitive, RobotModel};
 pub use health::{HealthError, HealthEvent, HealthLimits, HealthMonitor};
-pub use query::{RayCaster, RayHit, RayTargets, ViewVolume};
+pub use query::{RayCaster, RayHit, RayTargetBox, RayTargets, ViewVolume};
 pub use shapes::{PartShape, ShapeError};
 pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
 

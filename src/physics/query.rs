@@ -76,16 +76,88 @@ impl RayCaster<'_> {
         cylinder_bits: u64,
     ) -> Option<RayHit> {
         let ray = Ray::new(sim_point(origin), sim_dir(dir));
-        let mut best = self
-            .pipeline
-            .cast_ray_and_get_normal(&ray, sim(max_m), true)
-            .and_then(|(h, hit)| {
-                Some(RayHit {
-                    tag: self.world.tag_of(h)?,
-                    distance_m: hit.time_of_impact as f64 / SIM_UNITS_PER_M,
-                    normal: dir_from_sim(hit.normal),
-                })
-            });
+        let best = self.pipeline.cast_ray_and_get_normal(&ray, sim(max_m), true);
+        self.and_cylinders(
+            best.and_then(|(h, hit)| self.hit_of(h, &hit)),
+            origin,
+            dir,
+            max_m,
+            cylinder_bits,
+        )
+    }
+
+    /// Every collider the pipeline casts against (in the broad phase's tree and let through by
+    /// its filter), with the tree's box around it, in the collider set's order: a caller that
+    /// knows which boxes a ray may meet (a camera pixel inside a box's image) casts against
+    /// those alone with [`RayCaster::cast_listed`].
+    pub fn target_boxes(&self) -> Vec<RayTargetBox> {
+        let p = &self.pipeline;
+        p.colliders
+            .iter()
+            .filter_map(|(handle, c)| {
+                let node = *p.bvh.leaf_node(handle.into_raw_parts().0)?;
+                p.filter
+                    .test(p.bodies, handle, c)
+                    .then_some(RayTargetBox { handle, node })
+            })
+            .collect()
+    }
+
+    /// As [`RayCaster::cast_among`], with the pipeline's tree walk replaced by `targets` (from
+    /// [`RayCaster::target_boxes`]): each is tested as the walk tests a leaf (its box against
+    /// the nearest hit so far, then its shape), so the first hit is the walk's whenever every
+    /// target whose box the ray meets is listed (two colliders hit at exactly the same distance
+    /// may come in another order).
+    pub fn cast_listed<'t>(
+        &self,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        max_m: f64,
+        targets: impl IntoIterator<Item = &'t RayTargetBox>,
+        cylinder_bits: u64,
+    ) -> Option<RayHit> {
+        let ray = Ray::new(sim_point(origin), sim_dir(dir));
+        let mut nearest = sim(max_m);
+        let mut best = None;
+        for t in targets {
+            if t.node.cast_ray(&ray, nearest) >= nearest {
+                continue;
+            }
+            let c = &self.pipeline.colliders[t.handle];
+            if let Some(hit) = c.shape().cast_ray_and_get_normal(c.position(), &ray, nearest, true)
+                && hit.time_of_impact < nearest
+            {
+                nearest = hit.time_of_impact;
+                best = Some((t.handle, hit));
+            }
+        }
+        self.and_cylinders(
+            best.and_then(|(h, hit)| self.hit_of(h, &hit)),
+            origin,
+            dir,
+            max_m,
+            cylinder_bits,
+        )
+    }
+
+    /// A pipeline hit on collider `h` in metres and tags.
+    fn hit_of(&self, h: ColliderHandle, hit: &RayIntersection) -> Option<RayHit> {
+        Some(RayHit {
+            tag: self.world.tag_of(h)?,
+            distance_m: hit.time_of_impact as f64 / SIM_UNITS_PER_M,
+            normal: dir_from_sim(hit.normal),
+        })
+    }
+
+    /// `best` (the pipeline's first hit) or an arm cylinder in `cylinder_bits` met before it.
+    fn and_cylinders(
+        &self,
+        mut best: Option<RayHit>,
+        origin: &Vector3<f64>,
+        dir: &Vector3<f64>,
+        max_m: f64,
+        cylinder_bits: u64,
+    ) -> Option<RayHit> {
         let mut reach_m = best.map_or(max_m, |h| h.distance_m);
         if self.cylinders.is_empty() || ray_box_entry(&self.cylinders_box_m, origin, dir, reach_m).is_none() {
             return best;
@@ -105,6 +177,20 @@ impl RayCaster<'_> {
             }
         }
         best
+    }
+}
+
+/// A collider a [`RayCaster`]'s pipeline casts against, with its leaf of the broad phase's tree.
+#[derive(Debug, Clone, Copy)]
+pub struct RayTargetBox {
+    handle: ColliderHandle,
+    node: parry3d::partitioning::BvhNode,
+}
+
+impl RayTargetBox {
+    /// The tree's box around the collider: (min, max) corners [m, world].
+    pub fn aabb_m(&self) -> (Vector3<f64>, Vector3<f64>) {
+        (point_from_sim(self.node.mins()), point_from_sim(self.node.maxs()))
     }
 }
 

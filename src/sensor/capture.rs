@@ -6,7 +6,9 @@
 //! parts, the trays and table), so the arm and the parts really hide what lies beneath them;
 //! add depth noise growing with range squared and drop returns at grazing angles and at random.
 //! What the fixed cell shows each pixel is computed once ([`Background`]), so a capture casts
-//! only against what moves.
+//! only against what moves: each pixel against the targets whose box's image holds it (binned
+//! per 8 x 8 px tile), tested as the broad phase's tree tests its leaves, and the arm's
+//! cylinders in closed form.
 //!
 //! Units: m, px. Frames: depth along the camera's optical axis; points in the world frame.
 //! Randomness: the `sensor` stream of the run seed, positioned per row (and capture), so the
@@ -21,7 +23,7 @@ use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
 use super::Camera;
-use crate::physics::{RayHit, RayTargets, Tag, World};
+use crate::physics::{RayHit, RayTargetBox, RayTargets, Tag, World};
 
 /// One depth capture.
 #[derive(Debug, Clone)]
@@ -141,6 +143,57 @@ fn image_rect(camera: &Camera, lo: &Vector3<f64>, hi: &Vector3<f64>) -> Option<(
     ))
 }
 
+/// Side of the square image tiles the ray targets are binned into [px].
+const TILE_PX: usize = 8;
+
+/// The ray targets binned by the image rectangles of their boxes ([`image_rect`]), per
+/// [`TILE_PX`] tile.
+struct TargetBins {
+    tiles_across: usize,
+    /// Each tile's targets (indices), in the targets' order.
+    tiles: Vec<Vec<u32>>,
+    /// Each target's image rectangle (u0, v0, u1, v1, inclusive), if in the image.
+    rects: Vec<Option<(usize, usize, usize, usize)>>,
+}
+
+impl TargetBins {
+    fn new(camera: &Camera, targets: &[RayTargetBox]) -> Self {
+        let tiles_across = camera.width_px.div_ceil(TILE_PX);
+        let mut tiles = vec![Vec::new(); tiles_across * camera.height_px.div_ceil(TILE_PX)];
+        let rects: Vec<_> = targets
+            .iter()
+            .map(|t| {
+                let (lo, hi) = t.aabb_m();
+                image_rect(camera, &lo, &hi)
+            })
+            .collect();
+        for (k, r) in rects.iter().enumerate() {
+            if let Some((u0, v0, u1, v1)) = *r {
+                for tv in v0 / TILE_PX..=v1 / TILE_PX {
+                    for tu in u0 / TILE_PX..=u1 / TILE_PX {
+                        tiles[tv * tiles_across + tu].push(k as u32);
+                    }
+                }
+            }
+        }
+        TargetBins {
+            tiles_across,
+            tiles,
+            rects,
+        }
+    }
+
+    /// The targets whose image rectangle holds pixel (u, v).
+    fn at<'t>(&'t self, targets: &'t [RayTargetBox], u: usize, v: usize) -> impl Iterator<Item = &'t RayTargetBox> {
+        self.tiles[(v / TILE_PX) * self.tiles_across + u / TILE_PX]
+            .iter()
+            .filter(move |&&k| {
+                self.rects[k as usize].is_some_and(|(u0, v0, u1, v1)| (u0..=u1).contains(&u) && (v0..=v1).contains(&v))
+            })
+            .map(move |&k| &targets[k as usize])
+    }
+}
+
 /// Casts one ray per pixel into the world, in parallel over rows, with the noise model.
 pub fn capture(world: &World, camera: &Camera, seed: u64, id: u64) -> Capture {
     capture_over(world, camera, seed, id, None)
@@ -204,6 +257,14 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
             _ => bits,
         })
     };
+    // With a background, what moves is cast without the pipeline's tree: each target's tree box
+    // is binned by its image into tiles, and each pixel tests only the targets whose image box
+    // holds it (as the tree would, box first, then shape).
+    let targets = match background {
+        Some(_) => world.ray_caster(RayTargets::Moving).target_boxes(),
+        None => Vec::new(),
+    };
+    let target_bins = background.map(|_| TargetBins::new(camera, &targets));
     let cos_grazing = camera.dropout_grazing_rad.cos();
     /// One image row: depths, points, what each ray hit.
     type Row = (Vec<f32>, Vec<[f32; 3]>, Vec<Option<Tag>>);
@@ -232,7 +293,9 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                     (Some(bg), _) => {
                         let behind = bg.hits[v * w + u];
                         let reach = behind.map_or(camera.max_range_m, |b| b.distance_m);
-                        rays.cast_among(&origin, &dir, reach, cylinder_bits(u, v)).or(behind)
+                        let bins = target_bins.as_ref().expect("bins with a background");
+                        rays.cast_listed(&origin, &dir, reach, bins.at(&targets, u, v), cylinder_bits(u, v))
+                            .or(behind)
                     }
                     (None, _) => rays.cast_among(&origin, &dir, camera.max_range_m, cylinder_bits(u, v)),
                 };

@@ -629,3 +629,47 @@ fn the_arms_link_boxes_are_full_size_in_the_world() {
     }
     assert!(boxes >= 3, "the arm model has {boxes} boxes");
 }
+
+/// The camera's captures cast what moves against a list of targets binned by their image instead
+/// of the broad phase's tree: each listed target is tested as the tree tests a leaf, so over a
+/// pile the first hits are the tree's. Negative control: with the most often hit target left
+/// out of the list, hits change.
+#[test]
+fn listed_ray_targets_give_the_trees_first_hits() {
+    use binpick::physics::RayTargets;
+    let (mut w, scene, wp) = world("A");
+    w.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, 3))
+        .unwrap();
+    let origin = Vector3::from(scene.scene.sensor.position_m);
+    let tray = w.pick_tray().world_from_tray;
+    let rays = w.ray_caster(RayTargets::Moving);
+    let targets = rays.target_boxes();
+    let (mut hits, mut a_hit) = (0, None);
+    let n = 40;
+    for i in 0..n {
+        for j in 0..n {
+            let local = Vector3::new(
+                -0.09 + 0.18 * i as f64 / n as f64,
+                -0.07 + 0.14 * j as f64 / n as f64,
+                0.0,
+            );
+            let dir = ((tray * nalgebra::Point3::from(local)).coords - origin).normalize();
+            let tree = rays.cast_among(&origin, &dir, 2.0, u64::MAX);
+            let listed = rays.cast_listed(&origin, &dir, 2.0, &targets, u64::MAX);
+            assert_eq!(tree, listed, "ray {i}, {j}");
+            if tree.is_some_and(|h| matches!(h.tag, binpick::physics::Tag::Part(_))) {
+                hits += 1;
+                a_hit.get_or_insert((dir, tree));
+            }
+        }
+    }
+    assert!(hits > n * n / 3, "{hits} rays of {} hit a part", n * n);
+    // Negative control: the part the first of them hit left out of the list.
+    let (dir, tree) = a_hit.unwrap();
+    let hit = targets
+        .iter()
+        .position(|t| rays.cast_listed(&origin, &dir, 2.0, [t], u64::MAX) == tree)
+        .unwrap();
+    let fewer = targets.iter().enumerate().filter(|(k, _)| *k != hit).map(|(_, t)| t);
+    assert_ne!(rays.cast_listed(&origin, &dir, 2.0, fewer, u64::MAX), tree);
+}

@@ -158,10 +158,10 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
                 let (above, row) = grid.split_at_mut(j * w);
                 let above = if j > 0 { &above[(j - 1) * w..j * w] } else { &[][..] };
                 let mut run = 0;
-                for i in 0..n[0] {
-                    run += row[i];
+                for (i, cell) in row[..n[0]].iter_mut().enumerate() {
+                    run += *cell;
                     let v = run + above.get(i).copied().unwrap_or(0);
-                    row[i] = v;
+                    *cell = v;
                     if v == 0 {
                         cnt += 1;
                         m[0] += i as f64;
