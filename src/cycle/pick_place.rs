@@ -354,25 +354,25 @@ impl Run<'_, '_> {
         // start overlapping the transfer's end, if so), played as one motion when they overlap.
         // The valve closes `release_lead_s` before the descent ends (the motion's end).
         let part = self.st.world.held_part();
-        let close = |m: &dyn Fn() -> f64| Some(Valve::CloseAt((m() - release_lead_s).max(0.0)));
+        let close = |end_s: f64| Some(Valve::CloseAt((end_s - release_lead_s).max(0.0)));
         let carried = match (blend, &place.descent_blend) {
             (Some(b), Some(d)) => {
                 let rest = Overlapped::new(b.first().clone(), d.clone(), b.start_s()).rest();
-                self.play_with(&rest, &held, true, close(&|| rest.duration_s()), true)?
+                self.play_with(&rest, &held, true, close(rest.duration_s()), true)?
             }
-            (None, Some(d)) => self.play_with(d, &held, true, close(&|| d.duration_s()), true)?,
+            (None, Some(d)) => self.play_with(d, &held, true, close(d.duration_s()), true)?,
             (Some(b), None) => match self.play_with(&b.rest(), &held, true, None, false)? {
                 Played::Failed(o) => Played::Failed(o),
                 _ => {
                     let d = &place.descent;
-                    self.play_with(d, &held, true, close(&|| d.duration_s()), true)?
+                    self.play_with(d, &held, true, close(d.duration_s()), true)?
                 }
             },
             (None, None) => match self.play_with(&place.transfer, &held, true, None, false)? {
                 Played::Failed(o) => Played::Failed(o),
                 _ => {
                     let d = &place.descent;
-                    self.play_with(d, &held, true, close(&|| d.duration_s()), true)?
+                    self.play_with(d, &held, true, close(d.duration_s()), true)?
                 }
             },
         };
