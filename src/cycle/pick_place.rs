@@ -5,8 +5,10 @@
 //! then Pick motion generation, then Place motion generation, all after the recognition
 //! result), stall the arm until the Pick is ready (waiting for the sensor, then for compute),
 //! then play the Pick (transfer, descent with the vacuum valve opening `vacuum_lead_s` before
-//! the cup touches, vacuum build-up, lift) and the Place (transfer, descent, release, retreat),
-//! and record the pick: its stages' times, its outcome, the takt since the last release.
+//! the cup touches, vacuum build-up, lift) and the Place (transfer, descent with the valve
+//! closing the plan's `release_lead_s` before its end, the release as the vacuum vents, retreat
+//! `release_s` after the valve closed), and record the pick: its stages' times, its outcome, the
+//! takt since the last release (when the part came off).
 //!
 //! Units: s, m, rad. Frames: world.
 

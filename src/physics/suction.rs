@@ -229,8 +229,8 @@ impl SuctionGripper {
         }
     }
 
-    /// Closes the vacuum valve at `now_s`: a held part comes off after `release_s`; a vacuum
-    /// still building up fails the grasp.
+    /// Closes the vacuum valve at `now_s`: a held part comes off as the vacuum vents, at the
+    /// latest after `release_s`; a vacuum still building up fails the grasp.
     pub fn vacuum_off(&mut self, now_s: f64) {
         self.closed_since_s.get_or_insert(now_s);
         match self.state {
