@@ -77,13 +77,7 @@ impl RayCaster<'_> {
     ) -> Option<RayHit> {
         let ray = Ray::new(sim_point(origin), sim_dir(dir));
         let best = self.pipeline.cast_ray_and_get_normal(&ray, sim(max_m), true);
-        self.and_cylinders(
-            best.and_then(|(h, hit)| self.hit_of(h, &hit)),
-            origin,
-            dir,
-            max_m,
-            cylinder_bits,
-        )
+        self.and_cylinders(best, origin, dir, max_m, cylinder_bits)
     }
 
     /// Every collider the pipeline casts against (in the broad phase's tree and let through by
@@ -131,33 +125,26 @@ impl RayCaster<'_> {
                 best = Some((t.handle, hit));
             }
         }
-        self.and_cylinders(
-            best.and_then(|(h, hit)| self.hit_of(h, &hit)),
-            origin,
-            dir,
-            max_m,
-            cylinder_bits,
-        )
+        self.and_cylinders(best, origin, dir, max_m, cylinder_bits)
     }
 
-    /// A pipeline hit on collider `h` in metres and tags.
-    fn hit_of(&self, h: ColliderHandle, hit: &RayIntersection) -> Option<RayHit> {
-        Some(RayHit {
-            tag: self.world.tag_of(h)?,
-            distance_m: hit.time_of_impact as f64 / SIM_UNITS_PER_M,
-            normal: dir_from_sim(hit.normal),
-        })
-    }
-
-    /// `best` (the pipeline's first hit) or an arm cylinder in `cylinder_bits` met before it.
+    /// `hit` (the first collider hit, in rapier's units) in metres and tags, or an arm cylinder
+    /// in `cylinder_bits` met before it.
     fn and_cylinders(
         &self,
-        mut best: Option<RayHit>,
+        hit: Option<(ColliderHandle, RayIntersection)>,
         origin: &Vector3<f64>,
         dir: &Vector3<f64>,
         max_m: f64,
         cylinder_bits: u64,
     ) -> Option<RayHit> {
+        let mut best = hit.and_then(|(h, hit)| {
+            Some(RayHit {
+                tag: self.world.tag_of(h)?,
+                distance_m: hit.time_of_impact as f64 / SIM_UNITS_PER_M,
+                normal: dir_from_sim(hit.normal),
+            })
+        });
         let mut reach_m = best.map_or(max_m, |h| h.distance_m);
         if self.cylinders.is_empty() || ray_box_entry(&self.cylinders_box_m, origin, dir, reach_m).is_none() {
             return best;
