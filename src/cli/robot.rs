@@ -9,7 +9,7 @@ use nalgebra::{Isometry3, Translation3, UnitQuaternion};
 use serde_json::json;
 
 use super::{InputError, deg_list, finite_args, joints_from_deg, pose_json, pose_text, round};
-use binpick::config::LoadedScene;
+use binpick::config::{AccelCap, LoadedScene};
 use binpick::robot::{JointVector, Payload, RobotModel};
 
 /// Runs a robot command on the arm of `scene` (default: the embedded cell).
@@ -117,6 +117,7 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
             "world_from_base": pose_json(&robot.world_from_base),
             "flange_from_tool": pose_json(&robot.flange_from_tool),
             "moving_mass_kg": robot.moving_mass_kg(),
+            "accel_cap": loaded.scene.robot.drives.accel_cap.name(),
             "joints": joints, "links": links,
             "gripper": {"kind": format!("{:?}", g.kind).to_lowercase(), "mass_kg": hand.mass_kg, "com_flange_m": hand.com_flange_m.as_slice(),
                          "tool_length_m": g.tool_length_m, "cup_diameter_m": g.cup_diameter_m},
@@ -155,6 +156,14 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
         );
     }
     println!();
+    println!(
+        "planned motions' accelerations: {} (robot.drives.accel_cap = \"{}\"); amax is the specification",
+        match loaded.scene.robot.drives.accel_cap {
+            AccelCap::TorqueOnly => "bound by the torque limits alone",
+            AccelCap::Spec => "capped at amax as well as bound by the torque limits",
+        },
+        loaded.scene.robot.drives.accel_cap.name()
+    );
     println!("joint     lower_deg upper_deg  vmax_deg_s  amax_deg_s2  torque_nm  armature  coulomb_nm  viscous_nm_s");
     for j in &robot.joints {
         println!(

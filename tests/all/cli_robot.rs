@@ -37,6 +37,18 @@ fn info_lists_six_joints_and_28_kg() {
     let base = v["links"][0]["mass_kg"].as_f64().unwrap();
     let total = v["moving_mass_kg"].as_f64().unwrap() + base;
     assert!((total - 28.0).abs() < 0.01, "arm mass {total}");
+    // What binds the planned accelerations: the default cell lets the torque alone bind; a cell
+    // that caps them at the specification says so.
+    assert_eq!(v["accel_cap"], "none");
+    let ws = crate::support::Workspace::new();
+    let capped = ws.edit(
+        "scenes/default.toml",
+        "scenes/capped.toml",
+        "accel_cap = \"none\"",
+        "accel_cap = \"spec\"",
+    );
+    let v = json(&["robot", "info", "--json", "--scene", capped.to_str().unwrap()]);
+    assert_eq!(v["accel_cap"], "spec");
 }
 
 #[test]
