@@ -395,25 +395,6 @@ impl World {
         caster.cast(origin, dir, max_m)
     }
 
-    /// World-frame bounding boxes (min, max corners) [m] of every collider the sensor can see that
-    /// is not fixed: parts, arm links, tool, cup, held part. A pixel whose ray misses all of them
-    /// sees the fixed cell.
-    pub fn moving_view_boxes(&self) -> Vec<(Vector3<f64>, Vector3<f64>)> {
-        self.colliders
-            .iter()
-            .filter(|(h, c)| {
-                ray_visible(*h, c)
-                    && c.is_enabled()
-                    && c.parent()
-                        .is_some_and(|b| self.bodies.get(b).is_some_and(|b| !b.is_fixed()))
-            })
-            .map(|(_, c)| {
-                let a = c.compute_aabb();
-                (point_from_sim(a.mins), point_from_sim(a.maxs))
-            })
-            .collect()
-    }
-
     /// The first part of the robot (a link, the tool, the cup or the held part) inside `volume`,
     /// named.
     pub fn robot_inside(&self, volume: &ViewVolume) -> Option<String> {

@@ -226,27 +226,14 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
     let origin = camera.world_from_camera.translation.vector;
     let optical = camera.world_from_camera.rotation * Vector3::z();
     let stream = crate::rng::stream(seed, "sensor");
-    // Pixels whose rays may meet something that moves: the image boxes of the moving colliders'
-    // bounding boxes, a pixel wider each side (all of them if a box reaches behind the camera).
-    let mask: Option<Vec<bool>> = background.map(|_| {
-        let mut mask = vec![false; w * h];
-        for (lo, hi) in world.moving_view_boxes() {
-            let Some((u0, v0, u1, v1)) = image_rect(camera, &lo, &hi) else {
-                continue;
-            };
-            for v in v0..=v1 {
-                mask[v * w + u0..=v * w + u1].iter_mut().for_each(|m| *m = true);
-            }
-        }
-        mask
-    });
+    let kind = match background {
+        Some(_) => RayTargets::Moving,
+        None => RayTargets::All,
+    };
+    let caster = world.ray_caster(kind);
     // The arm's cylinders, cast in closed form: each pixel tests only those whose image box
     // holds it.
-    let cylinder_rects: Vec<Option<(usize, usize, usize, usize)>> = world
-        .ray_caster(match background {
-            Some(_) => RayTargets::Moving,
-            None => RayTargets::All,
-        })
+    let cylinder_rects: Vec<Option<(usize, usize, usize, usize)>> = caster
         .arm_cylinder_boxes_m()
         .iter()
         .map(|(lo, hi)| image_rect(camera, lo, hi))
@@ -259,9 +246,10 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
     };
     // With a background, what moves is cast without the pipeline's tree: each target's tree box
     // is binned by its image into tiles, and each pixel tests only the targets whose image box
-    // holds it (as the tree would, box first, then shape).
+    // holds it (as the tree would, box first, then shape). A pixel that neither a target's nor a
+    // cylinder's image holds shows the background.
     let targets = match background {
-        Some(_) => world.ray_caster(RayTargets::Moving).target_boxes(),
+        Some(_) => caster.target_boxes(),
         None => Vec::new(),
     };
     let target_bins = background.map(|_| TargetBins::new(camera, &targets));
@@ -277,10 +265,7 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
             let mut depth = vec![0f32; w];
             let mut pts = vec![[f32::NAN; 3]; w];
             let mut truth = vec![None; w];
-            let rays = world.ray_caster(match background {
-                Some(_) => RayTargets::Moving,
-                None => RayTargets::All,
-            });
+            let rays = world.ray_caster(kind);
             for u in 0..w {
                 let dir = camera.pixel_dir(u, v);
                 // The noise's two uniforms are drawn for every pixel (rows start at fixed stream
@@ -288,16 +273,19 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                 let (u1, u2) = gaussian_uniforms(&mut rng);
                 let drop_draw = rng.random::<f64>();
                 let _ = rng.random::<u64>();
-                let hit = match (background, &mask) {
-                    (Some(bg), Some(mask)) if !mask[v * w + u] => bg.hits[v * w + u],
-                    (Some(bg), _) => {
+                let bits = cylinder_bits(u, v);
+                let hit = match (background, &target_bins) {
+                    (Some(bg), Some(bins)) => {
                         let behind = bg.hits[v * w + u];
-                        let reach = behind.map_or(camera.max_range_m, |b| b.distance_m);
-                        let bins = target_bins.as_ref().expect("bins with a background");
-                        rays.cast_listed(&origin, &dir, reach, bins.at(&targets, u, v), cylinder_bits(u, v))
-                            .or(behind)
+                        let mut near = bins.at(&targets, u, v).peekable();
+                        if bits == 0 && near.peek().is_none() {
+                            behind
+                        } else {
+                            let reach = behind.map_or(camera.max_range_m, |b| b.distance_m);
+                            rays.cast_listed(&origin, &dir, reach, near, bits).or(behind)
+                        }
                     }
-                    (None, _) => rays.cast_among(&origin, &dir, camera.max_range_m, cylinder_bits(u, v)),
+                    _ => rays.cast_among(&origin, &dir, camera.max_range_m, bits),
                 };
                 let Some(RayHit {
                     tag,
