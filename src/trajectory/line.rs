@@ -198,18 +198,29 @@ pub fn straight_line(
     None
 }
 
+/// The tool's specific force |a - g| [m/s^2] at the middle of three tool positions `dt_s` apart
+/// [m, world], the latest first (a second difference).
+fn specific_force_m_s2(
+    later: &nalgebra::Vector3<f64>,
+    middle: &nalgebra::Vector3<f64>,
+    earlier: &nalgebra::Vector3<f64>,
+    dt_s: f64,
+) -> f64 {
+    let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
+    ((later - 2.0 * middle + earlier) / (dt_s * dt_s) - g).norm()
+}
+
 /// The largest specific force the tool exerts on what it holds along `motion`: max |a - g| of
 /// the tool centre point, from the forward kinematics sampled every `dt_s` (second differences)
 /// [m/s^2]. At rest it is g.
 pub fn peak_tool_specific_force(robot: &RobotModel, motion: &impl Motion, dt_s: f64) -> f64 {
-    let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
     let p: Vec<nalgebra::Vector3<f64>> = motion
         .sampled(dt_s)
         .iter()
         .map(|s| robot.world_from_tool(&s.q).translation.vector)
         .collect();
     p.windows(3)
-        .map(|w| ((w[2] - 2.0 * w[1] + w[0]) / (dt_s * dt_s) - g).norm())
+        .map(|w| specific_force_m_s2(&w[2], &w[1], &w[0], dt_s))
         .fold(crate::robot::GRAVITY_M_S2, f64::max)
 }
 
@@ -230,7 +241,6 @@ pub fn release_lead_s(
     if max_lead_s <= 0.0 || release_s <= 0.0 {
         return 0.0;
     }
-    let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
     let end_s = motion.duration_s();
     let n = (max_lead_s / dt_s + 1e-9).floor() as usize;
     // Tool positions at end - k dt for k = -1 ..= n + 1 (the arm stands still after the end).
@@ -241,8 +251,9 @@ pub fn release_lead_s(
         })
         .collect();
     // The specific force at end - k dt, k = 0 ..= n.
-    let force: Vec<f64> = (0..=n)
-        .map(|k| ((pos[k] - 2.0 * pos[k + 1] + pos[k + 2]) / (dt_s * dt_s) - g).norm())
+    let force: Vec<f64> = pos
+        .windows(3)
+        .map(|w| specific_force_m_s2(&w[0], &w[1], &w[2], dt_s))
         .collect();
     (0..=n)
         .rev()
