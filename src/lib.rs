@@ -4,7 +4,8 @@
 //! The modules follow one pick through the data flow:
 //!
 //! 1. [`config`]: the cell (scene) file and the workpiece files: strict parsing and validation.
-//! 2. [`geometry`]: the cell's solid shapes (trays, table, obstacles as named boxes, the hand's
+//! 2. [`part`]: the part model, one description of a workpiece's geometry for every stage;
+//!    [`geometry`]: the cell's solid shapes (trays, table, obstacles as named boxes, the hand's
 //!    cylinders) and the suction cup's force model, defined once for every stage below.
 //! 3. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
 //! 4. [`physics`]: the rapier world behind an API in metres: trays, piles of parts, the arm's
@@ -38,6 +39,7 @@ pub mod config;
 pub mod cycle;
 pub mod execution;
 pub mod geometry;
+pub mod part;
 pub mod grasp;
 pub mod physics;
 pub mod pipeline;
