@@ -8,6 +8,8 @@
 
 use std::fmt::Write;
 
+use crate::svg::escape;
+
 pub use crate::cycle::Stage as Lane;
 
 /// Every lane, top to bottom.
@@ -253,22 +255,6 @@ fn tick_step(width_s: f64) -> f64 {
         }
     }
     width_s
-}
-
-/// Escapes the XML special characters `& < > " '`.
-fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            _ => out.push(c),
-        }
-    }
-    out
 }
 
 #[cfg(test)]

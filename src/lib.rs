@@ -22,11 +22,16 @@
 //! 10. [`cycle`]: the cell cycle end to end (sensing, motion generation, Pick, Place, faults,
 //!     trays), its events and the observer interface through which a run is watched.
 //! 11. [`record`]: the run written to Rerun (`.rrd`) and MCAP files.
-//! 12. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
-//!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG); [`batch`]:
-//!     takt-time tables over many runs; [`sweep`]: the same over variants of the cell.
+//! 12. [`results`]: the one results type's figures (a run's or many runs' [`cycle::Tally`]
+//!     summarised) and the takt table's columns, listed once for Markdown, CSV and JSON;
+//!     [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
+//!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG).
+//! 13. [`study`]: many cell runs, one table: the spec (variants x workpieces x seeds x picks x
+//!     mode), the parallel runner, shards and their merge; its front ends [`batch`] (the cell
+//!     as given: the takt-time table) and [`sweep`] (variants of the cell and workpiece files).
 //!
-//! Beside the flow: [`mod@reference`] (the reference system's cases and tables), [`stats`]
+//! Beside the flow: [`mod@reference`] (the reference system's cases and tables), [`svg`] (the
+//! drawing helpers every chart shares), [`stats`]
 //! (statistics), [`rng`] (named seeded random streams), [`bench`] (the benchmarks).
 //!
 //! Units are SI inside the crate (m, rad, s, kg, N m); degrees appear only at the file and
@@ -39,17 +44,20 @@ pub mod config;
 pub mod cycle;
 pub mod execution;
 pub mod geometry;
-pub mod part;
 pub mod grasp;
+pub mod part;
 pub mod physics;
 pub mod pipeline;
 pub mod planning;
 pub mod record;
 pub mod reference;
 pub mod report;
+pub mod results;
 pub mod rng;
 pub mod robot;
 pub mod sensor;
 pub mod stats;
+pub mod study;
+pub mod svg;
 pub mod sweep;
 pub mod trajectory;

@@ -63,12 +63,8 @@ enum Command {
         /// The shards' folders (each holding a takt.json, or a sweep.json).
         #[arg(required = true)]
         dirs: Vec<PathBuf>,
-        /// Folder the merged batch folder is written into.
-        #[arg(long, default_value = "runs")]
-        out: PathBuf,
-        /// Machine-readable JSON output.
-        #[arg(long)]
-        json: bool,
+        #[command(flatten)]
+        out: cli::OutArgs,
     },
     /// Benchmarks: our code beside a baseline doing the same work.
     Bench {
@@ -111,7 +107,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Run(a) => cli::run::run(&a),
         Command::Batch(a) => cli::batch::batch(&a),
         Command::Sweep(a) => cli::sweep::sweep(&a),
-        Command::Merge { dirs, out, json } => cli::batch::merge(&dirs, &out, json),
+        Command::Merge { dirs, out } => cli::study::merge(&dirs, &out.out, out.json),
         Command::Bench { command } => cli::bench::run(command),
     }
 }

@@ -13,6 +13,13 @@ pub use tables::{Fixed, picks_csv, picks_table, to_csv};
 
 use crate::config::{LoadedScene, LoadedWorkpiece, ShapeKind, Source};
 
+/// A JSON document as binpick writes it: pretty, keys as the value orders them, a final line
+/// break.
+pub fn pretty_json(value: &serde_json::Value) -> String {
+    // A JSON value has string keys only, so it always serialises.
+    serde_json::to_string_pretty(value).expect("a JSON value serialises") + "\n"
+}
+
 /// Why a run folder could not be written.
 #[derive(Debug, thiserror::Error)]
 pub enum RunDirError {
@@ -86,7 +93,7 @@ impl RunDir {
         std::fs::write(&p, bytes).map_err(io(&p))
     }
 
-    /// Writes a value as pretty JSON.
+    /// Writes a value as pretty JSON ([`pretty_json`]'s text).
     pub fn write_json(&self, file: &str, value: &impl serde::Serialize) -> Result<(), RunDirError> {
         let text = serde_json::to_string_pretty(value).map_err(|e| RunDirError::Serialise {
             path: file.into(),

@@ -5,39 +5,25 @@
 //! ranges `start:stop:step`), form the variants (the product of the lists, the first key
 //! slowest), and describe the sweep's runs: every (variant, workpiece, seed), variant-major, each a
 //! run like `batch`'s. The variants are resolved and checked in [`resolve`] (before anything
-//! runs), their runs kept and tabulated in [`table`]; shards and merges work as for batches.
+//! runs); the runs, shards and merges are the study's ([`crate::study`]: a sweep is a study of
+//! several variants); the table, its files and the chart are [`table`]'s and
+//! [`sweep_chart`]'s.
 //!
 //! Units: the file's own (the key names carry them); s and counts in the results.
 
-pub mod chart;
 pub mod resolve;
-pub mod runner;
+pub mod sweep_chart;
 pub mod table;
 
-use serde::{Deserialize, Serialize};
+pub use resolve::resolve;
+pub use table::{SweepRow, csv, markdown, outputs, table};
 
-pub use resolve::{Resolved, Variant, resolve};
-pub use runner::{SweepRuns, run_sweep};
-pub use table::{SweepFile, SweepRow, SweepRun, csv, markdown, merge, table};
+use crate::study::StudyError;
 
 /// Most values one `--set` list gives (a range included): a typo guard (`0:1:0.0001`).
 pub const MAX_VALUES: usize = 1000;
 /// Most variants one sweep forms (the product of its lists).
 pub const MAX_VARIANTS: usize = 10_000;
-
-/// Why a sweep specification or a merge is invalid.
-#[derive(Debug, thiserror::Error)]
-pub enum SweepError {
-    /// A bad argument (`--set`, a merge's files).
-    #[error("{0}")]
-    Input(String),
-    /// A variant's cell or workpiece file is refused by the checks a cell file goes through.
-    #[error("{0}")]
-    Config(#[from] crate::config::ConfigError),
-    /// A run failed.
-    #[error("cell run failed: {0}")]
-    Run(String),
-}
 
 /// Which file a key path goes into.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -70,8 +56,8 @@ pub struct SetArg {
     pub values: Vec<toml::Value>,
 }
 
-fn input(m: impl Into<String>) -> SweepError {
-    SweepError::Input(m.into())
+fn input(m: impl Into<String>) -> StudyError {
+    StudyError::Input(m.into())
 }
 
 /// A value as the tables and folder names show it: TOML's inline form, a string bare.
@@ -144,7 +130,7 @@ fn split_top_level(text: &str) -> Vec<&str> {
 
 /// One value: a TOML value (`0.006`, `3`, `true`, `"x"`, `[0.4, -0.2, 0.006]`), else a bare word
 /// as a string (`oracle`).
-fn parse_value(key: &str, text: &str) -> Result<toml::Value, SweepError> {
+fn parse_value(key: &str, text: &str) -> Result<toml::Value, StudyError> {
     let t = text.trim();
     if t.is_empty() {
         return Err(input(format!("--set {key}: an empty value in the list")));
@@ -174,7 +160,7 @@ fn decimals(text: &str) -> i32 {
 
 /// A range `start:stop:step`: start, start + step, ... up to stop (included when a whole number of
 /// steps away). Integers if all three are; otherwise floats rounded to the decimals written.
-fn parse_range(key: &str, text: &str) -> Result<Vec<toml::Value>, SweepError> {
+fn parse_range(key: &str, text: &str) -> Result<Vec<toml::Value>, StudyError> {
     let parts: Vec<&str> = text.split(':').map(str::trim).collect();
     let bad = |why: &str| input(format!("--set {key}: range {text:?} {why}"));
     if parts.len() != 3 {
@@ -221,7 +207,7 @@ fn parse_range(key: &str, text: &str) -> Result<Vec<toml::Value>, SweepError> {
 }
 
 /// Parses one `--set KEY=V1,V2,...`.
-pub fn parse_set(text: &str) -> Result<SetArg, SweepError> {
+pub fn parse_set(text: &str) -> Result<SetArg, StudyError> {
     let (key, list) = text
         .split_once('=')
         .ok_or_else(|| input(format!("--set: expected KEY=V1,V2,..., got {text:?}")))?;
@@ -252,7 +238,7 @@ pub fn parse_set(text: &str) -> Result<SetArg, SweepError> {
 }
 
 /// Parses every `--set`; a key given twice is refused (its lists would multiply, not combine).
-pub fn parse_sets(texts: &[String]) -> Result<Vec<SetArg>, SweepError> {
+pub fn parse_sets(texts: &[String]) -> Result<Vec<SetArg>, StudyError> {
     if texts.is_empty() {
         return Err(input("sweep: give at least one --set KEY=V1,V2,..."));
     }
@@ -300,69 +286,6 @@ pub fn variants(sets: &[SetArg]) -> Vec<Vec<toml::Value>> {
     }
     out
 }
-
-/// What a sweep runs: recorded in `sweep.json`, compared when shards merge.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SweepSpec {
-    /// The cell file the variants start from (its label).
-    pub scene: String,
-    /// The varied keys, in `--set` order.
-    pub keys: Vec<String>,
-    /// Each variant's values, as [`value_text`] writes them, in `keys` order.
-    pub variants: Vec<Vec<String>>,
-    /// Workpieces, in table order.
-    pub workpieces: Vec<String>,
-    /// Seeds.
-    pub seeds: Vec<u64>,
-    /// Picks per run.
-    pub picks: usize,
-    /// Deterministic compute budgets.
-    pub deterministic: bool,
-}
-
-impl SweepSpec {
-    /// Every (variant index, workpiece, seed) run: variant-major, then workpiece, then seed.
-    pub fn jobs(&self) -> Vec<(usize, String, u64)> {
-        (0..self.variants.len())
-            .flat_map(|v| {
-                self.workpieces
-                    .iter()
-                    .flat_map(move |w| self.seeds.iter().map(move |s| (v, w.clone(), *s)))
-            })
-            .collect()
-    }
-
-    /// A name for the sweep's folder: the keys, the workpieces, the seeds, the picks.
-    pub fn name(&self) -> String {
-        let batch = crate::batch::BatchSpec {
-            workpieces: self.workpieces.clone(),
-            seeds: self.seeds.clone(),
-            picks: self.picks,
-            deterministic: self.deterministic,
-        }
-        .name();
-        let keys: String = self
-            .keys
-            .iter()
-            .map(|k| k.replace(|c: char| !c.is_ascii_alphanumeric() && c != '_' && c != '.', "_"))
-            .collect::<Vec<_>>()
-            .join("+");
-        format!("sweep-{keys}-{}", batch.trim_start_matches("batch-"))
-    }
-
-    /// A variant's values as `key=value, ...`.
-    pub fn describe(&self, variant: usize) -> String {
-        self.keys
-            .iter()
-            .zip(&self.variants[variant])
-            .map(|(k, v)| format!("{k}={v}"))
-            .collect::<Vec<_>>()
-            .join(", ")
-    }
-}
-
-/// The runs of shard `k` of `n`: every n-th run from the (k-1)-th, as for batches.
-pub use crate::batch::shard;
 
 #[cfg(test)]
 mod tests {
@@ -429,7 +352,7 @@ mod tests {
         assert_eq!(v.len(), 6);
         assert_eq!(v[1], vec![1.into(), "y".into()]);
         assert_eq!(v[3], vec![2.into(), "x".into()]);
-        let spec = SweepSpec {
+        let spec = crate::study::StudySpec {
             scene: "s".into(),
             keys: vec!["a".into(), "b".into()],
             variants: v.iter().map(|x| x.iter().map(value_text).collect()).collect(),
@@ -440,8 +363,9 @@ mod tests {
         };
         let jobs = spec.jobs();
         assert_eq!(jobs.len(), 24);
-        assert_eq!(jobs[5], (1, "A".into(), 2));
-        let mut all: Vec<_> = (1..=5).flat_map(|k| shard(&jobs, k, 5)).collect();
+        let j = &jobs[5];
+        assert_eq!((j.variant, j.workpiece.as_str(), j.seed), (1, "A", 2));
+        let mut all: Vec<_> = (1..=5).flat_map(|k| crate::study::shard(&jobs, k, 5)).collect();
         all.sort();
         let mut want = jobs.clone();
         want.sort();

@@ -12,9 +12,10 @@ pub mod check;
 pub mod pile;
 pub mod robot;
 pub mod run;
+pub mod study;
 pub mod sweep;
 
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 use anyhow::Result;
 use clap::Args;
@@ -33,6 +34,60 @@ pub struct InputError(pub String);
 #[derive(Debug, thiserror::Error)]
 #[error("interrupted: the results so far are in {0}")]
 pub struct Interrupted(pub String);
+
+/// How the cell charges compute: the mode of `run`, `batch` and `sweep`.
+#[derive(Args, Clone, Copy)]
+pub struct ModeArgs {
+    /// Charge the cell file's fixed compute budgets instead of measured wall time, so the
+    /// same seed gives byte-identical results.
+    #[arg(long)]
+    pub deterministic: bool,
+}
+
+/// Where results go and how they are printed: `run`, `batch`, `sweep` and `merge`.
+#[derive(Args, Clone)]
+pub struct OutArgs {
+    /// Folder the results folder is written into.
+    #[arg(long, default_value = "runs")]
+    pub out: PathBuf,
+    /// Machine-readable JSON output.
+    #[arg(long)]
+    pub json: bool,
+}
+
+/// The cell as given: `run` and `batch` (a sweep varies it with `--set`).
+#[derive(Args, Clone)]
+pub struct CellArgs {
+    /// Recognition: `cloud` (from the depth capture, the default) or `oracle` (the what-if of
+    /// perfect recognition); overrides the cell file's `sensor.recognition`.
+    #[arg(long, value_name = "cloud|oracle")]
+    pub recognition: Option<binpick::config::RecognitionMode>,
+    /// Scene file (default: the embedded default cell).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+}
+
+impl CellArgs {
+    /// The scene loaded, `--recognition` applied (so the resolved scene a run writes says which
+    /// it used), its arm built and its trays checked within reach.
+    pub fn load(&self) -> Result<(LoadedScene, RobotModel)> {
+        let mut loaded = LoadedScene::load(self.scene.as_deref())?;
+        if let Some(m) = self.recognition {
+            loaded.scene.sensor.recognition = m;
+        }
+        let robot = RobotModel::from_scene(&loaded)?;
+        robot.check_scene_reach(&loaded.label, &loaded.scene)?;
+        Ok((loaded, robot))
+    }
+}
+
+/// A workpiece loaded and checked against the cell: it fits, its shape builds.
+pub fn load_workpiece(name: &str, loaded: &LoadedScene) -> Result<LoadedWorkpiece> {
+    let wp = LoadedWorkpiece::resolve(name)?;
+    wp.workpiece.check_fits_scene(&wp.label, &loaded.scene)?;
+    binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    Ok(wp)
+}
 
 /// Recording formats a user can skip (`run` records both by default, `batch --record` too).
 #[derive(Args, Clone, Copy)]
@@ -61,9 +116,7 @@ pub fn load_cell(scene: Option<&Path>, workpiece: &str) -> Result<(LoadedScene, 
     let loaded = LoadedScene::load(scene)?;
     let robot = RobotModel::from_scene(&loaded)?;
     robot.check_scene_reach(&loaded.label, &loaded.scene)?;
-    let wp = LoadedWorkpiece::resolve(workpiece)?;
-    wp.workpiece.check_fits_scene(&wp.label, &loaded.scene)?;
-    binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    let wp = load_workpiece(workpiece, &loaded)?;
     Ok((loaded, wp, robot))
 }
 
@@ -107,7 +160,7 @@ pub fn round(v: f64, digits: i32) -> f64 {
     (v * s).round() / s
 }
 
-/// A pose as JSON: position [m] and roll-pitch-yaw [deg].
+/// A pose as JSON: position (m) and roll-pitch-yaw (deg).
 pub fn pose_json(p: &Isometry3<f64>) -> serde_json::Value {
     let (r, pi, y) = p.rotation.euler_angles();
     json!({
@@ -116,7 +169,7 @@ pub fn pose_json(p: &Isometry3<f64>) -> serde_json::Value {
     })
 }
 
-/// A pose as one line of text: position [m] and roll-pitch-yaw [deg].
+/// A pose as one line of text: position (m) and roll-pitch-yaw (deg).
 pub fn pose_text(p: &Isometry3<f64>) -> String {
     let (r, pi, y) = p.rotation.euler_angles();
     let t = p.translation.vector;

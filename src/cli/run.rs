@@ -2,13 +2,11 @@
 //! run folder with `picks.csv`, `summary.json`, `events.json`, the time charts, the recordings
 //! and the resolved inputs.
 
-use std::path::PathBuf;
-
 use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 
-use super::{Interrupted, SkipFormats, check_picks, load_cell, stop_on_ctrl_c};
+use super::{CellArgs, Interrupted, ModeArgs, OutArgs, SkipFormats, check_picks, load_workpiece, stop_on_ctrl_c};
 use binpick::chart::TimeChart;
 use binpick::cycle::{EndReason, EventLog, Observer, Observers, RunOptions};
 use binpick::record::Recorder;
@@ -25,33 +23,22 @@ pub struct RunArgs {
     /// Run seed.
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Charge the cell file's fixed compute budgets instead of measured wall time, so the
-    /// same seed gives byte-identical results.
-    #[arg(long)]
-    pub deterministic: bool,
-    /// Recognition: `cloud` (from the depth capture, the default) or `oracle` (the what-if of
-    /// perfect recognition); overrides the cell file's `sensor.recognition`.
-    #[arg(long, value_name = "cloud|oracle")]
-    pub recognition: Option<binpick::config::RecognitionMode>,
-    /// Scene file (default: the embedded default cell).
-    #[arg(long)]
-    pub scene: Option<PathBuf>,
-    /// Folder the run folder is written into.
-    #[arg(long, default_value = "runs")]
-    pub out: PathBuf,
+    #[command(flatten)]
+    pub mode: ModeArgs,
+    #[command(flatten)]
+    pub cell: CellArgs,
+    #[command(flatten)]
+    pub out: OutArgs,
     #[command(flatten)]
     pub skip: SkipFormats,
-    /// Machine-readable JSON output.
-    #[arg(long)]
-    pub json: bool,
 }
 
 /// `binpick run`: one cell run; prints the per-pick table and the summary, writes the run folder.
 pub fn run(a: &RunArgs) -> Result<()> {
     check_picks(a.picks)?;
-    let (mut loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
-    super::override_recognition(&mut loaded, a.recognition);
-    let (seed, deterministic, out, json) = (a.seed, a.deterministic, a.out.as_path(), a.json);
+    let (loaded, robot) = a.cell.load()?;
+    let wp = load_workpiece(&a.workpiece, &loaded)?;
+    let (seed, deterministic, out, json) = (a.seed, a.mode.deterministic, a.out.out.as_path(), a.out.json);
     let formats = a.skip.formats(true);
     let opts = RunOptions {
         picks: a.picks,
@@ -85,11 +72,17 @@ pub fn run(a: &RunArgs) -> Result<()> {
     let run = binpick::report::RunDir::create(out, &name)?;
     run.write_inputs(&loaded, Some(&wp))?;
     run.write("picks.csv", binpick::report::picks_csv(&result.records))?;
-    run.write_json("summary.json", &result.summary)?;
+    let summary = binpick::results::Summary::of(&result.tally);
+    let run_summary = binpick::results::RunSummary {
+        summary: &summary,
+        deterministic,
+        per_capture: &result.recognition_per_capture,
+    };
+    run.write_json("summary.json", &run_summary)?;
     run.write_json("events.json", &log.into_sorted())?;
     let title = format!("binpick run: workpiece {}, seed {seed}", wp.workpiece.name);
     let releases: Vec<f64> = result.records.iter().filter_map(|r| r.release_s).collect();
-    let (whole, steady) = chart.svgs(&title, result.summary.sim_time_s, &releases);
+    let (whole, steady) = chart.svgs(&title, result.tally.sim_time_s, &releases);
     run.write("timechart.svg", whole)?;
     if let Some(steady) = steady {
         run.write("timechart-steady.svg", steady)?;
@@ -114,9 +107,8 @@ pub fn run(a: &RunArgs) -> Result<()> {
         .map_err(|(path, e)| anyhow::anyhow!("writing {}: {e}", path.display()))?;
     }
     let dest = run.finish()?;
-    let s = &result.summary;
     let done = || -> Result<()> {
-        match s.ended {
+        match summary.tally.ended {
             EndReason::Interrupted => Err(Interrupted(dest.display().to_string()).into()),
             _ => Ok(()),
         }
@@ -125,12 +117,20 @@ pub fn run(a: &RunArgs) -> Result<()> {
         println!(
             "{}",
             serde_json::to_string_pretty(
-                &json!({"summary": s, "wall_s": wall_s, "run_dir": dest.display().to_string()})
+                &json!({"summary": run_summary, "wall_s": wall_s, "run_dir": dest.display().to_string()})
             )?
         );
         return done();
     }
     print!("{}", binpick::report::picks_table(&result.records));
+    print_summary(&summary, loaded.scene.sensor.recognition.name(), wall_s);
+    println!("wrote {}", dest.display());
+    done()
+}
+
+/// Prints a run's summary: takt, success, waits, faults, the servo's figures, recognition.
+fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) {
+    let t = &s.tally;
     println!(
         "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \
          defines it) mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} intervals (reference {}); excluding \
@@ -138,8 +138,8 @@ pub fn run(a: &RunArgs) -> Result<()> {
          stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), agitations {}, refills {}; \
          peak torque demand {:.0} % of a limit, saturated {:.3} s, max tracking error {:.3} deg; \
          {:.1} s simulated in {:.2} s wall ({:.0}x real time)",
-        s.placed,
-        s.attempts,
+        t.placed,
+        t.attempts,
         100.0 * s.success_rate,
         s.takt.mean_s,
         s.takt.p95_s,
@@ -151,31 +151,31 @@ pub fn run(a: &RunArgs) -> Result<()> {
         s.mean_pick_s,
         s.mean_place_s,
         s.mean_pick_s + s.mean_place_s,
-        s.sensor_stalls.0,
-        s.sensor_stalls.1,
-        s.compute_stalls.0,
-        s.compute_stalls.1,
-        s.protective_stops,
-        s.collisions,
-        s.drops,
-        s.parts_lost,
-        s.captures.0,
-        s.captures.1,
-        s.agitations,
-        s.refills,
-        100.0 * s.peak_demand_ratio.iter().cloned().fold(0.0, f64::max),
-        s.saturated_s,
-        s.max_tracking_error_deg,
-        s.sim_time_s,
+        t.sensor_waits.count,
+        t.sensor_waits.total_s,
+        t.compute_waits.count,
+        t.compute_waits.total_s,
+        t.faults.protective_stops,
+        t.faults.collisions,
+        t.faults.drops,
+        t.faults.parts_lost,
+        t.captures.0,
+        t.captures.1,
+        t.agitations,
+        t.refills,
+        100.0 * s.peak_demand_ratio(),
+        t.saturated_s,
+        t.max_tracking_error_deg,
+        t.sim_time_s,
         wall_s,
-        s.sim_time_s / wall_s
+        t.sim_time_s / wall_s
     );
     let r = &s.recognition;
     println!(
         "recognition ({}), against the truth at each trigger: top layer {} / {} found (recall {:.1} %), \
          {} of {} detections correct (precision {:.1} %; correct = within 2 mm and 5 deg), pose error median \
          {:.2} mm / {:.2} deg, p95 {:.2} mm / {:.2} deg; grasps sealed {} / {}, misrecognised {}",
-        loaded.scene.sensor.recognition.name(),
+        recognition,
         r.top_layer_found,
         r.top_layer,
         100.0 * r.recall,
@@ -186,10 +186,8 @@ pub fn run(a: &RunArgs) -> Result<()> {
         r.rotation_error_deg[0],
         r.position_error_mm[1],
         r.rotation_error_deg[1],
-        s.grasps.1,
-        s.grasps.0,
-        s.misrecognised
+        t.grasps.1,
+        t.grasps.0,
+        t.misrecognised
     );
-    println!("wrote {}", dest.display());
-    done()
 }

@@ -58,7 +58,7 @@ pub use events::{
     StallCause,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
-pub use records::{PickRecord, RunCounts, RunLabel, RunResult, RunSummary, RunTally, TaktStats, summarise, takts};
+pub use records::{Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
@@ -101,7 +101,7 @@ pub struct RunOptions {
     /// returned and the summary says `interrupted`.
     pub stop: Option<&'static std::sync::atomic::AtomicBool>,
     /// Keep every pick's record and every recognition result's report in the result (`binpick
-    /// run` writes them, a recording plays them). Without, a run keeps only its [`RunTally`], so
+    /// run` writes them, a recording plays them). Without, a run keeps only its [`Tally`], so
     /// its memory does not grow with its picks beyond the tally's samples.
     pub keep_records: bool,
 }
@@ -183,7 +183,7 @@ pub struct CellState {
     pub run_peak_demand_ratio: [f64; crate::robot::DOF],
     /// The picks so far, and every recognition result evaluated against the truth at its
     /// trigger (evaluation only), tallied.
-    pub tally: RunTally,
+    pub tally: Tally,
     /// Every recognition result's report, without its per-detection matches, if the run keeps
     /// its records (evaluation only).
     pub recognitions: Vec<RecognitionReport>,
@@ -358,7 +358,7 @@ impl<'a> Cell<'a> {
             pick: None,
             parts_lost: 0,
             run_peak_demand_ratio: [0.0; crate::robot::DOF],
-            tally: RunTally::default(),
+            tally: Tally::default(),
             recognitions: Vec::new(),
             in_hand: None,
             pick_spots: Vec::new(),
@@ -388,31 +388,21 @@ pub fn run(
     let mut run = Run { cell: &cell, st, obs };
     let (records, ended) = run.picks()?;
     let st = &mut run.st;
-    let counts = RunCounts {
-        parts_lost: st.parts_lost,
-        captures: (st.sensor.triggered, st.sensor.spoiled),
-        refills: st.trays.refills,
-        agitations: st.trays.agitations,
-        place_tray_exchanges: st.trays.exchanges,
-        peak_demand_ratio: st.run_peak_demand_ratio,
-    };
-    let label = RunLabel {
-        workpiece: workpiece.workpiece.name.clone(),
-        seed: opts.seed,
-        deterministic: opts.deterministic,
-    };
-    let summary = summarise(
-        label,
-        &st.tally,
-        counts,
-        std::mem::take(&mut st.recognitions),
-        ended,
-        st.world.time_s(),
-    );
+    let mut tally = std::mem::take(&mut st.tally);
+    tally.workpiece = workpiece.workpiece.name.clone();
+    tally.seed = opts.seed;
+    tally.faults.parts_lost = st.parts_lost;
+    tally.captures = (st.sensor.triggered, st.sensor.spoiled);
+    tally.refills = st.trays.refills;
+    tally.agitations = st.trays.agitations;
+    tally.place_tray_exchanges = st.trays.exchanges;
+    tally.peak_demand_ratio = st.run_peak_demand_ratio;
+    tally.sim_time_s = st.world.time_s();
+    tally.ended = ended;
     Ok(RunResult {
         records,
-        tally: std::mem::take(&mut st.tally),
-        summary,
+        tally,
+        recognition_per_capture: std::mem::take(&mut st.recognitions),
     })
 }
 

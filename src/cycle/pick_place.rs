@@ -33,7 +33,11 @@ impl Run<'_, '_> {
         aimed_m: Option<nalgebra::Vector3<f64>>,
         rec: &mut PickRecord,
     ) -> Result<(), CycleError> {
-        [rec.grasp_compute_s, rec.pick_compute_s, rec.place_compute_s] = charged;
+        rec.compute = crate::cycle::StageCompute {
+            grasp_s: charged[0],
+            pick_s: charged[1],
+            place_s: charged[2],
+        };
         let grasp_done = ready_s + charged[0];
         let pick_ready = grasp_done + charged[1];
         let place_ready = pick_ready + charged[2];
@@ -208,10 +212,10 @@ impl Run<'_, '_> {
         };
         // The transfer, then the descent (or the overlap's head, then its rest: the descent
         // starts while the transfer ends).
-        rec.overlap_s[1] = prep.pick_blend.as_ref().map_or(0.0, |b| b.both().duration_s());
+        rec.overlaps.pick_descent_s = prep.pick_blend.as_ref().map_or(0.0, |b| b.both().duration_s());
         let transferred = match (&prep.retreat_blend, &prep.pick_blend) {
             (Some(rb), _) => {
-                rec.overlap_s[3] = rb.motion.both().duration_s();
+                rec.overlaps.retreat_s = rb.motion.both().duration_s();
                 let s = rb.motion.start_s();
                 self.play_with(&rb.motion.window(s, s + rb.descent_from_s), &hand, false, None, false)?
             }
@@ -308,7 +312,7 @@ impl Run<'_, '_> {
         };
         let lifted = match blend {
             Some(b) => {
-                rec.overlap_s[0] = b.both().duration_s();
+                rec.overlaps.lift_s = b.both().duration_s();
                 self.play_with(&b.head(), &held, true, None, false)?
             }
             None => self.play_with(&prep.lift, &held, true, None, false)?,
@@ -332,7 +336,7 @@ impl Run<'_, '_> {
         };
         let up = &place.retreat;
         rec.suction_speed_factor = place.suction_speed_factor;
-        rec.overlap_s[2] = place.descent_blend.as_ref().map_or(0.0, |d| d.both().duration_s());
+        rec.overlaps.place_descent_s = place.descent_blend.as_ref().map_or(0.0, |d| d.both().duration_s());
         let t_place = self.st.world.time_s();
         // The controller knows from now where the arm ends: the next pick's compute may start.
         self.st.planned_end_q = Some(up.end_q());

@@ -1,9 +1,12 @@
-//! What a cell run produces: one record per pick, the run's summary, and the takt statistics
-//! over them.
+//! What a cell run produces: one record per pick, and the run's [`Tally`]: the one results
+//! type every summary, table and shard file is made from.
 //!
 //! Job: keep, per pick, when each stage happened and how long it took (capture, recognition
-//! result, compute, stalls, Pick, Place, release), its outcome and its errors; summarise a run
-//! (success, takt, waits, faults) from those records alone.
+//! result, compute, stalls, Pick, Place, release), its outcome and its errors; tally a run
+//! (attempts, takts, waits, faults, ...) as each pick ends, so a long run keeps a few numbers
+//! per pick and not its records; merge tallies of several runs (a table row, shards). The
+//! figures derived from a tally (rates, means, percentiles) and their writing are
+//! [`crate::results`]'s.
 //!
 //! Takt, as the reference system defines it (its Table 5: the mean of consecutive Pick-and-Place
 //! cycles, only the very first cycle's sensing and motion generation excluded): the intervals
@@ -14,11 +17,10 @@
 //! graspable), a grasp failure, a drop and a missing motion too. Units: s, mm and deg where a
 //! name says so.
 
-use serde::Serialize;
+use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use super::events::{EndReason, Outcome};
-use crate::sensor::{RecognitionReport, RecognitionSummary, RecognitionTotals, TruthMatch};
-use crate::stats::{Summary, mean_of};
+use crate::sensor::{RecognitionReport, RecognitionTotals, TruthMatch};
 
 /// One pick (or one capture that found nothing to pick).
 #[derive(Debug, Clone, Serialize)]
@@ -27,50 +29,45 @@ pub struct PickRecord {
     pub index: usize,
     /// Outcome.
     pub outcome: Outcome,
-    /// When the capture this pick used was triggered [s].
+    /// When the capture this pick used was triggered (s).
     pub capture_s: f64,
-    /// When its recognition result arrived [s].
+    /// When its recognition result arrived (s).
     pub ready_s: f64,
-    /// When the part was released [s] (placed picks).
+    /// When the part was released (s) (placed picks).
     pub release_s: Option<f64>,
-    /// Time since the previous release [s] (none for the run's first release).
+    /// Time since the previous release (s) (none for the run's first release).
     pub takt_s: Option<f64>,
     /// A pick-tray refill happened since the previous release.
     pub spans_refill: bool,
-    /// Pick: transfer, descent, vacuum build-up and lift [s].
+    /// Pick: transfer, descent, vacuum build-up and lift (s).
     pub pick_s: f64,
-    /// Place: transfer, descent, release and retreat [s].
+    /// Place: transfer, descent, release and retreat (s).
     pub place_s: f64,
-    /// The arm waited for the recognition result [s].
+    /// The arm waited for the recognition result (s).
     pub stall_sensor_s: f64,
-    /// The arm waited for grasp selection or motion generation [s].
+    /// The arm waited for grasp selection or motion generation (s).
     pub stall_compute_s: f64,
-    /// Grasp selection, charged [s].
-    pub grasp_compute_s: f64,
-    /// Pick motion generation (planning, acceleration, the straight lines), charged [s].
-    pub pick_compute_s: f64,
-    /// Place motion generation, charged [s].
-    pub place_compute_s: f64,
-    /// Horizontal placement error [mm] (placed picks).
+    /// Compute charged per stage: grasp selection, Pick motion generation (planning,
+    /// acceleration, the straight lines), Place motion generation.
+    pub compute: StageCompute,
+    /// Horizontal placement error (mm) (placed picks).
     pub placement_error_mm: Option<f64>,
-    /// Yaw placement error [deg], modulo the part's symmetry (placed picks).
+    /// Yaw placement error (deg), modulo the part's symmetry (placed picks).
     pub yaw_error_deg: Option<f64>,
-    /// Largest servo tracking error over the pick's motions [deg].
+    /// Largest servo tracking error over the pick's motions (deg).
     pub max_tracking_error_deg: f64,
     /// Largest |demanded torque| / torque limit over the pick's motions and joints (before the
     /// drive's saturation).
     pub peak_demand_ratio: f64,
     /// The joint (1..6) of that peak.
     pub peak_demand_joint: usize,
-    /// Time some joint was saturated during the pick's motions [s].
+    /// Time some joint was saturated during the pick's motions (s).
     pub saturated_s: f64,
     /// Time scaling of the held-part Place transfer for the cup's holding force (1: none).
     pub suction_speed_factor: f64,
-    /// How long two motions ran at once, as played [s]: the lift and the Place transfer, the
-    /// Pick transfer and its descent, the Place transfer and its descent, the last Place's
-    /// retreat and this Pick's transfer (0: one after the other).
-    pub overlap_s: [f64; 4],
-    /// The vacuum valve closed this long before the Place's descent ended [s].
+    /// How long two motions ran at once, as played (0: one after the other).
+    pub overlaps: Overlaps,
+    /// The vacuum valve closed this long before the Place's descent ended (s).
     pub release_lead_s: f64,
     /// A blind pick: picks went into the pile after its result's capture (the image no longer
     /// shows the pile as it is; the part was taken clear of them).
@@ -103,9 +100,7 @@ impl PickRecord {
             place_s: 0.0,
             stall_sensor_s: 0.0,
             stall_compute_s: 0.0,
-            grasp_compute_s: 0.0,
-            pick_compute_s: 0.0,
-            place_compute_s: 0.0,
+            compute: StageCompute::default(),
             placement_error_mm: None,
             yaw_error_deg: None,
             max_tracking_error_deg: 0.0,
@@ -113,7 +108,7 @@ impl PickRecord {
             peak_demand_joint: 0,
             saturated_s: 0.0,
             suction_speed_factor: 1.0,
-            overlap_s: [0.0; 4],
+            overlaps: Overlaps::default(),
             release_lead_s: 0.0,
             blind: false,
             from_result: 0,
@@ -125,149 +120,339 @@ impl PickRecord {
     }
 }
 
-/// Takt statistics [s] over release-to-release intervals.
-pub type TaktStats = Summary;
+/// Compute charged per stage of a pick (s): grasp selection, Pick motion generation, Place
+/// motion generation. Written as `[grasp, pick, place]` in result files.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct StageCompute {
+    /// Grasp selection (s).
+    pub grasp_s: f64,
+    /// Pick motion generation (s).
+    pub pick_s: f64,
+    /// Place motion generation (s).
+    pub place_s: f64,
+}
 
-/// A run's summary.
-#[derive(Debug, Clone, Serialize)]
-pub struct RunSummary {
-    /// Workpiece.
-    pub workpiece: String,
-    /// Seed.
-    pub seed: u64,
-    /// Deterministic mode.
-    pub deterministic: bool,
-    /// Attempts: every pick, re-captures included.
-    pub attempts: usize,
-    /// Picks placed.
-    pub placed: usize,
-    /// placed / attempts.
-    pub success_rate: f64,
-    /// Takt as the reference defines it: every release-to-release interval after the first.
-    pub takt: TaktStats,
-    /// The same, leaving out the intervals that span a pick-tray refill (a side figure).
-    pub takt_excl_refills: TaktStats,
-    /// The reference system's takt for this workpiece [s], if it is one of A..F.
-    pub reference_takt_s: Option<f64>,
-    /// Mean Pick time over the placed picks [s].
-    pub mean_pick_s: f64,
-    /// Mean Place time over the placed picks [s].
-    pub mean_place_s: f64,
-    /// Mean compute charged per pick the arm set out to make: grasp selection, Pick and Place
-    /// motion generation [s].
-    pub mean_compute_s: [f64; 3],
-    /// Stalls waiting for the sensor: count and total [s] (placed picks with a takt).
-    pub sensor_stalls: (usize, f64),
-    /// Stalls waiting for compute: count and total [s].
-    pub compute_stalls: (usize, f64),
-    /// Protective stops.
+impl StageCompute {
+    /// Each stage's sum, added stage by stage.
+    pub fn plus(self, o: StageCompute) -> StageCompute {
+        StageCompute {
+            grasp_s: self.grasp_s + o.grasp_s,
+            pick_s: self.pick_s + o.pick_s,
+            place_s: self.place_s + o.place_s,
+        }
+    }
+
+    /// Each stage divided by `n` (NaN when `n` is 0).
+    pub fn per(self, n: usize) -> StageCompute {
+        let d = |s: f64| if n == 0 { f64::NAN } else { s / n as f64 };
+        StageCompute {
+            grasp_s: d(self.grasp_s),
+            pick_s: d(self.pick_s),
+            place_s: d(self.place_s),
+        }
+    }
+
+    /// What the result waits for before its Pick can move: grasp selection and Pick motion (s).
+    pub fn result_to_motion_s(self) -> f64 {
+        self.grasp_s + self.pick_s
+    }
+}
+
+impl Serialize for StageCompute {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        [self.grasp_s, self.pick_s, self.place_s].serialize(s)
+    }
+}
+
+impl<'de> Deserialize<'de> for StageCompute {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let [grasp_s, pick_s, place_s] = <[f64; 3]>::deserialize(d)?;
+        Ok(StageCompute {
+            grasp_s,
+            pick_s,
+            place_s,
+        })
+    }
+}
+
+/// How long two motions of a pick ran at once, as played (s) (0: one after the other).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize)]
+pub struct Overlaps {
+    /// The lift and the Place transfer.
+    pub lift_s: f64,
+    /// The Pick transfer and its descent.
+    pub pick_descent_s: f64,
+    /// The Place transfer and its descent.
+    pub place_descent_s: f64,
+    /// The last Place's retreat and this Pick's transfer.
+    pub retreat_s: f64,
+}
+
+/// Waits of the arm: how many and their total (s). Written as `[count, total]` in tallies.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct Waits {
+    /// How many waits.
+    pub count: usize,
+    /// Their total (s).
+    pub total_s: f64,
+}
+
+impl Waits {
+    /// Adds one wait of `s` seconds, if it is one (longer than 1 ns).
+    pub fn add(&mut self, s: f64) {
+        if s > 1e-9 {
+            self.count += 1;
+            self.total_s += s;
+        }
+    }
+
+    /// Both counts and totals added.
+    pub fn merge(&mut self, o: &Waits) {
+        self.count += o.count;
+        self.total_s += o.total_s;
+    }
+
+    /// The mean wait (s) (0 when there was none).
+    pub fn mean_s(&self) -> f64 {
+        if self.count == 0 {
+            0.0
+        } else {
+            self.total_s / self.count as f64
+        }
+    }
+}
+
+impl Serialize for Waits {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        (self.count, self.total_s).serialize(s)
+    }
+}
+
+impl<'de> Deserialize<'de> for Waits {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let (count, total_s) = <(usize, f64)>::deserialize(d)?;
+        Ok(Waits { count, total_s })
+    }
+}
+
+/// Faults of a run, counted by kind. Written as the array `[protective_stops, collisions,
+/// drops, grasp_failures, parts_lost]` in tallies (the format of shard files since the first).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq)]
+pub struct Faults {
+    /// Protective stops of the servo.
     pub protective_stops: usize,
     /// Collisions.
     pub collisions: usize,
     /// Parts dropped from the cup.
     pub drops: usize,
+    /// Grasp failures.
+    pub grasp_failures: usize,
     /// Parts lost out of the trays.
     pub parts_lost: usize,
-    /// Captures triggered and spoiled.
-    pub captures: (u64, u64),
-    /// Pick-tray refills.
-    pub refills: usize,
-    /// Pick-tray agitations.
-    pub agitations: usize,
-    /// Place-tray exchanges.
-    pub place_tray_exchanges: usize,
-    /// Largest |demanded torque| / limit over the run, per joint (before saturation).
-    pub peak_demand_ratio: [f64; 6],
-    /// Time some joint was saturated, over the run [s].
-    pub saturated_s: f64,
-    /// Largest servo tracking error over the run [deg].
-    pub max_tracking_error_deg: f64,
-    /// Grasps attempted (the cup reached the part) and sealed.
-    pub grasps: (usize, usize),
-    /// Blind picks (picks went into the pile after the result's capture): attempted and placed.
-    pub blind_picks: (usize, usize),
-    /// Recognition results the picks the arm set out to make came from.
-    pub results_used: usize,
-    /// Picks the arm set out to make per recognition result they came from.
-    pub picks_per_capture: f64,
-    /// Grasp failures on a detection that was wrong (more than 2 mm or 5 deg from every part).
-    pub misrecognised: usize,
-    /// Recognition over the run's results, against the truth at each trigger.
-    pub recognition: RecognitionSummary,
-    /// Per recognition result (kept when the run keeps its records, else empty).
-    pub recognition_per_capture: Vec<RecognitionReport>,
-    /// Why the run ended.
-    pub ended: EndReason,
-    /// Simulated time [s].
-    pub sim_time_s: f64,
 }
 
-/// Everything a run produced (what its watchers kept is theirs).
-#[derive(Debug, Clone)]
-pub struct RunResult {
-    /// Per pick, when the run was asked to keep them ([`crate::cycle::RunOptions::keep_records`];
-    /// empty otherwise).
-    pub records: Vec<PickRecord>,
-    /// What the summary and a batch's table need of the picks, tallied as each pick ended.
-    pub tally: RunTally,
-    /// Summary.
-    pub summary: RunSummary,
+impl Faults {
+    /// Counts a pick's outcome, if it is a fault.
+    pub fn count(&mut self, outcome: &Outcome) {
+        match outcome.name() {
+            "protective_stop" => self.protective_stops += 1,
+            "collision" => self.collisions += 1,
+            "dropped" => self.drops += 1,
+            "grasp_failed" => self.grasp_failures += 1,
+            _ => {}
+        }
+    }
+
+    /// Each count added.
+    pub fn merge(&mut self, o: &Faults) {
+        self.protective_stops += o.protective_stops;
+        self.collisions += o.collisions;
+        self.drops += o.drops;
+        self.grasp_failures += o.grasp_failures;
+        self.parts_lost += o.parts_lost;
+    }
 }
 
-/// The takts [s]: every release-to-release interval after the run's first release (the
-/// reference's definition).
-pub fn takts(records: &[PickRecord]) -> Vec<f64> {
-    records.iter().filter_map(|r| r.takt_s).collect()
+impl Serialize for Faults {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        [
+            self.protective_stops,
+            self.collisions,
+            self.drops,
+            self.grasp_failures,
+            self.parts_lost,
+        ]
+        .serialize(s)
+    }
 }
 
-/// What a run's summary needs of its picks and recognition results, taken as each one ends,
-/// so that a long run keeps a few numbers per pick (the samples of its exact medians and
-/// percentiles: takts, Pick and Place times, pose errors of correct detections), not its records.
-/// Sums run in pick order, as over the records.
-#[derive(Debug, Clone, Default)]
-pub struct RunTally {
-    /// Picks, re-captures included (attempts).
+impl<'de> Deserialize<'de> for Faults {
+    fn deserialize<D: Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+        let [protective_stops, collisions, drops, grasp_failures, parts_lost] = <[usize; 5]>::deserialize(d)?;
+        Ok(Faults {
+            protective_stops,
+            collisions,
+            drops,
+            grasp_failures,
+            parts_lost,
+        })
+    }
+}
+
+/// Why a run ended, in a tally: written as its text, read back from it.
+mod ended_text {
+    use super::EndReason;
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+
+    const ALL: [EndReason; 5] = [
+        EndReason::PicksDone,
+        EndReason::TrayEmpty,
+        EndReason::NothingGraspableInFullTray,
+        EndReason::NoPathOutOfView,
+        EndReason::Interrupted,
+    ];
+
+    pub fn serialize<S: Serializer>(e: &EndReason, s: S) -> Result<S::Ok, S::Error> {
+        e.serialize(s)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<EndReason, D::Error> {
+        let text = String::deserialize(d)?;
+        ALL.into_iter()
+            .find(|e| e.text() == text)
+            .ok_or_else(|| serde::de::Error::custom(format!("{text:?} is not a reason a run ends")))
+    }
+}
+
+fn one() -> usize {
+    1
+}
+
+/// A run's results, tallied as each pick ends, or the merge of several runs' tallies (a table
+/// row, a shard merge). What the summaries, tables and shard files of binpick are made from:
+/// the samples of exact medians and percentiles (takts, Pick and Place times, compute before
+/// motion), counts, sums and maxima. Sums run in pick order, then in the order runs merge.
+///
+/// Written as one entry of `takt.json` / `sweep.json`'s runs; field names are kept as shard
+/// files have always had them, so shards written before still merge.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Tally {
+    /// Workpiece.
+    pub workpiece: String,
+    /// Seed (of the first run, when merged).
+    pub seed: u64,
+    /// Runs tallied (not written: an entry of a shard file is one run).
+    #[serde(skip_serializing, default = "one")]
+    pub runs: usize,
+    /// Attempts: every pick, re-captures included.
     pub attempts: usize,
     /// Picks placed.
     pub placed: usize,
-    /// Picks the arm set out to make.
+    /// Picks the arm set out to make (a grasp chosen, motions generated).
     pub set_out: usize,
-    /// The takts [s] ([`takts`]).
+    /// Every release-to-release interval after a run's first release (s) (the reference's
+    /// takt).
     pub takts_s: Vec<f64>,
-    /// The takts of intervals that span no pick-tray refill [s].
+    /// The intervals that span no pick-tray refill (s).
     pub takts_excl_refills_s: Vec<f64>,
-    /// Pick time of each placed pick [s].
+    /// Pick times of the placed picks (s).
     pub pick_s: Vec<f64>,
-    /// Place time of each placed pick [s].
+    /// Place times of the placed picks (s).
     pub place_s: Vec<f64>,
-    /// Compute charged over the picks set out: grasp selection, Pick and Place motion [s].
-    pub compute_sum_s: [f64; 3],
-    /// Compute between each pick's result and the motion it unblocks (grasp selection and
-    /// Pick motion), per pick set out [s].
+    /// Compute charged over the picks set out, summed per stage (s).
+    #[serde(rename = "compute_sum_s")]
+    pub compute_sum: StageCompute,
+    /// Compute between each pick's result and the motion it unblocks (grasp and Pick), per
+    /// pick set out (s).
+    #[serde(default)]
     pub result_to_motion_s: Vec<f64>,
-    /// Stalls waiting for the sensor: count and total [s] (placed picks with a takt).
-    pub sensor_stalls: (usize, f64),
-    /// Stalls waiting for compute: count and total [s].
-    pub compute_stalls: (usize, f64),
-    /// Protective stops, collisions, drops, grasp failures.
-    pub faults: [usize; 4],
-    /// Grasp failures on a wrong detection.
-    pub misrecognised: usize,
-    /// Time some joint was saturated [s].
-    pub saturated_s: f64,
-    /// Largest servo tracking error [deg].
-    pub max_tracking_error_deg: f64,
-    /// Grasps attempted and sealed.
+    /// Waits for the sensor in the takts (placed picks with a takt).
+    pub sensor_waits: Waits,
+    /// Waits for compute in the takts.
+    pub compute_waits: Waits,
+    /// Faults by kind.
+    pub faults: Faults,
+    /// Refills of the pick tray.
+    pub refills: usize,
+    /// Agitations of the pick tray.
+    #[serde(default)]
+    pub agitations: usize,
+    /// Place-tray exchanges (not written in shard files: no table shows it).
+    #[serde(skip)]
+    pub place_tray_exchanges: usize,
+    /// Captures triggered and spoiled (not written in shard files: no table shows it).
+    #[serde(skip)]
+    pub captures: (u64, u64),
+    /// Grasps attempted (the cup reached the part) and sealed.
+    #[serde(default)]
     pub grasps: (usize, usize),
-    /// Blind picks attempted and placed.
+    /// Grasp failures on a wrong detection.
+    #[serde(default)]
+    pub misrecognised: usize,
+    /// Blind picks (picks went into the pile after the result's capture): attempted, placed.
+    #[serde(default)]
     pub blind_picks: (usize, usize),
     /// Recognition results the picks set out came from.
+    #[serde(default)]
     pub results_used: usize,
-    /// Recognition of the results, against the truth at each trigger.
+    /// Recognition of the results the run used, against the truth at each trigger.
+    #[serde(default)]
     pub recognition: RecognitionTotals,
+    /// Largest |demanded torque| / limit per joint (before saturation).
+    pub peak_demand_ratio: [f64; crate::robot::DOF],
+    /// Time some joint was saturated (s).
+    pub saturated_s: f64,
+    /// Largest servo tracking error (deg).
+    pub max_tracking_error_deg: f64,
+    /// Simulated time (s).
+    pub sim_time_s: f64,
+    /// Wall time of the runs (s): a measurement, not a result, so a deterministic study leaves
+    /// it out (`None`) and its files repeat byte for byte; `None` when any run's is unknown.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub wall_s: Option<f64>,
+    /// Why the run ended (merged: the first run that did not end with its picks done).
+    #[serde(with = "ended_text")]
+    pub ended: EndReason,
 }
 
-impl RunTally {
+impl Default for Tally {
+    fn default() -> Self {
+        Tally {
+            workpiece: String::new(),
+            seed: 0,
+            runs: 1,
+            attempts: 0,
+            placed: 0,
+            set_out: 0,
+            takts_s: Vec::new(),
+            takts_excl_refills_s: Vec::new(),
+            pick_s: Vec::new(),
+            place_s: Vec::new(),
+            compute_sum: StageCompute::default(),
+            result_to_motion_s: Vec::new(),
+            sensor_waits: Waits::default(),
+            compute_waits: Waits::default(),
+            faults: Faults::default(),
+            refills: 0,
+            agitations: 0,
+            place_tray_exchanges: 0,
+            captures: (0, 0),
+            grasps: (0, 0),
+            misrecognised: 0,
+            blind_picks: (0, 0),
+            results_used: 0,
+            recognition: RecognitionTotals::default(),
+            peak_demand_ratio: [0.0; crate::robot::DOF],
+            saturated_s: 0.0,
+            max_tracking_error_deg: 0.0,
+            sim_time_s: 0.0,
+            wall_s: None,
+            ended: EndReason::PicksDone,
+        }
+    }
+}
+
+impl Tally {
     /// Adds a finished pick.
     pub fn add(&mut self, r: &PickRecord) {
         self.attempts += 1;
@@ -278,15 +463,8 @@ impl RunTally {
                 self.takts_excl_refills_s.push(t);
             }
             if placed {
-                for (stalls, s) in [
-                    (&mut self.sensor_stalls, r.stall_sensor_s),
-                    (&mut self.compute_stalls, r.stall_compute_s),
-                ] {
-                    if s > 1e-9 {
-                        stalls.0 += 1;
-                        stalls.1 += s;
-                    }
-                }
+                self.sensor_waits.add(r.stall_sensor_s);
+                self.compute_waits.add(r.stall_compute_s);
             }
         }
         if placed {
@@ -296,24 +474,13 @@ impl RunTally {
         }
         if r.outcome.set_out() {
             self.set_out += 1;
-            self.compute_sum_s[0] += r.grasp_compute_s;
-            self.compute_sum_s[1] += r.pick_compute_s;
-            self.compute_sum_s[2] += r.place_compute_s;
-            self.result_to_motion_s.push(r.grasp_compute_s + r.pick_compute_s);
+            self.compute_sum = self.compute_sum.plus(r.compute);
+            self.result_to_motion_s.push(r.compute.result_to_motion_s());
             if r.from_result == 0 {
                 self.results_used += 1;
             }
         }
-        let fault = match r.outcome {
-            Outcome::ProtectiveStop(_) => Some(0),
-            Outcome::Collision(_) => Some(1),
-            Outcome::Dropped(_) => Some(2),
-            Outcome::GraspFailed(_) => Some(3),
-            _ => None,
-        };
-        if let Some(k) = fault {
-            self.faults[k] += 1;
-        }
+        self.faults.count(&r.outcome);
         self.misrecognised += usize::from(r.outcome.misrecognised());
         self.saturated_s += r.saturated_s;
         self.max_tracking_error_deg = self.max_tracking_error_deg.max(r.max_tracking_error_deg);
@@ -327,98 +494,69 @@ impl RunTally {
         }
     }
 
-    /// Mean compute charged per pick set out [s].
-    pub fn mean_compute_s(&self) -> [f64; 3] {
-        self.compute_sum_s.map(|s| {
-            if self.set_out == 0 {
-                f64::NAN
-            } else {
-                s / self.set_out as f64
-            }
-        })
+    /// Adds another run's (or merge's) tally: counts and sums added, samples appended, maxima
+    /// taken. The label (workpiece, seed) stays this one's.
+    pub fn merge(&mut self, o: &Tally) {
+        self.runs += o.runs;
+        self.attempts += o.attempts;
+        self.placed += o.placed;
+        self.set_out += o.set_out;
+        self.takts_s.extend_from_slice(&o.takts_s);
+        self.takts_excl_refills_s.extend_from_slice(&o.takts_excl_refills_s);
+        self.pick_s.extend_from_slice(&o.pick_s);
+        self.place_s.extend_from_slice(&o.place_s);
+        self.compute_sum = self.compute_sum.plus(o.compute_sum);
+        self.result_to_motion_s.extend_from_slice(&o.result_to_motion_s);
+        self.sensor_waits.merge(&o.sensor_waits);
+        self.compute_waits.merge(&o.compute_waits);
+        self.faults.merge(&o.faults);
+        self.refills += o.refills;
+        self.agitations += o.agitations;
+        self.place_tray_exchanges += o.place_tray_exchanges;
+        self.captures = (self.captures.0 + o.captures.0, self.captures.1 + o.captures.1);
+        self.grasps = (self.grasps.0 + o.grasps.0, self.grasps.1 + o.grasps.1);
+        self.misrecognised += o.misrecognised;
+        self.blind_picks = (
+            self.blind_picks.0 + o.blind_picks.0,
+            self.blind_picks.1 + o.blind_picks.1,
+        );
+        self.results_used += o.results_used;
+        self.recognition.merge(&o.recognition);
+        for (p, q) in self.peak_demand_ratio.iter_mut().zip(o.peak_demand_ratio) {
+            *p = p.max(q);
+        }
+        self.saturated_s += o.saturated_s;
+        self.max_tracking_error_deg = self.max_tracking_error_deg.max(o.max_tracking_error_deg);
+        self.sim_time_s += o.sim_time_s;
+        self.wall_s = self.wall_s.zip(o.wall_s).map(|(a, b)| a + b);
+        if self.ended == EndReason::PicksDone {
+            self.ended = o.ended;
+        }
+    }
+
+    /// The merge of `tallies`, in their order (`None` when there is none).
+    pub fn merged<'a>(tallies: impl IntoIterator<Item = &'a Tally>) -> Option<Tally> {
+        let mut it = tallies.into_iter();
+        let mut all = it.next()?.clone();
+        it.for_each(|t| all.merge(t));
+        Some(all)
     }
 }
 
-/// Counts of a run that the records do not hold.
-#[derive(Debug, Clone, Copy, Default)]
-pub struct RunCounts {
-    /// Parts lost out of the trays.
-    pub parts_lost: usize,
-    /// Captures triggered and spoiled.
-    pub captures: (u64, u64),
-    /// Pick-tray refills.
-    pub refills: usize,
-    /// Pick-tray agitations.
-    pub agitations: usize,
-    /// Place-tray exchanges.
-    pub place_tray_exchanges: usize,
-    /// Largest |demanded torque| / limit per joint over the run.
-    pub peak_demand_ratio: [f64; 6],
-}
-
-/// What a run was.
+/// Everything a run produced (what its watchers kept is theirs).
 #[derive(Debug, Clone)]
-pub struct RunLabel {
-    /// Workpiece name.
-    pub workpiece: String,
-    /// Run seed.
-    pub seed: u64,
-    /// Fixed compute budgets.
-    pub deterministic: bool,
+pub struct RunResult {
+    /// Per pick, when the run was asked to keep them ([`crate::cycle::RunOptions::keep_records`];
+    /// empty otherwise).
+    pub records: Vec<PickRecord>,
+    /// The run's tally, taken as each pick ended.
+    pub tally: Tally,
+    /// Per recognition result (kept when the run keeps its records, else empty).
+    pub recognition_per_capture: Vec<RecognitionReport>,
 }
 
-/// The summary of a run from its tally; `per_capture`: the recognition reports kept, if any.
-pub fn summarise(
-    label: RunLabel,
-    tally: &RunTally,
-    counts: RunCounts,
-    per_capture: Vec<RecognitionReport>,
-    ended: EndReason,
-    sim_time_s: f64,
-) -> RunSummary {
-    let t = tally;
-    RunSummary {
-        reference_takt_s: crate::reference::reference_takt(&label.workpiece),
-        workpiece: label.workpiece,
-        seed: label.seed,
-        deterministic: label.deterministic,
-        attempts: t.attempts,
-        placed: t.placed,
-        success_rate: if t.attempts == 0 {
-            f64::NAN
-        } else {
-            t.placed as f64 / t.attempts as f64
-        },
-        takt: TaktStats::of(&t.takts_s),
-        takt_excl_refills: TaktStats::of(&t.takts_excl_refills_s),
-        mean_pick_s: mean_of(t.pick_s.iter().copied()),
-        mean_place_s: mean_of(t.place_s.iter().copied()),
-        mean_compute_s: t.mean_compute_s(),
-        sensor_stalls: t.sensor_stalls,
-        compute_stalls: t.compute_stalls,
-        protective_stops: t.faults[0],
-        collisions: t.faults[1],
-        drops: t.faults[2],
-        parts_lost: counts.parts_lost,
-        captures: counts.captures,
-        refills: counts.refills,
-        agitations: counts.agitations,
-        place_tray_exchanges: counts.place_tray_exchanges,
-        peak_demand_ratio: counts.peak_demand_ratio,
-        saturated_s: t.saturated_s,
-        max_tracking_error_deg: t.max_tracking_error_deg,
-        grasps: t.grasps,
-        misrecognised: t.misrecognised,
-        blind_picks: t.blind_picks,
-        results_used: t.results_used,
-        picks_per_capture: if t.results_used > 0 {
-            t.set_out as f64 / t.results_used as f64
-        } else {
-            f64::NAN
-        },
-        recognition: t.recognition.summary(),
-        recognition_per_capture: per_capture,
-        ended,
-        sim_time_s,
-    }
+/// The takts (s): every release-to-release interval after the run's first release (the
+/// reference's definition).
+pub fn takts(records: &[PickRecord]) -> Vec<f64> {
+    records.iter().filter_map(|r| r.takt_s).collect()
 }

@@ -6,39 +6,16 @@
 //! checks `binpick check` and `batch` run: the trays within reach, each workpiece fitting the
 //! pick tray, the cup and the place tray, its shape building. The first variant refused stops the
 //! sweep; its error names the variant, the key and the value. Variants whose arm and hand are the
-//! same share one [`RobotModel`]; every run of a variant shares its resolved files.
+//! same share one arm model; every run of a variant shares its resolved files.
 //!
 //! Units: the files' own. Frames: none.
 
 use std::path::Path;
 
-use super::{Segment, SetArg, SweepError, Target, value_text};
+use super::{Segment, SetArg, Target, value_text};
 use crate::config::{ConfigError, LoadedScene, LoadedWorkpiece, scene_text, workpiece_text};
 use crate::robot::RobotModel;
-
-/// One variant, resolved: its values, its cell, its workpieces, which arm model it runs.
-#[derive(Debug, Clone)]
-pub struct Variant {
-    /// Its values, in `--set` order.
-    pub values: Vec<toml::Value>,
-    /// The cell with the values applied, validated.
-    pub scene: LoadedScene,
-    /// Index into [`Resolved::robots`].
-    pub robot: usize,
-    /// The workpieces with the values applied, validated, in `--workpieces` order.
-    pub workpieces: Vec<LoadedWorkpiece>,
-}
-
-/// Every variant of a sweep, and the arm models they share.
-#[derive(Debug, Clone)]
-pub struct Resolved {
-    /// The variants, in sweep order.
-    pub variants: Vec<Variant>,
-    /// Distinct arm models (one unless a variant changes the robot or the gripper).
-    pub robots: Vec<RobotModel>,
-    /// The cell file's label.
-    pub scene_label: String,
-}
+use crate::study::{Resolved, StudyError, Variant};
 
 /// Sets `path` in `table` to `value`: missing tables on the way are created (an unknown key is
 /// then refused by the strict deserialisation, as in a file); an index must name an element.
@@ -106,7 +83,7 @@ pub fn resolve(
     workpieces: &[String],
     sets: &[SetArg],
     values: &[Vec<toml::Value>],
-) -> Result<Resolved, SweepError> {
+) -> Result<Resolved, StudyError> {
     let (scene_label, scene_source, text) = scene_text(scene)?;
     let scene_tree = tree(&scene_label, &text)?;
     let mut wp_trees = Vec::new();
@@ -151,7 +128,7 @@ pub fn resolve(
             crate::physics::PartShape::build(&wp.workpiece, &wp.source)
                 .map_err(|e| ConfigError::one(&wl, "shape", e.to_string()))?;
             if wps.iter().any(|w| w.workpiece.name == wp.workpiece.name) {
-                return Err(SweepError::Input(format!(
+                return Err(StudyError::Input(format!(
                     "--workpieces: {} appears twice",
                     wp.workpiece.name
                 )));
@@ -177,7 +154,7 @@ mod tests {
     use super::super::{parse_sets, variants};
     use super::*;
 
-    fn run(sets: &[&str]) -> Result<Resolved, SweepError> {
+    fn run(sets: &[&str]) -> Result<Resolved, StudyError> {
         let sets = parse_sets(&sets.iter().map(|s| s.to_string()).collect::<Vec<_>>()).unwrap();
         resolve(None, &["A".into(), "E".into()], &sets, &variants(&sets))
     }

@@ -1,64 +1,39 @@
-//! A sweep's results: every run kept per variant, the table (one row per variant and workpiece,
-//! the batch table's columns after the variant's values), as Markdown and CSV, and the merge of
-//! a sweep's shards.
+//! A sweep's results: the table (one row per variant and workpiece, the batch table's columns
+//! after the variant's values), as Markdown and CSV, and the sweep's files.
 //!
 //! Units: s, counts. Rows are variant-major, then in workpiece order as given.
 
-use serde::{Deserialize, Serialize};
+use serde::Serialize;
+use serde_json::json;
 
-use super::{SweepError, SweepSpec};
-use crate::batch::{Row, RunEntry};
-
-/// One run of a sweep: the variant it ran and what a batch keeps of a run.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct SweepRun {
-    /// Index into [`SweepSpec::variants`].
-    pub variant: usize,
-    /// The run's values, as a batch keeps them.
-    pub run: RunEntry,
-}
-
-/// What `sweep.json` holds besides the table: the sweep, which shard, every run.
-#[derive(Debug, Clone, Serialize, Deserialize)]
-pub struct SweepFile {
-    /// binpick version.
-    pub version: String,
-    /// The whole sweep.
-    pub spec: SweepSpec,
-    /// This file's shard (K, N); (1, 1) for a whole sweep or a merge.
-    pub shard: (usize, usize),
-    /// Runs, in job order.
-    pub runs: Vec<SweepRun>,
-}
+use crate::results::Summary;
+use crate::results::table::num;
+use crate::study::{Outputs, StudyFile, StudySpec};
 
 /// One row of the sweep table: a workpiece under one variant.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub struct SweepRow {
-    /// Index into [`SweepSpec::variants`] (0-based; tables print it 1-based).
+    /// Index into [`StudySpec::variants`] (0-based; tables print it 1-based).
     pub variant: usize,
     /// The variant's values, in key order.
     pub values: Vec<String>,
-    /// 5th percentile of the takt (nearest rank) [s]: the lower edge of the charts' band.
+    /// 5th percentile of the takt (nearest rank) (s): the lower edge of the charts' band.
     pub takt_p5_s: f64,
     /// The batch table's row over this variant's runs of the workpiece.
-    pub row: Row,
+    pub row: Summary,
 }
 
 /// The table: for each variant, one row per workpiece that has runs.
-pub fn table(spec: &SweepSpec, runs: &[SweepRun]) -> Vec<SweepRow> {
+pub fn table(file: &StudyFile) -> Vec<SweepRow> {
+    let spec = &file.spec;
     let mut rows = Vec::new();
     for (v, values) in spec.variants.iter().enumerate() {
-        let entries: Vec<RunEntry> = runs.iter().filter(|r| r.variant == v).map(|r| r.run.clone()).collect();
-        for row in crate::batch::table(&spec.workpieces, &entries) {
-            let takts: Vec<f64> = entries
-                .iter()
-                .filter(|e| e.workpiece == row.workpiece)
-                .flat_map(|e| e.takts_s.iter().copied())
-                .collect();
+        let tallies = file.runs.iter().filter(|r| r.variant == v).map(|r| &r.tally);
+        for row in crate::results::per_workpiece(&spec.workpieces, tallies) {
             rows.push(SweepRow {
                 variant: v,
                 values: values.clone(),
-                takt_p5_s: crate::stats::percentile_sorted(&crate::stats::sorted(&takts), 0.05),
+                takt_p5_s: row.takt_p5_s,
                 row,
             });
         }
@@ -66,17 +41,9 @@ pub fn table(spec: &SweepSpec, runs: &[SweepRun]) -> Vec<SweepRow> {
     rows
 }
 
-fn num(v: f64, digits: usize) -> String {
-    if v.is_finite() {
-        format!("{v:.digits$}")
-    } else {
-        "-".into()
-    }
-}
-
 /// The table as Markdown: the figures a comparison reads first, one row per variant and
 /// workpiece (the full batch columns are in `sweep.csv`).
-pub fn markdown(spec: &SweepSpec, rows: &[SweepRow]) -> String {
+pub fn markdown(spec: &StudySpec, rows: &[SweepRow]) -> String {
     let mut md = String::from("| variant |");
     for k in &spec.keys {
         md += &format!(" `{k}` |");
@@ -91,22 +58,23 @@ pub fn markdown(spec: &SweepSpec, rows: &[SweepRow]) -> String {
         for v in &r.values {
             md += &format!(" {v} |");
         }
-        let faults = w.protective_stops + w.collisions + w.drops + w.parts_lost;
+        let f = w.tally.faults;
+        let faults = f.protective_stops + f.collisions + f.drops + f.parts_lost;
         md += &format!(
             " {} | {}/{} | {} % | {} | {} | {} | {} | {} | {}/{} | {} ({}) | {} | {} |\n",
-            w.workpiece,
-            w.placed,
-            w.attempts,
+            w.tally.workpiece,
+            w.tally.placed,
+            w.tally.attempts,
             num(100.0 * w.success_rate, 1),
             num(w.takt.mean_s, 3),
             num(r.takt_p5_s, 3),
             num(w.takt.p95_s, 3),
             w.reference_takt_s.map_or("-".into(), |t| num(t, 1)),
             num(w.motion_floor_s, 3),
-            w.grasps.1,
-            w.grasps.0,
-            w.sensor_waits.0,
-            num(w.sensor_waits.1, 3),
+            w.tally.grasps.1,
+            w.tally.grasps.0,
+            w.tally.sensor_waits.count,
+            num(w.tally.sensor_waits.mean_s(), 3),
             num(w.picks_per_capture, 2),
             faults,
         );
@@ -125,14 +93,14 @@ fn csv_field(s: &str) -> String {
 
 /// The table as CSV (`sweep.csv`): `variant`, one column per key (named by the key), the batch
 /// table's columns (`takt.csv`'s), then `takt_p5_s`.
-pub fn csv(spec: &SweepSpec, rows: &[SweepRow]) -> String {
+pub fn csv(spec: &StudySpec, rows: &[SweepRow]) -> String {
     let mut out = String::from("variant");
     for k in &spec.keys {
         out += &format!(",{}", csv_field(k));
     }
-    out += &format!(",{},takt_p5_s\n", crate::batch::table::TAKT_CSV_HEADER.join(","));
+    out += &format!(",{},takt_p5_s\n", crate::results::table::csv_header().join(","));
     for r in rows {
-        let body = crate::batch::csv(std::slice::from_ref(&r.row));
+        let body = crate::results::table::csv(std::slice::from_ref(&r.row));
         let line = body.lines().nth(1).unwrap_or_default();
         out += &(r.variant + 1).to_string();
         for v in &r.values {
@@ -148,45 +116,17 @@ pub fn csv(spec: &SweepSpec, rows: &[SweepRow]) -> String {
     out
 }
 
-/// Joins the `sweep.json` of every shard of one sweep: the specs must agree, and together the
-/// shards must cover each run exactly once. The runs come back in job order.
-pub fn merge(files: &[(String, SweepFile)]) -> Result<SweepFile, SweepError> {
-    let Some((first_path, first)) = files.first() else {
-        return Err(SweepError::Input("merge: no shard results given".into()));
-    };
-    let mut runs: Vec<&SweepRun> = Vec::new();
-    for (path, f) in files {
-        if f.spec != first.spec {
-            return Err(SweepError::Input(format!(
-                "merge: {path} is from another sweep than {first_path} ({} vs {})",
-                f.spec.name(),
-                first.spec.name()
-            )));
-        }
-        runs.extend(&f.runs);
-    }
-    let mut ordered = Vec::new();
-    for (v, w, s) in first.spec.jobs() {
-        let found: Vec<&&SweepRun> = runs
-            .iter()
-            .filter(|r| r.variant == v && r.run.workpiece == w && r.run.seed == s)
-            .collect();
-        match found.len() {
-            1 => ordered.push((*found[0]).clone()),
-            n => {
-                return Err(SweepError::Input(format!(
-                    "merge: run {w} seed {s} of variant {} ({}) is in {} of the shards given",
-                    v + 1,
-                    first.spec.describe(v),
-                    if n == 0 { "none".to_string() } else { n.to_string() }
-                )));
-            }
-        }
-    }
-    Ok(SweepFile {
-        version: first.version.clone(),
-        spec: first.spec.clone(),
-        shard: (1, 1),
-        runs: ordered,
-    })
+/// The sweep's files (`sweep.json`, `sweep.csv`, `sweep.md`, `sweep.svg`) and its table.
+pub fn outputs(file: &StudyFile) -> Outputs {
+    let rows = table(file);
+    let table = json!(rows);
+    let markdown = markdown(&file.spec, &rows);
+    let doc = json!({"sweep": file.to_json(), "table": table});
+    let files = vec![
+        ("sweep.json", crate::report::pretty_json(&doc)),
+        ("sweep.csv", csv(&file.spec, &rows)),
+        ("sweep.md", markdown.clone()),
+        ("sweep.svg", super::sweep_chart::sweep_svg(&file.spec, &rows)),
+    ];
+    Outputs { files, markdown, table }
 }

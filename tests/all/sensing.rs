@@ -419,7 +419,7 @@ fn the_capture_fires_at_the_earliest_moment() {
         ..Default::default()
     };
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut watch).unwrap();
-    assert_eq!((r.summary.agitations, r.summary.refills), (0, 0), "a steady run");
+    assert_eq!((r.tally.agitations, r.tally.refills), (0, 0), "a steady run");
     assert!(watch.captures.len() >= 5, "{:?}", watch.captures);
     let exposure_s = scene.scene.sensor.exposure_s;
     assert_eq!(late_captures(&watch, &watch.captures, exposure_s), Vec::<f64>::new());

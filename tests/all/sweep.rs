@@ -383,3 +383,84 @@ fn a_mesh_workpiece_goes_beside_each_variant() {
     }
     assert!(read(&dir.join("variant-2/workpiece-M.toml")).contains("friction = 0.5"));
 }
+
+/// Shards written before the study pipeline still merge: the golden `takt.json` (a batch
+/// written by an earlier binpick) split into two shard files reads back, merges into the same
+/// file as the whole one read, and is written again as the same document, table included.
+/// Negative controls: a run left out is refused, and one changed count shows in the document.
+#[test]
+fn shards_written_before_merge_into_the_same_file() {
+    use binpick::study::{StudyFile, merge};
+    let golden = crate::support::repo().join("tests/golden/batch-ABCDEF-seeds1-2-picks21-det/takt.json");
+    let text = std::fs::read_to_string(&golden).unwrap();
+    let doc: serde_json::Value = serde_json::from_str(&text).unwrap();
+    let whole = StudyFile::from_json(&doc).expect("the golden takt.json reads");
+    assert!(whole.spec.is_batch() && whole.runs.len() == 12);
+    // Split as `--shard K/2` would, each shard file written in the old layout.
+    let shard = |k: usize| {
+        let mut v = doc["batch"].clone();
+        let runs: Vec<serde_json::Value> = v["runs"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .skip(k - 1)
+            .step_by(2)
+            .cloned()
+            .collect();
+        v["runs"] = runs.into();
+        v["shard"] = serde_json::json!([k, 2]);
+        let f = StudyFile::from_json(&serde_json::json!({ "batch": v })).unwrap();
+        (format!("shard{k}"), f)
+    };
+    let merged = merge(&[shard(2), shard(1)]).unwrap();
+    assert_eq!(merged, whole);
+    let takt_json = |f: &StudyFile| {
+        let files = binpick::batch::outputs(f).files;
+        files.into_iter().find(|(n, _)| *n == "takt.json").unwrap().1
+    };
+    let written = takt_json(&merged);
+    assert!(
+        written == takt_json(&whole),
+        "the merge is not the whole batch's takt.json"
+    );
+    // The same document as the golden one: every key, every count, every number (serde_json
+    // reads a decimal to within one unit in the last place, so numbers compare to 1e-15).
+    let written: serde_json::Value = serde_json::from_str(&written).unwrap();
+    assert_eq!(same_numbers(&written, &doc), Ok(()));
+    // A run left out: refused.
+    let (p, mut f) = shard(1);
+    f.runs.pop();
+    let e = merge(&[(p, f), shard(2)]).unwrap_err().to_string();
+    assert!(e.contains("is in none of the shards given"), "{e}");
+    // A count changed: the table written differs.
+    let mut changed = merged.clone();
+    changed.runs[0].tally.agitations += 1;
+    let changed: serde_json::Value = serde_json::from_str(&takt_json(&changed)).unwrap();
+    assert!(same_numbers(&changed, &doc).is_err(), "a changed count must show");
+}
+
+/// Whether two JSON documents have the same keys, texts and counts, and numbers equal to a
+/// relative 1e-15; else the first path that differs.
+fn same_numbers(a: &serde_json::Value, b: &serde_json::Value) -> Result<(), String> {
+    use serde_json::Value;
+    match (a, b) {
+        (Value::Number(x), Value::Number(y)) if x.is_f64() || y.is_f64() => {
+            let (x, y) = (x.as_f64().unwrap(), y.as_f64().unwrap());
+            if (x - y).abs() <= 1e-15 * x.abs().max(y.abs()) {
+                Ok(())
+            } else {
+                Err(format!("{x} vs {y}"))
+            }
+        }
+        (Value::Array(x), Value::Array(y)) if x.len() == y.len() => x
+            .iter()
+            .zip(y)
+            .enumerate()
+            .try_for_each(|(i, (x, y))| same_numbers(x, y).map_err(|e| format!("[{i}] {e}"))),
+        (Value::Object(x), Value::Object(y)) if x.keys().eq(y.keys()) => x
+            .iter()
+            .try_for_each(|(k, v)| same_numbers(v, &y[k]).map_err(|e| format!(".{k} {e}"))),
+        _ if a == b => Ok(()),
+        _ => Err(format!("{a} vs {b}")),
+    }
+}

@@ -10,8 +10,9 @@
 
 use std::fmt::Write;
 
-use super::{SweepRow, SweepSpec};
-use crate::batch::chart::{Plot, colour, escape, open, tick_label, ticks};
+use super::SweepRow;
+use crate::study::StudySpec;
+use crate::svg::{Plot, colour, escape, open, tick_label, ticks};
 
 /// The unit a key's name ends in (`_m` → m, `_s` → s, `_m_s2` → m/s², ...); `-` when it carries
 /// none (counts and ratios).
@@ -47,7 +48,7 @@ pub fn axis_label(key: &str) -> String {
 }
 
 /// `sweep.svg` of a sweep's table.
-pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
+pub fn sweep_svg(spec: &StudySpec, rows: &[SweepRow]) -> String {
     // The x positions: the first key's distinct values, numeric if they all are.
     let mut xs: Vec<String> = Vec::new();
     for v in &spec.variants {
@@ -200,7 +201,7 @@ pub fn sweep_svg(spec: &SweepSpec, rows: &[SweepRow]) -> String {
             let col = colour(i);
             let mut pts: Vec<(f64, &SweepRow)> = rows
                 .iter()
-                .filter(|r| &r.row.workpiece == w && r.values[1..] == rest[..])
+                .filter(|r| &r.row.tally.workpiece == w && r.values[1..] == rest[..])
                 .map(|r| (pos(&r.values[0]), r))
                 .collect();
             pts.sort_by(|a, b| a.0.total_cmp(&b.0));

@@ -1,0 +1,191 @@
+//! Report stage: `takt.svg` of a batch (per workpiece: the takt's mean, its p5–p95 spread and
+//! min–max, the reference's takt and the physical floor as marks; success beside it), drawn
+//! with the shared helpers of [`crate::svg`].
+//!
+//! Units: s on the takt axis, % on the success axis; SVG user units (px) for the drawing.
+
+use std::fmt::Write;
+
+use crate::svg::{Plot, colour, escape, open, ticks};
+
+/// One workpiece of a batch as `takt.svg` draws it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TaktBar {
+    /// Workpiece.
+    pub workpiece: String,
+    /// Takt mean, 5th and 95th percentiles, min, max (s) (NaN when the runs placed too little).
+    pub mean_s: f64,
+    /// 5th percentile (s).
+    pub p5_s: f64,
+    /// 95th percentile (s).
+    pub p95_s: f64,
+    /// Minimum (s).
+    pub min_s: f64,
+    /// Maximum (s).
+    pub max_s: f64,
+    /// The reference's takt (s), if it has one for this workpiece.
+    pub reference_s: Option<f64>,
+    /// The physical floor (s) (mean Pick + Place), if known.
+    pub floor_s: Option<f64>,
+    /// placed / attempts.
+    pub success: f64,
+}
+
+/// `takt.svg`: per workpiece the takt (mean as a dot, p5–p95 as a box, min–max as a whisker),
+/// the reference's takt (a black diamond) and the physical floor (a dashed bar); success [%] in
+/// a panel beside it.
+pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
+    let n = bars.len().max(1) as f64;
+    let slot = 90.0;
+    let takt_w = (slot * n).max(360.0);
+    let width = 90.0 + takt_w + 90.0 + (48.0 * n).max(200.0) + 40.0;
+    let height = 460.0;
+    let mut svg = open(width, height, title);
+    let top = bars
+        .iter()
+        .flat_map(|b| [b.max_s, b.p95_s, b.reference_s.unwrap_or(0.0), b.floor_s.unwrap_or(0.0)])
+        .filter(|v| v.is_finite())
+        .fold(1.0, f64::max);
+    let (yt, _, y_hi) = ticks(0.0, top * 1.05, 6.0);
+    let plot = Plot {
+        x0: 90.0,
+        y0: 70.0,
+        w: takt_w,
+        h: 320.0,
+        x_range: (0.0, n),
+        y_range: (0.0, y_hi),
+    };
+    plot.y_axis(&mut svg, &yt, "takt [s]");
+    plot.x_label(&mut svg, "workpiece");
+    for (i, b) in bars.iter().enumerate() {
+        let c = colour(i);
+        let cx = plot.x(i as f64 + 0.5);
+        let _ = writeln!(
+            svg,
+            r#"<g class="series" data-workpiece="{}"><title>{}: takt mean {:.3} s, p5–p95 {:.3}–{:.3} s, min–max {:.3}–{:.3} s</title>"#,
+            escape(&b.workpiece),
+            escape(&b.workpiece),
+            b.mean_s,
+            b.p5_s,
+            b.p95_s,
+            b.min_s,
+            b.max_s
+        );
+        if b.min_s.is_finite() && b.max_s.is_finite() {
+            let _ = writeln!(
+                svg,
+                r##"<line x1="{cx:.1}" y1="{:.1}" x2="{cx:.1}" y2="{:.1}" stroke="#666"/>"##,
+                plot.y(b.min_s),
+                plot.y(b.max_s)
+            );
+        }
+        if b.p5_s.is_finite() && b.p95_s.is_finite() {
+            let _ = writeln!(
+                svg,
+                r##"<rect x="{:.1}" y="{:.1}" width="28" height="{:.1}" fill="{c}" fill-opacity="0.35" stroke="{c}"/>"##,
+                cx - 14.0,
+                plot.y(b.p95_s),
+                (plot.y(b.p5_s) - plot.y(b.p95_s)).max(1.0)
+            );
+        }
+        if b.mean_s.is_finite() {
+            let y = plot.y(b.mean_s);
+            let _ = writeln!(
+                svg,
+                r##"<circle cx="{cx:.1}" cy="{y:.1}" r="5" fill="{c}" stroke="#222"/><text x="{:.1}" y="{:.1}" class="note">{:.2}</text>"##,
+                cx + 18.0,
+                y + 4.0,
+                b.mean_s
+            );
+        }
+        if let Some(r) = b.reference_s {
+            let y = plot.y(r);
+            let _ = writeln!(
+                svg,
+                r##"<path d="M{:.1} {y:.1} l6 -6 l6 6 l-6 6 z" fill="#111"><title>reference takt {r:.1} s</title></path>"##,
+                cx - 30.0
+            );
+        }
+        if let Some(f) = b.floor_s.filter(|f| f.is_finite()) {
+            let y = plot.y(f);
+            let _ = writeln!(
+                svg,
+                r##"<line x1="{:.1}" y1="{y:.1}" x2="{:.1}" y2="{y:.1}" stroke="#111" stroke-width="2" stroke-dasharray="4 3"><title>physical floor {f:.3} s</title></line>"##,
+                cx - 22.0,
+                cx + 22.0
+            );
+        }
+        let _ = writeln!(
+            svg,
+            r#"<text x="{cx:.1}" y="{:.1}" text-anchor="middle" class="axis">{}</text></g>"#,
+            plot.y0 + plot.h + 18.0,
+            escape(&b.workpiece)
+        );
+    }
+    // Success beside it.
+    let (st, _, _) = ticks(0.0, 100.0, 5.0);
+    let sp = Plot {
+        x0: plot.x0 + plot.w + 90.0,
+        y0: 70.0,
+        w: (48.0 * n).max(200.0),
+        h: 320.0,
+        x_range: (0.0, n),
+        y_range: (0.0, 100.0),
+    };
+    sp.y_axis(&mut svg, &st, "success [%]");
+    sp.x_label(&mut svg, "workpiece");
+    for (i, b) in bars.iter().enumerate() {
+        let cx = sp.x(i as f64 + 0.5);
+        let pct = 100.0 * b.success;
+        if pct.is_finite() {
+            let _ = writeln!(
+                svg,
+                r#"<rect x="{:.1}" y="{:.1}" width="24" height="{:.1}" fill="{}"><title>{}: success {pct:.1} %</title></rect><text x="{cx:.1}" y="{:.1}" text-anchor="middle" class="note">{pct:.0}</text>"#,
+                cx - 12.0,
+                sp.y(pct),
+                sp.y(0.0) - sp.y(pct),
+                colour(i),
+                escape(&b.workpiece),
+                sp.y(pct) - 4.0
+            );
+        }
+        let _ = writeln!(
+            svg,
+            r#"<text x="{cx:.1}" y="{:.1}" text-anchor="middle" class="axis">{}</text>"#,
+            sp.y0 + sp.h + 18.0,
+            escape(&b.workpiece)
+        );
+    }
+    let ly = 48.0;
+    let _ = writeln!(
+        svg,
+        r##"<g class="legend"><circle cx="96" cy="{ly:.1}" r="5" fill="#999" stroke="#222"/><text x="106" y="{:.1}" class="note">takt mean</text><rect x="180" y="{:.1}" width="14" height="12" fill="#999" fill-opacity="0.35" stroke="#999"/><text x="200" y="{:.1}" class="note">p5–p95</text><line x1="260" y1="{:.1}" x2="260" y2="{:.1}" stroke="#666"/><text x="268" y="{:.1}" class="note">min–max</text><path d="M330 {ly:.1} l6 -6 l6 6 l-6 6 z" fill="#111"/><text x="348" y="{:.1}" class="note">reference takt</text><line x1="440" y1="{ly:.1}" x2="470" y2="{ly:.1}" stroke="#111" stroke-width="2" stroke-dasharray="4 3"/><text x="476" y="{:.1}" class="note">physical floor (Pick + Place)</text></g>"##,
+        ly + 4.0,
+        ly - 6.0,
+        ly + 4.0,
+        ly - 7.0,
+        ly + 7.0,
+        ly + 4.0,
+        ly + 4.0,
+        ly + 4.0
+    );
+    svg += "</svg>\n";
+    svg
+}
+
+/// The bars of a batch table: its rows.
+pub fn takt_bars(rows: &[crate::results::Summary]) -> Vec<TaktBar> {
+    rows.iter()
+        .map(|r| TaktBar {
+            workpiece: r.tally.workpiece.clone(),
+            mean_s: r.takt.mean_s,
+            p5_s: r.takt_p5_s,
+            p95_s: r.takt.p95_s,
+            min_s: r.takt.min_s,
+            max_s: r.takt.max_s,
+            reference_s: r.reference_takt_s,
+            floor_s: r.motion_floor_s.is_finite().then_some(r.motion_floor_s),
+            success: r.success_rate,
+        })
+        .collect()
+}

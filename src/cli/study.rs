@@ -1,0 +1,277 @@
+//! What `binpick batch` and `binpick sweep` share, the two front ends of one study: the
+//! arguments that say which runs to make and how, the run with a progress bar, the writing of
+//! the results folder and its table on stdout, and `binpick merge` of a study's shards (a
+//! batch's or a sweep's).
+
+use std::path::{Path, PathBuf};
+
+use anyhow::{Context, Result};
+use clap::Args;
+
+use super::{InputError, Interrupted, ModeArgs, check_picks, stop_on_ctrl_c};
+use binpick::cycle::EndReason;
+use binpick::report::RunDir;
+use binpick::study::{Outputs, RecordTo, Resolved, RunSettings, StudyError, StudyFile, StudySpec};
+
+/// Which runs a study makes, and how: the arguments batch and sweep share.
+#[derive(Args)]
+pub struct StudyArgs {
+    /// Workpieces, comma-separated: A ... F (embedded) or paths to workpiece files.
+    #[arg(long, default_value = "A,B,C,D,E,F")]
+    pub workpieces: String,
+    /// Picks per run (the first of each run follows the initial sensing and has no takt).
+    #[arg(long, default_value_t = 21)]
+    pub picks: usize,
+    /// Seeds: 1-3, or 1,2,5.
+    #[arg(long, default_value = "1")]
+    pub seeds: String,
+    /// Runs in parallel (default: the machine's cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Run only the K-th of N disjoint slices of the runs (1-based), e.g. 2/4.
+    #[arg(long)]
+    pub shard: Option<String>,
+    #[command(flatten)]
+    pub mode: ModeArgs,
+}
+
+/// [`StudyArgs`] checked: seeds, shard (k of n), threads and workpiece names.
+pub struct Study {
+    /// Seeds.
+    pub seeds: Vec<u64>,
+    /// This shard, k of n (1 of 1: all).
+    pub shard: (usize, usize),
+    /// Runs in parallel.
+    pub threads: usize,
+    /// Workpiece names or paths, as given.
+    pub workpieces: Vec<String>,
+}
+
+/// A study's error as the command line reports it: bad input exits 2.
+pub fn study_error(e: StudyError) -> anyhow::Error {
+    match e {
+        StudyError::Input(m) => InputError(m).into(),
+        StudyError::Config(c) => c.into(),
+        other => other.into(),
+    }
+}
+
+impl StudyArgs {
+    /// The arguments checked; a bad one is an input error naming the option.
+    pub fn checked(&self) -> Result<Study> {
+        check_picks(self.picks)?;
+        let seeds = binpick::study::parse_seeds(&self.seeds).map_err(study_error)?;
+        let shard = match &self.shard {
+            Some(t) => binpick::study::parse_shard(t).map_err(study_error)?,
+            None => (1, 1),
+        };
+        let threads = match self.jobs {
+            Some(0) => return Err(InputError("--jobs must be at least 1, got 0".into()).into()),
+            Some(j) => j,
+            None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+        };
+        let mut workpieces = Vec::new();
+        for name in self.workpieces.split(',').map(str::trim) {
+            if name.is_empty() {
+                return Err(InputError(format!("--workpieces: empty name in {:?}", self.workpieces)).into());
+            }
+            workpieces.push(name.to_string());
+        }
+        Ok(Study {
+            seeds,
+            shard,
+            threads,
+            workpieces,
+        })
+    }
+}
+
+/// A study's results folder, named for the spec and the shard.
+pub fn results_dir(out: &Path, spec: &StudySpec, (k, n): (usize, usize)) -> Result<RunDir> {
+    let name = if n > 1 {
+        format!("{}-shard{k}of{n}", spec.name())
+    } else {
+        spec.name()
+    };
+    Ok(RunDir::create(out, &name)?)
+}
+
+/// Wall times of a study: the whole study's and the sum of its runs' (s) (NaN, `None` when not
+/// known, as for a merge of deterministic shards).
+pub struct WallTimes {
+    /// The study, start to end.
+    pub study_s: f64,
+    /// Its runs, summed.
+    pub runs_s: Option<f64>,
+    /// Threads the runs went on.
+    pub threads: usize,
+}
+
+/// Runs this shard of the study with a progress bar; records each run into `dir` in `record`'s
+/// formats, if any. Returns the study's file and its wall times.
+pub fn run(
+    resolved: &Resolved,
+    spec: StudySpec,
+    study: &Study,
+    dir: &RunDir,
+    record: Option<binpick::record::Formats>,
+) -> Result<(StudyFile, WallTimes)> {
+    let (k, n) = study.shard;
+    let mine = binpick::study::shard(&spec.jobs(), k, n);
+    let bar = indicatif::ProgressBar::new(mine.len() as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}")
+            .context("the progress bar's template")?
+            .progress_chars("=> "),
+    );
+    let settings = RunSettings {
+        threads: study.threads,
+        record: record.filter(|f| f.any()).map(|formats| RecordTo {
+            dir: dir.staging_dir(),
+            formats,
+        }),
+        stop: Some(stop_on_ctrl_c()),
+    };
+    let wall = std::time::Instant::now();
+    let runs = binpick::study::run_study(resolved, &spec, &mine, &settings, &|_| bar.inc(1));
+    bar.finish_and_clear();
+    let runs = runs.map_err(study_error)?;
+    let times = WallTimes {
+        study_s: wall.elapsed().as_secs_f64(),
+        runs_s: Some(runs.iter().filter_map(|r| r.tally.wall_s).sum()),
+        threads: study.threads,
+    };
+    Ok((StudyFile::new(spec, study.shard, runs), times))
+}
+
+/// Writes the study's files (a batch's `takt.*`, a sweep's `sweep.*`), moves the folder into
+/// place and prints the table; an interrupted run makes it exit 130.
+pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> Result<()> {
+    let Outputs {
+        files,
+        markdown: md,
+        table,
+    } = if file.spec.is_batch() {
+        binpick::batch::outputs(file)
+    } else {
+        binpick::sweep::outputs(file)
+    };
+    for (name, text) in &files {
+        dir.write(name, text)?;
+    }
+    let dest = dir.finish()?;
+    let done = || -> Result<()> {
+        if file.runs.iter().any(|r| r.tally.ended == EndReason::Interrupted) {
+            Err(Interrupted(dest.display().to_string()).into())
+        } else {
+            Ok(())
+        }
+    };
+    if json {
+        let out = serde_json::json!({"table": table, "wall_s": times.study_s, "dir": dest.display().to_string()});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return done();
+    }
+    let spec = &file.spec;
+    let (k, n) = file.shard;
+    let mode = if spec.deterministic {
+        ", deterministic compute budgets"
+    } else {
+        ", measured compute"
+    };
+    let shard = if n > 1 {
+        format!(", shard {k} of {n}")
+    } else {
+        String::new()
+    };
+    let sim_s: f64 = file.runs.iter().map(|r| r.tally.sim_time_s).sum();
+    // A merge of deterministic shards knows no wall time.
+    let wall = if times.study_s.is_finite() {
+        format!(", {:.1} s wall on {} threads", times.study_s, times.threads)
+    } else {
+        String::new()
+    };
+    if spec.is_batch() {
+        println!(
+            "{} runs of {} picks{mode}{shard}, seeds {:?}\n",
+            file.runs.len(),
+            spec.picks,
+            spec.seeds
+        );
+        print!("{md}");
+        println!(
+            "\ntakt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; grasps sealed / attempted; recognition against the truth at each trigger (correct = within 2 mm and 5 deg of a part; recall over the top layer); torque demand before saturation; {sim_s:.1} s simulated{}{wall}",
+            times.runs_s.map_or(String::new(), |w| format!(
+                " in {w:.1} s of run time ({:.0}x real time per core)",
+                sim_s / w.max(1e-9)
+            )),
+        );
+    } else {
+        println!(
+            "{} variants x {} workpieces x {} seeds: {} runs of {} picks{mode}{shard}\n",
+            spec.variants.len(),
+            spec.workpieces.len(),
+            spec.seeds.len(),
+            file.runs.len(),
+            spec.picks,
+        );
+        print!("{md}");
+        println!(
+            "\ntakt as the reference defines it (see `binpick batch`); p5 and p95 are the 5th and 95th percentiles of every interval; faults = protective stops + collisions + drops + parts lost; every column of the batch table is in sweep.csv; {sim_s:.1} s simulated{wall}"
+        );
+    }
+    println!("wrote {}", dest.display());
+    done()
+}
+
+/// Copies the files and folders of a shard's folder that are not its results (the resolved
+/// inputs, a sweep's variants, recordings) into the merge's folder.
+fn copy_inputs(from: &Path, dir: &RunDir, sub: &str) -> Result<()> {
+    for entry in std::fs::read_dir(from).with_context(|| from.display().to_string())? {
+        let entry = entry?;
+        let name = entry.file_name().to_string_lossy().into_owned();
+        let rel = if sub.is_empty() {
+            name.clone()
+        } else {
+            format!("{sub}/{name}")
+        };
+        if entry.file_type()?.is_dir() {
+            std::fs::create_dir_all(dir.path(&rel))?;
+            copy_inputs(&entry.path(), dir, &rel)?;
+        } else if !(sub.is_empty() && (name.starts_with("takt.") || name.starts_with("sweep."))) {
+            dir.write(&rel, std::fs::read(entry.path())?)?;
+        }
+    }
+    Ok(())
+}
+
+/// `binpick merge`: the shards of one study (folders holding a `takt.json`, or a
+/// `sweep.json`) into its table.
+pub fn merge(dirs: &[PathBuf], out: &Path, json: bool) -> Result<()> {
+    let mut files = Vec::new();
+    for d in dirs {
+        let path = if d.join("sweep.json").is_file() {
+            d.join("sweep.json")
+        } else {
+            d.join("takt.json")
+        };
+        let text =
+            std::fs::read_to_string(&path).map_err(|e| InputError(format!("{}: cannot read: {e}", path.display())))?;
+        let f = serde_json::from_str(&text)
+            .map_err(|e| e.to_string())
+            .and_then(|v| StudyFile::from_json(&v))
+            .map_err(|e| InputError(format!("{}: not a batch or sweep result: {e}", path.display())))?;
+        files.push((path.display().to_string(), f));
+    }
+    let merged = binpick::study::merge(&files).map_err(study_error)?;
+    let dir = RunDir::create(out, &merged.spec.name())?;
+    // The shards' resolved inputs are the same; the first one's go with the merge.
+    copy_inputs(&dirs[0], &dir, "")?;
+    let runs_s: Option<f64> = merged.runs.iter().map(|r| r.tally.wall_s).sum();
+    let times = WallTimes {
+        study_s: runs_s.unwrap_or(f64::NAN),
+        runs_s,
+        threads: 1,
+    };
+    finish(dir, &merged, &times, json)
+}

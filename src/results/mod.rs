@@ -1,0 +1,104 @@
+//! Results: the figures of a run or of many runs, and how they are written.
+//!
+//! Job: from one [`Tally`] (a run's, or the merge of several runs': see
+//! [`crate::cycle::records`]) derive its [`Summary`] (rates, means, takt statistics,
+//! percentiles), and write it: the takt table's columns ([`table`]: one list gives the
+//! Markdown, the CSV and the JSON of a row) and a run's `summary.json` ([`run_summary`]).
+//!
+//! Takt, as the reference system defines it (its Table 5: the mean of consecutive Pick-and-Place
+//! cycles, only the very first cycle's sensing and motion generation excluded): the intervals
+//! between consecutive releases after a run's first release, everything in between included
+//! (failed picks, re-captures, waits, tray refills). The takt "excluding tray refills" leaves out
+//! the intervals that span a refill: a labelled side figure, not the headline. Success = placed /
+//! attempts, where every pick counts as an attempt: a re-capture (nothing detected, nothing
+//! graspable), a grasp failure, a drop and a missing motion too.
+//!
+//! Units: s (ms in the Markdown's compute column), mm and deg where a name says so, counts.
+
+pub mod run_summary;
+pub mod table;
+
+pub use crate::cycle::{Faults, StageCompute, Tally, Waits};
+pub use run_summary::RunSummary;
+
+use crate::sensor::RecognitionSummary;
+use crate::stats::{Summary as Stats, mean, median_min_max, percentile_sorted, sorted};
+
+/// What a tally comes to: the tally itself (its counts are read from it) and the figures derived
+/// from it.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// The tally summarised.
+    pub tally: Tally,
+    /// placed / attempts.
+    pub success_rate: f64,
+    /// Takt as the reference defines it: every release-to-release interval after a run's first.
+    pub takt: Stats,
+    /// The same, leaving out the intervals that span a pick-tray refill (a side figure).
+    pub takt_excl_refills: Stats,
+    /// 5th percentile of the takt (nearest rank) (s): the lower edge of the charts' band.
+    pub takt_p5_s: f64,
+    /// The reference system's takt for this workpiece (s), if it is one of A..F.
+    pub reference_takt_s: Option<f64>,
+    /// Mean Pick time over the placed picks (s).
+    pub mean_pick_s: f64,
+    /// Mean Place time over the placed picks (s).
+    pub mean_place_s: f64,
+    /// The physical floor (s): the takt with instantaneous sensing and compute, motion time only
+    /// (mean Pick + Place of the placed picks).
+    pub motion_floor_s: f64,
+    /// Mean compute charged per pick the arm set out to make, per stage (s).
+    pub mean_compute: StageCompute,
+    /// Median compute between a pick's result and the motion it unblocks (grasp and Pick) (s).
+    pub median_result_to_motion_s: f64,
+    /// Grasps sealed / attempted.
+    pub grasp_success_rate: f64,
+    /// Picks the arm set out to make per recognition result they came from.
+    pub picks_per_capture: f64,
+    /// Recognition over the results used, against the truth at each trigger.
+    pub recognition: RecognitionSummary,
+}
+
+/// `a / b`, NaN when `b` is 0.
+fn ratio(a: usize, b: usize) -> f64 {
+    if b == 0 { f64::NAN } else { a as f64 / b as f64 }
+}
+
+impl Summary {
+    /// The figures of `tally`.
+    pub fn of(tally: &Tally) -> Summary {
+        let t = tally;
+        let (mean_pick_s, mean_place_s) = (mean(&t.pick_s), mean(&t.place_s));
+        Summary {
+            success_rate: ratio(t.placed, t.attempts),
+            takt: Stats::of(&t.takts_s),
+            takt_excl_refills: Stats::of(&t.takts_excl_refills_s),
+            takt_p5_s: percentile_sorted(&sorted(&t.takts_s), 0.05),
+            reference_takt_s: crate::reference::reference_takt(&t.workpiece),
+            mean_pick_s,
+            mean_place_s,
+            motion_floor_s: mean_pick_s + mean_place_s,
+            mean_compute: t.compute_sum.per(t.set_out),
+            median_result_to_motion_s: median_min_max(&t.result_to_motion_s).0,
+            grasp_success_rate: ratio(t.grasps.1, t.grasps.0),
+            picks_per_capture: ratio(t.set_out, t.results_used),
+            recognition: t.recognition.summary(),
+            tally: tally.clone(),
+        }
+    }
+
+    /// The largest |demanded torque| / limit over every joint (before saturation).
+    pub fn peak_demand_ratio(&self) -> f64 {
+        self.tally.peak_demand_ratio.iter().copied().fold(0.0, f64::max)
+    }
+}
+
+/// One summary per workpiece of `order` that has runs in `tallies`, over all its runs (in the
+/// order given).
+pub fn per_workpiece<'a>(order: &[String], tallies: impl Iterator<Item = &'a Tally> + Clone) -> Vec<Summary> {
+    order
+        .iter()
+        .filter_map(|w| Tally::merged(tallies.clone().filter(|t| &t.workpiece == w)))
+        .map(|t| Summary::of(&t))
+        .collect()
+}

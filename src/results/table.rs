@@ -1,0 +1,348 @@
+//! The takt table's columns, listed once: each metric with its JSON keys (`takt.json`'s and
+//! `sweep.json`'s table rows), its CSV columns (`takt.csv`, `sweep.csv`: the header is this
+//! list's names) and its Markdown columns (`takt.md`). Adding a metric to the table is one entry
+//! here.
+//!
+//! Units: as the names say (s; ms in the Markdown's compute column; % in its rates); CSV numbers
+//! with 6 decimals, empty where absent; Markdown `-` where absent.
+
+use serde::{Serialize, Serializer};
+use serde_json::{Value, json};
+
+use super::Summary;
+
+/// A JSON key of a row and its value (`None`: the key is left out).
+type JsonCell = (&'static str, fn(&Summary) -> Option<Value>);
+/// A CSV column: its name and its text.
+type CsvCell = (&'static str, fn(&Summary) -> String);
+/// A Markdown column: its header, whether it is right-aligned, and its text.
+type MdCell = (&'static str, bool, fn(&Summary) -> String);
+
+/// One metric of the table, as each format writes it.
+pub struct Column {
+    /// Keys of the JSON row.
+    pub json: &'static [JsonCell],
+    /// Columns of the CSV file, in file order.
+    pub csv: &'static [CsvCell],
+    /// Columns of the Markdown table.
+    pub md: &'static [MdCell],
+}
+
+/// A number with `d` decimals; `-` when not finite (Markdown).
+pub fn num(v: f64, d: usize) -> String {
+    if v.is_finite() { format!("{v:.d$}") } else { "-".into() }
+}
+
+/// A number with 6 decimals; empty when not finite (CSV).
+pub fn f6(v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.6}")
+    } else {
+        String::new()
+    }
+}
+
+fn val(v: impl Serialize) -> Option<Value> {
+    Some(json!(v))
+}
+
+/// The table's metrics, in CSV order.
+pub const COLUMNS: &[Column] = &[
+    Column {
+        json: &[("workpiece", |s| val(&s.tally.workpiece))],
+        csv: &[("workpiece", |s| s.tally.workpiece.clone())],
+        md: &[("part", false, |s| s.tally.workpiece.clone())],
+    },
+    Column {
+        json: &[("runs", |s| val(s.tally.runs))],
+        csv: &[("runs", |s| s.tally.runs.to_string())],
+        md: &[("runs", true, |s| s.tally.runs.to_string())],
+    },
+    Column {
+        json: &[
+            ("attempts", |s| val(s.tally.attempts)),
+            ("placed", |s| val(s.tally.placed)),
+        ],
+        csv: &[
+            ("attempts", |s| s.tally.attempts.to_string()),
+            ("placed", |s| s.tally.placed.to_string()),
+        ],
+        md: &[("placed / attempts", true, |s| {
+            format!("{}/{}", s.tally.placed, s.tally.attempts)
+        })],
+    },
+    Column {
+        json: &[("success_rate", |s| val(s.success_rate))],
+        csv: &[("success_rate", |s| f6(s.success_rate))],
+        md: &[("success", true, |s| format!("{} %", num(100.0 * s.success_rate, 1)))],
+    },
+    Column {
+        json: &[("takt", |s| val(s.takt))],
+        csv: &[
+            ("takt_mean_s", |s| f6(s.takt.mean_s)),
+            ("takt_p95_s", |s| f6(s.takt.p95_s)),
+            ("takt_min_s", |s| f6(s.takt.min_s)),
+            ("takt_max_s", |s| f6(s.takt.max_s)),
+            ("takt_count", |s| s.takt.count.to_string()),
+        ],
+        md: &[
+            ("takt mean [s]", true, |s| num(s.takt.mean_s, 3)),
+            ("p95", true, |s| num(s.takt.p95_s, 3)),
+            ("min", true, |s| num(s.takt.min_s, 3)),
+            ("max", true, |s| num(s.takt.max_s, 3)),
+        ],
+    },
+    Column {
+        json: &[("reference_takt_s", |s| val(s.reference_takt_s))],
+        csv: &[("reference_takt_s", |s| s.reference_takt_s.map_or(String::new(), f6))],
+        md: &[("reference [s]", true, |s| {
+            s.reference_takt_s.map_or("-".into(), |t| num(t, 1))
+        })],
+    },
+    Column {
+        json: &[("takt_excl_refills", |s| val(s.takt_excl_refills))],
+        csv: &[("takt_excl_refills_mean_s", |s| f6(s.takt_excl_refills.mean_s))],
+        md: &[("takt excl. tray refills [s]", true, |s| {
+            num(s.takt_excl_refills.mean_s, 3)
+        })],
+    },
+    Column {
+        json: &[("mean_pick_s", |s| val(s.mean_pick_s))],
+        csv: &[("mean_pick_s", |s| f6(s.mean_pick_s))],
+        md: &[("Pick [s]", true, |s| num(s.mean_pick_s, 3))],
+    },
+    Column {
+        json: &[("mean_place_s", |s| val(s.mean_place_s))],
+        csv: &[("mean_place_s", |s| f6(s.mean_place_s))],
+        md: &[("Place [s]", true, |s| num(s.mean_place_s, 3))],
+    },
+    Column {
+        json: &[("motion_floor_s", |s| val(s.motion_floor_s))],
+        csv: &[("motion_floor_s", |s| f6(s.motion_floor_s))],
+        md: &[("motion floor [s]", true, |s| num(s.motion_floor_s, 3))],
+    },
+    Column {
+        json: &[("mean_compute_s", |s| val(s.mean_compute))],
+        csv: &[
+            ("mean_grasp_compute_s", |s| f6(s.mean_compute.grasp_s)),
+            ("mean_pick_compute_s", |s| f6(s.mean_compute.pick_s)),
+            ("mean_place_compute_s", |s| f6(s.mean_compute.place_s)),
+        ],
+        md: &[("compute grasp/Pick/Place [ms]", true, |s| {
+            let c = s.mean_compute;
+            format!(
+                "{}/{}/{}",
+                num(c.grasp_s * 1e3, 1),
+                num(c.pick_s * 1e3, 1),
+                num(c.place_s * 1e3, 1)
+            )
+        })],
+    },
+    Column {
+        json: &[("median_result_to_motion_s", |s| val(s.median_result_to_motion_s))],
+        csv: &[("median_result_to_motion_compute_s", |s| f6(s.median_result_to_motion_s))],
+        md: &[("result to motion median [ms]", true, |s| {
+            num(s.median_result_to_motion_s * 1e3, 1)
+        })],
+    },
+    Column {
+        json: &[("sensor_waits", |s| {
+            val((s.tally.sensor_waits.count, s.tally.sensor_waits.mean_s()))
+        })],
+        csv: &[
+            ("sensor_waits", |s| s.tally.sensor_waits.count.to_string()),
+            ("sensor_wait_mean_s", |s| f6(s.tally.sensor_waits.mean_s())),
+        ],
+        md: &[("sensor waits (mean s)", true, |s| {
+            let w = s.tally.sensor_waits;
+            format!("{} ({})", w.count, num(w.mean_s(), 3))
+        })],
+    },
+    Column {
+        json: &[("compute_waits", |s| {
+            val((s.tally.compute_waits.count, s.tally.compute_waits.mean_s()))
+        })],
+        csv: &[
+            ("compute_waits", |s| s.tally.compute_waits.count.to_string()),
+            ("compute_wait_mean_s", |s| f6(s.tally.compute_waits.mean_s())),
+        ],
+        md: &[("compute waits (mean s)", true, |s| {
+            let w = s.tally.compute_waits;
+            format!("{} ({})", w.count, num(w.mean_s(), 3))
+        })],
+    },
+    Column {
+        json: &[("protective_stops", |s| val(s.tally.faults.protective_stops))],
+        csv: &[("protective_stops", |s| s.tally.faults.protective_stops.to_string())],
+        md: &[("stops", true, |s| s.tally.faults.protective_stops.to_string())],
+    },
+    Column {
+        json: &[("collisions", |s| val(s.tally.faults.collisions))],
+        csv: &[("collisions", |s| s.tally.faults.collisions.to_string())],
+        md: &[("collisions", true, |s| s.tally.faults.collisions.to_string())],
+    },
+    Column {
+        json: &[("drops", |s| val(s.tally.faults.drops))],
+        csv: &[("drops", |s| s.tally.faults.drops.to_string())],
+        md: &[("drops", true, |s| s.tally.faults.drops.to_string())],
+    },
+    Column {
+        json: &[("grasp_failures", |s| val(s.tally.faults.grasp_failures))],
+        csv: &[("grasp_failures", |s| s.tally.faults.grasp_failures.to_string())],
+        md: &[("grasp fails", true, |s| s.tally.faults.grasp_failures.to_string())],
+    },
+    Column {
+        json: &[("parts_lost", |s| val(s.tally.faults.parts_lost))],
+        csv: &[("parts_lost", |s| s.tally.faults.parts_lost.to_string())],
+        md: &[("lost", true, |s| s.tally.faults.parts_lost.to_string())],
+    },
+    Column {
+        json: &[("agitations", |s| val(s.tally.agitations))],
+        csv: &[("agitations", |s| s.tally.agitations.to_string())],
+        md: &[("agitations", true, |s| s.tally.agitations.to_string())],
+    },
+    Column {
+        json: &[("refills", |s| val(s.tally.refills))],
+        csv: &[("refills", |s| s.tally.refills.to_string())],
+        md: &[("refills", true, |s| s.tally.refills.to_string())],
+    },
+    Column {
+        json: &[
+            ("grasps", |s| val(s.tally.grasps)),
+            ("grasp_success_rate", |s| val(s.grasp_success_rate)),
+        ],
+        csv: &[
+            ("grasps_attempted", |s| s.tally.grasps.0.to_string()),
+            ("grasps_sealed", |s| s.tally.grasps.1.to_string()),
+        ],
+        md: &[("grasps sealed", true, |s| {
+            format!("{} %", num(100.0 * s.grasp_success_rate, 1))
+        })],
+    },
+    Column {
+        json: &[("misrecognised", |s| val(s.tally.misrecognised))],
+        csv: &[("misrecognised", |s| s.tally.misrecognised.to_string())],
+        md: &[("misrecognised", true, |s| s.tally.misrecognised.to_string())],
+    },
+    Column {
+        json: &[("picks_per_capture", |s| val(s.picks_per_capture))],
+        csv: &[("picks_per_capture", |s| f6(s.picks_per_capture))],
+        md: &[("picks / capture", true, |s| num(s.picks_per_capture, 2))],
+    },
+    Column {
+        json: &[("blind_picks", |s| val(s.tally.blind_picks))],
+        csv: &[
+            ("blind_picks", |s| s.tally.blind_picks.0.to_string()),
+            ("blind_picks_placed", |s| s.tally.blind_picks.1.to_string()),
+        ],
+        md: &[("blind picks placed", true, |s| {
+            format!("{}/{}", s.tally.blind_picks.1, s.tally.blind_picks.0)
+        })],
+    },
+    Column {
+        json: &[("recognition", |s| val(s.recognition))],
+        csv: &[
+            ("recognition_recall", |s| f6(s.recognition.recall)),
+            ("recognition_precision", |s| f6(s.recognition.precision)),
+            ("pose_error_median_mm", |s| f6(s.recognition.position_error_mm[0])),
+            ("pose_error_p95_mm", |s| f6(s.recognition.position_error_mm[1])),
+            ("pose_error_median_deg", |s| f6(s.recognition.rotation_error_deg[0])),
+            ("pose_error_p95_deg", |s| f6(s.recognition.rotation_error_deg[1])),
+        ],
+        md: &[
+            ("recognition recall / precision", true, |s| {
+                let r = &s.recognition;
+                format!("{} % / {} %", num(100.0 * r.recall, 1), num(100.0 * r.precision, 1))
+            }),
+            ("pose error med mm / deg", true, |s| {
+                let r = &s.recognition;
+                format!(
+                    "{} / {}",
+                    num(r.position_error_mm[0], 2),
+                    num(r.rotation_error_deg[0], 2)
+                )
+            }),
+        ],
+    },
+    Column {
+        json: &[("peak_demand_ratio", |s| val(s.peak_demand_ratio()))],
+        csv: &[("peak_demand_ratio", |s| f6(s.peak_demand_ratio()))],
+        md: &[("peak torque demand", true, |s| {
+            format!("{} %", num(100.0 * s.peak_demand_ratio(), 1))
+        })],
+    },
+    Column {
+        json: &[("saturated_s", |s| val(s.tally.saturated_s))],
+        csv: &[("saturated_s", |s| f6(s.tally.saturated_s))],
+        md: &[("saturated [s]", true, |s| num(s.tally.saturated_s, 3))],
+    },
+    Column {
+        json: &[("max_tracking_error_deg", |s| val(s.tally.max_tracking_error_deg))],
+        csv: &[("max_tracking_error_deg", |s| f6(s.tally.max_tracking_error_deg))],
+        md: &[("max tracking error [deg]", true, |s| {
+            num(s.tally.max_tracking_error_deg, 3)
+        })],
+    },
+    Column {
+        json: &[
+            ("sim_time_s", |s| val(s.tally.sim_time_s)),
+            ("wall_s", |s| s.tally.wall_s.map(|w| json!(w))),
+        ],
+        csv: &[("sim_time_s", |s| f6(s.tally.sim_time_s))],
+        md: &[],
+    },
+];
+
+fn csv_cells() -> impl Iterator<Item = &'static CsvCell> {
+    COLUMNS.iter().flat_map(|c| c.csv.iter())
+}
+
+fn md_cells() -> impl Iterator<Item = &'static MdCell> {
+    COLUMNS.iter().flat_map(|c| c.md.iter())
+}
+
+/// The CSV header's names, in order.
+pub fn csv_header() -> Vec<&'static str> {
+    csv_cells().map(|c| c.0).collect()
+}
+
+/// One summary's CSV fields, in header order (unquoted).
+pub fn csv_fields(s: &Summary) -> Vec<String> {
+    csv_cells().map(|c| (c.1)(s)).collect()
+}
+
+/// The table as CSV (`takt.csv`): fields quoted where they need it.
+pub fn csv(rows: &[Summary]) -> String {
+    crate::report::to_csv(&csv_header(), rows.iter().map(csv_fields))
+}
+
+/// The table as Markdown (`takt.md`).
+pub fn markdown(rows: &[Summary]) -> String {
+    let mut md = String::from("|");
+    let mut rule = String::from("|");
+    for (header, right, _) in md_cells() {
+        md += &format!(" {header} |");
+        rule += if *right { "---:|" } else { "---|" };
+    }
+    md += &format!("\n{rule}\n");
+    for s in rows {
+        md += "|";
+        for (_, _, cell) in md_cells() {
+            md += &format!(" {} |", cell(s));
+        }
+        md += "\n";
+    }
+    md
+}
+
+/// A row as JSON: every key of the list (the order is the map's).
+impl Serialize for Summary {
+    fn serialize<S: Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        let row: serde_json::Map<String, Value> = COLUMNS
+            .iter()
+            .flat_map(|c| c.json.iter())
+            .filter_map(|(k, v)| v(self).map(|v| (k.to_string(), v)))
+            .collect();
+        row.serialize(s)
+    }
+}

@@ -1,0 +1,188 @@
+//! The study runner: every run of a study or of its shard, in parallel on a pool of worker
+//! threads, each optionally recorded, with a progress callback.
+//!
+//! Job: run [`crate::cycle::run`] for each job on `threads` workers (rayon) with its variant's
+//! resolved cell, its workpiece and the arm model it shares with the other variants (nothing is
+//! parsed or built per run), and keep each run's [`Tally`] in job order: results do not depend
+//! on the number of threads or their timing in deterministic mode, and a variant's run gives
+//! what a batch gives on the variant's resolved files. Each run's recordings are written
+//! beside the study's results when asked; each finished run is reported to the caller (a
+//! progress bar).
+//!
+//! Units: s of wall time per run. Frames: none.
+
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+
+use rayon::prelude::*;
+
+use super::{Job, StudyError, StudyRun, StudySpec};
+use crate::config::{LoadedScene, LoadedWorkpiece};
+use crate::cycle::{Observer, RunOptions, Tally};
+use crate::record::{Formats, Recorder, RunInfo};
+use crate::robot::RobotModel;
+use crate::sensor::Camera;
+
+/// One variant, resolved: its values, its cell, its workpieces, which arm model it runs.
+#[derive(Debug, Clone)]
+pub struct Variant {
+    /// Its values, in `--set` order (none for a batch).
+    pub values: Vec<toml::Value>,
+    /// The cell with the values applied, validated.
+    pub scene: LoadedScene,
+    /// Index into [`Resolved::robots`].
+    pub robot: usize,
+    /// The workpieces with the values applied, validated, in `--workpieces` order.
+    pub workpieces: Vec<LoadedWorkpiece>,
+}
+
+/// Every variant of a study, loaded and checked, and the arm models they share.
+#[derive(Debug, Clone)]
+pub struct Resolved {
+    /// The variants, in study order.
+    pub variants: Vec<Variant>,
+    /// Distinct arm models (one unless a variant changes the robot or the gripper).
+    pub robots: Vec<RobotModel>,
+    /// The cell file's label.
+    pub scene_label: String,
+}
+
+impl Resolved {
+    /// A batch's one variant: the cell, its arm and the workpieces as loaded.
+    pub fn single(scene: LoadedScene, robot: RobotModel, workpieces: Vec<LoadedWorkpiece>) -> Self {
+        Resolved {
+            scene_label: scene.label.clone(),
+            variants: vec![Variant {
+                values: Vec::new(),
+                scene,
+                robot: 0,
+                workpieces,
+            }],
+            robots: vec![robot],
+        }
+    }
+}
+
+/// Where and how to record each run: `<dir>/run-<workpiece>-seed<seed>.rrd` and `.mcap`
+/// (`run-v<variant>-...` when the study has several variants).
+#[derive(Clone, Copy)]
+pub struct RecordTo<'a> {
+    /// The folder.
+    pub dir: &'a Path,
+    /// Which files.
+    pub formats: Formats,
+}
+
+/// How a study's runs go (what they are is the spec's).
+#[derive(Clone, Copy)]
+pub struct RunSettings<'a> {
+    /// Worker threads.
+    pub threads: usize,
+    /// Record each run, if asked.
+    pub record: Option<RecordTo<'a>>,
+    /// Set (by a Ctrl-C handler) to end each run after its pick under way.
+    pub stop: Option<&'static AtomicBool>,
+}
+
+/// Runs `jobs` of `spec` on the worker threads and returns their tallies in job order, each
+/// with its wall time ([`super::StudyFile::new`] leaves it out of a deterministic study's
+/// file); `progress` is called (from any worker) after each run. A run that fails, or
+/// whose recording fails, fails the study (the first such in job order is reported).
+pub fn run_study(
+    resolved: &Resolved,
+    spec: &StudySpec,
+    jobs: &[Job],
+    settings: &RunSettings<'_>,
+    progress: &(dyn Fn(&StudyRun) + Sync),
+) -> Result<Vec<StudyRun>, StudyError> {
+    let pool = rayon::ThreadPoolBuilder::new()
+        .num_threads(settings.threads.max(1))
+        .build()
+        .map_err(|e| StudyError::Run(format!("starting the worker threads: {e}")))?;
+    let results: Vec<Result<StudyRun, String>> = pool.install(|| {
+        jobs.par_iter()
+            .map(|job| {
+                let run = run_one(resolved, spec, job, settings)?;
+                progress(&run);
+                Ok(run)
+            })
+            .collect()
+    });
+    results.into_iter().map(|r| r.map_err(StudyError::Run)).collect()
+}
+
+/// One run of the study, recorded if asked.
+fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSettings<'_>) -> Result<StudyRun, String> {
+    let Job {
+        variant: v,
+        workpiece: w,
+        seed,
+    } = job;
+    let several = resolved.variants.len() > 1;
+    let what = if several {
+        format!("variant {} workpiece {w} seed {seed}", v + 1)
+    } else {
+        format!("workpiece {w} seed {seed}")
+    };
+    let variant = resolved
+        .variants
+        .get(*v)
+        .ok_or_else(|| format!("variant {} is not resolved", v + 1))?;
+    let wp = variant
+        .workpieces
+        .iter()
+        .find(|x| &x.workpiece.name == w)
+        .ok_or_else(|| format!("workpiece {w} is not loaded"))?;
+    let robot = &resolved.robots[variant.robot];
+    let record = settings.record;
+    let opts = RunOptions {
+        picks: spec.picks,
+        seed: *seed,
+        deterministic: spec.deterministic,
+        stop: settings.stop,
+        // A recording plays the records; the table needs only the tally.
+        keep_records: record.is_some(),
+    };
+    let mut recorder = match record {
+        Some(r) if r.formats.any() => {
+            let camera = Camera::from_config(&variant.scene.scene.sensor).ok_or("the sensor's pose is degenerate")?;
+            Some(Recorder::new(robot, camera, wp.workpiece.size_m))
+        }
+        _ => None,
+    };
+    let t = std::time::Instant::now();
+    let obs: &mut dyn Observer = match recorder.as_mut() {
+        Some(r) => r,
+        None => &mut (),
+    };
+    let result = crate::cycle::run(&variant.scene, robot, wp, &opts, obs).map_err(|e| format!("{what}: {e}"))?;
+    let tally = Tally {
+        wall_s: Some(t.elapsed().as_secs_f64()),
+        ..result.tally.clone()
+    };
+    if let (Some(rec), Some(to)) = (recorder, record) {
+        let info = RunInfo {
+            scene: variant.scene.label.clone(),
+            workpiece: w.clone(),
+            seed: *seed,
+            deterministic: spec.deterministic,
+            picks: spec.picks,
+        };
+        let name = if several {
+            format!("run-v{}-{w}-seed{seed}", v + 1)
+        } else {
+            format!("run-{w}-seed{seed}")
+        };
+        crate::record::write_recordings(
+            to.dir,
+            &name,
+            to.formats,
+            &rec.finish(&result),
+            robot,
+            &variant.scene.scene,
+            &info,
+        )
+        .map_err(|(path, e)| format!("{}: {e}", path.display()))?;
+    }
+    Ok(StudyRun { variant: *v, tally })
+}
