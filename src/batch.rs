@@ -62,6 +62,7 @@ mod tests {
         crate::cycle::Tally {
             workpiece: w.into(),
             seed,
+            runs: 1,
             attempts: n,
             placed: n,
             set_out: n,

@@ -122,7 +122,32 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
             escape(&b.workpiece)
         );
     }
-    // Success beside it.
+    success_panel(&mut svg, &plot, bars);
+    legend(&mut svg);
+    svg += "</svg>\n";
+    svg
+}
+
+/// The bars of a batch table: its rows.
+pub fn takt_bars(rows: &[crate::results::Summary]) -> Vec<TaktBar> {
+    rows.iter()
+        .map(|r| TaktBar {
+            workpiece: r.tally.workpiece.clone(),
+            mean_s: r.takt.mean_s,
+            p5_s: r.takt_p5_s,
+            p95_s: r.takt.p95_s,
+            min_s: r.takt.min_s,
+            max_s: r.takt.max_s,
+            reference_s: r.reference_takt_s,
+            floor_s: r.motion_floor_s.is_finite().then_some(r.motion_floor_s),
+            success: r.success_rate,
+        })
+        .collect()
+}
+
+/// Success (%) per workpiece, in a panel to the right of the takt's.
+fn success_panel(svg: &mut String, plot: &Plot, bars: &[TaktBar]) {
+    let n = bars.len().max(1) as f64;
     let (st, _, _) = ticks(0.0, 100.0, 5.0);
     let sp = Plot {
         x0: plot.x0 + plot.w + 90.0,
@@ -132,8 +157,8 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
         x_range: (0.0, n),
         y_range: (0.0, 100.0),
     };
-    sp.y_axis(&mut svg, &st, "success [%]");
-    sp.x_label(&mut svg, "workpiece");
+    sp.y_axis(svg, &st, "success [%]");
+    sp.x_label(svg, "workpiece");
     for (i, b) in bars.iter().enumerate() {
         let cx = sp.x(i as f64 + 0.5);
         let pct = 100.0 * b.success;
@@ -156,6 +181,10 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
             escape(&b.workpiece)
         );
     }
+}
+
+/// The legend of the takt marks, above the plots.
+fn legend(svg: &mut String) {
     let ly = 48.0;
     let _ = writeln!(
         svg,
@@ -169,23 +198,4 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
         ly + 4.0,
         ly + 4.0
     );
-    svg += "</svg>\n";
-    svg
-}
-
-/// The bars of a batch table: its rows.
-pub fn takt_bars(rows: &[crate::results::Summary]) -> Vec<TaktBar> {
-    rows.iter()
-        .map(|r| TaktBar {
-            workpiece: r.tally.workpiece.clone(),
-            mean_s: r.takt.mean_s,
-            p5_s: r.takt_p5_s,
-            p95_s: r.takt.p95_s,
-            min_s: r.takt.min_s,
-            max_s: r.takt.max_s,
-            reference_s: r.reference_takt_s,
-            floor_s: r.motion_floor_s.is_finite().then_some(r.motion_floor_s),
-            success: r.success_rate,
-        })
-        .collect()
 }

@@ -109,7 +109,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
     let dest = run.finish()?;
     let done = || -> Result<()> {
         match summary.tally.ended {
-            EndReason::Interrupted => Err(Interrupted(dest.display().to_string()).into()),
+            Some(EndReason::Interrupted) => Err(Interrupted(dest.display().to_string()).into()),
             _ => Ok(()),
         }
     };

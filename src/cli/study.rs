@@ -161,7 +161,7 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> R
     }
     let dest = dir.finish()?;
     let done = || -> Result<()> {
-        if file.runs.iter().any(|r| r.tally.ended == EndReason::Interrupted) {
+        if file.runs.iter().any(|r| r.tally.ended == Some(EndReason::Interrupted)) {
             Err(Interrupted(dest.display().to_string()).into())
         } else {
             Ok(())

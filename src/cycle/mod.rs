@@ -398,7 +398,8 @@ pub fn run(
     tally.place_tray_exchanges = st.trays.exchanges;
     tally.peak_demand_ratio = st.run_peak_demand_ratio;
     tally.sim_time_s = st.world.time_s();
-    tally.ended = ended;
+    tally.runs = 1;
+    tally.ended = Some(ended);
     Ok(RunResult {
         records,
         tally,

@@ -206,12 +206,6 @@ impl Waits {
         }
     }
 
-    /// Both counts and totals added.
-    pub fn merge(&mut self, o: &Waits) {
-        self.count += o.count;
-        self.total_s += o.total_s;
-    }
-
     /// The mean wait (s) (0 when there was none).
     pub fn mean_s(&self) -> f64 {
         if self.count == 0 {
@@ -262,15 +256,6 @@ impl Faults {
             _ => {}
         }
     }
-
-    /// Each count added.
-    pub fn merge(&mut self, o: &Faults) {
-        self.protective_stops += o.protective_stops;
-        self.collisions += o.collisions;
-        self.drops += o.drops;
-        self.grasp_failures += o.grasp_failures;
-        self.parts_lost += o.parts_lost;
-    }
 }
 
 impl Serialize for Faults {
@@ -299,7 +284,7 @@ impl<'de> Deserialize<'de> for Faults {
     }
 }
 
-/// Why a run ended, in a tally: written as its text, read back from it.
+/// Why a run ended, in a tally: written as its text (null while it runs), read back from it.
 mod ended_text {
     use super::EndReason;
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
@@ -312,14 +297,17 @@ mod ended_text {
         EndReason::Interrupted,
     ];
 
-    pub fn serialize<S: Serializer>(e: &EndReason, s: S) -> Result<S::Ok, S::Error> {
+    pub fn serialize<S: Serializer>(e: &Option<EndReason>, s: S) -> Result<S::Ok, S::Error> {
         e.serialize(s)
     }
 
-    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<EndReason, D::Error> {
-        let text = String::deserialize(d)?;
+    pub fn deserialize<'de, D: Deserializer<'de>>(d: D) -> Result<Option<EndReason>, D::Error> {
+        let Some(text) = Option::<String>::deserialize(d)? else {
+            return Ok(None);
+        };
         ALL.into_iter()
             .find(|e| e.text() == text)
+            .map(Some)
             .ok_or_else(|| serde::de::Error::custom(format!("{text:?} is not a reason a run ends")))
     }
 }
@@ -328,128 +316,206 @@ fn one() -> usize {
     1
 }
 
+/// A field of a tally joined with the same field of another run's: counts and sums added,
+/// samples appended (in run order), pairs added element by element.
+pub trait Merge {
+    /// Joins `o` into `self`.
+    fn merge(&mut self, o: &Self);
+}
+
+impl Merge for usize {
+    fn merge(&mut self, o: &Self) {
+        *self += o;
+    }
+}
+
+impl Merge for u64 {
+    fn merge(&mut self, o: &Self) {
+        *self += o;
+    }
+}
+
+impl Merge for f64 {
+    fn merge(&mut self, o: &Self) {
+        *self += o;
+    }
+}
+
+impl<A: Merge, B: Merge> Merge for (A, B) {
+    fn merge(&mut self, o: &Self) {
+        self.0.merge(&o.0);
+        self.1.merge(&o.1);
+    }
+}
+
+impl Merge for Vec<f64> {
+    fn merge(&mut self, o: &Self) {
+        self.extend_from_slice(o);
+    }
+}
+
+/// A measurement some runs may lack (wall time): the sum, `None` when either is unknown.
+impl Merge for Option<f64> {
+    fn merge(&mut self, o: &Self) {
+        *self = self.zip(*o).map(|(a, b)| a + b);
+    }
+}
+
+impl Merge for StageCompute {
+    fn merge(&mut self, o: &Self) {
+        *self = self.plus(*o);
+    }
+}
+
+impl Merge for Waits {
+    fn merge(&mut self, o: &Self) {
+        self.count += o.count;
+        self.total_s += o.total_s;
+    }
+}
+
+impl Merge for Faults {
+    fn merge(&mut self, o: &Self) {
+        self.protective_stops += o.protective_stops;
+        self.collisions += o.collisions;
+        self.drops += o.drops;
+        self.grasp_failures += o.grasp_failures;
+        self.parts_lost += o.parts_lost;
+    }
+}
+
+impl Merge for RecognitionTotals {
+    fn merge(&mut self, o: &Self) {
+        RecognitionTotals::merge(self, o);
+    }
+}
+
+/// Declares the tally with each field's rule for joining runs (`sum`: [`Merge`]; `max`: the
+/// larger; `max_each`: the larger per element; `keep`: this run's; `ended`: the first run
+/// that did not end with its picks done), so a field is declared, documented and merged in
+/// one place.
+macro_rules! tally {
+    ($(#[$sm:meta])* pub struct $name:ident {
+        $( $(#[$fm:meta])* pub $f:ident : $t:ty => $rule:ident, )*
+    }) => {
+        $(#[$sm])*
+        pub struct $name {
+            $( $(#[$fm])* pub $f: $t, )*
+        }
+
+        impl $name {
+            /// Adds another run's (or merge's) tally, field by field by its rule: counts and
+            /// sums added, samples appended, maxima taken; the label (workpiece, seed) stays
+            /// this one's.
+            pub fn merge(&mut self, o: &$name) {
+                $( tally!(@rule $rule, self.$f, o.$f); )*
+            }
+        }
+    };
+    (@rule sum, $a:expr, $b:expr) => { Merge::merge(&mut $a, &$b) };
+    (@rule max, $a:expr, $b:expr) => { $a = $a.max($b) };
+    (@rule max_each, $a:expr, $b:expr) => {
+        for (p, q) in $a.iter_mut().zip($b) {
+            *p = p.max(q);
+        }
+    };
+    (@rule keep, $a:expr, $b:expr) => {};
+    (@rule ended, $a:expr, $b:expr) => {
+        if $a.is_none_or(|e| e == EndReason::PicksDone) {
+            $a = $b;
+        }
+    };
+}
+
+tally! {
 /// A run's results, tallied as each pick ends, or the merge of several runs' tallies (a table
 /// row, a shard merge). What the summaries, tables and shard files of binpick are made from:
 /// the samples of exact medians and percentiles (takts, Pick and Place times, compute before
 /// motion), counts, sums and maxima. Sums run in pick order, then in the order runs merge.
 ///
 /// Written as one entry of `takt.json` / `sweep.json`'s runs; field names are kept as shard
-/// files have always had them, so shards written before still merge.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+/// files have always had them, so shards written before still merge. A field's rule after
+/// `=>` says how runs join (see the `tally!` macro).
+#[derive(Debug, Clone, Default, PartialEq, Serialize, Deserialize)]
 pub struct Tally {
     /// Workpiece.
-    pub workpiece: String,
+    pub workpiece: String => keep,
     /// Seed (of the first run, when merged).
-    pub seed: u64,
-    /// Runs tallied (not written: an entry of a shard file is one run).
+    pub seed: u64 => keep,
+    /// Runs tallied (set when a run ends; not written: an entry of a shard file is one run).
     #[serde(skip_serializing, default = "one")]
-    pub runs: usize,
+    pub runs: usize => sum,
     /// Attempts: every pick, re-captures included.
-    pub attempts: usize,
+    pub attempts: usize => sum,
     /// Picks placed.
-    pub placed: usize,
+    pub placed: usize => sum,
     /// Picks the arm set out to make (a grasp chosen, motions generated).
-    pub set_out: usize,
-    /// Every release-to-release interval after a run's first release (s) (the reference's
-    /// takt).
-    pub takts_s: Vec<f64>,
+    pub set_out: usize => sum,
+    /// Every release-to-release interval after a run's first release (s): the reference's
+    /// takt.
+    pub takts_s: Vec<f64> => sum,
     /// The intervals that span no pick-tray refill (s).
-    pub takts_excl_refills_s: Vec<f64>,
+    pub takts_excl_refills_s: Vec<f64> => sum,
     /// Pick times of the placed picks (s).
-    pub pick_s: Vec<f64>,
+    pub pick_s: Vec<f64> => sum,
     /// Place times of the placed picks (s).
-    pub place_s: Vec<f64>,
+    pub place_s: Vec<f64> => sum,
     /// Compute charged over the picks set out, summed per stage (s).
     #[serde(rename = "compute_sum_s")]
-    pub compute_sum: StageCompute,
+    pub compute_sum: StageCompute => sum,
     /// Compute between each pick's result and the motion it unblocks (grasp and Pick), per
     /// pick set out (s).
     #[serde(default)]
-    pub result_to_motion_s: Vec<f64>,
+    pub result_to_motion_s: Vec<f64> => sum,
     /// Waits for the sensor in the takts (placed picks with a takt).
-    pub sensor_waits: Waits,
+    pub sensor_waits: Waits => sum,
     /// Waits for compute in the takts.
-    pub compute_waits: Waits,
+    pub compute_waits: Waits => sum,
     /// Faults by kind.
-    pub faults: Faults,
+    pub faults: Faults => sum,
     /// Refills of the pick tray.
-    pub refills: usize,
+    pub refills: usize => sum,
     /// Agitations of the pick tray.
     #[serde(default)]
-    pub agitations: usize,
+    pub agitations: usize => sum,
     /// Place-tray exchanges (not written in shard files: no table shows it).
     #[serde(skip)]
-    pub place_tray_exchanges: usize,
+    pub place_tray_exchanges: usize => sum,
     /// Captures triggered and spoiled (not written in shard files: no table shows it).
     #[serde(skip)]
-    pub captures: (u64, u64),
+    pub captures: (u64, u64) => sum,
     /// Grasps attempted (the cup reached the part) and sealed.
     #[serde(default)]
-    pub grasps: (usize, usize),
+    pub grasps: (usize, usize) => sum,
     /// Grasp failures on a wrong detection.
     #[serde(default)]
-    pub misrecognised: usize,
+    pub misrecognised: usize => sum,
     /// Blind picks (picks went into the pile after the result's capture): attempted, placed.
     #[serde(default)]
-    pub blind_picks: (usize, usize),
+    pub blind_picks: (usize, usize) => sum,
     /// Recognition results the picks set out came from.
     #[serde(default)]
-    pub results_used: usize,
+    pub results_used: usize => sum,
     /// Recognition of the results the run used, against the truth at each trigger.
     #[serde(default)]
-    pub recognition: RecognitionTotals,
+    pub recognition: RecognitionTotals => sum,
     /// Largest |demanded torque| / limit per joint (before saturation).
-    pub peak_demand_ratio: [f64; crate::robot::DOF],
+    pub peak_demand_ratio: [f64; crate::robot::DOF] => max_each,
     /// Time some joint was saturated (s).
-    pub saturated_s: f64,
+    pub saturated_s: f64 => sum,
     /// Largest servo tracking error (deg).
-    pub max_tracking_error_deg: f64,
+    pub max_tracking_error_deg: f64 => max,
     /// Simulated time (s).
-    pub sim_time_s: f64,
+    pub sim_time_s: f64 => sum,
     /// Wall time of the runs (s): a measurement, not a result, so a deterministic study leaves
     /// it out (`None`) and its files repeat byte for byte; `None` when any run's is unknown.
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub wall_s: Option<f64>,
-    /// Why the run ended (merged: the first run that did not end with its picks done).
+    pub wall_s: Option<f64> => sum,
+    /// Why the run ended (`None` while it runs; merged: the first run that did not end with
+    /// its picks done).
     #[serde(with = "ended_text")]
-    pub ended: EndReason,
+    pub ended: Option<EndReason> => ended,
 }
-
-impl Default for Tally {
-    fn default() -> Self {
-        Tally {
-            workpiece: String::new(),
-            seed: 0,
-            runs: 1,
-            attempts: 0,
-            placed: 0,
-            set_out: 0,
-            takts_s: Vec::new(),
-            takts_excl_refills_s: Vec::new(),
-            pick_s: Vec::new(),
-            place_s: Vec::new(),
-            compute_sum: StageCompute::default(),
-            result_to_motion_s: Vec::new(),
-            sensor_waits: Waits::default(),
-            compute_waits: Waits::default(),
-            faults: Faults::default(),
-            refills: 0,
-            agitations: 0,
-            place_tray_exchanges: 0,
-            captures: (0, 0),
-            grasps: (0, 0),
-            misrecognised: 0,
-            blind_picks: (0, 0),
-            results_used: 0,
-            recognition: RecognitionTotals::default(),
-            peak_demand_ratio: [0.0; crate::robot::DOF],
-            saturated_s: 0.0,
-            max_tracking_error_deg: 0.0,
-            sim_time_s: 0.0,
-            wall_s: None,
-            ended: EndReason::PicksDone,
-        }
-    }
 }
 
 impl Tally {
@@ -494,46 +560,6 @@ impl Tally {
         }
     }
 
-    /// Adds another run's (or merge's) tally: counts and sums added, samples appended, maxima
-    /// taken. The label (workpiece, seed) stays this one's.
-    pub fn merge(&mut self, o: &Tally) {
-        self.runs += o.runs;
-        self.attempts += o.attempts;
-        self.placed += o.placed;
-        self.set_out += o.set_out;
-        self.takts_s.extend_from_slice(&o.takts_s);
-        self.takts_excl_refills_s.extend_from_slice(&o.takts_excl_refills_s);
-        self.pick_s.extend_from_slice(&o.pick_s);
-        self.place_s.extend_from_slice(&o.place_s);
-        self.compute_sum = self.compute_sum.plus(o.compute_sum);
-        self.result_to_motion_s.extend_from_slice(&o.result_to_motion_s);
-        self.sensor_waits.merge(&o.sensor_waits);
-        self.compute_waits.merge(&o.compute_waits);
-        self.faults.merge(&o.faults);
-        self.refills += o.refills;
-        self.agitations += o.agitations;
-        self.place_tray_exchanges += o.place_tray_exchanges;
-        self.captures = (self.captures.0 + o.captures.0, self.captures.1 + o.captures.1);
-        self.grasps = (self.grasps.0 + o.grasps.0, self.grasps.1 + o.grasps.1);
-        self.misrecognised += o.misrecognised;
-        self.blind_picks = (
-            self.blind_picks.0 + o.blind_picks.0,
-            self.blind_picks.1 + o.blind_picks.1,
-        );
-        self.results_used += o.results_used;
-        self.recognition.merge(&o.recognition);
-        for (p, q) in self.peak_demand_ratio.iter_mut().zip(o.peak_demand_ratio) {
-            *p = p.max(q);
-        }
-        self.saturated_s += o.saturated_s;
-        self.max_tracking_error_deg = self.max_tracking_error_deg.max(o.max_tracking_error_deg);
-        self.sim_time_s += o.sim_time_s;
-        self.wall_s = self.wall_s.zip(o.wall_s).map(|(a, b)| a + b);
-        if self.ended == EndReason::PicksDone {
-            self.ended = o.ended;
-        }
-    }
-
     /// The merge of `tallies`, in their order (`None` when there is none).
     pub fn merged<'a>(tallies: impl IntoIterator<Item = &'a Tally>) -> Option<Tally> {
         let mut it = tallies.into_iter();
@@ -559,4 +585,65 @@ pub struct RunResult {
 /// reference's definition).
 pub fn takts(records: &[PickRecord]) -> Vec<f64> {
     records.iter().filter_map(|r| r.takt_s).collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A run's tally with a few of every kind of field.
+    fn run(seed: u64, takt_s: f64, ended: EndReason) -> Tally {
+        Tally {
+            workpiece: "A".into(),
+            seed,
+            runs: 1,
+            attempts: 3,
+            placed: 2,
+            takts_s: vec![takt_s],
+            sensor_waits: Waits { count: 1, total_s: 0.5 },
+            faults: Faults {
+                drops: 1,
+                ..Faults::default()
+            },
+            grasps: (3, 2),
+            peak_demand_ratio: [0.5, 0.9, 0.1, 0.1, 0.1, 0.1],
+            max_tracking_error_deg: 0.2 * seed as f64,
+            wall_s: Some(1.0),
+            ended: Some(ended),
+            ..Tally::default()
+        }
+    }
+
+    #[test]
+    fn tallies_merge_by_each_fields_rule_and_read_back_as_written() {
+        let mut t = run(1, 2.0, EndReason::PicksDone);
+        t.merge(&run(2, 3.0, EndReason::Interrupted));
+        assert_eq!((t.seed, t.runs, t.attempts, t.placed), (1, 2, 6, 4));
+        assert_eq!(t.takts_s, vec![2.0, 3.0]);
+        assert_eq!(t.sensor_waits, Waits { count: 2, total_s: 1.0 });
+        assert_eq!((t.faults.drops, t.grasps), (2, (6, 4)));
+        assert_eq!(t.peak_demand_ratio[1], 0.9);
+        assert_eq!(t.max_tracking_error_deg, 0.4);
+        assert_eq!(t.wall_s, Some(2.0));
+        assert_eq!(t.ended, Some(EndReason::Interrupted));
+        // One run's wall time unknown: the sum is unknown.
+        t.merge(&Tally {
+            wall_s: None,
+            ..run(3, 1.0, EndReason::PicksDone)
+        });
+        assert_eq!((t.wall_s, t.ended), (None, Some(EndReason::Interrupted)));
+        // The file layout: faults and waits as arrays, ended as text, runs not written.
+        let v = serde_json::to_value(run(1, 2.0, EndReason::TrayEmpty)).unwrap();
+        assert_eq!(v["faults"], serde_json::json!([0, 0, 1, 0, 0]));
+        assert_eq!(v["sensor_waits"], serde_json::json!([1, 0.5]));
+        assert_eq!(v["ended"], "tray empty");
+        assert!(v.get("runs").is_none() && v.get("compute_sum_s").is_some());
+        let back: Tally = serde_json::from_value(v.clone()).unwrap();
+        assert_eq!(back, run(1, 2.0, EndReason::TrayEmpty));
+        // Negative control: a reason no run ends with is refused, naming it.
+        let mut bad = v;
+        bad["ended"] = "bored".into();
+        let e = serde_json::from_value::<Tally>(bad).unwrap_err().to_string();
+        assert!(e.contains("\"bored\" is not a reason a run ends"), "{e}");
+    }
 }

@@ -346,3 +346,45 @@ impl Serialize for Summary {
         row.serialize(s)
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cycle::Tally;
+
+    /// Names that appear twice in a list of columns.
+    fn repeated(names: &[&str]) -> Vec<String> {
+        let mut seen = std::collections::BTreeSet::new();
+        names
+            .iter()
+            .filter(|n| !seen.insert(**n))
+            .map(|n| n.to_string())
+            .collect()
+    }
+
+    #[test]
+    fn every_format_has_one_cell_per_column_and_no_name_twice() {
+        let t = Tally {
+            workpiece: "A".into(),
+            runs: 1,
+            ..Tally::default()
+        };
+        let s = Summary::of(&t);
+        assert_eq!(csv_fields(&s).len(), csv_header().len());
+        assert_eq!(repeated(&csv_header()), Vec::<String>::new());
+        let json_keys: Vec<&str> = COLUMNS.iter().flat_map(|c| c.json.iter().map(|j| j.0)).collect();
+        assert_eq!(repeated(&json_keys), Vec::<String>::new());
+        let md = markdown(std::slice::from_ref(&s));
+        let bars: Vec<usize> = md.lines().map(|l| l.matches('|').count()).collect();
+        assert!(bars.windows(2).all(|w| w[0] == w[1]), "{md}");
+        // Empty figures: `-` in Markdown, empty in CSV, null in JSON; the wall time left out.
+        assert!(
+            md.lines().nth(2).unwrap().starts_with("| A | 1 | 0/0 | - % | - |"),
+            "{md}"
+        );
+        let row = serde_json::to_value(&s).unwrap();
+        assert!(row["success_rate"].is_null() && row.get("wall_s").is_none());
+        // Negative control: the check finds a name given twice.
+        assert_eq!(repeated(&["a", "b", "a"]), vec!["a".to_string()]);
+    }
+}
