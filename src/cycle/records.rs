@@ -16,7 +16,8 @@
 
 use serde::Serialize;
 
-use super::events::{EndReason, Outcome};
+use super::events::EndReason;
+use super::outcome::Outcome;
 use crate::sensor::{RecognitionReport, RecognitionSummary, RecognitionTotals, TruthMatch};
 use crate::stats::{Summary, mean_of};
 
@@ -308,7 +309,7 @@ impl RunTally {
             Outcome::ProtectiveStop(_) => Some(0),
             Outcome::Collision(_) => Some(1),
             Outcome::Dropped(_) => Some(2),
-            Outcome::GraspFailed(_) => Some(3),
+            Outcome::GraspFailed(_) | Outcome::Misrecognised { .. } => Some(3),
             _ => None,
         };
         if let Some(k) = fault {

@@ -362,9 +362,9 @@ pub fn write_mcap<W: Write + Seek>(
 /// `/cell`: table, trays and obstacles as grey cubes, the camera's frustum out to the pick tray.
 fn cell_messages(m: &mut Messages, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
     let mut cell = entity(0.0, "cell");
-    for (_, b) in crate::geometry::cell_boxes(scene) {
+    for b in &result.cell_boxes {
         cell.cubes
-            .push(cube(&b.world_from_box(), &(2.0 * b.half_m), [0.6, 0.6, 0.6], 1.0));
+            .push(cube(&b.world_from_box, &(2.0 * b.half_m), [0.6, 0.6, 0.6], 1.0));
     }
     let c = &result.camera;
     let range_m = (Vector3::from(scene.pick_tray.center_m) - c.world_from_camera.translation.vector).norm();

@@ -237,16 +237,13 @@ fn log_run(
 
 /// Table, trays, obstacles and the camera (static).
 fn log_cell(rec: &mut Rec, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
-    let cell: Vec<(Isometry3<f64>, Vector3<f64>, String)> = crate::geometry::cell_boxes(scene)
-        .into_iter()
-        .map(|(_, b)| (b.world_from_box(), b.half_m, b.name))
-        .collect();
+    let cell = &result.cell_boxes;
     let boxes = rerun::Boxes3D::from_centers_and_half_sizes(
-        cell.iter().map(|b| v3(&b.0.translation.vector)),
-        cell.iter().map(|b| v3(&b.1)),
+        cell.iter().map(|b| v3(&b.world_from_box.translation.vector)),
+        cell.iter().map(|b| v3(&b.half_m)),
     )
-    .with_quaternions(cell.iter().map(|b| quat(&b.0)))
-    .with_labels(cell.iter().map(|b| b.2.clone()))
+    .with_quaternions(cell.iter().map(|b| quat(&b.world_from_box)))
+    .with_labels(cell.iter().map(|b| b.name.clone()))
     .with_show_labels(false)
     .with_colors(
         cell.iter()

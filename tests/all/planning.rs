@@ -309,9 +309,9 @@ fn the_nearest_pair_is_named_only_on_request_and_the_same() {
         for _ in 0..50 {
             let q = case.start + JointVector::from_fn(|_, _| rng.random_range(-0.5..0.5));
             let (d, nearest) = case.model.nearest(&q, &mut stats);
-            let (dc, name) = case.model.clearance(&q, &mut stats);
-            assert_eq!(d.to_bits(), dc.to_bits());
-            assert_eq!(name, case.model.describe(nearest));
+            let (again, _) = case.model.nearest(&q, &mut stats);
+            assert_eq!(d.to_bits(), again.to_bits());
+            let name = case.model.describe(nearest);
             assert_eq!(name.is_empty(), d >= case.model.horizon_m, "{d} {name:?}");
             named += usize::from(!name.is_empty());
         }
@@ -326,9 +326,10 @@ fn the_nearest_pair_is_named_only_on_request_and_the_same() {
 /// hidden part itself (ground truth, a box under the hole) does.
 #[test]
 fn the_planner_does_not_descend_into_what_it_did_not_see() {
+    use binpick::geometry::NamedBox;
     use binpick::physics::TrayVolume;
     use binpick::pipeline::{HEIGHT_MAP_CELL_M, PILE_POOL_CELLS, pile_map};
-    use binpick::planning::{EnvBox, Environment, PileColumns, RobotSpheres};
+    use binpick::planning::{Environment, PileColumns, RobotSpheres};
     use binpick::sensor::HeightMap;
     let (scene, robot) = setup();
     let tray = TrayVolume::new(&scene.scene.pick_tray);
@@ -371,7 +372,7 @@ fn the_planner_does_not_descend_into_what_it_did_not_see() {
     // Ground truth: a 4 cm square part 4.5 cm tall under the hole's middle.
     let floor = tray.world_from_tray * nalgebra::Point3::new(hole_x, hole_y, 0.0);
     let mut truth_env = Environment::from_scene(&scene.scene);
-    truth_env.boxes.push(EnvBox {
+    truth_env.boxes.push(NamedBox {
         name: "hidden part".into(),
         world_from_box: Isometry3::translation(floor.x, floor.y, floor.z + 0.0225),
         half_m: Vector3::new(0.02, 0.02, 0.0225),
