@@ -18,10 +18,10 @@
 //!    edges, generic sampling-based search, the cell's planner.
 //! 8. [`trajectory`]: timed trajectories through via points, torques, the acceleration search,
 //!    path correction, TOPP-RA, straight tool lines.
-//! 9. [`execution`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
+//! 9. [`servo`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
 //! 10. [`cycle`]: the cell cycle end to end (sensing, motion generation, Pick, Place, faults,
 //!     trays), its events and the observer interface through which a run is watched.
-//! 11. [`record`]: the run written to Rerun (`.rrd`) and MCAP files.
+//! 11. [`recording`]: the run written to Rerun (`.rrd`) and MCAP files.
 //! 12. [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
 //!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG); [`batch`]:
 //!     takt-time tables over many runs; [`sweep`]: the same over variants of the cell.
@@ -37,19 +37,19 @@ pub mod bench;
 pub mod chart;
 pub mod config;
 pub mod cycle;
-pub mod execution;
 pub mod geometry;
 pub mod grasp;
 pub mod part;
 pub mod physics;
 pub mod pipeline;
 pub mod planning;
-pub mod record;
+pub mod recording;
 pub mod reference;
 pub mod report;
 pub mod rng;
 pub mod robot;
 pub mod sensor;
+pub mod servo;
 pub mod stats;
 pub mod sweep;
 pub mod trajectory;

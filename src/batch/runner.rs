@@ -16,7 +16,7 @@ use rayon::prelude::*;
 use super::{BatchError, RunEntry};
 use crate::config::{LoadedScene, LoadedWorkpiece};
 use crate::cycle::{Observer, RunOptions};
-use crate::record::{Formats, Recorder, RunInfo};
+use crate::recording::{Formats, Recorder, RunInfo};
 use crate::robot::RobotModel;
 use crate::sensor::Camera;
 
@@ -121,7 +121,7 @@ pub fn run_batch(
                         deterministic,
                         picks,
                     };
-                    crate::record::write_recordings(
+                    crate::recording::write_recordings(
                         to.dir,
                         &format!("run-{w}-seed{seed}"),
                         to.formats,

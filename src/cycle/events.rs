@@ -13,10 +13,10 @@ use std::fmt;
 use serde::{Serialize, Serializer};
 
 use super::outcome::{Fault, MotionFailure, Outcome};
-use crate::execution::Tick;
 use crate::grasp::GraspCandidate;
 use crate::physics::World;
 use crate::sensor::{Capture, CaptureProblem, Detection, RecognitionReport, TruthAtTrigger};
+use crate::servo::Tick;
 use crate::trajectory::Motion;
 
 /// A stage of the cell cycle, as the time chart draws it (one lane each, top to bottom).

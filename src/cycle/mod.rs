@@ -2,7 +2,7 @@
 //!
 //! Job: run picks of one workpiece end to end in the simulated cell and time them, following the
 //! reference system's time chart (its Fig. 3). The arm is driven by the torque-limited servo
-//! ([`crate::execution`]) whose joint states move the arm's bodies in the physics world every
+//! ([`crate::servo`]) whose joint states move the arm's bodies in the physics world every
 //! physics step, so the arm pushes parts and hides them from the sensor.
 //!
 //! The cycle is a constant [`Cell`] (robot, scene, grasp selector, servo, budgets, place slots)
@@ -22,7 +22,7 @@
 //! 3. [`pick_place`]: Pick: transfer, descent, vacuum on and build-up, lift. Place: transfer,
 //!    descent, release, retreat. The arm waits only when the next motion is not ready: a stall,
 //!    split into waiting for the sensor and waiting for compute.
-//! 4. [`execute`]: each motion is played through the servo into the world. Faults: a
+//! 4. [`play`]: each motion is played through the servo into the world. Faults: a
 //!    protective stop, a collision of the arm (or the held part) with the cell or a part
 //!    pressed into the tray (the world's health monitor), a part slipping off the cup. Each ends
 //!    the pick with its outcome; after a stop or a collision the arm waits the reset time and
@@ -44,11 +44,11 @@
 //! Units: s, m, rad. Frames: world.
 
 pub mod events;
-pub mod execute;
 pub mod motions;
 mod next_pick;
 pub mod outcome;
 pub mod pick_place;
+pub mod play;
 pub mod records;
 pub mod sensing;
 pub mod trays;
@@ -64,7 +64,6 @@ pub use records::{PickRecord, RunCounts, RunLabel, RunResult, RunSummary, RunTal
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
-use crate::execution::Servo;
 use crate::geometry::SuctionModel;
 use crate::grasp::GraspSelector;
 use crate::physics::pile::PileOptions;
@@ -72,6 +71,7 @@ use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthError, PartShape, World};
 use crate::robot::{Payload, RobotModel};
 use crate::sensor::{CaptureJob, RecognitionReport, Sensor};
+use crate::servo::Servo;
 use next_pick::{PlacementFix, Prefetched};
 
 pub use crate::reference::reference_takt;
@@ -178,7 +178,7 @@ pub struct Cell<'a> {
 #[derive(Debug, Clone, Copy)]
 pub struct ArmState {
     /// The arm's actual joint state and the servo's integral after the last motion.
-    pub servo: crate::execution::ServoState,
+    pub servo: crate::servo::ServoState,
     /// When the arm has nothing to do from [s].
     pub free_s: f64,
     /// Largest tracking error since the pick's motions began [rad].
@@ -346,7 +346,7 @@ impl<'a> Cell<'a> {
         }
         Ok(CellState {
             arm: ArmState {
-                servo: crate::execution::ServoState::at_rest(world.joints()),
+                servo: crate::servo::ServoState::at_rest(world.joints()),
                 free_s: world.time_s(),
                 max_error_rad: 0.0,
                 peak_demand_ratio: [0.0; crate::robot::DOF],

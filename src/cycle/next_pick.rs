@@ -10,8 +10,8 @@
 use nalgebra::{Isometry3, Vector3};
 
 use super::events::Event;
-use super::execute::{Capture, Played, Segment};
 use super::motions::{Prepared, StageCompute};
+use super::play::{Capture, Played, Segment};
 use super::sensing::SensedResult;
 use super::{CycleError, InHand, Run};
 use crate::trajectory::{LineMotion, Motion};

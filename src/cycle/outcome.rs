@@ -11,11 +11,11 @@ use std::fmt;
 
 use serde::{Serialize, Serializer};
 
-use crate::execution::Trip;
 use crate::physics::{GraspFailure, HealthEvent};
 use crate::pipeline::NoGrasp;
 use crate::planning::PlanError;
 use crate::robot::IkError;
+use crate::servo::Trip;
 
 /// Why a pick went wrong or did not start.
 #[derive(Debug, Clone, PartialEq)]

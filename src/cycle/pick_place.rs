@@ -17,10 +17,10 @@
 use nalgebra::Vector3;
 
 use super::events::{Event, Planned, Stage, StallCause};
-use super::execute::{Capture, Played, Segment, Valve};
 use super::motions::{PlaceMotion, Prepared, StageCompute};
 use super::next_pick::{LatePlacement, PlacementFix, Prefetched};
 use super::outcome::{NoSeal, Outcome, Slip, WrongPose};
+use super::play::{Capture, Played, Segment, Valve};
 use super::records::PickRecord;
 use super::{CycleError, Run};
 use crate::physics::suction::GripperEvent;

@@ -13,8 +13,8 @@
 use nalgebra::{Isometry3, Translation3};
 
 use super::events::{Event, Stage};
-use super::execute::{Capture, Segment};
 use super::outcome::Fault;
+use super::play::{Capture, Segment};
 use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
@@ -274,7 +274,7 @@ impl Run<'_, '_> {
         let played = self.play(&Segment::new(&acc, hand).capturing(capture))?;
         self.span(Stage::WaitingPose, t, self.st.world.time_s(), "to the waiting pose");
         self.st.arm.free_s = self.st.world.time_s();
-        if !matches!(played, super::execute::Played::Done) {
+        if !matches!(played, super::play::Played::Done) {
             self.st.planned_end_q = None;
             self.st.compute_from_s = self.st.world.time_s();
         }
@@ -317,7 +317,7 @@ impl Run<'_, '_> {
         self.st.arm.free_s = self.st.world.time_s();
         self.st.planned_end_q = None;
         self.st.compute_from_s = self.st.world.time_s();
-        Ok(matches!(played, super::execute::Played::Done))
+        Ok(matches!(played, super::play::Played::Done))
     }
 }
 

@@ -9,7 +9,7 @@ use rapier3d::math::Pose;
 use rapier3d::prelude::*;
 
 use super::*;
-use crate::robot::{DOF, JointVector, Primitive as LinkPrimitive};
+use crate::robot::{DOF, JointVector, LinkPrimitive};
 
 fn arm_collider(shape: SharedShape, pose: Pose, tag: Tag, with_fixed: bool) -> Collider {
     let types = if with_fixed {

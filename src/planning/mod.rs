@@ -5,7 +5,7 @@
 //!
 //! 1. [`model`]: the cell's collision model: the arm covered by spheres, the cell's boxes and the
 //!    pile's height-map columns; clearance (a lower bound), free configurations, certified edges
-//!    (conservative advancement) and discrete edge checks; [`pile`]: the pile's columns and the
+//!    (conservative advancement) and discrete edge checks; [`pile_columns`]: the pile's columns and the
 //!    max-pooled pyramid that finds the nearest one.
 //!    [`axis_reach`]: how far each link reaches from each joint's axis at one configuration;
 //!    [`certify`]: certified edges, conservative advancement with the motion bounded by how far
@@ -22,7 +22,7 @@
 pub mod axis_reach;
 pub mod certify;
 pub mod model;
-pub mod pile;
+pub mod pile_columns;
 pub mod planner;
 pub mod search;
 

@@ -26,11 +26,11 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use super::axis_reach::AxisReach;
-pub use super::pile::PileColumns;
+pub use super::pile_columns::PileColumns;
 use super::search::PlanStats;
 use crate::config::Scene;
 use crate::geometry::NamedBox;
-use crate::robot::{DOF, JointVector, Primitive, RobotModel};
+use crate::robot::{DOF, JointVector, LinkPrimitive, RobotModel};
 
 /// A sphere [m].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -90,16 +90,16 @@ impl RobotSpheres {
             let mut v = Vec::new();
             for s in &link.shapes {
                 let local = match s.primitive {
-                    Primitive::Box { half_extents_m } => cover_box(&half_extents_m),
-                    Primitive::Cylinder {
+                    LinkPrimitive::Box { half_extents_m } => cover_box(&half_extents_m),
+                    LinkPrimitive::Cylinder {
                         radius_m,
                         half_length_m,
                     }
-                    | Primitive::Capsule {
+                    | LinkPrimitive::Capsule {
                         radius_m,
                         half_length_m,
                     } => cover_cylinder(radius_m, half_length_m),
-                    Primitive::Sphere { radius_m } => vec![Sphere {
+                    LinkPrimitive::Sphere { radius_m } => vec![Sphere {
                         center_m: Vector3::zeros(),
                         radius_m,
                     }],

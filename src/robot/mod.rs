@@ -16,7 +16,7 @@
 pub mod dynamics;
 pub mod ik;
 pub mod kinematics;
-pub mod model_error;
+pub mod plant;
 mod urdf;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3, Vector6};
@@ -83,7 +83,7 @@ pub struct Inertial {
 
 /// A collision/visual primitive in a link frame.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Primitive {
+pub enum LinkPrimitive {
     /// Box with half extents [m].
     Box {
         /// Half extents [m].
@@ -116,7 +116,7 @@ pub struct LinkShape {
     /// `link_from_shape`.
     pub link_from_shape: Isometry3<f64>,
     /// The primitive.
-    pub primitive: Primitive,
+    pub primitive: LinkPrimitive,
 }
 
 /// A link: name, mass properties, collision geometry.

@@ -12,7 +12,7 @@ use std::collections::BTreeMap;
 
 use nalgebra::{Isometry3, Matrix3, Translation3, UnitQuaternion, Vector3};
 
-use super::{DOF, GRAVITY_M_S2, Inertial, Joint, Link, LinkShape, Primitive, RobotModel, ik};
+use super::{DOF, GRAVITY_M_S2, Inertial, Joint, Link, LinkPrimitive, LinkShape, RobotModel, ik};
 use crate::config::{Checker, ConfigError, DrivesConfig, GripperConfig, Problem, RobotConfig};
 
 fn vec3(v: &urdf_rs::Vec3) -> Vector3<f64> {
@@ -398,15 +398,15 @@ fn link_from_urdf(c: &mut Checker, i: usize, l: &urdf_rs::Link) -> Link {
 /// arm's collision model takes; its problems collected in `c`.
 fn shape_from_urdf(c: &mut Checker, skey: &str, col: &urdf_rs::Collision) -> Option<LinkShape> {
     let prim = match &col.geometry {
-        urdf_rs::Geometry::Box { size } => Some(Primitive::Box {
+        urdf_rs::Geometry::Box { size } => Some(LinkPrimitive::Box {
             half_extents_m: vec3(size) / 2.0,
         }),
-        urdf_rs::Geometry::Cylinder { radius, length } => Some(Primitive::Cylinder {
+        urdf_rs::Geometry::Cylinder { radius, length } => Some(LinkPrimitive::Cylinder {
             radius_m: *radius,
             half_length_m: length / 2.0,
         }),
-        urdf_rs::Geometry::Sphere { radius } => Some(Primitive::Sphere { radius_m: *radius }),
-        urdf_rs::Geometry::Capsule { radius, length } => Some(Primitive::Capsule {
+        urdf_rs::Geometry::Sphere { radius } => Some(LinkPrimitive::Sphere { radius_m: *radius }),
+        urdf_rs::Geometry::Capsule { radius, length } => Some(LinkPrimitive::Capsule {
             radius_m: *radius,
             half_length_m: length / 2.0,
         }),
@@ -420,18 +420,18 @@ fn shape_from_urdf(c: &mut Checker, skey: &str, col: &urdf_rs::Collision) -> Opt
     };
     let p = prim?;
     let dims: Vec<f64> = match &p {
-        Primitive::Box { half_extents_m } => half_extents_m.iter().copied().collect(),
-        Primitive::Cylinder {
+        LinkPrimitive::Box { half_extents_m } => half_extents_m.iter().copied().collect(),
+        LinkPrimitive::Cylinder {
             radius_m,
             half_length_m,
         }
-        | Primitive::Capsule {
+        | LinkPrimitive::Capsule {
             radius_m,
             half_length_m,
         } => {
             vec![*radius_m, *half_length_m]
         }
-        Primitive::Sphere { radius_m } => vec![*radius_m],
+        LinkPrimitive::Sphere { radius_m } => vec![*radius_m],
     };
     if dims.iter().any(|v| !(v.is_finite() && *v > 0.0)) {
         c.fail(skey, format!("dimensions must be > 0, got {dims:?}"));

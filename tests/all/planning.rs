@@ -5,7 +5,7 @@ use binpick::bench::binpicking_queries;
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::planning::{Algorithm, CollisionModel, PlanError, PlanOptions, PlanStats};
 use binpick::reference::{PlannerCase, fig5_cases};
-use binpick::robot::{JointVector, Primitive, RobotModel};
+use binpick::robot::{JointVector, LinkPrimitive, RobotModel};
 use nalgebra::{Isometry3, Vector3};
 use rand::RngExt;
 use rapier3d::parry::query::intersection_test;
@@ -33,22 +33,22 @@ fn exact(model: &CollisionModel, scene: &LoadedScene) -> Exact {
             l.shapes
                 .iter()
                 .map(|s| match s.primitive {
-                    Primitive::Box { half_extents_m: h } => (
+                    LinkPrimitive::Box { half_extents_m: h } => (
                         s.link_from_shape,
                         SharedShape::cuboid(h.x as f32, h.y as f32, h.z as f32),
                     ),
-                    Primitive::Cylinder {
+                    LinkPrimitive::Cylinder {
                         radius_m,
                         half_length_m,
                     }
-                    | Primitive::Capsule {
+                    | LinkPrimitive::Capsule {
                         radius_m,
                         half_length_m,
                     } => {
                         let (rot, shape) = cyl_z(radius_m, half_length_m);
                         (s.link_from_shape * rot, shape)
                     }
-                    Primitive::Sphere { radius_m } => (s.link_from_shape, SharedShape::ball(radius_m as f32)),
+                    LinkPrimitive::Sphere { radius_m } => (s.link_from_shape, SharedShape::ball(radius_m as f32)),
                 })
                 .collect()
         })

@@ -16,11 +16,11 @@ use nalgebra::{Isometry3, Translation3};
 use super::events::{Event, PartLoss, Stage};
 use super::outcome::{Fault, Outcome, Slip, Stop};
 use super::{CycleError, Run};
-pub(super) use crate::execution::Settle;
-use crate::execution::{ServoState, execute_from};
 use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthEvent, PartState};
 use crate::robot::{DOF, JointVector, Payload};
+pub(super) use crate::servo::Settle;
+use crate::servo::{ServoState, execute_from};
 use crate::trajectory::{LineLimits, Motion, straight_line};
 
 /// How a motion ended.

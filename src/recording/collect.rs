@@ -14,11 +14,11 @@
 use nalgebra::{Isometry3, Vector3};
 
 use crate::cycle::{CycleEvent, Event, EventLog, Observer, PickRecord, Recognised, RunResult};
-use crate::execution::Tick;
 use crate::geometry::NamedBox;
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Camera, Capture, RecognitionReport, TruthAtTrigger};
+use crate::servo::Tick;
 use crate::trajectory::Motion;
 
 /// Period of the part-pose snapshots [s].

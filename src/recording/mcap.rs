@@ -396,7 +396,7 @@ fn single(v: &crate::robot::JointVector) -> [f32; DOF] {
 /// `/robot/geometry` once (each link's primitives locked to its frame), `/tf` at 50 Hz,
 /// `/robot/joint_states` and `/robot/servo` at 100 Hz.
 fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
-    use crate::robot::Primitive;
+    use crate::robot::LinkPrimitive;
     let name = |i: usize| {
         robot
             .links
@@ -425,13 +425,13 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
                 color: rgba(colour, 1.0),
             };
             match &s.primitive {
-                Primitive::Box { half_extents_m } => e.cubes.push(cube(at, &(2.0 * half_extents_m), colour, 1.0)),
-                Primitive::Cylinder {
+                LinkPrimitive::Box { half_extents_m } => e.cubes.push(cube(at, &(2.0 * half_extents_m), colour, 1.0)),
+                LinkPrimitive::Cylinder {
                     radius_m,
                     half_length_m,
                 } => e.cylinders.push(cylinder(*radius_m, *half_length_m)),
-                Primitive::Sphere { radius_m } => e.spheres.push(sphere(at, *radius_m)),
-                Primitive::Capsule {
+                LinkPrimitive::Sphere { radius_m } => e.spheres.push(sphere(at, *radius_m)),
+                LinkPrimitive::Capsule {
                     radius_m,
                     half_length_m,
                 } => {
