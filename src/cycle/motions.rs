@@ -290,6 +290,48 @@ impl Cell<'_> {
         overlap_end(first, second, line_s, &LINE_OVERLAP_SHARES, &check)
     }
 
+    /// The Pick's motions from `q_now` to `grasp` in the scene `empty` (the pile as seen, the part
+    /// cut out): the transfer to the approach pose (or why not), the straight descent (if the
+    /// line has a joint path) and, where clear and within the torques, the two overlapped.
+    #[allow(clippy::type_complexity)]
+    fn pick_motion(
+        &self,
+        q_now: &JointVector,
+        grasp: &GraspCandidate,
+        empty: &CollisionModel,
+        rng: &mut ChaCha8Rng,
+    ) -> (
+        Result<Trajectory, MotionFailure>,
+        Option<LineMotion>,
+        Option<Overlapped<Trajectory, LineMotion>>,
+    ) {
+        let (robot, hand) = (self.robot, self.hand);
+        let q_approach = JointVector::from(grasp.q_approach);
+        let dyn_hand = robot.dynamics(&hand);
+        let pick_transfer = empty
+            .plan(q_now, &q_approach, &PlanOptions::default(), rng)
+            .map(|p| {
+                let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+                accelerate_in_corridor(&self.accel_robot, &dyn_hand, &via, empty, CORRIDOR_CHECK_DT_S)
+                    .1
+                    .trajectory
+            })
+            .map_err(MotionFailure::PickTransfer);
+        let descent = self.line(
+            &q_approach,
+            &grasp.world_from_tool_approach,
+            &grasp.world_from_tool,
+            &hand,
+            None,
+        );
+        // The descent starts while the transfer ends, where the pile as seen allows.
+        let pick_blend = match (&pick_transfer, &descent) {
+            (Ok(t), Some(d)) => self.overlap_end(t, d, d.duration_s(), &hand, empty, None),
+            _ => None,
+        };
+        (pick_transfer, descent, pick_blend)
+    }
+
     /// The last Place's retreat `r` overlapped with the Pick (transfer `t`, descent `d`, and
     /// their overlap `pick_blend`): the transfer starts while the retreat ends, where the cell,
     /// the pile as seen in `empty` and the parts placed in this place tray before slot
@@ -442,28 +484,7 @@ impl Run<'_, '_> {
         let mut rng = crate::rng::stream(cell.opts.seed.wrapping_add(self.st.world.steps()), "planner");
         let q_approach = JointVector::from(grasp.q_approach);
         let hand = cell.hand;
-        let dyn_hand = robot.dynamics(&hand);
-        let pick_transfer = empty
-            .plan(&q_now, &q_approach, &PlanOptions::default(), &mut rng)
-            .map(|p| {
-                let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-                accelerate_in_corridor(&cell.accel_robot, &dyn_hand, &via, &empty, CORRIDOR_CHECK_DT_S)
-                    .1
-                    .trajectory
-            })
-            .map_err(MotionFailure::PickTransfer);
-        let descent = cell.line(
-            &q_approach,
-            &grasp.world_from_tool_approach,
-            &grasp.world_from_tool,
-            &hand,
-            None,
-        );
-        // The descent starts while the transfer ends, where the pile as seen allows.
-        let pick_blend = match (&pick_transfer, &descent) {
-            (Ok(t), Some(d)) => cell.overlap_end(t, d, d.duration_s(), &hand, &empty, None),
-            _ => None,
-        };
+        let (pick_transfer, descent, pick_blend) = cell.pick_motion(&q_now, &grasp, &empty, &mut rng);
         // The transfer starts while the last retreat ends, where the cell, the pile as seen and
         // the parts placed in this place tray allow (each where the cell put it: its slot, its
         // box grown by [`PLACED_PART_MARGIN_M`]); the retreat ends before the descent starts.
