@@ -180,7 +180,7 @@ pub enum Settle {
 /// The servo's target at `t` [s] into `motion`: past the end, the end at rest (the trajectory's
 /// last sample still carries the final blend's deceleration).
 #[inline]
-fn target_at(motion: &(impl Motion + ?Sized), t: f64) -> crate::trajectory::Sample {
+fn target_at(motion: &impl Motion, t: f64) -> crate::trajectory::Sample {
     if t > motion.duration_s() + 1e-9 {
         let end = motion.at(motion.duration_s());
         crate::trajectory::Sample {
@@ -223,7 +223,7 @@ pub fn execute_from(
     model: &DynamicsModel,
     plant: &DynamicsModel,
     servo: &Servo,
-    motion: &(impl Motion + ?Sized),
+    motion: &impl Motion,
     state: ServoState,
     settle: Settle,
 ) -> Execution {

@@ -21,7 +21,7 @@ use super::Cell;
 use super::Run;
 use super::events::Recognised;
 use super::outcome::MotionFailure;
-use super::play::{Capture, Segment, Settle, Valve};
+use super::play::{Capture, Segment, SegmentMotion, Settle, Valve};
 use crate::geometry::NamedBox;
 use crate::grasp::GraspCandidate;
 use crate::pipeline::{GraspContext, NoGrasp, sense_and_grasp};
@@ -108,8 +108,8 @@ impl PlaceMotion {
         held: Payload,
         capture: Capture,
     ) -> Vec<Segment<'m>> {
-        let descent = |motion: Box<dyn Motion + 'm>| {
-            let close_s = (motion.duration_s() - self.release_lead_s).max(0.0);
+        let descent = |motion: SegmentMotion<'m>| {
+            let close_s = (motion.as_motion().duration_s() - self.release_lead_s).max(0.0);
             Segment {
                 motion,
                 payload: held,
@@ -118,7 +118,7 @@ impl PlaceMotion {
                 capture,
             }
         };
-        let transfer = |motion: Box<dyn Motion + 'm>| Segment {
+        let transfer = |motion: SegmentMotion<'m>| Segment {
             motion,
             payload: held,
             valve: None,
@@ -126,12 +126,12 @@ impl PlaceMotion {
             capture,
         };
         match (lift_blend, &self.descent_blend) {
-            (Some(b), Some(d)) => vec![descent(Box::new(
-                Overlapped::new(b.first().clone(), d.clone(), b.start_s()).rest(),
-            ))],
-            (None, Some(d)) => vec![descent(Box::new(d))],
-            (Some(b), None) => vec![transfer(Box::new(b.rest())), descent(Box::new(&self.descent))],
-            (None, None) => vec![transfer(Box::new(&self.transfer)), descent(Box::new(&self.descent))],
+            (Some(b), Some(d)) => vec![descent(
+                Overlapped::new(b.first().clone(), d.clone(), b.start_s()).rest().into(),
+            )],
+            (None, Some(d)) => vec![descent(d.into())],
+            (Some(b), None) => vec![transfer(b.rest().into()), descent((&self.descent).into())],
+            (None, None) => vec![transfer((&self.transfer).into()), descent((&self.descent).into())],
         }
     }
 }
@@ -200,21 +200,21 @@ impl Prepared {
     /// the last Place's retreat (overlapped with it), overlapped with each other, or one after
     /// the other. The valve opens `vacuum_lead_s` before the descent ends; no capture runs.
     pub(super) fn pick<'m>(&'m self, transfer: &'m Trajectory, hand: Payload, vacuum_lead_s: f64) -> [Segment<'m>; 2] {
-        let (to, down): (Box<dyn Motion + 'm>, Box<dyn Motion + 'm>) = match (&self.retreat_blend, &self.pick_blend) {
+        let (to, down): (SegmentMotion<'m>, SegmentMotion<'m>) = match (&self.retreat_blend, &self.pick_blend) {
             (Some(rb), _) => {
                 let (m, s) = (&rb.motion, rb.motion.start_s());
                 (
-                    Box::new(m.window(s, s + rb.descent_from_s)),
-                    Box::new(m.window(s + rb.descent_from_s, m.duration_s())),
+                    m.window(s, s + rb.descent_from_s).into(),
+                    m.window(s + rb.descent_from_s, m.duration_s()).into(),
                 )
             }
-            (None, Some(b)) => (Box::new(b.head()), Box::new(b.rest())),
-            (None, None) => (Box::new(transfer), Box::new(&self.descent)),
+            (None, Some(b)) => (b.head().into(), b.rest().into()),
+            (None, None) => (transfer.into(), (&self.descent).into()),
         };
-        let open_s = (down.duration_s() - vacuum_lead_s).max(0.0);
+        let open_s = (down.as_motion().duration_s() - vacuum_lead_s).max(0.0);
         [
-            Segment::boxed(to, hand).flowing_on(),
-            Segment::boxed(down, hand).switching(Valve::OpenAt(open_s)),
+            Segment::new(to, hand).flowing_on(),
+            Segment::new(down, hand).switching(Valve::OpenAt(open_s)),
         ]
     }
 }

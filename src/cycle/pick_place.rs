@@ -217,7 +217,7 @@ impl Run<'_, '_> {
             let until_s = self.st.world.time_s() + rb.motion.start_s();
             let head = rb.motion.head();
             let played = self.play(
-                &Segment::new(&head, self.cell.hand)
+                &Segment::new(head, self.cell.hand)
                     .flowing_on()
                     .capturing(Capture::EndingBy(until_s)),
             )?;

@@ -11,6 +11,8 @@
 //!
 //! Units: s, rad, m. Frames: joint space; world for the tool.
 
+use std::borrow::Cow;
+
 use nalgebra::{Isometry3, Translation3};
 
 use super::events::{Event, PartLoss, Stage};
@@ -21,7 +23,7 @@ use crate::physics::{HealthEvent, PartState};
 use crate::robot::{DOF, JointVector, Payload};
 pub(super) use crate::servo::Settle;
 use crate::servo::{ServoState, execute_from};
-use crate::trajectory::{LineLimits, Motion, straight_line};
+use crate::trajectory::{LineLimits, LineMotion, Motion, Overlapped, Trajectory, straight_line};
 
 /// How a motion ended.
 pub(super) enum Played {
@@ -64,11 +66,76 @@ impl Capture {
     pub const ANY: Capture = Capture::EndingBy(f64::INFINITY);
 }
 
+/// The motion of a segment: one of the kinds the cycle plays, each through its own instance
+/// of the servo loop (as fast as a loop over one known motion type).
+#[derive(Debug)]
+pub(super) enum SegmentMotion<'m> {
+    /// A straight tool line (a descent, a lift, a retreat, a way out).
+    Line(&'m LineMotion),
+    /// A planned and accelerated transfer.
+    Transfer(&'m Trajectory),
+    /// A lift with the Place transfer started before it ends (or a window of it).
+    LiftTransfer(Overlapped<LineMotion, Trajectory>),
+    /// A transfer with the descent started before it ends (or a window of it).
+    TransferDescent(Cow<'m, Overlapped<Trajectory, LineMotion>>),
+    /// A line (a retreat, a lift) with a transfer and descent started before it ends.
+    LineThenPick(Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>),
+}
+
+impl SegmentMotion<'_> {
+    /// The motion, whichever its kind.
+    pub fn as_motion(&self) -> &dyn Motion {
+        match self {
+            SegmentMotion::Line(m) => *m,
+            SegmentMotion::Transfer(m) => *m,
+            SegmentMotion::LiftTransfer(m) => m,
+            SegmentMotion::TransferDescent(m) => m.as_ref(),
+            SegmentMotion::LineThenPick(m) => m,
+        }
+    }
+}
+
+impl<'m> From<&'m LineMotion> for SegmentMotion<'m> {
+    fn from(m: &'m LineMotion) -> Self {
+        SegmentMotion::Line(m)
+    }
+}
+
+impl<'m> From<&'m Trajectory> for SegmentMotion<'m> {
+    fn from(m: &'m Trajectory) -> Self {
+        SegmentMotion::Transfer(m)
+    }
+}
+
+impl From<Overlapped<LineMotion, Trajectory>> for SegmentMotion<'_> {
+    fn from(m: Overlapped<LineMotion, Trajectory>) -> Self {
+        SegmentMotion::LiftTransfer(m)
+    }
+}
+
+impl From<Overlapped<Trajectory, LineMotion>> for SegmentMotion<'_> {
+    fn from(m: Overlapped<Trajectory, LineMotion>) -> Self {
+        SegmentMotion::TransferDescent(Cow::Owned(m))
+    }
+}
+
+impl<'m> From<&'m Overlapped<Trajectory, LineMotion>> for SegmentMotion<'m> {
+    fn from(m: &'m Overlapped<Trajectory, LineMotion>) -> Self {
+        SegmentMotion::TransferDescent(Cow::Borrowed(m))
+    }
+}
+
+impl From<Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>> for SegmentMotion<'_> {
+    fn from(m: Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>) -> Self {
+        SegmentMotion::LineThenPick(m)
+    }
+}
+
 /// One motion as the arm plays it: what the controller believes the cup carries, the valve's
 /// switch, how it ends and whether the sensor may be triggered meanwhile.
 pub(super) struct Segment<'m> {
     /// The motion.
-    pub motion: Box<dyn Motion + 'm>,
+    pub motion: SegmentMotion<'m>,
     /// The payload the controller models (hand, or hand and part).
     pub payload: Payload,
     /// The valve's switch during it, if any.
@@ -81,14 +148,9 @@ pub(super) struct Segment<'m> {
 
 impl<'m> Segment<'m> {
     /// `motion` with `payload`, no valve switch, ending in position, no capture.
-    pub fn new(motion: impl Motion + 'm, payload: Payload) -> Self {
-        Segment::boxed(Box::new(motion), payload)
-    }
-
-    /// As [`Segment::new`], the motion boxed already.
-    pub fn boxed(motion: Box<dyn Motion + 'm>, payload: Payload) -> Self {
+    pub fn new(motion: impl Into<SegmentMotion<'m>>, payload: Payload) -> Self {
         Segment {
-            motion,
+            motion: motion.into(),
             payload,
             valve: None,
             settle: Settle::InPosition,
@@ -196,14 +258,24 @@ impl Run<'_, '_> {
     /// Plays a segment through the servo into the world, switching the vacuum valve and polling
     /// for the next capture as it says.
     pub(super) fn play(&mut self, segment: &Segment<'_>) -> Result<Played, CycleError> {
+        match &segment.motion {
+            SegmentMotion::Line(m) => self.play_motion(*m, segment),
+            SegmentMotion::Transfer(m) => self.play_motion(*m, segment),
+            SegmentMotion::LiftTransfer(m) => self.play_motion(m, segment),
+            SegmentMotion::TransferDescent(m) => self.play_motion(m.as_ref(), segment),
+            SegmentMotion::LineThenPick(m) => self.play_motion(m, segment),
+        }
+    }
+
+    /// [`Run::play`] of `motion`, the segment's motion as its own type.
+    fn play_motion<M: Motion>(&mut self, motion: &M, segment: &Segment<'_>) -> Result<Played, CycleError> {
         let Segment {
-            motion,
             payload,
             valve,
             settle,
             capture,
+            ..
         } = segment;
-        let motion: &dyn Motion = &**motion;
         let robot = self.cell.robot;
         let jump = (motion.at(0.0).q - self.st.world.joints()).amax();
         if jump > 1e-3 {

@@ -94,19 +94,3 @@ pub trait Motion {
             .collect()
     }
 }
-
-/// A borrowed motion is the motion.
-impl<M: Motion + ?Sized> Motion for &M {
-    fn stretches(&self) -> Option<Vec<Stretch>> {
-        (**self).stretches()
-    }
-    fn duration_s(&self) -> f64 {
-        (**self).duration_s()
-    }
-    fn at(&self, t: f64) -> Sample {
-        (**self).at(t)
-    }
-    fn sampled(&self, dt_s: f64) -> Vec<Sample> {
-        (**self).sampled(dt_s)
-    }
-}
