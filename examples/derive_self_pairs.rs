@@ -32,7 +32,7 @@
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::grasp::GraspSelector;
 use binpick::planning::SELF_PAIRS;
-use binpick::robot::{DOF, JointVector, Primitive, RobotModel};
+use binpick::robot::{DOF, JointVector, LinkPrimitive, RobotModel};
 use nalgebra::{Isometry3, Vector3};
 use rapier3d::parry::query::distance;
 use rapier3d::parry::shape::SharedShape;
@@ -71,27 +71,27 @@ fn links(robot: &RobotModel) -> Vec<Vec<Piece>> {
             l.shapes
                 .iter()
                 .map(|s| match s.primitive {
-                    Primitive::Box { half_extents_m: h } => Piece {
+                    LinkPrimitive::Box { half_extents_m: h } => Piece {
                         link_from_shape: s.link_from_shape,
                         shape: SharedShape::cuboid(h.x as f32, h.y as f32, h.z as f32),
                         reach_m: s.link_from_shape.translation.vector.norm() + h.norm(),
                     },
-                    Primitive::Cylinder {
+                    LinkPrimitive::Cylinder {
                         radius_m,
                         half_length_m,
                     }
-                    | Primitive::Capsule {
+                    | LinkPrimitive::Capsule {
                         radius_m,
                         half_length_m,
                     } => {
                         // A capsule is inside the cylinder as long as it plus its end caps.
                         let h = match s.primitive {
-                            Primitive::Capsule { .. } => half_length_m + radius_m,
+                            LinkPrimitive::Capsule { .. } => half_length_m + radius_m,
                             _ => half_length_m,
                         };
                         cylinder(s.link_from_shape, radius_m, h)
                     }
-                    Primitive::Sphere { radius_m } => Piece {
+                    LinkPrimitive::Sphere { radius_m } => Piece {
                         link_from_shape: s.link_from_shape,
                         shape: SharedShape::ball(radius_m as f32),
                         reach_m: s.link_from_shape.translation.vector.norm() + radius_m,

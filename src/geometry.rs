@@ -7,32 +7,39 @@
 //! grasp selector its cup length, the recordings their cell boxes and the benchmarks their scenes,
 //! so none of these can drift apart.
 //!
-//! Units: m, N, kg, m/s^2. Frames: each box is placed in a frame (`world_from_frame`: the world
-//! for the table, the tray frame for tray pieces, the obstacle's own yawed frame) at a centre in
-//! that frame; the hand's cylinders lie along the flange z axis, from the flange face (z = 0) to
+//! Units: m, N, kg, m/s^2. Frames: each box is placed in a frame (the world for the table, the
+//! tray frame for tray pieces, the obstacle's own yawed frame) at a centre in that frame, and
+//! kept as `world_from_box`; the hand's cylinders lie along the flange z axis, from the flange face (z = 0) to
 //! the tool frame at the cup lip (z = `tool_length_m`).
 
 use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 
 use crate::config::{GripperConfig, Scene, TrayConfig};
 
-/// A named solid box of the cell.
+/// A named solid box of the cell (and of the planner's scenes: a placed part, a test's obstacle).
 #[derive(Debug, Clone, PartialEq)]
 pub struct NamedBox {
     /// What it is (`table`, `pick tray wall +x`, `obstacle "sensor post"`, ...).
     pub name: String,
-    /// The frame the box is placed in, in the world.
-    pub world_from_frame: Isometry3<f64>,
-    /// The box's centre in that frame [m].
-    pub center_m: Vector3<f64>,
-    /// Half extents along the frame's axes [m].
+    /// `world_from_box`: the box's own frame (its centre, its axes).
+    pub world_from_box: Isometry3<f64>,
+    /// Half extents along the box's axes [m].
     pub half_m: Vector3<f64>,
 }
 
 impl NamedBox {
-    /// `world_from_box`: the box's own frame (centre, axes of its frame).
-    pub fn world_from_box(&self) -> Isometry3<f64> {
-        self.world_from_frame * Isometry3::translation(self.center_m.x, self.center_m.y, self.center_m.z)
+    /// The box centred at `center_m` in a frame placed at `world_from_frame`, with the frame's axes.
+    pub fn in_frame(
+        name: String,
+        world_from_frame: &Isometry3<f64>,
+        center_m: &Vector3<f64>,
+        half_m: Vector3<f64>,
+    ) -> Self {
+        NamedBox {
+            name,
+            world_from_box: world_from_frame * Isometry3::translation(center_m.x, center_m.y, center_m.z),
+            half_m,
+        }
     }
 }
 
@@ -52,27 +59,26 @@ pub enum BoxRole {
 /// The table top as a box.
 pub fn table_box(scene: &Scene) -> NamedBox {
     let t = &scene.table;
-    NamedBox {
-        name: "table".into(),
-        world_from_frame: Isometry3::identity(),
-        center_m: Vector3::new(t.center_xy_m[0], t.center_xy_m[1], t.top_z_m - t.thickness_m / 2.0),
-        half_m: Vector3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, t.thickness_m / 2.0),
-    }
+    NamedBox::in_frame(
+        "table".into(),
+        &Isometry3::identity(),
+        &Vector3::new(t.center_xy_m[0], t.center_xy_m[1], t.top_z_m - t.thickness_m / 2.0),
+        Vector3::new(t.size_m[0] / 2.0, t.size_m[1] / 2.0, t.thickness_m / 2.0),
+    )
 }
 
 /// Names of a tray's pieces, in the order [`tray_boxes`] returns them.
 pub const TRAY_PIECES: [&str; 5] = ["floor", "wall +x", "wall -x", "wall +y", "wall -y"];
 
-/// A tray's floor and four walls, named `"{name} floor"`, `"{name} wall +x"`, ... in the tray
-/// frame (origin at the centre of the inner floor surface). The floor reaches under the walls;
-/// the x walls span the whole outer length, the y walls fit between them.
-pub fn tray_boxes(name: &str, t: &TrayConfig) -> Vec<NamedBox> {
-    let world_from_tray = t.world_from_tray();
+/// A tray's floor and four walls in the tray frame (origin at the centre of the inner floor
+/// surface), in [`TRAY_PIECES`] order: (centre, half extents) [m]. The floor reaches under the
+/// walls; the x walls span the whole outer length, the y walls fit between them.
+pub fn tray_pieces_m(t: &TrayConfig) -> [(Vector3<f64>, Vector3<f64>); 5] {
     let [lx, ly] = t.inner_size_m;
     let (w, h, f) = (t.wall_thickness_m, t.wall_height_m, t.floor_thickness_m);
     let zc = (h - f) / 2.0;
     let hz = (h + f) / 2.0;
-    let pieces = [
+    [
         (
             Vector3::new(0.0, 0.0, -f / 2.0),
             Vector3::new(lx / 2.0 + w, ly / 2.0 + w, f / 2.0),
@@ -93,15 +99,18 @@ pub fn tray_boxes(name: &str, t: &TrayConfig) -> Vec<NamedBox> {
             Vector3::new(0.0, -ly / 2.0 - w / 2.0, zc),
             Vector3::new(lx / 2.0, w / 2.0, hz),
         ),
-    ];
-    pieces
+    ]
+}
+
+/// A tray's floor and four walls ([`tray_pieces_m`]) in the world, named `"{name} floor"`,
+/// `"{name} wall +x"`, ...
+pub fn tray_boxes(name: &str, t: &TrayConfig) -> Vec<NamedBox> {
+    let world_from_tray = t.world_from_tray();
+    tray_pieces_m(t)
         .into_iter()
         .zip(TRAY_PIECES)
-        .map(|((center_m, half_m), piece)| NamedBox {
-            name: format!("{name} {piece}"),
-            world_from_frame: world_from_tray,
-            center_m,
-            half_m,
+        .map(|((center_m, half_m), piece)| {
+            NamedBox::in_frame(format!("{name} {piece}"), &world_from_tray, &center_m, half_m)
         })
         .collect()
 }
@@ -111,14 +120,16 @@ pub fn obstacle_boxes(scene: &Scene) -> Vec<NamedBox> {
     scene
         .obstacles
         .iter()
-        .map(|o| NamedBox {
-            name: o.name.clone(),
-            world_from_frame: Isometry3::from_parts(
-                Translation3::new(o.center_m[0], o.center_m[1], o.center_m[2]),
-                UnitQuaternion::from_euler_angles(0.0, 0.0, o.yaw_deg.to_radians()),
-            ),
-            center_m: Vector3::zeros(),
-            half_m: Vector3::from(o.size_m) / 2.0,
+        .map(|o| {
+            NamedBox::in_frame(
+                o.name.clone(),
+                &Isometry3::from_parts(
+                    Translation3::new(o.center_m[0], o.center_m[1], o.center_m[2]),
+                    UnitQuaternion::from_euler_angles(0.0, 0.0, o.yaw_deg.to_radians()),
+                ),
+                &Vector3::zeros(),
+                Vector3::from(o.size_m) / 2.0,
+            )
         })
         .collect()
 }
@@ -272,26 +283,18 @@ mod tests {
     #[test]
     fn trays_are_five_pieces_that_enclose_the_inner_floor() {
         let s = LoadedScene::embedded_default().unwrap().scene;
-        let boxes = tray_boxes("pick tray", &s.pick_tray);
-        assert_eq!(boxes.len(), 5);
+        let boxes = tray_pieces_m(&s.pick_tray);
         let t = &s.pick_tray;
         // The floor's top is the tray frame's z = 0; the walls reach from under the floor to the rim.
-        assert!((boxes[0].center_m.z + boxes[0].half_m.z).abs() < 1e-12);
-        for b in &boxes[1..] {
-            assert!(
-                (b.center_m.z + b.half_m.z - t.wall_height_m).abs() < 1e-12,
-                "{}",
-                b.name
-            );
-            assert!(
-                (b.center_m.z - b.half_m.z + t.floor_thickness_m).abs() < 1e-12,
-                "{}",
-                b.name
-            );
+        assert!((boxes[0].0.z + boxes[0].1.z).abs() < 1e-12);
+        for ((c, h), name) in boxes[1..].iter().zip(&TRAY_PIECES[1..]) {
+            assert!((c.z + h.z - t.wall_height_m).abs() < 1e-12, "{name}");
+            assert!((c.z - h.z + t.floor_thickness_m).abs() < 1e-12, "{name}");
         }
         // Inner faces of the walls at +-inner/2.
-        assert!((boxes[1].center_m.x - boxes[1].half_m.x - t.inner_size_m[0] / 2.0).abs() < 1e-12);
-        assert!((boxes[4].center_m.y + boxes[4].half_m.y + t.inner_size_m[1] / 2.0).abs() < 1e-12);
+        assert!((boxes[1].0.x - boxes[1].1.x - t.inner_size_m[0] / 2.0).abs() < 1e-12);
+        assert!((boxes[4].0.y + boxes[4].1.y + t.inner_size_m[1] / 2.0).abs() < 1e-12);
+        assert_eq!(tray_boxes("pick tray", t)[1].name, "pick tray wall +x");
         let all = cell_boxes(&s);
         assert_eq!(all.len(), 11 + s.obstacles.len());
         assert_eq!(all[0].1.name, "table");

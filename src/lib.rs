@@ -18,10 +18,10 @@
 //!    edges, generic sampling-based search, the cell's planner.
 //! 8. [`trajectory`]: timed trajectories through via points, torques, the acceleration search,
 //!    path correction, TOPP-RA, straight tool lines.
-//! 9. [`execution`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
+//! 9. [`servo`]: the torque-limited 1 kHz joint servo on the arm's dynamics, protective stops.
 //! 10. [`cycle`]: the cell cycle end to end (sensing, motion generation, Pick, Place, faults,
 //!     trays), its events and the observer interface through which a run is watched.
-//! 11. [`record`]: the run written to Rerun (`.rrd`) and MCAP files.
+//! 11. [`recording`]: the run written to Rerun (`.rrd`) and MCAP files.
 //! 12. [`results`]: the one results type's figures (a run's or many runs' [`cycle::Tally`]
 //!     summarised) and the takt table's columns, listed once for Markdown, CSV and JSON;
 //!     [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
@@ -42,20 +42,20 @@ pub mod bench;
 pub mod chart;
 pub mod config;
 pub mod cycle;
-pub mod execution;
 pub mod geometry;
 pub mod grasp;
 pub mod part;
 pub mod physics;
 pub mod pipeline;
 pub mod planning;
-pub mod record;
+pub mod recording;
 pub mod reference;
 pub mod report;
 pub mod results;
 pub mod rng;
 pub mod robot;
 pub mod sensor;
+pub mod servo;
 pub mod stats;
 pub mod study;
 pub mod svg;

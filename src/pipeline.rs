@@ -14,6 +14,9 @@
 //!
 //! Units: m, rad. Frames: world; the pick tray frame for the height map and the cut-out.
 
+use std::collections::BTreeMap;
+use std::fmt;
+
 use nalgebra::{Point3, Vector3};
 
 use crate::config::Scene;
@@ -75,27 +78,53 @@ pub struct GraspChoice {
 
 impl GraspChoice {
     /// Why nothing was chosen (see [`why_none`]).
-    pub fn why_none(&self) -> String {
+    pub fn why_none(&self) -> NoGrasp {
         why_none(&self.plan)
+    }
+}
+
+/// Why no grasp can be tried.
+#[derive(Debug, Clone, PartialEq)]
+pub enum NoGrasp {
+    /// No feasible grasp: how many candidates each reason rejected.
+    NoneFeasible(BTreeMap<&'static str, usize>),
+    /// None of the best-ranked (this many) has a clear approach.
+    NoClearApproach(usize),
+    /// The chosen grasp's straight descent has no joint path (found by the motion generation).
+    NoStraightDescent,
+}
+
+impl fmt::Display for NoGrasp {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        match self {
+            NoGrasp::NoneFeasible(rejected) => {
+                let reasons = rejected
+                    .iter()
+                    .map(|(k, v)| format!("{k} {v}"))
+                    .collect::<Vec<_>>()
+                    .join(", ");
+                write!(f, "no feasible grasp ({reasons})")
+            }
+            NoGrasp::NoClearApproach(among) => write!(f, "no grasp with a clear approach among {among}"),
+            NoGrasp::NoStraightDescent => f.write_str("no joint path along the straight descent"),
+        }
+    }
+}
+
+/// As its text.
+impl serde::Serialize for NoGrasp {
+    fn serialize<S: serde::Serializer>(&self, s: S) -> Result<S::Ok, S::Error> {
+        s.collect_str(self)
     }
 }
 
 /// Why sense-and-grasp chose nothing from `plan`: no feasible grasp (with the rejection counts),
 /// or no clear approach among the best-ranked.
-pub fn why_none(plan: &GraspPlan) -> String {
+pub fn why_none(plan: &GraspPlan) -> NoGrasp {
     if plan.ranked.is_empty() {
-        let reasons = plan
-            .rejected_counts()
-            .iter()
-            .map(|(k, v)| format!("{k} {v}"))
-            .collect::<Vec<_>>()
-            .join(", ");
-        format!("no feasible grasp ({reasons})")
+        NoGrasp::NoneFeasible(plan.rejected_counts())
     } else {
-        format!(
-            "no grasp with a clear approach among {}",
-            plan.ranked.len().min(APPROACH_CANDIDATES)
-        )
+        NoGrasp::NoClearApproach(plan.ranked.len().min(APPROACH_CANDIDATES))
     }
 }
 

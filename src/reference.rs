@@ -12,7 +12,8 @@
 use nalgebra::{Isometry3, Vector3};
 
 use crate::config::Scene;
-use crate::planning::{CollisionModel, EnvBox, Environment, RobotSpheres};
+use crate::geometry::NamedBox;
+use crate::planning::{CollisionModel, Environment, RobotSpheres};
 use crate::robot::{JointVector, RobotModel, tool_down_pose};
 
 /// The reference's Table 5: takt per workpiece [s].
@@ -97,22 +98,14 @@ pub struct PlannerCase {
 /// The cell's table as the only obstacle (the reference's cases stand on an empty table).
 fn table_only(scene: &Scene) -> Environment {
     Environment {
-        boxes: vec![env_box(crate::geometry::table_box(scene))],
+        boxes: vec![crate::geometry::table_box(scene)],
         pile: None,
     }
 }
 
-fn env_box(b: crate::geometry::NamedBox) -> EnvBox {
-    EnvBox {
-        world_from_box: b.world_from_box(),
-        half_m: b.half_m,
-        name: b.name,
-    }
-}
-
 /// An axis-aligned box centred at `c` of full size `size` [m].
-fn bx(name: &str, c: [f64; 3], size: [f64; 3]) -> EnvBox {
-    EnvBox {
+fn bx(name: &str, c: [f64; 3], size: [f64; 3]) -> NamedBox {
+    NamedBox {
         name: name.into(),
         world_from_box: Isometry3::translation(c[0], c[1], c[2]),
         half_m: Vector3::from(size) / 2.0,
@@ -121,7 +114,7 @@ fn bx(name: &str, c: [f64; 3], size: [f64; 3]) -> EnvBox {
 
 /// An open container standing on z = 0: a 1 cm floor and four 1 cm walls around (x, y), inner
 /// size `inner` square, wall height `h` [m].
-fn container(name: &str, x: f64, y: f64, inner: f64, h: f64) -> Vec<EnvBox> {
+fn container(name: &str, x: f64, y: f64, inner: f64, h: f64) -> Vec<NamedBox> {
     let t = 0.01;
     let o = inner / 2.0 + t / 2.0;
     vec![

@@ -102,8 +102,8 @@ pub struct SkipFormats {
 
 impl SkipFormats {
     /// The formats to write when recording.
-    pub fn formats(self, record: bool) -> binpick::record::Formats {
-        binpick::record::Formats {
+    pub fn formats(self, record: bool) -> binpick::recording::Formats {
+        binpick::recording::Formats {
             rrd: record && !self.no_rrd,
             mcap: record && !self.no_mcap,
         }

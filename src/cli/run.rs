@@ -9,7 +9,7 @@ use serde_json::json;
 use super::{CellArgs, Interrupted, ModeArgs, OutArgs, SkipFormats, check_picks, load_workpiece, stop_on_ctrl_c};
 use binpick::chart::TimeChart;
 use binpick::cycle::{EndReason, EventLog, Observer, Observers, RunOptions};
-use binpick::record::Recorder;
+use binpick::recording::Recorder;
 
 /// Arguments of `binpick run`.
 #[derive(Args)]
@@ -88,14 +88,14 @@ pub fn run(a: &RunArgs) -> Result<()> {
         run.write("timechart-steady.svg", steady)?;
     }
     if let Some(recorder) = recorder {
-        let info = binpick::record::RunInfo {
+        let info = binpick::recording::RunInfo {
             scene: loaded.label.clone(),
             workpiece: wp.workpiece.name.clone(),
             seed,
             deterministic,
             picks: a.picks,
         };
-        binpick::record::write_recordings(
+        binpick::recording::write_recordings(
             run.staging_dir(),
             "run",
             formats,

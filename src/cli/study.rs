@@ -114,7 +114,7 @@ pub fn run(
     spec: StudySpec,
     study: &Study,
     dir: &RunDir,
-    record: Option<binpick::record::Formats>,
+    record: Option<binpick::recording::Formats>,
 ) -> Result<(StudyFile, WallTimes)> {
     let (k, n) = study.shard;
     let mine = binpick::study::shard(&spec.jobs(), k, n);

@@ -5,7 +5,8 @@
 //! This module holds what both file kinds share: the error types ([`Problem`], [`ConfigError`]),
 //! the [`Checker`] that collects problems, [`parse_toml`], the embedded files and the loaders
 //! ([`LoadedScene`] with its URDF, [`LoadedWorkpiece`]). The formats themselves are in [`scene`]
-//! (the cell) and [`workpiece`] (a kind of part); their items are re-exported here.
+//! (the cell; its checks beside it, in `scene_checks`) and [`workpiece`] (a kind of part); their
+//! items are re-exported here.
 //!
 //! Units: every key carries its unit in its name (`_m`, `_s`, `_kg`, `_deg`, `_nm`, ...). Degrees
 //! exist only here, at the file boundary; the accessors that the rest of the crate uses return SI
@@ -22,6 +23,7 @@ use std::path::{Path, PathBuf};
 pub mod agitation;
 pub mod model_error;
 pub mod scene;
+mod scene_checks;
 pub mod workpiece;
 
 pub use agitation::AgitationConfig;

@@ -2,8 +2,8 @@
 //! stages of the time chart, and the one observer interface through which recordings, the
 //! time chart, the event log and progress displays see a run.
 //!
-//! Job: name every kind of thing that happens in the cycle once, as a value (not a string), with
-//! its log line (`kind()` and the `Display` detail) and its severity; and define [`Observer`],
+//! Job: name every kind of thing that happens in the cycle once, as a value (not a string; a
+//! pick's outcome and its cause in [`super::outcome`]), with its log line (`kind()` and the `Display` detail) and its severity; and define [`Observer`],
 //! whose methods do nothing by default, so a run nobody watches keeps nothing.
 //!
 //! Units: s (simulation time), m, rad; detail texts print mm and deg. Frames: world.
@@ -12,10 +12,11 @@ use std::fmt;
 
 use serde::{Serialize, Serializer};
 
-use crate::execution::Tick;
+use super::outcome::{Fault, MotionFailure, Outcome};
 use crate::grasp::GraspCandidate;
 use crate::physics::World;
 use crate::sensor::{Capture, CaptureProblem, Detection, RecognitionReport, TruthAtTrigger};
+use crate::servo::Tick;
 use crate::trajectory::Motion;
 
 /// A stage of the cell cycle, as the time chart draws it (one lane each, top to bottom).
@@ -42,72 +43,6 @@ pub enum Stage {
     Stall,
     /// The pick tray vibrates to loosen the pile, then the pile settles.
     Agitation,
-}
-
-/// How a grasp failure's detail starts when the chosen detection was wrong: `grasp_failed:
-/// misrecognised ...` (evaluation against the truth at the trigger names it; nothing decides on it).
-pub const MISRECOGNISED: &str = "misrecognised";
-
-/// Why a pick went wrong or did not start.
-#[derive(Debug, Clone, PartialEq, Serialize)]
-pub enum Outcome {
-    /// The part was released in its slot.
-    Placed,
-    /// The cup did not seal (reason).
-    GraspFailed(String),
-    /// The recognition result held no part: re-capture.
-    NothingDetected,
-    /// Parts were detected but none was graspable (the selector's reasons).
-    NothingGraspable(String),
-    /// No path or trajectory for a motion (reason).
-    NoMotion(String),
-    /// The servo tripped a protective stop (reason).
-    ProtectiveStop(String),
-    /// The arm, the tool or the held part collided, or pressed a part into the tray (what).
-    Collision(String),
-    /// The part came off the cup on the way (reason).
-    Dropped(String),
-}
-
-impl Outcome {
-    /// Whether the arm set out to pick (a grasp was chosen and motions generated), as opposed to
-    /// a re-capture. (The success rate counts every pick as an attempt, re-captures too.)
-    pub fn set_out(&self) -> bool {
-        !matches!(self, Outcome::NothingDetected | Outcome::NothingGraspable(_))
-    }
-
-    /// A grasp failure on a detection that was wrong (the detail starts with
-    /// [`MISRECOGNISED`]).
-    pub fn misrecognised(&self) -> bool {
-        matches!(self, Outcome::GraspFailed(s) if s.starts_with(MISRECOGNISED))
-    }
-
-    /// A short name: `placed`, `grasp_failed`, ...
-    pub fn name(&self) -> &'static str {
-        match self {
-            Outcome::Placed => "placed",
-            Outcome::GraspFailed(_) => "grasp_failed",
-            Outcome::NothingDetected => "nothing_detected",
-            Outcome::NothingGraspable(_) => "nothing_graspable",
-            Outcome::NoMotion(_) => "no_motion",
-            Outcome::ProtectiveStop(_) => "protective_stop",
-            Outcome::Collision(_) => "collision",
-            Outcome::Dropped(_) => "dropped",
-        }
-    }
-
-    /// The reason, if the outcome has one.
-    pub fn detail(&self) -> &str {
-        match self {
-            Outcome::GraspFailed(s)
-            | Outcome::NothingGraspable(s)
-            | Outcome::NoMotion(s)
-            | Outcome::ProtectiveStop(s)
-            | Outcome::Collision(s)
-            | Outcome::Dropped(s) => s,
-            Outcome::Placed | Outcome::NothingDetected => "",
-        }
-    }
 }
 
 /// Why a run ended.
@@ -159,17 +94,6 @@ pub enum StallCause {
     Compute,
 }
 
-/// A fault that stopped a motion.
-#[derive(Debug, Clone, PartialEq)]
-pub enum Fault {
-    /// The arm, the tool or the held part collided, or pressed a part into the tray.
-    Collision(String),
-    /// The servo tripped a protective stop.
-    ProtectiveStop(String),
-    /// The arm could not leave the sensor's view.
-    NoPathOutOfView,
-}
-
 /// How a part was lost from the cell.
 #[derive(Debug, Clone, PartialEq)]
 pub enum PartLoss {
@@ -219,7 +143,7 @@ pub enum Planned {
         /// Which motion.
         motion: &'static str,
         /// Why.
-        why: String,
+        why: MotionFailure,
     },
 }
 
@@ -406,7 +330,7 @@ impl fmt::Display for Event {
                 f,
                 "{taken} pick(s) from this result before, {since_capture} into the pile since its capture"
             ),
-            Event::Outcome(o) => write!(f, "{}: {}", o.name(), o.detail()),
+            Event::Outcome(o) => write!(f, "{}: {}", o.name(), o.cause()),
             Event::MotionStartMismatch(jump_rad) => write!(f, "{jump_rad:.4} rad"),
             Event::PickStart | Event::PlaceStart | Event::Released | Event::PlaceTrayExchange => Ok(()),
         }
@@ -540,7 +464,9 @@ mod tests {
             (e.kind(), e.to_string().as_str()),
             ("stall", "waiting for the sensor 0.416 s")
         );
-        let o = Event::Outcome(Outcome::NothingGraspable("no feasible grasp (crowded 3)".into()));
+        let o = Event::Outcome(Outcome::NothingGraspable(crate::pipeline::NoGrasp::NoneFeasible(
+            [("crowded", 3)].into_iter().collect(),
+        )));
         assert_eq!(o.to_string(), "nothing_graspable: no feasible grasp (crowded 3)");
         assert!(o.is_warning());
         assert!(!Event::Outcome(Outcome::Placed).is_warning());

@@ -2,7 +2,7 @@
 //!
 //! Job: run picks of one workpiece end to end in the simulated cell and time them, following the
 //! reference system's time chart (its Fig. 3). The arm is driven by the torque-limited servo
-//! ([`crate::execution`]) whose joint states move the arm's bodies in the physics world every
+//! ([`crate::servo`]) whose joint states move the arm's bodies in the physics world every
 //! physics step, so the arm pushes parts and hides them from the sensor.
 //!
 //! The cycle is a constant [`Cell`] (robot, scene, grasp selector, servo, budgets, place slots)
@@ -22,7 +22,7 @@
 //! 3. [`pick_place`]: Pick: transfer, descent, vacuum on and build-up, lift. Place: transfer,
 //!    descent, release, retreat. The arm waits only when the next motion is not ready: a stall,
 //!    split into waiting for the sensor and waiting for compute.
-//! 4. [`execute`]: each motion is played through the servo into the world. Faults: a
+//! 4. [`play`]: each motion is played through the servo into the world. Faults: a
 //!    protective stop, a collision of the arm (or the held part) with the cell or a part
 //!    pressed into the tray (the world's health monitor), a part slipping off the cup. Each ends
 //!    the pick with its outcome; after a stop or a collision the arm waits the reset time and
@@ -44,9 +44,11 @@
 //! Units: s, m, rad. Frames: world.
 
 pub mod events;
-pub mod execute;
 pub mod motions;
+mod next_pick;
+pub mod outcome;
 pub mod pick_place;
+pub mod play;
 pub mod records;
 pub mod sensing;
 pub mod trays;
@@ -54,15 +56,14 @@ pub mod trays;
 use nalgebra::{Isometry3, Vector3};
 
 pub use events::{
-    CycleEvent, EndReason, Event, EventLog, Fault, Observer, Observers, Outcome, PartLoss, Planned, Recognised, Stage,
-    StallCause,
+    CycleEvent, EndReason, Event, EventLog, Observer, Observers, PartLoss, Planned, Recognised, Stage, StallCause,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
+pub use outcome::{Fault, MotionFailure, NoSeal, Outcome, Slip, Stop, WrongPose};
 pub use records::{Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
-use crate::execution::Servo;
 use crate::geometry::SuctionModel;
 use crate::grasp::GraspSelector;
 use crate::physics::pile::PileOptions;
@@ -70,7 +71,8 @@ use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthError, PartShape, World};
 use crate::robot::{Payload, RobotModel};
 use crate::sensor::{CaptureJob, RecognitionReport, Sensor};
-use crate::trajectory::{LineMotion, Motion};
+use crate::servo::Servo;
+use next_pick::{PlacementFix, Prefetched};
 
 pub use crate::reference::reference_takt;
 
@@ -83,9 +85,37 @@ pub enum CycleError {
     /// The physics world failed beyond recovery (a non-finite state).
     #[error("physics: {0}")]
     Health(#[from] HealthError),
-    /// Something the cycle needs is missing (sensor pose, place slots).
-    #[error("{0}")]
-    Setup(String),
+    /// Something the cycle needs is missing or impossible (place slots, sensor pose, waiting
+    /// pose).
+    #[error(transparent)]
+    Setup(#[from] SetupError),
+}
+
+/// What the cell file asks for that the cycle cannot set up.
+#[derive(Debug, thiserror::Error)]
+pub enum SetupError {
+    /// The place tray holds no slot for the workpiece.
+    #[error("no place slot for this workpiece")]
+    NoPlaceSlot,
+    /// The sensor's pose gives no camera.
+    #[error("degenerate sensor pose")]
+    DegenerateSensorPose,
+    /// The tool cannot point down at the waiting pose.
+    #[error("cycle.waiting_tool_m = {at_m:?}: the tool cannot point down there ({why})")]
+    WaitingPoseUnreachable {
+        /// `cycle.waiting_tool_m` [m].
+        at_m: [f64; 3],
+        /// The inverse kinematics' answer.
+        why: crate::robot::IkError,
+    },
+    /// The arm at the waiting pose is in the sensor's view.
+    #[error("cycle.waiting_tool_m = {at_m:?}: the arm's {what} is in the sensor's view there")]
+    WaitingPoseInView {
+        /// `cycle.waiting_tool_m` [m].
+        at_m: [f64; 3],
+        /// The arm's body in the view.
+        what: String,
+    },
 }
 
 /// Options of a run.
@@ -132,8 +162,8 @@ pub struct Cell<'a> {
     pub slots: Vec<Isometry3<f64>>,
     /// The part's yaw symmetry [rad] (0: none), for the placement error.
     pub yaw_symmetry_rad: f64,
-    /// Compute budgets charged in deterministic mode: grasp selection, Pick and Place motion [s].
-    pub budgets_s: [f64; 3],
+    /// Compute budgets charged in deterministic mode: grasp selection, Pick and Place motion.
+    pub budgets: StageCompute,
     /// Parts per pile.
     pub pile_count: usize,
     /// The workpiece (its model, for the sensor's recognition).
@@ -148,7 +178,7 @@ pub struct Cell<'a> {
 #[derive(Debug, Clone, Copy)]
 pub struct ArmState {
     /// The arm's actual joint state and the servo's integral after the last motion.
-    pub servo: crate::execution::ServoState,
+    pub servo: crate::servo::ServoState,
     /// When the arm has nothing to do from [s].
     pub free_s: f64,
     /// Largest tracking error since the pick's motions began [rad].
@@ -202,37 +232,11 @@ pub struct CellState {
     pub planned_end_q: Option<crate::robot::JointVector>,
     /// Recognition results taken into hand so far.
     pub results_collected: usize,
-    /// Until when the arm's planned motion keeps it out of the view [s] (infinite: no motion
-    /// into the view is planned). A capture is triggered only if its exposure ends before.
-    pub view_free_until_s: f64,
     /// No capture is triggered before this [s]: a part let go over the pick tray is still
     /// falling into the pile and would blur the image.
     pub capture_hold_until_s: f64,
     /// Captures in a row taken for a pile in motion (at most [`sensing::MOTION_RECAPTURES`] are).
     pub moving_in_a_row: usize,
-    /// The next pick, prepared at the last release, whose Pick the last Place's retreat runs
-    /// into (the retreat has not been played yet).
-    prefetched: Option<Prefetched>,
-    /// The pick (record index), part and slot whose placement error is measured once the
-    /// retreat that runs into the next Pick has left the part.
-    late_placement: Option<(usize, usize, Isometry3<f64>)>,
-    /// A placement error measured late: record index, horizontal error [m], yaw error [rad].
-    placement_fix: Option<(usize, f64, f64)>,
-}
-
-/// The next pick, prepared at a release from the result in hand (see `Run::prefetch_next`).
-struct Prefetched {
-    /// The result it comes from, the picks taken from it before and made since its trigger.
-    result: SensedResult,
-    taken: usize,
-    since: usize,
-    /// When its compute started [s].
-    compute_from_s: f64,
-    /// Its motions (with the retreat overlapped) and the wall time of each stage [s].
-    prep: motions::Prepared,
-    wall_s: [f64; 3],
-    /// The retreat it overlaps, not played yet.
-    retreat: LineMotion,
 }
 
 /// A recognition result in hand.
@@ -281,18 +285,16 @@ impl<'a> Cell<'a> {
         let s = &scene.scene;
         let slots = s.world_from_slots(wp);
         if slots.is_empty() {
-            return Err(CycleError::Setup("no place slot for this workpiece".into()));
+            return Err(SetupError::NoPlaceSlot.into());
         }
         let waiting_q = match s.cycle.waiting_tool_m {
             None => None,
             Some(w) => {
                 let home = crate::robot::JointVector::from(s.robot.home_rad());
                 let pose = crate::robot::tool_down_pose(Vector3::from(w), 0.0);
-                let q = robot.ik_tool_nearest(&pose, &home).map_err(|e| {
-                    CycleError::Setup(format!(
-                        "cycle.waiting_tool_m = {w:?}: the tool cannot point down there ({e})"
-                    ))
-                })?;
+                let q = robot
+                    .ik_tool_nearest(&pose, &home)
+                    .map_err(|why| SetupError::WaitingPoseUnreachable { at_m: w, why })?;
                 Some(q.q)
             }
         };
@@ -310,11 +312,11 @@ impl<'a> Cell<'a> {
             suction: SuctionModel::new(&s.gripper),
             slots,
             yaw_symmetry_rad: wp.grasp.yaw_symmetry_deg.to_radians(),
-            budgets_s: [
-                s.compute.grasp_estimation_s,
-                s.compute.motion_generation_s,
-                s.compute.motion_generation_s,
-            ],
+            budgets: StageCompute {
+                grasp_s: s.compute.grasp_estimation_s,
+                pick_s: s.compute.motion_generation_s,
+                place_s: s.compute.motion_generation_s,
+            },
             pile_count: wp.pile_count as usize,
             workpiece: wp.clone(),
             opts,
@@ -329,21 +331,22 @@ impl<'a> Cell<'a> {
             obs.stepped(w)
         })?;
         let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed, &self.workpiece)
-            .ok_or_else(|| CycleError::Setup("degenerate sensor pose".into()))?;
+            .ok_or(SetupError::DegenerateSensorPose)?;
         if let Some(q) = &self.waiting_q {
             // The waiting pose must leave the view free: checked on a scratch world.
             let mut scratch = World::new(self.scene, self.robot, self.shape.clone());
             scratch.place_arm(q);
             if let Some(what) = sensor.frustum.arm_inside(&scratch) {
-                return Err(CycleError::Setup(format!(
-                    "cycle.waiting_tool_m = {:?}: the arm's {what} is in the sensor's view there",
-                    self.scene.cycle.waiting_tool_m.unwrap_or_default()
-                )));
+                return Err(SetupError::WaitingPoseInView {
+                    at_m: self.scene.cycle.waiting_tool_m.unwrap_or_default(),
+                    what,
+                }
+                .into());
             }
         }
         Ok(CellState {
             arm: ArmState {
-                servo: crate::execution::ServoState::at_rest(world.joints()),
+                servo: crate::servo::ServoState::at_rest(world.joints()),
                 free_s: world.time_s(),
                 max_error_rad: 0.0,
                 peak_demand_ratio: [0.0; crate::robot::DOF],
@@ -365,12 +368,8 @@ impl<'a> Cell<'a> {
             compute_from_s: 0.0,
             planned_end_q: None,
             results_collected: 0,
-            view_free_until_s: f64::INFINITY,
             capture_hold_until_s: f64::NEG_INFINITY,
             moving_in_a_row: 0,
-            prefetched: None,
-            late_placement: None,
-            placement_fix: None,
         })
     }
 }
@@ -424,171 +423,7 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
 /// another).
 pub const LET_GO_SETTLE_S: f64 = 0.3;
 
-/// A later pick from the same result takes only a part whose centre is this much farther from
-/// every earlier pick's than both parts' bounding radii (or the tool's, whichever is larger) [m].
-pub const BLIND_PICK_MARGIN_M: f64 = 0.005;
-
 impl Run<'_, '_> {
-    /// The result in hand with only the detections the next pick may take, and the number of
-    /// picks made since its trigger (0: the image shows the pile as it is). `None` if the cell
-    /// file allows no more picks from it, or (when picks were made since its trigger) none of its
-    /// detections is clear of them: each taken must be recognised clear of every pick made after
-    /// the trigger (centres at least two bounding radii, or the tool's radius plus the part's,
-    /// plus [`BLIND_PICK_MARGIN_M`] apart horizontally), so neither the parts lifted nor the
-    /// tool's column over them touched it. A real cell can decide this from its recognition and
-    /// its own picks alone; whether the part is still there the seal check tells.
-    fn usable(&self) -> Option<(SensedResult, usize)> {
-        let h = self.st.in_hand.as_ref()?;
-        if h.taken >= self.cell.scene.cycle.max_picks_per_capture as usize {
-            return None;
-        }
-        let since: Vec<Vector3<f64>> = self
-            .st
-            .pick_spots
-            .iter()
-            .filter(|(t, _)| *t >= h.result.capture_s)
-            .map(|(_, c)| *c)
-            .collect();
-        if since.is_empty() {
-            return Some((
-                h.result
-                    .keeping(&vec![true; h.result.detections.as_ref().map_or(0, Vec::len)]),
-                0,
-            ));
-        }
-        let r_part = self.cell.shape.bounding_radius_m;
-        let reach_m = r_part + r_part.max(self.cell.scene.gripper.body_diameter_m / 2.0) + BLIND_PICK_MARGIN_M;
-        let keep: Vec<bool> = h
-            .result
-            .detections
-            .as_deref()?
-            .iter()
-            .map(|d| {
-                let c = d.world_from_part.translation.vector;
-                since.iter().all(|u| (c - u).xy().norm() >= reach_m)
-            })
-            .collect();
-        keep.iter().any(|k| *k).then(|| (h.result.keeping(&keep), since.len()))
-    }
-
-    /// The result the next pick comes from: the newest one that has arrived, if it still has
-    /// a part to offer ([`Run::usable`]); else the pending capture's, awaited at the waiting
-    /// pose; else a new capture's. Returns the result, the picks taken from it before and the
-    /// picks made since its trigger; `None` if the arm cannot leave the view.
-    fn result_for_pick(&mut self) -> Result<Option<(SensedResult, usize, usize)>, CycleError> {
-        loop {
-            self.collect_ready();
-            if let Some((r, since)) = self.usable() {
-                let taken = self.st.in_hand.as_ref().map_or(0, |h| h.taken);
-                return Ok(Some((r, taken, since)));
-            }
-            // Nothing to take from the result in hand: wait for the next one.
-            self.st.in_hand = None;
-            let Some(r) = self.next_result()? else {
-                return Ok(None);
-            };
-            self.st.in_hand = Some(InHand { result: r, taken: 0 });
-        }
-    }
-
-    /// At a release, with `up` the Place's retreat still to play: the next pick prepared now,
-    /// its Pick to start while the retreat ends. Taken only if the cell overlaps lines, the run
-    /// has another pick to make, a result in hand offers a part without waiting, that Pick
-    /// overlaps the retreat ([`motions::RetreatBlend`]), its compute is done before the overlap
-    /// would start, no exposure is still running then, and nothing else happens before it (this
-    /// part does not fill the place tray: its exchange would take the part away before its
-    /// placement error is measured, and could take time). Returns how long the retreat runs
-    /// alone [s]; the retreat is then played with that Pick. Otherwise the retreat is played as
-    /// before; a next pick prepared here is dropped and prepared again after it.
-    pub(super) fn prefetch_next(&mut self, up: &LineMotion) -> Option<f64> {
-        let cell = self.cell;
-        let opts = cell.opts;
-        let next = self.st.tally.attempts + 1;
-        if !cell.scene.cycle.overlap_lines
-            || next >= opts.picks
-            || opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed))
-            || self.st.trays.next_slot + 1 >= cell.slots.len()
-        {
-            return None;
-        }
-        self.collect_ready();
-        let (result, since) = self.usable()?;
-        let taken = self.st.in_hand.as_ref().map_or(0, |h| h.taken);
-        let compute_from_s = result.job.ready_s.max(self.st.compute_from_s);
-        // Planned from where the retreat ends.
-        self.st.arm.free_s = self.st.world.time_s() + up.duration_s();
-        let this = self.st.pick.replace(next);
-        let prepared = match result.detections.as_deref() {
-            Some(dets) if !dets.is_empty() => {
-                // This part is in the current slot: the next goes to the one after.
-                let slot = self.st.trays.next_slot + 1;
-                self.prepare(dets, &result.job, compute_from_s, slot, Some(up)).ok()
-            }
-            _ => None,
-        };
-        let now = self.st.world.time_s();
-        let taken_here = prepared.and_then(|(prep, wall_s)| {
-            let head_s = prep.retreat_blend.as_ref()?.motion.start_s();
-            let charged = if opts.deterministic { cell.budgets_s } else { wall_s };
-            let pick_ready = compute_from_s + charged[0] + charged[1];
-            let exposing = self
-                .st
-                .pending
-                .as_ref()
-                .is_some_and(|j| j.spoiled.is_none() && j.exposure_end_s > now + head_s + 1e-9);
-            (pick_ready <= now + head_s + 1e-9 && !exposing).then_some((prep, wall_s, head_s))
-        });
-        if taken_here.is_some() {
-            self.event(Event::ResultUsed {
-                taken,
-                since_capture: since,
-            });
-        }
-        self.st.pick = this;
-        let (prep, wall_s, head_s) = taken_here?;
-        self.st.prefetched = Some(Prefetched {
-            result,
-            taken,
-            since,
-            compute_from_s,
-            prep,
-            wall_s,
-            retreat: up.clone(),
-        });
-        Some(head_s)
-    }
-
-    /// A retreat left for a next Pick that will not come (the run ends): played alone now.
-    fn play_held_retreat(&mut self) -> Result<(), CycleError> {
-        if let Some(p) = self.st.prefetched.take() {
-            let hand = self.cell.hand;
-            if let execute::Played::Failed(o) = self.play(&p.retreat, &hand, true)? {
-                self.event(Event::Outcome(o));
-            }
-            self.measure_late_placement();
-        }
-        Ok(())
-    }
-
-    /// The placement error of a part whose retreat ran into the next Pick, once the cup has
-    /// left it.
-    pub(super) fn measure_late_placement(&mut self) {
-        if let Some((index, part, slot)) = self.st.late_placement.take() {
-            let (d, yaw) = self.st.world.placement_error(part, &slot, self.cell.yaw_symmetry_rad);
-            self.st.placement_fix = Some((index, d, yaw));
-        }
-    }
-
-    /// Writes a placement error measured late into the kept record it belongs to.
-    fn apply_placement_fix(&mut self, records: &mut [PickRecord]) {
-        if let Some((i, d, yaw)) = self.st.placement_fix.take()
-            && let Some(r) = records.get_mut(i)
-        {
-            r.placement_error_mm = Some(d * 1e3);
-            r.yaw_error_deg = Some(yaw.to_degrees());
-        }
-    }
-
     /// Tallies a finished pick, and keeps its record if the run keeps them.
     fn keep(&mut self, records: &mut Vec<PickRecord>, rec: PickRecord) {
         self.st.tally.add(&rec);
@@ -602,17 +437,23 @@ impl Run<'_, '_> {
     fn picks(&mut self) -> Result<(Vec<PickRecord>, EndReason), CycleError> {
         let opts = self.cell.opts;
         let mut records: Vec<PickRecord> = Vec::new();
+        // The next pick, prepared at the last release.
+        let mut next: Option<Prefetched> = None;
         while self.st.tally.attempts < opts.picks {
             if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
-                self.play_held_retreat()?;
-                self.apply_placement_fix(&mut records);
+                let fix = self.play_held_retreat(next.take())?;
+                apply_placement_fix(&mut records, fix);
                 return Ok((records, EndReason::Interrupted));
             }
             let index = self.st.tally.attempts;
             self.st.pick = Some(index);
-            let (result, taken, since, compute_from_s, prepared) = match self.st.prefetched.take() {
+            let mut late = None;
+            let (result, taken, since, compute_from_s, prepared) = match next.take() {
                 // Prepared at the last release, its Pick overlapping that Place's retreat.
-                Some(p) => (p.result, p.taken, p.since, p.compute_from_s, Ok((p.prep, p.wall_s))),
+                Some(p) => {
+                    late = p.late;
+                    (p.result, p.taken, p.since, p.compute_from_s, Ok((p.prep, p.wall)))
+                }
                 None => {
                     let Some((result, taken, since)) = self.result_for_pick()? else {
                         return Ok((records, EndReason::NoPathOutOfView));
@@ -651,14 +492,14 @@ impl Run<'_, '_> {
                 .evaluation
                 .as_ref()
                 .map(|e| (e.figures.detected, e.figures.correct));
-            let (prep, wall_s) = match prepared {
+            let (prep, wall) = match prepared {
                 Ok(p) => p,
                 Err(_) if blind || taken > 0 => {
                     // Nothing graspable among the parts clear of the picks since the capture: the
                     // cell decides so (charged at the grasp selection's budget) and takes the next
                     // result; no pick was attempted.
                     self.st.in_hand = None;
-                    let t = self.st.world.time_s().max(compute_from_s) + self.cell.budgets_s[0];
+                    let t = self.st.world.time_s().max(compute_from_s) + self.cell.budgets.grasp_s;
                     self.idle_until(t)?;
                     self.st.compute_from_s = self.st.world.time_s();
                     continue;
@@ -681,11 +522,7 @@ impl Run<'_, '_> {
                 .as_ref()
                 .and_then(|e| e.matches.get(prep.grasp.detection).copied().flatten());
             self.st.trays.attempted();
-            let charged = if opts.deterministic {
-                self.cell.budgets_s
-            } else {
-                wall_s
-            };
+            let charged = if opts.deterministic { self.cell.budgets } else { wall };
             if let Some(h) = self.st.in_hand.as_mut() {
                 h.taken += 1;
             }
@@ -693,17 +530,28 @@ impl Run<'_, '_> {
                 .detections
                 .as_deref()
                 .map(|d| d[prep.grasp.detection].world_from_part.translation.vector);
-            self.pick_and_place(&prep, charged, compute_from_s, chosen, &mut rec)?;
-            self.apply_placement_fix(&mut records);
-            if !matches!(rec.outcome, Outcome::Placed | Outcome::GraspFailed(_)) {
+            let end = self.pick_and_place(&prep, charged, compute_from_s, chosen, late, &mut rec)?;
+            next = end.next;
+            apply_placement_fix(&mut records, end.fix);
+            if !(rec.outcome == Outcome::Placed || rec.outcome.grasp_failed()) {
                 // The pile may have been disturbed anywhere: no result from before counts.
                 self.st.in_hand = None;
                 self.st.pending = None;
             }
             self.keep(&mut records, rec);
         }
-        self.play_held_retreat()?;
-        self.apply_placement_fix(&mut records);
+        let fix = self.play_held_retreat(next)?;
+        apply_placement_fix(&mut records, fix);
         Ok((records, EndReason::PicksDone))
+    }
+}
+
+/// Writes a placement error measured late into the kept record it belongs to.
+fn apply_placement_fix(records: &mut [PickRecord], fix: Option<PlacementFix>) {
+    if let Some(fix) = fix
+        && let Some(r) = records.get_mut(fix.record)
+    {
+        r.placement_error_mm = Some(fix.error_m * 1e3);
+        r.yaw_error_deg = Some(fix.yaw_rad.to_degrees());
     }
 }

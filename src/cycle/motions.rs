@@ -15,12 +15,17 @@
 use std::time::Instant;
 
 use nalgebra::{Isometry3, Translation3, Vector3};
+use rand_chacha::ChaCha8Rng;
 
 use super::Cell;
 use super::Run;
 use super::events::Recognised;
+use super::outcome::MotionFailure;
+use super::play::{Capture, Segment, SegmentMotion, Settle, Valve};
+use super::records::StageCompute;
+use crate::geometry::NamedBox;
 use crate::grasp::GraspCandidate;
-use crate::pipeline::{GraspContext, sense_and_grasp};
+use crate::pipeline::{GraspContext, NoGrasp, sense_and_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
 use crate::robot::{JointVector, Payload};
 use crate::sensor::{CaptureJob, Detection};
@@ -81,6 +86,43 @@ impl PlaceMotion {
             None => self.transfer.duration_s() + self.descent.duration_s(),
         }
     }
+
+    /// The carry to the slot with `held`: the transfer (its start overlapping the lift's end
+    /// when the lift was played as `lift_blend`'s head) and the descent (its start overlapping
+    /// the transfer's end, if so), one segment where they overlap; the valve closes
+    /// `release_lead_s` before the descent ends. A capture may run as `capture` says.
+    pub(super) fn carry<'m>(
+        &'m self,
+        lift_blend: Option<&'m Overlapped>,
+        held: Payload,
+        capture: Capture,
+    ) -> Vec<Segment<'m>> {
+        let descent = |motion: SegmentMotion<'m>| {
+            let close_s = (motion.as_motion().duration_s() - self.release_lead_s).max(0.0);
+            Segment {
+                motion,
+                payload: held,
+                valve: Some(Valve::CloseAt(close_s)),
+                settle: Settle::InPosition,
+                capture,
+            }
+        };
+        let transfer = |motion: SegmentMotion<'m>| Segment {
+            motion,
+            payload: held,
+            valve: None,
+            settle: Settle::AtEnd,
+            capture,
+        };
+        match (lift_blend, &self.descent_blend) {
+            (Some(b), Some(d)) => vec![descent(
+                Overlapped::new(b.first().clone(), d.clone(), b.start_s()).rest().into(),
+            )],
+            (None, Some(d)) => vec![descent(d.into())],
+            (Some(b), None) => vec![transfer(b.rest().into()), descent((&self.descent).into())],
+            (None, None) => vec![transfer((&self.transfer).into()), descent((&self.descent).into())],
+        }
+    }
 }
 
 /// The shares of a straight line (the lift, a descent) that may run while the transfer next to
@@ -108,6 +150,16 @@ pub(super) struct RetreatBlend {
 /// error is a few tenths of a millimetre).
 pub const PLACED_PART_MARGIN_M: f64 = 0.002;
 
+/// The planning scene and the payload with the part on the cup.
+pub(super) struct Holding<'a> {
+    /// The cell and the pile with the part's box on the hand.
+    pub model: &'a CollisionModel,
+    /// Hand and part as the controller believes them.
+    pub payload: Payload,
+    /// The largest specific force the cup holds with its margin [m/s^2].
+    pub max_force_m_s2: f64,
+}
+
 /// The motions of one pick, generated from one recognition result.
 pub(super) struct Prepared {
     /// The grasp.
@@ -115,7 +167,7 @@ pub(super) struct Prepared {
     /// Where the part goes.
     pub slot: Isometry3<f64>,
     /// Transfer to the approach pose (or why not).
-    pub pick_transfer: Result<Trajectory, String>,
+    pub pick_transfer: Result<Trajectory, MotionFailure>,
     /// Straight descent to the grasp.
     pub descent: LineMotion,
     /// The transfer and the descent overlapped, when that is clear and within the torques
@@ -127,9 +179,33 @@ pub(super) struct Prepared {
     /// Straight lift with the part, generated while the Pick runs.
     pub lift: LineMotion,
     /// The Place motion (or why not), generated while the Pick runs.
-    pub place: Result<PlaceMotion, String>,
+    pub place: Result<PlaceMotion, MotionFailure>,
     /// Hand and part as the controller believes them (the nominal part at the cup centre).
     pub held: Payload,
+}
+
+impl Prepared {
+    /// The Pick's transfer from `transfer` and its descent with the `hand`, as generated: after
+    /// the last Place's retreat (overlapped with it), overlapped with each other, or one after
+    /// the other. The valve opens `vacuum_lead_s` before the descent ends; no capture runs.
+    pub(super) fn pick<'m>(&'m self, transfer: &'m Trajectory, hand: Payload, vacuum_lead_s: f64) -> [Segment<'m>; 2] {
+        let (to, down): (SegmentMotion<'m>, SegmentMotion<'m>) = match (&self.retreat_blend, &self.pick_blend) {
+            (Some(rb), _) => {
+                let (m, s) = (&rb.motion, rb.motion.start_s());
+                (
+                    m.window(s, s + rb.descent_from_s).into(),
+                    m.window(s + rb.descent_from_s, m.duration_s()).into(),
+                )
+            }
+            (None, Some(b)) => (b.head().into(), b.rest().into()),
+            (None, None) => (transfer.into(), (&self.descent).into()),
+        };
+        let open_s = (down.as_motion().duration_s() - vacuum_lead_s).max(0.0);
+        [
+            Segment::new(to, hand).flowing_on(),
+            Segment::new(down, hand).switching(Valve::OpenAt(open_s)),
+        ]
+    }
 }
 
 impl Cell<'_> {
@@ -202,6 +278,152 @@ impl Cell<'_> {
         };
         overlap_end(first, second, line_s, &LINE_OVERLAP_SHARES, &check)
     }
+
+    /// The Pick's motions from `q_now` to `grasp` in the scene `empty` (the pile as seen, the part
+    /// cut out): the transfer to the approach pose (or why not), the straight descent (if the
+    /// line has a joint path) and, where clear and within the torques, the two overlapped.
+    #[allow(clippy::type_complexity)]
+    fn pick_motion(
+        &self,
+        q_now: &JointVector,
+        grasp: &GraspCandidate,
+        empty: &CollisionModel,
+        rng: &mut ChaCha8Rng,
+    ) -> (
+        Result<Trajectory, MotionFailure>,
+        Option<LineMotion>,
+        Option<Overlapped<Trajectory, LineMotion>>,
+    ) {
+        let (robot, hand) = (self.robot, self.hand);
+        let q_approach = JointVector::from(grasp.q_approach);
+        let dyn_hand = robot.dynamics(&hand);
+        let pick_transfer = empty
+            .plan(q_now, &q_approach, &PlanOptions::default(), rng)
+            .map(|p| {
+                let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+                accelerate_in_corridor(&self.accel_robot, &dyn_hand, &via, empty, CORRIDOR_CHECK_DT_S)
+                    .1
+                    .trajectory
+            })
+            .map_err(MotionFailure::PickTransfer);
+        let descent = self.line(
+            &q_approach,
+            &grasp.world_from_tool_approach,
+            &grasp.world_from_tool,
+            &hand,
+            None,
+        );
+        // The descent starts while the transfer ends, where the pile as seen allows.
+        let pick_blend = match (&pick_transfer, &descent) {
+            (Ok(t), Some(d)) => self.overlap_end(t, d, d.duration_s(), &hand, empty, None),
+            _ => None,
+        };
+        (pick_transfer, descent, pick_blend)
+    }
+
+    /// The last Place's retreat `r` overlapped with the Pick (transfer `t`, descent `d`, and
+    /// their overlap `pick_blend`): the transfer starts while the retreat ends, where the cell,
+    /// the pile as seen in `empty` and the parts placed in this place tray before slot
+    /// `slot_index` allow (each where the cell put it: its slot, its box grown by
+    /// [`PLACED_PART_MARGIN_M`]); the retreat ends before the descent starts.
+    fn retreat_blend(
+        &self,
+        r: &LineMotion,
+        t: &Trajectory,
+        d: &LineMotion,
+        pick_blend: Option<&Overlapped<Trajectory, LineMotion>>,
+        slot_index: usize,
+        empty: &CollisionModel,
+    ) -> Option<RetreatBlend> {
+        let robot = self.robot;
+        let (pick, descent_from_s) = match pick_blend {
+            Some(b) => (b.clone(), b.start_s()),
+            None => (Overlapped::new(t.clone(), d.clone(), t.duration_s()), t.duration_s()),
+        };
+        let mut placed = empty.env.clone();
+        let filled = (slot_index % self.slots.len()).min(self.slots.len());
+        placed.boxes.extend(self.slots[..filled].iter().map(|s| NamedBox {
+            name: "placed part".into(),
+            world_from_box: *s,
+            half_m: self.shape.half_extents_m.add_scalar(PLACED_PART_MARGIN_M),
+        }));
+        let placed = CollisionModel::new(robot, RobotSpheres::new(robot, self.scene, None), placed);
+        self.overlap_end(r, &pick, r.duration_s(), &self.hand, &placed, None)
+            .filter(|o| r.duration_s() - o.start_s() <= descent_from_s + 1e-9)
+            .map(|motion| RetreatBlend { motion, descent_from_s })
+    }
+
+    /// The Place motion of `grasp` after the `lift` (from the approach pose `q_approach` when
+    /// there is none): the transfer to above the slot in the `holding` scene, slowed where the
+    /// cup's holding force would not hold, the straight descent to the release pose, the
+    /// straight retreat, their overlaps and the release lead; or why not.
+    fn place_motion(
+        &self,
+        grasp: &GraspCandidate,
+        q_approach: JointVector,
+        lift: Option<&LineMotion>,
+        holding: &Holding<'_>,
+        rng: &mut ChaCha8Rng,
+    ) -> Result<PlaceMotion, MotionFailure> {
+        let (robot, hand, held, max_force) = (self.robot, self.hand, holding.payload, holding.max_force_m_s2);
+        let above_place = above_place(grasp);
+        let release_pose = Isometry3::from_parts(
+            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * self.release_above_m()),
+            grasp.world_from_tool_place.rotation,
+        );
+        let dyn_held = robot.dynamics(&held);
+        let q_above = robot
+            .ik_tool_nearest(&above_place, &JointVector::from(grasp.q_place))
+            .map_err(MotionFailure::PlacePose)?
+            .q;
+        let q_lifted = lift.map_or(q_approach, LineMotion::end_q);
+        let path = holding
+            .model
+            .plan(&q_lifted, &q_above, &PlanOptions::default(), rng)
+            .map_err(MotionFailure::PlaceTransfer)?;
+        let via: Vec<JointVector> = path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
+        let (via, acc, _) =
+            accelerate_in_corridor(&self.accel_robot, &dyn_held, &via, holding.model, CORRIDOR_CHECK_DT_S);
+        let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, max_force);
+        let down = self
+            .line(&q_above, &above_place, &release_pose, &held, Some(max_force))
+            .ok_or(MotionFailure::PlaceDescent)?;
+        let q_release = down.end_q();
+        let up = self
+            .line(&q_release, &release_pose, &above_place, &hand, None)
+            .ok_or(MotionFailure::PlaceRetreat)?;
+        // The transfer starts while the part still rises, and the descent into the slot
+        // while the transfer ends, once the lift is over.
+        let blend =
+            lift.and_then(|l| self.overlap_end(l, &transfer, l.duration_s(), &held, holding.model, Some(max_force)));
+        let lift_end_s = lift.map_or(0.0, LineMotion::duration_s);
+        let descent_blend = self
+            .overlap_end(
+                &transfer,
+                &down,
+                down.duration_s(),
+                &held,
+                holding.model,
+                Some(max_force),
+            )
+            .filter(|d| blend.as_ref().is_none_or(|b| b.start_s() + d.start_s() >= lift_end_s));
+        // The valve closes before the cup stops, as long before as the venting cup, with
+        // the planning margin on what is left of its force, keeps the part until then.
+        let (max_lead_s, venting_s) = (self.scene.cycle.release_lead_s, self.scene.gripper.release_s);
+        let lead_s = match &descent_blend {
+            Some(d) => release_lead_s(robot, d, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
+            None => release_lead_s(robot, &down, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
+        };
+        Ok(PlaceMotion {
+            transfer,
+            descent: down,
+            retreat: up,
+            suction_speed_factor: k,
+            lift_blend: blend,
+            descent_blend,
+            release_lead_s: lead_s,
+        })
+    }
 }
 
 impl Run<'_, '_> {
@@ -217,7 +439,7 @@ impl Run<'_, '_> {
         t_s: f64,
         slot_index: usize,
         retreat: Option<&LineMotion>,
-    ) -> Result<(Prepared, [f64; 3]), String> {
+    ) -> Result<(Prepared, StageCompute), NoGrasp> {
         let cell = self.cell;
         let robot = cell.robot;
         let wall = Instant::now();
@@ -251,51 +473,12 @@ impl Run<'_, '_> {
         let mut rng = crate::rng::stream(cell.opts.seed.wrapping_add(self.st.world.steps()), "planner");
         let q_approach = JointVector::from(grasp.q_approach);
         let hand = cell.hand;
-        let dyn_hand = robot.dynamics(&hand);
-        let pick_transfer = empty
-            .plan(&q_now, &q_approach, &PlanOptions::default(), &mut rng)
-            .map(|p| {
-                let via: Vec<JointVector> = p.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-                accelerate_in_corridor(&cell.accel_robot, &dyn_hand, &via, &empty, CORRIDOR_CHECK_DT_S)
-                    .1
-                    .trajectory
-            })
-            .map_err(|e| format!("pick transfer: {e}"));
-        let descent = cell.line(
-            &q_approach,
-            &grasp.world_from_tool_approach,
-            &grasp.world_from_tool,
-            &hand,
-            None,
-        );
-        // The descent starts while the transfer ends, where the pile as seen allows.
-        let pick_blend = match (&pick_transfer, &descent) {
-            (Ok(t), Some(d)) => cell.overlap_end(t, d, d.duration_s(), &hand, &empty, None),
-            _ => None,
-        };
+        let (pick_transfer, descent, pick_blend) = cell.pick_motion(&q_now, &grasp, &empty, &mut rng);
         // The transfer starts while the last retreat ends, where the cell, the pile as seen and
         // the parts placed in this place tray allow (each where the cell put it: its slot, its
         // box grown by [`PLACED_PART_MARGIN_M`]); the retreat ends before the descent starts.
         let retreat_blend = match (retreat, &pick_transfer, &descent) {
-            (Some(r), Ok(t), Some(d)) => {
-                let (pick, descent_from_s) = match &pick_blend {
-                    Some(b) => (b.clone(), b.start_s()),
-                    None => (Overlapped::new(t.clone(), d.clone(), t.duration_s()), t.duration_s()),
-                };
-                let mut placed = empty.env.clone();
-                let filled = (slot_index % cell.slots.len()).min(cell.slots.len());
-                placed
-                    .boxes
-                    .extend(cell.slots[..filled].iter().map(|s| crate::planning::EnvBox {
-                        name: "placed part".into(),
-                        world_from_box: *s,
-                        half_m: cell.shape.half_extents_m.add_scalar(PLACED_PART_MARGIN_M),
-                    }));
-                let placed = CollisionModel::new(robot, RobotSpheres::new(robot, cell.scene, None), placed);
-                cell.overlap_end(r, &pick, r.duration_s(), &hand, &placed, None)
-                    .filter(|o| r.duration_s() - o.start_s() <= descent_from_s + 1e-9)
-                    .map(|motion| RetreatBlend { motion, descent_from_s })
-            }
+            (Some(r), Ok(t), Some(d)) => cell.retreat_blend(r, t, d, pick_blend.as_ref(), slot_index, &empty),
             _ => None,
         };
         let pick_s = wall.elapsed().as_secs_f64();
@@ -322,66 +505,20 @@ impl Run<'_, '_> {
             &held,
             Some(max_force),
         );
-        let above_place = above_place(&grasp);
-        let release_pose = Isometry3::from_parts(
-            Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * cell.release_above_m()),
-            grasp.world_from_tool_place.rotation,
-        );
         let holding = CollisionModel::new(
             robot,
             RobotSpheres::new(robot, cell.scene, Some((tool_from_part, cell.shape.half_extents_m))),
             env,
         );
-        let dyn_held = robot.dynamics(&held);
-        let place = (|| {
-            let q_above = robot
-                .ik_tool_nearest(&above_place, &JointVector::from(grasp.q_place))
-                .map_err(|e| format!("place pose: {e}"))?
-                .q;
-            let q_lifted = lift.as_ref().map_or(q_approach, LineMotion::end_q);
-            let path = holding
-                .plan(&q_lifted, &q_above, &PlanOptions::default(), &mut rng)
-                .map_err(|e| format!("place transfer: {e}"))?;
-            let via: Vec<JointVector> = path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
-            let (via, acc, _) =
-                accelerate_in_corridor(&cell.accel_robot, &dyn_held, &via, &holding, CORRIDOR_CHECK_DT_S);
-            let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, max_force);
-            let down = cell
-                .line(&q_above, &above_place, &release_pose, &held, Some(max_force))
-                .ok_or("place descent: no joint path along the line")?;
-            let q_release = down.end_q();
-            let up = cell
-                .line(&q_release, &release_pose, &above_place, &hand, None)
-                .ok_or("place retreat: no joint path along the line")?;
-            // The transfer starts while the part still rises, and the descent into the slot
-            // while the transfer ends, once the lift is over.
-            let blend = lift
-                .as_ref()
-                .and_then(|l| cell.overlap_end(l, &transfer, l.duration_s(), &held, &holding, Some(max_force)));
-            let lift_end_s = lift.as_ref().map_or(0.0, LineMotion::duration_s);
-            let descent_blend = cell
-                .overlap_end(&transfer, &down, down.duration_s(), &held, &holding, Some(max_force))
-                .filter(|d| blend.as_ref().is_none_or(|b| b.start_s() + d.start_s() >= lift_end_s));
-            // The valve closes before the cup stops, as long before as the venting cup, with
-            // the planning margin on what is left of its force, keeps the part until then.
-            let (max_lead_s, venting_s) = (cell.scene.cycle.release_lead_s, cell.scene.gripper.release_s);
-            let lead_s = match &descent_blend {
-                Some(d) => release_lead_s(robot, d, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
-                None => release_lead_s(robot, &down, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
-            };
-            Ok::<_, String>(PlaceMotion {
-                transfer,
-                descent: down,
-                retreat: up,
-                suction_speed_factor: k,
-                lift_blend: blend,
-                descent_blend,
-                release_lead_s: lead_s,
-            })
-        })();
+        let holding = Holding {
+            model: &holding,
+            payload: held,
+            max_force_m_s2: max_force,
+        };
+        let place = cell.place_motion(&grasp, q_approach, lift.as_ref(), &holding, &mut rng);
         let place_s = wall.elapsed().as_secs_f64();
         let (Some(descent), Some(lift)) = (descent, lift) else {
-            return Err("no joint path along the straight descent".into());
+            return Err(NoGrasp::NoStraightDescent);
         };
         Ok((
             Prepared {
@@ -395,7 +532,11 @@ impl Run<'_, '_> {
                 place,
                 held,
             },
-            [grasp_s, pick_s, place_s],
+            StageCompute {
+                grasp_s,
+                pick_s,
+                place_s,
+            },
         ))
     }
 }

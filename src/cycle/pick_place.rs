@@ -8,39 +8,121 @@
 //! the cup touches, vacuum build-up, lift) and the Place (transfer, descent with the valve
 //! closing the plan's `release_lead_s` before its end, the release as the vacuum vents, retreat
 //! `release_s` after the valve closed), and record the pick: its stages' times, its outcome, the
-//! takt since the last release (when the part came off).
+//! takt since the last release (when the part came off). Each motion is played as a
+//! [`Segment`] (its motion, payload, valve switch, how it ends and whether a capture may run),
+//! the Pick's and the Place's carry as lists built once from the prepared motions.
 //!
 //! Units: s, m, rad. Frames: world.
 
-use super::events::{Event, MISRECOGNISED, Outcome, Planned, Stage, StallCause};
-use super::execute::{Played, Valve};
+use nalgebra::Vector3;
+
+use super::events::{Event, Planned, Stage, StallCause};
 use super::motions::{PlaceMotion, Prepared};
+use super::next_pick::{LatePlacement, PlacementFix, Prefetched};
+use super::outcome::{NoSeal, Outcome, Slip, WrongPose};
+use super::play::{Capture, Played, Segment, Valve};
 use super::records::PickRecord;
+use super::records::StageCompute;
 use super::{CycleError, Run};
 use crate::physics::suction::GripperEvent;
 use crate::robot::JointVector;
-use crate::trajectory::{Motion, Overlapped};
+use crate::trajectory::Motion;
+
+/// What one pick hands on to the pick loop.
+pub(super) struct PickEnd {
+    /// The next pick, prepared at this one's release, its Pick running into this Place's
+    /// retreat (not played yet).
+    pub next: Option<Prefetched>,
+    /// The placement error of the pick before, measured once this Pick's start left its part.
+    pub fix: Option<PlacementFix>,
+}
 
 impl Run<'_, '_> {
-    /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute
-    /// (grasp selection, Pick and Place motion generation [s]), aimed at the part recognised at
-    /// `aimed_m` [m, world]: stalls, motions, outcome.
+    /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute, aimed
+    /// at the part recognised at `aimed_m` [m, world], after the last Place's part `late` (when
+    /// its retreat runs into this Pick): stalls, motions, outcome.
     pub(super) fn pick_and_place(
         &mut self,
         prep: &Prepared,
-        charged: [f64; 3],
+        charged: StageCompute,
         ready_s: f64,
-        aimed_m: Option<nalgebra::Vector3<f64>>,
+        aimed_m: Option<Vector3<f64>>,
+        late: Option<LatePlacement>,
         rec: &mut PickRecord,
-    ) -> Result<(), CycleError> {
-        rec.compute = crate::cycle::StageCompute {
-            grasp_s: charged[0],
-            pick_s: charged[1],
-            place_s: charged[2],
+    ) -> Result<PickEnd, CycleError> {
+        let (pick_ready, place_ready) = self.charge(prep, charged, ready_s, rec);
+        // With the last retreat overlapped, the Pick was ready before the retreat's head ends.
+        if prep.retreat_blend.is_none() {
+            self.idle_until(pick_ready.max(self.st.world.time_s()))?;
+        }
+        let (outcome, end) = self.motions(prep, rec, place_ready, aimed_m, late)?;
+        // Compute for the next pick may start with this Place if it went as planned.
+        self.st.compute_from_s = match (&outcome, self.st.planned_end_q) {
+            (Outcome::Placed, Some(_)) => self.st.compute_from_s,
+            _ => {
+                self.st.planned_end_q = None;
+                self.st.world.time_s()
+            }
         };
-        let grasp_done = ready_s + charged[0];
-        let pick_ready = grasp_done + charged[1];
-        let place_ready = pick_ready + charged[2];
+        if outcome != Outcome::Placed && self.st.world.held_part().is_some() {
+            // A pick that ended with the part still on the cup (no Place motion): let it go where
+            // the arm is, over the pick tray, before anything else moves.
+            self.st.world.vacuum_off();
+            let t = self.st.world.time_s() + self.st.world.gripper().release_s + self.st.world.dt_s();
+            self.idle_until(t)?;
+            self.st.world.take_gripper_events();
+            self.event(Event::PartLetGo);
+            // The part falls back into the pile: no capture until it has come to rest there.
+            self.st.capture_hold_until_s = self.st.world.time_s() + super::LET_GO_SETTLE_S;
+            self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
+        }
+        // No motion for it is a failure at that spot too: the same pile gives the same plan.
+        if (outcome.grasp_failed()
+            || matches!(
+                outcome,
+                Outcome::Collision(_) | Outcome::ProtectiveStop(_) | Outcome::NoMotion(_)
+            ))
+            && rec.place_s == 0.0
+        {
+            self.st.failed_spots.push(prep.grasp.world_from_tool.translation.vector);
+        }
+        if rec.place_s > 0.0 && matches!(outcome, Outcome::Collision(_) | Outcome::ProtectiveStop(_)) {
+            // Something is in the slot (a part that bounced there): the next part goes to the next.
+            self.event(Event::SlotSkipped(self.st.trays.next_slot % self.cell.slots.len()));
+            self.st.trays.next_slot += 1;
+        }
+        rec.outcome = outcome;
+        self.event(Event::Outcome(rec.outcome.clone()));
+        if rec.outcome == Outcome::Placed {
+            let release = rec.release_s.unwrap_or(self.st.world.time_s());
+            rec.takt_s = self.st.trays.last_release_s.map(|r| release - r);
+            rec.spans_refill = rec.takt_s.is_some() && self.st.trays.refilled_since_release;
+            self.st.trays.refilled_since_release = false;
+            self.st.trays.last_release_s = Some(release);
+            self.st.trays.next_slot += 1;
+        }
+        self.exchange_full_place_tray()?;
+        let arm = &self.st.arm;
+        rec.max_tracking_error_deg = arm.max_error_rad.to_degrees();
+        let (joint, peak) = arm
+            .peak_demand_ratio
+            .iter()
+            .enumerate()
+            .fold((0, 0.0), |best, (i, r)| if *r > best.1 { (i, *r) } else { best });
+        rec.peak_demand_ratio = peak;
+        rec.peak_demand_joint = joint + 1;
+        rec.saturated_s = arm.saturated_s;
+        Ok(end)
+    }
+
+    /// The compute of the pick on the simulation clock from `ready_s`: its spans, the grasp
+    /// chosen, the motions generated and the stalls before the Pick, recorded. Returns when the
+    /// Pick and when the Place are ready [s].
+    fn charge(&mut self, prep: &Prepared, charged: StageCompute, ready_s: f64, rec: &mut PickRecord) -> (f64, f64) {
+        rec.compute = charged;
+        let grasp_done = ready_s + charged.grasp_s;
+        let pick_ready = grasp_done + charged.pick_s;
+        let place_ready = pick_ready + charged.place_s;
         self.span(Stage::Grasp, ready_s, grasp_done, "grasp selection");
         self.span(Stage::Planning, grasp_done, pick_ready, "Pick motion");
         self.span(Stage::Planning, pick_ready, place_ready, "Place motion");
@@ -60,7 +142,7 @@ impl Run<'_, '_> {
             Ok(t) => Planned::Pick {
                 transfer_s: t.duration_s(),
                 descent_s: prep.descent.duration_s(),
-                compute_s: charged[1],
+                compute_s: charged.pick_s,
             },
             Err(e) => Planned::Failed {
                 motion: "Pick",
@@ -73,7 +155,7 @@ impl Run<'_, '_> {
                 transfer_s: p.transfer.duration_s(),
                 descent_s: p.descent.duration_s(),
                 retreat_s: p.retreat.duration_s(),
-                compute_s: charged[2],
+                compute_s: charged.place_s,
             },
             Err(e) => Planned::Failed {
                 motion: "Place",
@@ -109,153 +191,95 @@ impl Run<'_, '_> {
         for (t_s, event) in stages {
             self.event_at(t_s, event);
         }
-        // With the last retreat overlapped, the Pick was ready before the retreat's head ends.
-        if prep.retreat_blend.is_none() {
-            self.idle_until(pick_ready.max(self.st.world.time_s()))?;
-        }
-        let outcome = self.motions(prep, rec, place_ready, aimed_m)?;
-        self.st.view_free_until_s = f64::INFINITY;
-        // Compute for the next pick may start with this Place if it went as planned.
-        self.st.compute_from_s = match (&outcome, self.st.planned_end_q) {
-            (Outcome::Placed, Some(_)) => self.st.compute_from_s,
-            _ => {
-                self.st.planned_end_q = None;
-                self.st.world.time_s()
-            }
-        };
-        if outcome != Outcome::Placed && self.st.world.held_part().is_some() {
-            // A pick that ended with the part still on the cup (no Place motion): let it go where
-            // the arm is, over the pick tray, before anything else moves.
-            self.st.world.vacuum_off();
-            let t = self.st.world.time_s() + self.st.world.gripper().release_s + self.st.world.dt_s();
-            self.idle_until(t)?;
-            self.st.world.take_gripper_events();
-            self.event(Event::PartLetGo);
-            // The part falls back into the pile: no capture until it has come to rest there.
-            self.st.capture_hold_until_s = self.st.world.time_s() + super::LET_GO_SETTLE_S;
-            self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
-        }
-        // No motion for it is a failure at that spot too: the same pile gives the same plan.
-        if matches!(
-            outcome,
-            Outcome::GraspFailed(_) | Outcome::Collision(_) | Outcome::ProtectiveStop(_) | Outcome::NoMotion(_)
-        ) && rec.place_s == 0.0
-        {
-            self.st.failed_spots.push(prep.grasp.world_from_tool.translation.vector);
-        }
-        if rec.place_s > 0.0 && matches!(outcome, Outcome::Collision(_) | Outcome::ProtectiveStop(_)) {
-            // Something is in the slot (a part that bounced there): the next part goes to the next.
-            self.event(Event::SlotSkipped(self.st.trays.next_slot % self.cell.slots.len()));
-            self.st.trays.next_slot += 1;
-        }
-        rec.outcome = outcome;
-        self.event(Event::Outcome(rec.outcome.clone()));
-        if rec.outcome == Outcome::Placed {
-            let release = rec.release_s.unwrap_or(self.st.world.time_s());
-            rec.takt_s = self.st.trays.last_release_s.map(|r| release - r);
-            rec.spans_refill = rec.takt_s.is_some() && self.st.trays.refilled_since_release;
-            self.st.trays.refilled_since_release = false;
-            self.st.trays.last_release_s = Some(release);
-            self.st.trays.next_slot += 1;
-        }
-        self.exchange_full_place_tray()?;
-        let arm = &self.st.arm;
-        rec.max_tracking_error_deg = arm.max_error_rad.to_degrees();
-        let (joint, peak) = arm
-            .peak_demand_ratio
-            .iter()
-            .enumerate()
-            .fold((0, 0.0), |best, (i, r)| if *r > best.1 { (i, *r) } else { best });
-        rec.peak_demand_ratio = peak;
-        rec.peak_demand_joint = joint + 1;
-        rec.saturated_s = arm.saturated_s;
-        Ok(())
+        (pick_ready, place_ready)
     }
 
-    /// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat).
+    /// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat),
+    /// after the last Place's retreat when it runs into this Pick (and `late`, that Place's
+    /// part, is measured once the retreat has left it).
     fn motions(
         &mut self,
         prep: &Prepared,
         rec: &mut PickRecord,
         place_ready: f64,
-        aimed_m: Option<nalgebra::Vector3<f64>>,
-    ) -> Result<Outcome, CycleError> {
-        let hand = self.cell.hand;
+        aimed_m: Option<Vector3<f64>>,
+        late: Option<LatePlacement>,
+    ) -> Result<(Outcome, PickEnd), CycleError> {
         self.st.arm.max_error_rad = 0.0;
         self.st.arm.peak_demand_ratio = [0.0; crate::robot::DOF];
         self.st.arm.saturated_s = 0.0;
+        let mut end = PickEnd { next: None, fix: None };
         // The last Place's retreat, alone up to where this Pick starts (that Place's end; its
         // servo errors and torques count for this pick). A capture may start only if its
         // exposure ends before the Pick does.
         if let Some(rb) = &prep.retreat_blend {
-            self.st.view_free_until_s = self.st.world.time_s() + rb.motion.start_s();
-            let head = self.play_with(&rb.motion.head(), &hand, true, None, false)?;
-            self.st.view_free_until_s = f64::INFINITY;
-            self.measure_late_placement();
-            if let Played::Failed(o) = head {
-                return Ok(o);
+            let until_s = self.st.world.time_s() + rb.motion.start_s();
+            let head = rb.motion.head();
+            let played = self.play(
+                &Segment::new(head, self.cell.hand)
+                    .flowing_on()
+                    .capturing(Capture::EndingBy(until_s)),
+            )?;
+            end.fix = late.map(|l| self.measure_placement(l));
+            if let Played::Failed(o) = played {
+                return Ok((o, end));
             }
         }
         let t_pick = self.st.world.time_s();
+        if let Some(o) = self.pick(prep, rec, t_pick, aimed_m)? {
+            return Ok((o, end));
+        }
+        let (outcome, next) = self.lift_and_place(prep, rec, t_pick, place_ready)?;
+        end.next = next;
+        Ok((outcome, end))
+    }
+
+    /// The Pick ends now: its time, its span, the arm free.
+    fn pick_done(&mut self, rec: &mut PickRecord, t_pick: f64) {
+        let lane = if rec.blind { Stage::BlindPick } else { Stage::Pick };
+        rec.pick_s = self.st.world.time_s() - t_pick;
+        self.span(lane, t_pick, self.st.world.time_s(), "Pick");
+        self.st.arm.free_s = self.st.world.time_s();
+    }
+
+    /// The Pick from `t_pick` up to the seal: transfer, descent with the valve opening, the
+    /// vacuum's build-up. `None` if the cup holds the part; else the outcome, after the lift
+    /// with nothing on the cup.
+    fn pick(
+        &mut self,
+        prep: &Prepared,
+        rec: &mut PickRecord,
+        t_pick: f64,
+        aimed_m: Option<Vector3<f64>>,
+    ) -> Result<Option<Outcome>, CycleError> {
+        let hand = self.cell.hand;
         self.st.planned_end_q = None;
-        let pick_lane = if rec.blind { Stage::BlindPick } else { Stage::Pick };
         self.event(Event::PickStart);
-        let pick_transfer = match &prep.pick_transfer {
+        let transfer = match &prep.pick_transfer {
             Ok(t) => t,
-            Err(e) => return Ok(Outcome::NoMotion(e.clone())),
+            Err(e) => return Ok(Some(Outcome::NoMotion(e.clone()))),
         };
         self.st.gripper_events.clear();
-        let pick_done = |run: &mut Self, rec: &mut PickRecord| {
-            rec.pick_s = run.st.world.time_s() - t_pick;
-            run.span(pick_lane, t_pick, run.st.world.time_s(), "Pick");
-            run.st.arm.free_s = run.st.world.time_s();
-        };
-        // The transfer, then the descent (or the overlap's head, then its rest: the descent
-        // starts while the transfer ends).
         rec.overlaps.pick_descent_s = prep.pick_blend.as_ref().map_or(0.0, |b| b.both().duration_s());
-        let transferred = match (&prep.retreat_blend, &prep.pick_blend) {
-            (Some(rb), _) => {
-                rec.overlaps.retreat_s = rb.motion.both().duration_s();
-                let s = rb.motion.start_s();
-                self.play_with(&rb.motion.window(s, s + rb.descent_from_s), &hand, false, None, false)?
-            }
-            (None, Some(b)) => self.play_with(&b.head(), &hand, false, None, false)?,
-            (None, None) => self.play_with(pick_transfer, &hand, false, None, false)?,
-        };
-        if let Played::Failed(o) = transferred {
-            pick_done(self, rec);
-            return Ok(o);
+        if let Some(rb) = &prep.retreat_blend {
+            rec.overlaps.retreat_s = rb.motion.both().duration_s();
         }
-        // The vacuum valve opens `vacuum_lead_s` before the cup reaches the face.
-        let lead = self.cell.scene.cycle.vacuum_lead_s;
-        let t_descent = self.st.world.time_s();
-        let vacuum_at;
+        let [to, down] = prep.pick(transfer, hand, self.cell.scene.cycle.vacuum_lead_s);
+        if let Played::Failed(o) = self.play(&to)? {
+            self.pick_done(rec, t_pick);
+            return Ok(Some(o));
+        }
         // From here on the pile is touched: results captured before do not show it.
+        let t_descent = self.st.world.time_s();
         if let Some(c) = aimed_m {
             self.st.pick_spots.push((t_descent, c));
         }
-        let descended = match (&prep.retreat_blend, &prep.pick_blend) {
-            (Some(rb), _) => {
-                let m = &rb.motion;
-                let rest = m.window(m.start_s() + rb.descent_from_s, m.duration_s());
-                vacuum_at = (rest.duration_s() - lead).max(0.0);
-                self.play_with(&rest, &hand, false, Some(Valve::OpenAt(vacuum_at)), true)?
-            }
-            (None, Some(b)) => {
-                let rest = b.rest();
-                vacuum_at = (rest.duration_s() - lead).max(0.0);
-                self.play_with(&rest, &hand, false, Some(Valve::OpenAt(vacuum_at)), true)?
-            }
-            (None, None) => {
-                vacuum_at = (prep.descent.duration_s() - lead).max(0.0);
-                self.play_with(&prep.descent, &hand, false, Some(Valve::OpenAt(vacuum_at)), true)?
-            }
-        };
-        if let Played::Failed(o) = descended {
-            pick_done(self, rec);
-            return Ok(o);
+        if let Played::Failed(o) = self.play(&down)? {
+            self.pick_done(rec, t_pick);
+            return Ok(Some(o));
         }
         self.st.world.vacuum_on();
+        let vacuum_at = down.valve.map_or(0.0, Valve::at_s);
         let t = (t_descent + vacuum_at).min(self.st.world.time_s())
             + self.st.world.gripper().build_up_s
             + self.st.world.dt_s();
@@ -273,55 +297,72 @@ impl Run<'_, '_> {
                         tilt_rad: seal.tilt_rad,
                     });
                 }
-                GripperEvent::GraspFailed { reason, .. } => failure = Some(Outcome::GraspFailed(reason.to_string())),
+                GripperEvent::GraspFailed { reason, .. } => {
+                    failure = Some(Outcome::GraspFailed(NoSeal::Failed(reason)))
+                }
                 GripperEvent::Slipped { required_n, .. } => {
-                    failure = Some(Outcome::Dropped(format!("slipped at rest: {required_n:.2} N")))
+                    failure = Some(Outcome::Dropped(Slip::AtRest { required_n }))
                 }
                 GripperEvent::Released { .. } => {}
             }
         }
         rec.sealed = Some(self.st.world.held_part().is_some());
-        if self.st.world.held_part().is_none() {
-            self.st.world.vacuum_off();
-            self.play(&prep.lift, &hand, false)?;
-            pick_done(self, rec);
-            let failure = failure.unwrap_or_else(|| Outcome::GraspFailed("no seal".into()));
-            // Evaluation only: a failure on a wrong detection is named for what started it.
-            return Ok(match (failure, rec.aimed_at) {
-                (Outcome::GraspFailed(why), Some(m)) if !m.correct => Outcome::GraspFailed(format!(
-                    "{MISRECOGNISED}: believed pose {:.1} mm / {:.1} deg from part {} ({why})",
-                    m.position_error_m * 1e3,
-                    m.rotation_error_rad.to_degrees(),
-                    m.part
-                )),
-                (Outcome::GraspFailed(why), None) => {
-                    Outcome::GraspFailed(format!("{MISRECOGNISED}: no part there ({why})"))
-                }
-                (f, _) => f,
-            });
+        if self.st.world.held_part().is_some() {
+            return Ok(None);
         }
-        let held = prep.held;
+        self.st.world.vacuum_off();
+        self.play(&Segment::new(&prep.lift, hand))?;
+        self.pick_done(rec, t_pick);
+        let failure = failure.unwrap_or(Outcome::GraspFailed(NoSeal::Unexplained));
+        // Evaluation only: a failure on a wrong detection is named for what started it.
+        Ok(Some(match (failure, rec.aimed_at) {
+            (Outcome::GraspFailed(failure), Some(m)) if !m.correct => Outcome::Misrecognised {
+                believed: Some(WrongPose {
+                    part: m.part,
+                    position_error_m: m.position_error_m,
+                    rotation_error_rad: m.rotation_error_rad,
+                }),
+                failure,
+            },
+            (Outcome::GraspFailed(failure), None) => Outcome::Misrecognised {
+                believed: None,
+                failure,
+            },
+            (f, _) => f,
+        }))
+    }
+
+    /// The lift (the rest of the Pick, from `t_pick`) and the Place: transfer, descent, release,
+    /// retreat. With the next pick prepared at the release, the retreat is left to it (returned).
+    fn lift_and_place(
+        &mut self,
+        prep: &Prepared,
+        rec: &mut PickRecord,
+        t_pick: f64,
+        place_ready: f64,
+    ) -> Result<(Outcome, Option<Prefetched>), CycleError> {
+        let (hand, held) = (self.cell.hand, prep.held);
         // The lift and the Place transfer overlapped, if they could be and the Place is ready
         // when the transfer would start: the Pick ends where the transfer starts.
         let now = self.st.world.time_s();
-        let blend = match &prep.place {
+        let lift_blend = match &prep.place {
             Ok(PlaceMotion {
                 lift_blend: Some(b), ..
             }) if place_ready <= now + b.start_s() + 1e-9 => Some(b),
             _ => None,
         };
-        let lifted = match blend {
+        let lift = match lift_blend {
             Some(b) => {
                 rec.overlaps.lift_s = b.both().duration_s();
-                self.play_with(&b.head(), &held, true, None, false)?
+                Segment::new(b.head(), held)
             }
-            None => self.play_with(&prep.lift, &held, true, None, false)?,
+            None => Segment::new(&prep.lift, held),
         };
+        let lifted = self.play(&lift.flowing_on().capturing(Capture::ANY))?;
+        self.pick_done(rec, t_pick);
         if let Played::Failed(o) = lifted {
-            pick_done(self, rec);
-            return Ok(o);
+            return Ok((o, None));
         }
-        pick_done(self, rec);
         // Place: the motions were generated while the Pick ran; wait if they are not ready yet.
         if place_ready > self.st.world.time_s() {
             let t = self.st.world.time_s();
@@ -332,7 +373,7 @@ impl Run<'_, '_> {
         }
         let place = match &prep.place {
             Ok(p) => p,
-            Err(e) => return Ok(Outcome::NoMotion(e.clone())),
+            Err(e) => return Ok((Outcome::NoMotion(e.clone()), None)),
         };
         let up = &place.retreat;
         rec.suction_speed_factor = place.suction_speed_factor;
@@ -345,49 +386,54 @@ impl Run<'_, '_> {
         let release_lead_s = place.release_lead_s;
         rec.release_lead_s = release_lead_s;
         let release_wait_s = (self.st.world.gripper().release_s - release_lead_s).max(0.0) + self.st.world.dt_s();
-        self.st.view_free_until_s = t_place + place.carry_s() + release_wait_s + up.duration_s();
+        let view_free_until_s = t_place + place.carry_s() + release_wait_s + up.duration_s();
+        let capture = Capture::EndingBy(view_free_until_s);
         self.event(Event::PlaceStart);
-        // The Place ends `after_s` from now: 0, or the head of a retreat that runs into the
-        // next Pick (played with it).
-        let place_done_after = |run: &mut Self, rec: &mut PickRecord, after_s: f64| {
-            let end = run.st.world.time_s() + after_s;
-            rec.place_s = end - t_place;
-            run.span(Stage::Place, t_place, end, "Place");
-            run.st.arm.free_s = end;
-        };
-        let place_done = |run: &mut Self, rec: &mut PickRecord| place_done_after(run, rec, 0.0);
-        // The transfer (its start overlapping the lift's end, if so) and the descent (its
-        // start overlapping the transfer's end, if so), played as one motion when they overlap.
-        // The valve closes `release_lead_s` before the descent ends (the motion's end).
         let part = self.st.world.held_part();
-        let close = |end_s: f64| Some(Valve::CloseAt((end_s - release_lead_s).max(0.0)));
-        let carried = match (blend, &place.descent_blend) {
-            (Some(b), Some(d)) => {
-                let rest = Overlapped::new(b.first().clone(), d.clone(), b.start_s()).rest();
-                self.play_with(&rest, &held, true, close(rest.duration_s()), true)?
-            }
-            (None, Some(d)) => self.play_with(d, &held, true, close(d.duration_s()), true)?,
-            (Some(b), None) => match self.play_with(&b.rest(), &held, true, None, false)? {
-                Played::Failed(o) => Played::Failed(o),
-                _ => {
-                    let d = &place.descent;
-                    self.play_with(d, &held, true, close(d.duration_s()), true)?
-                }
-            },
-            (None, None) => match self.play_with(&place.transfer, &held, true, None, false)? {
-                Played::Failed(o) => Played::Failed(o),
-                _ => {
-                    let d = &place.descent;
-                    self.play_with(d, &held, true, close(d.duration_s()), true)?
-                }
-            },
-        };
-        if let Played::Failed(o) = carried {
-            place_done(self, rec);
-            return Ok(o);
+        if let Played::Failed(o) = self.play_all(&place.carry(lift_blend, held, capture))? {
+            self.place_done(rec, t_place, 0.0);
+            return Ok((o, None));
         }
-        // The part comes off as the vacuum vents: the arm stays until it has surely vented,
-        // `release_s` after the valve closed (the controller's timing, not what the part did).
+        let release = self.release()?;
+        self.obs.marker(release, &format!("release {}", rec.index));
+        if let Some((mut next, head_s)) = self.prefetch_next(up) {
+            // The retreat runs into the next Pick, prepared now: its head alone ends this Place.
+            self.place_done(rec, t_place, head_s);
+            next.late = part.map(|part| LatePlacement {
+                record: rec.index,
+                part,
+                slot: prep.slot,
+            });
+            rec.release_s = Some(release);
+            return Ok((Outcome::Placed, Some(next)));
+        }
+        if let Played::Failed(o) = self.play(&Segment::new(up, hand).capturing(capture))? {
+            self.place_done(rec, t_place, 0.0);
+            return Ok((o, None));
+        }
+        self.place_done(rec, t_place, 0.0);
+        if let Some(i) = part {
+            let (d, yaw) = self.st.world.placement_error(i, &prep.slot, self.cell.yaw_symmetry_rad);
+            rec.placement_error_mm = Some(d * 1e3);
+            rec.yaw_error_deg = Some(yaw.to_degrees());
+        }
+        rec.release_s = Some(release);
+        Ok((Outcome::Placed, None))
+    }
+
+    /// The Place from `t_place` ends `after_s` from now: 0, or the head of a retreat that runs
+    /// into the next Pick (played with it).
+    fn place_done(&mut self, rec: &mut PickRecord, t_place: f64, after_s: f64) {
+        let end = self.st.world.time_s() + after_s;
+        rec.place_s = end - t_place;
+        self.span(Stage::Place, t_place, end, "Place");
+        self.st.arm.free_s = end;
+    }
+
+    /// The release at the end of the Place's descent: the part comes off as the vacuum vents;
+    /// the arm stays until it has surely vented, `release_s` after the valve closed (the
+    /// controller's timing, not what the part did). Returns when the part came off [s].
+    fn release(&mut self) -> Result<f64, CycleError> {
         self.st.world.vacuum_off();
         let closed_s = self
             .st
@@ -404,27 +450,6 @@ impl Run<'_, '_> {
         });
         let release = came_off_s.unwrap_or(self.st.world.time_s());
         self.event_at(release, Event::Released);
-        self.obs.marker(release, &format!("release {}", rec.index));
-        if let Some(head_s) = self.prefetch_next(up) {
-            // The retreat runs into the next Pick, prepared now: its head alone ends this Place.
-            place_done_after(self, rec, head_s);
-            if let Some(i) = part {
-                self.st.late_placement = Some((rec.index, i, prep.slot));
-            }
-            rec.release_s = Some(release);
-            return Ok(Outcome::Placed);
-        }
-        if let Played::Failed(o) = self.play(up, &hand, true)? {
-            place_done(self, rec);
-            return Ok(o);
-        }
-        place_done(self, rec);
-        if let Some(i) = part {
-            let (d, yaw) = self.st.world.placement_error(i, &prep.slot, self.cell.yaw_symmetry_rad);
-            rec.placement_error_mm = Some(d * 1e3);
-            rec.yaw_error_deg = Some(yaw.to_degrees());
-        }
-        rec.release_s = Some(release);
-        Ok(Outcome::Placed)
+        Ok(release)
     }
 }

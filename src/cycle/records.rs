@@ -19,7 +19,8 @@
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::events::{EndReason, Outcome};
+use super::events::EndReason;
+use super::outcome::Outcome;
 use crate::sensor::{RecognitionReport, RecognitionTotals, TruthMatch};
 
 /// One pick (or one capture that found nothing to pick).
@@ -248,11 +249,11 @@ pub struct Faults {
 impl Faults {
     /// Counts a pick's outcome, if it is a fault.
     pub fn count(&mut self, outcome: &Outcome) {
-        match outcome.name() {
-            "protective_stop" => self.protective_stops += 1,
-            "collision" => self.collisions += 1,
-            "dropped" => self.drops += 1,
-            "grasp_failed" => self.grasp_failures += 1,
+        match outcome {
+            Outcome::ProtectiveStop(_) => self.protective_stops += 1,
+            Outcome::Collision(_) => self.collisions += 1,
+            Outcome::Dropped(_) => self.drops += 1,
+            Outcome::GraspFailed(_) | Outcome::Misrecognised { .. } => self.grasp_failures += 1,
             _ => {}
         }
     }

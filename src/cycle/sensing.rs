@@ -12,7 +12,9 @@
 
 use nalgebra::{Isometry3, Translation3};
 
-use super::events::{Event, Fault, Stage};
+use super::events::{Event, Stage};
+use super::outcome::Fault;
+use super::play::{Capture, Segment};
 use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
@@ -72,14 +74,15 @@ impl SensedResult {
 impl Run<'_, '_> {
     /// Takes a result that has arrived into hand, then triggers a capture if none is pending
     /// (or the pending one was spoiled and the sensor has finished exposing it), the arm is out
-    /// of view and its plan keeps it out for the exposure.
-    pub(super) fn maybe_trigger(&mut self) {
+    /// of view and its plan keeps it out for the exposure: until `view_free_until_s` (infinite:
+    /// no motion into the view is planned).
+    pub(super) fn maybe_trigger(&mut self, view_free_until_s: f64) {
         self.collect_ready();
         if self.st.world.time_s() < self.st.capture_hold_until_s - 1e-9 {
             // A part let go is still falling into the pile.
             return;
         }
-        if self.st.world.time_s() + self.st.sensor.exposure_s > self.st.view_free_until_s + 1e-9 {
+        if self.st.world.time_s() + self.st.sensor.exposure_s > view_free_until_s + 1e-9 {
             // The arm's plan takes it into the view before the exposure would end.
             return;
         }
@@ -113,12 +116,12 @@ impl Run<'_, '_> {
                 let hold = self.st.capture_hold_until_s;
                 self.idle_until(hold)?;
             }
-            self.maybe_trigger();
+            self.maybe_trigger(f64::INFINITY);
             if self.st.pending.is_none() {
                 if !self.move_out_of_view()? {
                     return Ok(None);
                 }
-                self.maybe_trigger();
+                self.maybe_trigger(f64::INFINITY);
                 if self.st.pending.is_none() {
                     return Ok(None);
                 }
@@ -258,19 +261,20 @@ impl Run<'_, '_> {
         // A result arriving on the way sends the arm into the view from there; a capture
         // triggered on the way has its result long after.
         let end_s = t + acc.duration_s();
-        if self
+        let capture = if self
             .st
             .pending
             .as_ref()
             .is_some_and(|j| j.spoiled.is_none() && j.ready_s <= end_s)
         {
-            self.st.view_free_until_s = end_s;
-        }
-        let played = self.play(&acc, &hand, true)?;
-        self.st.view_free_until_s = f64::INFINITY;
+            Capture::EndingBy(end_s)
+        } else {
+            Capture::ANY
+        };
+        let played = self.play(&Segment::new(&acc, hand).capturing(capture))?;
         self.span(Stage::WaitingPose, t, self.st.world.time_s(), "to the waiting pose");
         self.st.arm.free_s = self.st.world.time_s();
-        if !matches!(played, super::execute::Played::Done) {
+        if !matches!(played, super::play::Played::Done) {
             self.st.planned_end_q = None;
             self.st.compute_from_s = self.st.world.time_s();
         }
@@ -298,7 +302,7 @@ impl Run<'_, '_> {
             );
             let hand = self.cell.hand;
             if let Some(line) = self.cell.line(&self.st.world.joints(), &tool, &up, &hand, None) {
-                self.play(&line, &hand, true)?;
+                self.play(&Segment::new(&line, hand).capturing(Capture::ANY))?;
             }
             plan = free.plan(&self.st.world.joints(), &home, &PlanOptions::default(), &mut rng);
         }
@@ -308,12 +312,12 @@ impl Run<'_, '_> {
         };
         let hand = self.cell.hand;
         let acc = self.cell.accelerate_free(&p.waypoints, &free);
-        let played = self.play(&acc, &hand, true)?;
+        let played = self.play(&Segment::new(&acc, hand).capturing(Capture::ANY))?;
         self.span(Stage::Place, t, self.st.world.time_s(), "out of view");
         self.st.arm.free_s = self.st.world.time_s();
         self.st.planned_end_q = None;
         self.st.compute_from_s = self.st.world.time_s();
-        Ok(matches!(played, super::execute::Played::Done))
+        Ok(matches!(played, super::play::Played::Done))
     }
 }
 

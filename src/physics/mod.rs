@@ -15,8 +15,10 @@
 //! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; CCD on every part;
 //! the cell file's timestep.
 
+mod arm;
 pub mod health;
 pub mod overlap;
+mod parts;
 pub mod pile;
 pub mod query;
 pub mod script;
@@ -29,7 +31,7 @@ use rapier3d::prelude::*;
 
 use crate::config::Scene;
 pub use crate::geometry::TrayVolume;
-use crate::robot::{DOF, JointVector, Primitive as LinkPrimitive, RobotModel};
+use crate::robot::{DOF, JointVector, RobotModel};
 pub use health::{HealthError, HealthEvent, HealthLimits, HealthMonitor};
 pub use query::{RayCaster, RayHit, RayTargetBox, RayTargets, ViewVolume};
 pub use shapes::{PartShape, ShapeError};
@@ -245,6 +247,8 @@ pub struct World {
     step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
     tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
+    /// The cell's fixed boxes as built (table, trays, obstacles), named as in the geometry.
+    cell_boxes: Vec<crate::geometry::NamedBox>,
 }
 
 /// The solver settings a world steps with.
@@ -255,21 +259,6 @@ pub enum Solver {
     /// rapier's default contact stiffness and solver iterations, one substep per step: the peer
     /// the physics benchmark compares with.
     RapierDefaults,
-}
-
-fn arm_collider(shape: SharedShape, pose: Pose, tag: Tag, with_fixed: bool) -> Collider {
-    let types = if with_fixed {
-        ActiveCollisionTypes::default() | ActiveCollisionTypes::KINEMATIC_FIXED
-    } else {
-        ActiveCollisionTypes::default()
-    };
-    ColliderBuilder::new(shape)
-        .position(pose)
-        .collision_groups(InteractionGroups::new(ARM, ENV | PARTS, InteractionTestMode::And))
-        .active_collision_types(types)
-        .friction(0.5)
-        .user_data(tag.encode())
-        .build()
 }
 
 impl World {
@@ -319,6 +308,7 @@ impl World {
                 .into_iter()
                 .chain(overlap::tray_pieces(&scene.place_tray.tray))
                 .collect(),
+            cell_boxes: Vec::new(),
         };
         // The cell's fixed boxes: table, trays, obstacles (one geometry for physics and planning).
         // The pick tray's hang on a body of their own (fixed, at the world origin) that an
@@ -330,7 +320,8 @@ impl World {
                 _ => b.name.clone(),
             };
             let parent = (role == crate::geometry::BoxRole::PickTray).then_some(w.pick_tray_body);
-            w.add_env_box(&name, b.world_from_box(), b.half_m, parent);
+            w.add_env_box(&name, b.world_from_box, b.half_m, parent);
+            w.cell_boxes.push(b);
         }
         w.set_solver(Solver::Tuned);
         w.add_arm(scene);
@@ -383,65 +374,6 @@ impl World {
         !self.bodies[self.pick_tray_body].is_fixed()
     }
 
-    fn add_arm(&mut self, scene: &Scene) {
-        let world_from_links = self.robot.world_from_links(&self.q);
-        for (i, link) in self.robot.links.iter().enumerate() {
-            let builder = if i == 0 {
-                RigidBodyBuilder::fixed()
-            } else {
-                RigidBodyBuilder::kinematic_position_based()
-            };
-            let body = self.bodies.insert(builder.pose(to_pose(&world_from_links[i])));
-            for s in &link.shapes {
-                let (shape, local) = match s.primitive {
-                    LinkPrimitive::Box { half_extents_m: h } => {
-                        (SharedShape::cuboid(sim(h.x), sim(h.y), sim(h.z)), Isometry3::identity())
-                    }
-                    // rapier's cylinders and capsules run along +y; the URDF's along +z.
-                    LinkPrimitive::Cylinder {
-                        radius_m,
-                        half_length_m,
-                    } => (
-                        SharedShape::cylinder(sim(half_length_m), sim(radius_m)),
-                        Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2),
-                    ),
-                    LinkPrimitive::Sphere { radius_m } => (SharedShape::ball(sim(radius_m)), Isometry3::identity()),
-                    LinkPrimitive::Capsule {
-                        radius_m,
-                        half_length_m,
-                    } => (
-                        SharedShape::capsule_z(sim(half_length_m), sim(radius_m)),
-                        Isometry3::identity(),
-                    ),
-                };
-                // The base stands on the table: its contact there is not a collision.
-                let c = arm_collider(shape, to_pose(&(s.link_from_shape * local)), Tag::Link(i as u8), i > 0);
-                self.colliders.insert_with_parent(c, body, &mut self.bodies);
-            }
-            self.link_bodies.push(body);
-        }
-        // The suction tool on the flange: a body cylinder, then the cup ending at the tool frame.
-        let hand = crate::geometry::HandGeometry::new(&scene.gripper);
-        let flange = self.link_bodies[DOF];
-        let along_z = |z: f64| {
-            Isometry3::translation(0.0, 0.0, z) * Isometry3::rotation(Vector3::x() * std::f64::consts::FRAC_PI_2)
-        };
-        let tool = arm_collider(
-            SharedShape::cylinder(sim(hand.body_length_m / 2.0), sim(hand.body_radius_m)),
-            to_pose(&along_z(hand.body_length_m / 2.0)),
-            Tag::Tool,
-            true,
-        );
-        self.colliders.insert_with_parent(tool, flange, &mut self.bodies);
-        let cup = arm_collider(
-            SharedShape::cylinder(sim(hand.cup_length_m / 2.0), sim(hand.cup_radius_m)),
-            to_pose(&along_z(hand.tool_length_m - hand.cup_length_m / 2.0)),
-            Tag::Cup,
-            true,
-        );
-        self.colliders.insert_with_parent(cup, flange, &mut self.bodies);
-    }
-
     /// Runs collision detection without advancing time, so scene queries see the current state.
     pub fn refresh_queries(&mut self) {
         // A physics step of 1 ns: collision detection runs and the bounding-volume tree is
@@ -475,48 +407,6 @@ impl World {
     /// gripper's tool acceleration and release velocity are differences over whole steps).
     pub fn dt_s(&self) -> f64 {
         self.step_dt_s
-    }
-
-    /// Joint positions of the arm now [rad].
-    pub fn joints(&self) -> JointVector {
-        self.q
-    }
-
-    /// Puts the arm at `q` immediately (a teleport, no sweep); for setting up scenes.
-    pub fn place_arm(&mut self, q: &JointVector) {
-        self.q = *q;
-        self.q_target = *q;
-        let world_from_links = self.robot.world_from_links(q);
-        for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
-            let pose = to_pose(&world_from_links[i]);
-            let b = &mut self.bodies[*h];
-            b.set_position(pose, true);
-            b.set_next_kinematic_position(pose);
-        }
-        self.tool_history = [self.tool_position(); 3];
-        self.refresh_queries();
-    }
-
-    /// Sets the joint positions the arm reaches at the end of the next step [rad]. The link
-    /// bodies sweep there during the step, pushing what they meet.
-    pub fn set_joint_target(&mut self, q: &JointVector) {
-        self.q_target = *q;
-    }
-
-    /// `world_from_tool` at the joint positions after the last step.
-    pub fn world_from_tool(&self) -> Isometry3<f64> {
-        self.robot.world_from_tool(&self.q)
-    }
-
-    fn tool_position(&self) -> Vector3<f64> {
-        self.world_from_tool().translation.vector
-    }
-
-    /// The tool's acceleration over the last two steps, finite differences [m/s^2].
-    pub fn tool_acceleration(&self) -> Vector3<f64> {
-        let dt = self.dt_s();
-        let [a, b, c] = self.tool_history;
-        (c - 2.0 * b + a) / (dt * dt)
     }
 
     /// Advances the world by one step: arm bodies sweep to the joint target, the gripper's timers
@@ -631,120 +521,6 @@ impl World {
         Ok(())
     }
 
-    /// Adds a part at `world_from_part`, dynamic and awake. A part taken out of the cell before
-    /// ([`World::remove_part`]) is put back in its place (the lowest index first), so a long run
-    /// keeps as many bodies as the trays ever held at once, not one per part ever poured: the
-    /// world's memory and every per-step walk over the parts stay bounded.
-    pub fn add_part(&mut self, world_from_part: &Isometry3<f64>) -> usize {
-        if let Some(idx) = self.parts.iter().position(|p| p.state == PartState::Removed) {
-            let p = &mut self.parts[idx];
-            p.state = PartState::Free;
-            p.rest_ref = None;
-            let b = &mut self.bodies[p.body];
-            b.set_enabled(true);
-            b.set_body_type(RigidBodyType::Dynamic, false);
-            b.set_position(to_pose(world_from_part), false);
-            b.set_linvel(Vector::ZERO, false);
-            b.set_angvel(Vector::ZERO, false);
-            b.reset_forces(false);
-            b.reset_torques(false);
-            b.wake_up(true);
-            return idx;
-        }
-        let idx = self.parts.len();
-        let body = self.bodies.insert(
-            RigidBodyBuilder::dynamic()
-                .pose(to_pose(world_from_part))
-                .ccd_enabled(true)
-                // Soft CCD: contacts are predicted along the body's path up to 10 mm ahead, so
-                // a thin part falling at a few m/s meets the floor's constraint before it sinks.
-                .soft_ccd_prediction(sim(0.01))
-                .user_data(Tag::Part(idx as u32).encode()),
-        );
-        let s = &self.part_shape;
-        let collider = self.colliders.insert_with_parent(
-            ColliderBuilder::new(s.shape.clone())
-                .mass(s.mass_kg as f32)
-                .friction(s.friction as f32)
-                .restitution(s.restitution as f32)
-                .collision_groups(InteractionGroups::new(PARTS, Group::ALL, InteractionTestMode::And))
-                .user_data(Tag::Part(idx as u32).encode()),
-            body,
-            &mut self.bodies,
-        );
-        let view_collider = self.colliders.insert_with_parent(
-            ColliderBuilder::new(s.view_shape.clone())
-                .density(0.0)
-                .sensor(true)
-                .collision_groups(InteractionGroups::new(
-                    Group::GROUP_5,
-                    Group::NONE,
-                    InteractionTestMode::And,
-                ))
-                .user_data(Tag::Part(idx as u32).encode() | VIEW_FLAG),
-            body,
-            &mut self.bodies,
-        );
-        {
-            let act = self.bodies[body].activation_mut();
-            act.time_until_sleep = 0.2;
-        }
-        self.parts.push(PartBody {
-            body,
-            collider,
-            view_collider,
-            state: PartState::Free,
-            rest_ref: None,
-        });
-        idx
-    }
-
-    /// Takes part `i` out of the cell: parked 10 m below the table (one spot per part, so parked
-    /// parts never touch), disabled, state [`PartState::Removed`]. Indices of other parts stay;
-    /// the next [`World::add_part`] takes this one's index and body.
-    pub fn remove_part(&mut self, i: usize) {
-        let Some(p) = self.parts.get_mut(i) else {
-            return;
-        };
-        p.state = PartState::Removed;
-        let parked = Isometry3::translation(i as f64 * 0.5, 0.0, -10.0);
-        let b = &mut self.bodies[p.body];
-        b.set_body_type(RigidBodyType::Fixed, false);
-        b.set_position(to_pose(&parked), false);
-        b.set_linvel(Vector::ZERO, false);
-        b.set_angvel(Vector::ZERO, false);
-        b.set_enabled(false);
-    }
-
-    /// Indices of the parts in a given state.
-    pub fn parts_in_state(&self, state: PartState) -> Vec<usize> {
-        (0..self.parts.len())
-            .filter(|&i| self.parts[i].state == state)
-            .collect()
-    }
-
-    /// `world_from_part` of part `i`.
-    pub fn part_pose(&self, i: usize) -> Isometry3<f64> {
-        to_isometry(self.bodies[self.parts[i].body].position())
-    }
-
-    /// Linear and angular speed of part `i` [m/s, rad/s].
-    pub fn part_speed(&self, i: usize) -> (f64, f64) {
-        let b = &self.bodies[self.parts[i].body];
-        (b.linvel().length() as f64 / SIM_UNITS_PER_M, b.angvel().length() as f64)
-    }
-
-    /// Whether every free part is asleep or slower than the given speeds.
-    pub fn parts_at_rest(&self, lin_m_s: f64, ang_rad_s: f64) -> bool {
-        self.parts.iter().all(|p| {
-            let b = &self.bodies[p.body];
-            matches!(p.state, PartState::Held | PartState::Removed)
-                || b.is_sleeping()
-                || ((b.linvel().length() as f64) < lin_m_s * SIM_UNITS_PER_M
-                    && (b.angvel().length() as f64) < ang_rad_s)
-        })
-    }
-
     /// A readable name for what a collider belongs to.
     pub fn describe(&self, tag: Option<Tag>) -> String {
         match tag {
@@ -771,33 +547,6 @@ impl World {
     /// The tag of a collider.
     pub fn tag_of(&self, c: ColliderHandle) -> Option<Tag> {
         self.colliders.get(c).and_then(|c| Tag::decode(c.user_data))
-    }
-
-    /// How far part `i` landed from where it should be: horizontal distance of the centres [m]
-    /// and yaw difference [rad], the latter modulo the part's yaw symmetry (0: any yaw).
-    pub fn placement_error(&self, i: usize, world_from_slot: &Isometry3<f64>, yaw_symmetry_rad: f64) -> (f64, f64) {
-        let p = self.part_pose(i);
-        let d = p.translation.vector - world_from_slot.translation.vector;
-        let horizontal = d.xy().norm();
-        if yaw_symmetry_rad <= 0.0 {
-            return (horizontal, 0.0);
-        }
-        let heading = |iso: &Isometry3<f64>| {
-            let x = iso.rotation * Vector3::x();
-            x.y.atan2(x.x)
-        };
-        let diff = (heading(&p) - heading(world_from_slot)).rem_euclid(yaw_symmetry_rad);
-        (horizontal, diff.min(yaw_symmetry_rad - diff))
-    }
-
-    /// Indices of the free parts whose centre lies inside the pick tray's inner walls.
-    pub fn parts_in_pick_tray(&self) -> Vec<usize> {
-        (0..self.parts.len())
-            .filter(|&i| {
-                self.parts[i].state == PartState::Free
-                    && self.pick_tray.inside_inner(&self.part_pose(i).translation.vector)
-            })
-            .collect()
     }
 
     /// Simulation time [s].
@@ -833,6 +582,12 @@ impl World {
     /// The shape every part of this world has.
     pub fn part_shape(&self) -> &PartShape {
         &self.part_shape
+    }
+
+    /// The cell's fixed boxes (table, trays, obstacles) where the world was built with them (an
+    /// agitation moves the pick tray's later).
+    pub fn cell_boxes(&self) -> &[crate::geometry::NamedBox] {
+        &self.cell_boxes
     }
 
     /// The pick tray's volume.
@@ -879,18 +634,5 @@ impl World {
                 self.max_substeps = 1;
             }
         }
-    }
-
-    /// Wakes every part up (for tests that disturb a settled pile).
-    pub fn wake_parts(&mut self) {
-        for p in &self.parts {
-            self.bodies[p.body].wake_up(true);
-        }
-    }
-
-    /// Moves part `i` to `world_from_part` at once, awake (for set-ups and tests).
-    pub fn set_part_pose(&mut self, i: usize, world_from_part: &Isometry3<f64>) {
-        let b = &mut self.bodies[self.parts[i].body];
-        b.set_position(to_pose(world_from_part), true);
     }
 }

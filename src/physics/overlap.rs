@@ -139,12 +139,13 @@ pub fn workpiece_pieces(w: &Workpiece) -> Option<Vec<Polytope>> {
     Some(w.pieces().iter().map(|(_, p)| Polytope::of(p)).collect())
 }
 
-/// The tray's floor and walls ([`crate::geometry::tray_boxes`]) as `(world_from_tray, box in the
+/// The tray's floor and walls ([`crate::geometry::tray_pieces_m`]) as `(world_from_tray, box in the
 /// tray frame)`.
 pub fn tray_pieces(t: &TrayConfig) -> Vec<(Isometry3<f64>, Polytope)> {
-    crate::geometry::tray_boxes("tray", t)
+    let world_from_tray = t.world_from_tray();
+    crate::geometry::tray_pieces_m(t)
         .into_iter()
-        .map(|b| (b.world_from_frame, Polytope::cuboid(b.center_m, b.half_m)))
+        .map(|(center_m, half_m)| (world_from_tray, Polytope::cuboid(center_m, half_m)))
         .collect()
 }
 

@@ -195,38 +195,7 @@ impl World {
                 }
             }
         }
-        // Settle: every 0.1 s of simulated time, compare poses with the last look. Settled when
-        // nothing moved more than 0.05 mm or 0.005 rad since (or everything sleeps). Motion, not
-        // velocity: a can standing on its cap can keep a solver velocity that moves nothing.
-        let poses_now = |w: &World| -> Vec<Isometry3<f64>> { (0..w.parts.len()).map(|i| w.part_pose(i)).collect() };
-        let mut last = poses_now(self);
-        let mut last_look = self.time_s;
-        let mut settled = false;
-        while self.time_s - start_time < opts.max_settle_s {
-            self.step()?;
-            on_step(self);
-            if self
-                .parts
-                .iter()
-                .all(|p| p.state == PartState::Removed || self.bodies[p.body].is_sleeping())
-            {
-                settled = true;
-                break;
-            }
-            if self.time_s - last_look >= 0.1 - 1e-9 {
-                let now = poses_now(self);
-                let still = now.iter().zip(&last).all(|(a, b)| {
-                    (a.translation.vector - b.translation.vector).norm() < 5e-5
-                        && a.rotation.angle_to(&b.rotation) < 0.005
-                });
-                if still {
-                    settled = true;
-                    break;
-                }
-                last = now;
-                last_look = self.time_s;
-            }
-        }
+        let settled = self.settle_pile(start_time, opts.max_settle_s, on_step)?;
         let in_tray = self.parts_in_pick_tray();
         let pile_height_m = in_tray
             .iter()
@@ -260,6 +229,46 @@ impl World {
             poses,
             wall_s: wall.elapsed().as_secs_f64(),
         })
+    }
+
+    /// Steps until the pile has settled (`true`) or `max_settle_s` have passed since
+    /// `start_time` [s].
+    fn settle_pile(
+        &mut self,
+        start_time: f64,
+        max_settle_s: f64,
+        on_step: &mut dyn FnMut(&World),
+    ) -> Result<bool, HealthError> {
+        // Settle: every 0.1 s of simulated time, compare poses with the last look. Settled when
+        // nothing moved more than 0.05 mm or 0.005 rad since (or everything sleeps). Motion, not
+        // velocity: a can standing on its cap can keep a solver velocity that moves nothing.
+        let poses_now = |w: &World| -> Vec<Isometry3<f64>> { (0..w.parts.len()).map(|i| w.part_pose(i)).collect() };
+        let mut last = poses_now(self);
+        let mut last_look = self.time_s;
+        while self.time_s - start_time < max_settle_s {
+            self.step()?;
+            on_step(self);
+            if self
+                .parts
+                .iter()
+                .all(|p| p.state == PartState::Removed || self.bodies[p.body].is_sleeping())
+            {
+                return Ok(true);
+            }
+            if self.time_s - last_look >= 0.1 - 1e-9 {
+                let now = poses_now(self);
+                let still = now.iter().zip(&last).all(|(a, b)| {
+                    (a.translation.vector - b.translation.vector).norm() < 5e-5
+                        && a.rotation.angle_to(&b.rotation) < 0.005
+                });
+                if still {
+                    return Ok(true);
+                }
+                last = now;
+                last_look = self.time_s;
+            }
+        }
+        Ok(false)
     }
 }
 

@@ -12,7 +12,7 @@
 //!   λ_jk bounds the distance of link k's points from joint j's axis in every configuration (the
 //!   chain's offsets from joint j to link k plus the farthest sphere point from link k's origin).
 //! - So over |t| ≤ τ around the configuration: displacement ≤ A τ + B τ² / 2, with
-//!   A = Σ_i |Δq_i| ρ_i(now) (read off the pose: [`AxisReach`]) and
+//!   A = Σ_i |Δq_i| ρ_i(now) (read off the pose: [`super::AxisReach`]) and
 //!   B = Σ_i |Δq_i| Σ_{i<j<k} |Δq_j| λ_jk (fixed per edge).
 //!
 //! For the environment both are taken as the largest over the links. A self pair (a, b) is
@@ -35,32 +35,6 @@ use crate::robot::{DOF, JointVector};
 /// A configuration clear by less than the margin plus this is a collision [m] (a certified step
 /// must make progress).
 const MIN_PROGRESS_M: f64 = 1e-6;
-
-/// How far each link's spheres reach from each joint's axis at one configuration: `reach_m[k][i]`
-/// is the largest distance from joint i's axis to a point of link k's spheres (0 for i ≥ k) [m].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct AxisReach {
-    /// Per link (base first), per joint [m].
-    pub reach_m: [[f64; DOF]; DOF + 1],
-}
-
-impl AxisReach {
-    /// Nothing reaches anywhere (a robot without spheres).
-    pub fn zero() -> Self {
-        AxisReach {
-            reach_m: [[0.0; DOF]; DOF + 1],
-        }
-    }
-
-    /// A: the fastest any sphere point moves per unit of t when the joints move by `dq_abs` per
-    /// unit of t, here [m].
-    pub fn speed_m(&self, dq_abs: &[f64; DOF]) -> f64 {
-        self.reach_m
-            .iter()
-            .map(|r| (0..DOF).map(|i| dq_abs[i] * r[i]).sum::<f64>())
-            .fold(0.0, f64::max)
-    }
-}
 
 /// How fast clearances can shrink along one edge, per unit of t, apart from the pose: the joint
 /// motion and the second-order terms (B) of the environment and of each self pair.

@@ -5,8 +5,9 @@
 //!
 //! 1. [`model`]: the cell's collision model: the arm covered by spheres, the cell's boxes and the
 //!    pile's height-map columns; clearance (a lower bound), free configurations, certified edges
-//!    (conservative advancement) and discrete edge checks; [`pile`]: the pile's columns and the
+//!    (conservative advancement) and discrete edge checks; [`pile_columns`]: the pile's columns and the
 //!    max-pooled pyramid that finds the nearest one.
+//!    [`axis_reach`]: how far each link reaches from each joint's axis at one configuration;
 //!    [`certify`]: certified edges, conservative advancement with the motion bounded by how far
 //!    the arm reaches from each joint's axis at each examined configuration.
 //! 2. [`search`]: generic sampling-based search that knows nothing of robots: RRT, RRT-Connect
@@ -18,13 +19,14 @@
 //!
 //! Units: m, rad, s. Frames: joint space; the world for the cell and the escape's tool lines.
 
+pub mod axis_reach;
 pub mod certify;
 pub mod model;
-pub mod pile;
+pub mod pile_columns;
 pub mod planner;
 pub mod search;
 
-pub use certify::AxisReach;
-pub use model::{CollisionModel, EnvBox, Environment, Nearest, PileColumns, Probe, RobotSpheres, SELF_PAIRS, Sphere};
+pub use axis_reach::AxisReach;
+pub use model::{CollisionModel, Environment, Nearest, PileColumns, Probe, RobotSpheres, SELF_PAIRS, Sphere};
 pub use planner::{Algorithm, CertifiedEdges, DiscreteEdges, Plan, PlanError, PlanOptions};
 pub use search::{Budget, ConfigSpace, EdgeValidity, JointBox, PlanStats, Search};

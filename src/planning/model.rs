@@ -25,11 +25,12 @@
 
 use nalgebra::{Isometry3, Point3, Vector3};
 
-use super::certify::AxisReach;
-pub use super::pile::PileColumns;
+use super::axis_reach::AxisReach;
+pub use super::pile_columns::PileColumns;
 use super::search::PlanStats;
 use crate::config::Scene;
-use crate::robot::{DOF, JointVector, Primitive, RobotModel};
+use crate::geometry::NamedBox;
+use crate::robot::{DOF, JointVector, LinkPrimitive, RobotModel};
 
 /// A sphere [m].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -89,16 +90,16 @@ impl RobotSpheres {
             let mut v = Vec::new();
             for s in &link.shapes {
                 let local = match s.primitive {
-                    Primitive::Box { half_extents_m } => cover_box(&half_extents_m),
-                    Primitive::Cylinder {
+                    LinkPrimitive::Box { half_extents_m } => cover_box(&half_extents_m),
+                    LinkPrimitive::Cylinder {
                         radius_m,
                         half_length_m,
                     }
-                    | Primitive::Capsule {
+                    | LinkPrimitive::Capsule {
                         radius_m,
                         half_length_m,
                     } => cover_cylinder(radius_m, half_length_m),
-                    Primitive::Sphere { radius_m } => vec![Sphere {
+                    LinkPrimitive::Sphere { radius_m } => vec![Sphere {
                         center_m: Vector3::zeros(),
                         radius_m,
                     }],
@@ -189,21 +190,10 @@ impl RobotSpheres {
     }
 }
 
-/// An oriented box obstacle.
-#[derive(Debug, Clone)]
-pub struct EnvBox {
-    /// What it is.
-    pub name: String,
-    /// `world_from_box`.
-    pub world_from_box: Isometry3<f64>,
-    /// Half extents [m].
-    pub half_m: Vector3<f64>,
-}
-
 /// Signed distance from a point to a box (negative inside) [m]: the plain formula, the reference
 /// [`box_distance_below`] is tested against.
 #[cfg(test)]
-fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
+fn point_box_distance(p_world: &Vector3<f64>, b: &NamedBox) -> f64 {
     let l = b.world_from_box.inverse_transform_point(&Point3::from(*p_world)).coords;
     let q = l.abs() - b.half_m;
     let outside = q.sup(&Vector3::zeros()).norm();
@@ -214,7 +204,7 @@ fn point_box_distance(p_world: &Vector3<f64>, b: &EnvBox) -> f64 {
 #[derive(Debug, Clone)]
 pub struct Environment {
     /// Boxes: table, trays, obstacles, case obstacles.
-    pub boxes: Vec<EnvBox>,
+    pub boxes: Vec<NamedBox>,
     /// The pile, if any.
     pub pile: Option<PileColumns>,
 }
@@ -222,14 +212,7 @@ pub struct Environment {
 impl Environment {
     /// The cell's fixed geometry: table, both trays, obstacles.
     pub fn from_scene(scene: &Scene) -> Self {
-        let boxes = crate::geometry::cell_boxes(scene)
-            .into_iter()
-            .map(|(_, b)| EnvBox {
-                world_from_box: b.world_from_box(),
-                half_m: b.half_m,
-                name: b.name,
-            })
-            .collect();
+        let boxes = crate::geometry::cell_boxes(scene).into_iter().map(|(_, b)| b).collect();
         Environment { boxes, pile: None }
     }
 
@@ -293,7 +276,7 @@ impl NearLink {
 /// (no rotation, no square root), or outside the box by more than `thr + r` (no square root).
 /// A box that is not turned is not rotated into (the same numbers: the identity leaves them).
 #[inline]
-fn box_distance_below(p_world: &Vector3<f64>, r: f64, b: &EnvBox, thr: f64) -> Option<f64> {
+fn box_distance_below(p_world: &Vector3<f64>, r: f64, b: &NamedBox, thr: f64) -> Option<f64> {
     let t = thr + r + BOUND_SLACK_M;
     let rel = p_world - b.world_from_box.translation.vector;
     // The box lies within |he| <= |he|_1 of its centre.
@@ -426,13 +409,6 @@ impl CollisionModel {
             margin_m: 0.002,
             horizon_m: 0.10,
         }
-    }
-
-    /// Lower bound on the robot's clearance at `q` (environment and self) [m], and what is nearest,
-    /// named (`"link4 and pick tray wall +x"`; empty when nothing is within the horizon).
-    pub fn clearance(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, String) {
-        let (d, nearest) = self.nearest(q, stats);
-        (d, self.describe(nearest))
     }
 
     /// Lower bound on the robot's clearance at `q` (environment and self) [m], capped at the
@@ -665,12 +641,12 @@ mod tests {
     fn box_distance_below_is_the_plain_distance_or_surely_not_below() {
         use rand::{RngExt, SeedableRng};
         let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(5);
-        let turned = EnvBox {
+        let turned = NamedBox {
             name: "turned".into(),
             world_from_box: Isometry3::new(Vector3::new(0.3, -0.2, 0.1), Vector3::new(0.2, -0.4, 1.1)),
             half_m: Vector3::new(0.1, 0.02, 0.05),
         };
-        let straight = EnvBox {
+        let straight = NamedBox {
             name: "straight".into(),
             world_from_box: Isometry3::translation(0.3, -0.2, 0.1),
             half_m: Vector3::new(0.1, 0.02, 0.0),
@@ -706,7 +682,7 @@ mod tests {
 
     #[test]
     fn point_box_distance_signs() {
-        let b = EnvBox {
+        let b = NamedBox {
             name: "b".into(),
             world_from_box: Isometry3::identity(),
             half_m: Vector3::new(1.0, 1.0, 1.0),

@@ -86,7 +86,7 @@ pub const PICKS_CSV_HEADER: [&str; 36] = [
 struct PickRow<'a> {
     pick: usize,
     outcome: &'a str,
-    detail: &'a str,
+    detail: String,
     capture_s: Fixed<6>,
     ready_s: Fixed<6>,
     release_s: Fixed<6>,
@@ -211,7 +211,9 @@ mod tests {
     #[test]
     fn picks_csv_quotes_reasons_and_keeps_them_whole() {
         let mut r = PickRecord::new(3, 1.0, 2.1);
-        r.outcome = Outcome::NothingGraspable("no feasible grasp (crowded 3, face \"tilted\" 2)".into());
+        r.outcome = Outcome::NothingGraspable(crate::pipeline::NoGrasp::NoneFeasible(
+            [("crowded", 3), ("face \"tilted\"", 2)].into_iter().collect(),
+        ));
         let text = picks_csv(&[r]);
         let mut rd = csv::Reader::from_reader(text.as_bytes());
         let header: Vec<String> = rd.headers().unwrap().iter().map(String::from).collect();

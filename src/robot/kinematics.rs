@@ -49,14 +49,6 @@ impl Frame {
             UnitQuaternion::from_rotation_matrix(&Rotation3::from_matrix_unchecked(self.rot)),
         )
     }
-
-    /// From an isometry.
-    pub fn from_isometry(iso: &Isometry3<f64>) -> Self {
-        Frame {
-            rot: *iso.rotation.to_rotation_matrix().matrix(),
-            pos: iso.translation.vector,
-        }
-    }
 }
 
 /// Rotation by `angle` about the unit `axis` (Rodrigues).

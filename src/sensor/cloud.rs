@@ -69,9 +69,7 @@ pub const MIN_PATCH_PX: usize = 8;
 pub const FIT_VIOLATION_M: f64 = 0.0006;
 /// A silhouette fit whose feasible interval is wider than this does not pin the part down [m].
 pub const FIT_AMBIGUITY_M: f64 = 0.0025;
-/// A silhouette fit whose consistent yaws span more than this does not pin the yaw down [rad]
-/// (the default; precision first: half of it is the largest yaw error reported).
-pub const YAW_SPAN_MAX_RAD: f64 = 8.0 * std::f64::consts::PI / 180.0;
+pub use crate::config::YAW_SPAN_MAX_RAD;
 /// Two hypotheses closer than this (and [`SAME_POSE_RAD`]) are the same [m].
 pub const SAME_POSE_M: f64 = 0.002;
 /// Two hypotheses closer than this (and [`SAME_POSE_M`]) are the same [rad].

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::{Job, StudyError, StudyRun, StudySpec};
 use crate::config::{LoadedScene, LoadedWorkpiece};
 use crate::cycle::{Observer, RunOptions, Tally};
-use crate::record::{Formats, Recorder, RunInfo};
+use crate::recording::{Formats, Recorder, RunInfo};
 use crate::robot::RobotModel;
 use crate::sensor::Camera;
 
@@ -173,7 +173,7 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
         } else {
             format!("run-{w}-seed{seed}")
         };
-        crate::record::write_recordings(
+        crate::recording::write_recordings(
             to.dir,
             &name,
             to.formats,

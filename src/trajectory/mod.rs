@@ -29,8 +29,8 @@
 mod accel;
 mod blend;
 mod line;
-mod overlap;
 mod retime;
+mod superposed;
 mod toppra;
 mod torque;
 
@@ -41,8 +41,8 @@ pub use accel::{
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
 pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, release_lead_s, straight_line};
-pub use overlap::{OverlapCheck, Overlapped, overlap_end};
 pub use retime::{ArcPath, Retimed, RobotPathConstraints, Shares, toppra};
+pub use superposed::{OverlapCheck, Overlapped, overlap_end};
 pub use toppra::{PathConstraints, PathPoint, PathTiming, StageRow, time_optimal};
 pub use torque::{TorqueProfile, torques};
 

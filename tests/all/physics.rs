@@ -549,7 +549,7 @@ fn the_bellows_take_up_the_cups_overtravel_at_the_seal() {
 #[test]
 fn the_arms_link_boxes_are_full_size_in_the_world() {
     use binpick::physics::ViewVolume;
-    use binpick::robot::Primitive;
+    use binpick::robot::LinkPrimitive;
     let (w, scene, _) = world("E");
     let robot = RobotModel::from_scene(&scene).unwrap();
     let q = binpick::robot::JointVector::from(scene.scene.robot.home_rad());
@@ -563,13 +563,15 @@ fn the_arms_link_boxes_are_full_size_in_the_world() {
                 }
                 let l = (world_from_links[i] * s.link_from_shape).inverse_transform_point(&(*p).into());
                 match s.primitive {
-                    Primitive::Box { half_extents_m: h } => l.x.abs() <= h.x && l.y.abs() <= h.y && l.z.abs() <= h.z,
-                    Primitive::Cylinder {
+                    LinkPrimitive::Box { half_extents_m: h } => {
+                        l.x.abs() <= h.x && l.y.abs() <= h.y && l.z.abs() <= h.z
+                    }
+                    LinkPrimitive::Cylinder {
                         radius_m,
                         half_length_m,
                     } => l.x.hypot(l.y) <= radius_m && l.z.abs() <= half_length_m,
-                    Primitive::Sphere { radius_m } => l.coords.norm() <= radius_m,
-                    Primitive::Capsule {
+                    LinkPrimitive::Sphere { radius_m } => l.coords.norm() <= radius_m,
+                    LinkPrimitive::Capsule {
                         radius_m,
                         half_length_m,
                     } => l.x.hypot(l.y).hypot((l.z.abs() - half_length_m).max(0.0)) <= radius_m,
@@ -593,7 +595,7 @@ fn the_arms_link_boxes_are_full_size_in_the_world() {
     let mut boxes = 0;
     for (i, link) in robot.links.iter().enumerate().skip(1) {
         for (k, s) in link.shapes.iter().enumerate() {
-            let Primitive::Box { half_extents_m: h } = s.primitive else {
+            let LinkPrimitive::Box { half_extents_m: h } = s.primitive else {
                 continue;
             };
             let world_from_shape = world_from_links[i] * s.link_from_shape;

@@ -5,7 +5,7 @@ use binpick::bench::binpicking_queries;
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::planning::{Algorithm, CollisionModel, PlanError, PlanOptions, PlanStats};
 use binpick::reference::{PlannerCase, fig5_cases};
-use binpick::robot::{JointVector, Primitive, RobotModel};
+use binpick::robot::{JointVector, LinkPrimitive, RobotModel};
 use nalgebra::{Isometry3, Vector3};
 use rand::RngExt;
 use rapier3d::parry::query::intersection_test;
@@ -33,22 +33,22 @@ fn exact(model: &CollisionModel, scene: &LoadedScene) -> Exact {
             l.shapes
                 .iter()
                 .map(|s| match s.primitive {
-                    Primitive::Box { half_extents_m: h } => (
+                    LinkPrimitive::Box { half_extents_m: h } => (
                         s.link_from_shape,
                         SharedShape::cuboid(h.x as f32, h.y as f32, h.z as f32),
                     ),
-                    Primitive::Cylinder {
+                    LinkPrimitive::Cylinder {
                         radius_m,
                         half_length_m,
                     }
-                    | Primitive::Capsule {
+                    | LinkPrimitive::Capsule {
                         radius_m,
                         half_length_m,
                     } => {
                         let (rot, shape) = cyl_z(radius_m, half_length_m);
                         (s.link_from_shape * rot, shape)
                     }
-                    Primitive::Sphere { radius_m } => (s.link_from_shape, SharedShape::ball(radius_m as f32)),
+                    LinkPrimitive::Sphere { radius_m } => (s.link_from_shape, SharedShape::ball(radius_m as f32)),
                 })
                 .collect()
         })
@@ -309,9 +309,9 @@ fn the_nearest_pair_is_named_only_on_request_and_the_same() {
         for _ in 0..50 {
             let q = case.start + JointVector::from_fn(|_, _| rng.random_range(-0.5..0.5));
             let (d, nearest) = case.model.nearest(&q, &mut stats);
-            let (dc, name) = case.model.clearance(&q, &mut stats);
-            assert_eq!(d.to_bits(), dc.to_bits());
-            assert_eq!(name, case.model.describe(nearest));
+            let (again, _) = case.model.nearest(&q, &mut stats);
+            assert_eq!(d.to_bits(), again.to_bits());
+            let name = case.model.describe(nearest);
             assert_eq!(name.is_empty(), d >= case.model.horizon_m, "{d} {name:?}");
             named += usize::from(!name.is_empty());
         }
@@ -326,9 +326,10 @@ fn the_nearest_pair_is_named_only_on_request_and_the_same() {
 /// hidden part itself (ground truth, a box under the hole) does.
 #[test]
 fn the_planner_does_not_descend_into_what_it_did_not_see() {
+    use binpick::geometry::NamedBox;
     use binpick::physics::TrayVolume;
     use binpick::pipeline::{HEIGHT_MAP_CELL_M, PILE_POOL_CELLS, pile_map};
-    use binpick::planning::{EnvBox, Environment, PileColumns, RobotSpheres};
+    use binpick::planning::{Environment, PileColumns, RobotSpheres};
     use binpick::sensor::HeightMap;
     let (scene, robot) = setup();
     let tray = TrayVolume::new(&scene.scene.pick_tray);
@@ -371,7 +372,7 @@ fn the_planner_does_not_descend_into_what_it_did_not_see() {
     // Ground truth: a 4 cm square part 4.5 cm tall under the hole's middle.
     let floor = tray.world_from_tray * nalgebra::Point3::new(hole_x, hole_y, 0.0);
     let mut truth_env = Environment::from_scene(&scene.scene);
-    truth_env.boxes.push(EnvBox {
+    truth_env.boxes.push(NamedBox {
         name: "hidden part".into(),
         world_from_box: Isometry3::translation(floor.x, floor.y, floor.z + 0.0225),
         half_m: Vector3::new(0.02, 0.02, 0.0225),

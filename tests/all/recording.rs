@@ -153,7 +153,7 @@ impl McapDecoder {
 
 /// Whether `v` [m] lies on the recorded clouds' grid.
 fn on_cloud_grid(v: f32) -> bool {
-    let k = f64::from(v) / binpick::record::CLOUD_GRID_M;
+    let k = f64::from(v) / binpick::recording::CLOUD_GRID_M;
     (k - k.round()).abs() < 1e-3
 }
 
@@ -472,7 +472,7 @@ fn run_mcap_holds_what_the_run_did() {
         );
         // Negative control: a point moved by one grid step is not found.
         let mut moved = sparse[0];
-        moved[0] += binpick::record::CLOUD_GRID_M as f32;
+        moved[0] += binpick::recording::CLOUD_GRID_M as f32;
         assert!(!all.contains(&key(&moved)));
     }
     assert_eq!(rows("/world/recognition/detections"), used);
@@ -594,13 +594,13 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
 fn a_failed_write_is_reported_and_leaves_nothing() {
     use binpick::config::{LoadedScene, LoadedWorkpiece};
     use binpick::cycle::RunOptions;
-    use binpick::record::{Formats, RunInfo, write_recordings};
+    use binpick::recording::{Formats, RunInfo, write_recordings};
     use binpick::robot::RobotModel;
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("E").unwrap();
     let camera = binpick::sensor::Camera::from_config(&scene.scene.sensor).unwrap();
-    let mut recorder = binpick::record::Recorder::new(&robot, camera, wp.workpiece.size_m);
+    let mut recorder = binpick::recording::Recorder::new(&robot, camera, wp.workpiece.size_m);
     let opts = RunOptions {
         picks: 1,
         seed: 1,

@@ -10,10 +10,10 @@ use crate::support::demand_check;
 use crate::support::{Workspace, binpick_in, stderr};
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::cycle::{RunOptions, RunResult};
-use binpick::execution::Tick;
-use binpick::record::{Recorder, Recording};
+use binpick::recording::{Recorder, Recording};
 use binpick::robot::{DOF, DynamicsModel, JointVector, Payload, RobotModel};
 use binpick::sensor::Camera;
+use binpick::servo::Tick;
 
 /// Torque the motion between two consecutive servo ticks needs: M(q) qdd + C(q, qd) qd + g(q)
 /// plus friction, with C qd = dM/dt qd - 1/2 d(qd' M qd)/dq and g = dV/dq, by central
@@ -127,7 +127,7 @@ fn scenario(workpiece: &str) {
     );
     assert_eq!(s.faults.collisions, 0, "{workpiece}: {outcomes:?}");
     assert_eq!(s.faults.protective_stops, 0, "{workpiece}: {outcomes:?}");
-    let servo = binpick::execution::Servo::from_config(&scene.scene.sim);
+    let servo = binpick::servo::Servo::from_config(&scene.scene.sim);
     let check = demand_check(&robot, &servo, &rec.trace);
     assert!(check.is_ok(), "{workpiece}: {check:?}");
     assert!(

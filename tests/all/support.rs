@@ -147,8 +147,8 @@ pub fn planned_fig5_paths(scene: &LoadedScene, robot: &RobotModel) -> Vec<(Plann
 /// tolerance. Returns the largest demand / limit and error / tolerance, or the first tick beyond.
 pub fn demand_check(
     robot: &RobotModel,
-    servo: &binpick::execution::Servo,
-    trace: &[binpick::execution::Tick],
+    servo: &binpick::servo::Servo,
+    trace: &[binpick::servo::Tick],
 ) -> Result<(f64, f64), String> {
     let limit = robot.torque_limit_nm();
     let (mut demand, mut error) = (0.0f64, 0.0f64);

@@ -225,7 +225,8 @@ mod tests {
     /// put where the accepted overlap's arm passes makes it take a smaller share or none.
     #[test]
     fn an_overlap_is_taken_only_within_the_torques_and_the_corridor() {
-        use crate::planning::{CollisionModel, EnvBox, Environment, PlanStats, RobotSpheres};
+        use crate::geometry::NamedBox;
+        use crate::planning::{CollisionModel, Environment, PlanStats, RobotSpheres};
         let scene = LoadedScene::embedded_default().unwrap();
         let robot = RobotModel::from_scene(&scene).unwrap();
         let hand = Payload::from_gripper(&scene.scene.gripper);
@@ -273,7 +274,7 @@ mod tests {
         // A box around the tool where the taken overlap turns back.
         let turn = taken.both().at(0.5 * taken.both().duration_s()).q;
         let mut env = Environment::from_scene(&scene.scene);
-        env.boxes.push(EnvBox {
+        env.boxes.push(NamedBox {
             world_from_box: robot.world_from_tool(&turn),
             half_m: Vector3::repeat(0.01),
             name: "in the way".into(),

@@ -164,13 +164,60 @@ pub fn execute(
         qd: start.qd,
         error_integral: JointVector::zeros(),
     };
-    execute_from(robot, model, plant, servo, motion, state, true)
+    execute_from(robot, model, plant, servo, motion, state, Settle::InPosition)
+}
+
+/// How the servo ends a motion.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum Settle {
+    /// It holds the end until every joint is in position (at most 0.3 s).
+    InPosition,
+    /// It hands over at the motion's end without waiting: the next motion continues from where
+    /// the arm is.
+    AtEnd,
+}
+
+/// The servo's target at `t` [s] into `motion`: past the end, the end at rest (the trajectory's
+/// last sample still carries the final blend's deceleration).
+#[inline]
+fn target_at(motion: &impl Motion, t: f64) -> crate::trajectory::Sample {
+    if t > motion.duration_s() + 1e-9 {
+        let end = motion.at(motion.duration_s());
+        crate::trajectory::Sample {
+            qd: JointVector::zeros(),
+            qdd: JointVector::zeros(),
+            ..end
+        }
+    } else {
+        motion.at(t)
+    }
+}
+
+impl Servo {
+    /// The protective stop the tracking errors `e` [rad] and the joints' saturation times [s]
+    /// trip, if any: a tracking error first, then a saturation, the lowest joint first.
+    #[inline]
+    fn trip(&self, e: &JointVector, saturated_for: &[f64; DOF]) -> Option<Trip> {
+        (0..DOF)
+            .find(|&i| e[i].abs() > self.tolerance_rad)
+            .map(|i| Trip::TrackingError {
+                joint: i,
+                error_rad: e[i],
+            })
+            .or_else(|| {
+                (0..DOF)
+                    .find(|&i| saturated_for[i] > self.saturation_trip_s)
+                    .map(|i| Trip::Saturation {
+                        joint: i,
+                        for_s: saturated_for[i],
+                    })
+            })
+    }
 }
 
 /// As [`execute`], from the arm's actual state `(q, qd)` (the servo absorbs a residual error
-/// from the previous motion). With `settle` false the servo hands over at the motion's end
-/// without waiting to be in position: the next motion continues from where the arm is (a
-/// continuous-path junction, as between a transfer and the straight descent after it).
+/// from the previous motion), ending as `settle` says ([`Settle::AtEnd`]: a continuous-path
+/// junction, as between a transfer and the straight descent after it).
 pub fn execute_from(
     robot: &RobotModel,
     model: &DynamicsModel,
@@ -178,7 +225,7 @@ pub fn execute_from(
     servo: &Servo,
     motion: &impl Motion,
     state: ServoState,
-    settle: bool,
+    settle: Settle,
 ) -> Execution {
     let limit = robot.torque_limit_nm();
     let ServoState {
@@ -191,7 +238,10 @@ pub fn execute_from(
     // step in its target velocity).
     let n = (motion.duration_s() / servo.dt_s - 1e-6).ceil().max(0.0) as usize;
     // After the motion, hold its end until every joint is in position (or give up after 0.3 s).
-    let hold = if settle { (0.3 / servo.dt_s).ceil() as usize } else { 0 };
+    let hold = match settle {
+        Settle::InPosition => (0.3 / servo.dt_s).ceil() as usize,
+        Settle::AtEnd => 0,
+    };
     let mut ticks = Vec::with_capacity(n + hold + 1);
     let mut max_error = [0.0f64; DOF];
     let mut saturated_for = [0.0f64; DOF];
@@ -199,18 +249,7 @@ pub fn execute_from(
     let mut peak_demand = [0.0f64; DOF];
     for k in 0..=(n + hold) {
         let t = k as f64 * servo.dt_s;
-        // Past the end the target is the end at rest (the trajectory's last sample still
-        // carries the final blend's deceleration).
-        let d = if t > motion.duration_s() + 1e-9 {
-            let end = motion.at(motion.duration_s());
-            crate::trajectory::Sample {
-                qd: JointVector::zeros(),
-                qdd: JointVector::zeros(),
-                ..end
-            }
-        } else {
-            motion.at(t)
-        };
+        let d = target_at(motion, t);
         let e = d.q - q;
         let ed = d.qd - qd;
         let command = d.qdd + ed * servo.kd + e * servo.kp + integral * servo.ki;
@@ -249,21 +288,7 @@ pub fn execute_from(
             tau_nm: tau,
             error_rad: e,
         });
-        let trip = (0..DOF)
-            .find(|&i| e[i].abs() > servo.tolerance_rad)
-            .map(|i| Trip::TrackingError {
-                joint: i,
-                error_rad: e[i],
-            })
-            .or_else(|| {
-                (0..DOF)
-                    .find(|&i| saturated_for[i] > servo.saturation_trip_s)
-                    .map(|i| Trip::Saturation {
-                        joint: i,
-                        for_s: saturated_for[i],
-                    })
-            });
-        if let Some(trip) = trip {
+        if let Some(trip) = servo.trip(&e, &saturated_for) {
             return Execution {
                 ticks,
                 max_error_rad: max_error,
@@ -273,7 +298,8 @@ pub fn execute_from(
                 end_state: ServoState::at_rest(q),
             };
         }
-        if k >= n && (!settle || (e.amax() < IN_POSITION_RAD && (d.qd - qd).amax() < IN_POSITION_RAD_S)) {
+        if k >= n && (settle == Settle::AtEnd || (e.amax() < IN_POSITION_RAD && (d.qd - qd).amax() < IN_POSITION_RAD_S))
+        {
             break;
         }
         // The plant steps with its own dynamics, friction taken implicitly (it is stiff near rest).

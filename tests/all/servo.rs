@@ -4,8 +4,8 @@
 
 use crate::support::{demand_check, planned_fig5_paths};
 use binpick::config::LoadedScene;
-use binpick::execution::{Servo, Trip, execute};
 use binpick::robot::{JointVector, Payload, RobotModel};
+use binpick::servo::{Servo, Trip, execute};
 use binpick::trajectory::{MotionLimits, TORQUE_DT_S, TORQUE_THRESHOLD, Trajectory, optimise_accelerations, torques};
 
 #[test]

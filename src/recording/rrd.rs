@@ -37,7 +37,7 @@ use super::{
 };
 use crate::config::Scene;
 use crate::physics::PartState;
-use crate::robot::{DOF, Primitive, RobotModel};
+use crate::robot::{DOF, LinkPrimitive, RobotModel};
 
 fn rr(e: impl std::fmt::Display) -> RecordError {
     RecordError::Rerun(e.to_string())
@@ -237,16 +237,13 @@ fn log_run(
 
 /// Table, trays, obstacles and the camera (static).
 fn log_cell(rec: &mut Rec, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
-    let cell: Vec<(Isometry3<f64>, Vector3<f64>, String)> = crate::geometry::cell_boxes(scene)
-        .into_iter()
-        .map(|(_, b)| (b.world_from_box(), b.half_m, b.name))
-        .collect();
+    let cell = &result.cell_boxes;
     let boxes = rerun::Boxes3D::from_centers_and_half_sizes(
-        cell.iter().map(|b| v3(&b.0.translation.vector)),
-        cell.iter().map(|b| v3(&b.1)),
+        cell.iter().map(|b| v3(&b.world_from_box.translation.vector)),
+        cell.iter().map(|b| v3(&b.half_m)),
     )
-    .with_quaternions(cell.iter().map(|b| quat(&b.0)))
-    .with_labels(cell.iter().map(|b| b.2.clone()))
+    .with_quaternions(cell.iter().map(|b| quat(&b.world_from_box)))
+    .with_labels(cell.iter().map(|b| b.name.clone()))
     .with_show_labels(false)
     .with_colors(
         cell.iter()
@@ -293,14 +290,14 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
             let q = quat(&s.link_from_shape);
             let shape_path = format!("{path}/{k}");
             match &s.primitive {
-                Primitive::Box { half_extents_m } => rec.log_static(
+                LinkPrimitive::Box { half_extents_m } => rec.log_static(
                     &shape_path,
                     &rerun::Boxes3D::from_centers_and_half_sizes([at], [v3(half_extents_m)])
                         .with_quaternions([q])
                         .with_colors([colour])
                         .with_fill_mode(rerun::FillMode::Solid),
                 )?,
-                Primitive::Cylinder {
+                LinkPrimitive::Cylinder {
                     radius_m,
                     half_length_m,
                 } => rec.log_static(
@@ -311,13 +308,13 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
                         .with_colors([colour])
                         .with_fill_mode(rerun::FillMode::Solid),
                 )?,
-                Primitive::Sphere { radius_m } => rec.log_static(
+                LinkPrimitive::Sphere { radius_m } => rec.log_static(
                     &shape_path,
                     &rerun::Ellipsoids3D::from_centers_and_radii([at], [*radius_m as f32])
                         .with_colors([colour])
                         .with_fill_mode(rerun::FillMode::Solid),
                 )?,
-                Primitive::Capsule {
+                LinkPrimitive::Capsule {
                     radius_m,
                     half_length_m,
                 } => {
@@ -348,7 +345,7 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
         rec.columns(&link_path(i), &times, columns)?;
     }
     // Joint series at 100 Hz: positions and velocities (six series each), torque beside its limit.
-    let ticks: Vec<&crate::execution::Tick> = result.trace.iter().step_by(JOINT_STATE_EVERY).collect();
+    let ticks: Vec<&crate::servo::Tick> = result.trace.iter().step_by(JOINT_STATE_EVERY).collect();
     let times: Vec<f64> = ticks.iter().map(|t| t.t_s).collect();
     let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
     rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;

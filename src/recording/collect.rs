@@ -14,10 +14,11 @@
 use nalgebra::{Isometry3, Vector3};
 
 use crate::cycle::{CycleEvent, Event, EventLog, Observer, PickRecord, Recognised, RunResult};
-use crate::execution::Tick;
+use crate::geometry::NamedBox;
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Camera, Capture, RecognitionReport, TruthAtTrigger};
+use crate::servo::Tick;
 use crate::trajectory::Motion;
 
 /// Period of the part-pose snapshots [s].
@@ -139,6 +140,8 @@ pub struct Recording {
     pub camera: Camera,
     /// The parts' bounding box [m].
     pub part_size_m: [f64; 3],
+    /// The cell's fixed boxes (table, trays, obstacles), as the world was built.
+    pub cell_boxes: Vec<NamedBox>,
 }
 
 /// The observer that collects a [`Recording`].
@@ -146,6 +149,7 @@ pub struct Recorder<'a> {
     robot: &'a RobotModel,
     camera: Camera,
     part_size_m: [f64; 3],
+    cell_boxes: Vec<NamedBox>,
     trace: Vec<Tick>,
     scene_frames: Vec<SceneFrame>,
     captures: Vec<CaptureImage>,
@@ -165,6 +169,7 @@ impl<'a> Recorder<'a> {
             robot,
             camera,
             part_size_m,
+            cell_boxes: Vec::new(),
             trace: Vec::new(),
             scene_frames: Vec::new(),
             captures: Vec::new(),
@@ -189,6 +194,7 @@ impl<'a> Recorder<'a> {
             records: result.records.clone(),
             camera: self.camera,
             part_size_m: self.part_size_m,
+            cell_boxes: self.cell_boxes,
         }
     }
 }
@@ -200,6 +206,9 @@ impl Observer for Recorder<'_> {
 
     /// Every step at least [`SCENE_FRAME_S`] after the last snapshot records every part.
     fn stepped(&mut self, world: &World) {
+        if self.cell_boxes.is_empty() {
+            self.cell_boxes = world.cell_boxes().to_vec();
+        }
         if self
             .scene_frames
             .last()

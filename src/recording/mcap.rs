@@ -362,9 +362,9 @@ pub fn write_mcap<W: Write + Seek>(
 /// `/cell`: table, trays and obstacles as grey cubes, the camera's frustum out to the pick tray.
 fn cell_messages(m: &mut Messages, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
     let mut cell = entity(0.0, "cell");
-    for (_, b) in crate::geometry::cell_boxes(scene) {
+    for b in &result.cell_boxes {
         cell.cubes
-            .push(cube(&b.world_from_box(), &(2.0 * b.half_m), [0.6, 0.6, 0.6], 1.0));
+            .push(cube(&b.world_from_box, &(2.0 * b.half_m), [0.6, 0.6, 0.6], 1.0));
     }
     let c = &result.camera;
     let range_m = (Vector3::from(scene.pick_tray.center_m) - c.world_from_camera.translation.vector).norm();
@@ -396,7 +396,7 @@ fn single(v: &crate::robot::JointVector) -> [f32; DOF] {
 /// `/robot/geometry` once (each link's primitives locked to its frame), `/tf` at 50 Hz,
 /// `/robot/joint_states` and `/robot/servo` at 100 Hz.
 fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
-    use crate::robot::Primitive;
+    use crate::robot::LinkPrimitive;
     let name = |i: usize| {
         robot
             .links
@@ -425,13 +425,13 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
                 color: rgba(colour, 1.0),
             };
             match &s.primitive {
-                Primitive::Box { half_extents_m } => e.cubes.push(cube(at, &(2.0 * half_extents_m), colour, 1.0)),
-                Primitive::Cylinder {
+                LinkPrimitive::Box { half_extents_m } => e.cubes.push(cube(at, &(2.0 * half_extents_m), colour, 1.0)),
+                LinkPrimitive::Cylinder {
                     radius_m,
                     half_length_m,
                 } => e.cylinders.push(cylinder(*radius_m, *half_length_m)),
-                Primitive::Sphere { radius_m } => e.spheres.push(sphere(at, *radius_m)),
-                Primitive::Capsule {
+                LinkPrimitive::Sphere { radius_m } => e.spheres.push(sphere(at, *radius_m)),
+                LinkPrimitive::Capsule {
                     radius_m,
                     half_length_m,
                 } => {

@@ -11,15 +11,19 @@
 //!
 //! Units: s, rad, m. Frames: joint space; world for the tool.
 
+use std::borrow::Cow;
+
 use nalgebra::{Isometry3, Translation3};
 
-use super::events::{Event, Fault, Outcome, PartLoss, Stage};
+use super::events::{Event, PartLoss, Stage};
+use super::outcome::{Fault, Outcome, Slip, Stop};
 use super::{CycleError, Run};
-use crate::execution::{ServoState, execute_from};
 use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthEvent, PartState};
 use crate::robot::{DOF, JointVector, Payload};
-use crate::trajectory::{LineLimits, Motion, straight_line};
+pub(super) use crate::servo::Settle;
+use crate::servo::{ServoState, execute_from};
+use crate::trajectory::{LineLimits, LineMotion, Motion, Overlapped, Trajectory, straight_line};
 
 /// How a motion ended.
 pub(super) enum Played {
@@ -38,11 +42,149 @@ pub(super) enum Valve {
     CloseAt(f64),
 }
 
+impl Valve {
+    /// When it switches, from the motion's start [s].
+    pub fn at_s(self) -> f64 {
+        match self {
+            Valve::OpenAt(t) | Valve::CloseAt(t) => t,
+        }
+    }
+}
+
+/// Whether the sensor may be triggered while a segment plays (once the arm is out of view).
+#[derive(Debug, Clone, Copy)]
+pub(super) enum Capture {
+    /// Never: the arm is over the pile or heading there.
+    Never,
+    /// If the exposure ends by this simulation time [s]: the arm's plan takes it into the view
+    /// then (infinite: no motion into the view is planned).
+    EndingBy(f64),
+}
+
+impl Capture {
+    /// A capture at any time the arm is out of view.
+    pub const ANY: Capture = Capture::EndingBy(f64::INFINITY);
+}
+
+/// The motion of a segment: one of the kinds the cycle plays, each through its own instance
+/// of the servo loop (as fast as a loop over one known motion type).
+#[derive(Debug)]
+pub(super) enum SegmentMotion<'m> {
+    /// A straight tool line (a descent, a lift, a retreat, a way out).
+    Line(&'m LineMotion),
+    /// A planned and accelerated transfer.
+    Transfer(&'m Trajectory),
+    /// A lift with the Place transfer started before it ends (or a window of it).
+    LiftTransfer(Overlapped<LineMotion, Trajectory>),
+    /// A transfer with the descent started before it ends (or a window of it).
+    TransferDescent(Cow<'m, Overlapped<Trajectory, LineMotion>>),
+    /// A line (a retreat, a lift) with a transfer and descent started before it ends.
+    LineThenPick(Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>),
+}
+
+impl SegmentMotion<'_> {
+    /// The motion, whichever its kind.
+    pub fn as_motion(&self) -> &dyn Motion {
+        match self {
+            SegmentMotion::Line(m) => *m,
+            SegmentMotion::Transfer(m) => *m,
+            SegmentMotion::LiftTransfer(m) => m,
+            SegmentMotion::TransferDescent(m) => m.as_ref(),
+            SegmentMotion::LineThenPick(m) => m,
+        }
+    }
+}
+
+impl<'m> From<&'m LineMotion> for SegmentMotion<'m> {
+    fn from(m: &'m LineMotion) -> Self {
+        SegmentMotion::Line(m)
+    }
+}
+
+impl<'m> From<&'m Trajectory> for SegmentMotion<'m> {
+    fn from(m: &'m Trajectory) -> Self {
+        SegmentMotion::Transfer(m)
+    }
+}
+
+impl From<Overlapped<LineMotion, Trajectory>> for SegmentMotion<'_> {
+    fn from(m: Overlapped<LineMotion, Trajectory>) -> Self {
+        SegmentMotion::LiftTransfer(m)
+    }
+}
+
+impl From<Overlapped<Trajectory, LineMotion>> for SegmentMotion<'_> {
+    fn from(m: Overlapped<Trajectory, LineMotion>) -> Self {
+        SegmentMotion::TransferDescent(Cow::Owned(m))
+    }
+}
+
+impl<'m> From<&'m Overlapped<Trajectory, LineMotion>> for SegmentMotion<'m> {
+    fn from(m: &'m Overlapped<Trajectory, LineMotion>) -> Self {
+        SegmentMotion::TransferDescent(Cow::Borrowed(m))
+    }
+}
+
+impl From<Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>> for SegmentMotion<'_> {
+    fn from(m: Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>) -> Self {
+        SegmentMotion::LineThenPick(m)
+    }
+}
+
+/// One motion as the arm plays it: what the controller believes the cup carries, the valve's
+/// switch, how it ends and whether the sensor may be triggered meanwhile.
+pub(super) struct Segment<'m> {
+    /// The motion.
+    pub motion: SegmentMotion<'m>,
+    /// The payload the controller models (hand, or hand and part).
+    pub payload: Payload,
+    /// The valve's switch during it, if any.
+    pub valve: Option<Valve>,
+    /// How it ends.
+    pub settle: Settle,
+    /// Whether a capture may be triggered.
+    pub capture: Capture,
+}
+
+impl<'m> Segment<'m> {
+    /// `motion` with `payload`, no valve switch, ending in position, no capture.
+    pub fn new(motion: impl Into<SegmentMotion<'m>>, payload: Payload) -> Self {
+        Segment {
+            motion: motion.into(),
+            payload,
+            valve: None,
+            settle: Settle::InPosition,
+            capture: Capture::Never,
+        }
+    }
+
+    /// The same, handing over to the next segment while still moving.
+    pub fn flowing_on(self) -> Self {
+        Segment {
+            settle: Settle::AtEnd,
+            ..self
+        }
+    }
+
+    /// The same, switching the valve.
+    pub fn switching(self, valve: Valve) -> Self {
+        Segment {
+            valve: Some(valve),
+            ..self
+        }
+    }
+
+    /// The same, a capture allowed as `capture` says.
+    pub fn capturing(self, capture: Capture) -> Self {
+        Segment { capture, ..self }
+    }
+}
+
 impl Run<'_, '_> {
     /// One physics step, watched. Parts that left their tray are taken out of the cell (lost);
     /// the first collision of the arm or part pressed into the tray is returned; a non-finite
     /// state ends the run.
-    pub(super) fn step(&mut self) -> Result<Option<String>, CycleError> {
+    pub(super) fn step(&mut self) -> Result<Option<HealthEvent>, CycleError> {
         let result = self.st.world.step();
         self.obs.stepped(&self.st.world);
         if let Some(job) = self.st.pending.as_mut()
@@ -70,7 +212,7 @@ impl Run<'_, '_> {
                     self.event(Event::PartLost(PartLoss::LeftTray { body, tray: volume }));
                 }
                 e @ (HealthEvent::ArmCollision { .. } | HealthEvent::DeepPenetration { .. }) => {
-                    fault.get_or_insert(e.to_string());
+                    fault.get_or_insert(e);
                 }
                 HealthEvent::NonFinite { .. } => {}
             }
@@ -103,27 +245,37 @@ impl Run<'_, '_> {
         Ok(())
     }
 
-    /// Plays a motion through the servo into the world; `trigger` polls for the next capture.
-    pub(super) fn play(
-        &mut self,
-        motion: &impl Motion,
-        payload: &Payload,
-        trigger: bool,
-    ) -> Result<Played, CycleError> {
-        self.play_with(motion, payload, trigger, None, true)
+    /// Plays segments in order until one fails.
+    pub(super) fn play_all(&mut self, segments: &[Segment<'_>]) -> Result<Played, CycleError> {
+        for segment in segments {
+            if let failed @ Played::Failed(_) = self.play(segment)? {
+                return Ok(failed);
+            }
+        }
+        Ok(Played::Done)
     }
 
-    /// As [`Run::play`], switching the vacuum valve as `valve` says into the motion; with
-    /// `settle` false the next motion takes over at this one's end without waiting to be in
-    /// position.
-    pub(super) fn play_with(
-        &mut self,
-        motion: &impl Motion,
-        payload: &Payload,
-        trigger: bool,
-        valve: Option<Valve>,
-        settle: bool,
-    ) -> Result<Played, CycleError> {
+    /// Plays a segment through the servo into the world, switching the vacuum valve and polling
+    /// for the next capture as it says.
+    pub(super) fn play(&mut self, segment: &Segment<'_>) -> Result<Played, CycleError> {
+        match &segment.motion {
+            SegmentMotion::Line(m) => self.play_motion(*m, segment),
+            SegmentMotion::Transfer(m) => self.play_motion(*m, segment),
+            SegmentMotion::LiftTransfer(m) => self.play_motion(m, segment),
+            SegmentMotion::TransferDescent(m) => self.play_motion(m.as_ref(), segment),
+            SegmentMotion::LineThenPick(m) => self.play_motion(m, segment),
+        }
+    }
+
+    /// [`Run::play`] of `motion`, the segment's motion as its own type.
+    fn play_motion<M: Motion>(&mut self, motion: &M, segment: &Segment<'_>) -> Result<Played, CycleError> {
+        let Segment {
+            payload,
+            valve,
+            settle,
+            capture,
+            ..
+        } = segment;
         let robot = self.cell.robot;
         let jump = (motion.at(0.0).q - self.st.world.joints()).amax();
         if jump > 1e-3 {
@@ -140,7 +292,7 @@ impl Run<'_, '_> {
             &self.cell.servo,
             motion,
             self.st.arm.servo,
-            settle,
+            *settle,
         );
         self.st.arm.servo = run.end_state;
         let t0 = self.st.world.time_s();
@@ -161,7 +313,7 @@ impl Run<'_, '_> {
         while k < run.ticks.len() - 1 + per_step {
             let end = k.min(run.ticks.len() - 1);
             self.st.world.set_joint_target(&run.ticks[end].q);
-            match valve {
+            match *valve {
                 Some(Valve::OpenAt(t)) if run.ticks[end].t_s + 1e-9 >= t => self.st.world.vacuum_on(),
                 Some(Valve::CloseAt(t)) if run.ticks[end].t_s + 1e-9 >= t => self.st.world.vacuum_off(),
                 _ => {}
@@ -173,8 +325,8 @@ impl Run<'_, '_> {
                 self.recover(&path, Fault::Collision(what.clone()))?;
                 return Ok(Played::Failed(Outcome::Collision(what)));
             }
-            if trigger {
-                self.maybe_trigger();
+            if let Capture::EndingBy(until_s) = capture {
+                self.maybe_trigger(*until_s);
             }
             for ev in self.st.world.take_gripper_events() {
                 if let GripperEvent::Slipped {
@@ -184,10 +336,11 @@ impl Run<'_, '_> {
                     ..
                 } = ev
                 {
-                    dropped.get_or_insert(format!(
-                        "slipped {:.3} s into the motion: {required_n:.2} N needed, {holding_n:.2} N held",
-                        time_s - t0
-                    ));
+                    dropped.get_or_insert(Slip::Moving {
+                        after_s: time_s - t0,
+                        required_n,
+                        holding_n,
+                    });
                 } else {
                     self.st.gripper_events.push(ev);
                 }
@@ -195,10 +348,10 @@ impl Run<'_, '_> {
             k += per_step;
         }
         self.obs.executed(t0, motion, &run.ticks, played);
-        if let Some((t, trip)) = run.trip {
-            let what = format!("{trip:?} at {t:.3} s into the motion");
-            self.recover(&[], Fault::ProtectiveStop(what.clone()))?;
-            return Ok(Played::Failed(Outcome::ProtectiveStop(what)));
+        if let Some((after_s, trip)) = run.trip {
+            let stop = Stop { trip, after_s };
+            self.recover(&[], Fault::ProtectiveStop(stop.clone()))?;
+            return Ok(Played::Failed(Outcome::ProtectiveStop(stop)));
         }
         if let Some(why) = dropped {
             return Ok(Played::Failed(Outcome::Dropped(why)));

@@ -1,0 +1,160 @@
+//! The parts in the physics world: added as dynamic bodies, taken out, read back (poses, rest,
+//! the placement error in a slot).
+//!
+//! Units: m, rad (rapier's millimetres inside, converted at this boundary). Frames: world; each
+//! part in its part frame.
+
+use nalgebra::{Isometry3, Vector3};
+use rapier3d::prelude::*;
+
+use super::*;
+
+impl World {
+    /// Adds a part at `world_from_part`, dynamic and awake. A part taken out of the cell before
+    /// ([`World::remove_part`]) is put back in its place (the lowest index first), so a long run
+    /// keeps as many bodies as the trays ever held at once, not one per part ever poured: the
+    /// world's memory and every per-step walk over the parts stay bounded.
+    pub fn add_part(&mut self, world_from_part: &Isometry3<f64>) -> usize {
+        if let Some(idx) = self.parts.iter().position(|p| p.state == PartState::Removed) {
+            let p = &mut self.parts[idx];
+            p.state = PartState::Free;
+            p.rest_ref = None;
+            let b = &mut self.bodies[p.body];
+            b.set_enabled(true);
+            b.set_body_type(RigidBodyType::Dynamic, false);
+            b.set_position(to_pose(world_from_part), false);
+            b.set_linvel(Vector::ZERO, false);
+            b.set_angvel(Vector::ZERO, false);
+            b.reset_forces(false);
+            b.reset_torques(false);
+            b.wake_up(true);
+            return idx;
+        }
+        let idx = self.parts.len();
+        let body = self.bodies.insert(
+            RigidBodyBuilder::dynamic()
+                .pose(to_pose(world_from_part))
+                .ccd_enabled(true)
+                // Soft CCD: contacts are predicted along the body's path up to 10 mm ahead, so
+                // a thin part falling at a few m/s meets the floor's constraint before it sinks.
+                .soft_ccd_prediction(sim(0.01))
+                .user_data(Tag::Part(idx as u32).encode()),
+        );
+        let s = &self.part_shape;
+        let collider = self.colliders.insert_with_parent(
+            ColliderBuilder::new(s.shape.clone())
+                .mass(s.mass_kg as f32)
+                .friction(s.friction as f32)
+                .restitution(s.restitution as f32)
+                .collision_groups(InteractionGroups::new(PARTS, Group::ALL, InteractionTestMode::And))
+                .user_data(Tag::Part(idx as u32).encode()),
+            body,
+            &mut self.bodies,
+        );
+        let view_collider = self.colliders.insert_with_parent(
+            ColliderBuilder::new(s.view_shape.clone())
+                .density(0.0)
+                .sensor(true)
+                .collision_groups(InteractionGroups::new(
+                    Group::GROUP_5,
+                    Group::NONE,
+                    InteractionTestMode::And,
+                ))
+                .user_data(Tag::Part(idx as u32).encode() | VIEW_FLAG),
+            body,
+            &mut self.bodies,
+        );
+        {
+            let act = self.bodies[body].activation_mut();
+            act.time_until_sleep = 0.2;
+        }
+        self.parts.push(PartBody {
+            body,
+            collider,
+            view_collider,
+            state: PartState::Free,
+            rest_ref: None,
+        });
+        idx
+    }
+
+    /// Takes part `i` out of the cell: parked 10 m below the table (one spot per part, so parked
+    /// parts never touch), disabled, state [`PartState::Removed`]. Indices of other parts stay;
+    /// the next [`World::add_part`] takes this one's index and body.
+    pub fn remove_part(&mut self, i: usize) {
+        let Some(p) = self.parts.get_mut(i) else {
+            return;
+        };
+        p.state = PartState::Removed;
+        let parked = Isometry3::translation(i as f64 * 0.5, 0.0, -10.0);
+        let b = &mut self.bodies[p.body];
+        b.set_body_type(RigidBodyType::Fixed, false);
+        b.set_position(to_pose(&parked), false);
+        b.set_linvel(Vector::ZERO, false);
+        b.set_angvel(Vector::ZERO, false);
+        b.set_enabled(false);
+    }
+
+    /// Indices of the parts in a given state.
+    pub fn parts_in_state(&self, state: PartState) -> Vec<usize> {
+        (0..self.parts.len())
+            .filter(|&i| self.parts[i].state == state)
+            .collect()
+    }
+
+    /// `world_from_part` of part `i`.
+    pub fn part_pose(&self, i: usize) -> Isometry3<f64> {
+        to_isometry(self.bodies[self.parts[i].body].position())
+    }
+
+    /// Whether every free part is asleep or slower than the given speeds.
+    pub fn parts_at_rest(&self, lin_m_s: f64, ang_rad_s: f64) -> bool {
+        self.parts.iter().all(|p| {
+            let b = &self.bodies[p.body];
+            matches!(p.state, PartState::Held | PartState::Removed)
+                || b.is_sleeping()
+                || ((b.linvel().length() as f64) < lin_m_s * SIM_UNITS_PER_M
+                    && (b.angvel().length() as f64) < ang_rad_s)
+        })
+    }
+
+    /// How far part `i` landed from where it should be: horizontal distance of the centres [m]
+    /// and yaw difference [rad], the latter modulo the part's yaw symmetry (0: any yaw).
+    pub fn placement_error(&self, i: usize, world_from_slot: &Isometry3<f64>, yaw_symmetry_rad: f64) -> (f64, f64) {
+        let p = self.part_pose(i);
+        let d = p.translation.vector - world_from_slot.translation.vector;
+        let horizontal = d.xy().norm();
+        if yaw_symmetry_rad <= 0.0 {
+            return (horizontal, 0.0);
+        }
+        let heading = |iso: &Isometry3<f64>| {
+            let x = iso.rotation * Vector3::x();
+            x.y.atan2(x.x)
+        };
+        let diff = (heading(&p) - heading(world_from_slot)).rem_euclid(yaw_symmetry_rad);
+        (horizontal, diff.min(yaw_symmetry_rad - diff))
+    }
+
+    /// Indices of the free parts whose centre lies inside the pick tray's inner walls.
+    pub fn parts_in_pick_tray(&self) -> Vec<usize> {
+        (0..self.parts.len())
+            .filter(|&i| {
+                self.parts[i].state == PartState::Free
+                    && self.pick_tray.inside_inner(&self.part_pose(i).translation.vector)
+            })
+            .collect()
+    }
+
+    /// Wakes every part up (for tests that disturb a settled pile).
+    pub fn wake_parts(&mut self) {
+        for p in &self.parts {
+            self.bodies[p.body].wake_up(true);
+        }
+    }
+
+    /// Moves part `i` to `world_from_part` at once, awake (for set-ups and tests).
+    pub fn set_part_pose(&mut self, i: usize, world_from_part: &Isometry3<f64>) {
+        let b = &mut self.bodies[self.parts[i].body];
+        b.set_position(to_pose(world_from_part), true);
+    }
+}
