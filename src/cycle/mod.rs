@@ -21,11 +21,13 @@
 //!    our own code otherwise.
 //! 3. [`pick_place`]: Pick: transfer, descent, vacuum on and build-up, lift. Place: transfer,
 //!    descent, release, retreat. The arm waits only when the next motion is not ready: a stall,
-//!    split into waiting for the sensor and waiting for compute.
-//! 4. [`play`]: each motion is played through the servo into the world. Faults: a
+//!    split into waiting for the sensor and waiting for compute. At a release the next pick may
+//!    be prepared at once, its Pick starting while this Place's retreat ends (`next_pick`).
+//! 4. [`play`]: each motion is played through the servo into the world as a segment (its
+//!    motion, payload, valve switch, how it ends, whether a capture may run). Faults: a
 //!    protective stop, a collision of the arm (or the held part) with the cell or a part
 //!    pressed into the tray (the world's health monitor), a part slipping off the cup. Each ends
-//!    the pick with its outcome; after a stop or a collision the arm waits the reset time and
+//!    the pick with its outcome ([`outcome`]: the cause as the type that found it); after a stop or a collision the arm waits the reset time and
 //!    retraces its path out. Parts pushed out of a tray are taken out of the cell as lost.
 //! 5. [`trays`]: nothing detected or nothing graspable: re-capture; after
 //!    `empty_after_captures` in a row the cell file's policy exchanges the pick tray for a full

@@ -540,3 +540,83 @@ impl Run<'_, '_> {
         ))
     }
 }
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::robot::test_support::default_robot;
+    use crate::trajectory::{LineLimits, MotionLimits};
+
+    /// A transfer to the home pose, a 3 cm descent from there and the retreat back up.
+    fn place_motion(release_lead_s: f64, blended: bool) -> PlaceMotion {
+        let robot = default_robot();
+        let home = JointVector::from(
+            crate::config::LoadedScene::embedded_default()
+                .unwrap()
+                .scene
+                .robot
+                .home_rad(),
+        );
+        let start = home + JointVector::from_element(0.2);
+        let limits = MotionLimits {
+            vel_rad_s: JointVector::from_element(1.0),
+            accel_rad_s2: JointVector::from_element(4.0),
+        };
+        let transfer = Trajectory::through(&[start, home], &limits);
+        let above = robot.world_from_tool(&home);
+        let below = Isometry3::from_parts(
+            Translation3::from(above.translation.vector - Vector3::z() * 0.03),
+            above.rotation,
+        );
+        let line = LineLimits {
+            speed_m_s: 0.5,
+            accel_m_s2: 5.0,
+        };
+        let dynamics = robot.dynamics(&Payload::point(0.5, Vector3::zeros()));
+        let descent = straight_line(&robot, &dynamics, &home, &above, &below, &line, None).unwrap();
+        let retreat = straight_line(&robot, &dynamics, &descent.end_q(), &below, &above, &line, None).unwrap();
+        let descent_blend =
+            blended.then(|| Overlapped::new(transfer.clone(), descent.clone(), 0.9 * transfer.duration_s()));
+        PlaceMotion {
+            transfer,
+            descent,
+            retreat,
+            suction_speed_factor: 1.0,
+            lift_blend: None,
+            descent_blend,
+            release_lead_s,
+        }
+    }
+
+    /// The carry plays the transfer flowing on into the descent, or the two as one overlapped
+    /// segment; the valve closes once, `release_lead_s` before the last segment's end, and every
+    /// segment may trigger a capture as asked. The control: a lead longer than the descent
+    /// closes the valve at its start, not before.
+    #[test]
+    fn the_carry_closes_the_valve_once_before_the_descents_end() {
+        let payload = Payload::point(0.1, Vector3::zeros());
+        let capture = Capture::EndingBy(12.5);
+        for blended in [false, true] {
+            let p = place_motion(0.02, blended);
+            let carry = p.carry(None, payload, capture);
+            assert_eq!(carry.len(), if blended { 1 } else { 2 }, "blended {blended}");
+            let last = carry.last().unwrap();
+            assert_eq!(last.settle, Settle::InPosition);
+            let closes: Vec<f64> = carry.iter().filter_map(|s| s.valve.map(Valve::at_s)).collect();
+            let end_s = last.motion.as_motion().duration_s();
+            assert_eq!(closes, vec![end_s - 0.02], "blended {blended}");
+            assert!(matches!(last.valve, Some(Valve::CloseAt(_))));
+            assert!(
+                carry
+                    .iter()
+                    .all(|s| matches!(s.capture, Capture::EndingBy(t) if t == 12.5))
+            );
+            assert!(carry[..carry.len() - 1].iter().all(|s| s.settle == Settle::AtEnd));
+            let total: f64 = carry.iter().map(|s| s.motion.as_motion().duration_s()).sum();
+            assert!((total - p.carry_s()).abs() < 1e-9, "{total} vs {}", p.carry_s());
+        }
+        let long = place_motion(1e3, false);
+        let carry = long.carry(None, payload, capture);
+        assert_eq!(carry.last().unwrap().valve.map(Valve::at_s), Some(0.0));
+    }
+}
