@@ -70,6 +70,9 @@ enum Command {
         #[arg(long)]
         json: bool,
     },
+    /// A box or compound workpiece's primitives as a mesh part: `<name>.stl` and a workpiece
+    /// file `<name>-mesh.toml` of `kind = "mesh"`, to run a built-in part as CAD.
+    ExportMesh(cli::export::ExportMeshArgs),
     /// Benchmarks: our code beside a baseline doing the same work.
     Bench {
         #[command(subcommand)]
@@ -112,6 +115,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Batch(a) => cli::batch::batch(&a),
         Command::Sweep(a) => cli::sweep::sweep(&a),
         Command::Merge { dirs, out, json } => cli::batch::merge(&dirs, &out, json),
+        Command::ExportMesh(a) => cli::export::export_mesh(&a),
         Command::Bench { command } => cli::bench::run(command),
     }
 }
