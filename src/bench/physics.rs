@@ -1,5 +1,10 @@
 //! Benchmark of the physics: pile build-and-settle wall time per workpiece and the step time of
-//! resting parts with the arm moving, beside rapier's default solver settings.
+//! resting parts with the arm moving, beside rapier's default solver settings; and CAD parts
+//! beside primitives: piles of a workpiece as a mesh (its primitives tessellated,
+//! [`crate::part::tessellate`]) beside the same workpiece as primitives, and a hex standoff blank
+//! (a 6-sided prism mesh, 14 mm across corners, 6 mm thick) beside a primitive can of its size
+//! (a 16-sided prism, 14 mm across, 6 mm) and beside its collider before issue 29 (parry's VHACD
+//! of the raw mesh with default parameters).
 //!
 //! Units: s of wall time (ms for steps); medians over runs.
 
@@ -45,6 +50,33 @@ pub struct PhysicsBench {
     pub step_pile: (usize, String),
     /// Targets: settle wall time per pile [s] and step time [ms].
     pub targets: (f64, f64),
+    /// CAD parts beside primitives of similar size and count.
+    pub meshes: Vec<MeshPileTiming>,
+    /// Target: a CAD part's pile costs at most this many times the primitive's wall time.
+    pub mesh_target_ratio: f64,
+}
+
+/// A pile of a mesh part beside a pile of a primitive part of similar size and count (same seeds).
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshPileTiming {
+    /// The mesh part and what it is compared with.
+    pub mesh: String,
+    /// The primitive part.
+    pub primitive: String,
+    /// Parts in each pile.
+    pub count: usize,
+    /// Convex pieces of the mesh part's collider.
+    pub mesh_pieces: usize,
+    /// Wall time to build and settle the mesh pile: median, min, max of runs [s].
+    pub mesh_wall_s: (f64, f64, f64),
+    /// The same for the primitive pile [s].
+    pub primitive_wall_s: (f64, f64, f64),
+    /// Median mesh wall time over median primitive wall time.
+    pub ratio: f64,
+    /// Deepest overlap after settling, mesh and primitive pile of the last run [m].
+    pub max_penetration_m: (f64, f64),
+    /// Pile height above the tray floor, mesh and primitive pile of the last run [m].
+    pub pile_height_m: (f64, f64),
 }
 
 fn median(v: Vec<f64>) -> (f64, f64, f64) {
@@ -134,5 +166,124 @@ pub fn physics_bench(
         step_ms_min_max: (lo, hi),
         step_pile: (100, f.workpiece.name.clone()),
         targets: (1.0, 0.3),
+        meshes: mesh_piles(scene, robot, workpieces, runs)?,
+        mesh_target_ratio: 2.0,
     })
+}
+
+type BenchResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
+
+/// Builds and settles `runs` piles of `count` parts (seeds 1..=runs): wall times (median, min,
+/// max) and the last pile's report.
+fn time_piles(
+    scene: &crate::config::LoadedScene,
+    robot: &RobotModel,
+    shape: &crate::physics::PartShape,
+    count: usize,
+    runs: usize,
+) -> BenchResult<((f64, f64, f64), crate::physics::pile::PileReport)> {
+    use crate::physics::{World, pile::PileOptions};
+    let mut walls = Vec::new();
+    let mut last = None;
+    for run in 0..runs.max(1) {
+        let mut w = World::new(&scene.scene, robot, shape.clone());
+        let t0 = Instant::now();
+        let r = w.build_pile(&PileOptions::new(count, 1 + run as u64))?;
+        walls.push(t0.elapsed().as_secs_f64());
+        last = Some(r);
+    }
+    Ok((median(walls), last.expect("at least one run")))
+}
+
+/// CAD parts beside primitives: A, B and E as meshes beside themselves as primitives; the hex
+/// standoff blank as a mesh (ours, and the raw-mesh VHACD collider before) beside a primitive can.
+pub fn mesh_piles(
+    scene: &crate::config::LoadedScene,
+    robot: &RobotModel,
+    workpieces: &[crate::config::LoadedWorkpiece],
+    runs: usize,
+) -> BenchResult<Vec<MeshPileTiming>> {
+    use crate::config::{Axis, PartRole, Primitive, ShapeConfig, ShapeKind, ShapePart};
+    use crate::part::tessellate;
+    use crate::physics::PartShape;
+    let mut pairs: Vec<(String, PartShape, String, PartShape, usize)> = Vec::new();
+    for wp in workpieces
+        .iter()
+        .filter(|w| ["A", "B", "E"].contains(&w.workpiece.name.as_str()))
+    {
+        let w = &wp.workpiece;
+        let mesh = tessellate::workpiece_mesh(w).ok_or("a built-in workpiece is not a mesh")?;
+        pairs.push((
+            format!("{}-mesh", w.name),
+            PartShape::from_mesh(w, &mesh)?,
+            w.name.clone(),
+            PartShape::build(w, &wp.source)?,
+            w.pile_count as usize,
+        ));
+    }
+    // The hex standoff blank (6.5 g of brass) and a primitive can of its size.
+    let base = workpieces.first().ok_or("no workpiece given")?.workpiece.clone();
+    let hex = tessellate::prism_mesh(nalgebra::Vector3::zeros(), 0.007, 0.003, Axis::Z, 6);
+    let (lo, hi) = hex.bounds_m().ok_or("empty hex mesh")?;
+    let mut hex_wp = base.clone();
+    hex_wp.name = "hex".into();
+    hex_wp.size_m = (hi - lo).into();
+    hex_wp.mass_kg = 0.0065;
+    hex_wp.friction = 0.4;
+    hex_wp.restitution = 0.1;
+    hex_wp.shape = ShapeConfig {
+        kind: ShapeKind::Mesh,
+        parts: Vec::new(),
+        mesh_file: Some("hex.stl".into()),
+        mesh_scale: Some(1.0),
+    };
+    let mut can = hex_wp.clone();
+    can.name = "can".into();
+    can.size_m = [0.014, 0.014, 0.006];
+    can.shape = ShapeConfig {
+        kind: ShapeKind::Compound,
+        parts: vec![ShapePart {
+            primitive: Primitive::Cylinder,
+            role: PartRole::Body,
+            center_m: [0.0; 3],
+            size_m: None,
+            radius_m: Some(0.007),
+            length_m: Some(0.006),
+            axis: Some(Axis::Z),
+        }],
+        mesh_file: None,
+        mesh_scale: None,
+    };
+    let can_shape = PartShape::build(&can, &crate::config::Source::Embedded)?;
+    pairs.push((
+        "hex-mesh".into(),
+        PartShape::from_mesh(&hex_wp, &hex)?,
+        "can".into(),
+        can_shape.clone(),
+        60,
+    ));
+    pairs.push((
+        "hex-mesh, raw VHACD (before)".into(),
+        PartShape::from_mesh_raw_vhacd(&hex_wp, &hex)?,
+        "can".into(),
+        can_shape,
+        60,
+    ));
+    let mut rows = Vec::new();
+    for (mesh_name, mesh_shape, prim_name, prim_shape, count) in pairs {
+        let (mw, mr) = time_piles(scene, robot, &mesh_shape, count, runs)?;
+        let (pw, pr) = time_piles(scene, robot, &prim_shape, count, runs)?;
+        rows.push(MeshPileTiming {
+            mesh: mesh_name,
+            primitive: prim_name,
+            count,
+            mesh_pieces: mesh_shape.convex_pieces,
+            mesh_wall_s: mw,
+            primitive_wall_s: pw,
+            ratio: mw.0 / pw.0,
+            max_penetration_m: (mr.max_penetration_m, pr.max_penetration_m),
+            pile_height_m: (mr.pile_height_m, pr.pile_height_m),
+        });
+    }
+    Ok(rows)
 }

@@ -7,6 +7,7 @@ mod cli_sense;
 mod execution;
 mod fuzz;
 mod golden;
+mod mesh_export;
 mod physics;
 mod planning;
 mod recording;
