@@ -73,6 +73,9 @@ pub struct MeshPileTiming {
     pub primitive_wall_s: (f64, f64, f64),
     /// Median mesh wall time over median primitive wall time.
     pub ratio: f64,
+    /// One agitation of the settled pile and its settling: simulated seconds per wall second,
+    /// median of runs, mesh and primitive.
+    pub agitation_real_time: (f64, f64),
     /// Deepest overlap after settling, mesh and primitive pile of the last run [m].
     pub max_penetration_m: (f64, f64),
     /// Pile height above the tray floor, mesh and primitive pile of the last run [m].
@@ -173,26 +176,41 @@ pub fn physics_bench(
 
 type BenchResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
-/// Builds and settles `runs` piles of `count` parts (seeds 1..=runs): wall times (median, min,
-/// max) and the last pile's report.
+/// Wall times of `runs` piles of `count` parts (seeds 1..=runs): building and settling each
+/// (median, min, max [s]), then one agitation of the cell file's `[agitation]` and its settling
+/// as simulated seconds per wall second (median); and the last pile's report.
 fn time_piles(
     scene: &crate::config::LoadedScene,
     robot: &RobotModel,
     shape: &crate::physics::PartShape,
     count: usize,
     runs: usize,
-) -> BenchResult<((f64, f64, f64), crate::physics::pile::PileReport)> {
+) -> BenchResult<((f64, f64, f64), f64, crate::physics::pile::PileReport)> {
     use crate::physics::{World, pile::PileOptions};
     let mut walls = Vec::new();
+    let mut shakes = Vec::new();
     let mut last = None;
     for run in 0..runs.max(1) {
         let mut w = World::new(&scene.scene, robot, shape.clone());
         let t0 = Instant::now();
         let r = w.build_pile(&PileOptions::new(count, 1 + run as u64))?;
         walls.push(t0.elapsed().as_secs_f64());
+        // One agitation as the cell shakes its tray, then the pile settles.
+        let a = scene.scene.agitation;
+        let tray = w.pick_tray().world_from_tray.rotation;
+        let (sim0, t1) = (w.time_s(), Instant::now());
+        while w.time_s() + 1e-9 < sim0 + a.duration_s {
+            let t_next = w.time_s() + w.dt_s() - sim0;
+            w.set_pick_tray_offset(tray * nalgebra::Vector3::from(a.offset_m(t_next)));
+            w.step()?;
+        }
+        w.set_pick_tray_offset(nalgebra::Vector3::zeros());
+        w.step()?;
+        w.run_for(a.settle_s)?;
+        shakes.push((w.time_s() - sim0) / t1.elapsed().as_secs_f64());
         last = Some(r);
     }
-    Ok((median(walls), last.expect("at least one run")))
+    Ok((median(walls), median(shakes).0, last.expect("at least one run")))
 }
 
 /// CAD parts beside primitives: A, B and E as meshes beside themselves as primitives; the hex
@@ -271,8 +289,8 @@ pub fn mesh_piles(
     ));
     let mut rows = Vec::new();
     for (mesh_name, mesh_shape, prim_name, prim_shape, count) in pairs {
-        let (mw, mr) = time_piles(scene, robot, &mesh_shape, count, runs)?;
-        let (pw, pr) = time_piles(scene, robot, &prim_shape, count, runs)?;
+        let (mw, ms, mr) = time_piles(scene, robot, &mesh_shape, count, runs)?;
+        let (pw, ps, pr) = time_piles(scene, robot, &prim_shape, count, runs)?;
         rows.push(MeshPileTiming {
             mesh: mesh_name,
             primitive: prim_name,
@@ -281,6 +299,7 @@ pub fn mesh_piles(
             mesh_wall_s: mw,
             primitive_wall_s: pw,
             ratio: mw.0 / pw.0,
+            agitation_real_time: (ms, ps),
             max_penetration_m: (mr.max_penetration_m, pr.max_penetration_m),
             pile_height_m: (mr.pile_height_m, pr.pile_height_m),
         });

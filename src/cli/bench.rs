@@ -176,7 +176,7 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
         b.mesh_target_ratio
     );
     println!(
-        "{:<30} {:>6} {:>5} {:>6}  {:<24} {:<24} {:>6}  {:>17}  {:>15}",
+        "{:<30} {:>6} {:>5} {:>6}  {:<24} {:<24} {:>6}  {:>17}  {:>15}  {:>13}",
         "mesh part",
         "pieces",
         "vs",
@@ -185,11 +185,12 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
         "prim wall_s med (min..max)",
         "ratio",
         "max_pen_mm m/p",
-        "height_mm m/p"
+        "height_mm m/p",
+        "shake x_rt m/p"
     );
     for m in &b.meshes {
         println!(
-            "{:<30} {:>6} {:>5} {:>6}  {:.3} ({:.3}..{:.3})      {:.3} ({:.3}..{:.3})      {:>6.2}  {:>8.3} {:>8.3}  {:>7.2} {:>7.2}",
+            "{:<30} {:>6} {:>5} {:>6}  {:.3} ({:.3}..{:.3})      {:.3} ({:.3}..{:.3})      {:>6.2}  {:>8.3} {:>8.3}  {:>7.2} {:>7.2}  {:>6.1} {:>6.1}",
             m.mesh,
             m.mesh_pieces,
             m.primitive,
@@ -204,7 +205,9 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
             m.max_penetration_m.0 * 1e3,
             m.max_penetration_m.1 * 1e3,
             m.pile_height_m.0 * 1e3,
-            m.pile_height_m.1 * 1e3
+            m.pile_height_m.1 * 1e3,
+            m.agitation_real_time.0,
+            m.agitation_real_time.1
         );
     }
     Ok(())
