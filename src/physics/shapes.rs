@@ -202,7 +202,7 @@ pub const MAX_PIECES_PER_SHELL: u32 = 16;
 /// Most convex pieces of a whole mesh collider (shells beyond this many pieces are refused).
 pub const MAX_PIECES: usize = 64;
 /// VHACD's voxel grid across the shell's longest edge (a 30 mm part: 0.23 mm voxels, so a
-/// 1 mm pin is four voxels wide).
+/// 0.5 mm pin is two voxels wide; at parry's default of 64 the test relay's 0.5 mm pins merge).
 const VHACD_RESOLUTION: u32 = 128;
 
 /// One convex piece of a mesh collider: its polyhedron (rapier units, part frame) and what rays
@@ -469,7 +469,11 @@ impl PartShape {
         }
         let n = pieces.len();
         let polytopes = pieces.iter().map(|p| polytope_of(&p.shape)).collect();
-        let (shape, view_shape) = if n == 1 && pieces[0].view.0.translation.length() < 1e-6 {
+        // A single box centred on the origin is the bare polyhedron (as a box workpiece's);
+        // anything else a compound, as a compound workpiece's primitives.
+        let single_box =
+            n == 1 && pieces[0].view.1.as_cuboid().is_some() && pieces[0].view.0.translation.length() < 1e-6;
+        let (shape, view_shape) = if single_box {
             (pieces[0].shape.clone(), pieces[0].view.1.clone())
         } else {
             (
@@ -691,12 +695,12 @@ mod tests {
 
     #[test]
     fn a_relay_welded_with_its_pins_keeps_its_pins() {
-        // A 20 x 30 x 7 mm body with five 1 mm square pins, 3 mm long, out of its bottom face.
+        // A 20 x 30 x 7 mm body with five 0.5 mm square pins, 3 mm long, out of its bottom face.
         let pins = [(-6.0, -11.0), (6.0, -11.0), (-6.0, 11.0), (6.0, 11.0), (0.0, -4.0)];
         let mut boxes = vec![([-10.0, -15.0, -2.0], [10.0, 15.0, 5.0])];
         boxes.extend(
             pins.iter()
-                .map(|&(x, y)| ([x - 0.5, y - 0.5, -5.0], [x + 0.5, y + 0.5, -2.0])),
+                .map(|&(x, y)| ([x - 0.25, y - 0.25, -5.0], [x + 0.25, y + 0.25, -2.0])),
         );
         let mesh = union_of_boxes_mm(&boxes);
         assert_eq!(
@@ -755,7 +759,13 @@ mod tests {
         let hex = tessellate::prism_mesh(Vector3::zeros(), 0.007, 0.003, crate::config::Axis::Z, 6);
         let s = PartShape::from_mesh(&workpiece_of_mesh("hex", &hex), &hex).unwrap();
         assert_eq!(s.convex_pieces, 1);
-        assert!(s.shape.as_convex_polyhedron().is_some_and(|c| c.points().len() == 12));
+        let piece = &s
+            .shape
+            .as_compound()
+            .expect("a compound, as a compound workpiece's")
+            .shapes()[0]
+            .1;
+        assert!(piece.as_convex_polyhedron().is_some_and(|c| c.points().len() == 12));
         for wp in LoadedWorkpiece::all_embedded().unwrap() {
             let w = &wp.workpiece;
             let prim = PartShape::build(w, &wp.source).unwrap();
@@ -800,6 +810,34 @@ mod tests {
             };
             assert_eq!(cuboids(&meshed.view_shape), cuboids(&prim.view_shape), "{}", w.name);
         }
+    }
+
+    #[test]
+    fn a_meshed_prism_overlaps_as_the_primitive_prism_does() {
+        use crate::physics::overlap::{Polytope, depth};
+        use rand::{RngExt, SeedableRng};
+        let c = Vector3::zeros();
+        let prism = Polytope::prism(c, 0.007, 0.003, crate::config::Axis::Z);
+        let mesh = crate::part::tessellate::prism_mesh(c, 0.007, 0.003, crate::config::Axis::Z, 16);
+        let s = PartShape::from_mesh(&workpiece_of_mesh("can", &mesh), &mesh).unwrap();
+        let ours = &s.pieces.as_ref().unwrap()[0];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut worst = 0.0f64;
+        for _ in 0..2000 {
+            let t = Vector3::new(
+                rng.random_range(-0.014..0.014),
+                rng.random_range(-0.014..0.014),
+                rng.random_range(-0.008..0.008),
+            );
+            let r = Vector3::new(
+                rng.random_range(-3.2..3.2),
+                rng.random_range(-3.2..3.2),
+                rng.random_range(-3.2..3.2),
+            );
+            let (a, b) = (nalgebra::Isometry3::identity(), nalgebra::Isometry3::new(t, r));
+            worst = worst.max((depth(&a, &prism, &b, &prism) - depth(&a, ours, &b, ours)).abs());
+        }
+        assert!(worst < 1e-6, "depths differ by {worst}");
     }
 
     #[test]
