@@ -4,7 +4,8 @@
 //! [`crate::part::tessellate`]) beside the same workpiece as primitives, and a hex standoff blank
 //! (a 6-sided prism mesh, 14 mm across corners, 6 mm thick) beside a primitive can of its size
 //! (a 16-sided prism, 14 mm across, 6 mm) and beside its collider before issue 29 (parry's VHACD
-//! of the raw mesh with default parameters).
+//! of the raw mesh with default parameters); a CAD can of that size tessellated with 64 sides
+//! beside the same primitive can.
 //!
 //! Units: s of wall time (ms for steps); medians over runs.
 
@@ -80,6 +81,9 @@ pub struct MeshPileTiming {
     pub max_penetration_m: (f64, f64),
     /// Pile height above the tray floor, mesh and primitive pile of the last run [m].
     pub pile_height_m: (f64, f64),
+    /// Runs the health monitor stopped (seed and why), mesh and primitive: left out of the
+    /// medians.
+    pub stops: (Vec<String>, Vec<String>),
 }
 
 fn median(v: Vec<f64>) -> (f64, f64, f64) {
@@ -178,39 +182,64 @@ type BenchResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 /// Wall times of `runs` piles of `count` parts (seeds 1..=runs): building and settling each
 /// (median, min, max [s]), then one agitation of the cell file's `[agitation]` and its settling
-/// as simulated seconds per wall second (median); and the last pile's report.
+/// as simulated seconds per wall second (median); the last completed pile's report; and the runs
+/// the health monitor stopped (left out of the medians). An error if every run stopped.
 fn time_piles(
     scene: &crate::config::LoadedScene,
     robot: &RobotModel,
     shape: &crate::physics::PartShape,
     count: usize,
     runs: usize,
-) -> BenchResult<((f64, f64, f64), f64, crate::physics::pile::PileReport)> {
-    use crate::physics::{World, pile::PileOptions};
+) -> BenchResult<PileRuns> {
+    use crate::physics::{HealthError, World, pile::PileOptions};
     let mut walls = Vec::new();
     let mut shakes = Vec::new();
     let mut last = None;
+    let mut stops = Vec::new();
     for run in 0..runs.max(1) {
         let mut w = World::new(&scene.scene, robot, shape.clone());
         let t0 = Instant::now();
-        let r = w.build_pile(&PileOptions::new(count, 1 + run as u64))?;
-        walls.push(t0.elapsed().as_secs_f64());
-        // One agitation as the cell shakes its tray, then the pile settles.
-        let a = scene.scene.agitation;
-        let tray = w.pick_tray().world_from_tray.rotation;
-        let (sim0, t1) = (w.time_s(), Instant::now());
-        while w.time_s() + 1e-9 < sim0 + a.duration_s {
-            let t_next = w.time_s() + w.dt_s() - sim0;
-            w.set_pick_tray_offset(tray * nalgebra::Vector3::from(a.offset_m(t_next)));
+        let mut one = || -> Result<(f64, f64, crate::physics::pile::PileReport), HealthError> {
+            let r = w.build_pile(&PileOptions::new(count, 1 + run as u64))?;
+            let wall = t0.elapsed().as_secs_f64();
+            // One agitation as the cell shakes its tray, then the pile settles.
+            let a = scene.scene.agitation;
+            let tray = w.pick_tray().world_from_tray.rotation;
+            let (sim0, t1) = (w.time_s(), Instant::now());
+            while w.time_s() + 1e-9 < sim0 + a.duration_s {
+                let t_next = w.time_s() + w.dt_s() - sim0;
+                w.set_pick_tray_offset(tray * nalgebra::Vector3::from(a.offset_m(t_next)));
+                w.step()?;
+            }
+            w.set_pick_tray_offset(nalgebra::Vector3::zeros());
             w.step()?;
+            w.run_for(a.settle_s)?;
+            Ok((wall, (w.time_s() - sim0) / t1.elapsed().as_secs_f64(), r))
+        };
+        match one() {
+            Ok((wall, shake, r)) => {
+                walls.push(wall);
+                shakes.push(shake);
+                last = Some(r);
+            }
+            Err(e) => stops.push(format!("seed {}: {e}", 1 + run)),
         }
-        w.set_pick_tray_offset(nalgebra::Vector3::zeros());
-        w.step()?;
-        w.run_for(a.settle_s)?;
-        shakes.push((w.time_s() - sim0) / t1.elapsed().as_secs_f64());
-        last = Some(r);
     }
-    Ok((median(walls), median(shakes).0, last.expect("at least one run")))
+    let last = last.ok_or_else(|| format!("every run stopped: {}", stops.join("; ")))?;
+    Ok(PileRuns {
+        wall_s: median(walls),
+        shake_real_time: median(shakes).0,
+        last,
+        stops,
+    })
+}
+
+/// What [`time_piles`] measured.
+struct PileRuns {
+    wall_s: (f64, f64, f64),
+    shake_real_time: f64,
+    last: crate::physics::pile::PileReport,
+    stops: Vec<String>,
 }
 
 /// CAD parts beside primitives: A, B and E as meshes beside themselves as primitives; the hex
@@ -280,6 +309,18 @@ pub fn mesh_piles(
         can_shape.clone(),
         60,
     ));
+    // A CAD can tessellated finer than the built-in prisms: 64 sides, 7 mm radius, 6 mm tall.
+    let can64 = tessellate::prism_mesh(nalgebra::Vector3::zeros(), 0.007, 0.003, Axis::Z, 64);
+    let mut can64_wp = hex_wp.clone();
+    can64_wp.name = "can64".into();
+    can64_wp.size_m = can.size_m;
+    pairs.push((
+        "can64-mesh".into(),
+        PartShape::from_mesh(&can64_wp, &can64)?,
+        "can".into(),
+        can_shape.clone(),
+        60,
+    ));
     pairs.push((
         "hex-mesh, raw VHACD (before)".into(),
         PartShape::from_mesh_raw_vhacd(&hex_wp, &hex)?,
@@ -289,19 +330,20 @@ pub fn mesh_piles(
     ));
     let mut rows = Vec::new();
     for (mesh_name, mesh_shape, prim_name, prim_shape, count) in pairs {
-        let (mw, ms, mr) = time_piles(scene, robot, &mesh_shape, count, runs)?;
-        let (pw, ps, pr) = time_piles(scene, robot, &prim_shape, count, runs)?;
+        let m = time_piles(scene, robot, &mesh_shape, count, runs)?;
+        let p = time_piles(scene, robot, &prim_shape, count, runs)?;
         rows.push(MeshPileTiming {
             mesh: mesh_name,
             primitive: prim_name,
             count,
             mesh_pieces: mesh_shape.convex_pieces,
-            mesh_wall_s: mw,
-            primitive_wall_s: pw,
-            ratio: mw.0 / pw.0,
-            agitation_real_time: (ms, ps),
-            max_penetration_m: (mr.max_penetration_m, pr.max_penetration_m),
-            pile_height_m: (mr.pile_height_m, pr.pile_height_m),
+            mesh_wall_s: m.wall_s,
+            primitive_wall_s: p.wall_s,
+            ratio: m.wall_s.0 / p.wall_s.0,
+            agitation_real_time: (m.shake_real_time, p.shake_real_time),
+            max_penetration_m: (m.last.max_penetration_m, p.last.max_penetration_m),
+            pile_height_m: (m.last.pile_height_m, p.last.pile_height_m),
+            stops: (m.stops, p.stops),
         });
     }
     Ok(rows)

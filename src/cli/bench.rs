@@ -209,6 +209,11 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
             m.agitation_real_time.0,
             m.agitation_real_time.1
         );
+        for (what, stops) in [(&m.mesh, &m.stops.0), (&m.primitive, &m.stops.1)] {
+            for s in stops {
+                println!("    {what} stopped (left out of the medians): {s}");
+            }
+        }
     }
     Ok(())
 }
