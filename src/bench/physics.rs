@@ -68,18 +68,18 @@ pub struct MeshPileTiming {
     pub count: usize,
     /// Convex pieces of the mesh part's collider.
     pub mesh_pieces: usize,
-    /// Wall time to build and settle the mesh pile: median, min, max of runs [s].
+    /// Wall time to build and settle the mesh pile: median, min, max of runs (s).
     pub mesh_wall_s: (f64, f64, f64),
-    /// The same for the primitive pile [s].
+    /// The same for the primitive pile (s).
     pub primitive_wall_s: (f64, f64, f64),
     /// Median mesh wall time over median primitive wall time.
     pub ratio: f64,
     /// One agitation of the settled pile and its settling: simulated seconds per wall second,
     /// median of runs, mesh and primitive.
     pub agitation_real_time: (f64, f64),
-    /// Deepest overlap after settling, mesh and primitive pile of the last run [m].
+    /// Deepest overlap after settling, mesh and primitive pile of the last run (m).
     pub max_penetration_m: (f64, f64),
-    /// Pile height above the tray floor, mesh and primitive pile of the last run [m].
+    /// Pile height above the tray floor, mesh and primitive pile of the last run (m).
     pub pile_height_m: (f64, f64),
     /// Runs the health monitor stopped (seed and why), mesh and primitive: left out of the
     /// medians.
@@ -181,7 +181,7 @@ pub fn physics_bench(
 type BenchResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
 
 /// Wall times of `runs` piles of `count` parts (seeds 1..=runs): building and settling each
-/// (median, min, max [s]), then one agitation of the cell file's `[agitation]` and its settling
+/// (median, min, max, in s), then one agitation of the cell file's `[agitation]` and its settling
 /// as simulated seconds per wall second (median); the last completed pile's report; and the runs
 /// the health monitor stopped (left out of the medians). An error if every run stopped.
 fn time_piles(

@@ -200,10 +200,11 @@ pub const HULL_SAMPLE_SPACING_M: f64 = 0.0005;
 /// Most convex pieces a non-convex shell is decomposed into.
 pub const MAX_PIECES_PER_SHELL: u32 = 16;
 /// Most vertices of one convex piece of a mesh collider (the built-in 16-sided prism has 32):
-/// a piece with more is simplified ([`decimate`]), so a finely tessellated CAD cylinder costs
-/// what the built-in prism costs and rests on facets as it does.
+/// a piece with more is simplified (greedily, dropping the vertex whose removal moves the hull
+/// least), so a finely tessellated CAD cylinder costs what the built-in prism costs and rests
+/// on facets as it does.
 pub const MAX_PIECE_VERTICES: usize = 32;
-/// Most convex pieces of a whole mesh collider (shells beyond this many pieces are refused).
+/// Most convex pieces of a whole mesh collider: a mesh that needs more (many shells) is refused.
 pub const MAX_PIECES: usize = 64;
 /// VHACD's voxel grid across the shell's longest edge (a 30 mm part: 0.23 mm voxels, so a
 /// 0.5 mm pin is two voxels wide; at parry's default of 64 the test relay's 0.5 mm pins merge).
@@ -250,7 +251,6 @@ fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> Vec<MeshPiece> {
             pieces.extend(decomposed.into_iter().map(mesh_piece));
         }
     }
-    pieces.truncate(MAX_PIECES);
     pieces
 }
 
@@ -532,12 +532,21 @@ impl PartShape {
 
     /// The shape of a mesh workpiece from its surface (m, any frame: the part frame's origin is
     /// put at the mesh's bounding-box centre), whose bounding box must match `size_m` within 1 mm.
-    /// The collider is described in [`mesh_collider`].
+    /// The collider is described in the module header.
     pub fn from_mesh(workpiece: &Workpiece, mesh: &Mesh) -> Result<Self, ShapeError> {
         let sim_verts = centred_sim_vertices(workpiece, mesh)?;
         let pieces = mesh_collider(&sim_verts, &mesh.triangles);
         if pieces.is_empty() {
             return Err(ShapeError::Degenerate(workpiece.name.clone()));
+        }
+        if pieces.len() > MAX_PIECES {
+            return Err(ShapeError::Mesh {
+                file: workpiece.name.clone(),
+                reason: format!(
+                    "its collider needs {} convex pieces, more than {MAX_PIECES} (too many separate bodies?)",
+                    pieces.len()
+                ),
+            });
         }
         let n = pieces.len();
         let polytopes = pieces.iter().map(|p| polytope_of(&p.shape)).collect();
@@ -954,6 +963,28 @@ mod tests {
             .map(|p| coarse.distance_to_local_point(*p, true))
             .fold(0.0, f32::max);
         assert!(coarse_worst >= 0.25, "{coarse_worst}");
+    }
+
+    #[test]
+    fn a_mesh_of_more_bodies_than_pieces_allowed_is_refused() {
+        use crate::part::tessellate::{append, box_mesh};
+        let cubes = |n: usize| {
+            let mut m = Mesh::default();
+            for i in 0..n {
+                let c = Vector3::new((i % 8) as f64 * 0.003, (i / 8) as f64 * 0.003, 0.0);
+                append(&mut m, &box_mesh(c, Vector3::repeat(0.001)));
+            }
+            m
+        };
+        let ok = cubes(MAX_PIECES);
+        let s = PartShape::from_mesh(&workpiece_of_mesh("cubes", &ok), &ok).unwrap();
+        assert_eq!(s.convex_pieces, MAX_PIECES);
+        let too_many = cubes(MAX_PIECES + 1);
+        let e = PartShape::from_mesh(&workpiece_of_mesh("cubes", &too_many), &too_many)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("65 convex pieces, more than 64"), "{e}");
     }
 
     #[test]
