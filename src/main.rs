@@ -66,6 +66,9 @@ enum Command {
         #[command(flatten)]
         out: cli::OutArgs,
     },
+    /// A box or compound workpiece's primitives as a mesh part: `<name>.stl` and a workpiece
+    /// file `<name>-mesh.toml` of `kind = "mesh"`, to run a built-in part as CAD.
+    ExportMesh(cli::export::ExportMeshArgs),
     /// Benchmarks: our code beside a baseline doing the same work.
     Bench {
         #[command(subcommand)]
@@ -108,6 +111,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Batch(a) => cli::batch::batch(&a),
         Command::Sweep(a) => cli::sweep::sweep(&a),
         Command::Merge { dirs, out } => cli::study::merge(&dirs, &out.out, out.json),
+        Command::ExportMesh(a) => cli::export::export_mesh(&a),
         Command::Bench { command } => cli::bench::run(command),
     }
 }

@@ -15,7 +15,7 @@ pub mod robot;
 pub mod sensor;
 
 pub use accel::{AccelRow, accel_bench};
-pub use physics::{PhysicsBench, PileTiming, physics_bench};
+pub use physics::{MeshPileTiming, PhysicsBench, PileTiming, physics_bench};
 pub use planner::{PlannerRow, binpicking_queries, planner_bench};
 pub use robot::{RobotBench, Timing, numerical_ik, robot_bench, time_per_call};
 pub use sensor::{SenseBench, SenseTiming, sense_bench};

@@ -1,5 +1,11 @@
 //! Benchmark of the physics: pile build-and-settle wall time per workpiece and the step time of
-//! resting parts with the arm moving, beside rapier's default solver settings.
+//! resting parts with the arm moving, beside rapier's default solver settings; and CAD parts
+//! beside primitives: piles of a workpiece as a mesh (its primitives tessellated,
+//! [`crate::part::tessellate`]) beside the same workpiece as primitives, and a hex standoff blank
+//! (a 6-sided prism mesh, 14 mm across corners, 6 mm thick) beside a primitive can of its size
+//! (a 16-sided prism, 14 mm across, 6 mm) and beside its collider before issue 29 (parry's VHACD
+//! of the raw mesh with default parameters); a CAD can of that size tessellated with 64 sides
+//! beside the same primitive can.
 //!
 //! Units: s of wall time (ms for steps); medians over runs.
 
@@ -45,6 +51,39 @@ pub struct PhysicsBench {
     pub step_pile: (usize, String),
     /// Targets: settle wall time per pile [s] and step time [ms].
     pub targets: (f64, f64),
+    /// CAD parts beside primitives of similar size and count.
+    pub meshes: Vec<MeshPileTiming>,
+    /// Target: a CAD part's pile costs at most this many times the primitive's wall time.
+    pub mesh_target_ratio: f64,
+}
+
+/// A pile of a mesh part beside a pile of a primitive part of similar size and count (same seeds).
+#[derive(Debug, Clone, Serialize)]
+pub struct MeshPileTiming {
+    /// The mesh part and what it is compared with.
+    pub mesh: String,
+    /// The primitive part.
+    pub primitive: String,
+    /// Parts in each pile.
+    pub count: usize,
+    /// Convex pieces of the mesh part's collider.
+    pub mesh_pieces: usize,
+    /// Wall time to build and settle the mesh pile: median, min, max of runs (s).
+    pub mesh_wall_s: (f64, f64, f64),
+    /// The same for the primitive pile (s).
+    pub primitive_wall_s: (f64, f64, f64),
+    /// Median mesh wall time over median primitive wall time.
+    pub ratio: f64,
+    /// One agitation of the settled pile and its settling: simulated seconds per wall second,
+    /// median of runs, mesh and primitive.
+    pub agitation_real_time: (f64, f64),
+    /// Deepest overlap after settling, mesh and primitive pile of the last run (m).
+    pub max_penetration_m: (f64, f64),
+    /// Pile height above the tray floor, mesh and primitive pile of the last run (m).
+    pub pile_height_m: (f64, f64),
+    /// Runs the health monitor stopped (seed and why), mesh and primitive: left out of the
+    /// medians.
+    pub stops: (Vec<String>, Vec<String>),
 }
 
 fn median(v: Vec<f64>) -> (f64, f64, f64) {
@@ -134,5 +173,178 @@ pub fn physics_bench(
         step_ms_min_max: (lo, hi),
         step_pile: (100, f.workpiece.name.clone()),
         targets: (1.0, 0.3),
+        meshes: mesh_piles(scene, robot, workpieces, runs)?,
+        mesh_target_ratio: 2.0,
     })
+}
+
+type BenchResult<T> = Result<T, Box<dyn std::error::Error + Send + Sync>>;
+
+/// Wall times of `runs` piles of `count` parts (seeds 1..=runs): building and settling each
+/// (median, min, max, in s), then one agitation of the cell file's `[agitation]` and its settling
+/// as simulated seconds per wall second (median); the last completed pile's report; and the runs
+/// the health monitor stopped (left out of the medians). An error if every run stopped.
+fn time_piles(
+    scene: &crate::config::LoadedScene,
+    robot: &RobotModel,
+    shape: &crate::physics::PartShape,
+    count: usize,
+    runs: usize,
+) -> BenchResult<PileRuns> {
+    use crate::physics::{HealthError, World, pile::PileOptions};
+    let mut walls = Vec::new();
+    let mut shakes = Vec::new();
+    let mut last = None;
+    let mut stops = Vec::new();
+    for run in 0..runs.max(1) {
+        let mut w = World::new(&scene.scene, robot, shape.clone());
+        let t0 = Instant::now();
+        let mut one = || -> Result<(f64, f64, crate::physics::pile::PileReport), HealthError> {
+            let r = w.build_pile(&PileOptions::new(count, 1 + run as u64))?;
+            let wall = t0.elapsed().as_secs_f64();
+            // One agitation as the cell shakes its tray, then the pile settles.
+            let a = scene.scene.agitation;
+            let tray = w.pick_tray().world_from_tray.rotation;
+            let (sim0, t1) = (w.time_s(), Instant::now());
+            while w.time_s() + 1e-9 < sim0 + a.duration_s {
+                let t_next = w.time_s() + w.dt_s() - sim0;
+                w.set_pick_tray_offset(tray * nalgebra::Vector3::from(a.offset_m(t_next)));
+                w.step()?;
+            }
+            w.set_pick_tray_offset(nalgebra::Vector3::zeros());
+            w.step()?;
+            w.run_for(a.settle_s)?;
+            Ok((wall, (w.time_s() - sim0) / t1.elapsed().as_secs_f64(), r))
+        };
+        match one() {
+            Ok((wall, shake, r)) => {
+                walls.push(wall);
+                shakes.push(shake);
+                last = Some(r);
+            }
+            Err(e) => stops.push(format!("seed {}: {e}", 1 + run)),
+        }
+    }
+    let last = last.ok_or_else(|| format!("every run stopped: {}", stops.join("; ")))?;
+    Ok(PileRuns {
+        wall_s: median(walls),
+        shake_real_time: median(shakes).0,
+        last,
+        stops,
+    })
+}
+
+/// What [`time_piles`] measured.
+struct PileRuns {
+    wall_s: (f64, f64, f64),
+    shake_real_time: f64,
+    last: crate::physics::pile::PileReport,
+    stops: Vec<String>,
+}
+
+/// CAD parts beside primitives: A, B and E as meshes beside themselves as primitives; the hex
+/// standoff blank as a mesh (ours, and the raw-mesh VHACD collider before) beside a primitive can.
+pub fn mesh_piles(
+    scene: &crate::config::LoadedScene,
+    robot: &RobotModel,
+    workpieces: &[crate::config::LoadedWorkpiece],
+    runs: usize,
+) -> BenchResult<Vec<MeshPileTiming>> {
+    use crate::config::{Axis, PartRole, Primitive, ShapeConfig, ShapeKind, ShapePart};
+    use crate::part::tessellate;
+    use crate::physics::PartShape;
+    let mut pairs: Vec<(String, PartShape, String, PartShape, usize)> = Vec::new();
+    for wp in workpieces
+        .iter()
+        .filter(|w| ["A", "B", "E"].contains(&w.workpiece.name.as_str()))
+    {
+        let w = &wp.workpiece;
+        let mesh = tessellate::workpiece_mesh(w).ok_or("a built-in workpiece is not a mesh")?;
+        pairs.push((
+            format!("{}-mesh", w.name),
+            PartShape::from_mesh(w, &mesh)?,
+            w.name.clone(),
+            PartShape::build(w, &wp.source)?,
+            w.pile_count as usize,
+        ));
+    }
+    // The hex standoff blank (6.5 g of brass) and a primitive can of its size.
+    let base = workpieces.first().ok_or("no workpiece given")?.workpiece.clone();
+    let hex = tessellate::prism_mesh(nalgebra::Vector3::zeros(), 0.007, 0.003, Axis::Z, 6);
+    let (lo, hi) = hex.bounds_m().ok_or("empty hex mesh")?;
+    let mut hex_wp = base.clone();
+    hex_wp.name = "hex".into();
+    hex_wp.size_m = (hi - lo).into();
+    hex_wp.mass_kg = 0.0065;
+    hex_wp.friction = 0.4;
+    hex_wp.restitution = 0.1;
+    hex_wp.shape = ShapeConfig {
+        kind: ShapeKind::Mesh,
+        parts: Vec::new(),
+        mesh_file: Some("hex.stl".into()),
+        mesh_scale: Some(1.0),
+    };
+    let mut can = hex_wp.clone();
+    can.name = "can".into();
+    can.size_m = [0.014, 0.014, 0.006];
+    can.shape = ShapeConfig {
+        kind: ShapeKind::Compound,
+        parts: vec![ShapePart {
+            primitive: Primitive::Cylinder,
+            role: PartRole::Body,
+            center_m: [0.0; 3],
+            size_m: None,
+            radius_m: Some(0.007),
+            length_m: Some(0.006),
+            axis: Some(Axis::Z),
+        }],
+        mesh_file: None,
+        mesh_scale: None,
+    };
+    let can_shape = PartShape::build(&can, &crate::config::Source::Embedded)?;
+    pairs.push((
+        "hex-mesh".into(),
+        PartShape::from_mesh(&hex_wp, &hex)?,
+        "can".into(),
+        can_shape.clone(),
+        60,
+    ));
+    // A CAD can tessellated finer than the built-in prisms: 64 sides, 7 mm radius, 6 mm tall.
+    let can64 = tessellate::prism_mesh(nalgebra::Vector3::zeros(), 0.007, 0.003, Axis::Z, 64);
+    let mut can64_wp = hex_wp.clone();
+    can64_wp.name = "can64".into();
+    can64_wp.size_m = can.size_m;
+    pairs.push((
+        "can64-mesh".into(),
+        PartShape::from_mesh(&can64_wp, &can64)?,
+        "can".into(),
+        can_shape.clone(),
+        60,
+    ));
+    pairs.push((
+        "hex-mesh, raw VHACD (before)".into(),
+        PartShape::from_mesh_raw_vhacd(&hex_wp, &hex)?,
+        "can".into(),
+        can_shape,
+        60,
+    ));
+    let mut rows = Vec::new();
+    for (mesh_name, mesh_shape, prim_name, prim_shape, count) in pairs {
+        let m = time_piles(scene, robot, &mesh_shape, count, runs)?;
+        let p = time_piles(scene, robot, &prim_shape, count, runs)?;
+        rows.push(MeshPileTiming {
+            mesh: mesh_name,
+            primitive: prim_name,
+            count,
+            mesh_pieces: mesh_shape.convex_pieces,
+            mesh_wall_s: m.wall_s,
+            primitive_wall_s: p.wall_s,
+            ratio: m.wall_s.0 / p.wall_s.0,
+            agitation_real_time: (m.shake_real_time, p.shake_real_time),
+            max_penetration_m: (m.last.max_penetration_m, p.last.max_penetration_m),
+            pile_height_m: (m.last.pile_height_m, p.last.pile_height_m),
+            stops: (m.stops, p.stops),
+        });
+    }
+    Ok(rows)
 }

@@ -77,7 +77,8 @@ pub enum BenchCommand {
         json: bool,
     },
     /// Physics: pile build-and-settle wall time per workpiece, and the step time of 100 resting
-    /// parts with the arm moving, beside rapier's default solver settings.
+    /// parts with the arm moving, beside rapier's default solver settings; CAD parts (meshes)
+    /// beside primitives of their size and count.
     Physics {
         /// Runs to take the median over.
         #[arg(long, default_value_t = 5)]
@@ -170,6 +171,50 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
         "step with {} resting parts of {} and the arm moving: {:.4} ms median ({:.4}..{:.4}), target <= {:.1} ms",
         b.step_pile.0, b.step_pile.1, b.step_ms_median, b.step_ms_min_max.0, b.step_ms_min_max.1, b.targets.1
     );
+    println!(
+        "CAD parts beside primitives (same seeds); target: mesh wall <= {:.0} x primitive wall",
+        b.mesh_target_ratio
+    );
+    println!(
+        "{:<30} {:>6} {:>5} {:>6}  {:<24} {:<24} {:>6}  {:>17}  {:>15}  {:>13}",
+        "mesh part",
+        "pieces",
+        "vs",
+        "parts",
+        "mesh wall_s med (min..max)",
+        "prim wall_s med (min..max)",
+        "ratio",
+        "max_pen_mm m/p",
+        "height_mm m/p",
+        "shake x_rt m/p"
+    );
+    for m in &b.meshes {
+        println!(
+            "{:<30} {:>6} {:>5} {:>6}  {:.3} ({:.3}..{:.3})      {:.3} ({:.3}..{:.3})      {:>6.2}  {:>8.3} {:>8.3}  {:>7.2} {:>7.2}  {:>6.1} {:>6.1}",
+            m.mesh,
+            m.mesh_pieces,
+            m.primitive,
+            m.count,
+            m.mesh_wall_s.0,
+            m.mesh_wall_s.1,
+            m.mesh_wall_s.2,
+            m.primitive_wall_s.0,
+            m.primitive_wall_s.1,
+            m.primitive_wall_s.2,
+            m.ratio,
+            m.max_penetration_m.0 * 1e3,
+            m.max_penetration_m.1 * 1e3,
+            m.pile_height_m.0 * 1e3,
+            m.pile_height_m.1 * 1e3,
+            m.agitation_real_time.0,
+            m.agitation_real_time.1
+        );
+        for (what, stops) in [(&m.mesh, &m.stops.0), (&m.primitive, &m.stops.1)] {
+            for s in stops {
+                println!("    {what} stopped (left out of the medians): {s}");
+            }
+        }
+    }
     Ok(())
 }
 

@@ -8,3 +8,4 @@
 //! its edges).
 
 pub mod mesh;
+pub mod tessellate;

@@ -1,5 +1,15 @@
 //! Workpiece shapes for the physics world: boxes, compounds of boxes and cylinders (bodies with
-//! leads), and triangle meshes (OBJ or STL) convex-decomposed for their dynamic collider.
+//! leads), and triangle meshes (OBJ or STL, or a [`Mesh`] in memory).
+//!
+//! A mesh's collider: each shell (connected part of the surface) whose convex hull lies within
+//! [`HULL_TOLERANCE_M`] of it is that hull; any other shell is decomposed by parry's VHACD into at
+//! most [`MAX_PIECES_PER_SHELL`] convex pieces (pins and leads keep pieces of their own). The view
+//! for rays is the same pieces, axis-aligned boxes among them as cuboids. So a box or compound
+//! workpiece exported as a mesh gets the same convex pieces as its primitives.
+//!
+//! Mass properties are the collider's (volume of its pieces at the density that gives the file's
+//! mass; overlapping pieces count twice, a hull counts its bridged concavities): the mesh's own
+//! centroid and inertia are to come from the part model.
 //!
 //! Units: m, kg. Frame: the part frame of the workpiece file (origin at the bounding-box centre).
 //! rapier's cylinders run along their local +y; workpiece cylinders along x, y or z are rotated.
@@ -10,7 +20,10 @@ use nalgebra::{Matrix3, Vector3};
 use rapier3d::math::{Pose, Vector};
 use rapier3d::prelude::SharedShape;
 
+use rapier3d::parry::transformation::vhacd::{VHACD, VHACDParameters};
+
 use crate::config::{Piece, ShapeKind, Source, Workpiece};
+use crate::part::mesh::Mesh;
 
 /// Why a workpiece shape could not be built.
 #[derive(Debug, thiserror::Error)]
@@ -50,8 +63,11 @@ pub struct PartShape {
     pub bounding_radius_m: f64,
     /// Half extents of the bounding box [m].
     pub half_extents_m: Vector3<f64>,
-    /// The convex pieces for the independent overlap check (`None` for meshes).
+    /// The convex pieces for the independent overlap check: the primitives' polytopes, or a
+    /// mesh collider's convex pieces.
     pub pieces: Option<Vec<super::overlap::Polytope>>,
+    /// Convex pieces of the collider (1 for a single convex shape).
+    pub convex_pieces: usize,
     /// Coulomb friction coefficient.
     pub friction: f64,
     /// Restitution coefficient.
@@ -142,6 +158,314 @@ fn polytope_shape(p: &super::overlap::Polytope, name: &str) -> Result<SharedShap
     SharedShape::convex_hull(&pts).ok_or_else(|| ShapeError::Degenerate(name.to_string()))
 }
 
+/// A mesh's vertices in rapier units about its bounding-box centre (the part frame's origin),
+/// once its bounding box is checked against `size_m` (within 1 mm).
+fn centred_sim_vertices(workpiece: &Workpiece, mesh: &Mesh) -> Result<Vec<Vector>, ShapeError> {
+    let err = |reason: String| ShapeError::Mesh {
+        file: workpiece.name.clone(),
+        reason,
+    };
+    let (lo, hi) = mesh.bounds_m().ok_or_else(|| err("has no vertices".into()))?;
+    let centre = (lo.coords + hi.coords) / 2.0;
+    let extent = hi - lo;
+    if (extent - Vector3::from(workpiece.size_m)).amax() > 1e-3 {
+        return Err(err(format!(
+            "its bounding box {:.4} x {:.4} x {:.4} m differs from the workpiece's size_m {:?} by more than 1 mm",
+            extent.x, extent.y, extent.z, workpiece.size_m
+        )));
+    }
+    if let Some(bad) = mesh
+        .triangles
+        .iter()
+        .flatten()
+        .find(|&&i| i as usize >= mesh.vertices_m.len())
+    {
+        return Err(err(format!(
+            "triangle index {bad} out of range ({} vertices)",
+            mesh.vertices_m.len()
+        )));
+    }
+    Ok(mesh
+        .vertices_m
+        .iter()
+        .map(|v| super::sim_point(&(v.coords - centre)))
+        .collect())
+}
+
+/// Largest distance of a shell's convex hull from the shell's surface for the hull to stand in
+/// for the shell (m): sampled over the hull's surface, at most [`HULL_SAMPLE_SPACING_M`] apart.
+pub const HULL_TOLERANCE_M: f64 = 0.0001;
+/// Spacing of the samples on a hull's triangles for [`HULL_TOLERANCE_M`] (m; at most 16 per edge).
+pub const HULL_SAMPLE_SPACING_M: f64 = 0.0005;
+/// Most convex pieces a non-convex shell is decomposed into.
+pub const MAX_PIECES_PER_SHELL: u32 = 16;
+/// Most vertices of one convex piece of a mesh collider (the built-in 16-sided prism has 32):
+/// a piece with more is simplified (greedily, dropping the vertex whose removal moves the hull
+/// least), so a finely tessellated CAD cylinder costs what the built-in prism costs and rests
+/// on facets as it does.
+pub const MAX_PIECE_VERTICES: usize = 32;
+/// Most convex pieces of a whole mesh collider: a mesh that needs more (many shells) is refused.
+pub const MAX_PIECES: usize = 64;
+/// VHACD's voxel grid across the shell's longest edge (a 30 mm part: 0.23 mm voxels, so a
+/// 0.5 mm pin is two voxels wide; at parry's default of 64 the test relay's 0.5 mm pins merge).
+const VHACD_RESOLUTION: u32 = 128;
+
+/// One convex piece of a mesh collider: its polyhedron (rapier units, part frame) and what rays
+/// see of it (an axis-aligned box as a cuboid at its centre, else the same polyhedron).
+struct MeshPiece {
+    shape: SharedShape,
+    view: (Pose, SharedShape),
+}
+
+/// The collider of a triangle mesh (rapier units, part frame): vertices at the same position are
+/// welded; the mesh falls into shells (connected by shared vertices); each shell whose convex hull
+/// lies within [`HULL_TOLERANCE_M`] of its surface is that hull (one convex piece: the common case
+/// of a box, a prism, a meshed primitive), any other shell is decomposed by parry's VHACD into at
+/// most [`MAX_PIECES_PER_SHELL`] exact convex hulls of the shell's own triangles (pins and leads
+/// come out as pieces of their own: see the tests). Flat shells (no volume) are dropped.
+///
+/// Simplification: shells are solids of their own; a shell inside another (a cavity) is filled.
+fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> Vec<MeshPiece> {
+    let mut pieces = Vec::new();
+    for (sv, st) in shells(verts, tris) {
+        let Some(hull) = SharedShape::convex_hull(&sv) else {
+            continue;
+        };
+        if hull_distance(&sv, &st) <= super::sim(HULL_TOLERANCE_M) {
+            pieces.push(mesh_piece(hull));
+            continue;
+        }
+        let params = VHACDParameters {
+            resolution: VHACD_RESOLUTION,
+            max_convex_hulls: MAX_PIECES_PER_SHELL,
+            ..VHACDParameters::default()
+        };
+        let decomposed: Vec<SharedShape> = VHACD::decompose(&params, &sv, &st, true)
+            .compute_exact_convex_hulls(&sv, &st)
+            .into_iter()
+            .filter_map(|(v, _)| SharedShape::convex_hull(&v))
+            .collect();
+        if decomposed.is_empty() {
+            pieces.push(mesh_piece(hull));
+        } else {
+            pieces.extend(decomposed.into_iter().map(mesh_piece));
+        }
+    }
+    pieces
+}
+
+/// A convex piece with its view for rays: an axis-aligned box (8 vertices, each on a corner of
+/// its bounding box) as a cuboid, whose ray test is analytic.
+fn mesh_piece(shape: SharedShape) -> MeshPiece {
+    let mut pts = shape
+        .as_convex_polyhedron()
+        .map(|c| c.points().to_vec())
+        .unwrap_or_default();
+    let shape = if pts.len() > MAX_PIECE_VERTICES {
+        pts = decimate(&pts);
+        SharedShape::convex_hull(&pts).unwrap_or(shape)
+    } else {
+        shape
+    };
+    let (lo, hi) = pts
+        .iter()
+        .fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(lo, hi), v| {
+            (lo.min(*v), hi.max(*v))
+        });
+    let eps = 1e-4 * (hi - lo).max_element().max(1.0);
+    let on_corner = |v: &Vector| (0..3).all(|a| (v[a] - lo[a]).abs() < eps || (v[a] - hi[a]).abs() < eps);
+    let view = if pts.len() == 8 && pts.iter().all(on_corner) {
+        let he = (hi - lo) * 0.5;
+        (
+            Pose::from_translation((lo + hi) * 0.5),
+            SharedShape::cuboid(he.x, he.y, he.z),
+        )
+    } else {
+        (Pose::IDENTITY, shape.clone())
+    };
+    MeshPiece { shape, view }
+}
+
+/// A convex point set's hull simplified to at most [`MAX_PIECE_VERTICES`] vertices: one at a time,
+/// the vertex whose removal moves the hull least (its distance to the hull of the others) is
+/// dropped; only the neighbours of a dropped vertex are re-costed. Greedy, not optimal: a
+/// 64-sided can of 7 mm radius keeps 32 vertices within 0.21 mm of its own (an even 16-gon:
+/// 0.13 mm). A set whose hull cannot be built is returned as it is.
+fn decimate(points: &[Vector]) -> Vec<Vector> {
+    use rapier3d::parry::query::PointQuery;
+    use rapier3d::parry::transformation::try_convex_hull;
+    let Ok((hv, _)) = try_convex_hull(points) else {
+        return points.to_vec();
+    };
+    let mut alive = vec![true; hv.len()];
+    let removal_cost = |alive: &[bool], i: usize| -> f32 {
+        let others: Vec<Vector> = (0..hv.len()).filter(|&j| j != i && alive[j]).map(|j| hv[j]).collect();
+        rapier3d::parry::shape::ConvexPolyhedron::from_convex_hull(&others)
+            .map_or(f32::INFINITY, |h| h.distance_to_local_point(hv[i], true))
+    };
+    // Each live vertex's neighbours on the hull of the live vertices.
+    let neighbours = |alive: &[bool]| -> Option<Vec<Vec<usize>>> {
+        let ids: Vec<usize> = (0..hv.len()).filter(|&j| alive[j]).collect();
+        let pts: Vec<Vector> = ids.iter().map(|&j| hv[j]).collect();
+        let (kept, tris) = try_convex_hull(&pts).ok()?;
+        let back: Vec<usize> = kept
+            .iter()
+            .map(|p| ids.iter().copied().find(|&j| hv[j] == *p))
+            .collect::<Option<_>>()?;
+        let mut n = vec![Vec::new(); hv.len()];
+        for t in tris {
+            for k in 0..3 {
+                let (a, b) = (back[t[k] as usize], back[t[(k + 1) % 3] as usize]);
+                n[a].push(b);
+                n[b].push(a);
+            }
+        }
+        Some(n)
+    };
+    let mut cost: Vec<f32> = (0..hv.len()).map(|i| removal_cost(&alive, i)).collect();
+    let mut count = hv.len();
+    while count > MAX_PIECE_VERTICES {
+        let Some(adjacent) = neighbours(&alive) else {
+            break;
+        };
+        let Some(u) = (0..hv.len())
+            .filter(|&i| alive[i])
+            .min_by(|&a, &b| cost[a].total_cmp(&cost[b]))
+        else {
+            break;
+        };
+        if !cost[u].is_finite() {
+            break;
+        }
+        alive[u] = false;
+        count -= 1;
+        for &w in &adjacent[u] {
+            if alive[w] {
+                cost[w] = removal_cost(&alive, w);
+            }
+        }
+    }
+    (0..hv.len()).filter(|&i| alive[i]).map(|i| hv[i]).collect()
+}
+
+/// The mesh's shells: vertices welded by exact position, triangles grouped by shared vertices;
+/// each shell with its own vertices and indices. Degenerate triangles (repeated vertex) are dropped.
+fn shells(verts: &[Vector], tris: &[[u32; 3]]) -> Vec<(Vec<Vector>, Vec<[u32; 3]>)> {
+    let mut weld = std::collections::HashMap::new();
+    let id: Vec<usize> = verts
+        .iter()
+        .map(|v| {
+            let n = weld.len();
+            *weld.entry(v.to_array().map(f32::to_bits)).or_insert(n)
+        })
+        .collect();
+    let tris: Vec<[usize; 3]> = tris
+        .iter()
+        .map(|t| t.map(|i| id[i as usize]))
+        .filter(|t| t[0] != t[1] && t[1] != t[2] && t[0] != t[2])
+        .collect();
+    let mut parent: Vec<usize> = (0..weld.len()).collect();
+    fn root(p: &mut [usize], mut i: usize) -> usize {
+        while p[i] != i {
+            p[i] = p[p[i]];
+            i = p[i];
+        }
+        i
+    }
+    for t in &tris {
+        let a = root(&mut parent, t[0]);
+        for &b in &t[1..] {
+            let b = root(&mut parent, b);
+            parent[b] = a;
+        }
+    }
+    let mut pos = vec![Vector::ZERO; weld.len()];
+    for (i, v) in verts.iter().enumerate() {
+        pos[id[i]] = *v;
+    }
+    // Shells in order of their first triangle; vertices renumbered within each (a welded vertex
+    // belongs to one shell).
+    let mut shell_of_root = std::collections::HashMap::new();
+    let mut local = vec![u32::MAX; pos.len()];
+    let mut out: Vec<(Vec<Vector>, Vec<[u32; 3]>)> = Vec::new();
+    for t in &tris {
+        let r = root(&mut parent, t[0]);
+        let k = *shell_of_root.entry(r).or_insert_with(|| {
+            out.push((Vec::new(), Vec::new()));
+            out.len() - 1
+        });
+        let (sv, st) = &mut out[k];
+        let tri = t.map(|i| {
+            if local[i] == u32::MAX {
+                local[i] = sv.len() as u32;
+                sv.push(pos[i]);
+            }
+            local[i]
+        });
+        st.push(tri);
+    }
+    out
+}
+
+/// How far the convex hull of a shell's vertices strays from the shell's surface (rapier units):
+/// the largest distance to the surface of points sampled on the hull's triangles.
+fn hull_distance(verts: &[Vector], tris: &[[u32; 3]]) -> f32 {
+    use rapier3d::parry::query::PointQuery;
+    let Ok(surface) = rapier3d::parry::shape::TriMesh::new(verts.to_vec(), tris.to_vec()) else {
+        return f32::INFINITY;
+    };
+    let Ok((hv, ht)) = rapier3d::parry::transformation::try_convex_hull(verts) else {
+        return f32::INFINITY;
+    };
+    let spacing = super::sim(HULL_SAMPLE_SPACING_M);
+    let mut worst = 0.0f32;
+    for t in &ht {
+        let [a, b, c] = t.map(|i| hv[i as usize]);
+        let longest = (b - a).length().max((c - b).length()).max((a - c).length());
+        let n = ((longest / spacing).ceil() as usize).clamp(1, 16);
+        for i in 0..=n {
+            for j in 0..=(n - i) {
+                let (u, v) = (i as f32 / n as f32, j as f32 / n as f32);
+                let p = a + (b - a) * u + (c - a) * v;
+                let d = (surface.project_local_point(p, false).point - p).length();
+                worst = worst.max(d);
+            }
+        }
+    }
+    worst
+}
+
+/// A convex polyhedron (rapier units) as a polytope for the overlap check (m): its vertices, its
+/// face normals and edge directions, each direction once up to sign.
+fn polytope_of(shape: &SharedShape) -> super::overlap::Polytope {
+    let push_dir = |dirs: &mut Vec<Vector3<f64>>, d: Vector| {
+        let d = Vector3::new(d.x as f64, d.y as f64, d.z as f64);
+        if let Some(d) = d.try_normalize(1e-12)
+            && !dirs.iter().any(|e| e.dot(&d).abs() > 1.0 - 1e-6)
+        {
+            dirs.push(d);
+        }
+    };
+    let mut p = super::overlap::Polytope {
+        vertices: Vec::new(),
+        normals: Vec::new(),
+        edges: Vec::new(),
+    };
+    if let Some(c) = shape.as_convex_polyhedron() {
+        p.vertices = c.points().iter().map(|v| super::point_from_sim(*v).into()).collect();
+        // The faces' own edges (parry keeps the diagonals of merged coplanar triangles in
+        // `edges()`, marked deleted; the faces list only the real ones).
+        for f in c.faces() {
+            push_dir(&mut p.normals, f.normal);
+            let first = f.first_vertex_or_edge as usize;
+            for &e in &c.edges_adj_to_face()[first..first + f.num_vertices_or_edges as usize] {
+                push_dir(&mut p.edges, c.edges()[e as usize].dir);
+            }
+        }
+    }
+    p
+}
+
 impl PartShape {
     /// Builds the shape of a workpiece. Mesh paths resolve against the workpiece file's folder.
     pub fn build(workpiece: &Workpiece, source: &Source) -> Result<Self, ShapeError> {
@@ -180,35 +504,86 @@ impl PartShape {
                     Source::Embedded => return Err(ShapeError::EmbeddedMesh(workpiece.name.clone())),
                 };
                 let path = dir.join(&file);
-                let (mut verts, tris) = load_mesh(&path, workpiece.shape.mesh_scale.unwrap_or(1.0))?;
-                // The part frame's origin is the bounding-box centre.
-                let (lo, hi) = verts
+                let (verts, tris) = load_mesh(&path, workpiece.shape.mesh_scale.unwrap_or(1.0))?;
+                let verts = verts
                     .iter()
-                    .fold((Vector::splat(f32::MAX), Vector::splat(f32::MIN)), |(lo, hi), v| {
-                        (lo.min(*v), hi.max(*v))
-                    });
-                let centre = (lo + hi) * 0.5;
-                verts.iter_mut().for_each(|v| *v -= centre);
-                let extent = hi - lo;
-                let want = Vector::new(
-                    workpiece.size_m[0] as f32,
-                    workpiece.size_m[1] as f32,
-                    workpiece.size_m[2] as f32,
-                );
-                if (extent - want).abs().max_element() > 1e-3 {
-                    return Err(ShapeError::Mesh {
+                    .map(|v| nalgebra::Point3::new(v.x as f64, v.y as f64, v.z as f64))
+                    .collect();
+                return Self::from_mesh(
+                    workpiece,
+                    &Mesh {
+                        vertices_m: verts,
+                        triangles: tris,
+                    },
+                )
+                .map_err(|e| match e {
+                    ShapeError::Mesh { reason, .. } => ShapeError::Mesh {
                         file: path.display().to_string(),
-                        reason: format!(
-                            "its bounding box {:.4} x {:.4} x {:.4} m differs from the workpiece's size_m {:?} by more than 1 mm",
-                            extent.x, extent.y, extent.z, workpiece.size_m
-                        ),
-                    });
-                }
-                let sim_verts: Vec<Vector> = verts.iter().map(|v| *v * super::sim(1.0)).collect();
-                let decomposed = SharedShape::convex_decomposition(&sim_verts, &tris);
-                (decomposed.clone(), decomposed)
+                        reason,
+                    },
+                    e => e,
+                });
             }
         };
+        let pieces = super::overlap::workpiece_pieces(workpiece);
+        let convex_pieces = shape.as_compound().map_or(1, |c| c.shapes().len());
+        Ok(Self::assemble(workpiece, shape, view_shape, pieces, convex_pieces))
+    }
+
+    /// The shape of a mesh workpiece from its surface (m, any frame: the part frame's origin is
+    /// put at the mesh's bounding-box centre), whose bounding box must match `size_m` within 1 mm.
+    /// The collider is described in the module header.
+    pub fn from_mesh(workpiece: &Workpiece, mesh: &Mesh) -> Result<Self, ShapeError> {
+        let sim_verts = centred_sim_vertices(workpiece, mesh)?;
+        let pieces = mesh_collider(&sim_verts, &mesh.triangles);
+        if pieces.is_empty() {
+            return Err(ShapeError::Degenerate(workpiece.name.clone()));
+        }
+        if pieces.len() > MAX_PIECES {
+            return Err(ShapeError::Mesh {
+                file: workpiece.name.clone(),
+                reason: format!(
+                    "its collider needs {} convex pieces, more than {MAX_PIECES} (too many separate bodies?)",
+                    pieces.len()
+                ),
+            });
+        }
+        let n = pieces.len();
+        let polytopes = pieces.iter().map(|p| polytope_of(&p.shape)).collect();
+        // A single box centred on the origin is the bare polyhedron (as a box workpiece's);
+        // anything else a compound, as a compound workpiece's primitives.
+        let single_box =
+            n == 1 && pieces[0].view.1.as_cuboid().is_some() && pieces[0].view.0.translation.length() < 1e-6;
+        let (shape, view_shape) = if single_box {
+            (pieces[0].shape.clone(), pieces[0].view.1.clone())
+        } else {
+            (
+                SharedShape::compound(pieces.iter().map(|p| (Pose::IDENTITY, p.shape.clone())).collect()),
+                SharedShape::compound(pieces.iter().map(|p| p.view.clone()).collect()),
+            )
+        };
+        Ok(Self::assemble(workpiece, shape, view_shape, Some(polytopes), n))
+    }
+
+    /// The collider mesh workpieces had before issue 29, kept as the physics benchmark's
+    /// baseline: parry's VHACD of the whole raw mesh with its default parameters (up to 1024
+    /// pieces), the same pieces for rays, no pieces for the overlap check.
+    pub fn from_mesh_raw_vhacd(workpiece: &Workpiece, mesh: &Mesh) -> Result<Self, ShapeError> {
+        let sim_verts = centred_sim_vertices(workpiece, mesh)?;
+        let decomposed = SharedShape::convex_decomposition(&sim_verts, &mesh.triangles);
+        let n = decomposed.as_compound().map_or(1, |c| c.shapes().len());
+        Ok(Self::assemble(workpiece, decomposed.clone(), decomposed, None, n))
+    }
+
+    /// Mass properties and bounds of a built collider.
+    fn assemble(
+        workpiece: &Workpiece,
+        shape: SharedShape,
+        view_shape: SharedShape,
+        pieces: Option<Vec<super::overlap::Polytope>>,
+        convex_pieces: usize,
+    ) -> Self {
+        let he = Vector3::from(workpiece.size_m) / 2.0;
         // Mass properties: the shape's, at the density that gives the workpiece's mass.
         let unit = shape.mass_properties(1.0);
         let volume = unit.mass() as f64;
@@ -227,7 +602,7 @@ impl PartShape {
         ));
         let aabb = shape.compute_local_aabb();
         let corner = aabb.mins.abs().max(aabb.maxs.abs());
-        Ok(PartShape {
+        PartShape {
             shape,
             view_shape,
             mass_kg: workpiece.mass_kg,
@@ -240,10 +615,11 @@ impl PartShape {
                 aabb.half_extents().z as f64 / super::SIM_UNITS_PER_M,
             )
             .sup(&he),
-            pieces: super::overlap::workpiece_pieces(workpiece),
+            pieces,
+            convex_pieces,
             friction: workpiece.friction,
             restitution: workpiece.restitution,
-        })
+        }
     }
 }
 
@@ -324,6 +700,291 @@ mod tests {
         // The notch is empty: its centre is outside the decomposed shape.
         assert!(!s.shape.contains_point(&Pose::IDENTITY, Vector::new(5.0, 5.0, 0.0)));
         assert!(s.shape.contains_point(&Pose::IDENTITY, Vector::new(-5.0, -5.0, 0.0)));
+    }
+
+    /// A union of axis-aligned boxes (mm: `[lo, hi]`) as one welded, closed shell: the boundary
+    /// faces of the grid cells the boxes fill, on the grid of every box's bounds.
+    fn union_of_boxes_mm(boxes: &[([f64; 3], [f64; 3])]) -> Mesh {
+        let axis = |a: usize| {
+            let mut c: Vec<f64> = boxes.iter().flat_map(|(lo, hi)| [lo[a], hi[a]]).collect();
+            c.sort_by(f64::total_cmp);
+            c.dedup();
+            c
+        };
+        let g = [axis(0), axis(1), axis(2)];
+        let n = [g[0].len() - 1, g[1].len() - 1, g[2].len() - 1];
+        let filled = |c: [i64; 3]| {
+            (0..3).all(|a| c[a] >= 0 && (c[a] as usize) < n[a]) && {
+                let m = [0, 1, 2].map(|a| (g[a][c[a] as usize] + g[a][c[a] as usize + 1]) / 2.0);
+                boxes
+                    .iter()
+                    .any(|(lo, hi)| (0..3).all(|a| lo[a] < m[a] && m[a] < hi[a]))
+            }
+        };
+        let mut mesh = Mesh::default();
+        let mut index = std::collections::HashMap::new();
+        let mut vertex = |p: [usize; 3], mesh: &mut Mesh| {
+            *index.entry(p).or_insert_with(|| {
+                mesh.vertices_m
+                    .push(nalgebra::Point3::new(g[0][p[0]], g[1][p[1]], g[2][p[2]]) * 1e-3);
+                mesh.vertices_m.len() as u32 - 1
+            })
+        };
+        // Corner bits as in `part::tessellate::box_mesh`: x bit 2, y bit 1, z bit 0.
+        let faces: [([i64; 3], [usize; 4]); 6] = [
+            ([-1, 0, 0], [0, 1, 3, 2]),
+            ([1, 0, 0], [4, 6, 7, 5]),
+            ([0, -1, 0], [0, 4, 5, 1]),
+            ([0, 1, 0], [2, 3, 7, 6]),
+            ([0, 0, -1], [0, 2, 6, 4]),
+            ([0, 0, 1], [1, 5, 7, 3]),
+        ];
+        for i in 0..n[0] {
+            for j in 0..n[1] {
+                for k in 0..n[2] {
+                    let c = [i as i64, j as i64, k as i64];
+                    if !filled(c) {
+                        continue;
+                    }
+                    for (d, quad) in faces {
+                        if filled([c[0] + d[0], c[1] + d[1], c[2] + d[2]]) {
+                            continue;
+                        }
+                        let q = quad.map(|b| vertex([i + (b >> 2 & 1), j + (b >> 1 & 1), k + (b & 1)], &mut mesh));
+                        mesh.triangles.push([q[0], q[1], q[2]]);
+                        mesh.triangles.push([q[0], q[2], q[3]]);
+                    }
+                }
+            }
+        }
+        mesh
+    }
+
+    fn workpiece_of_mesh(name: &str, mesh: &Mesh) -> Workpiece {
+        let (lo, hi) = mesh.bounds_m().unwrap();
+        let mut w = LoadedWorkpiece::resolve("B").unwrap().workpiece;
+        w.name = name.into();
+        w.size_m = (hi - lo).into();
+        w.shape = crate::config::ShapeConfig {
+            kind: ShapeKind::Mesh,
+            parts: Vec::new(),
+            mesh_file: Some(format!("{name}.stl")),
+            mesh_scale: Some(1.0),
+        };
+        w
+    }
+
+    #[test]
+    fn a_relay_welded_with_its_pins_keeps_its_pins() {
+        // A 20 x 30 x 7 mm body with five 0.5 mm square pins, 3 mm long, out of its bottom face.
+        let pins = [(-6.0, -11.0), (6.0, -11.0), (-6.0, 11.0), (6.0, 11.0), (0.0, -4.0)];
+        let mut boxes = vec![([-10.0, -15.0, -2.0], [10.0, 15.0, 5.0])];
+        boxes.extend(
+            pins.iter()
+                .map(|&(x, y)| ([x - 0.25, y - 0.25, -5.0], [x + 0.25, y + 0.25, -2.0])),
+        );
+        let mesh = union_of_boxes_mm(&boxes);
+        assert_eq!(
+            shells(
+                &mesh
+                    .vertices_m
+                    .iter()
+                    .map(|v| super::super::sim_point(&v.coords))
+                    .collect::<Vec<_>>(),
+                &mesh.triangles
+            )
+            .len(),
+            1
+        );
+        let s = PartShape::from_mesh(&workpiece_of_mesh("relay", &mesh), &mesh).unwrap();
+        assert!(
+            (2..=MAX_PIECES_PER_SHELL as usize).contains(&s.convex_pieces),
+            "{} pieces",
+            s.convex_pieces
+        );
+        // Every pin's tip is solid; the space between the pins under the body is not.
+        let at = |x: f64, y: f64, z: f64| Vector::new(x as f32, y as f32, z as f32);
+        for &(x, y) in &pins {
+            assert!(
+                s.shape.contains_point(&Pose::IDENTITY, at(x, y, -4.7)),
+                "pin at ({x}, {y})"
+            );
+            assert!(
+                s.view_shape.contains_point(&Pose::IDENTITY, at(x, y, -4.7)),
+                "pin at ({x}, {y}) for rays"
+            );
+        }
+        for (x, y) in [(0.0, 4.0), (-3.0, -11.0), (3.0, 0.0), (0.0, -8.0)] {
+            assert!(
+                !s.shape.contains_point(&Pose::IDENTITY, at(x, y, -4.0)),
+                "between the pins at ({x}, {y})"
+            );
+        }
+        // Negative control: the relay's convex hull (what a loose tolerance would give) fills
+        // the space between the pins.
+        let hull = SharedShape::convex_hull(
+            &mesh
+                .vertices_m
+                .iter()
+                .map(|v| super::super::sim_point(&v.coords))
+                .collect::<Vec<_>>(),
+        )
+        .unwrap();
+        assert!(hull.contains_point(&Pose::IDENTITY, at(0.0, 4.0, -4.0)));
+    }
+
+    #[test]
+    fn a_convex_mesh_is_its_hull_and_the_meshed_builtins_get_their_primitives_pieces() {
+        use crate::part::tessellate;
+        // A hex prism, 14 mm across corners, 6 mm thick: one convex piece.
+        let hex = tessellate::prism_mesh(Vector3::zeros(), 0.007, 0.003, crate::config::Axis::Z, 6);
+        let s = PartShape::from_mesh(&workpiece_of_mesh("hex", &hex), &hex).unwrap();
+        assert_eq!(s.convex_pieces, 1);
+        let piece = &s
+            .shape
+            .as_compound()
+            .expect("a compound, as a compound workpiece's")
+            .shapes()[0]
+            .1;
+        assert!(piece.as_convex_polyhedron().is_some_and(|c| c.points().len() == 12));
+        for wp in LoadedWorkpiece::all_embedded().unwrap() {
+            let w = &wp.workpiece;
+            let prim = PartShape::build(w, &wp.source).unwrap();
+            let mesh = tessellate::workpiece_mesh(w).unwrap();
+            let meshed = PartShape::from_mesh(w, &mesh).unwrap();
+            assert_eq!(meshed.convex_pieces, prim.convex_pieces, "{}", w.name);
+            assert!((meshed.com_m - prim.com_m).amax() < 1e-7, "{}", w.name);
+            let rel = (meshed.inertia_com_kg_m2 - prim.inertia_com_kg_m2).amax() / prim.inertia_com_kg_m2.amax();
+            assert!(rel < 1e-4, "{}: inertia differs by {rel}", w.name);
+            assert!(
+                (meshed.half_extents_m - prim.half_extents_m).amax() < 1e-7,
+                "{}",
+                w.name
+            );
+            // The same convex pieces for the overlap check.
+            let (a, b) = (prim.pieces.unwrap(), meshed.pieces.unwrap());
+            assert_eq!(a.len(), b.len(), "{}", w.name);
+            // Each direction set covers the other up to sign (the primitives' list some twice).
+            let covers = |x: &[Vector3<f64>], y: &[Vector3<f64>]| {
+                x.iter().all(|d| y.iter().any(|e| d.dot(e).abs() > 1.0 - 1e-6))
+            };
+            for (pa, pb) in a.iter().zip(&b) {
+                assert_eq!(pa.vertices.len(), pb.vertices.len(), "{}", w.name);
+                for v in &pa.vertices {
+                    assert!(pb.vertices.iter().any(|u| (u - v).norm() < 1e-7), "{}: {v}", w.name);
+                }
+                assert!(
+                    covers(&pa.normals, &pb.normals) && covers(&pb.normals, &pa.normals),
+                    "{}",
+                    w.name
+                );
+                assert!(
+                    covers(&pa.edges, &pb.edges) && covers(&pb.edges, &pa.edges),
+                    "{}",
+                    w.name
+                );
+            }
+            // Rays see the same: boxes as cuboids.
+            let cuboids = |v: &SharedShape| match v.as_compound() {
+                Some(c) => c.shapes().iter().filter(|(_, s)| s.as_cuboid().is_some()).count(),
+                None => usize::from(v.as_cuboid().is_some()),
+            };
+            assert_eq!(cuboids(&meshed.view_shape), cuboids(&prim.view_shape), "{}", w.name);
+        }
+    }
+
+    #[test]
+    fn a_meshed_prism_overlaps_as_the_primitive_prism_does() {
+        use crate::physics::overlap::{Polytope, depth};
+        use rand::{RngExt, SeedableRng};
+        let c = Vector3::zeros();
+        let prism = Polytope::prism(c, 0.007, 0.003, crate::config::Axis::Z);
+        let mesh = crate::part::tessellate::prism_mesh(c, 0.007, 0.003, crate::config::Axis::Z, 16);
+        let s = PartShape::from_mesh(&workpiece_of_mesh("can", &mesh), &mesh).unwrap();
+        let ours = &s.pieces.as_ref().unwrap()[0];
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
+        let mut worst = 0.0f64;
+        for _ in 0..2000 {
+            let t = Vector3::new(
+                rng.random_range(-0.014..0.014),
+                rng.random_range(-0.014..0.014),
+                rng.random_range(-0.008..0.008),
+            );
+            let r = Vector3::new(
+                rng.random_range(-3.2..3.2),
+                rng.random_range(-3.2..3.2),
+                rng.random_range(-3.2..3.2),
+            );
+            let (a, b) = (nalgebra::Isometry3::identity(), nalgebra::Isometry3::new(t, r));
+            worst = worst.max((depth(&a, &prism, &b, &prism) - depth(&a, ours, &b, ours)).abs());
+        }
+        assert!(worst < 1e-6, "depths differ by {worst}");
+    }
+
+    #[test]
+    fn a_finely_tessellated_cylinder_is_simplified_to_the_builtin_prisms_vertex_count() {
+        use rapier3d::parry::query::PointQuery;
+        // A CAD can: 64 sides, 7 mm radius, 6 mm tall.
+        let mesh = crate::part::tessellate::prism_mesh(Vector3::zeros(), 0.007, 0.003, crate::config::Axis::Z, 64);
+        let pts: Vec<Vector> = mesh
+            .vertices_m
+            .iter()
+            .map(|v| super::super::sim_point(&v.coords))
+            .collect();
+        // Negative control: its hull has all 128 vertices.
+        let full = SharedShape::convex_hull(&pts).unwrap();
+        assert_eq!(full.as_convex_polyhedron().unwrap().points().len(), 128);
+        let s = PartShape::from_mesh(&workpiece_of_mesh("can64", &mesh), &mesh).unwrap();
+        let piece = &s.shape.as_compound().unwrap().shapes()[0].1;
+        let kept = piece.as_convex_polyhedron().unwrap();
+        assert!(
+            kept.points().len() <= MAX_PIECE_VERTICES,
+            "{} vertices",
+            kept.points().len()
+        );
+        // Every original vertex lies within 0.25 mm of the simplified piece (an even 16-gon of
+        // this radius lies 0.13 mm inside the circle; the greedy choice is a little uneven).
+        let worst = pts
+            .iter()
+            .map(|p| kept.distance_to_local_point(*p, true))
+            .fold(0.0, f32::max);
+        assert!(worst < 0.25, "a vertex is {worst} mm off");
+        // Negative control: an octagonal piece (every eighth ring vertex) fails the bound.
+        let coarse: Vec<Vector> = pts
+            .iter()
+            .enumerate()
+            .filter(|(i, _)| i % 8 == 0)
+            .map(|(_, p)| *p)
+            .collect();
+        let coarse = SharedShape::convex_hull(&coarse).unwrap();
+        let coarse = coarse.as_convex_polyhedron().unwrap();
+        let coarse_worst = pts
+            .iter()
+            .map(|p| coarse.distance_to_local_point(*p, true))
+            .fold(0.0, f32::max);
+        assert!(coarse_worst >= 0.25, "{coarse_worst}");
+    }
+
+    #[test]
+    fn a_mesh_of_more_bodies_than_pieces_allowed_is_refused() {
+        use crate::part::tessellate::{append, box_mesh};
+        let cubes = |n: usize| {
+            let mut m = Mesh::default();
+            for i in 0..n {
+                let c = Vector3::new((i % 8) as f64 * 0.003, (i / 8) as f64 * 0.003, 0.0);
+                append(&mut m, &box_mesh(c, Vector3::repeat(0.001)));
+            }
+            m
+        };
+        let ok = cubes(MAX_PIECES);
+        let s = PartShape::from_mesh(&workpiece_of_mesh("cubes", &ok), &ok).unwrap();
+        assert_eq!(s.convex_pieces, MAX_PIECES);
+        let too_many = cubes(MAX_PIECES + 1);
+        let e = PartShape::from_mesh(&workpiece_of_mesh("cubes", &too_many), &too_many)
+            .err()
+            .expect("refused")
+            .to_string();
+        assert!(e.contains("65 convex pieces, more than 64"), "{e}");
     }
 
     #[test]

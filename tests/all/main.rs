@@ -6,6 +6,7 @@ mod cli_robot;
 mod cli_sense;
 mod fuzz;
 mod golden;
+mod mesh_export;
 mod physics;
 mod planning;
 mod recording;
