@@ -1,4 +1,6 @@
-//! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs.
+//! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs. A mesh workpiece's
+//! mesh is read and repaired (or refused naming the defect), its part model derived, and a
+//! warning printed when none of its faces takes the cell's cup.
 
 use std::path::{Path, PathBuf};
 
@@ -61,6 +63,12 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 let wp = LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
+                    // A mesh part: its model derives, and a warning when no face takes the cup.
+                    if let Some(m) = super::part::model_of(&wp, &s.scene)?
+                        && let Some(why) = super::part::no_cup_face(&m)
+                    {
+                        eprintln!("warning: {label}: {why}");
+                    }
                 }
                 Ok(format!("workpiece {:?}: {}", wp.workpiece.name, wp.workpiece.kind))
             }

@@ -9,6 +9,7 @@
 pub mod batch;
 pub mod bench;
 pub mod check;
+pub mod part;
 pub mod pile;
 pub mod robot;
 pub mod run;
