@@ -18,6 +18,7 @@ use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{Checker, ConfigError, MAX_PLACE_SLOTS, Scene, SlotPattern};
+pub use crate::part::primitive::{Axis, PartRole, Piece};
 
 /// How far a given `size_m` of a mesh workpiece may differ from the mesh's bounding box (m).
 pub const MESH_SIZE_TOL_M: f64 = 0.0001;
@@ -146,39 +147,6 @@ pub enum Primitive {
     Cylinder,
 }
 
-/// Roles of compound parts: the body carries the suction faces; leads do not.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum PartRole {
-    /// The part's body (suction faces).
-    Body,
-    /// A lead or pin.
-    Lead,
-}
-
-/// Axes of the part frame.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum Axis {
-    /// Part x.
-    X,
-    /// Part y.
-    Y,
-    /// Part z.
-    Z,
-}
-
-impl Axis {
-    /// The unit vector of this axis in the part frame.
-    pub fn unit(self) -> Vector3<f64> {
-        match self {
-            Axis::X => Vector3::x(),
-            Axis::Y => Vector3::y(),
-            Axis::Z => Vector3::z(),
-        }
-    }
-}
-
 /// One primitive of a compound shape.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
@@ -215,50 +183,6 @@ impl ShapePart {
                     Axis::Y => [r, h, r],
                     Axis::Z => [r, r, h],
                 })
-            }
-        }
-    }
-}
-
-/// A workpiece primitive resolved to its geometry, in the part frame [m].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Piece {
-    /// A box.
-    Box {
-        /// Centre.
-        center_m: Vector3<f64>,
-        /// Half extents.
-        half_m: Vector3<f64>,
-    },
-    /// A cylinder.
-    Cylinder {
-        /// Centre.
-        center_m: Vector3<f64>,
-        /// Radius.
-        radius_m: f64,
-        /// Half length along `axis`.
-        half_length_m: f64,
-        /// Axis.
-        axis: Axis,
-    },
-}
-
-impl Piece {
-    /// How far the piece reaches along the part-frame unit direction `n` from the part origin:
-    /// the largest `p . n` over its points [m].
-    pub fn support_m(&self, n: &Vector3<f64>) -> f64 {
-        match self {
-            Piece::Box { center_m, half_m } => {
-                center_m.dot(n) + half_m.iter().zip(n.iter()).map(|(h, v)| h * v.abs()).sum::<f64>()
-            }
-            Piece::Cylinder {
-                center_m,
-                radius_m,
-                half_length_m,
-                axis,
-            } => {
-                let a = axis.unit().dot(n).abs();
-                center_m.dot(n) + half_length_m * a + radius_m * (1.0 - a * a).max(0.0).sqrt()
             }
         }
     }

@@ -6,7 +6,8 @@
 //! ([`model::PartModel`]: mass properties, planar faces with their cup-fit regions, stable poses,
 //! symmetry). The data flow: [`import`] (and [`vrml`]) read a CAD file into a raw triangle
 //! soup, [`repair`] makes it a closed solid in metres (or refuses it), [`model`] derives the
-//! rest; [`svg`] draws it. [`load_mesh`] is the one entry from a file to a repaired mesh.
+//! rest; [`svg`] draws it. [`primitive`] holds the workpiece file's primitives and the
+//! flat body faces that follow from them (what grasp and recognition fit and match). [`load_mesh`] is the one entry from a file to a repaired mesh.
 //!
 //! This module depends on nothing else in the crate (the workpiece file's keys are read by
 //! `config`, which calls [`load_mesh`]).
@@ -20,6 +21,7 @@ pub mod mass;
 pub mod mesh;
 pub mod model;
 pub mod poses;
+pub mod primitive;
 pub mod repair;
 pub mod svg;
 pub mod symmetry;
