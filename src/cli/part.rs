@@ -213,11 +213,18 @@ pub fn part(a: &PartArgs) -> Result<()> {
         c.y * 1e3,
         c.z * 1e3
     );
+    let order = |n: u32| {
+        if n >= binpick::part::symmetry::MAX_ORDER {
+            "round".to_string()
+        } else {
+            n.to_string()
+        }
+    };
     println!(
-        "symmetry: orders {} {} {} about x, y, z ({})",
-        m.symmetry.orders[0],
-        m.symmetry.orders[1],
-        m.symmetry.orders[2],
+        "symmetry: orders {} {} {} about x, y, z through the centre of mass ({})",
+        order(m.symmetry.orders[0]),
+        order(m.symmetry.orders[1]),
+        order(m.symmetry.orders[2]),
         if m.symmetry_detected {
             "detected"
         } else {

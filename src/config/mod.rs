@@ -374,6 +374,25 @@ impl LoadedScene {
     }
 }
 
+impl Workpiece {
+    /// A mesh workpiece's mesh, read from the file its `shape.mesh_file` names (relative to the
+    /// workpiece file's folder) in its `shape.units`, and repaired into a closed solid in metres
+    /// about its bounding box's centre (the part frame), with what the repair did; `None` for
+    /// primitives and for embedded workpieces (which name no file on disk). The one loader every
+    /// stage uses ([`crate::part::load_mesh`] behind it).
+    pub fn repaired_mesh(
+        &self,
+        source: &Source,
+    ) -> Result<Option<(crate::part::mesh::Mesh, crate::part::repair::RepairReport)>, crate::part::MeshError> {
+        let (ShapeKind::Mesh, Source::File(p), Some(f)) = (self.shape.kind, source, &self.shape.mesh_file) else {
+            return Ok(None);
+        };
+        let path = p.parent().unwrap_or(Path::new(".")).join(f);
+        let (scale, units) = self.shape.mesh_units();
+        crate::part::load_mesh(&path, scale, &units).map(Some)
+    }
+}
+
 /// A workpiece loaded and validated.
 #[derive(Debug, Clone)]
 pub struct LoadedWorkpiece {
@@ -442,8 +461,10 @@ impl LoadedWorkpiece {
                 ));
             }
             let (scale, units) = workpiece.shape.mesh_units();
-            let (m, report) = crate::part::load_mesh(&path, scale, &units)
-                .map_err(|e| ConfigError::one(label, "shape.mesh_file", e.to_string()))?;
+            let (m, report) = workpiece
+                .repaired_mesh(&source)
+                .map_err(|e| ConfigError::one(label, "shape.mesh_file", e.to_string()))?
+                .ok_or_else(|| ConfigError::one(label, "shape.mesh_file", "is required when kind = \"mesh\""))?;
             let derived = m.extent_m();
             if workpiece.size_m != [0.0; 3]
                 && let Some(a) = (0..3).find(|&a| (workpiece.size_m[a] - derived[a]).abs() > MESH_SIZE_TOL_M)

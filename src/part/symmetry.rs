@@ -133,16 +133,34 @@ pub fn detect(mesh: &Mesh, com: &Point3<f64>, tol_m: f64) -> Symmetry {
             Point3::from((a.coords + b.coords + c.coords) / 3.0)
         })
         .collect();
-    let maps = |axis: Vector3<f64>, n: u32| {
-        let r = Rotation3::from_axis_angle(
-            &nalgebra::Unit::new_normalize(axis),
-            2.0 * std::f64::consts::PI / n as f64,
-        );
+    let maps = |axis: Vector3<f64>, angle: f64| {
+        let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle);
         let turn = |p: &Point3<f64>| com + r * (p - com);
         mesh.vertices_m.iter().all(|p| verts.has(&turn(p))) && cents.iter().all(|p| surface.on_surface(&turn(p)))
     };
-    let orders = [Vector3::x(), Vector3::y(), Vector3::z()]
-        .map(|axis| (2..=MAX_ORDER).rev().find(|&n| maps(axis, n)).unwrap_or(1));
+    // A round part first: turns by angles of no regular polygon map every vertex and every
+    // triangle's centroid onto the surface within a looser tolerance (1e-3 of the part's
+    // diagonal), as they do for a finely tessellated round surface (not onto vertices: those of
+    // the turned mesh fall between the original's).
+    let diag = mesh.extent_m().iter().map(|e| e * e).sum::<f64>().sqrt();
+    let round_surface = SurfaceGrid::new(mesh, (1e-3 * diag).max(tol_m));
+    let round = |axis: Vector3<f64>, angle: f64| {
+        let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle);
+        let turn = |p: &Point3<f64>| com + r * (p - com);
+        mesh.vertices_m
+            .iter()
+            .chain(cents.iter())
+            .all(|p| round_surface.on_surface(&turn(p)))
+    };
+    let orders = [Vector3::x(), Vector3::y(), Vector3::z()].map(|axis| {
+        if [1.0, 0.37, 2.3].iter().all(|&a| round(axis, a)) {
+            return MAX_ORDER;
+        }
+        (2..=MAX_ORDER)
+            .rev()
+            .find(|&n| maps(axis, 2.0 * std::f64::consts::PI / n as f64))
+            .unwrap_or(1)
+    });
     Symmetry { orders }
 }
 
@@ -159,5 +177,27 @@ mod tests {
         assert_eq!(detect(&plate, &Point3::origin(), 1e-7).orders, [2, 2, 2]);
         // Negative control: about a point off the centre, nothing maps onto itself.
         assert_eq!(detect(&plate, &Point3::new(0.001, 0.0, 0.0), 1e-7).orders, [2, 1, 1]);
+        // A fine 720-gon prism reads as round about its axis; an octagonal one has order 8.
+        let prism = |n: u32| {
+            let mut m = Mesh::default();
+            for z in [-0.002, 0.002] {
+                for k in 0..n {
+                    let a = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+                    m.vertices_m.push(Point3::new(0.005 * a.cos(), 0.005 * a.sin(), z));
+                }
+            }
+            for k in 0..n {
+                let j = (k + 1) % n;
+                m.triangles.push([k, j, n + j]);
+                m.triangles.push([k, n + j, n + k]);
+                if k > 0 && j > 0 {
+                    m.triangles.push([0, j, k]);
+                    m.triangles.push([n, n + k, n + j]);
+                }
+            }
+            m
+        };
+        assert_eq!(detect(&prism(720), &Point3::origin(), 1e-7).orders[2], MAX_ORDER);
+        assert_eq!(detect(&prism(8), &Point3::origin(), 1e-7).orders[2], 8);
     }
 }
