@@ -395,3 +395,66 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     let c = &top["cup_fit"]["best_centre_mm"];
     assert!(c[0].as_f64().unwrap().hypot(c[1].as_f64().unwrap()) < 0.5, "{c}");
 }
+
+/// A valid mesh just under the triangle cap (a cylinder of 2000 sides in 46 rings, 188,000
+/// triangles) is read, repaired and modelled within the bound: large files are no hang, and the
+/// part reads as round about its axis.
+#[test]
+fn a_mesh_near_the_cap_is_modelled_within_the_bound() {
+    let tmp = tempdir().unwrap();
+    let d = tmp.path();
+    let (n, rings, r, h) = (2000usize, 46usize, 10.0f32, 20.0f32);
+    let p = |k: usize, j: usize| {
+        let a = 2.0 * std::f32::consts::PI * (k % n) as f32 / n as f32;
+        [r * a.cos(), r * a.sin(), h * j as f32 / rings as f32]
+    };
+    let mut tris: Vec<[[f32; 3]; 3]> = Vec::new();
+    for j in 0..rings {
+        for k in 0..n {
+            tris.push([p(k, j), p(k + 1, j), p(k + 1, j + 1)]);
+            tris.push([p(k, j), p(k + 1, j + 1), p(k, j + 1)]);
+        }
+    }
+    for k in 0..n {
+        tris.push([[0.0, 0.0, 0.0], p(k + 1, 0), p(k, 0)]);
+        tris.push([[0.0, 0.0, h], p(k, rings), p(k + 1, rings)]);
+    }
+    let mut bytes = vec![b' '; 80];
+    bytes.extend((tris.len() as u32).to_le_bytes());
+    for t in &tris {
+        bytes.extend([0u8; 12]);
+        for v in t {
+            for c in v {
+                bytes.extend(c.to_le_bytes());
+            }
+        }
+        bytes.extend([0u8; 2]);
+    }
+    std::fs::write(d.join("cyl.stl"), bytes).unwrap();
+    let toml = workpiece(d, "cyl", "cyl.stl", "");
+    let t0 = Instant::now();
+    let o = binpick_in(
+        d,
+        &[
+            "part",
+            toml.to_str().unwrap(),
+            "--json",
+            "--svg",
+            d.join("cyl.svg").to_str().unwrap(),
+        ],
+    );
+    let took = t0.elapsed();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(took < 3 * BOUND, "took {took:?}");
+    let j: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(j["triangles"], 188_000);
+    assert_eq!(j["symmetry_orders"][2], 64, "round about its axis");
+    // Its flat ends take the cup (independently: a 20 mm disc holds a 7 mm one).
+    let ends = j["faces"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["cup_fit"]["takes_cup"] == true)
+        .count();
+    assert_eq!(ends, 2);
+}
