@@ -5,7 +5,7 @@
 //! came from a CAD file or from the workpiece file's primitives, and what follows from it
 //! ([`model::PartModel`]: mass properties, planar faces with their cup-fit regions, stable poses,
 //! symmetry). The data flow: [`import`] (and [`vrml`]) read a CAD file into a raw triangle
-//! soup, [`repair`] makes it a closed solid in metres (or refuses it), [`model`] derives the
+//! soup ([`raw`]), [`repair`] makes it a closed solid in metres (or refuses it), [`model`] derives the
 //! rest; [`svg`] draws it. [`primitive`] holds the workpiece file's primitives and the
 //! flat body faces that follow from them (what grasp and recognition fit and match). [`load_mesh`] is the one entry from a file to a repaired mesh.
 //!
@@ -22,6 +22,7 @@ pub mod mesh;
 pub mod model;
 pub mod poses;
 pub mod primitive;
+pub mod raw;
 pub mod repair;
 pub mod svg;
 pub mod symmetry;
@@ -29,8 +30,8 @@ pub mod vrml;
 
 use std::path::Path;
 
-pub use import::{Defect, MeshError};
 pub use model::{CupSpec, PartModel};
+pub use raw::{Defect, MeshError};
 
 /// Reads a mesh file (STL, OBJ or VRML 2.0) in units of `metres_per_unit` (named `units` in
 /// messages) and repairs it into a closed, outward-wound mesh in metres about its bounding box's

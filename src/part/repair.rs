@@ -30,8 +30,8 @@ use std::collections::HashMap;
 
 use nalgebra::{Point3, Vector3};
 
-use super::import::{Defect, RawMesh};
 use super::mesh::Mesh;
+use super::raw::{Defect, RawMesh};
 
 /// The smallest largest extent of a part (m).
 pub const MIN_EXTENT_M: f64 = 0.0005;

@@ -16,7 +16,7 @@ use std::collections::HashMap;
 
 use nalgebra::{Matrix4, Rotation3, Unit, Vector3};
 
-use super::import::{Defect, MAX_TRIANGLES, MAX_VERTICES, RawMesh, coordinate};
+use super::raw::{Defect, MAX_TRIANGLES, MAX_VERTICES, RawMesh, coordinate};
 
 /// The deepest node nesting read (a guard against files built to exhaust the stack).
 const MAX_DEPTH: usize = 64;
