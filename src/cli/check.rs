@@ -70,7 +70,32 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                         eprintln!("warning: {label}: {why}");
                     }
                 }
-                Ok(format!("workpiece {:?}: {}", wp.workpiece.name, wp.workpiece.kind))
+                let mesh = match &wp.mesh {
+                    Some(m) => {
+                        let r = &m.1;
+                        format!(
+                            "; mesh of {} triangles in {} {}, {:.2} x {:.2} x {:.2} mm; repaired: {} vertices welded, {} zero-area, {} duplicate and {} inner-wall triangles dropped, {} triangles and {} bodies flipped, {} holes closed",
+                            m.0.triangles.len(),
+                            r.bodies,
+                            if r.bodies == 1 { "body" } else { "bodies" },
+                            wp.workpiece.size_m[0] * 1e3,
+                            wp.workpiece.size_m[1] * 1e3,
+                            wp.workpiece.size_m[2] * 1e3,
+                            r.welded_vertices,
+                            r.zero_area_triangles,
+                            r.duplicate_triangles,
+                            2 * r.inner_wall_pairs,
+                            r.flipped_triangles,
+                            r.flipped_bodies,
+                            r.holes_closed
+                        )
+                    }
+                    None => String::new(),
+                };
+                Ok(format!(
+                    "workpiece {:?}: {}{mesh}",
+                    wp.workpiece.name, wp.workpiece.kind
+                ))
             }
         }
         _ => Err(ConfigError::one(

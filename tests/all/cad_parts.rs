@@ -138,6 +138,12 @@ fn bad_mesh_files_are_refused_naming_the_file_and_the_defect() {
             "cannot load mesh",
         ),
         (
+            "nan.wrl",
+            b"#VRML V2.0 utf8\nShape { geometry IndexedFaceSet { coordIndex [0 1 2 -1]\n coord Coordinate { point [0 0 0, 10 0 0, 0 nan 0] } } }\n".to_vec(),
+            "",
+            "non-finite",
+        ),
+        (
             "notvrml.wrl",
             b"#VRML V1.0 ascii\nSeparator { }\n".to_vec(),
             "",
