@@ -51,7 +51,7 @@ pub fn picture(model: &PartModel, title: &str) -> String {
     let largest = model.size_m.iter().cloned().fold(1e-9, f64::max);
     let scale = (VIEW_PX - 2.0 * PAD_PX) / largest;
     let width = 3.0 * VIEW_PX + 2.0 * PAD_PX;
-    let height = VIEW_PX + 110.0;
+    let height = VIEW_PX + 150.0;
     let mut grasp_of = vec![None; model.mesh.triangles.len()];
     for (i, f) in model.faces.iter().enumerate() {
         if f.fit.takes_cup() {
@@ -168,12 +168,20 @@ pub fn picture(model: &PartModel, title: &str) -> String {
             )
         })
         .collect();
-    let _ = writeln!(
-        s,
-        "<text x=\"{PAD_PX}\" y=\"{:.0}\">resting on (down normal, likelihood): {}</text>",
-        legend_y + 20.0,
-        escape(&poses.join(", "))
-    );
+    // The poses, four to a line.
+    for (i, line) in poses.chunks(4).enumerate() {
+        let head = if i == 0 {
+            "resting on (down normal, likelihood): "
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            s,
+            "<text x=\"{PAD_PX}\" y=\"{:.0}\">{head}{}</text>",
+            legend_y + 20.0 * (i + 1) as f64,
+            escape(&line.join(", "))
+        );
+    }
     s.push_str("</svg>\n");
     s
 }
