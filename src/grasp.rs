@@ -16,7 +16,8 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
-use crate::config::{Axis, PartRole, Piece, Scene, Workpiece};
+use crate::config::{Scene, Workpiece};
+use crate::part::primitive::{Face, body_faces};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
 
@@ -24,97 +25,6 @@ use crate::sensor::{Detection, HeightMap};
 /// lying on it [m]: depth noise (0.5 mm-class), the cell's highest point, and the face's tilt
 /// across a cell, well below the thinnest part (C: 5 mm).
 pub const COVER_TOLERANCE_M: f64 = 0.003;
-
-/// A flat face of a workpiece's body, in the part frame.
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub struct Face {
-    /// Centre [m].
-    pub center: Vector3<f64>,
-    /// Outward normal (unit).
-    pub normal: Vector3<f64>,
-    /// Direction of the face's first extent (unit, in the face).
-    pub along: Vector3<f64>,
-    /// Extents along `along` and across it [m]; equal for a disc (its diameter).
-    pub extent_m: [f64; 2],
-    /// A round face (cylinder cap).
-    pub disc: bool,
-}
-
-/// The centre of a piece in the part frame [m].
-fn piece_center(piece: &Piece) -> Vector3<f64> {
-    match piece {
-        Piece::Box { center_m, .. } | Piece::Cylinder { center_m, .. } => *center_m,
-    }
-}
-
-/// The flat faces of a workpiece's body (box faces, cylinder caps) on which nothing else of the
-/// part stands out: a capacitor's leads rule out the face they leave from, a can on a base rules
-/// out the base's face under it and the can's end on the base. Mesh workpieces have none here:
-/// their faces are not known analytically (a stated gap).
-pub fn body_faces(w: &Workpiece) -> Vec<Face> {
-    let pieces: Vec<(PartRole, Piece)> = w.pieces();
-    let mut faces = Vec::new();
-    for (k, (role, piece)) in pieces.iter().enumerate() {
-        if *role != PartRole::Body {
-            continue;
-        }
-        for f in piece_faces(piece) {
-            let blocked = pieces.iter().enumerate().any(|(j, (_, other))| {
-                let beyond = other.support_m(&f.normal) - f.center.dot(&f.normal) > 1e-4;
-                let offset = piece_center(other) - f.center;
-                let in_plane = (offset - f.normal * offset.dot(&f.normal)).norm();
-                j != k && beyond && in_plane <= 0.5 * f.extent_m[0].max(f.extent_m[1])
-            });
-            if !blocked {
-                faces.push(f);
-            }
-        }
-    }
-    faces
-}
-
-/// The flat faces of one piece.
-fn piece_faces(piece: &Piece) -> Vec<Face> {
-    let mut faces = Vec::new();
-    match *piece {
-        Piece::Box {
-            center_m: c,
-            half_m: he,
-        } => {
-            for a in 0..3 {
-                let (b, d) = ((a + 1) % 3, (a + 2) % 3);
-                for s in [-1.0, 1.0] {
-                    faces.push(Face {
-                        center: c + Vector3::ith(a, s * he[a]),
-                        normal: Vector3::ith(a, s),
-                        along: Vector3::ith(b, 1.0),
-                        extent_m: [2.0 * he[b], 2.0 * he[d]],
-                        disc: false,
-                    });
-                }
-            }
-        }
-        Piece::Cylinder {
-            center_m: c,
-            radius_m: r,
-            half_length_m: h,
-            axis,
-        } => {
-            let a = axis.unit();
-            let along = if axis == Axis::X { Vector3::y() } else { Vector3::x() };
-            for s in [-1.0, 1.0] {
-                faces.push(Face {
-                    center: c + a * (s * h),
-                    normal: a * s,
-                    along,
-                    extent_m: [2.0 * r, 2.0 * r],
-                    disc: true,
-                });
-            }
-        }
-    }
-    faces
-}
 
 /// Where on a detected part's face the cup would go, in the world.
 struct FacePoint {
@@ -262,7 +172,7 @@ impl GraspSelector {
         let t = &scene.pick_tray;
         GraspSelector {
             robot: robot.clone(),
-            faces: body_faces(workpiece),
+            faces: body_faces(&workpiece.pieces()),
             cup_radius_m: g.cup_diameter_m / 2.0,
             // The recognised pose is off by up to two standard deviations of its noise: the cup
             // must stay on the face that much farther from its edges.
@@ -638,7 +548,7 @@ mod tests {
     #[test]
     fn faces_of_a_box_and_of_capacitors() {
         let b = LoadedWorkpiece::resolve("B").unwrap().workpiece;
-        let f = body_faces(&b);
+        let f = body_faces(&b.pieces());
         assert_eq!(f.len(), 6);
         assert!(
             f.iter()
@@ -647,7 +557,7 @@ mod tests {
         let radial = LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/capacitor-radial.toml"))
             .unwrap()
             .workpiece;
-        let caps = body_faces(&radial);
+        let caps = body_faces(&radial.pieces());
         assert_eq!(
             caps.len(),
             1,
@@ -655,7 +565,7 @@ mod tests {
         );
         assert!(caps[0].disc && caps[0].normal == Vector3::z() && (caps[0].extent_m[0] - 0.01).abs() < 1e-12);
         // D: the can's top, the base's bottom and its four thin sides; not the faces in between.
-        let d = body_faces(&LoadedWorkpiece::resolve("D").unwrap().workpiece);
+        let d = body_faces(&LoadedWorkpiece::resolve("D").unwrap().workpiece.pieces());
         assert_eq!(d.len(), 6, "{d:?}");
         assert!(d.iter().any(|f| f.disc && f.normal == Vector3::z()));
         assert!(
@@ -672,7 +582,7 @@ mod tests {
         let robot = crate::robot::test_support::default_robot();
         let c = LoadedWorkpiece::resolve("C").unwrap().workpiece;
         let sel = GraspSelector::new(&scene.scene, &robot, &c);
-        let top = body_faces(&c)
+        let top = body_faces(&c.pieces())
             .into_iter()
             .position(|f| f.normal == Vector3::z())
             .unwrap();

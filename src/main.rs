@@ -45,6 +45,8 @@ enum Command {
         #[arg(long, global = true)]
         json: bool,
     },
+    /// A part's model before a run: its faces and cup-fit regions, stable poses, an SVG picture.
+    Part(cli::part::PartArgs),
     /// Build and settle a random pile of one workpiece type in the pick tray.
     Pile(cli::pile::PileArgs),
     /// Build a pile, take a depth capture, recognise the parts and select a grasp.
@@ -105,6 +107,7 @@ fn dispatch(cli: Cli) -> Result<()> {
     match cli.command {
         Command::Check { files, scene } => cli::check::check(&files, scene.as_deref()),
         Command::Robot { command, scene, json } => cli::robot::run(command, scene.as_deref(), json),
+        Command::Part(a) => cli::part::part(&a),
         Command::Pile(a) => cli::pile::pile(&a),
         Command::Sense(a) => cli::pile::sense(&a),
         Command::Run(a) => cli::run::run(&a),

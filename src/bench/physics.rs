@@ -259,7 +259,7 @@ pub fn mesh_piles(
         .filter(|w| ["A", "B", "E"].contains(&w.workpiece.name.as_str()))
     {
         let w = &wp.workpiece;
-        let mesh = tessellate::workpiece_mesh(w).ok_or("a built-in workpiece is not a mesh")?;
+        let mesh = w.primitive_mesh().ok_or("a built-in workpiece is not a mesh")?;
         pairs.push((
             format!("{}-mesh", w.name),
             PartShape::from_mesh(w, &mesh)?,
@@ -283,6 +283,8 @@ pub fn mesh_piles(
         parts: Vec::new(),
         mesh_file: Some("hex.stl".into()),
         mesh_scale: Some(1.0),
+        units: None,
+        symmetry_orders: None,
     };
     let mut can = hex_wp.clone();
     can.name = "can".into();
@@ -300,6 +302,8 @@ pub fn mesh_piles(
         }],
         mesh_file: None,
         mesh_scale: None,
+        units: None,
+        symmetry_orders: None,
     };
     let can_shape = PartShape::build(&can, &crate::config::Source::Embedded)?;
     pairs.push((

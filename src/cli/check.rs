@@ -1,4 +1,6 @@
-//! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs.
+//! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs. A mesh workpiece's
+//! mesh is read and repaired (or refused naming the defect), its part model derived, and a
+//! warning printed when none of its faces takes the cell's cup.
 
 use std::path::{Path, PathBuf};
 
@@ -61,8 +63,39 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 let wp = LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
+                    // A mesh part: its model derives, and a warning when no face takes the cup.
+                    if let Some(m) = super::part::model_of(&wp, &s.scene)?
+                        && let Some(why) = super::part::no_cup_face(&m)
+                    {
+                        eprintln!("warning: {label}: {why}");
+                    }
                 }
-                Ok(format!("workpiece {:?}: {}", wp.workpiece.name, wp.workpiece.kind))
+                let mesh = match &wp.mesh {
+                    Some(m) => {
+                        let r = &m.1;
+                        format!(
+                            "; mesh of {} triangles in {} {}, {:.2} x {:.2} x {:.2} mm; repaired: {} vertices welded, {} zero-area, {} duplicate and {} inner-wall triangles dropped, {} triangles and {} bodies flipped, {} holes closed",
+                            m.0.triangles.len(),
+                            r.bodies,
+                            if r.bodies == 1 { "body" } else { "bodies" },
+                            wp.workpiece.size_m[0] * 1e3,
+                            wp.workpiece.size_m[1] * 1e3,
+                            wp.workpiece.size_m[2] * 1e3,
+                            r.welded_vertices,
+                            r.zero_area_triangles,
+                            r.duplicate_triangles,
+                            2 * r.inner_wall_pairs,
+                            r.flipped_triangles,
+                            r.flipped_bodies,
+                            r.holes_closed
+                        )
+                    }
+                    None => String::new(),
+                };
+                Ok(format!(
+                    "workpiece {:?}: {}{mesh}",
+                    wp.workpiece.name, wp.workpiece.kind
+                ))
             }
         }
         _ => Err(ConfigError::one(

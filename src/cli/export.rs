@@ -37,7 +37,7 @@ pub fn export_mesh(a: &ExportMeshArgs) -> Result<()> {
     for name in a.workpiece.split(',').map(str::trim) {
         let wp = LoadedWorkpiece::resolve(name)?;
         let w = &wp.workpiece;
-        let Some(mesh) = tessellate::workpiece_mesh(w) else {
+        let Some(mesh) = w.primitive_mesh() else {
             return Err(InputError(format!(
                 "--workpiece {name}: {} is already a mesh workpiece; export takes box or compound workpieces",
                 wp.label

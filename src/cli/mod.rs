@@ -10,6 +10,7 @@ pub mod batch;
 pub mod bench;
 pub mod check;
 pub mod export;
+pub mod part;
 pub mod pile;
 pub mod robot;
 pub mod run;

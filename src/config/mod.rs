@@ -376,6 +376,25 @@ impl LoadedScene {
     }
 }
 
+impl Workpiece {
+    /// A mesh workpiece's mesh, read from the file its `shape.mesh_file` names (relative to the
+    /// workpiece file's folder) in its `shape.units`, and repaired into a closed solid in metres
+    /// about its bounding box's centre (the part frame), with what the repair did; `None` for
+    /// primitives and for embedded workpieces (which name no file on disk). The one loader every
+    /// stage uses ([`crate::part::load_mesh`] behind it).
+    pub fn repaired_mesh(
+        &self,
+        source: &Source,
+    ) -> Result<Option<(crate::part::mesh::Mesh, crate::part::repair::RepairReport)>, crate::part::MeshError> {
+        let (ShapeKind::Mesh, Source::File(p), Some(f)) = (self.shape.kind, source, &self.shape.mesh_file) else {
+            return Ok(None);
+        };
+        let path = p.parent().unwrap_or(Path::new(".")).join(f);
+        let (scale, units) = self.shape.mesh_units();
+        crate::part::load_mesh(&path, scale, &units).map(Some)
+    }
+}
+
 /// A workpiece loaded and validated.
 #[derive(Debug, Clone)]
 pub struct LoadedWorkpiece {
@@ -385,6 +404,9 @@ pub struct LoadedWorkpiece {
     pub source: Source,
     /// The workpiece.
     pub workpiece: Workpiece,
+    /// A mesh workpiece's repaired mesh (m, part frame) and what its repair did; `None` for
+    /// primitives and for embedded workpieces.
+    pub mesh: Option<std::sync::Arc<(crate::part::mesh::Mesh, crate::part::repair::RepairReport)>>,
 }
 
 impl LoadedWorkpiece {
@@ -424,24 +446,54 @@ impl LoadedWorkpiece {
         Self::from_workpiece(label, source, workpiece)
     }
 
-    /// Validates a parsed workpiece (and that its mesh file exists).
-    fn from_workpiece(label: &str, source: Source, workpiece: Workpiece) -> Result<Self, ConfigError> {
+    /// Validates a parsed workpiece; a mesh workpiece's mesh is read and repaired
+    /// ([`crate::part::load_mesh`]), its `size_m` derived from it (or a given one checked against
+    /// it) and its `shape.units` resolved into `shape.mesh_scale`.
+    fn from_workpiece(label: &str, source: Source, mut workpiece: Workpiece) -> Result<Self, ConfigError> {
         workpiece.validate(label)?;
+        let mut mesh = None;
         if let (ShapeKind::Mesh, Source::File(p), Some(f)) = (workpiece.shape.kind, &source, &workpiece.shape.mesh_file)
         {
-            let mesh = p.parent().unwrap_or(Path::new(".")).join(f);
-            if !mesh.is_file() {
+            let path = p.parent().unwrap_or(Path::new(".")).join(f);
+            if !path.is_file() {
                 return Err(ConfigError::one(
                     label,
                     "shape.mesh_file",
-                    format!("names a file that does not exist: {}", mesh.display()),
+                    format!("names a file that does not exist: {}", path.display()),
                 ));
             }
+            let (scale, units) = workpiece.shape.mesh_units();
+            let (m, report) = workpiece
+                .repaired_mesh(&source)
+                .map_err(|e| ConfigError::one(label, "shape.mesh_file", e.to_string()))?
+                .ok_or_else(|| ConfigError::one(label, "shape.mesh_file", "is required when kind = \"mesh\""))?;
+            let derived = m.extent_m();
+            if workpiece.size_m != [0.0; 3]
+                && let Some(a) = (0..3).find(|&a| (workpiece.size_m[a] - derived[a]).abs() > MESH_SIZE_TOL_M)
+            {
+                return Err(ConfigError::one(
+                    label,
+                    &format!("size_m[{a}]"),
+                    format!(
+                        "is {} m, but the mesh {} is {:.6} x {:.6} x {:.6} m (read in {units}): size_m is derived from the mesh, leave it out",
+                        workpiece.size_m[a],
+                        path.display(),
+                        derived[0],
+                        derived[1],
+                        derived[2]
+                    ),
+                ));
+            }
+            workpiece.size_m = derived;
+            workpiece.shape.mesh_scale = Some(scale);
+            workpiece.shape.units = None;
+            mesh = Some(std::sync::Arc::new((m, report)));
         }
         Ok(LoadedWorkpiece {
             label: label.to_string(),
             source,
             workpiece,
+            mesh,
         })
     }
 

@@ -4,13 +4,24 @@
 //! [`Workpiece::validate`] on its own and [`Workpiece::check_fits_scene`] against a cell (the part
 //! fits both trays, the suction cup fits on one of its faces).
 //!
-//! Units: metres, kilograms, degrees only in `grasp.*_deg` (as read). Frame: the part frame, origin
-//! at the centre of the bounding box `size_m`, its axes along the box edges.
+//! Units: metres, kilograms, degrees only in `grasp.*_deg` (as read); a mesh file's own units are
+//! named by `shape.units` (or given as `shape.mesh_scale`, metres per file unit). Frame: the part
+//! frame, origin at the centre of the bounding box `size_m`, its axes along the box edges.
+//!
+//! For `kind = "mesh"`, `size_m` is derived from the mesh (its bounding box, after repair) when
+//! the workpiece is loaded: it may be left out, and if it is given it must agree with the mesh
+//! within [`MESH_SIZE_TOL_M`] (a second, hand-typed size that disagrees with the CAD file is a
+//! mistake to refuse, not a value to choose between). Likewise `shape.units` is resolved into
+//! `shape.mesh_scale` on load, so the resolved workpiece a run writes names the scale it used.
 
 use nalgebra::Vector3;
 use serde::{Deserialize, Serialize};
 
 use super::{Checker, ConfigError, MAX_PLACE_SLOTS, Scene, SlotPattern};
+pub use crate::part::primitive::{Axis, PartRole, Piece};
+
+/// How far a given `size_m` of a mesh workpiece may differ from the mesh's bounding box (m).
+pub const MESH_SIZE_TOL_M: f64 = 0.0001;
 
 /// A workpiece type: one kind of part to be piled and picked.
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
@@ -20,7 +31,9 @@ pub struct Workpiece {
     pub name: String,
     /// What electronic part this is.
     pub kind: String,
-    /// Bounding box of the whole part (body and leads) in the part frame [m].
+    /// Bounding box of the whole part (body and leads) in the part frame [m]. Required for box
+    /// and compound shapes; derived from the mesh for mesh shapes (absent reads as zeros).
+    #[serde(default)]
     pub size_m: [f64; 3],
     /// Part mass [kg].
     pub mass_kg: f64,
@@ -44,8 +57,47 @@ pub enum ShapeKind {
     Box,
     /// A compound of boxes and cylinders (`parts`), e.g. a body with leads.
     Compound,
-    /// A triangle mesh file (OBJ or STL), convex-decomposed for the physics.
+    /// A triangle mesh file (STL, OBJ or VRML 2.0), convex-decomposed for the physics.
     Mesh,
+}
+
+/// The units of a mesh file's coordinates.
+#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
+pub enum MeshUnits {
+    /// Metres.
+    #[serde(rename = "m")]
+    M,
+    /// Millimetres (most STL exports).
+    #[serde(rename = "mm")]
+    Mm,
+    /// Inches.
+    #[serde(rename = "inch")]
+    Inch,
+    /// KiCad's 3D-model VRML unit: 0.1 inch (2.54 mm).
+    #[serde(rename = "kicad_vrml")]
+    KicadVrml,
+}
+
+impl MeshUnits {
+    /// Metres per file unit.
+    pub fn metres_per_unit(self) -> f64 {
+        match self {
+            MeshUnits::M => 1.0,
+            MeshUnits::Mm => 0.001,
+            MeshUnits::Inch => 0.0254,
+            MeshUnits::KicadVrml => 0.00254,
+        }
+    }
+
+    /// The name as written in the file.
+    pub fn name(self) -> &'static str {
+        match self {
+            MeshUnits::M => "m",
+            MeshUnits::Mm => "mm",
+            MeshUnits::Inch => "inch",
+            MeshUnits::KicadVrml => "kicad_vrml",
+        }
+    }
 }
 
 /// The collision shape of a workpiece, in the part frame (origin at the bounding box centre).
@@ -60,9 +112,29 @@ pub struct ShapeConfig {
     /// Mesh: file path relative to the workpiece file.
     #[serde(default)]
     pub mesh_file: Option<String>,
-    /// Mesh: scale from file units to metres.
+    /// Mesh: the file's units (`"m"`, `"mm"`, `"inch"`, `"kicad_vrml"`); resolved into
+    /// `mesh_scale` on load. Give this or `mesh_scale`, not both; neither means metres.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub units: Option<MeshUnits>,
+    /// Mesh: scale from file units to metres, for units `units` does not name.
     #[serde(default)]
     pub mesh_scale: Option<f64>,
+    /// Mesh: orders of rotational symmetry about the part's x, y, z axes through the centre of
+    /// mass (1: none), overriding what is detected from the mesh.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub symmetry_orders: Option<[u32; 3]>,
+}
+
+impl ShapeConfig {
+    /// Metres per unit of the mesh file (1 when neither `units` nor `mesh_scale` is given), and
+    /// the units' name for messages.
+    pub fn mesh_units(&self) -> (f64, String) {
+        match (self.units, self.mesh_scale) {
+            (Some(u), _) => (u.metres_per_unit(), format!("shape.units = \"{}\"", u.name())),
+            (None, Some(s)) => (s, format!("shape.mesh_scale = {s}")),
+            (None, None) => (1.0, "metres (no shape.units)".into()),
+        }
+    }
 }
 
 /// Primitive kinds in a compound shape.
@@ -73,39 +145,6 @@ pub enum Primitive {
     Box,
     /// A cylinder of `radius_m` and `length_m` along `axis`.
     Cylinder,
-}
-
-/// Roles of compound parts: the body carries the suction faces; leads do not.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum PartRole {
-    /// The part's body (suction faces).
-    Body,
-    /// A lead or pin.
-    Lead,
-}
-
-/// Axes of the part frame.
-#[derive(Debug, Clone, Copy, Serialize, Deserialize, PartialEq, Eq)]
-#[serde(rename_all = "snake_case")]
-pub enum Axis {
-    /// Part x.
-    X,
-    /// Part y.
-    Y,
-    /// Part z.
-    Z,
-}
-
-impl Axis {
-    /// The unit vector of this axis in the part frame.
-    pub fn unit(self) -> Vector3<f64> {
-        match self {
-            Axis::X => Vector3::x(),
-            Axis::Y => Vector3::y(),
-            Axis::Z => Vector3::z(),
-        }
-    }
 }
 
 /// One primitive of a compound shape.
@@ -149,51 +188,15 @@ impl ShapePart {
     }
 }
 
-/// A workpiece primitive resolved to its geometry, in the part frame [m].
-#[derive(Debug, Clone, Copy, PartialEq)]
-pub enum Piece {
-    /// A box.
-    Box {
-        /// Centre.
-        center_m: Vector3<f64>,
-        /// Half extents.
-        half_m: Vector3<f64>,
-    },
-    /// A cylinder.
-    Cylinder {
-        /// Centre.
-        center_m: Vector3<f64>,
-        /// Radius.
-        radius_m: f64,
-        /// Half length along `axis`.
-        half_length_m: f64,
-        /// Axis.
-        axis: Axis,
-    },
-}
-
-impl Piece {
-    /// How far the piece reaches along the part-frame unit direction `n` from the part origin:
-    /// the largest `p . n` over its points [m].
-    pub fn support_m(&self, n: &Vector3<f64>) -> f64 {
-        match self {
-            Piece::Box { center_m, half_m } => {
-                center_m.dot(n) + half_m.iter().zip(n.iter()).map(|(h, v)| h * v.abs()).sum::<f64>()
-            }
-            Piece::Cylinder {
-                center_m,
-                radius_m,
-                half_length_m,
-                axis,
-            } => {
-                let a = axis.unit().dot(n).abs();
-                center_m.dot(n) + half_length_m * a + radius_m * (1.0 - a * a).max(0.0).sqrt()
-            }
-        }
-    }
-}
-
 impl Workpiece {
+    /// The primitives of a box or compound workpiece as one closed mesh, one shell per primitive
+    /// (cylinders as the physics' prisms); `None` for a mesh workpiece, whose surface lives in its
+    /// file. For validated workpieces.
+    pub fn primitive_mesh(&self) -> Option<crate::part::mesh::Mesh> {
+        (self.shape.kind != ShapeKind::Mesh)
+            .then(|| crate::part::tessellate::pieces_mesh(self.pieces().iter().map(|(_, p)| p)))
+    }
+
     /// The shape's primitives with their roles: a box workpiece is one body box, a compound its
     /// parts, a mesh none (its geometry lives in the mesh file). For validated workpieces.
     pub fn pieces(&self) -> Vec<(PartRole, Piece)> {
@@ -251,7 +254,20 @@ impl Workpiece {
         if self.name.trim().is_empty() {
             c.fail("name", "must not be empty");
         }
-        c.positive_all("size_m", &self.size_m);
+        if self.shape.kind != ShapeKind::Mesh && self.size_m == [0.0; 3] {
+            c.fail(
+                "size_m",
+                format!(
+                    "is required when shape.kind = \"{}\"",
+                    match self.shape.kind {
+                        ShapeKind::Box => "box",
+                        _ => "compound",
+                    }
+                ),
+            );
+        } else if self.size_m != [0.0; 3] {
+            c.positive_all("size_m", &self.size_m);
+        }
         c.positive("mass_kg", self.mass_kg);
         c.within("friction", self.friction, 0.0, 2.0);
         c.within("restitution", self.restitution, 0.0, 1.0);
@@ -265,6 +281,17 @@ impl Workpiece {
         c.finite("grasp.place_yaw_deg", self.grasp.place_yaw_deg);
         c.non_negative("grasp.face_margin_m", self.grasp.face_margin_m);
         let sh = &self.shape;
+        if sh.kind != ShapeKind::Mesh {
+            for (key, given) in [
+                ("shape.units", sh.units.is_some()),
+                ("shape.mesh_scale", sh.mesh_scale.is_some()),
+                ("shape.symmetry_orders", sh.symmetry_orders.is_some()),
+            ] {
+                if given {
+                    c.fail(key, "is only allowed when kind = \"mesh\"");
+                }
+            }
+        }
         match sh.kind {
             ShapeKind::Box => {
                 if !sh.parts.is_empty() {
@@ -327,13 +354,27 @@ impl Workpiece {
             ShapeKind::Mesh => {
                 match &sh.mesh_file {
                     None => c.fail("shape.mesh_file", "is required when kind = \"mesh\""),
-                    Some(f) if !(f.ends_with(".obj") || f.ends_with(".stl")) => {
-                        c.fail("shape.mesh_file", format!("must be an .obj or .stl file, got {f:?}"))
-                    }
+                    Some(f) if crate::part::import::Format::of(std::path::Path::new(f)).is_none() => c.fail(
+                        "shape.mesh_file",
+                        format!("must be an .stl, .obj or .wrl (VRML 2.0) file, got {f:?}"),
+                    ),
                     _ => {}
                 }
                 if let Some(s) = sh.mesh_scale {
                     c.positive("shape.mesh_scale", s);
+                    if sh.units.is_some() {
+                        c.fail("shape.mesh_scale", "must not be given with shape.units (give one)");
+                    }
+                }
+                if let Some(o) = sh.symmetry_orders {
+                    for (a, n) in o.iter().enumerate() {
+                        if !(1..=crate::part::symmetry::MAX_ORDER).contains(n) {
+                            c.fail(
+                                &format!("shape.symmetry_orders[{a}]"),
+                                format!("must be within [1, {}], got {n}", crate::part::symmetry::MAX_ORDER),
+                            );
+                        }
+                    }
                 }
             }
         }
@@ -379,17 +420,26 @@ impl Workpiece {
         let [tx, ty] = scene.pick_tray.inner_size_m;
         let (tray_long, tray_short) = (tx.max(ty), tx.min(ty));
         if dims[0] > tray_long || dims[1] > tray_short {
+            let from_mesh = match (&self.shape.kind, &self.shape.mesh_file) {
+                (ShapeKind::Mesh, Some(f)) => format!(
+                    " (derived from the mesh {f} read in {}: check shape.units)",
+                    self.shape.mesh_units().1
+                ),
+                _ => String::new(),
+            };
             c.fail(
                 "size_m",
                 format!(
-                    "is larger than the pick tray: a part of {} x {} m lying flat does not fit its {tx} x {ty} m inner floor",
+                    "is larger than the pick tray: a part of {} x {} m lying flat does not fit its {tx} x {ty} m inner floor{from_mesh}",
                     dims[0], dims[1]
                 ),
             );
         }
+        // A mesh's faces are its own, not its bounding box's: the part model checks them (and
+        // `binpick check` warns when none takes the cup).
         let cup = scene.gripper.cup_diameter_m + 2.0 * self.grasp.face_margin_m;
         let faces = self.body_faces_m();
-        if !faces.iter().any(|(_, [a, b])| a.min(*b) >= cup) {
+        if self.shape.kind != ShapeKind::Mesh && !faces.iter().any(|(_, [a, b])| a.min(*b) >= cup) {
             let largest = faces
                 .iter()
                 .map(|(_, [a, b])| format!("{a}x{b}"))

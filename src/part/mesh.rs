@@ -5,7 +5,7 @@
 //!
 //! Units: m. Frame: the part frame.
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 
 /// A triangle mesh: shared vertices, triangles as vertex indices wound counter-clockwise seen
 /// from outside the solid.
@@ -26,6 +26,33 @@ impl Mesh {
                 .iter()
                 .fold((first, first), |(lo, hi), v| (lo.inf(v), hi.sup(v))),
         )
+    }
+
+    /// The three corners of triangle `k` (m).
+    pub fn corners(&self, k: usize) -> [Point3<f64>; 3] {
+        self.triangles[k].map(|i| self.vertices_m[i as usize])
+    }
+
+    /// Twice the area of triangle `k` times its unit normal: the cross product of two edges
+    /// (m^2), pointing out for a triangle wound counter-clockwise seen from outside.
+    pub fn area_normal(&self, k: usize) -> Vector3<f64> {
+        let [a, b, c] = self.corners(k);
+        (b - a).cross(&(c - a))
+    }
+
+    /// Area of triangle `k` (m^2).
+    pub fn area_m2(&self, k: usize) -> f64 {
+        0.5 * self.area_normal(k).norm()
+    }
+
+    /// The surface's area (m^2).
+    pub fn surface_m2(&self) -> f64 {
+        (0..self.triangles.len()).map(|k| self.area_m2(k)).sum()
+    }
+
+    /// Edge lengths of the bounding box (m); zeros for an empty mesh.
+    pub fn extent_m(&self) -> [f64; 3] {
+        self.bounds_m().map_or([0.0; 3], |(lo, hi)| (hi - lo).into())
     }
 }
 

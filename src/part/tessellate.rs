@@ -17,22 +17,18 @@
 use nalgebra::{Point3, Vector3};
 
 use super::mesh::Mesh;
-use crate::config::{Axis, Piece, ShapeKind, Workpiece};
+use super::primitive::{Axis, Piece};
 
 /// Sides of the prisms that stand in for cylinders (the physics uses the same number).
 pub const PRISM_SIDES: usize = 16;
 
-/// The mesh of a box or compound workpiece (`None` for a mesh workpiece, whose surface lives in
-/// its file). For validated workpieces.
-pub fn workpiece_mesh(w: &Workpiece) -> Option<Mesh> {
-    if w.shape.kind == ShapeKind::Mesh {
-        return None;
-    }
+/// The primitives of a box or compound workpiece as one mesh: one closed shell per primitive.
+pub fn pieces_mesh<'a>(pieces: impl IntoIterator<Item = &'a Piece>) -> Mesh {
     let mut mesh = Mesh::default();
-    for (_, piece) in w.pieces() {
-        append(&mut mesh, &piece_mesh(&piece));
+    for piece in pieces {
+        append(&mut mesh, &piece_mesh(piece));
     }
-    Some(mesh)
+    mesh
 }
 
 /// One primitive as a closed shell: a box exactly, a cylinder as the [`PRISM_SIDES`]-sided prism.
@@ -122,7 +118,7 @@ mod tests {
     use std::collections::HashMap;
 
     use super::*;
-    use crate::config::LoadedWorkpiece;
+    use crate::config::{LoadedWorkpiece, Workpiece};
 
     /// Every directed edge appears once and its reverse once: closed and consistently wound.
     fn closed_and_consistent(m: &Mesh) -> Result<(), String> {
@@ -178,7 +174,7 @@ mod tests {
         all.push(LoadedWorkpiece::resolve("workpieces/capacitor-radial.toml").unwrap());
         for wp in all {
             let w = &wp.workpiece;
-            let m = workpiece_mesh(w).unwrap();
+            let m = w.primitive_mesh().unwrap();
             closed_and_consistent(&m).unwrap_or_else(|e| panic!("{}: {e}", w.name));
             let (v, want) = (signed_volume(&m), analytic_volume(w));
             assert!(v > 0.0, "{}: inward-wound (volume {v})", w.name);
@@ -241,7 +237,7 @@ mod tests {
         // A workpiece whose primitives do not reach its size_m: the bounds check would see it.
         let mut w = LoadedWorkpiece::resolve("A").unwrap().workpiece;
         w.size_m[2] += 0.001;
-        let (lo, hi) = workpiece_mesh(&w).unwrap().bounds_m().unwrap();
+        let (lo, hi) = w.primitive_mesh().unwrap().bounds_m().unwrap();
         assert!((hi.z - lo.z - w.size_m[2]).abs() > 1e-4);
     }
 }

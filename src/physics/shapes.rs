@@ -14,8 +14,6 @@
 //! Units: m, kg. Frame: the part frame of the workpiece file (origin at the bounding-box centre).
 //! rapier's cylinders run along their local +y; workpiece cylinders along x, y or z are rotated.
 
-use std::path::Path;
-
 use nalgebra::{Matrix3, Vector3};
 use rapier3d::math::{Pose, Vector};
 use rapier3d::prelude::SharedShape;
@@ -72,84 +70,6 @@ pub struct PartShape {
     pub friction: f64,
     /// Restitution coefficient.
     pub restitution: f64,
-}
-
-/// Loads a triangle mesh from an OBJ or STL file, scaled to metres.
-pub(crate) fn load_mesh(path: &Path, scale: f64) -> Result<(Vec<Vector>, Vec<[u32; 3]>), ShapeError> {
-    let err = |reason: String| ShapeError::Mesh {
-        file: path.display().to_string(),
-        reason,
-    };
-    let ext = path
-        .extension()
-        .and_then(|e| e.to_str())
-        .unwrap_or("")
-        .to_ascii_lowercase();
-    let (verts, tris): (Vec<[f64; 3]>, Vec<[u32; 3]>) = match ext.as_str() {
-        "obj" => {
-            let opts = tobj::LoadOptions {
-                triangulate: true,
-                single_index: true,
-                ..Default::default()
-            };
-            let (models, _) = tobj::load_obj(path, &opts).map_err(|e| err(e.to_string()))?;
-            let mut verts = Vec::new();
-            let mut tris = Vec::new();
-            for m in models {
-                let base = verts.len() as u32;
-                verts.extend(
-                    m.mesh
-                        .positions
-                        .chunks_exact(3)
-                        .map(|p| [p[0] as f64, p[1] as f64, p[2] as f64]),
-                );
-                tris.extend(
-                    m.mesh
-                        .indices
-                        .chunks_exact(3)
-                        .map(|t| [base + t[0], base + t[1], base + t[2]]),
-                );
-            }
-            (verts, tris)
-        }
-        "stl" => {
-            let mut f = std::fs::File::open(path).map_err(|e| err(e.to_string()))?;
-            let mesh = stl_io::read_stl(&mut f).map_err(|e| err(e.to_string()))?;
-            let verts = mesh
-                .vertices
-                .iter()
-                .map(|v| [v[0] as f64, v[1] as f64, v[2] as f64])
-                .collect();
-            let tris = mesh
-                .faces
-                .iter()
-                .map(|f| [f.vertices[0] as u32, f.vertices[1] as u32, f.vertices[2] as u32])
-                .collect();
-            (verts, tris)
-        }
-        other => return Err(err(format!("unsupported mesh format {other:?} (OBJ or STL)"))),
-    };
-    if verts.len() < 4 || tris.is_empty() {
-        return Err(err(format!(
-            "needs a closed mesh, got {} vertices and {} triangles",
-            verts.len(),
-            tris.len()
-        )));
-    }
-    if let Some(bad) = tris.iter().flatten().find(|&&i| i as usize >= verts.len()) {
-        return Err(err(format!(
-            "triangle index {bad} out of range ({} vertices)",
-            verts.len()
-        )));
-    }
-    if verts.iter().flatten().any(|v| !v.is_finite()) {
-        return Err(err("non-finite vertex coordinate".into()));
-    }
-    let verts = verts
-        .into_iter()
-        .map(|v| Vector::new((v[0] * scale) as f32, (v[1] * scale) as f32, (v[2] * scale) as f32))
-        .collect();
-    Ok((verts, tris))
 }
 
 /// A convex piece (box or prism, in metres) as a rapier convex polyhedron in rapier units.
@@ -498,29 +418,18 @@ impl PartShape {
                 (SharedShape::compound(all), SharedShape::compound(view))
             }
             ShapeKind::Mesh => {
+                if matches!(source, Source::Embedded) {
+                    return Err(ShapeError::EmbeddedMesh(workpiece.name.clone()));
+                }
+                // The part model's reader and repair: closed, outward-wound, in metres.
+                let mesh_error = |file: String, reason: String| ShapeError::Mesh { file, reason };
+                let (mesh, _) = workpiece
+                    .repaired_mesh(source)
+                    .map_err(|e| mesh_error(e.file.clone(), e.defect.to_string()))?
+                    .ok_or_else(|| ShapeError::Degenerate(workpiece.name.clone()))?;
                 let file = workpiece.shape.mesh_file.clone().unwrap_or_default();
-                let dir = match source {
-                    Source::File(p) => p.parent().unwrap_or(Path::new(".")).to_path_buf(),
-                    Source::Embedded => return Err(ShapeError::EmbeddedMesh(workpiece.name.clone())),
-                };
-                let path = dir.join(&file);
-                let (verts, tris) = load_mesh(&path, workpiece.shape.mesh_scale.unwrap_or(1.0))?;
-                let verts = verts
-                    .iter()
-                    .map(|v| nalgebra::Point3::new(v.x as f64, v.y as f64, v.z as f64))
-                    .collect();
-                return Self::from_mesh(
-                    workpiece,
-                    &Mesh {
-                        vertices_m: verts,
-                        triangles: tris,
-                    },
-                )
-                .map_err(|e| match e {
-                    ShapeError::Mesh { reason, .. } => ShapeError::Mesh {
-                        file: path.display().to_string(),
-                        reason,
-                    },
+                return Self::from_mesh(workpiece, &mesh).map_err(|e| match e {
+                    ShapeError::Mesh { reason, .. } => mesh_error(file.clone(), reason),
                     e => e,
                 });
             }
@@ -770,6 +679,8 @@ mod tests {
             parts: Vec::new(),
             mesh_file: Some(format!("{name}.stl")),
             mesh_scale: Some(1.0),
+            units: None,
+            symmetry_orders: None,
         };
         w
     }
@@ -850,7 +761,7 @@ mod tests {
         for wp in LoadedWorkpiece::all_embedded().unwrap() {
             let w = &wp.workpiece;
             let prim = PartShape::build(w, &wp.source).unwrap();
-            let mesh = tessellate::workpiece_mesh(w).unwrap();
+            let mesh = w.primitive_mesh().unwrap();
             let meshed = PartShape::from_mesh(w, &mesh).unwrap();
             assert_eq!(meshed.convex_pieces, prim.convex_pieces, "{}", w.name);
             assert!((meshed.com_m - prim.com_m).amax() < 1e-7, "{}", w.name);
@@ -991,7 +902,15 @@ mod tests {
     fn bad_mesh_is_a_clear_error() {
         let dir = TestDir::new();
         std::fs::write(dir.path().join("x.obj"), "v 0 0 0\nf 1 2 3\n").unwrap();
-        let e = load_mesh(&dir.path().join("x.obj"), 1.0).unwrap_err().to_string();
-        assert!(e.contains("x.obj: cannot load mesh"), "{e}");
+        let toml = "name = \"x\"\nkind = \"bad\"\nmass_kg = 0.01\nfriction = 0.4\nrestitution = 0.1\npile_count = 5\n\
+                    [shape]\nkind = \"mesh\"\nmesh_file = \"x.obj\"\nunits = \"mm\"\n[grasp]\nyaw_symmetry_deg = 360.0\n\
+                    place_yaw_deg = 0.0\nface_margin_m = 0.0005\n";
+        std::fs::write(dir.path().join("x.toml"), toml).unwrap();
+        // The loader refuses the file on load, naming it; the physics never sees it.
+        let e = match crate::config::LoadedWorkpiece::from_file(&dir.path().join("x.toml")) {
+            Ok(_) => panic!("a one-triangle mesh was accepted"),
+            Err(e) => e.to_string(),
+        };
+        assert!(e.contains("x.obj"), "{e}");
     }
 }

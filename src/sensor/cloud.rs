@@ -51,7 +51,7 @@ use serde::Serialize;
 use super::{Camera, Capture};
 use crate::config::{PartRole, Piece, ShapeKind, Workpiece};
 use crate::geometry::TrayVolume;
-use crate::grasp::{Face, body_faces};
+use crate::part::primitive::{Face, body_faces};
 
 /// Points lower than this above the tray floor are background [m]: depth noise is 0.3 mm at 1 m.
 pub const FLOOR_TOL_M: f64 = 0.0012;
@@ -112,9 +112,9 @@ impl CloudModel {
     /// are [`body_faces`] (same indices), then the body's faces that only leads stand out of (a
     /// relay lying on its back shows its pinned face: it must be matched to be told apart).
     pub fn new(w: &Workpiece) -> Self {
-        let mut faces = body_faces(w);
-        let mut bare = w.clone();
-        bare.shape.parts.retain(|p| p.role == PartRole::Body);
+        let pieces = w.pieces();
+        let mut faces = body_faces(&pieces);
+        let bare: Vec<(PartRole, Piece)> = pieces.into_iter().filter(|(r, _)| *r == PartRole::Body).collect();
         for f in body_faces(&bare) {
             if !faces
                 .iter()

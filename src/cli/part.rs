@@ -1,0 +1,301 @@
+//! `binpick part WORKPIECE [--scene S] [--json] [--svg FILE]`: what the cell will see and take of
+//! a part, before a run: its part model (mass properties, planar faces with the cup-fit regions
+//! for the cell's cup, stable resting poses with their likelihoods, symmetry, what the mesh
+//! repair did) and an SVG picture of it with its grasp faces.
+//!
+//! Units: mm, g and degrees in the text and JSON (named in the keys); SI inside.
+
+use std::path::{Path, PathBuf};
+
+use anyhow::Result;
+use clap::Args;
+use serde_json::json;
+
+use binpick::config::{ConfigError, LoadedScene, LoadedWorkpiece, Scene};
+use binpick::part::mass::MassSpec;
+use binpick::part::symmetry::Symmetry;
+use binpick::part::{CupSpec, PartModel};
+
+use super::{InputError, round};
+
+/// Arguments of `binpick part`.
+#[derive(Args)]
+pub struct PartArgs {
+    /// The workpiece file (.toml with shape.kind = "mesh").
+    pub workpiece: String,
+    /// Scene whose gripper the faces are fitted for (default: the embedded default cell).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    /// Machine-readable JSON output.
+    #[arg(long)]
+    pub json: bool,
+    /// Where the SVG picture is written (default: NAME.part.svg in the current folder).
+    #[arg(long)]
+    pub svg: Option<PathBuf>,
+}
+
+/// The part model of a loaded mesh workpiece for the scene's cup; `None` for primitives.
+pub fn model_of(wp: &LoadedWorkpiece, scene: &Scene) -> Result<Option<PartModel>, ConfigError> {
+    let Some(mesh) = &wp.mesh else {
+        return Ok(None);
+    };
+    let w = &wp.workpiece;
+    let cup = CupSpec {
+        diameter_m: scene.gripper.cup_diameter_m,
+        face_margin_m: w.grasp.face_margin_m,
+    };
+    let symmetry = w.shape.symmetry_orders.map(|orders| Symmetry { orders });
+    PartModel::derive(mesh.0.clone(), MassSpec::MassKg(w.mass_kg), cup, symmetry)
+        .map(Some)
+        .map_err(|e| {
+            ConfigError::one(
+                &wp.label,
+                "shape.mesh_file",
+                format!("{}: {e}", w.shape.mesh_file.clone().unwrap_or_default()),
+            )
+        })
+}
+
+/// Why no face takes the cup, or `None` when one does.
+pub fn no_cup_face(m: &PartModel) -> Option<String> {
+    if m.grasp_faces().next().is_some() {
+        return None;
+    }
+    let largest = m
+        .faces
+        .iter()
+        .map(|f| {
+            format!(
+                "{:.1} x {:.1} mm (best clearance {:.2} mm)",
+                f.face.extent_m()[0] * 1e3,
+                f.face.extent_m()[1] * 1e3,
+                f.face.cup_fit(0.0).best_clearance_m * 1e3
+            )
+        })
+        .take(3)
+        .collect::<Vec<_>>()
+        .join(", ");
+    Some(format!(
+        "no planar face takes the cell's {:.1} mm cup with its {:.1} mm margin (a disc of {:.2} mm radius must lie on the face); the largest faces: {}",
+        m.cup.diameter_m * 1e3,
+        m.cup.face_margin_m * 1e3,
+        m.cup.disc_radius_m() * 1e3,
+        if largest.is_empty() {
+            "none".to_string()
+        } else {
+            largest
+        }
+    ))
+}
+
+pub fn part(a: &PartArgs) -> Result<()> {
+    let scene = LoadedScene::load(a.scene.as_deref())?;
+    let wp = LoadedWorkpiece::resolve(&a.workpiece)?;
+    wp.workpiece.check_fits_scene(&wp.label, &scene.scene)?;
+    let Some(m) = model_of(&wp, &scene.scene)? else {
+        return Err(InputError(format!(
+            "{}: binpick part reads mesh workpieces (shape.kind = \"mesh\"); this one is built from primitives",
+            wp.label
+        ))
+        .into());
+    };
+    let report = &wp.mesh.as_ref().map(|m| m.1.clone()).unwrap_or_default();
+    let w = &wp.workpiece;
+    let tilt = scene.scene.gripper.max_tilt_deg.to_radians();
+    let share = m.graspable_share(tilt);
+    let svg_path = a
+        .svg
+        .clone()
+        .unwrap_or_else(|| PathBuf::from(format!("{}.part.svg", w.name)));
+    let title = format!(
+        "{} ({}): {}",
+        w.name,
+        w.shape.mesh_file.clone().unwrap_or_default(),
+        w.kind
+    );
+    write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title))?;
+    let mm = |v: f64| round(v * 1e3, 4);
+    let faces: Vec<_> = m
+        .faces
+        .iter()
+        .map(|f| {
+            json!({
+                "normal": f.face.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
+                "centroid_mm": f.face.centroid_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
+                "area_mm2": round(f.face.area_m2 * 1e6, 4),
+                "extent_mm": f.face.extent_m().map(mm),
+                "holes": f.face.holes.len(),
+                "outline_mm": f.face.outer.iter().map(|p| [mm(p.x), mm(p.y)]).collect::<Vec<_>>(),
+                "cup_fit": {
+                    "takes_cup": f.fit.takes_cup(),
+                    "area_mm2": round(f.fit.area_m2 * 1e6, 4),
+                    "centres": f.fit.centres.len(),
+                    "grid_spacing_mm": mm(f.fit.spacing_m),
+                    "best_centre_mm": f.fit.best.map(|b| {
+                        let p = f.face.to_part(&b);
+                        [mm(p.x), mm(p.y), mm(p.z)]
+                    }),
+                    "best_clearance_mm": mm(f.fit.best_clearance_m),
+                },
+            })
+        })
+        .collect();
+    let poses: Vec<_> = m
+        .poses
+        .iter()
+        .map(|p| {
+            json!({
+                "down_normal": p.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
+                "likelihood": round(p.likelihood, 6),
+                "com_height_mm": mm(p.com_height_m),
+                "stability_margin_mm": mm(p.stability_margin_m),
+                "support_area_mm2": round(p.support_area_m2 * 1e6, 4),
+            })
+        })
+        .collect();
+    let warning = no_cup_face(&m);
+    if a.json {
+        let out = json!({
+            "workpiece": wp.label,
+            "mesh_file": w.shape.mesh_file,
+            "triangles": m.mesh.triangles.len(),
+            "repair": report,
+            "size_mm": m.size_m.map(mm),
+            "volume_mm3": round(m.mass.volume_m3 * 1e9, 4),
+            "mass_g": round(m.mass.mass_kg * 1e3, 6),
+            "density_kg_m3": round(m.mass.density_kg_m3, 3),
+            "com_mm": m.mass.com_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
+            "inertia_com_kg_mm2": m.mass.inertia_com_kg_m2.row_iter().map(|r| r.iter().map(|v| round(v * 1e6, 9)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+            "symmetry_orders": m.symmetry.orders,
+            "symmetry_detected": m.symmetry_detected,
+            "cup_diameter_mm": mm(m.cup.diameter_m),
+            "face_margin_mm": mm(m.cup.face_margin_m),
+            "faces": faces,
+            "poses": poses,
+            "graspable_share": round(share, 6),
+            "warning": warning,
+            "svg": svg_path.display().to_string(),
+        });
+        println!("{}", serde_json::to_string_pretty(&out)?);
+        return Ok(());
+    }
+    println!(
+        "part {:?} ({}): mesh {}, {} triangles in {} {}",
+        w.name,
+        wp.label,
+        w.shape.mesh_file.clone().unwrap_or_default(),
+        m.mesh.triangles.len(),
+        report.bodies,
+        if report.bodies == 1 { "body" } else { "bodies" }
+    );
+    println!(
+        "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
+        report.welded_vertices,
+        report.zero_area_triangles,
+        report.duplicate_triangles,
+        report.inner_wall_pairs,
+        report.flipped_triangles,
+        report.flipped_bodies,
+        report.holes_closed,
+        report.holes_area_m2 * 1e6,
+        report.non_manifold_edges
+    );
+    let c = m.mass.com_m;
+    println!(
+        "size {:.2} x {:.2} x {:.2} mm, volume {:.1} mm^3, mass {:.3} g ({:.0} kg/m^3), centre of mass [{:.3} {:.3} {:.3}] mm",
+        m.size_m[0] * 1e3,
+        m.size_m[1] * 1e3,
+        m.size_m[2] * 1e3,
+        m.mass.volume_m3 * 1e9,
+        m.mass.mass_kg * 1e3,
+        m.mass.density_kg_m3,
+        c.x * 1e3,
+        c.y * 1e3,
+        c.z * 1e3
+    );
+    let order = |n: u32| {
+        if n >= binpick::part::symmetry::MAX_ORDER {
+            "round".to_string()
+        } else {
+            n.to_string()
+        }
+    };
+    println!(
+        "symmetry: orders {} {} {} about x, y, z through the centre of mass ({})",
+        order(m.symmetry.orders[0]),
+        order(m.symmetry.orders[1]),
+        order(m.symmetry.orders[2]),
+        if m.symmetry_detected {
+            "detected"
+        } else {
+            "from the file"
+        }
+    );
+    println!(
+        "\nplanar faces, for the {:.1} mm cup with a {:.1} mm margin (largest first):",
+        m.cup.diameter_m * 1e3,
+        m.cup.face_margin_m * 1e3
+    );
+    println!("   #  normal                  area mm^2   extent mm      holes  cup fits  fit area mm^2  best centre mm");
+    // The text lists the faces that matter to a cup (--json lists every face).
+    let largest = m.faces.first().map_or(0.0, |f| f.face.area_m2);
+    let shown = |f: &binpick::part::model::ModelFace| f.fit.takes_cup() || f.face.area_m2 >= 0.05 * largest;
+    for (i, f) in m.faces.iter().enumerate().filter(|(_, f)| shown(f)) {
+        let n = f.face.normal;
+        let e = f.face.extent_m();
+        let best = f.fit.best.map_or("-".to_string(), |b| {
+            let p = f.face.to_part(&b);
+            format!("[{:.2} {:.2} {:.2}]", p.x * 1e3, p.y * 1e3, p.z * 1e3)
+        });
+        println!(
+            "  {:>2}  [{:6.3} {:6.3} {:6.3}]  {:10.2}  {:5.2} x {:5.2}  {:5}  {:8}  {:13.2}  {best}",
+            i + 1,
+            n.x,
+            n.y,
+            n.z,
+            f.face.area_m2 * 1e6,
+            e[0] * 1e3,
+            e[1] * 1e3,
+            f.face.holes.len(),
+            if f.fit.takes_cup() { "yes" } else { "no" },
+            f.fit.area_m2 * 1e6
+        );
+    }
+    let hidden = m.faces.iter().filter(|f| !shown(f)).count();
+    if hidden > 0 {
+        println!("  (and {hidden} faces under 5 % of the largest face's area: --json lists them)");
+    }
+    println!("\nstable resting poses (the part lies on the hull face whose outward normal points down):");
+    println!("  down normal               likelihood  CoM height mm  margin mm  a cup face looks up");
+    for p in &m.poses {
+        let up = m.grasp_faces().any(|f| -f.face.normal.dot(&p.normal) >= tilt.cos());
+        println!(
+            "  [{:6.3} {:6.3} {:6.3}]  {:9.1} %  {:13.2}  {:9.2}  {}",
+            p.normal.x,
+            p.normal.y,
+            p.normal.z,
+            100.0 * p.likelihood,
+            p.com_height_m * 1e3,
+            p.stability_margin_m * 1e3,
+            if up { "yes" } else { "no" }
+        );
+    }
+    println!(
+        "\nshare of resting poses with a cup face up (within the cup's {:.0} deg tilt): {:.1} %",
+        tilt.to_degrees(),
+        100.0 * share
+    );
+    if let Some(why) = warning {
+        println!("warning: {why}");
+    }
+    println!("picture: {}", svg_path.display());
+    Ok(())
+}
+
+/// Writes `text` to `path` through a temporary file beside it (never half-written).
+fn write_atomically(path: &Path, text: &str) -> Result<()> {
+    let tmp = path.with_extension("svg.partial");
+    std::fs::write(&tmp, text).map_err(|e| InputError(format!("cannot write {}: {e}", tmp.display())))?;
+    std::fs::rename(&tmp, path).map_err(|e| InputError(format!("cannot write {}: {e}", path.display())))?;
+    Ok(())
+}

@@ -1,0 +1,191 @@
+//! A picture of a part model as SVG: three orthographic views (top, front, side) of its mesh,
+//! shaded, with the faces the cell's cup seals on in green, their cup-fit regions dotted and the
+//! cup drawn at each face's best centre.
+//!
+//! Units: m in, pixels out (one scale for the three views). Frames: top looks down the part's
+//! -z (x right, y up), front looks along +y (x right, z up), side looks along -x (y right, z up).
+
+use std::fmt::Write;
+
+use nalgebra::{Point3, Vector3};
+
+use super::model::PartModel;
+
+/// Pixels per view (square).
+const VIEW_PX: f64 = 300.0;
+/// Margin around the views (px).
+const PAD_PX: f64 = 20.0;
+/// The most cup-fit centres drawn per face.
+const MAX_DOTS: usize = 600;
+
+struct View {
+    name: &'static str,
+    /// Direction toward the viewer.
+    toward: Vector3<f64>,
+    h: Vector3<f64>,
+    v: Vector3<f64>,
+}
+
+/// The SVG text of the picture, titled `title`.
+pub fn picture(model: &PartModel, title: &str) -> String {
+    let views = [
+        View {
+            name: "top (looking down z)",
+            toward: Vector3::z(),
+            h: Vector3::x(),
+            v: Vector3::y(),
+        },
+        View {
+            name: "front (looking along +y)",
+            toward: -Vector3::y(),
+            h: Vector3::x(),
+            v: Vector3::z(),
+        },
+        View {
+            name: "side (looking along -x)",
+            toward: Vector3::x(),
+            h: Vector3::y(),
+            v: Vector3::z(),
+        },
+    ];
+    let largest = model.size_m.iter().cloned().fold(1e-9, f64::max);
+    let scale = (VIEW_PX - 2.0 * PAD_PX) / largest;
+    let width = 3.0 * VIEW_PX + 2.0 * PAD_PX;
+    let height = VIEW_PX + 150.0;
+    let mut grasp_of = vec![None; model.mesh.triangles.len()];
+    for (i, f) in model.faces.iter().enumerate() {
+        if f.fit.takes_cup() {
+            for &k in &f.face.triangles {
+                grasp_of[k] = Some(i);
+            }
+        }
+    }
+    let mut s = String::new();
+    let _ = writeln!(
+        s,
+        "<svg xmlns=\"http://www.w3.org/2000/svg\" width=\"{width:.0}\" height=\"{height:.0}\" viewBox=\"0 0 {width:.0} {height:.0}\" font-family=\"sans-serif\" font-size=\"12\">"
+    );
+    let _ = writeln!(s, "<rect width=\"100%\" height=\"100%\" fill=\"white\"/>");
+    let _ = writeln!(
+        s,
+        "<text x=\"{PAD_PX}\" y=\"22\" font-size=\"15\">{}</text>",
+        escape(title)
+    );
+    for (vi, view) in views.iter().enumerate() {
+        let ox = PAD_PX + vi as f64 * VIEW_PX + VIEW_PX / 2.0;
+        let oy = 40.0 + VIEW_PX / 2.0;
+        let px = |p: &Point3<f64>| (ox + scale * p.coords.dot(&view.h), oy - scale * p.coords.dot(&view.v));
+        let _ = writeln!(
+            s,
+            "<rect x=\"{:.1}\" y=\"40\" width=\"{:.1}\" height=\"{VIEW_PX:.1}\" fill=\"none\" stroke=\"#ccc\"/>",
+            ox - VIEW_PX / 2.0 + 4.0,
+            VIEW_PX - 8.0
+        );
+        let _ = writeln!(
+            s,
+            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+            ox,
+            40.0 + VIEW_PX + 16.0,
+            view.name
+        );
+        // Triangles facing the viewer, far ones first.
+        let mut order: Vec<(f64, usize)> = (0..model.mesh.triangles.len())
+            .filter_map(|k| {
+                let n = model.mesh.area_normal(k);
+                if n.dot(&view.toward) <= 0.0 {
+                    return None;
+                }
+                let [a, b, c] = model.mesh.corners(k);
+                Some(((a.coords + b.coords + c.coords).dot(&view.toward), k))
+            })
+            .collect();
+        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+        for (_, k) in order {
+            let n = model.mesh.area_normal(k).normalize();
+            let light = 0.35 + 0.65 * n.dot(&view.toward).abs();
+            let (r, g, b) = if grasp_of[k].is_some() {
+                (60.0, 170.0, 80.0)
+            } else {
+                (170.0, 170.0, 180.0)
+            };
+            let [a, bb, c] = model.mesh.corners(k).map(|p| px(&p));
+            let col = format!("rgb({:.0},{:.0},{:.0})", r * light, g * light, b * light);
+            let _ = writeln!(
+                s,
+                "<polygon points=\"{:.2},{:.2} {:.2},{:.2} {:.2},{:.2}\" fill=\"{col}\" stroke=\"{col}\" stroke-width=\"0.4\"/>",
+                a.0, a.1, bb.0, bb.1, c.0, c.1
+            );
+        }
+        // Cup-fit regions and the cup on faces looking at the viewer.
+        for f in model.faces.iter().filter(|f| f.fit.takes_cup()) {
+            if f.face.normal.dot(&view.toward) < 0.99 {
+                continue;
+            }
+            let step = f.fit.centres.len().div_ceil(MAX_DOTS).max(1);
+            for c in f.fit.centres.iter().step_by(step) {
+                let (x, y) = px(&f.face.to_part(c));
+                let _ = writeln!(s, "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"0.9\" fill=\"#0a5\"/>");
+            }
+            if let Some(b) = f.fit.best {
+                let (x, y) = px(&f.face.to_part(&b));
+                let _ = writeln!(
+                    s,
+                    "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"{:.2}\" fill=\"none\" stroke=\"#c30\" stroke-width=\"1.5\" stroke-dasharray=\"4 2\"/>",
+                    scale * model.cup.diameter_m / 2.0
+                );
+            }
+        }
+        // The centre of mass.
+        let (x, y) = px(&model.mass.com_m);
+        let _ = writeln!(
+            s,
+            "<g stroke=\"#c00\" stroke-width=\"1.2\"><line x1=\"{:.2}\" y1=\"{y:.2}\" x2=\"{:.2}\" y2=\"{y:.2}\"/><line x1=\"{x:.2}\" y1=\"{:.2}\" x2=\"{x:.2}\" y2=\"{:.2}\"/></g>",
+            x - 5.0,
+            x + 5.0,
+            y - 5.0,
+            y + 5.0
+        );
+    }
+    let legend_y = 40.0 + VIEW_PX + 40.0;
+    let _ = writeln!(
+        s,
+        "<text x=\"{PAD_PX}\" y=\"{legend_y:.0}\">green: faces the {:.1} mm cup seals on (margin {:.1} mm); dots: admissible cup centres; dashed: the cup at the best centre; red cross: centre of mass. Scale: {:.0} px per mm.</text>",
+        model.cup.diameter_m * 1e3,
+        model.cup.face_margin_m * 1e3,
+        scale / 1e3
+    );
+    let poses: Vec<String> = model
+        .poses
+        .iter()
+        .take(6)
+        .map(|p| {
+            format!(
+                "[{:.2} {:.2} {:.2}] {:.0} %",
+                p.normal.x,
+                p.normal.y,
+                p.normal.z,
+                100.0 * p.likelihood
+            )
+        })
+        .collect();
+    // The poses, four to a line.
+    for (i, line) in poses.chunks(4).enumerate() {
+        let head = if i == 0 {
+            "resting on (down normal, likelihood): "
+        } else {
+            ""
+        };
+        let _ = writeln!(
+            s,
+            "<text x=\"{PAD_PX}\" y=\"{:.0}\">{head}{}</text>",
+            legend_y + 20.0 * (i + 1) as f64,
+            escape(&line.join(", "))
+        );
+    }
+    s.push_str("</svg>\n");
+    s
+}
+
+fn escape(t: &str) -> String {
+    t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}

@@ -1,0 +1,203 @@
+//! The rotational symmetry of a part's mesh.
+//!
+//! Job: for each axis of the part frame through the centre of mass, the order of rotational
+//! symmetry: the largest `n` (up to [`MAX_ORDER`]) such that the rotation by 360/n degrees maps
+//! the mesh onto itself (every vertex and every triangle's centroid lands within the tolerance
+//! of a vertex, respectively a triangle centroid, of the mesh); 1 for none. An order of
+//! [`MAX_ORDER`] or more reads as continuous (a round part). The workpiece file may override what
+//! is detected.
+//!
+//! Stated simplification: only rotations about the part frame's axes are tried (CAD models of
+//! symmetric parts are drawn on their axes); a symmetry about a tilted axis is not found.
+//!
+//! Units: m. Frame: the part frame.
+
+use std::collections::HashMap;
+
+use nalgebra::{Point3, Rotation3, Vector3};
+
+use super::mesh::Mesh;
+
+/// The highest order tried; a part with this order or more is taken as round.
+pub const MAX_ORDER: u32 = 64;
+
+/// Orders of rotational symmetry about the part's x, y and z axes through the centre of mass.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize)]
+pub struct Symmetry {
+    /// Orders about x, y, z (1: none; [`MAX_ORDER`]: round).
+    pub orders: [u32; 3],
+}
+
+/// A set of points for nearest-point queries within a tolerance.
+struct PointSet {
+    tol: f64,
+    cells: HashMap<[i64; 3], Vec<Point3<f64>>>,
+}
+
+impl PointSet {
+    fn new(points: impl Iterator<Item = Point3<f64>>, tol: f64) -> Self {
+        let mut cells: HashMap<[i64; 3], Vec<Point3<f64>>> = HashMap::new();
+        for p in points {
+            cells.entry(Self::key(&p, tol)).or_default().push(p);
+        }
+        PointSet { tol, cells }
+    }
+    fn key(p: &Point3<f64>, tol: f64) -> [i64; 3] {
+        [0, 1, 2].map(|a| (p[a] / tol).floor() as i64)
+    }
+    fn has(&self, p: &Point3<f64>) -> bool {
+        let k = Self::key(p, self.tol);
+        for dx in -1..=1 {
+            for dy in -1..=1 {
+                for dz in -1..=1 {
+                    if let Some(c) = self.cells.get(&[k[0] + dx, k[1] + dy, k[2] + dz])
+                        && c.iter().any(|q| (q - p).norm() <= self.tol)
+                    {
+                        return true;
+                    }
+                }
+            }
+        }
+        false
+    }
+}
+
+/// The triangles of a mesh on a grid, for "is this point on the surface" queries.
+struct SurfaceGrid<'a> {
+    mesh: &'a Mesh,
+    cell: f64,
+    tol: f64,
+    cells: HashMap<[i64; 3], Vec<u32>>,
+}
+
+impl<'a> SurfaceGrid<'a> {
+    fn new(mesh: &'a Mesh, tol: f64) -> Self {
+        let ext = mesh.extent_m();
+        let cell = (ext.iter().cloned().fold(0.0, f64::max) / 32.0).max(tol * 4.0);
+        let mut cells: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
+        for k in 0..mesh.triangles.len() {
+            let c = mesh.corners(k);
+            let lo = [0, 1, 2].map(|a| ((c[0][a].min(c[1][a]).min(c[2][a]) - tol) / cell).floor() as i64);
+            let hi = [0, 1, 2].map(|a| ((c[0][a].max(c[1][a]).max(c[2][a]) + tol) / cell).floor() as i64);
+            for x in lo[0]..=hi[0] {
+                for y in lo[1]..=hi[1] {
+                    for z in lo[2]..=hi[2] {
+                        cells.entry([x, y, z]).or_default().push(k as u32);
+                    }
+                }
+            }
+        }
+        SurfaceGrid { mesh, cell, tol, cells }
+    }
+
+    fn on_surface(&self, p: &Point3<f64>) -> bool {
+        let key = [0, 1, 2].map(|a| (p[a] / self.cell).floor() as i64);
+        self.cells.get(&key).is_some_and(|ts| {
+            ts.iter()
+                .any(|&k| distance_to_triangle(p, &self.mesh.corners(k as usize)) <= self.tol)
+        })
+    }
+}
+
+/// Distance from `p` to the triangle `t` (its plane inside it, else its nearest edge).
+fn distance_to_triangle(p: &Point3<f64>, t: &[Point3<f64>; 3]) -> f64 {
+    let n = (t[1] - t[0]).cross(&(t[2] - t[0]));
+    let nn = n.norm_squared();
+    if nn > 0.0 {
+        let d = (p - t[0]).dot(&n) / nn;
+        let q = p - n * d;
+        let inside = (0..3).all(|e| (t[(e + 1) % 3] - t[e]).cross(&(q - t[e])).dot(&n) >= 0.0);
+        if inside {
+            return (p - q).norm();
+        }
+    }
+    (0..3)
+        .map(|e| {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            let ab = b - a;
+            let s = ((p - a).dot(&ab) / ab.norm_squared().max(1e-300)).clamp(0.0, 1.0);
+            (p - (a + ab * s)).norm()
+        })
+        .fold(f64::INFINITY, f64::min)
+}
+
+/// Detects the symmetry of `mesh` about axes through `com`, matching within `tol_m`: a rotation
+/// is a symmetry when every vertex lands on a vertex and every triangle's centroid lands on the
+/// surface (the second test does not depend on how the faces are triangulated).
+pub fn detect(mesh: &Mesh, com: &Point3<f64>, tol_m: f64) -> Symmetry {
+    let verts = PointSet::new(mesh.vertices_m.iter().copied(), tol_m);
+    let surface = SurfaceGrid::new(mesh, tol_m);
+    let cents: Vec<Point3<f64>> = (0..mesh.triangles.len())
+        .map(|k| {
+            let [a, b, c] = mesh.corners(k);
+            Point3::from((a.coords + b.coords + c.coords) / 3.0)
+        })
+        .collect();
+    let maps = |axis: Vector3<f64>, angle: f64| {
+        let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle);
+        let turn = |p: &Point3<f64>| com + r * (p - com);
+        mesh.vertices_m.iter().all(|p| verts.has(&turn(p))) && cents.iter().all(|p| surface.on_surface(&turn(p)))
+    };
+    // A round part first: turns by angles of no regular polygon map every vertex and every
+    // triangle's centroid onto the surface within a looser tolerance (1e-3 of the part's
+    // diagonal), as they do for a finely tessellated round surface (not onto vertices: those of
+    // the turned mesh fall between the original's).
+    let diag = mesh.extent_m().iter().map(|e| e * e).sum::<f64>().sqrt();
+    let round_surface = SurfaceGrid::new(mesh, (1e-3 * diag).max(tol_m));
+    let round = |axis: Vector3<f64>, angle: f64| {
+        let r = Rotation3::from_axis_angle(&nalgebra::Unit::new_normalize(axis), angle);
+        let turn = |p: &Point3<f64>| com + r * (p - com);
+        mesh.vertices_m
+            .iter()
+            .chain(cents.iter())
+            .all(|p| round_surface.on_surface(&turn(p)))
+    };
+    let orders = [Vector3::x(), Vector3::y(), Vector3::z()].map(|axis| {
+        if [1.0, 0.37, 2.3].iter().all(|&a| round(axis, a)) {
+            return MAX_ORDER;
+        }
+        (2..=MAX_ORDER)
+            .rev()
+            .find(|&n| maps(axis, 2.0 * std::f64::consts::PI / n as f64))
+            .unwrap_or(1)
+    });
+    Symmetry { orders }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::part::mass::tests::box_mesh;
+
+    #[test]
+    fn boxes_have_the_orders_of_their_faces() {
+        let cube = box_mesh([-0.005; 3], [0.005; 3]);
+        assert_eq!(detect(&cube, &Point3::origin(), 1e-7).orders, [4, 4, 4]);
+        let plate = box_mesh([-0.01, -0.005, -0.001], [0.01, 0.005, 0.001]);
+        assert_eq!(detect(&plate, &Point3::origin(), 1e-7).orders, [2, 2, 2]);
+        // Negative control: about a point off the centre, nothing maps onto itself.
+        assert_eq!(detect(&plate, &Point3::new(0.001, 0.0, 0.0), 1e-7).orders, [2, 1, 1]);
+        // A fine 720-gon prism reads as round about its axis; an octagonal one has order 8.
+        let prism = |n: u32| {
+            let mut m = Mesh::default();
+            for z in [-0.002, 0.002] {
+                for k in 0..n {
+                    let a = 2.0 * std::f64::consts::PI * k as f64 / n as f64;
+                    m.vertices_m.push(Point3::new(0.005 * a.cos(), 0.005 * a.sin(), z));
+                }
+            }
+            for k in 0..n {
+                let j = (k + 1) % n;
+                m.triangles.push([k, j, n + j]);
+                m.triangles.push([k, n + j, n + k]);
+                if k > 0 && j > 0 {
+                    m.triangles.push([0, j, k]);
+                    m.triangles.push([n, n + k, n + j]);
+                }
+            }
+            m
+        };
+        assert_eq!(detect(&prism(720), &Point3::origin(), 1e-7).orders[2], MAX_ORDER);
+        assert_eq!(detect(&prism(8), &Point3::origin(), 1e-7).orders[2], 8);
+    }
+}

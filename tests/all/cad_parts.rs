@@ -1,0 +1,466 @@
+//! CAD parts: the shipped mesh workpieces pass `binpick check` and `binpick part` shows their
+//! faces and poses; bad mesh files (truncated, NaN and infinite vertices, zero-area triangles,
+//! open shells, millions of triangles, wrong units, bad indices, garbage) are refused by
+//! `binpick check` with exit 2 and a message naming the mesh file, never a panic, within a time
+//! bound.
+//!
+//! The truncations are drawn from `binpick::rng::stream(CUT_SEED, "cad-cuts")`, so a failing cut
+//! is the same on every machine; its message names the file and the cut.
+
+use std::path::{Path, PathBuf};
+use std::time::{Duration, Instant};
+
+use rand::RngExt;
+
+use crate::support::{Workspace, binpick_in, stderr, stdout, tempdir};
+
+/// Seed of the truncation points.
+const CUT_SEED: u64 = 29;
+/// Truncations per shipped mesh file.
+const CUTS: usize = 12;
+/// The longest one `binpick check` of a bad file may take.
+const BOUND: Duration = Duration::from_secs(20);
+
+/// A workpiece file naming `mesh` with `units` (a TOML value line or empty), written beside it.
+fn workpiece(dir: &Path, name: &str, mesh: &str, extra: &str) -> PathBuf {
+    let p = dir.join(format!("{name}.toml"));
+    std::fs::write(
+        &p,
+        format!(
+            "name = \"{name}\"\nkind = \"fuzz case\"\nmass_kg = 0.002\nfriction = 0.4\nrestitution = 0.1\n\
+             pile_count = 10\n{extra}\n[shape]\nkind = \"mesh\"\nmesh_file = \"{mesh}\"\nunits = \"mm\"\n\n\
+             [grasp]\nyaw_symmetry_deg = 360.0\nplace_yaw_deg = 0.0\nface_margin_m = 0.0005\n"
+        ),
+    )
+    .unwrap();
+    p
+}
+
+/// A closed 10 x 20 x 30 mm box as OBJ text (mm), optionally without some of its faces.
+fn box_obj(skip: &[usize]) -> String {
+    let mut s = String::new();
+    for i in 0..8 {
+        let (x, y, z) = (10 * (i & 1), 20 * ((i >> 1) & 1), 30 * ((i >> 2) & 1));
+        s += &format!("v {x} {y} {z}\n");
+    }
+    let tris = [
+        [0, 2, 3],
+        [0, 3, 1],
+        [4, 5, 7],
+        [4, 7, 6],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 6, 7],
+        [2, 7, 3],
+        [0, 4, 6],
+        [0, 6, 2],
+        [1, 3, 7],
+        [1, 7, 5],
+    ];
+    for (k, t) in tris.iter().enumerate() {
+        if !skip.contains(&k) {
+            s += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);
+        }
+    }
+    s
+}
+
+/// Runs `binpick check FILE` and asserts exit 2, the mesh file named on stderr, no panic, and
+/// the time bound; returns stderr.
+fn refused(dir: &Path, toml: &Path, mesh: &str, why: &str) -> String {
+    let t0 = Instant::now();
+    let o = binpick_in(dir, &["check", toml.to_str().unwrap()]);
+    let took = t0.elapsed();
+    let err = stderr(&o);
+    assert_eq!(
+        o.status.code(),
+        Some(2),
+        "{why}: {mesh}: exit {:?}, stderr {err}",
+        o.status.code()
+    );
+    assert!(!err.contains("panicked"), "{why}: {err}");
+    assert!(err.contains(mesh), "{why}: stderr does not name {mesh}: {err}");
+    assert!(took < BOUND, "{why}: took {took:?}");
+    err
+}
+
+#[test]
+fn bad_mesh_files_are_refused_naming_the_file_and_the_defect() {
+    let tmp = tempdir().unwrap();
+    let d = tmp.path();
+    let stl_ascii = |v: &str| {
+        format!(
+            "solid t\nfacet normal 0 0 1\nouter loop\nvertex 0 0 0\nvertex 10 0 0\nvertex {v}\nendloop\nendfacet\nendsolid t\n"
+        )
+    };
+    let mut binary_nan = vec![0u8; 84 + 50];
+    binary_nan[80] = 1;
+    binary_nan[84 + 12..84 + 16].copy_from_slice(&f32::NAN.to_le_bytes());
+    let cases: Vec<(&str, Vec<u8>, &str, &str)> = vec![
+        (
+            "nan.obj",
+            format!("{}v nan 0 0\n", box_obj(&[])).into_bytes(),
+            "",
+            "non-finite",
+        ),
+        ("inf.stl", stl_ascii("0 inf 0").into_bytes(), "", "non-finite"),
+        ("nanbin.stl", binary_nan, "", "non-finite"),
+        (
+            "flat.obj",
+            b"v 0 0 0\nv 10 0 0\nv 20 0 0\nf 1 2 3\nf 1 3 2\n".to_vec(),
+            "",
+            "empty mesh",
+        ),
+        (
+            "zero.obj",
+            b"v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 1 2\nf 2 3 3\n".to_vec(),
+            "",
+            "empty mesh",
+        ),
+        ("open.obj", box_obj(&[8, 9]).into_bytes(), "", "open shell"),
+        (
+            "index.obj",
+            b"v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 9\n".to_vec(),
+            "",
+            "out of range",
+        ),
+        (
+            "cut.obj",
+            b"v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2".to_vec(),
+            "",
+            "truncated",
+        ),
+        ("empty.stl", Vec::new(), "", "truncated"),
+        (
+            "garbage.stl",
+            (0..999u32).map(|i| (i * 7919 % 251) as u8).collect(),
+            "",
+            "cannot load mesh",
+        ),
+        (
+            "nan.wrl",
+            b"#VRML V2.0 utf8\nShape { geometry IndexedFaceSet { coordIndex [0 1 2 -1]\n coord Coordinate { point [0 0 0, 10 0 0, 0 nan 0] } } }\n".to_vec(),
+            "",
+            "non-finite",
+        ),
+        (
+            "notvrml.wrl",
+            b"#VRML V1.0 ascii\nSeparator { }\n".to_vec(),
+            "",
+            "not VRML 2.0",
+        ),
+        (
+            "boxnode.wrl",
+            b"#VRML V2.0 utf8\nShape { geometry Box { size 1 1 1 } }\n".to_vec(),
+            "",
+            "unsupported",
+        ),
+        // Wrong units: a 10 x 20 x 30 mm box read as metres (30 m), as micrometres by scale
+        // (0.03 mm), and as inches (0.76 m: not in the tray).
+        ("metres.obj", box_obj(&[]).into_bytes(), "units_m", "wrong units"),
+        ("tiny.obj", box_obj(&[]).into_bytes(), "scale", "wrong units"),
+        (
+            "inches.obj",
+            box_obj(&[]).into_bytes(),
+            "units_inch",
+            "larger than the pick tray",
+        ),
+        (
+            "sized.obj",
+            box_obj(&[]).into_bytes(),
+            "size",
+            "size_m is derived from the mesh",
+        ),
+    ];
+    for (mesh, bytes, how, want) in &cases {
+        std::fs::write(d.join(mesh), bytes).unwrap();
+        let stem = mesh.replace('.', "_");
+        let toml = workpiece(
+            d,
+            &stem,
+            mesh,
+            if *how == "size" {
+                "size_m = [0.01, 0.02, 0.031]"
+            } else {
+                ""
+            },
+        );
+        let text = std::fs::read_to_string(&toml).unwrap();
+        let text = match *how {
+            "units_m" => text.replace("units = \"mm\"", "units = \"m\""),
+            "units_inch" => text.replace("units = \"mm\"", "units = \"inch\""),
+            "scale" => text.replace("units = \"mm\"", "mesh_scale = 0.000001"),
+            _ => text,
+        };
+        std::fs::write(&toml, text).unwrap();
+        let err = refused(d, &toml, mesh, want);
+        assert!(err.contains(want), "{mesh}: expected {want:?} in: {err}");
+    }
+    // Negative control: the same box in the right units is accepted.
+    let toml = workpiece(d, "good", "metres.obj", "");
+    let o = binpick_in(d, &["check", toml.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(stdout(&o).contains("ok: "), "{}", stdout(&o));
+}
+
+#[test]
+fn millions_of_triangles_are_refused_at_once() {
+    let tmp = tempdir().unwrap();
+    let d = tmp.path();
+    // A binary STL announcing 3 million triangles, of the size that holds them (a sparse file
+    // of 150 MB): refused from its header, without reading it.
+    let n: u32 = 3_000_000;
+    let mut f = std::fs::File::create(d.join("huge.stl")).unwrap();
+    let mut head = vec![b' '; 80];
+    head.extend(n.to_le_bytes());
+    std::io::Write::write_all(&mut f, &head).unwrap();
+    f.set_len(84 + 50 * n as u64).unwrap();
+    drop(f);
+    let toml = workpiece(d, "huge", "huge.stl", "");
+    let err = refused(d, &toml, "huge.stl", "3M triangles");
+    assert!(err.contains("3000000 triangles"), "{err}");
+    // A text OBJ of 250,000 triangles (a triangle strip): refused when the cap is passed.
+    let mut s = String::with_capacity(12_000_000);
+    for i in 0..250_002 {
+        s += &format!("v {} {} 0\n", i / 2, i % 2);
+    }
+    for i in 1..=250_000 {
+        s += &format!("f {} {} {}\n", i, i + 1, i + 2);
+    }
+    std::fs::write(d.join("strip.obj"), s).unwrap();
+    let toml = workpiece(d, "strip", "strip.obj", "");
+    let err = refused(d, &toml, "strip.obj", "250k triangles");
+    assert!(err.contains("more than the 200000"), "{err}");
+}
+
+#[test]
+fn truncated_shipped_meshes_are_refused() {
+    let ws = Workspace::new();
+    let mut rng = binpick::rng::stream(CUT_SEED, "cad-cuts");
+    for (toml, mesh, always) in [
+        ("hex-standoff.toml", "hex-standoff.stl", true),
+        ("to220.toml", "to220.wrl", true),
+        ("dip8.toml", "dip8.wrl", true),
+        // An OBJ has no end marker: a cut at a line end between two bodies leaves a valid part.
+        // It must be refused or accepted, never crash.
+        ("smd-elcap.toml", "smd-elcap.obj", false),
+    ] {
+        let bytes = std::fs::read(ws.path(&format!("workpieces/{mesh}"))).unwrap();
+        for k in 0..CUTS {
+            let cut = rng.random_range(16..bytes.len() - 8);
+            let name = format!("cut{k}-{mesh}");
+            std::fs::write(ws.path(&format!("workpieces/{name}")), &bytes[..cut]).unwrap();
+            let t = ws.edit(
+                &format!("workpieces/{toml}"),
+                &format!("workpieces/cut{k}-{toml}"),
+                &format!("mesh_file = \"{mesh}\""),
+                &format!("mesh_file = \"{name}\""),
+            );
+            let why = format!("{mesh} cut at byte {cut} of {}", bytes.len());
+            // A VRML cut between two top-level nodes is a whole file of fewer shapes.
+            let between_nodes = mesh.ends_with(".wrl") && brace_depth(&bytes[..cut]) == 0;
+            if always && !between_nodes {
+                refused(ws.dir.path(), &t, &name, &why);
+            } else {
+                let o = binpick_in(ws.dir.path(), &["check", t.to_str().unwrap()]);
+                let err = stderr(&o);
+                assert!(
+                    matches!(o.status.code(), Some(0 | 2)),
+                    "{why}: {:?} {err}",
+                    o.status.code()
+                );
+                assert!(o.status.code() == Some(0) || err.contains(&name), "{why}: {err}");
+            }
+        }
+    }
+}
+
+/// How many braces and brackets are open at the end of `text` (comments skipped).
+fn brace_depth(text: &[u8]) -> i64 {
+    let mut depth = 0;
+    let mut comment = false;
+    for &c in text {
+        match c {
+            b'\n' => comment = false,
+            b'#' => comment = true,
+            b'{' | b'[' if !comment => depth += 1,
+            b'}' | b']' if !comment => depth -= 1,
+            _ => {}
+        }
+    }
+    depth
+}
+
+#[test]
+fn shipped_cad_parts_check_and_show_their_faces() {
+    let ws = Workspace::new();
+    let files: Vec<String> = ["hex-standoff", "to220", "dip8", "smd-elcap"]
+        .iter()
+        .map(|n| ws.path(&format!("workpieces/{n}.toml")).display().to_string())
+        .collect();
+    let mut args = vec!["check"];
+    args.extend(files.iter().map(|s| s.as_str()));
+    let o = binpick_in(ws.dir.path(), &args);
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert_eq!(stdout(&o).matches("ok: ").count(), 4, "{}", stdout(&o));
+    // Only the DIP-8 (6.35 mm body) has no face for the 6 mm cup: check says so, and why.
+    let err = stderr(&o);
+    assert_eq!(err.matches("warning: ").count(), 1, "{err}");
+    assert!(
+        err.contains("dip8.toml: no planar face takes the cell's 6.0 mm cup"),
+        "{err}"
+    );
+
+    let part = |name: &str| -> serde_json::Value {
+        let svg = ws.path(&format!("{name}.svg"));
+        let o = binpick_in(
+            ws.dir.path(),
+            &[
+                "part",
+                &ws.path(&format!("workpieces/{name}.toml")).display().to_string(),
+                "--json",
+                "--svg",
+                &svg.display().to_string(),
+            ],
+        );
+        assert!(o.status.success(), "{name}: {}", stderr(&o));
+        let svg_text = std::fs::read_to_string(&svg).unwrap();
+        assert!(svg_text.starts_with("<svg") && svg_text.trim_end().ends_with("</svg>"));
+        serde_json::from_str(&stdout(&o)).unwrap()
+    };
+    // The hex standoff: 20 mm long, 14 mm across flats. Independently: each of its six flats
+    // is 14 / sqrt(3) = 8.083 mm wide and 20 mm long, and only those take the 7 mm disc (the
+    // ends are rings 3.6 mm wide about the 6.8 mm bore).
+    let hex = part("hex-standoff");
+    let size: Vec<f64> = hex["size_mm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        (size[1] - 14.0).abs() < 1e-3 && (size[2] - 20.0).abs() < 1e-3,
+        "{size:?}"
+    );
+    let faces = hex["faces"].as_array().unwrap();
+    let takes: Vec<&serde_json::Value> = faces.iter().filter(|f| f["cup_fit"]["takes_cup"] == true).collect();
+    assert_eq!(takes.len(), 6, "{faces:?}");
+    let flat = 14.0 / 3f64.sqrt() * 20.0;
+    for f in &takes {
+        assert!((f["area_mm2"].as_f64().unwrap() - flat).abs() < 0.01, "{f}");
+    }
+    let ends: Vec<&serde_json::Value> = faces.iter().filter(|f| f["holes"] == 1).collect();
+    assert_eq!(ends.len(), 2);
+    assert!(ends.iter().all(|f| f["cup_fit"]["takes_cup"] == false));
+    // Its mass properties: the hexagon minus the bore, times the length.
+    let vol = (3f64.sqrt() / 2.0 * 14.0 * 14.0 - 18.0 * 3.4 * 3.4 * (2.0 * std::f64::consts::PI / 36.0).sin()) * 20.0;
+    assert!(
+        (hex["volume_mm3"].as_f64().unwrap() - vol).abs() < 0.05,
+        "{} vs {vol}",
+        hex["volume_mm3"]
+    );
+    // Resting: on a flat (six, equally likely by symmetry) or on an end.
+    let poses = hex["poses"].as_array().unwrap();
+    let sum: f64 = poses.iter().map(|p| p["likelihood"].as_f64().unwrap()).sum();
+    assert!((sum - 1.0).abs() < 1e-5);
+    assert_eq!(poses.len(), 8, "{poses:?}");
+    assert_eq!(hex["symmetry_orders"][2], 6);
+
+    // The TO-220: three bodies and more (body, tab, leads), the tab's hole found; its body's top
+    // and back take the cup.
+    let to = part("to220");
+    assert!(to["repair"]["bodies"].as_u64().unwrap() >= 5, "{}", to["repair"]);
+    let size: Vec<f64> = to["size_mm"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .map(|v| v.as_f64().unwrap())
+        .collect();
+    assert!(
+        (size[0] - 10.0).abs() < 1e-3 && (size[1] - 28.5).abs() < 1e-3 && (size[2] - 4.4).abs() < 1e-3,
+        "{size:?}"
+    );
+    let faces = to["faces"].as_array().unwrap();
+    assert!(faces.iter().any(|f| f["holes"] == 1), "the tab's hole");
+    assert!(faces.iter().filter(|f| f["cup_fit"]["takes_cup"] == true).count() >= 2);
+
+    // The SMD capacitor: the can's top takes the cup, centred within the 0.5 mm the 8 mm can
+    // leaves about a 7 mm disc.
+    let cap = part("smd-elcap");
+    let takes: Vec<&serde_json::Value> = cap["faces"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["cup_fit"]["takes_cup"] == true)
+        .collect();
+    assert!(!takes.is_empty());
+    let top = takes
+        .iter()
+        .find(|f| f["normal"][2].as_f64().unwrap() > 0.999)
+        .expect("the can's top");
+    let c = &top["cup_fit"]["best_centre_mm"];
+    assert!(c[0].as_f64().unwrap().hypot(c[1].as_f64().unwrap()) < 0.5, "{c}");
+}
+
+/// A valid mesh just under the triangle cap (a cylinder of 2000 sides in 46 rings, 188,000
+/// triangles) is read, repaired and modelled within the bound: large files are no hang, and the
+/// part reads as round about its axis.
+#[test]
+fn a_mesh_near_the_cap_is_modelled_within_the_bound() {
+    let tmp = tempdir().unwrap();
+    let d = tmp.path();
+    let (n, rings, r, h) = (2000usize, 46usize, 10.0f32, 20.0f32);
+    let p = |k: usize, j: usize| {
+        let a = 2.0 * std::f32::consts::PI * (k % n) as f32 / n as f32;
+        [r * a.cos(), r * a.sin(), h * j as f32 / rings as f32]
+    };
+    let mut tris: Vec<[[f32; 3]; 3]> = Vec::new();
+    for j in 0..rings {
+        for k in 0..n {
+            tris.push([p(k, j), p(k + 1, j), p(k + 1, j + 1)]);
+            tris.push([p(k, j), p(k + 1, j + 1), p(k, j + 1)]);
+        }
+    }
+    for k in 0..n {
+        tris.push([[0.0, 0.0, 0.0], p(k + 1, 0), p(k, 0)]);
+        tris.push([[0.0, 0.0, h], p(k, rings), p(k + 1, rings)]);
+    }
+    let mut bytes = vec![b' '; 80];
+    bytes.extend((tris.len() as u32).to_le_bytes());
+    for t in &tris {
+        bytes.extend([0u8; 12]);
+        for v in t {
+            for c in v {
+                bytes.extend(c.to_le_bytes());
+            }
+        }
+        bytes.extend([0u8; 2]);
+    }
+    std::fs::write(d.join("cyl.stl"), bytes).unwrap();
+    let toml = workpiece(d, "cyl", "cyl.stl", "");
+    let t0 = Instant::now();
+    let o = binpick_in(
+        d,
+        &[
+            "part",
+            toml.to_str().unwrap(),
+            "--json",
+            "--svg",
+            d.join("cyl.svg").to_str().unwrap(),
+        ],
+    );
+    let took = t0.elapsed();
+    assert!(o.status.success(), "{}", stderr(&o));
+    assert!(took < 3 * BOUND, "took {took:?}");
+    let j: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    assert_eq!(j["triangles"], 188_000);
+    assert_eq!(j["symmetry_orders"][2], 64, "round about its axis");
+    // Its flat ends take the cup (independently: a 20 mm disc holds a 7 mm one).
+    let ends = j["faces"]
+        .as_array()
+        .unwrap()
+        .iter()
+        .filter(|f| f["cup_fit"]["takes_cup"] == true)
+        .count();
+    assert_eq!(ends, 2);
+}
