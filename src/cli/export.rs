@@ -15,7 +15,6 @@ use clap::Args;
 use super::InputError;
 use binpick::config::{LoadedWorkpiece, ShapeKind, Workpiece};
 use binpick::part::mesh::Mesh;
-use binpick::part::tessellate;
 
 /// Arguments of `binpick export-mesh`.
 #[derive(Args)]
