@@ -15,3 +15,4 @@ mod sensing;
 mod support;
 mod sweep;
 mod trajectory;
+mod tune;
