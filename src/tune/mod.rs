@@ -32,7 +32,8 @@
 //! whole number gets an equal share. Continuous keys are rounded to 5 significant digits of the
 //! range (clean numbers in the files, exact keys for the journal). A candidate the cell file's
 //! own validation refuses is not run; the optimizer is told it is infeasible (a large cost).
-//! Constraint violations are penalised likewise ([`INFEASIBLE_COST`]), so the swarm steers away.
+//! Constraint violations are penalised by how far they miss ([`INFEASIBLE_COST`]), so the swarm
+//! steers toward the feasible region.
 //!
 //! The budget counts candidates asked for; the last round is cut short when the budget ends in
 //! it (its remaining particles are never run). Rounds beyond the first depend on the figures of
@@ -60,8 +61,9 @@ use crate::results::Summary;
 use crate::study::StudyError;
 use crate::sweep::{Segment, Target};
 
-/// The cost the optimizer is given for a candidate that was run but violates a constraint: above
-/// any takt, plus the candidate's takt, so among infeasible ones the swarm still prefers faster.
+/// The cost the optimizer is given for a candidate that was run but violates a constraint, times
+/// one plus how far it is from feasible ([`Constraints::violation`]), plus its takt: above any
+/// feasible takt; among infeasible candidates the swarm prefers the nearer, then the faster.
 pub const INFEASIBLE_COST: f64 = 1.0e3;
 /// The cost of a candidate the cell file's validation refuses (never run).
 pub const REFUSED_COST: f64 = 1.0e6;
@@ -257,6 +259,19 @@ impl Constraints {
         over(f.parts_lost, self.max_parts_lost, "parts lost");
         v
     }
+
+    /// How far `f` is from feasible: the success rate's shortfall (0 to 1) plus each count over
+    /// its limit, plus 1 without a takt (0: feasible). It scales the penalty, so among
+    /// infeasible candidates the swarm is drawn toward the feasible region.
+    pub fn violation(&self, f: &Figures) -> f64 {
+        let over = |n: usize, max: usize| n.saturating_sub(max) as f64;
+        let success = f.success_rate.map_or(1.0, |s| (self.min_success - s).max(0.0));
+        success
+            + over(f.collisions, self.max_collisions)
+            + over(f.protective_stops, self.max_stops)
+            + over(f.parts_lost, self.max_parts_lost)
+            + if f.takt_s.is_none() { 1.0 } else { 0.0 }
+    }
 }
 
 /// What became of a candidate.
@@ -357,7 +372,12 @@ impl Cost<'_> {
                 Outcome::Measured(f) => {
                     let v = self.settings.constraints.violations(f);
                     let takt = f.takt_s.unwrap_or(0.0);
-                    let cost = if v.is_empty() { takt } else { INFEASIBLE_COST + takt };
+                    let c = &self.settings.constraints;
+                    let cost = if v.is_empty() {
+                        takt
+                    } else {
+                        INFEASIBLE_COST * (1.0 + c.violation(f)) + takt
+                    };
                     (v, cost)
                 }
                 Outcome::Refused(m) => (vec![format!("refused: {m}")], REFUSED_COST),
@@ -567,6 +587,30 @@ mod tests {
         let free = run(usize::MAX);
         assert!(free.values[0] < 0.013, "{:?}", free.values);
         assert_eq!(free.figures().unwrap().collisions, 1);
+    }
+
+    #[test]
+    fn the_penalty_grows_with_how_far_a_candidate_misses() {
+        let c = settings(1, 0).constraints;
+        let f = |success: f64, collisions: usize| Figures {
+            takt_s: Some(2.0),
+            takt_count: 20,
+            success_rate: Some(success),
+            placed: 0,
+            attempts: 0,
+            collisions,
+            protective_stops: 0,
+            parts_lost: 0,
+            drops: 0,
+            runs: 1,
+        };
+        assert_eq!(c.violation(&f(0.95, 0)), 0.0);
+        assert!(c.violations(&f(0.95, 0)).is_empty());
+        assert!((c.violation(&f(0.75, 0)) - 0.2).abs() < 1e-12);
+        assert!(c.violation(&f(0.5, 0)) > c.violation(&f(0.75, 0)));
+        assert_eq!(c.violation(&f(1.0, 2)), 2.0);
+        // Negative control: each miss is named.
+        assert_eq!(c.violations(&f(0.5, 2)).len(), 2);
     }
 
     #[test]
