@@ -210,6 +210,11 @@ pub fn svg(r: &Report<'_>) -> String {
     let lo = takts.iter().copied().fold(f64::INFINITY, f64::min);
     let hi = takts.iter().copied().fold(f64::NEG_INFINITY, f64::max);
     let (lo, hi) = if lo.is_finite() { (lo, hi) } else { (0.0, 1.0) };
+    // A takt over 3 times the lowest (a cell that hardly picks) would flatten the rest: such
+    // points are drawn as triangles on the top edge, and counted in a note.
+    let cap = if hi > 3.0 * lo && lo > 0.0 { 3.0 * lo } else { hi };
+    let above = takts.iter().filter(|t| **t > cap).count();
+    let hi = cap;
     let (yt, y0, y1) = ticks(lo, hi, 6.0);
     let (xt, x0, x1) = ticks(0.0, n as f64, 8.0);
     let plot = Plot {
@@ -262,6 +267,20 @@ pub fn svg(r: &Report<'_>) -> String {
     for e in r.evaluations {
         let x = plot.x(e.index as f64 + 1.0);
         match e.figures().and_then(|f| f.takt_s) {
+            Some(t) if t > cap => {
+                let y = plot.y0;
+                let fill = if e.feasible() { "#4e79a7" } else { "white" };
+                let _ = writeln!(
+                    svg,
+                    r##"<path d="M{:.1},{:.1} L{:.1},{:.1} L{x:.1},{:.1} Z" fill="{fill}" stroke="{}" stroke-width="1.5"/>"##,
+                    x - 4.0,
+                    y + 7.0,
+                    x + 4.0,
+                    y + 7.0,
+                    y,
+                    if e.feasible() { "#4e79a7" } else { "#e15759" }
+                );
+            }
             Some(t) if e.feasible() => {
                 let _ = writeln!(
                     svg,
@@ -319,6 +338,20 @@ pub fn svg(r: &Report<'_>) -> String {
             escape(text)
         );
     }
+    if above > 0 {
+        let note = [
+            format!("{above} above {} s:", num(cap, 2)),
+            "triangles on the top edge".into(),
+        ];
+        for (i, l) in note.iter().enumerate() {
+            let _ = writeln!(
+                svg,
+                r#"<text x="{lx:.1}" y="{:.1}" class="note">{}</text>"#,
+                plot.y0 + 104.0 + 14.0 * i as f64,
+                escape(l)
+            );
+        }
+    }
     if let (Some(b), Some((tuned, untuned))) = (r.best, &r.test) {
         let lines = [
             format!("best: evaluation {}", b.index + 1),
@@ -329,7 +362,7 @@ pub fn svg(r: &Report<'_>) -> String {
             let _ = writeln!(
                 svg,
                 r#"<text x="{lx:.1}" y="{:.1}" class="note">{}</text>"#,
-                plot.y0 + 120.0 + 16.0 * i as f64,
+                plot.y0 + 142.0 + 16.0 * i as f64,
                 escape(l)
             );
         }
