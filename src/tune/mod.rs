@@ -21,7 +21,9 @@
 //! - argmin's other derivative-free solvers (Nelder-Mead, simulated annealing): one candidate at
 //!   a time, so nothing to run in parallel.
 //!
-//! argmin with only its `rand` feature adds about six small crates (no BLAS). The swarm is
+//! argmin with only its `rand` feature adds three small crates to the build (argmin, argmin-math,
+//! rand_xoshiro; the rand 0.9 and num-complex they use were already built for other
+//! dependencies), no BLAS. The swarm is
 //! population-based, so a round (its `population` particles) is one study run in parallel; it
 //! takes box bounds natively (positions are clamped into them) and it needs no gradient, so a
 //! noisy objective and rounded integer keys are fine. Its random numbers come from
