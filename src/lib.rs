@@ -28,7 +28,9 @@
 //!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG).
 //! 13. [`study`]: many cell runs, one table: the spec (variants x workpieces x seeds x picks x
 //!     mode), the parallel runner, shards and their merge; its front ends [`batch`] (the cell
-//!     as given: the takt-time table) and [`sweep`] (variants of the cell and workpiece files).
+//!     as given: the takt-time table) and [`sweep`] (variants of the cell and workpiece files);
+//!     [`tune`], the third front end: an optimizer picks each round's variants, judged on test
+//!     seeds it never evaluated.
 //!
 //! Beside the flow: [`mod@reference`] (the reference system's cases and tables), [`svg`] (the
 //! drawing helpers every chart shares), [`stats`]
@@ -61,3 +63,4 @@ pub mod study;
 pub mod svg;
 pub mod sweep;
 pub mod trajectory;
+pub mod tune;

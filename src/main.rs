@@ -60,6 +60,9 @@ enum Command {
     /// What-if sweeps: the takt table over variants of the cell and workpiece files
     /// (`--set KEY=V1,V2,...`), one row per variant and workpiece, with a chart.
     Sweep(cli::sweep::SweepArgs),
+    /// The cell's settings for one workpiece chosen by an optimizer (`--vary KEY=LO:HI`), judged
+    /// on test seeds it never evaluated, beside the untuned cell.
+    Tune(cli::tune::TuneArgs),
     /// Joins the results of a batch's or a sweep's shards (`--shard K/N`) into the one table.
     Merge {
         /// The shards' folders (each holding a takt.json, or a sweep.json).
@@ -113,6 +116,7 @@ fn dispatch(cli: Cli) -> Result<()> {
         Command::Run(a) => cli::run::run(&a),
         Command::Batch(a) => cli::batch::batch(&a),
         Command::Sweep(a) => cli::sweep::sweep(&a),
+        Command::Tune(a) => cli::tune::tune(&a),
         Command::Merge { dirs, out } => cli::study::merge(&dirs, &out.out, out.json),
         Command::ExportMesh(a) => cli::export::export_mesh(&a),
         Command::Bench { command } => cli::bench::run(command),

@@ -16,6 +16,7 @@ pub mod robot;
 pub mod run;
 pub mod study;
 pub mod sweep;
+pub mod tune;
 
 use std::path::{Path, PathBuf};
 

@@ -67,43 +67,48 @@ pub fn sweep(a: &SweepArgs) -> Result<()> {
 /// re-runs on its own (`binpick batch --scene variant-N/scene.toml --workpieces variant-N/workpiece-A.toml`).
 fn write_variants(dir: &binpick::report::RunDir, resolved: &Resolved) -> Result<()> {
     for (i, v) in resolved.variants.iter().enumerate() {
-        let sub = format!("variant-{}", i + 1);
-        std::fs::create_dir_all(dir.path(&sub)).with_context(|| dir.path(&sub).display().to_string())?;
-        let urdf_name = Path::new(&v.scene.scene.robot.urdf)
-            .file_name()
-            .map(|n| n.to_string_lossy().into_owned())
-            .unwrap_or_else(|| "robot.urdf".into());
-        let mut scene = v.scene.scene.clone();
-        scene.robot.urdf = urdf_name.clone();
-        let header = format!(
-            "# binpick {}: resolved scene, from {}\n",
-            env!("CARGO_PKG_VERSION"),
-            v.scene.label
-        );
-        dir.write(&format!("{sub}/scene.toml"), header + &toml::to_string(&scene)?)?;
-        dir.write(&format!("{sub}/{urdf_name}"), &v.scene.urdf_text)?;
-        for wp in &v.workpieces {
-            // A mesh goes beside the variant's workpiece file, which names it by its bare name.
-            let mut wp = wp.clone();
-            if let (ShapeKind::Mesh, Source::File(p), Some(mesh)) = (
-                wp.workpiece.shape.kind,
-                &wp.source,
-                wp.workpiece.shape.mesh_file.clone(),
-            ) {
-                let from = p.parent().unwrap_or(Path::new(".")).join(&mesh);
-                let name = Path::new(&mesh)
-                    .file_name()
-                    .map(|n| n.to_string_lossy().into_owned())
-                    .unwrap_or(mesh);
-                dir.write(
-                    &format!("{sub}/{name}"),
-                    std::fs::read(&from).with_context(|| from.display().to_string())?,
-                )?;
-                wp.workpiece.shape.mesh_file = Some(name);
-                wp.source = Source::Embedded;
-            }
-            dir.write_workpiece(&wp, &format!("{sub}/workpiece-{}.toml", wp.workpiece.name))?;
+        write_variant(dir, &format!("variant-{}", i + 1), v)?;
+    }
+    Ok(())
+}
+
+/// One variant's resolved cell (with its URDF) and workpieces (with their meshes) in `sub/`.
+pub fn write_variant(dir: &binpick::report::RunDir, sub: &str, v: &binpick::study::Variant) -> Result<()> {
+    std::fs::create_dir_all(dir.path(sub)).with_context(|| dir.path(sub).display().to_string())?;
+    let urdf_name = Path::new(&v.scene.scene.robot.urdf)
+        .file_name()
+        .map(|n| n.to_string_lossy().into_owned())
+        .unwrap_or_else(|| "robot.urdf".into());
+    let mut scene = v.scene.scene.clone();
+    scene.robot.urdf = urdf_name.clone();
+    let header = format!(
+        "# binpick {}: resolved scene, from {}\n",
+        env!("CARGO_PKG_VERSION"),
+        v.scene.label
+    );
+    dir.write(&format!("{sub}/scene.toml"), header + &toml::to_string(&scene)?)?;
+    dir.write(&format!("{sub}/{urdf_name}"), &v.scene.urdf_text)?;
+    for wp in &v.workpieces {
+        // A mesh goes beside the variant's workpiece file, which names it by its bare name.
+        let mut wp = wp.clone();
+        if let (ShapeKind::Mesh, Source::File(p), Some(mesh)) = (
+            wp.workpiece.shape.kind,
+            &wp.source,
+            wp.workpiece.shape.mesh_file.clone(),
+        ) {
+            let from = p.parent().unwrap_or(Path::new(".")).join(&mesh);
+            let name = Path::new(&mesh)
+                .file_name()
+                .map(|n| n.to_string_lossy().into_owned())
+                .unwrap_or(mesh);
+            dir.write(
+                &format!("{sub}/{name}"),
+                std::fs::read(&from).with_context(|| from.display().to_string())?,
+            )?;
+            wp.workpiece.shape.mesh_file = Some(name);
+            wp.source = Source::Embedded;
         }
+        dir.write_workpiece(&wp, &format!("{sub}/workpiece-{}.toml", wp.workpiece.name))?;
     }
     Ok(())
 }

@@ -17,3 +17,4 @@ mod servo;
 mod support;
 mod sweep;
 mod trajectory;
+mod tune;

@@ -1,0 +1,257 @@
+//! `binpick tune`: the cell's settings for one workpiece chosen by an optimizer over
+//! `--vary KEY=LO:HI` keys ([`binpick::tune`]), judged on test seeds it never evaluated.
+//!
+//! Everything is checked before anything runs or is written (exit 2): the seeds (training and
+//! test seeds that overlap are refused), the keys (unknown, non-numeric, a bad range), the
+//! constraints. Each round is one study; each finished evaluation goes to the journal
+//! `<out>/<name>.journal.jsonl`, and the same command re-run (after Ctrl-C, or with a larger
+//! `--budget`) resumes from it. The folder `<out>/<name>/` holds `tune.md`, `tune.json`,
+//! `tune.svg`, the tuned cell and workpiece files in `tuned/` and the untuned ones in
+//! `untuned/`. When no candidate meets the constraints, the files are written without a best
+//! and the command fails (exit 1).
+
+use std::path::PathBuf;
+use std::sync::atomic::Ordering;
+
+use anyhow::{Context, Result, anyhow};
+use clap::Args;
+
+use super::study::study_error;
+use super::{InputError, Interrupted, ModeArgs, OutArgs, check_picks, stop_on_ctrl_c};
+use binpick::report::RunDir;
+use binpick::tune::journal::{Header, Journal};
+use binpick::tune::output::Report;
+use binpick::tune::{Constraints, Settings};
+
+/// Arguments of `binpick tune`.
+#[derive(Args)]
+pub struct TuneArgs {
+    /// The workpiece: A ... F (embedded) or a path to a workpiece file.
+    #[arg(long)]
+    pub workpiece: String,
+    /// A numeric key of the cell file (`gripper.cup_diameter_m`) or, prefixed `workpiece.`, of
+    /// the workpiece file, and its range `LO:HI`; an integer key takes whole numbers. Repeat for
+    /// more keys.
+    #[arg(long = "vary", value_name = "KEY=LO:HI", required = true)]
+    pub varies: Vec<String>,
+    /// Candidates the optimizer may ask for, in all.
+    #[arg(long, default_value_t = 60)]
+    pub budget: usize,
+    /// Candidates per round (the swarm's particles), run in parallel as one study.
+    #[arg(long, default_value_t = 10)]
+    pub population: usize,
+    /// Seeds the optimizer evaluates candidates on: 1-5, or 1,2,5.
+    #[arg(long)]
+    pub train_seeds: String,
+    /// Seeds the best and the untuned cell are measured on afterwards (none of the training seeds).
+    #[arg(long)]
+    pub test_seeds: String,
+    /// Picks per run.
+    #[arg(long, default_value_t = 21)]
+    pub picks: usize,
+    /// The optimizer's seed (its random numbers come from this seed's `tune-optimizer` stream).
+    #[arg(long, default_value_t = 1)]
+    pub seed: u64,
+    /// Lowest success rate (placed / attempts, 0 to 1) a best must reach on the training seeds.
+    #[arg(long, default_value_t = 0.95)]
+    pub min_success: f64,
+    /// Most collisions a best may have over its training runs.
+    #[arg(long, default_value_t = 0)]
+    pub max_collisions: usize,
+    /// Most protective stops.
+    #[arg(long, default_value_t = 0)]
+    pub max_stops: usize,
+    /// Most parts lost.
+    #[arg(long, default_value_t = 0)]
+    pub max_parts_lost: usize,
+    /// Runs in parallel (default: the machine's cores).
+    #[arg(long)]
+    pub jobs: Option<usize>,
+    /// Scene file the candidates start from (default: the embedded default cell).
+    #[arg(long)]
+    pub scene: Option<PathBuf>,
+    #[command(flatten)]
+    pub mode: ModeArgs,
+    #[command(flatten)]
+    pub out: OutArgs,
+}
+
+/// Seeds as a folder name writes them: a range when consecutive.
+fn seeds_name(s: &[u64]) -> String {
+    match (s.first(), s.last()) {
+        (Some(a), Some(b)) if s.len() > 1 && s.windows(2).all(|w| w[0].checked_add(1) == Some(w[1])) => {
+            format!("{a}-{b}")
+        }
+        _ => s.iter().map(u64::to_string).collect::<Vec<_>>().join("_"),
+    }
+}
+
+/// `binpick tune`.
+pub fn tune(a: &TuneArgs) -> Result<()> {
+    check_picks(a.picks)?;
+    if a.budget == 0 || a.budget > 10_000 {
+        return Err(InputError(format!("--budget must be within [1, 10000], got {}", a.budget)).into());
+    }
+    if a.population == 0 || a.population > 1000 {
+        return Err(InputError(format!("--population must be within [1, 1000], got {}", a.population)).into());
+    }
+    if !(0.0..=1.0).contains(&a.min_success) {
+        return Err(InputError(format!("--min-success must be within [0, 1], got {}", a.min_success)).into());
+    }
+    let threads = match a.jobs {
+        Some(0) => return Err(InputError("--jobs must be at least 1, got 0".into()).into()),
+        Some(j) => j,
+        None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+    };
+    let parse = |t: &str, opt: &str| {
+        binpick::study::parse_seeds(t)
+            .map_err(|e| InputError(format!("{opt}{}", e.to_string().trim_start_matches("--seeds"))))
+    };
+    let train = parse(&a.train_seeds, "--train-seeds")?;
+    let test = parse(&a.test_seeds, "--test-seeds")?;
+    let both: Vec<u64> = train.iter().filter(|s| test.contains(s)).copied().collect();
+    if !both.is_empty() {
+        return Err(InputError(format!(
+            "--train-seeds and --test-seeds overlap ({}): the test figure must come from seeds the optimizer never evaluated",
+            seeds_name(&both)
+        ))
+        .into());
+    }
+    let mut dims = binpick::tune::parse_varies(&a.varies).map_err(study_error)?;
+    let base = binpick::tune::cell::base(a.scene.as_deref(), &a.workpiece).map_err(study_error)?;
+    binpick::tune::cell::check_keys(&base, &mut dims).map_err(study_error)?;
+    let untuned = &base.variants[0];
+    let wp_name = untuned.workpieces[0].workpiece.name.clone();
+    let header = Header {
+        version: env!("CARGO_PKG_VERSION").into(),
+        scene: base.scene_label.clone(),
+        workpiece: a.workpiece.clone(),
+        keys: dims.clone(),
+        train_seeds: train.clone(),
+        picks: a.picks,
+        deterministic: a.mode.deterministic,
+        seed: a.seed,
+        population: a.population,
+    };
+    let keys: String = dims
+        .iter()
+        .map(|d| {
+            d.key
+                .replace(|c: char| !c.is_ascii_alphanumeric() && c != '_' && c != '.', "_")
+        })
+        .collect::<Vec<_>>()
+        .join("+");
+    let name = format!(
+        "tune-{wp_name}-{keys}-train{}-test{}-picks{}-seed{}{}",
+        seeds_name(&train),
+        seeds_name(&test),
+        a.picks,
+        a.seed,
+        if a.mode.deterministic { "-det" } else { "" }
+    );
+    let dir = RunDir::create(&a.out.out, &name)?;
+    let journal_path = a.out.out.join(format!("{name}.journal.jsonl"));
+    let journal = Journal::open(&journal_path, &header).map_err(study_error)?;
+    let settings = Settings {
+        budget: a.budget,
+        population: a.population,
+        seed: a.seed,
+        constraints: Constraints {
+            min_success: a.min_success,
+            max_collisions: a.max_collisions,
+            max_stops: a.max_stops,
+            max_parts_lost: a.max_parts_lost,
+        },
+    };
+
+    let bar = indicatif::ProgressBar::new((a.budget * train.len() + 2 * test.len()) as u64);
+    bar.set_style(
+        indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs (at most) {msg}")
+            .context("the progress bar's template")?
+            .progress_chars("=> "),
+    );
+    let progress = |_: &binpick::study::StudyRun| bar.inc(1);
+    let stop = stop_on_ctrl_c();
+    let wall = std::time::Instant::now();
+    let mut cell = binpick::tune::cell::Cell::new(
+        a.scene.as_deref(),
+        a.workpiece.clone(),
+        dims.clone(),
+        train.clone(),
+        a.picks,
+        a.mode.deterministic,
+        threads,
+        &journal,
+        &progress,
+    );
+    cell.stop = Some(stop);
+    let interrupted = || {
+        Interrupted(format!(
+            "{}: it keeps every finished evaluation; the same command resumes from it",
+            journal.path().display()
+        ))
+    };
+    let evaluations = match binpick::tune::optimize(&dims, &settings, &mut cell) {
+        Ok(e) => e,
+        Err(_) if stop.load(Ordering::Relaxed) => {
+            bar.finish_and_clear();
+            return Err(interrupted().into());
+        }
+        Err(e) => return Err(study_error(e)),
+    };
+    let best = binpick::tune::best(&evaluations);
+    let test_figures = match best {
+        Some(b) => match cell.test(&b.values, &test) {
+            Ok(f) => Some(f),
+            Err(_) if stop.load(Ordering::Relaxed) => {
+                bar.finish_and_clear();
+                return Err(interrupted().into());
+            }
+            Err(e) => return Err(study_error(e)),
+        },
+        None => None,
+    };
+    bar.finish_and_clear();
+    let report = Report {
+        header: &header,
+        budget: a.budget,
+        constraints: settings.constraints,
+        test_seeds: &test,
+        evaluations: &evaluations,
+        best,
+        test: test_figures,
+    };
+    let doc = binpick::tune::output::json(&report);
+    dir.write_json("tune.json", &doc)?;
+    let md = binpick::tune::output::markdown(&report);
+    dir.write("tune.md", &md)?;
+    dir.write("tune.svg", binpick::tune::output::svg(&report))?;
+    super::sweep::write_variant(&dir, "untuned", untuned)?;
+    if let Some(b) = best {
+        let tuned = cell.resolve(&b.values).map_err(study_error)?;
+        super::sweep::write_variant(&dir, "tuned", &tuned.variants[0])?;
+    }
+    let dest = dir.finish()?;
+    if a.out.json {
+        let out = serde_json::json!({"tune": doc["tune"]["best"], "test": doc["tune"]["test"], "dir": dest.display().to_string()});
+        println!("{}", serde_json::to_string_pretty(&out)?);
+    } else {
+        print!("{md}");
+        println!(
+            "\n{} evaluations ({} from the journal {}), {} cell runs, {:.1} s wall on {threads} threads",
+            evaluations.len(),
+            cell.replayed,
+            journal.path().display(),
+            cell.runs,
+            wall.elapsed().as_secs_f64()
+        );
+        println!("wrote {}", dest.display());
+    }
+    if best.is_none() {
+        return Err(anyhow!(
+            "no candidate met every constraint on the training seeds; the evaluations are in {}",
+            dest.display()
+        ));
+    }
+    Ok(())
+}

@@ -1,0 +1,296 @@
+//! The cell as a tune's evaluator: each round's candidates resolved like a sweep's variants and
+//! run as one study on the training seeds; the best and the untuned cell run on the test seeds.
+//!
+//! Job: check the varied keys against the resolved files (a key the cell or workpiece file does
+//! not hold, or holds as anything but a number, is bad input; an integer there makes the key an
+//! integer key, whose bounds must be whole); resolve each candidate through
+//! [`crate::sweep::resolve`] (the checks a cell file goes through: a candidate they refuse is
+//! [`Outcome::Refused`], never run); run the round's new candidates as one study through
+//! [`crate::study::run_study`] (in parallel), answer repeated candidates and those in the
+//! [`Journal`] without running them, and append each candidate to the journal as soon as all its
+//! runs finished. A run ended by Ctrl-C is not journalled.
+//!
+//! Units: the files' own; s and counts in the figures.
+
+use std::collections::HashMap;
+use std::path::Path;
+use std::sync::Mutex;
+use std::sync::atomic::AtomicBool;
+
+use super::journal::Journal;
+use super::{Dim, Evaluator, Figures, Outcome};
+use crate::cycle::{EndReason, Tally};
+use crate::study::{Resolved, RunSettings, StudyError, StudyRun, StudySpec, run_study};
+use crate::sweep::{Segment, SetArg};
+
+/// The value at `path` in a TOML tree, if there is one.
+fn lookup<'a>(mut v: &'a toml::Value, path: &[Segment]) -> Option<&'a toml::Value> {
+    for s in path {
+        v = match s {
+            Segment::Key(k) => v.as_table()?.get(k)?,
+            Segment::Index(i) => v.as_array()?.get(*i)?,
+        };
+    }
+    Some(v)
+}
+
+/// The untuned cell and workpiece, resolved as a sweep resolves them.
+pub fn base(scene: Option<&Path>, workpiece: &str) -> Result<Resolved, StudyError> {
+    crate::sweep::resolve(scene, &[workpiece.to_string()], &[], &[Vec::new()])
+}
+
+/// Checks each key against the resolved (defaults filled in) cell and workpiece files: it must
+/// hold a number there; an integer makes the key an integer key (its bounds must be whole).
+pub fn check_keys(base: &Resolved, dims: &mut [Dim]) -> Result<(), StudyError> {
+    let v = &base.variants[0];
+    let as_tree = |what: &str, r: Result<toml::Value, toml::ser::Error>| {
+        r.map_err(|e| StudyError::Run(format!("the resolved {what} does not serialise: {e}")))
+    };
+    let scene = as_tree("cell", toml::Value::try_from(&v.scene.scene))?;
+    let wp = as_tree("workpiece", toml::Value::try_from(&v.workpieces[0].workpiece))?;
+    for d in dims.iter_mut() {
+        let (target, path) = d.target();
+        let (tree, file) = match target {
+            crate::sweep::Target::Cell => (&scene, &v.scene.label),
+            crate::sweep::Target::Workpiece => (&wp, &v.workpieces[0].label),
+        };
+        let bad = |m: String| StudyError::Input(format!("--vary {}: {m}", d.key));
+        match lookup(tree, &path) {
+            None => return Err(bad(format!("{file} has no such key"))),
+            Some(toml::Value::Integer(_)) => {
+                if d.lo.fract() != 0.0 || d.hi.fract() != 0.0 {
+                    return Err(bad(format!(
+                        "the key takes whole numbers, so its range must be whole numbers, got {}:{}",
+                        d.lo, d.hi
+                    )));
+                }
+                d.integer = true;
+            }
+            Some(toml::Value::Float(_)) => d.integer = false,
+            Some(other) => {
+                return Err(bad(format!(
+                    "not a numeric key: {file} holds {} there",
+                    crate::sweep::value_text(other)
+                )));
+            }
+        }
+    }
+    Ok(())
+}
+
+/// Values as the files write them (the journal's and the spec's keys).
+pub fn texts(dims: &[Dim], values: &[f64]) -> Vec<String> {
+    dims.iter()
+        .zip(values)
+        .map(|(d, x)| crate::sweep::value_text(&d.value(*x)))
+        .collect()
+}
+
+/// Joins resolved studies into one (their arm models kept, indices shifted).
+fn join(label: &str, parts: Vec<Resolved>) -> Resolved {
+    let mut out = Resolved {
+        variants: Vec::new(),
+        robots: Vec::new(),
+        scene_label: label.to_string(),
+    };
+    for p in parts {
+        let shift = out.robots.len();
+        out.variants.extend(p.variants.into_iter().map(|mut v| {
+            v.robot += shift;
+            v
+        }));
+        out.robots.extend(p.robots);
+    }
+    out
+}
+
+/// The cell evaluating a tune's candidates.
+pub struct Cell<'a> {
+    /// The cell file (none: the embedded default).
+    pub scene: Option<&'a Path>,
+    /// The workpiece as given (a name or a path).
+    pub workpiece: String,
+    /// The keys.
+    pub dims: Vec<Dim>,
+    /// Training seeds.
+    pub train_seeds: Vec<u64>,
+    /// Picks per run.
+    pub picks: usize,
+    /// Fixed compute budgets.
+    pub deterministic: bool,
+    /// Worker threads.
+    pub threads: usize,
+    /// Set by Ctrl-C.
+    pub stop: Option<&'static AtomicBool>,
+    /// The journal.
+    pub journal: &'a Journal,
+    /// Called after each run.
+    pub progress: &'a (dyn Fn(&StudyRun) + Sync),
+    /// Candidates answered from the journal (each counted once).
+    pub replayed: usize,
+    /// Cell runs made.
+    pub runs: usize,
+    /// Figures known: the journal's and those run here.
+    memo: HashMap<Vec<String>, Figures>,
+    /// Values answered from the journal so far.
+    from_journal: std::collections::HashSet<Vec<String>>,
+}
+
+impl<'a> Cell<'a> {
+    /// The evaluator; its memo starts with the journal's entries.
+    #[allow(clippy::too_many_arguments)]
+    pub fn new(
+        scene: Option<&'a Path>,
+        workpiece: String,
+        dims: Vec<Dim>,
+        train_seeds: Vec<u64>,
+        picks: usize,
+        deterministic: bool,
+        threads: usize,
+        journal: &'a Journal,
+        progress: &'a (dyn Fn(&StudyRun) + Sync),
+    ) -> Self {
+        Cell {
+            scene,
+            workpiece,
+            dims,
+            train_seeds,
+            picks,
+            deterministic,
+            threads,
+            stop: None,
+            journal,
+            progress,
+            replayed: 0,
+            runs: 0,
+            memo: journal.entries.clone(),
+            from_journal: Default::default(),
+        }
+    }
+
+    /// One candidate resolved and checked.
+    pub fn resolve(&self, values: &[f64]) -> Result<Resolved, StudyError> {
+        let sets: Vec<SetArg> = self
+            .dims
+            .iter()
+            .map(|d| {
+                let (target, path) = d.target();
+                SetArg {
+                    key: d.key.clone(),
+                    target,
+                    path,
+                    values: Vec::new(),
+                }
+            })
+            .collect();
+        let vals: Vec<toml::Value> = self.dims.iter().zip(values).map(|(d, x)| d.value(*x)).collect();
+        crate::sweep::resolve(self.scene, std::slice::from_ref(&self.workpiece), &sets, &[vals])
+    }
+
+    /// Runs `resolved`'s variants (labelled `rows`) on `seeds` as one study; returns each
+    /// variant's figures, in order. `journal` appends each variant's figures as it finishes.
+    fn study(
+        &mut self,
+        resolved: &Resolved,
+        rows: Vec<Vec<String>>,
+        seeds: &[u64],
+        journal: bool,
+    ) -> Result<Vec<Figures>, StudyError> {
+        let spec = StudySpec {
+            scene: resolved.scene_label.clone(),
+            keys: self.dims.iter().map(|d| d.key.clone()).collect(),
+            variants: rows.clone(),
+            workpieces: vec![resolved.variants[0].workpieces[0].workpiece.name.clone()],
+            seeds: seeds.to_vec(),
+            picks: self.picks,
+            deterministic: self.deterministic,
+        };
+        let jobs = spec.jobs();
+        let done: Mutex<Vec<Vec<Tally>>> = Mutex::new(vec![Vec::new(); rows.len()]);
+        let failed: Mutex<Option<StudyError>> = Mutex::new(None);
+        let progress = self.progress;
+        let journal_to = self.journal;
+        let on_run = |r: &StudyRun| {
+            progress(r);
+            let Ok(mut done) = done.lock() else { return };
+            let mine = &mut done[r.variant];
+            mine.push(r.tally.clone());
+            let interrupted = mine.iter().any(|t| t.ended == Some(EndReason::Interrupted));
+            if journal && mine.len() == seeds.len() && !interrupted {
+                let f = Figures::of(&Tally::merged(mine.iter()).expect("one run at least"));
+                if let Err(e) = journal_to.append(&rows[r.variant], &f)
+                    && let Ok(mut slot) = failed.lock()
+                {
+                    slot.get_or_insert(e);
+                }
+            }
+        };
+        let settings = RunSettings {
+            threads: self.threads,
+            record: None,
+            stop: self.stop,
+        };
+        let runs = run_study(resolved, &spec, &jobs, &settings, &on_run)?;
+        self.runs += runs.len();
+        if let Some(e) = failed.into_inner().ok().flatten() {
+            return Err(e);
+        }
+        if runs.iter().any(|r| r.tally.ended == Some(EndReason::Interrupted)) {
+            return Err(StudyError::Run("interrupted".into()));
+        }
+        Ok((0..rows.len())
+            .map(|v| {
+                let t = Tally::merged(runs.iter().filter(|r| r.variant == v).map(|r| &r.tally));
+                Figures::of(&t.expect("every variant has runs"))
+            })
+            .collect())
+    }
+
+    /// The best candidate and the untuned cell on `seeds` (the test seeds): their figures.
+    pub fn test(&mut self, best: &[f64], seeds: &[u64]) -> Result<(Figures, Figures), StudyError> {
+        let tuned = self.resolve(best)?;
+        let untuned = base(self.scene, &self.workpiece)?;
+        let label = tuned.scene_label.clone();
+        let rows = vec![texts(&self.dims, best), vec!["untuned".to_string(); self.dims.len()]];
+        let both = join(&label, vec![tuned, untuned]);
+        let f = self.study(&both, rows, seeds, false)?;
+        Ok((f[0].clone(), f[1].clone()))
+    }
+}
+
+impl Evaluator for Cell<'_> {
+    fn evaluate(&mut self, _round: usize, candidates: &[Vec<f64>]) -> Result<Vec<Outcome>, StudyError> {
+        let mut outcomes: Vec<Option<Outcome>> = vec![None; candidates.len()];
+        let mut to_run: Vec<(Vec<String>, Resolved)> = Vec::new();
+        for (i, c) in candidates.iter().enumerate() {
+            let key = texts(&self.dims, c);
+            if let Some(f) = self.memo.get(&key) {
+                if self.journal.entries.contains_key(&key) && self.from_journal.insert(key.clone()) {
+                    self.replayed += 1;
+                }
+                outcomes[i] = Some(Outcome::Measured(f.clone()));
+            } else if to_run.iter().any(|(k, _)| k == &key) {
+                // Asked twice in this round: run once (filled in below).
+            } else {
+                match self.resolve(c) {
+                    Ok(r) => to_run.push((key, r)),
+                    Err(StudyError::Config(e)) => outcomes[i] = Some(Outcome::Refused(e.to_string())),
+                    Err(e) => return Err(e),
+                }
+            }
+        }
+        if !to_run.is_empty() {
+            let label = to_run[0].1.scene_label.clone();
+            let rows: Vec<Vec<String>> = to_run.iter().map(|(k, _)| k.clone()).collect();
+            let resolved = join(&label, to_run.into_iter().map(|(_, r)| r).collect());
+            let seeds = self.train_seeds.clone();
+            let figures = self.study(&resolved, rows.clone(), &seeds, true)?;
+            self.memo.extend(rows.into_iter().zip(figures));
+        }
+        Ok(candidates
+            .iter()
+            .zip(outcomes)
+            .map(|(c, o)| o.unwrap_or_else(|| Outcome::Measured(self.memo[&texts(&self.dims, c)].clone())))
+            .collect())
+    }
+}
