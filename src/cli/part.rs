@@ -13,6 +13,9 @@ use serde_json::json;
 
 use binpick::config::{ConfigError, LoadedScene, LoadedWorkpiece, Scene};
 use binpick::part::mass::MassSpec;
+use binpick::part::model::ModelFace;
+use binpick::part::poses::RestingPose;
+use binpick::part::repair::RepairReport;
 use binpick::part::symmetry::Symmetry;
 use binpick::part::{CupSpec, PartModel};
 
@@ -102,7 +105,6 @@ pub fn part(a: &PartArgs) -> Result<()> {
     let report = &wp.mesh.as_ref().map(|m| m.1.clone()).unwrap_or_default();
     let w = &wp.workpiece;
     let tilt = scene.scene.gripper.max_tilt_deg.to_radians();
-    let share = m.graspable_share(tilt);
     let svg_path = a
         .svg
         .clone()
@@ -114,71 +116,90 @@ pub fn part(a: &PartArgs) -> Result<()> {
         w.kind
     );
     write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title))?;
-    let mm = |v: f64| round(v * 1e3, 4);
-    let faces: Vec<_> = m
-        .faces
-        .iter()
-        .map(|f| {
-            json!({
-                "normal": f.face.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
-                "centroid_mm": f.face.centroid_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
-                "area_mm2": round(f.face.area_m2 * 1e6, 4),
-                "extent_mm": f.face.extent_m().map(mm),
-                "holes": f.face.holes.len(),
-                "outline_mm": f.face.outer.iter().map(|p| [mm(p.x), mm(p.y)]).collect::<Vec<_>>(),
-                "cup_fit": {
-                    "takes_cup": f.fit.takes_cup(),
-                    "area_mm2": round(f.fit.area_m2 * 1e6, 4),
-                    "centres": f.fit.centres.len(),
-                    "grid_spacing_mm": mm(f.fit.spacing_m),
-                    "best_centre_mm": f.fit.best.map(|b| {
-                        let p = f.face.to_part(&b);
-                        [mm(p.x), mm(p.y), mm(p.z)]
-                    }),
-                    "best_clearance_mm": mm(f.fit.best_clearance_m),
-                },
-            })
-        })
-        .collect();
-    let poses: Vec<_> = m
-        .poses
-        .iter()
-        .map(|p| {
-            json!({
-                "down_normal": p.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
-                "likelihood": round(p.likelihood, 6),
-                "com_height_mm": mm(p.com_height_m),
-                "stability_margin_mm": mm(p.stability_margin_m),
-                "support_area_mm2": round(p.support_area_m2 * 1e6, 4),
-            })
-        })
-        .collect();
-    let warning = no_cup_face(&m);
     if a.json {
-        let out = json!({
-            "workpiece": wp.label,
-            "mesh_file": w.shape.mesh_file,
-            "triangles": m.mesh.triangles.len(),
-            "repair": report,
-            "size_mm": m.size_m.map(mm),
-            "volume_mm3": round(m.mass.volume_m3 * 1e9, 4),
-            "mass_g": round(m.mass.mass_kg * 1e3, 6),
-            "density_kg_m3": round(m.mass.density_kg_m3, 3),
-            "com_mm": m.mass.com_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
-            "inertia_com_kg_mm2": m.mass.inertia_com_kg_m2.row_iter().map(|r| r.iter().map(|v| round(v * 1e6, 9)).collect::<Vec<_>>()).collect::<Vec<_>>(),
-            "symmetry_orders": m.symmetry.orders,
-            "symmetry_detected": m.symmetry_detected,
-            "cup_diameter_mm": mm(m.cup.diameter_m),
-            "face_margin_mm": mm(m.cup.face_margin_m),
-            "faces": faces,
-            "poses": poses,
-            "graspable_share": round(share, 6),
-            "warning": warning,
-            "svg": svg_path.display().to_string(),
-        });
-        println!("{}", serde_json::to_string_pretty(&out)?);
-        return Ok(());
+        print_json(&wp, &m, report, tilt, &svg_path)
+    } else {
+        print_summary(&wp, &m, report);
+        print_faces(&m);
+        print_poses(&m, tilt);
+        if let Some(why) = no_cup_face(&m) {
+            println!("warning: {why}");
+        }
+        println!("picture: {}", svg_path.display());
+        Ok(())
     }
+}
+
+/// Millimetres from metres, rounded for the JSON output.
+fn mm(v: f64) -> f64 {
+    round(v * 1e3, 4)
+}
+
+/// The `--json` output: the part model with every face and pose.
+fn print_json(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport, tilt: f64, svg_path: &Path) -> Result<()> {
+    let w = &wp.workpiece;
+    let out = json!({
+        "workpiece": wp.label,
+        "mesh_file": w.shape.mesh_file,
+        "triangles": m.mesh.triangles.len(),
+        "repair": report,
+        "size_mm": m.size_m.map(mm),
+        "volume_mm3": round(m.mass.volume_m3 * 1e9, 4),
+        "mass_g": round(m.mass.mass_kg * 1e3, 6),
+        "density_kg_m3": round(m.mass.density_kg_m3, 3),
+        "com_mm": m.mass.com_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
+        "inertia_com_kg_mm2": m.mass.inertia_com_kg_m2.row_iter().map(|r| r.iter().map(|v| round(v * 1e6, 9)).collect::<Vec<_>>()).collect::<Vec<_>>(),
+        "symmetry_orders": m.symmetry.orders,
+        "symmetry_detected": m.symmetry_detected,
+        "cup_diameter_mm": mm(m.cup.diameter_m),
+        "face_margin_mm": mm(m.cup.face_margin_m),
+        "faces": m.faces.iter().map(face_json).collect::<Vec<_>>(),
+        "poses": m.poses.iter().map(pose_json).collect::<Vec<_>>(),
+        "graspable_share": round(m.graspable_share(tilt), 6),
+        "warning": no_cup_face(m),
+        "svg": svg_path.display().to_string(),
+    });
+    println!("{}", serde_json::to_string_pretty(&out)?);
+    Ok(())
+}
+
+/// One planar face with its cup fit, in the JSON output.
+fn face_json(f: &ModelFace) -> serde_json::Value {
+    json!({
+        "normal": f.face.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
+        "centroid_mm": f.face.centroid_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
+        "area_mm2": round(f.face.area_m2 * 1e6, 4),
+        "extent_mm": f.face.extent_m().map(mm),
+        "holes": f.face.holes.len(),
+        "outline_mm": f.face.outer.iter().map(|p| [mm(p.x), mm(p.y)]).collect::<Vec<_>>(),
+        "cup_fit": {
+            "takes_cup": f.fit.takes_cup(),
+            "area_mm2": round(f.fit.area_m2 * 1e6, 4),
+            "centres": f.fit.centres.len(),
+            "grid_spacing_mm": mm(f.fit.spacing_m),
+            "best_centre_mm": f.fit.best.map(|b| {
+                let p = f.face.to_part(&b);
+                [mm(p.x), mm(p.y), mm(p.z)]
+            }),
+            "best_clearance_mm": mm(f.fit.best_clearance_m),
+        },
+    })
+}
+
+/// One stable resting pose, in the JSON output.
+fn pose_json(p: &RestingPose) -> serde_json::Value {
+    json!({
+        "down_normal": p.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
+        "likelihood": round(p.likelihood, 6),
+        "com_height_mm": mm(p.com_height_m),
+        "stability_margin_mm": mm(p.stability_margin_m),
+        "support_area_mm2": round(p.support_area_m2 * 1e6, 4),
+    })
+}
+
+/// The text head: the mesh, what its repair did, size and mass, symmetry.
+fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
+    let w = &wp.workpiece;
     println!(
         "part {:?} ({}): mesh {}, {} triangles in {} {}",
         w.name,
@@ -231,15 +252,18 @@ pub fn part(a: &PartArgs) -> Result<()> {
             "from the file"
         }
     );
+}
+
+/// The text table of the planar faces that matter to a cup (`--json` lists every face).
+fn print_faces(m: &PartModel) {
     println!(
         "\nplanar faces, for the {:.1} mm cup with a {:.1} mm margin (largest first):",
         m.cup.diameter_m * 1e3,
         m.cup.face_margin_m * 1e3
     );
     println!("   #  normal                  area mm^2   extent mm      holes  cup fits  fit area mm^2  best centre mm");
-    // The text lists the faces that matter to a cup (--json lists every face).
     let largest = m.faces.first().map_or(0.0, |f| f.face.area_m2);
-    let shown = |f: &binpick::part::model::ModelFace| f.fit.takes_cup() || f.face.area_m2 >= 0.05 * largest;
+    let shown = |f: &ModelFace| f.fit.takes_cup() || f.face.area_m2 >= 0.05 * largest;
     for (i, f) in m.faces.iter().enumerate().filter(|(_, f)| shown(f)) {
         let n = f.face.normal;
         let e = f.face.extent_m();
@@ -265,6 +289,10 @@ pub fn part(a: &PartArgs) -> Result<()> {
     if hidden > 0 {
         println!("  (and {hidden} faces under 5 % of the largest face's area: --json lists them)");
     }
+}
+
+/// The text table of the stable resting poses and the share with a cup face up.
+fn print_poses(m: &PartModel, tilt: f64) {
     println!("\nstable resting poses (the part lies on the hull face whose outward normal points down):");
     println!("  down normal               likelihood  CoM height mm  margin mm  a cup face looks up");
     for p in &m.poses {
@@ -283,13 +311,8 @@ pub fn part(a: &PartArgs) -> Result<()> {
     println!(
         "\nshare of resting poses with a cup face up (within the cup's {:.0} deg tilt): {:.1} %",
         tilt.to_degrees(),
-        100.0 * share
+        100.0 * m.graspable_share(tilt)
     );
-    if let Some(why) = warning {
-        println!("warning: {why}");
-    }
-    println!("picture: {}", svg_path.display());
-    Ok(())
 }
 
 /// Writes `text` to `path` through a temporary file beside it (never half-written).

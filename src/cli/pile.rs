@@ -10,6 +10,8 @@ use serde_json::json;
 
 use super::{InputError, load_cell};
 use binpick::config::{LoadedScene, LoadedWorkpiece};
+use binpick::pipeline::GraspChoice;
+use binpick::sensor::RecognitionReport;
 
 /// A pile of one workpiece in a cell, and where its run folder goes.
 #[derive(Args)]
@@ -209,10 +211,18 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         job.capture.valid_count(),
         state.sensor.spoiled
     );
+    print_recognition(&loaded, &report, sensed.recognition_wall_s);
+    print_grasp(&choice, grasp_ms);
+    println!("  wrote            {}", dest.display());
+    Ok(())
+}
+
+/// The text lines of the recognition result against the truth (evaluation only).
+fn print_recognition(loaded: &LoadedScene, report: &RecognitionReport, recognition_wall_s: f64) {
     println!(
         "  recognition      {} ({:.1} ms): {} detected, {} correct (precision {:.1} %); top layer {} / {} found (recall {:.1} %); {} parts in the tray",
         loaded.scene.sensor.recognition.name(),
-        sensed.recognition_wall_s * 1e3,
+        recognition_wall_s * 1e3,
         report.figures.detected,
         report.figures.correct,
         report.figures.precision * 100.0,
@@ -228,7 +238,11 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         report.figures.rotation_error_deg[0],
         report.figures.rotation_error_deg[1]
     );
-    match chosen {
+}
+
+/// The text lines of the chosen grasp, the candidates and the time sense-and-grasp took.
+fn print_grasp(choice: &GraspChoice, grasp_ms: f64) {
+    match choice.chosen.as_ref().map(|c| &c.grasp) {
         Some(g) => {
             let p = g.world_from_tool.translation.vector;
             println!(
@@ -263,6 +277,4 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         }
     );
     println!("  sense and grasp  {grasp_ms:.2} ms wall (height map, candidates, IK, ranking, clear approach)");
-    println!("  wrote            {}", dest.display());
-    Ok(())
 }

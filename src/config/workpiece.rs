@@ -280,104 +280,7 @@ impl Workpiece {
         c.within("grasp.yaw_symmetry_deg", self.grasp.yaw_symmetry_deg, 0.0, 360.0);
         c.finite("grasp.place_yaw_deg", self.grasp.place_yaw_deg);
         c.non_negative("grasp.face_margin_m", self.grasp.face_margin_m);
-        let sh = &self.shape;
-        if sh.kind != ShapeKind::Mesh {
-            for (key, given) in [
-                ("shape.units", sh.units.is_some()),
-                ("shape.mesh_scale", sh.mesh_scale.is_some()),
-                ("shape.symmetry_orders", sh.symmetry_orders.is_some()),
-            ] {
-                if given {
-                    c.fail(key, "is only allowed when kind = \"mesh\"");
-                }
-            }
-        }
-        match sh.kind {
-            ShapeKind::Box => {
-                if !sh.parts.is_empty() {
-                    c.fail("shape.parts", "is only allowed when kind = \"compound\"");
-                }
-                if sh.mesh_file.is_some() {
-                    c.fail("shape.mesh_file", "is only allowed when kind = \"mesh\"");
-                }
-            }
-            ShapeKind::Compound => {
-                if sh.parts.is_empty() {
-                    c.fail(
-                        "shape.parts",
-                        "must list at least one primitive when kind = \"compound\"",
-                    );
-                }
-                if !sh.parts.iter().any(|p| p.role == PartRole::Body) {
-                    c.fail("shape.parts", "must contain at least one part with role = \"body\"");
-                }
-                let half = self.size_m.map(|s| s / 2.0);
-                for (i, p) in sh.parts.iter().enumerate() {
-                    let k = format!("shape.parts[{i}]");
-                    c.finite_all(&format!("{k}.center_m"), &p.center_m);
-                    match p.primitive {
-                        Primitive::Box => match p.size_m {
-                            Some(s) => c.positive_all(&format!("{k}.size_m"), &s),
-                            None => c.fail(&format!("{k}.size_m"), "is required for a box"),
-                        },
-                        Primitive::Cylinder => {
-                            match p.radius_m {
-                                Some(r) => c.positive(&format!("{k}.radius_m"), r),
-                                None => c.fail(&format!("{k}.radius_m"), "is required for a cylinder"),
-                            }
-                            match p.length_m {
-                                Some(l) => c.positive(&format!("{k}.length_m"), l),
-                                None => c.fail(&format!("{k}.length_m"), "is required for a cylinder"),
-                            }
-                            if p.axis.is_none() {
-                                c.fail(&format!("{k}.axis"), "is required for a cylinder");
-                            }
-                        }
-                    }
-                    if let Some(he) = p.half_extents_m() {
-                        for a in 0..3 {
-                            let (lo, hi) = (p.center_m[a] - he[a], p.center_m[a] + he[a]);
-                            if lo < -half[a] - 1e-9 || hi > half[a] + 1e-9 {
-                                c.fail(
-                                    &k,
-                                    format!(
-                                        "sticks out of the bounding box size_m along axis {a}: spans [{lo:.4}, {hi:.4}], box is ±{:.4}",
-                                        half[a]
-                                    ),
-                                );
-                                break;
-                            }
-                        }
-                    }
-                }
-            }
-            ShapeKind::Mesh => {
-                match &sh.mesh_file {
-                    None => c.fail("shape.mesh_file", "is required when kind = \"mesh\""),
-                    Some(f) if crate::part::import::Format::of(std::path::Path::new(f)).is_none() => c.fail(
-                        "shape.mesh_file",
-                        format!("must be an .stl, .obj or .wrl (VRML 2.0) file, got {f:?}"),
-                    ),
-                    _ => {}
-                }
-                if let Some(s) = sh.mesh_scale {
-                    c.positive("shape.mesh_scale", s);
-                    if sh.units.is_some() {
-                        c.fail("shape.mesh_scale", "must not be given with shape.units (give one)");
-                    }
-                }
-                if let Some(o) = sh.symmetry_orders {
-                    for (a, n) in o.iter().enumerate() {
-                        if !(1..=crate::part::symmetry::MAX_ORDER).contains(n) {
-                            c.fail(
-                                &format!("shape.symmetry_orders[{a}]"),
-                                format!("must be within [1, {}], got {n}", crate::part::symmetry::MAX_ORDER),
-                            );
-                        }
-                    }
-                }
-            }
-        }
+        self.shape.validate(&mut c, &self.size_m);
         c.finish()
     }
 
@@ -473,5 +376,124 @@ impl Workpiece {
             );
         }
         c.finish()
+    }
+}
+
+impl ShapeConfig {
+    /// The shape's keys: those of its kind present and valid, those of other kinds absent.
+    fn validate(&self, c: &mut Checker, size_m: &[f64; 3]) {
+        if self.kind != ShapeKind::Mesh {
+            for (key, given) in [
+                ("shape.units", self.units.is_some()),
+                ("shape.mesh_scale", self.mesh_scale.is_some()),
+                ("shape.symmetry_orders", self.symmetry_orders.is_some()),
+            ] {
+                if given {
+                    c.fail(key, "is only allowed when kind = \"mesh\"");
+                }
+            }
+        }
+        match self.kind {
+            ShapeKind::Box => {
+                if !self.parts.is_empty() {
+                    c.fail("shape.parts", "is only allowed when kind = \"compound\"");
+                }
+                if self.mesh_file.is_some() {
+                    c.fail("shape.mesh_file", "is only allowed when kind = \"mesh\"");
+                }
+            }
+            ShapeKind::Compound => self.validate_compound(c, size_m),
+            ShapeKind::Mesh => self.validate_mesh(c),
+        }
+    }
+
+    /// A compound: at least one part, a body among them, each part valid and inside the
+    /// bounding box `size_m`.
+    fn validate_compound(&self, c: &mut Checker, size_m: &[f64; 3]) {
+        if self.parts.is_empty() {
+            c.fail(
+                "shape.parts",
+                "must list at least one primitive when kind = \"compound\"",
+            );
+        }
+        if !self.parts.iter().any(|p| p.role == PartRole::Body) {
+            c.fail("shape.parts", "must contain at least one part with role = \"body\"");
+        }
+        let half_size_m = size_m.map(|s| s / 2.0);
+        for (i, p) in self.parts.iter().enumerate() {
+            p.validate(c, i, &half_size_m);
+        }
+    }
+
+    /// A mesh: a mesh file of a format read, a positive scale or units (not both), symmetry
+    /// orders in range.
+    fn validate_mesh(&self, c: &mut Checker) {
+        match &self.mesh_file {
+            None => c.fail("shape.mesh_file", "is required when kind = \"mesh\""),
+            Some(f) if crate::part::import::Format::of(std::path::Path::new(f)).is_none() => c.fail(
+                "shape.mesh_file",
+                format!("must be an .stl, .obj or .wrl (VRML 2.0) file, got {f:?}"),
+            ),
+            _ => {}
+        }
+        if let Some(s) = self.mesh_scale {
+            c.positive("shape.mesh_scale", s);
+            if self.units.is_some() {
+                c.fail("shape.mesh_scale", "must not be given with shape.units (give one)");
+            }
+        }
+        if let Some(o) = self.symmetry_orders {
+            for (a, n) in o.iter().enumerate() {
+                if !(1..=crate::part::symmetry::MAX_ORDER).contains(n) {
+                    c.fail(
+                        &format!("shape.symmetry_orders[{a}]"),
+                        format!("must be within [1, {}], got {n}", crate::part::symmetry::MAX_ORDER),
+                    );
+                }
+            }
+        }
+    }
+}
+
+impl ShapePart {
+    /// Part `i` of a compound: its primitive's dimensions given and positive, and inside the
+    /// bounding box of half size `half_size_m`.
+    fn validate(&self, c: &mut Checker, i: usize, half_size_m: &[f64; 3]) {
+        let k = format!("shape.parts[{i}]");
+        c.finite_all(&format!("{k}.center_m"), &self.center_m);
+        match self.primitive {
+            Primitive::Box => match self.size_m {
+                Some(s) => c.positive_all(&format!("{k}.size_m"), &s),
+                None => c.fail(&format!("{k}.size_m"), "is required for a box"),
+            },
+            Primitive::Cylinder => {
+                match self.radius_m {
+                    Some(r) => c.positive(&format!("{k}.radius_m"), r),
+                    None => c.fail(&format!("{k}.radius_m"), "is required for a cylinder"),
+                }
+                match self.length_m {
+                    Some(l) => c.positive(&format!("{k}.length_m"), l),
+                    None => c.fail(&format!("{k}.length_m"), "is required for a cylinder"),
+                }
+                if self.axis.is_none() {
+                    c.fail(&format!("{k}.axis"), "is required for a cylinder");
+                }
+            }
+        }
+        if let Some(he) = self.half_extents_m() {
+            for a in 0..3 {
+                let (lo, hi) = (self.center_m[a] - he[a], self.center_m[a] + he[a]);
+                if lo < -half_size_m[a] - 1e-9 || hi > half_size_m[a] + 1e-9 {
+                    c.fail(
+                        &k,
+                        format!(
+                            "sticks out of the bounding box size_m along axis {a}: spans [{lo:.4}, {hi:.4}], box is ±{:.4}",
+                            half_size_m[a]
+                        ),
+                    );
+                    break;
+                }
+            }
+        }
     }
 }

@@ -167,52 +167,8 @@ fn stl_binary(body: &[u8], count: usize) -> Result<RawMesh, Defect> {
 
 /// The triangles of an ASCII STL (one or more `solid` blocks).
 fn stl_ascii(text: &str) -> Result<RawMesh, Defect> {
-    struct Tokens<'a, I: Iterator<Item = (usize, &'a str)>> {
-        it: std::iter::Peekable<I>,
-        line: usize,
-        /// The file ends inside a token (no whitespace after the last one).
-        cut_tail: bool,
-    }
-    impl<'a, I: Iterator<Item = (usize, &'a str)>> Tokens<'a, I> {
-        /// A defect at the last token of a file that ends inside it is a truncation.
-        fn or_cut(&mut self, d: Defect) -> Defect {
-            if self.cut_tail && self.it.peek().is_none() {
-                Defect::Truncated(format!("the ASCII STL ends inside a word on line {}", self.line))
-            } else {
-                d
-            }
-        }
-        fn number(&mut self) -> Result<f64, Defect> {
-            let (l, t) = self.get("a coordinate")?;
-            coordinate(t, || format!("line {l}")).map_err(|d| self.or_cut(d))
-        }
-        fn get(&mut self, what: &str) -> Result<(usize, &'a str), Defect> {
-            match self.it.next() {
-                Some((l, t)) => {
-                    self.line = l;
-                    Ok((l, t))
-                }
-                None => Err(Defect::Truncated(format!(
-                    "the ASCII STL ends after line {}, expected {what}",
-                    self.line
-                ))),
-            }
-        }
-        fn expect(&mut self, want: &str) -> Result<(), Defect> {
-            let (l, t) = self.get(&format!("{want:?}"))?;
-            if t.eq_ignore_ascii_case(want) {
-                Ok(())
-            } else {
-                let d = Defect::Malformed {
-                    at: format!("line {l}"),
-                    what: format!("expected {want:?}, got {t:?}"),
-                };
-                Err(self.or_cut(d))
-            }
-        }
-    }
     let mut m = RawMesh::default();
-    let mut tk = Tokens {
+    let mut tk = StlTokens {
         it: text
             .lines()
             .enumerate()
@@ -253,30 +209,7 @@ fn stl_ascii(text: &str) -> Result<RawMesh, Defect> {
                 name_line = l;
             }
             (true, "facet") => {
-                tk.expect("normal")?;
-                for _ in 0..3 {
-                    tk.get("a normal component")?;
-                }
-                tk.expect("outer")?;
-                tk.expect("loop")?;
-                let base = m.vertices.len() as u32;
-                for _ in 0..3 {
-                    tk.expect("vertex")?;
-                    let mut v = [0.0; 3];
-                    for c in &mut v {
-                        *c = tk.number()?;
-                    }
-                    m.vertices.push(v);
-                }
-                tk.expect("endloop")?;
-                tk.expect("endfacet")?;
-                m.triangles.push([base, base + 1, base + 2]);
-                if m.triangles.len() > MAX_TRIANGLES {
-                    return Err(Defect::TooManyTriangles {
-                        found: m.triangles.len() as u64,
-                        cap: MAX_TRIANGLES,
-                    });
-                }
+                stl_facet(&mut tk, &mut m)?;
             }
             _ => {
                 let want = if in_solid {
@@ -293,6 +226,84 @@ fn stl_ascii(text: &str) -> Result<RawMesh, Defect> {
         }
     }
     Ok(m)
+}
+
+/// One `facet normal ... endfacet` after its `facet`: its three vertices and triangle into `m`.
+fn stl_facet<'a, I: Iterator<Item = (usize, &'a str)>>(
+    tk: &mut StlTokens<'a, I>,
+    m: &mut RawMesh,
+) -> Result<(), Defect> {
+    tk.expect("normal")?;
+    for _ in 0..3 {
+        tk.get("a normal component")?;
+    }
+    tk.expect("outer")?;
+    tk.expect("loop")?;
+    let base = m.vertices.len() as u32;
+    for _ in 0..3 {
+        tk.expect("vertex")?;
+        let mut v = [0.0; 3];
+        for c in &mut v {
+            *c = tk.number()?;
+        }
+        m.vertices.push(v);
+    }
+    tk.expect("endloop")?;
+    tk.expect("endfacet")?;
+    m.triangles.push([base, base + 1, base + 2]);
+    if m.triangles.len() > MAX_TRIANGLES {
+        return Err(Defect::TooManyTriangles {
+            found: m.triangles.len() as u64,
+            cap: MAX_TRIANGLES,
+        });
+    }
+    Ok(())
+}
+
+/// The whitespace-separated words of an ASCII STL with their line numbers.
+struct StlTokens<'a, I: Iterator<Item = (usize, &'a str)>> {
+    it: std::iter::Peekable<I>,
+    line: usize,
+    /// The file ends inside a token (no whitespace after the last one).
+    cut_tail: bool,
+}
+impl<'a, I: Iterator<Item = (usize, &'a str)>> StlTokens<'a, I> {
+    /// A defect at the last token of a file that ends inside it is a truncation.
+    fn or_cut(&mut self, d: Defect) -> Defect {
+        if self.cut_tail && self.it.peek().is_none() {
+            Defect::Truncated(format!("the ASCII STL ends inside a word on line {}", self.line))
+        } else {
+            d
+        }
+    }
+    fn number(&mut self) -> Result<f64, Defect> {
+        let (l, t) = self.get("a coordinate")?;
+        coordinate(t, || format!("line {l}")).map_err(|d| self.or_cut(d))
+    }
+    fn get(&mut self, what: &str) -> Result<(usize, &'a str), Defect> {
+        match self.it.next() {
+            Some((l, t)) => {
+                self.line = l;
+                Ok((l, t))
+            }
+            None => Err(Defect::Truncated(format!(
+                "the ASCII STL ends after line {}, expected {what}",
+                self.line
+            ))),
+        }
+    }
+    fn expect(&mut self, want: &str) -> Result<(), Defect> {
+        let (l, t) = self.get(&format!("{want:?}"))?;
+        if t.eq_ignore_ascii_case(want) {
+            Ok(())
+        } else {
+            let d = Defect::Malformed {
+                at: format!("line {l}"),
+                what: format!("expected {want:?}, got {t:?}"),
+            };
+            Err(self.or_cut(d))
+        }
+    }
 }
 
 /// The faces of a Wavefront OBJ (`v` and `f` lines; polygons fan-triangulated; texture and

@@ -106,6 +106,43 @@ struct HullFace {
 /// The stable resting poses of a hull about the centre of mass `com`, most likely first.
 /// Poses with a likelihood under 1e-6 are dropped.
 pub fn resting_poses(hull: &Hull, com: &Point3<f64>) -> Vec<RestingPose> {
+    let edge_tri = triangle_of_edge(hull);
+    let (faces, face_of) = hull_faces(hull, &edge_tri);
+    let share = solid_angle_shares(hull, &faces, com);
+    let (next, margin) = topple_targets(hull, &faces, &face_of, &edge_tri, com);
+    let mass = settled_shares(&faces, &next, &share, com);
+    let mut poses: Vec<RestingPose> = faces
+        .iter()
+        .enumerate()
+        .filter(|(i, _)| mass[*i] > 1e-6)
+        .map(|(i, f)| RestingPose {
+            normal: f.normal,
+            com_height_m: f.offset - com.coords.dot(&f.normal),
+            support_area_m2: f.area,
+            stability_margin_m: margin[i],
+            likelihood: mass[i],
+        })
+        .collect();
+    let total: f64 = poses.iter().map(|p| p.likelihood).sum();
+    poses.iter_mut().for_each(|p| p.likelihood /= total);
+    poses.sort_by(|a, b| b.likelihood.total_cmp(&a.likelihood));
+    poses
+}
+
+/// The hull triangle that runs each directed edge.
+fn triangle_of_edge(hull: &Hull) -> HashMap<(u32, u32), usize> {
+    let mut edge_tri: HashMap<(u32, u32), usize> = HashMap::new();
+    for (k, t) in hull.triangles.iter().enumerate() {
+        for e in 0..3 {
+            edge_tri.insert((t[e], t[(e + 1) % 3]), k);
+        }
+    }
+    edge_tri
+}
+
+/// The hull's faces (coplanar hull triangles merged over shared edges) and, for each hull
+/// triangle, the index of its face.
+fn hull_faces(hull: &Hull, edge_tri: &HashMap<(u32, u32), usize>) -> (Vec<HullFace>, Vec<usize>) {
     let v = &hull.vertices_m;
     let tri_n: Vec<Vector3<f64>> = hull
         .triangles
@@ -115,13 +152,6 @@ pub fn resting_poses(hull: &Hull, com: &Point3<f64>) -> Vec<RestingPose> {
             (b - a).cross(&(c - a))
         })
         .collect();
-    // Merge coplanar hull triangles over shared edges.
-    let mut edge_tri: HashMap<(u32, u32), usize> = HashMap::new();
-    for (k, t) in hull.triangles.iter().enumerate() {
-        for e in 0..3 {
-            edge_tri.insert((t[e], t[(e + 1) % 3]), k);
-        }
-    }
     let cos_tol = HULL_FACE_TOL_RAD.cos();
     let mut face_of = vec![usize::MAX; hull.triangles.len()];
     let mut faces: Vec<HullFace> = Vec::new();
@@ -147,34 +177,50 @@ pub fn resting_poses(hull: &Hull, com: &Point3<f64>) -> Vec<RestingPose> {
                 }
             }
         }
-        let nsum: Vector3<f64> = members.iter().map(|&k| tri_n[k]).sum();
-        let normal = nsum.normalize();
-        let offset = members
-            .iter()
-            .flat_map(|&k| hull.triangles[k])
-            .map(|i| v[i as usize].coords.dot(&normal))
-            .fold(f64::NEG_INFINITY, f64::max);
-        let mut edges = Vec::new();
-        for &k in &members {
-            let t = hull.triangles[k];
-            for e in 0..3 {
-                let (a, b) = (t[e], t[(e + 1) % 3]);
-                if edge_tri.get(&(b, a)).is_none_or(|&o| !members.contains(&o)) {
-                    edges.push((a, b));
-                }
+        faces.push(hull_face(hull, edge_tri, &tri_n, members));
+    }
+    (faces, face_of)
+}
+
+/// The face of the hull triangles `members` (`tri_n`: each hull triangle's area-weighted normal).
+fn hull_face(
+    hull: &Hull,
+    edge_tri: &HashMap<(u32, u32), usize>,
+    tri_n: &[Vector3<f64>],
+    members: Vec<usize>,
+) -> HullFace {
+    let v = &hull.vertices_m;
+    let nsum: Vector3<f64> = members.iter().map(|&k| tri_n[k]).sum();
+    let normal = nsum.normalize();
+    let offset = members
+        .iter()
+        .flat_map(|&k| hull.triangles[k])
+        .map(|i| v[i as usize].coords.dot(&normal))
+        .fold(f64::NEG_INFINITY, f64::max);
+    let mut edges = Vec::new();
+    for &k in &members {
+        let t = hull.triangles[k];
+        for e in 0..3 {
+            let (a, b) = (t[e], t[(e + 1) % 3]);
+            if edge_tri.get(&(b, a)).is_none_or(|&o| !members.contains(&o)) {
+                edges.push((a, b));
             }
         }
-        let area = 0.5 * nsum.norm();
-        faces.push(HullFace {
-            normal,
-            offset,
-            triangles: members,
-            edges,
-            area,
-        });
     }
-    // Solid angle of each face at the centre of mass.
-    let share: Vec<f64> = faces
+    let area = 0.5 * nsum.norm();
+    HullFace {
+        normal,
+        offset,
+        triangles: members,
+        edges,
+        area,
+    }
+}
+
+/// Solid angle of each face at the centre of mass, as a share of the whole sphere.
+fn solid_angle_shares(hull: &Hull, faces: &[HullFace], com: &Point3<f64>) -> Vec<f64> {
+    let v = &hull.vertices_m;
+    faces
         .iter()
         .map(|f| {
             f.triangles
@@ -186,8 +232,19 @@ pub fn resting_poses(hull: &Hull, com: &Point3<f64>) -> Vec<RestingPose> {
                 .sum::<f64>()
                 / (4.0 * std::f64::consts::PI)
         })
-        .collect();
-    // For each face: stable, or the face it topples onto.
+        .collect()
+}
+
+/// For each face: the face it topples onto (`None`: stable), and the stability margin (m) of a
+/// stable face.
+fn topple_targets(
+    hull: &Hull,
+    faces: &[HullFace],
+    face_of: &[usize],
+    edge_tri: &HashMap<(u32, u32), usize>,
+    com: &Point3<f64>,
+) -> (Vec<Option<usize>>, Vec<f64>) {
+    let v = &hull.vertices_m;
     let beyond = |f: &HullFace| -> Option<((u32, u32), f64)> {
         // The projection of the centre of mass onto the face's plane, against each edge: the
         // signed distance outward (positive: outside that edge).
@@ -211,6 +268,11 @@ pub fn resting_poses(hull: &Hull, com: &Point3<f64>) -> Vec<RestingPose> {
             None => {}
         }
     }
+    (next, margin)
+}
+
+/// Each face's share after the unstable faces passed theirs on down the topple walk.
+fn settled_shares(faces: &[HullFace], next: &[Option<usize>], share: &[f64], com: &Point3<f64>) -> Vec<f64> {
     let mut mass = vec![0.0; faces.len()];
     for (i, s) in share.iter().enumerate() {
         let mut at = i;
@@ -227,22 +289,7 @@ pub fn resting_poses(hull: &Hull, com: &Point3<f64>) -> Vec<RestingPose> {
         }
         mass[at] += s;
     }
-    let mut poses: Vec<RestingPose> = faces
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| mass[*i] > 1e-6)
-        .map(|(i, f)| RestingPose {
-            normal: f.normal,
-            com_height_m: f.offset - com.coords.dot(&f.normal),
-            support_area_m2: f.area,
-            stability_margin_m: margin[i],
-            likelihood: mass[i],
-        })
-        .collect();
-    let total: f64 = poses.iter().map(|p| p.likelihood).sum();
-    poses.iter_mut().for_each(|p| p.likelihood /= total);
-    poses.sort_by(|a, b| b.likelihood.total_cmp(&a.likelihood));
-    poses
+    mass
 }
 
 #[cfg(test)]

@@ -77,17 +77,48 @@ pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh,
         return Err(Defect::Empty("the file holds no triangles".into()));
     }
     // 1. Size of the referenced vertices.
-    let used: Vec<usize> = {
-        let mut u = vec![false; raw.vertices.len()];
-        for t in &raw.triangles {
-            for &i in t {
-                u[i as usize] = true;
-            }
+    let used = used_vertices(raw);
+    let (centre, tol) = checked_extent(raw, &used, metres_per_unit, units)?;
+    // 2. Weld on a grid of cells of the tolerance.
+    let (mut verts, remap) = weld(raw, &used, metres_per_unit, centre, tol, &mut rep);
+    // 3. Zero-area triangles.
+    let mut tris = drop_zero_area(raw, &remap, &verts, tol, &mut rep);
+    // 4. Duplicates and inner walls.
+    drop_duplicates(&mut tris, &mut rep);
+    if tris.is_empty() {
+        return Err(Defect::Empty("no triangle with an area is left".into()));
+    }
+    // 5. Consistent winding per body, then outward.
+    orient(&verts, &mut tris, &mut rep);
+    // 6. Holes.
+    close_holes(&mut verts, &mut tris, &mut rep)?;
+    rep.non_manifold_edges = edge_uses(&tris).values().filter(|u| u.len() > 2).count();
+    rep.bodies = bodies(&tris).1;
+    Ok((
+        Mesh {
+            vertices_m: verts,
+            triangles: tris,
+        },
+        rep,
+    ))
+}
+
+/// The indices of the vertices some triangle references, ascending.
+fn used_vertices(raw: &RawMesh) -> Vec<usize> {
+    let mut u = vec![false; raw.vertices.len()];
+    for t in &raw.triangles {
+        for &i in t {
+            u[i as usize] = true;
         }
-        (0..raw.vertices.len()).filter(|&i| u[i]).collect()
-    };
+    }
+    (0..raw.vertices.len()).filter(|&i| u[i]).collect()
+}
+
+/// The centre of the used vertices' box (m) and the weld tolerance (m), after checking that the
+/// box's size in metres is one a part can have (else the units are wrong).
+fn checked_extent(raw: &RawMesh, used: &[usize], metres_per_unit: f64, units: &str) -> Result<([f64; 3], f64), Defect> {
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-    for &i in &used {
+    for &i in used {
         for a in 0..3 {
             lo[a] = lo[a].min(raw.vertices[i][a]);
             hi[a] = hi[a].max(raw.vertices[i][a]);
@@ -118,13 +149,25 @@ pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh,
         )));
     }
     let diag = ext_m.iter().map(|e| e * e).sum::<f64>().sqrt();
-    let tol = WELD_SHARE * diag;
     let centre = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]) * metres_per_unit);
-    // 2. Weld on a grid of cells of the tolerance (a vertex checks the 27 cells about it).
+    Ok((centre, WELD_SHARE * diag))
+}
+
+/// Welds the used vertices closer than `tol` on a grid of cells of the tolerance (a vertex checks
+/// the 27 cells about it): the welded vertices in metres about `centre`, and the map from a raw
+/// vertex index to its welded one.
+fn weld(
+    raw: &RawMesh,
+    used: &[usize],
+    metres_per_unit: f64,
+    centre: [f64; 3],
+    tol: f64,
+    rep: &mut RepairReport,
+) -> (Vec<Point3<f64>>, Vec<u32>) {
     let mut cells: HashMap<[i64; 3], Vec<u32>> = HashMap::new();
     let mut verts: Vec<Point3<f64>> = Vec::new();
     let mut remap = vec![u32::MAX; raw.vertices.len()];
-    for &i in &used {
+    for &i in used {
         let p = Point3::from([0, 1, 2].map(|a| raw.vertices[i][a] * metres_per_unit - centre[a]));
         let key = [0, 1, 2].map(|a| (p[a] / tol).floor() as i64);
         let mut found = None;
@@ -155,7 +198,17 @@ pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh,
             }
         };
     }
-    // 3. Zero-area triangles.
+    (verts, remap)
+}
+
+/// The raw triangles on the welded vertices, without those of (near) zero area.
+fn drop_zero_area(
+    raw: &RawMesh,
+    remap: &[u32],
+    verts: &[Point3<f64>],
+    tol: f64,
+    rep: &mut RepairReport,
+) -> Vec<[u32; 3]> {
     let mut tris: Vec<[u32; 3]> = Vec::with_capacity(raw.triangles.len());
     for t in &raw.triangles {
         let t = t.map(|i| remap[i as usize]);
@@ -168,70 +221,61 @@ pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh,
             tris.push(t);
         }
     }
-    // 4. Duplicates and inner walls.
-    {
-        let mut seen: HashMap<[u32; 3], Vec<usize>> = HashMap::new();
-        for (k, t) in tris.iter().enumerate() {
-            let mut s = *t;
-            s.sort_unstable();
-            seen.entry(s).or_default().push(k);
-        }
-        let mut keep = vec![true; tris.len()];
-        let mut groups: Vec<&Vec<usize>> = seen.values().filter(|g| g.len() > 1).collect();
-        groups.sort();
-        for g in groups {
-            let parity = |t: &[u32; 3]| {
-                let r = t.iter().position(|&v| v == *t.iter().min().unwrap_or(&0)).unwrap_or(0);
-                t[(r + 1) % 3] < t[(r + 2) % 3]
-            };
-            let (mut fwd, mut back): (Vec<usize>, Vec<usize>) = (Vec::new(), Vec::new());
-            for &k in g {
-                if parity(&tris[k]) { fwd.push(k) } else { back.push(k) }
-            }
-            let pairs = fwd.len().min(back.len());
-            rep.inner_wall_pairs += pairs;
-            for &k in fwd.iter().take(pairs).chain(back.iter().take(pairs)) {
-                keep[k] = false;
-            }
-            let (rest, rest_len) = if fwd.len() > pairs {
-                (&fwd[pairs..], fwd.len() - pairs)
-            } else {
-                (&back[pairs..], back.len() - pairs)
-            };
-            for &k in rest.iter().skip(1) {
-                keep[k] = false;
-            }
-            rep.duplicate_triangles += rest_len.saturating_sub(1);
-        }
-        let mut k = 0;
-        tris.retain(|_| {
-            k += 1;
-            keep[k - 1]
-        });
+    tris
+}
+
+/// Drops the triangles on the same three vertices: a pair wound opposite ways is an inner wall
+/// (both go), of those wound alike one stays.
+fn drop_duplicates(tris: &mut Vec<[u32; 3]>, rep: &mut RepairReport) {
+    let mut seen: HashMap<[u32; 3], Vec<usize>> = HashMap::new();
+    for (k, t) in tris.iter().enumerate() {
+        let mut s = *t;
+        s.sort_unstable();
+        seen.entry(s).or_default().push(k);
     }
-    if tris.is_empty() {
-        return Err(Defect::Empty("no triangle with an area is left".into()));
+    let mut keep = vec![true; tris.len()];
+    let mut groups: Vec<&Vec<usize>> = seen.values().filter(|g| g.len() > 1).collect();
+    groups.sort();
+    for g in groups {
+        let parity = |t: &[u32; 3]| {
+            let r = t.iter().position(|&v| v == *t.iter().min().unwrap_or(&0)).unwrap_or(0);
+            t[(r + 1) % 3] < t[(r + 2) % 3]
+        };
+        let (mut fwd, mut back): (Vec<usize>, Vec<usize>) = (Vec::new(), Vec::new());
+        for &k in g {
+            if parity(&tris[k]) { fwd.push(k) } else { back.push(k) }
+        }
+        let pairs = fwd.len().min(back.len());
+        rep.inner_wall_pairs += pairs;
+        for &k in fwd.iter().take(pairs).chain(back.iter().take(pairs)) {
+            keep[k] = false;
+        }
+        let (rest, rest_len) = if fwd.len() > pairs {
+            (&fwd[pairs..], fwd.len() - pairs)
+        } else {
+            (&back[pairs..], back.len() - pairs)
+        };
+        for &k in rest.iter().skip(1) {
+            keep[k] = false;
+        }
+        rep.duplicate_triangles += rest_len.saturating_sub(1);
     }
-    // 5. Consistent winding per body, then outward.
-    orient(&verts, &mut tris, &mut rep);
-    let surface = tris.iter().map(|t| area(&verts, t)).sum::<f64>();
-    // 6. Holes.
-    let loops = boundary_loops(&tris).map_err(Defect::OpenShell)?;
+    let mut k = 0;
+    tris.retain(|_| {
+        k += 1;
+        keep[k - 1]
+    });
+}
+
+/// Closes each boundary loop with a fan about its centroid, unless a hole (or all holes together)
+/// is too large a share of the surface to be a meshing gap; then winds capped bodies outward again.
+fn close_holes(verts: &mut Vec<Point3<f64>>, tris: &mut Vec<[u32; 3]>, rep: &mut RepairReport) -> Result<(), Defect> {
+    let surface = tris.iter().map(|t| area(verts, t)).sum::<f64>();
+    let loops = boundary_loops(tris).map_err(Defect::OpenShell)?;
     let mut caps = Vec::new();
     let mut hole_total = 0.0;
     for lp in &loops {
-        let c = lp.iter().map(|&i| verts[i as usize].coords).sum::<Vector3<f64>>() / lp.len() as f64;
-        let ci = (verts.len() + caps.len()) as u32;
-        let cap: Vec<[u32; 3]> = (0..lp.len()).map(|k| [lp[(k + 1) % lp.len()], lp[k], ci]).collect();
-        let a: f64 = (0..lp.len())
-            .map(|k| {
-                let (p, q) = (
-                    verts[lp[k] as usize].coords,
-                    verts[lp[(k + 1) % lp.len()] as usize].coords,
-                );
-                0.5 * (p - c).cross(&(q - c)).norm()
-            })
-            .sum();
+        let (c, cap, a) = hole_cap(verts, lp, (verts.len() + caps.len()) as u32);
         if a > HOLE_SHARE * surface {
             return Err(Defect::OpenShell(format!(
                 "a hole of {} edges and {:.3} mm^2 ({:.1} % of the surface; at most {} % is closed): export a closed solid",
@@ -242,7 +286,7 @@ pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh,
             )));
         }
         hole_total += a;
-        caps.push((Point3::from(c), cap));
+        caps.push((c, cap));
     }
     if hole_total > HOLES_SHARE * surface {
         return Err(Defect::OpenShell(format!(
@@ -261,17 +305,26 @@ pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh,
     }
     if rep.holes_closed > 0 {
         // A capped body's sign is now defined: wind it outward again.
-        orient(&verts, &mut tris, &mut RepairReport::default());
+        orient(verts, tris, &mut RepairReport::default());
     }
-    rep.non_manifold_edges = edge_uses(&tris).values().filter(|u| u.len() > 2).count();
-    rep.bodies = bodies(&tris).1;
-    Ok((
-        Mesh {
-            vertices_m: verts,
-            triangles: tris,
-        },
-        rep,
-    ))
+    Ok(())
+}
+
+/// The cap of one boundary loop: its centroid (the new vertex `ci`), the fan of triangles from the
+/// loop's edges to it, and the fan's area (m^2).
+fn hole_cap(verts: &[Point3<f64>], lp: &[u32], ci: u32) -> (Point3<f64>, Vec<[u32; 3]>, f64) {
+    let c = lp.iter().map(|&i| verts[i as usize].coords).sum::<Vector3<f64>>() / lp.len() as f64;
+    let cap: Vec<[u32; 3]> = (0..lp.len()).map(|k| [lp[(k + 1) % lp.len()], lp[k], ci]).collect();
+    let a: f64 = (0..lp.len())
+        .map(|k| {
+            let (p, q) = (
+                verts[lp[k] as usize].coords,
+                verts[lp[(k + 1) % lp.len()] as usize].coords,
+            );
+            0.5 * (p - c).cross(&(q - c)).norm()
+        })
+        .sum();
+    (Point3::from(c), cap, a)
 }
 
 /// A triangle's area.

@@ -26,9 +26,9 @@ struct View {
     v: Vector3<f64>,
 }
 
-/// The SVG text of the picture, titled `title`.
-pub fn picture(model: &PartModel, title: &str) -> String {
-    let views = [
+/// The three views: top, front, side.
+fn views() -> [View; 3] {
+    [
         View {
             name: "top (looking down z)",
             toward: Vector3::z(),
@@ -47,19 +47,16 @@ pub fn picture(model: &PartModel, title: &str) -> String {
             h: Vector3::y(),
             v: Vector3::z(),
         },
-    ];
+    ]
+}
+
+/// The SVG text of the picture, titled `title`.
+pub fn picture(model: &PartModel, title: &str) -> String {
     let largest = model.size_m.iter().cloned().fold(1e-9, f64::max);
     let scale = (VIEW_PX - 2.0 * PAD_PX) / largest;
     let width = 3.0 * VIEW_PX + 2.0 * PAD_PX;
     let height = VIEW_PX + 150.0;
-    let mut grasp_of = vec![None; model.mesh.triangles.len()];
-    for (i, f) in model.faces.iter().enumerate() {
-        if f.fit.takes_cup() {
-            for &k in &f.face.triangles {
-                grasp_of[k] = Some(i);
-            }
-        }
-    }
+    let grasp_of = grasp_face_of_triangles(model);
     let mut s = String::new();
     let _ = writeln!(
         s,
@@ -71,81 +68,121 @@ pub fn picture(model: &PartModel, title: &str) -> String {
         "<text x=\"{PAD_PX}\" y=\"22\" font-size=\"15\">{}</text>",
         escape(title)
     );
-    for (vi, view) in views.iter().enumerate() {
-        let ox = PAD_PX + vi as f64 * VIEW_PX + VIEW_PX / 2.0;
-        let oy = 40.0 + VIEW_PX / 2.0;
-        let px = |p: &Point3<f64>| (ox + scale * p.coords.dot(&view.h), oy - scale * p.coords.dot(&view.v));
-        let _ = writeln!(
-            s,
-            "<rect x=\"{:.1}\" y=\"40\" width=\"{:.1}\" height=\"{VIEW_PX:.1}\" fill=\"none\" stroke=\"#ccc\"/>",
-            ox - VIEW_PX / 2.0 + 4.0,
-            VIEW_PX - 8.0
-        );
-        let _ = writeln!(
-            s,
-            "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
-            ox,
-            40.0 + VIEW_PX + 16.0,
-            view.name
-        );
-        // Triangles facing the viewer, far ones first.
-        let mut order: Vec<(f64, usize)> = (0..model.mesh.triangles.len())
-            .filter_map(|k| {
-                let n = model.mesh.area_normal(k);
-                if n.dot(&view.toward) <= 0.0 {
-                    return None;
-                }
-                let [a, b, c] = model.mesh.corners(k);
-                Some(((a.coords + b.coords + c.coords).dot(&view.toward), k))
-            })
-            .collect();
-        order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-        for (_, k) in order {
-            let n = model.mesh.area_normal(k).normalize();
-            let light = 0.35 + 0.65 * n.dot(&view.toward).abs();
-            let (r, g, b) = if grasp_of[k].is_some() {
-                (60.0, 170.0, 80.0)
-            } else {
-                (170.0, 170.0, 180.0)
-            };
-            let [a, bb, c] = model.mesh.corners(k).map(|p| px(&p));
-            let col = format!("rgb({:.0},{:.0},{:.0})", r * light, g * light, b * light);
-            let _ = writeln!(
-                s,
-                "<polygon points=\"{:.2},{:.2} {:.2},{:.2} {:.2},{:.2}\" fill=\"{col}\" stroke=\"{col}\" stroke-width=\"0.4\"/>",
-                a.0, a.1, bb.0, bb.1, c.0, c.1
-            );
-        }
-        // Cup-fit regions and the cup on faces looking at the viewer.
-        for f in model.faces.iter().filter(|f| f.fit.takes_cup()) {
-            if f.face.normal.dot(&view.toward) < 0.99 {
-                continue;
-            }
-            let step = f.fit.centres.len().div_ceil(MAX_DOTS).max(1);
-            for c in f.fit.centres.iter().step_by(step) {
-                let (x, y) = px(&f.face.to_part(c));
-                let _ = writeln!(s, "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"0.9\" fill=\"#0a5\"/>");
-            }
-            if let Some(b) = f.fit.best {
-                let (x, y) = px(&f.face.to_part(&b));
-                let _ = writeln!(
-                    s,
-                    "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"{:.2}\" fill=\"none\" stroke=\"#c30\" stroke-width=\"1.5\" stroke-dasharray=\"4 2\"/>",
-                    scale * model.cup.diameter_m / 2.0
-                );
+    for (vi, view) in views().iter().enumerate() {
+        draw_view(&mut s, model, view, vi, scale, &grasp_of);
+    }
+    draw_legend(&mut s, model, scale);
+    s.push_str("</svg>\n");
+    s
+}
+
+/// For each mesh triangle, the index of the cup-taking face it belongs to, if any.
+fn grasp_face_of_triangles(model: &PartModel) -> Vec<Option<usize>> {
+    let mut grasp_of = vec![None; model.mesh.triangles.len()];
+    for (i, f) in model.faces.iter().enumerate() {
+        if f.fit.takes_cup() {
+            for &k in &f.face.triangles {
+                grasp_of[k] = Some(i);
             }
         }
-        // The centre of mass.
-        let (x, y) = px(&model.mass.com_m);
+    }
+    grasp_of
+}
+
+/// View number `vi`: its frame and caption, the shaded mesh, the cup fits facing the viewer and
+/// the centre of mass.
+fn draw_view(s: &mut String, model: &PartModel, view: &View, vi: usize, scale: f64, grasp_of: &[Option<usize>]) {
+    let ox = PAD_PX + vi as f64 * VIEW_PX + VIEW_PX / 2.0;
+    let oy = 40.0 + VIEW_PX / 2.0;
+    let px = |p: &Point3<f64>| (ox + scale * p.coords.dot(&view.h), oy - scale * p.coords.dot(&view.v));
+    let _ = writeln!(
+        s,
+        "<rect x=\"{:.1}\" y=\"40\" width=\"{:.1}\" height=\"{VIEW_PX:.1}\" fill=\"none\" stroke=\"#ccc\"/>",
+        ox - VIEW_PX / 2.0 + 4.0,
+        VIEW_PX - 8.0
+    );
+    let _ = writeln!(
+        s,
+        "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
+        ox,
+        40.0 + VIEW_PX + 16.0,
+        view.name
+    );
+    draw_triangles(s, model, view, &px, grasp_of);
+    draw_cup_fits(s, model, view, &px, scale);
+    // The centre of mass.
+    let (x, y) = px(&model.mass.com_m);
+    let _ = writeln!(
+        s,
+        "<g stroke=\"#c00\" stroke-width=\"1.2\"><line x1=\"{:.2}\" y1=\"{y:.2}\" x2=\"{:.2}\" y2=\"{y:.2}\"/><line x1=\"{x:.2}\" y1=\"{:.2}\" x2=\"{x:.2}\" y2=\"{:.2}\"/></g>",
+        x - 5.0,
+        x + 5.0,
+        y - 5.0,
+        y + 5.0
+    );
+}
+
+/// The triangles facing the viewer, far ones first, shaded; those of cup faces green.
+fn draw_triangles(
+    s: &mut String,
+    model: &PartModel,
+    view: &View,
+    px: &impl Fn(&Point3<f64>) -> (f64, f64),
+    grasp_of: &[Option<usize>],
+) {
+    let mut order: Vec<(f64, usize)> = (0..model.mesh.triangles.len())
+        .filter_map(|k| {
+            let n = model.mesh.area_normal(k);
+            if n.dot(&view.toward) <= 0.0 {
+                return None;
+            }
+            let [a, b, c] = model.mesh.corners(k);
+            Some(((a.coords + b.coords + c.coords).dot(&view.toward), k))
+        })
+        .collect();
+    order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
+    for (_, k) in order {
+        let n = model.mesh.area_normal(k).normalize();
+        let light = 0.35 + 0.65 * n.dot(&view.toward).abs();
+        let (r, g, b) = if grasp_of[k].is_some() {
+            (60.0, 170.0, 80.0)
+        } else {
+            (170.0, 170.0, 180.0)
+        };
+        let [a, bb, c] = model.mesh.corners(k).map(|p| px(&p));
+        let col = format!("rgb({:.0},{:.0},{:.0})", r * light, g * light, b * light);
         let _ = writeln!(
             s,
-            "<g stroke=\"#c00\" stroke-width=\"1.2\"><line x1=\"{:.2}\" y1=\"{y:.2}\" x2=\"{:.2}\" y2=\"{y:.2}\"/><line x1=\"{x:.2}\" y1=\"{:.2}\" x2=\"{x:.2}\" y2=\"{:.2}\"/></g>",
-            x - 5.0,
-            x + 5.0,
-            y - 5.0,
-            y + 5.0
+            "<polygon points=\"{:.2},{:.2} {:.2},{:.2} {:.2},{:.2}\" fill=\"{col}\" stroke=\"{col}\" stroke-width=\"0.4\"/>",
+            a.0, a.1, bb.0, bb.1, c.0, c.1
         );
     }
+}
+
+/// Cup-fit regions (dotted) and the cup at the best centre, on the cup faces looking at the viewer.
+fn draw_cup_fits(s: &mut String, model: &PartModel, view: &View, px: &impl Fn(&Point3<f64>) -> (f64, f64), scale: f64) {
+    for f in model.faces.iter().filter(|f| f.fit.takes_cup()) {
+        if f.face.normal.dot(&view.toward) < 0.99 {
+            continue;
+        }
+        let step = f.fit.centres.len().div_ceil(MAX_DOTS).max(1);
+        for c in f.fit.centres.iter().step_by(step) {
+            let (x, y) = px(&f.face.to_part(c));
+            let _ = writeln!(s, "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"0.9\" fill=\"#0a5\"/>");
+        }
+        if let Some(b) = f.fit.best {
+            let (x, y) = px(&f.face.to_part(&b));
+            let _ = writeln!(
+                s,
+                "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"{:.2}\" fill=\"none\" stroke=\"#c30\" stroke-width=\"1.5\" stroke-dasharray=\"4 2\"/>",
+                scale * model.cup.diameter_m / 2.0
+            );
+        }
+    }
+}
+
+/// The legend under the views and the most likely resting poses, four to a line.
+fn draw_legend(s: &mut String, model: &PartModel, scale: f64) {
     let legend_y = 40.0 + VIEW_PX + 40.0;
     let _ = writeln!(
         s,
@@ -168,7 +205,6 @@ pub fn picture(model: &PartModel, title: &str) -> String {
             )
         })
         .collect();
-    // The poses, four to a line.
     for (i, line) in poses.chunks(4).enumerate() {
         let head = if i == 0 {
             "resting on (down normal, likelihood): "
@@ -182,8 +218,6 @@ pub fn picture(model: &PartModel, title: &str) -> String {
             escape(&line.join(", "))
         );
     }
-    s.push_str("</svg>\n");
-    s
 }
 
 fn escape(t: &str) -> String {
