@@ -74,7 +74,7 @@ impl Rejection {
 pub struct GraspCandidate {
     /// Index of the detection.
     pub detection: usize,
-    /// Which body face (index into [`body_faces`]).
+    /// Which face (index into [`GraspSelector::faces`]: [`body_faces`] for primitives).
     pub face: usize,
     /// The tool at the grasp: cup lip on the face.
     #[serde(serialize_with = "crate::sensor::ser_pose")]

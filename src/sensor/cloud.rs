@@ -159,7 +159,8 @@ pub fn face_of_planar(face: &crate::part::faces::PlanarFace) -> Face {
 }
 
 impl CloudModel {
-    /// The model of a workpiece (mesh workpieces have no faces: nothing is recognised). The faces
+    /// The model of a primitive workpiece (a mesh workpiece gets no faces here: its model is
+    /// [`CloudModel::of_part_model`], as the sensor builds it). The faces
     /// are [`body_faces`] (same indices), then the body's faces that only leads stand out of (a
     /// relay lying on its back shows its pinned face: it must be matched to be told apart).
     pub fn new(w: &Workpiece) -> Self {
