@@ -4,7 +4,8 @@
 //! points on body faces large enough for the cup whose normal is within the cup's tilt of
 //! vertical; drop those the tool would not clear (height map), whose straight approach or retreat
 //! would meet the tray walls (cell geometry), or that the arm cannot reach within its limits along
-//! the whole straight descent; pick the tool yaw that makes the place motion quickest; rank by
+//! the whole straight descent (a mesh workpiece's faces are its part model's planar faces that
+//! take the cup, each grasped at the centre of its cup-fit region farthest from its edges); pick the tool yaw that makes the place motion quickest; rank by
 //! exposure, clearance, expected grasp success and expected motion time. Nothing here reads the
 //! world's ground truth.
 //!
@@ -73,7 +74,7 @@ impl Rejection {
 pub struct GraspCandidate {
     /// Index of the detection.
     pub detection: usize,
-    /// Which body face (index into [`body_faces`]).
+    /// Which face (index into [`GraspSelector::faces`]: [`body_faces`] for primitives).
     pub face: usize,
     /// The tool at the grasp: cup lip on the face.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
@@ -139,6 +140,14 @@ impl GraspPlan {
 pub struct GraspSelector {
     robot: RobotModel,
     faces: Vec<Face>,
+    /// Per face: where the cup goes (part frame) and its distance to the face's nearest edge
+    /// (m): a primitive face's centre and half its smaller extent; a mesh face's clearest
+    /// admissible cup centre.
+    sites: Vec<(Vector3<f64>, f64)>,
+    /// The faces are a part model's (their cup-fit regions decide which take the cup).
+    model_faces: bool,
+    /// The workpiece's own face margin, for which the part model's cup-fit regions were made (m).
+    fit_margin_m: f64,
     cup_radius_m: f64,
     face_margin_m: f64,
     max_tilt_rad: f64,
@@ -170,9 +179,16 @@ impl GraspSelector {
     pub fn new(scene: &Scene, robot: &RobotModel, workpiece: &Workpiece) -> Self {
         let g = &scene.gripper;
         let t = &scene.pick_tray;
+        let faces = body_faces(&workpiece.pieces());
         GraspSelector {
             robot: robot.clone(),
-            faces: body_faces(&workpiece.pieces()),
+            sites: faces
+                .iter()
+                .map(|f| (f.center, 0.5 * f.extent_m[0].min(f.extent_m[1])))
+                .collect(),
+            faces,
+            model_faces: false,
+            fit_margin_m: workpiece.grasp.face_margin_m,
             cup_radius_m: g.cup_diameter_m / 2.0,
             // The recognised pose is off by up to two standard deviations of its noise: the cup
             // must stay on the face that much farther from its edges.
@@ -188,6 +204,28 @@ impl GraspSelector {
             yaw_symmetry_rad: workpiece.grasp.yaw_symmetry_deg.to_radians(),
             height_tolerance_m: 0.0015,
         }
+    }
+
+    /// The selector for a loaded workpiece: a mesh workpiece's faces are its part model's planar
+    /// faces that take the cell's cup, each fitted as [`crate::sensor::cloud::face_of_planar`]
+    /// fits it and grasped at its cup-fit region's clearest centre; primitives as [`Self::new`].
+    pub fn for_workpiece(scene: &Scene, robot: &RobotModel, workpiece: &crate::config::LoadedWorkpiece) -> Self {
+        let mut sel = Self::new(scene, robot, &workpiece.workpiece);
+        let Some(mesh) = &workpiece.mesh else {
+            return sel;
+        };
+        let Ok(pm) = workpiece.workpiece.part_model(&mesh.0, scene.gripper.cup_diameter_m) else {
+            return sel;
+        };
+        sel.faces.clear();
+        sel.sites.clear();
+        for f in pm.grasp_faces() {
+            let Some(best) = f.fit.best else { continue };
+            sel.faces.push(crate::sensor::cloud::face_of_planar(&f.face));
+            sel.sites.push((f.face.to_part(&best).coords, f.fit.best_clearance_m));
+        }
+        sel.model_faces = true;
+        sel
     }
 
     /// The faces the selector proposes grasps on.
@@ -301,11 +339,24 @@ impl GraspSelector {
                     }
                     continue;
                 }
-                if face.extent_m[0].min(face.extent_m[1]) < need {
+                let (site, site_clearance) = self.sites[fi];
+                // A part model's face takes the cup where its cup-fit region (cup radius and the
+                // workpiece's face margin) holds the site; a primitive face needs the margin for
+                // the pose's noise too.
+                let (too_small, width) = if self.model_faces {
+                    (
+                        site_clearance < self.cup_radius_m + self.fit_margin_m,
+                        2.0 * site_clearance,
+                    )
+                } else {
+                    let w = face.extent_m[0].min(face.extent_m[1]);
+                    (w < need, w)
+                };
+                if too_small {
                     plan.rejected.push((di, fi, Rejection::FaceTooSmall));
                     continue;
                 }
-                let mut point = det.world_from_part * Point3::from(face.center);
+                let mut point = det.world_from_part * Point3::from(site);
                 let mut local = tray_from_world * point;
                 // Correct the recognised face height by the surface the sensor measured under the
                 // cup: the median of its cells within 3 mm of the recognised height (robust
@@ -362,7 +413,7 @@ impl GraspSelector {
                             let r = com - point.coords;
                             (r - n * r.dot(&n)).norm()
                         };
-                        let margin = ((face.extent_m[0].min(face.extent_m[1]) - need) / need).clamp(0.0, 1.0);
+                        let margin = ((width - need) / need).clamp(0.0, 1.0);
                         let success = tilt.cos()
                             * (0.5 + 0.5 * margin)
                             * (1.0 / (1.0 + 20.0 * lateral))

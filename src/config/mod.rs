@@ -393,6 +393,30 @@ impl Workpiece {
         let (scale, units) = self.shape.mesh_units();
         crate::part::load_mesh(&path, scale, &units).map(Some)
     }
+
+    /// The part model of this workpiece's repaired `mesh` (m, part frame) for a cup of
+    /// `cup_diameter_m` with the workpiece's face margin: its mass, and its symmetry as the file
+    /// overrides it or as detected. The one derivation the sensor and the grasp selector share.
+    pub fn part_model(
+        &self,
+        mesh: &crate::part::mesh::Mesh,
+        cup_diameter_m: f64,
+    ) -> Result<crate::part::PartModel, crate::part::model::ModelError> {
+        let cup = crate::part::CupSpec {
+            diameter_m: cup_diameter_m,
+            face_margin_m: self.grasp.face_margin_m,
+        };
+        let symmetry = self
+            .shape
+            .symmetry_orders
+            .map(|orders| crate::part::symmetry::Symmetry { orders });
+        crate::part::PartModel::derive(
+            mesh.clone(),
+            crate::part::mass::MassSpec::MassKg(self.mass_kg),
+            cup,
+            symmetry,
+        )
+    }
 }
 
 /// A workpiece loaded and validated.

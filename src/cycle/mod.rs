@@ -305,7 +305,7 @@ impl<'a> Cell<'a> {
             plant: robot.with_model_error(&s.model_error, opts.seed),
             accel_robot: robot.with_torque_share(1.0 - s.cycle.torque_margin),
             scene: s,
-            selector: GraspSelector::new(s, robot, wp),
+            selector: GraspSelector::for_workpiece(s, robot, workpiece),
             // The controller compensates the share of its friction model it is sure of.
             servo: Servo::from_config(&s.sim).with_friction_compensation(1.0 - s.model_error.joint_friction_fraction),
             hand: Payload::from_gripper(&s.gripper),

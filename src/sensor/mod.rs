@@ -190,6 +190,15 @@ impl Sensor {
     /// The sensor of a cell over `world`'s pick tray, recognising `workpiece`.
     pub fn new(cfg: &SensorConfig, world: &World, seed: u64, workpiece: &Workpiece) -> Option<Self> {
         let camera = Camera::from_config(cfg)?;
+        // A mesh workpiece is recognised through its part model (the cup does not matter for
+        // recognition: its faces are matched whatever takes the cup).
+        let mut model = world
+            .part_shape()
+            .mesh
+            .as_ref()
+            .and_then(|mesh| workpiece.part_model(mesh, 0.0).ok())
+            .map_or_else(|| CloudModel::new(workpiece), |pm| CloudModel::of_part_model(&pm));
+        model.yaw_span_max_rad = cfg.max_yaw_ambiguity_deg.to_radians();
         Some(Sensor {
             frustum: ViewFrustum::over_tray(world.pick_tray(), &camera)?,
             background: std::sync::Arc::new(Background::new(world, &camera)),
@@ -201,12 +210,8 @@ impl Sensor {
             pose_noise_m: cfg.pose_noise_m,
             pose_noise_rad: cfg.pose_noise_deg.to_radians(),
             recognition: cfg.recognition,
-            model: std::sync::Arc::new({
-                let mut m = CloudModel::new(workpiece);
-                m.yaw_span_max_rad = cfg.max_yaw_ambiguity_deg.to_radians();
-                m
-            }),
-            symmetry: std::sync::Arc::new(Symmetry::of(workpiece)),
+            symmetry: std::sync::Arc::new(model.symmetry().clone()),
+            model: std::sync::Arc::new(model),
             seed,
             triggered: 0,
             spoiled: 0,

@@ -70,6 +70,9 @@ pub struct PartShape {
     pub friction: f64,
     /// Restitution coefficient.
     pub restitution: f64,
+    /// A mesh workpiece's surface (m, part frame), from which the sensor's recognition derives
+    /// its part model; `None` for primitives.
+    pub mesh: Option<std::sync::Arc<Mesh>>,
 }
 
 /// A convex piece (box or prism, in metres) as a rapier convex polyhedron in rapier units.
@@ -471,7 +474,15 @@ impl PartShape {
                 SharedShape::compound(pieces.iter().map(|p| p.view.clone()).collect()),
             )
         };
-        Ok(Self::assemble(workpiece, shape, view_shape, Some(polytopes), n))
+        let mut built = Self::assemble(workpiece, shape, view_shape, Some(polytopes), n);
+        let centre = mesh
+            .bounds_m()
+            .map_or(Vector3::zeros(), |(lo, hi)| nalgebra::center(&lo, &hi).coords);
+        built.mesh = Some(std::sync::Arc::new(Mesh {
+            vertices_m: mesh.vertices_m.iter().map(|p| p - centre).collect(),
+            triangles: mesh.triangles.clone(),
+        }));
+        Ok(built)
     }
 
     /// The collider mesh workpieces had before issue 29, kept as the physics benchmark's
@@ -528,6 +539,7 @@ impl PartShape {
             convex_pieces,
             friction: workpiece.friction,
             restitution: workpiece.restitution,
+            mesh: None,
         }
     }
 }

@@ -37,8 +37,11 @@
 //!   reported only where the floor or a pixel on a pin decides;
 //! - a can (D) lying on its side is found when its axis fits within 4 degrees (standard error)
 //!   and both its base end and its station are decided; about 6 in 400 are off by 5-7 degrees;
-//! - mesh workpieces have no faces in [`CloudModel`]: nothing is recognised (flat faces found on
-//!   the mesh would give them candidates; not done).
+//! - a mesh workpiece (a CAD part) is matched through its part model's planar faces
+//!   ([`CloudModel::of_part_model`]): each face's outline is fitted as its minimum-area bounding
+//!   rectangle (or as a disc when it is round), and hypotheses are verified by rendering the real
+//!   mesh, so a rectangle that is not the face's true outline is caught there. A part whose
+//!   visible surface is not a large planar face (no point-pair features yet) is not recognised.
 //!
 //! Units: m, rad, px. Frames: world (`world_from_part`), the pick tray frame for the background,
 //! a patch's plane basis (e1, e2, normal toward the camera) for the silhouette fits.
@@ -105,10 +108,59 @@ pub struct CloudModel {
     round_side: bool,
     /// A face whose outline leaves its yaw open by more than this is no hypothesis [rad].
     pub yaw_span_max_rad: f64,
+    /// A mesh workpiece's surface, rendered instead of `pieces` (which are then empty).
+    mesh: Option<std::sync::Arc<render::MeshView>>,
+}
+
+/// A planar face of a part model smaller than this share of the largest is not matched.
+pub const MESH_FACE_MIN_SHARE: f64 = 0.03;
+/// A planar face of a part model narrower than this is not matched (m): a 1 mm strip is a pixel
+/// or two wide in the image.
+pub const MESH_FACE_MIN_WIDTH_M: f64 = 0.0015;
+/// A face outline whose vertices lie within this share of one radius from its centre (and has at
+/// least [`DISC_MIN_VERTICES`]) is fitted as a disc.
+pub const DISC_RADIUS_SPREAD: f64 = 0.03;
+/// Fewest outline vertices of a face fitted as a disc.
+pub const DISC_MIN_VERTICES: usize = 12;
+
+/// A part model's planar face as recognition and the grasp selector fit it: a disc when its outer
+/// outline is round (and it has no hole), else its minimum-area bounding rectangle, in the part
+/// frame.
+pub fn face_of_planar(face: &crate::part::faces::PlanarFace) -> Face {
+    let pts: Vec<[f64; 2]> = face.outer.iter().map(|p| [p.x, p.y]).collect();
+    let hull = convex_hull(&pts);
+    let (lo, hi) = fit::bounds_at(&hull, 0.0);
+    let mid = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+    let radii: Vec<f64> = pts.iter().map(|p| (p[0] - mid[0]).hypot(p[1] - mid[1])).collect();
+    let r_max = radii.iter().cloned().fold(0.0, f64::max);
+    let r_min = radii.iter().cloned().fold(f64::INFINITY, f64::min);
+    if face.holes.is_empty() && pts.len() >= DISC_MIN_VERTICES && r_max - r_min <= DISC_RADIUS_SPREAD * r_max {
+        return Face {
+            center: face.centroid_m.coords + face.u * mid[0] + face.v * mid[1],
+            normal: face.normal,
+            along: face.u,
+            extent_m: [2.0 * r_max, 2.0 * r_max],
+            disc: true,
+        };
+    }
+    let theta = min_area_theta(&hull);
+    let (lo, hi) = fit::bounds_at(&hull, theta);
+    let (c, s) = (theta.cos(), theta.sin());
+    let m = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
+    // Back from the turned frame (q = R(-theta) p) to the face frame.
+    let p = [c * m[0] - s * m[1], s * m[0] + c * m[1]];
+    Face {
+        center: face.centroid_m.coords + face.u * p[0] + face.v * p[1],
+        normal: face.normal,
+        along: face.u * c + face.v * s,
+        extent_m: [hi[0] - lo[0], hi[1] - lo[1]],
+        disc: false,
+    }
 }
 
 impl CloudModel {
-    /// The model of a workpiece (mesh workpieces have no faces: nothing is recognised). The faces
+    /// The model of a primitive workpiece (a mesh workpiece gets no faces here: its model is
+    /// [`CloudModel::of_part_model`], as the sensor builds it). The faces
     /// are [`body_faces`] (same indices), then the body's faces that only leads stand out of (a
     /// relay lying on its back shows its pinned face: it must be matched to be told apart).
     pub fn new(w: &Workpiece) -> Self {
@@ -135,7 +187,47 @@ impl CloudModel {
                 .pieces()
                 .iter()
                 .any(|(r, p)| *r == PartRole::Body && matches!(p, Piece::Cylinder { .. })),
+            mesh: None,
         }
+    }
+
+    /// The model of a mesh workpiece from its part model: the planar faces large enough to be
+    /// matched ([`MESH_FACE_MIN_SHARE`], [`MESH_FACE_MIN_WIDTH_M`]) as [`face_of_planar`] fits
+    /// them, less the faces a symmetry of the part maps onto an earlier one; hypotheses are
+    /// rendered from the mesh. Both half turns about a face are tried (the symmetry decides
+    /// whether they differ).
+    pub fn of_part_model(pm: &crate::part::PartModel) -> Self {
+        let symmetry = Symmetry::of_orders(pm.symmetry.orders);
+        let largest = pm.faces.first().map_or(0.0, |f| f.face.area_m2);
+        let mut faces: Vec<Face> = Vec::new();
+        for mf in &pm.faces {
+            if mf.face.area_m2 < MESH_FACE_MIN_SHARE * largest {
+                continue;
+            }
+            let f = face_of_planar(&mf.face);
+            if f.extent_m[0].min(f.extent_m[1]) < MESH_FACE_MIN_WIDTH_M {
+                continue;
+            }
+            if !faces.iter().any(|g| symmetry.maps_onto(&f, g)) {
+                faces.push(f);
+            }
+        }
+        CloudModel {
+            faces,
+            pieces: Vec::new(),
+            lead: Vec::new(),
+            half_size_m: Vector3::from(pm.size_m) / 2.0,
+            half_turn_matters: true,
+            symmetry,
+            round_side: false,
+            yaw_span_max_rad: YAW_SPAN_MAX_RAD,
+            mesh: render::MeshView::new(&pm.mesh).map(std::sync::Arc::new),
+        }
+    }
+
+    /// The turns that leave the part looking the same.
+    pub fn symmetry(&self) -> &Symmetry {
+        &self.symmetry
     }
 
     /// The face whose outward normal at `pose` is turned most toward `to_camera` (world).
@@ -150,10 +242,16 @@ impl CloudModel {
     fn lowest_along(&self, pose: &Isometry3<f64>, up: &Vector3<f64>) -> f64 {
         let d = pose.rotation.inverse() * -up;
         let t = pose.translation.vector.dot(up);
-        self.pieces
-            .iter()
-            .map(|p| t - p.support_m(&d))
-            .fold(f64::INFINITY, f64::min)
+        let pieces = self.pieces.iter().map(|p| t - p.support_m(&d));
+        match &self.mesh {
+            Some(m) => m
+                .vertices_m
+                .iter()
+                .map(|v| t - v.dot(&d))
+                .chain(pieces)
+                .fold(f64::INFINITY, f64::min),
+            None => pieces.fold(f64::INFINITY, f64::min),
+        }
     }
 
     /// Whether two poses of the part look alike (within [`SAME_POSE_M`] and [`SAME_POSE_RAD`],

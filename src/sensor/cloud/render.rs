@@ -1,14 +1,53 @@
 //! Rendering of the workpiece model by ray casting: the entry distance of a ray into the model's
-//! boxes and cylinders, in the part frame [m].
+//! boxes and cylinders, or into a mesh workpiece's triangle mesh (parry's bounding-volume tree,
+//! in millimetres and single precision), in the part frame [m].
 
 use nalgebra::{Point3, Vector3};
 
 use super::CloudModel;
 use crate::config::{Axis, Piece};
 
+/// A mesh workpiece's surface for rendering: the triangle mesh (mm, part frame) and its vertices
+/// (m, for the lowest point of a pose).
+#[derive(Debug, Clone)]
+pub(crate) struct MeshView {
+    surface: parry3d::shape::TriMesh,
+    pub(crate) vertices_m: Vec<Vector3<f64>>,
+}
+
+impl MeshView {
+    /// The view of a mesh (m, part frame); `None` if parry refuses it (no triangles).
+    pub(crate) fn new(mesh: &crate::part::mesh::Mesh) -> Option<Self> {
+        let verts = mesh
+            .vertices_m
+            .iter()
+            .map(|p| parry3d::math::Vector3::new((p.x * 1e3) as f32, (p.y * 1e3) as f32, (p.z * 1e3) as f32))
+            .collect();
+        let surface = parry3d::shape::TriMesh::new(verts, mesh.triangles.clone()).ok()?;
+        Some(MeshView {
+            surface,
+            vertices_m: mesh.vertices_m.iter().map(|p| p.coords).collect(),
+        })
+    }
+
+    /// Entry distance of a ray (part frame, unit direction) into the surface (m).
+    fn ray(&self, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
+        use parry3d::query::RayCast;
+        let v = |x: f64, y: f64, z: f64| parry3d::math::Vector3::new(x as f32, y as f32, z as f32);
+        let ray = parry3d::query::Ray::new(v(o.x * 1e3, o.y * 1e3, o.z * 1e3), v(d.x, d.y, d.z));
+        self.surface
+            .cast_local_ray(&ray, f32::MAX, false)
+            .map(|t| t as f64 * 1e-3)
+            .filter(|t| *t > 0.0)
+    }
+}
+
 /// Nearest entry distance of a ray (part frame, unit direction) into the model's pieces.
 #[cfg(test)]
 pub(crate) fn ray_model(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<f64> {
+    if let Some(m) = &model.mesh {
+        return m.ray(o, d);
+    }
     model
         .pieces
         .iter()
@@ -20,6 +59,9 @@ pub(crate) fn ray_model(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -
 /// from its axis than [`THIN_CORE`] of its radius, where a pose a fraction of a millimetre off
 /// decides whether it hits.
 pub(super) fn ray_model_graze(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<(f64, bool)> {
+    if let Some(m) = &model.mesh {
+        return m.ray(o, d).map(|t| (t, false));
+    }
     let (t, k) = model
         .pieces
         .iter()
