@@ -372,6 +372,11 @@ impl fmt::Display for PhysicsFault {
             FaultDuring::Cycle => "picking",
         };
         let problems: Vec<String> = self.problems.iter().map(ToString::to_string).collect();
-        write!(f, "physics fault at step {} ({during}): {}", self.step, problems.join("; "))
+        write!(
+            f,
+            "physics fault at step {} ({during}): {}",
+            self.step,
+            problems.join("; ")
+        )
     }
 }

@@ -56,10 +56,13 @@ pub const COLUMNS: &[Column] = &[
     Column {
         // Runs that ended on a physics fault are marked (the JSON key and the Markdown mark only
         // when there are some, so tables without faults read as before).
-        json: &[("runs", |s| val(s.tally.runs)), ("runs_ended_on_physics_fault", |s| {
-            let n = s.tally.physics_faults.len();
-            (n > 0).then(|| json!(n))
-        })],
+        json: &[
+            ("runs", |s| val(s.tally.runs)),
+            ("runs_ended_on_physics_fault", |s| {
+                let n = s.tally.physics_faults.len();
+                (n > 0).then(|| json!(n))
+            }),
+        ],
         csv: &[("runs", |s| s.tally.runs.to_string())],
         md: &[("runs", true, |s| match s.tally.physics_faults.len() {
             0 => s.tally.runs.to_string(),
