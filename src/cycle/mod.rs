@@ -28,7 +28,9 @@
 //!    protective stop, a collision of the arm (or the held part) with the cell or a part
 //!    pressed into the tray (the world's health monitor), a part slipping off the cup. Each ends
 //!    the pick with its outcome ([`outcome`]: the cause as the type that found it); after a stop or a collision the arm waits the reset time and
-//!    retraces its path out. Parts pushed out of a tray are taken out of the cell as lost.
+//!    retraces its path out. Parts pushed out of a tray are taken out of the cell as lost. A
+//!    physics fault (a non-finite state, a pour failing the health monitor) ends the run, not its
+//!    caller: [`run`] returns the tally so far with the fault's record ([`PhysicsFault`]).
 //! 5. [`trays`]: nothing detected or nothing graspable: re-capture; after
 //!    `empty_after_captures` in a row the cell file's policy exchanges the pick tray for a full
 //!    one (`refill_s`) or ends the run. A full place tray is exchanged for an empty one.
