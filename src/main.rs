@@ -2,7 +2,8 @@
 //! (`src/cli/`), which call the library's pipelines.
 //!
 //! Exit codes: 0 success; 2 bad input (invalid file, bad argument, unreachable target), with one
-//! clear line per problem on stderr and nothing written; 130 interrupted; 1 any other failure.
+//! clear line per problem on stderr and nothing written; 3 a run ended on a physics fault (the
+//! other runs and the table written); 130 interrupted; 1 any other failure.
 
 mod cli;
 
@@ -13,11 +14,17 @@ use anyhow::Result;
 use clap::{Parser, Subcommand};
 
 use binpick::config::ConfigError;
-use cli::{InputError, Interrupted};
+use cli::{InputError, Interrupted, RunsFailed};
 
 /// A digital twin of a robotic bin-picking cell (OMRON Viper s650).
 #[derive(Parser)]
-#[command(name = "binpick", version, about, long_about = None)]
+#[command(
+    name = "binpick",
+    version,
+    about,
+    long_about = None,
+    after_help = "Exit codes: 0 success; 2 bad input (nothing written); 3 a run of run, batch or sweep ended on a physics fault (the other runs, the failed run up to its fault and the table are written, the failed run marked); 130 interrupted; 1 any other failure."
+)]
 struct Cli {
     #[command(subcommand)]
     command: Command,
@@ -95,6 +102,9 @@ fn main() -> ExitCode {
             } else if let Some(i) = e.downcast_ref::<InputError>() {
                 eprintln!("error: {i}");
                 ExitCode::from(2)
+            } else if let Some(f) = e.downcast_ref::<RunsFailed>() {
+                eprintln!("error: {f}");
+                ExitCode::from(3)
             } else if let Some(i) = e.downcast_ref::<Interrupted>() {
                 eprintln!("{i}");
                 ExitCode::from(130)

@@ -3,8 +3,9 @@
 //! (clap does) and calls the library's pipelines.
 //!
 //! Exit codes: 0 success; 2 bad input (invalid file, bad argument, unreachable target), with one
-//! clear line per problem on stderr and nothing written; 130 interrupted (results so far
-//! written); 1 any other failure. Units: degrees only at this boundary, SI inside.
+//! clear line per problem on stderr and nothing written; 3 a run ended on a physics fault (every
+//! run's results, the failed one's up to its fault, and the table written; the fault on stderr);
+//! 130 interrupted (results so far written); 1 any other failure. Units: degrees only at this boundary, SI inside.
 
 pub mod batch;
 pub mod bench;
@@ -37,6 +38,37 @@ pub struct InputError(pub String);
 #[derive(Debug, thiserror::Error)]
 #[error("interrupted: the results so far are in {0}")]
 pub struct Interrupted(pub String);
+
+/// Runs ended on a physics fault; every run's results were written (exit 3).
+#[derive(Debug, thiserror::Error)]
+#[error("{count} run(s) ended on a physics fault (their results up to it are in {dir}):\n{faults}")]
+pub struct RunsFailed {
+    /// Runs that ended on a fault.
+    pub count: usize,
+    /// Where the results are.
+    pub dir: String,
+    /// Each fault, one line per run.
+    pub faults: String,
+}
+
+impl RunsFailed {
+    /// The failure of `tallies` written to `dir`, if a run ended on a physics fault.
+    pub fn of<'a>(tallies: impl IntoIterator<Item = &'a binpick::cycle::Tally>, dir: &str) -> Option<Self> {
+        let lines: Vec<String> = tallies
+            .into_iter()
+            .flat_map(|t| {
+                t.physics_faults
+                    .iter()
+                    .map(move |f| format!("  workpiece {} seed {}: {f}", t.workpiece, t.seed))
+            })
+            .collect();
+        (!lines.is_empty()).then(|| RunsFailed {
+            count: lines.len(),
+            dir: dir.to_string(),
+            faults: lines.join("\n"),
+        })
+    }
+}
 
 /// How the cell charges compute: the mode of `run`, `batch` and `sweep`.
 #[derive(Args, Clone, Copy)]

@@ -6,7 +6,9 @@ use anyhow::Result;
 use clap::Args;
 use serde_json::json;
 
-use super::{CellArgs, Interrupted, ModeArgs, OutArgs, SkipFormats, check_picks, load_workpiece, stop_on_ctrl_c};
+use super::{
+    CellArgs, Interrupted, ModeArgs, OutArgs, RunsFailed, SkipFormats, check_picks, load_workpiece, stop_on_ctrl_c,
+};
 use binpick::chart::TimeChart;
 use binpick::cycle::{EndReason, EventLog, Observer, Observers, RunOptions};
 use binpick::recording::Recorder;
@@ -110,7 +112,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
     let done = || -> Result<()> {
         match summary.tally.ended {
             Some(EndReason::Interrupted) => Err(Interrupted(dest.display().to_string()).into()),
-            _ => Ok(()),
+            _ => RunsFailed::of([&summary.tally], &dest.display().to_string()).map_or(Ok(()), |f| Err(f.into())),
         }
     };
     if json {

@@ -8,7 +8,7 @@ use std::path::{Path, PathBuf};
 use anyhow::{Context, Result};
 use clap::Args;
 
-use super::{InputError, Interrupted, ModeArgs, check_picks, stop_on_ctrl_c};
+use super::{InputError, Interrupted, ModeArgs, RunsFailed, check_picks, stop_on_ctrl_c};
 use binpick::cycle::EndReason;
 use binpick::report::RunDir;
 use binpick::study::{Outputs, RecordTo, Resolved, RunSettings, StudyError, StudyFile, StudySpec};
@@ -145,7 +145,8 @@ pub fn run(
 }
 
 /// Writes the study's files (a batch's `takt.*`, a sweep's `sweep.*`), moves the folder into
-/// place and prints the table; an interrupted run makes it exit 130.
+/// place and prints the table; an interrupted run makes it exit 130, a run ended on a physics
+/// fault exit 3.
 pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> Result<()> {
     let Outputs {
         files,
@@ -163,6 +164,8 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> R
     let done = || -> Result<()> {
         if file.runs.iter().any(|r| r.tally.ended == Some(EndReason::Interrupted)) {
             Err(Interrupted(dest.display().to_string()).into())
+        } else if let Some(failed) = RunsFailed::of(file.runs.iter().map(|r| &r.tally), &dest.display().to_string()) {
+            Err(failed.into())
         } else {
             Ok(())
         }

@@ -12,7 +12,7 @@ use std::fmt;
 
 use serde::{Serialize, Serializer};
 
-use super::outcome::{Fault, MotionFailure, Outcome};
+use super::outcome::{Fault, MotionFailure, Outcome, PhysicsFault};
 use crate::grasp::GraspCandidate;
 use crate::physics::World;
 use crate::sensor::{Capture, CaptureProblem, Detection, RecognitionReport, TruthAtTrigger};
@@ -58,6 +58,9 @@ pub enum EndReason {
     NoPathOutOfView,
     /// Ctrl-C: the run ended after the pick under way.
     Interrupted,
+    /// The physics world failed (a pour's deep penetration, a non-finite state): the tally's
+    /// `physics_faults` holds the record.
+    PhysicsFault,
 }
 
 impl EndReason {
@@ -69,6 +72,7 @@ impl EndReason {
             EndReason::NothingGraspableInFullTray => "nothing graspable in a full tray",
             EndReason::NoPathOutOfView => "the arm found no path out of the sensor's view",
             EndReason::Interrupted => "interrupted",
+            EndReason::PhysicsFault => "physics fault",
         }
     }
 }
@@ -206,6 +210,8 @@ pub enum Event {
     SlotSkipped(usize),
     /// The pick tray was exchanged for a full one (pile number).
     Refill(u64),
+    /// The physics world failed: the run ends here.
+    PhysicsFault(PhysicsFault),
     /// The pick tray was agitated (the how-manieth in a row).
     Agitation(u32),
     /// A pick looks for a part in a recognition result: how many picks the result has served
@@ -247,6 +253,7 @@ impl Event {
             Event::PartLetGo => "part_let_go",
             Event::SlotSkipped(_) => "slot_skipped",
             Event::Refill(_) => "refill",
+            Event::PhysicsFault(_) => "physics_fault",
             Event::Agitation(_) => "agitation",
             Event::ResultUsed { .. } => "result_used",
             Event::PlaceTrayExchange => "place_tray_exchange",
@@ -258,7 +265,7 @@ impl Event {
     /// Whether a log shows it as a warning: faults, lost parts, picks that were not placed.
     pub fn is_warning(&self) -> bool {
         match self {
-            Event::Fault(_) | Event::PartLost(_) => true,
+            Event::Fault(_) | Event::PartLost(_) | Event::PhysicsFault(_) => true,
             Event::Outcome(o) => *o != Outcome::Placed,
             _ => false,
         }
@@ -325,6 +332,7 @@ impl fmt::Display for Event {
             Event::PartLetGo => f.write_str("the part stays in the pick tray"),
             Event::SlotSkipped(slot) => write!(f, "slot {slot}"),
             Event::Refill(pile) => write!(f, "pile {pile}"),
+            Event::PhysicsFault(fault) => write!(f, "{fault}"),
             Event::Agitation(k) => write!(f, "the pick tray shaken (number {k} in a row)"),
             Event::ResultUsed { taken, since_capture } => write!(
                 f,

@@ -28,7 +28,9 @@
 //!    protective stop, a collision of the arm (or the held part) with the cell or a part
 //!    pressed into the tray (the world's health monitor), a part slipping off the cup. Each ends
 //!    the pick with its outcome ([`outcome`]: the cause as the type that found it); after a stop or a collision the arm waits the reset time and
-//!    retraces its path out. Parts pushed out of a tray are taken out of the cell as lost.
+//!    retraces its path out. Parts pushed out of a tray are taken out of the cell as lost. A
+//!    physics fault (a non-finite state, a pour failing the health monitor) ends the run, not its
+//!    caller: [`run`] returns the tally so far with the fault's record ([`PhysicsFault`]).
 //! 5. [`trays`]: nothing detected or nothing graspable: re-capture; after
 //!    `empty_after_captures` in a row the cell file's policy exchanges the pick tray for a full
 //!    one (`refill_s`) or ends the run. A full place tray is exchanged for an empty one.
@@ -61,7 +63,7 @@ pub use events::{
     CycleEvent, EndReason, Event, EventLog, Observer, Observers, PartLoss, Planned, Recognised, Stage, StallCause,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
-pub use outcome::{Fault, MotionFailure, NoSeal, Outcome, Slip, Stop, WrongPose};
+pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
 pub use records::{Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
 pub use sensing::SensedResult;
 
@@ -87,6 +89,10 @@ pub enum CycleError {
     /// The physics world failed beyond recovery (a non-finite state).
     #[error("physics: {0}")]
     Health(#[from] HealthError),
+    /// Pouring a pile (the first or a refill) failed the world's health check (a deep
+    /// penetration between poured parts, a part poured out of the tray).
+    #[error("physics while pouring a pile: {0}")]
+    Pour(HealthError),
     /// Something the cycle needs is missing or impossible (place slots, sensor pose, waiting
     /// pose).
     #[error(transparent)]
@@ -329,9 +335,11 @@ impl<'a> Cell<'a> {
     /// The cell's state at the start: the world with its first pile poured and the sensor over it.
     pub fn start(&self, obs: &mut dyn Observer) -> Result<CellState, CycleError> {
         let mut world = World::new(self.scene, self.robot, self.shape.clone());
-        world.build_pile_observed(&PileOptions::new(self.pile_count, self.opts.seed), &mut |w| {
-            obs.stepped(w)
-        })?;
+        world
+            .build_pile_observed(&PileOptions::new(self.pile_count, self.opts.seed), &mut |w| {
+                obs.stepped(w)
+            })
+            .map_err(CycleError::Pour)?;
         let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed, &self.workpiece)
             .ok_or(SetupError::DegenerateSensorPose)?;
         if let Some(q) = &self.waiting_q {
@@ -376,7 +384,10 @@ impl<'a> Cell<'a> {
     }
 }
 
-/// Runs `opts.picks` picks of `workpiece` in the cell of `scene`, watched by `obs`.
+/// Runs `opts.picks` picks of `workpiece` in the cell of `scene`, watched by `obs`. A physics
+/// fault (a pour's deep penetration, a non-finite state) ends the run, not the caller: its
+/// tally so far is returned, `ended` [`EndReason::PhysicsFault`] and the fault in
+/// `physics_faults`.
 pub fn run(
     scene: &LoadedScene,
     robot: &RobotModel,
@@ -385,12 +396,46 @@ pub fn run(
     obs: &mut dyn Observer,
 ) -> Result<RunResult, CycleError> {
     let cell = Cell::new(scene, robot, workpiece, *opts)?;
-    let st = cell.start(obs)?;
-    let mut run = Run { cell: &cell, st, obs };
-    let (records, ended) = run.picks()?;
+    match cell.start(obs) {
+        Ok(st) => run_from(&cell, st, obs),
+        Err(CycleError::Pour(e)) => {
+            let mut tally = Tally {
+                workpiece: workpiece.workpiece.name.clone(),
+                seed: opts.seed,
+                sim_time_s: e.time_s,
+                runs: 1,
+                ended: Some(EndReason::PhysicsFault),
+                ..Tally::default()
+            };
+            tally.physics_faults.push(PhysicsFault::new(&e, FaultDuring::Pour));
+            Ok(RunResult {
+                records: Vec::new(),
+                tally,
+                recognition_per_capture: Vec::new(),
+            })
+        }
+        Err(e) => Err(e),
+    }
+}
+
+/// Runs `cell.opts.picks` picks from the state `st` (as [`Cell::start`] leaves it, or changed by
+/// the caller), watched by `obs`; a physics fault ends the run as in [`run`].
+pub fn run_from(cell: &Cell<'_>, st: CellState, obs: &mut dyn Observer) -> Result<RunResult, CycleError> {
+    let opts = &cell.opts;
+    let mut run = Run { cell, st, obs };
+    let mut records = Vec::new();
+    let (ended, fault) = match run.picks(&mut records) {
+        Ok(ended) => (ended, None),
+        Err(CycleError::Health(e)) => (EndReason::PhysicsFault, Some(PhysicsFault::new(&e, FaultDuring::Cycle))),
+        Err(CycleError::Pour(e)) => (EndReason::PhysicsFault, Some(PhysicsFault::new(&e, FaultDuring::Pour))),
+        Err(e) => return Err(e),
+    };
+    if let Some(f) = &fault {
+        run.event(Event::PhysicsFault(f.clone()));
+    }
     let st = &mut run.st;
     let mut tally = std::mem::take(&mut st.tally);
-    tally.workpiece = workpiece.workpiece.name.clone();
+    tally.workpiece = cell.workpiece.name.clone();
     tally.seed = opts.seed;
     tally.faults.parts_lost = st.parts_lost;
     tally.captures = (st.sensor.triggered, st.sensor.spoiled);
@@ -401,6 +446,7 @@ pub fn run(
     tally.sim_time_s = st.world.time_s();
     tally.runs = 1;
     tally.ended = Some(ended);
+    tally.physics_faults.extend(fault);
     Ok(RunResult {
         records,
         tally,
@@ -436,16 +482,17 @@ impl Run<'_, '_> {
 
     /// The pick loop: until the asked-for attempts are made (every pick is one, a re-capture
     /// too) or the run ends otherwise.
-    fn picks(&mut self) -> Result<(Vec<PickRecord>, EndReason), CycleError> {
+    /// The picks' records go to `records` as each pick ends (kept there if a fault ends the
+    /// run).
+    fn picks(&mut self, records: &mut Vec<PickRecord>) -> Result<EndReason, CycleError> {
         let opts = self.cell.opts;
-        let mut records: Vec<PickRecord> = Vec::new();
         // The next pick, prepared at the last release.
         let mut next: Option<Prefetched> = None;
         while self.st.tally.attempts < opts.picks {
             if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
                 let fix = self.play_held_retreat(next.take())?;
-                apply_placement_fix(&mut records, fix);
-                return Ok((records, EndReason::Interrupted));
+                apply_placement_fix(records, fix);
+                return Ok(EndReason::Interrupted);
             }
             let index = self.st.tally.attempts;
             self.st.pick = Some(index);
@@ -458,7 +505,7 @@ impl Run<'_, '_> {
                 }
                 None => {
                     let Some((result, taken, since)) = self.result_for_pick()? else {
-                        return Ok((records, EndReason::NoPathOutOfView));
+                        return Ok(EndReason::NoPathOutOfView);
                     };
                     self.event(Event::ResultUsed {
                         taken,
@@ -510,9 +557,9 @@ impl Run<'_, '_> {
                     self.st.in_hand = None;
                     rec.outcome = why.map_or(Outcome::NothingDetected, Outcome::NothingGraspable);
                     self.event(Event::Outcome(rec.outcome.clone()));
-                    self.keep(&mut records, rec);
+                    self.keep(records, rec);
                     if let Some(end) = self.nothing_to_pick()? {
-                        return Ok((records, end));
+                        return Ok(end);
                     }
                     self.st.compute_from_s = self.st.world.time_s();
                     continue;
@@ -534,17 +581,17 @@ impl Run<'_, '_> {
                 .map(|d| d[prep.grasp.detection].world_from_part.translation.vector);
             let end = self.pick_and_place(&prep, charged, compute_from_s, chosen, late, &mut rec)?;
             next = end.next;
-            apply_placement_fix(&mut records, end.fix);
+            apply_placement_fix(records, end.fix);
             if !(rec.outcome == Outcome::Placed || rec.outcome.grasp_failed()) {
                 // The pile may have been disturbed anywhere: no result from before counts.
                 self.st.in_hand = None;
                 self.st.pending = None;
             }
-            self.keep(&mut records, rec);
+            self.keep(records, rec);
         }
         let fix = self.play_held_retreat(next)?;
-        apply_placement_fix(&mut records, fix);
-        Ok((records, EndReason::PicksDone))
+        apply_placement_fix(records, fix);
+        Ok(EndReason::PicksDone)
     }
 }
 

@@ -327,3 +327,56 @@ mod tests {
         );
     }
 }
+
+/// What the cell was doing when the physics world failed.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum FaultDuring {
+    /// Pouring a pile (the first, or a refill).
+    Pour,
+    /// The picks: motions, waits, agitation.
+    Cycle,
+}
+
+/// A physics fault that ended a run: the health monitor's every problem of the step it was
+/// found at (the bodies, the depth), a pour's deep penetration or a non-finite state. The run's
+/// tally up to it is kept; the run's `ended` is [`super::EndReason::PhysicsFault`].
+#[derive(Debug, Clone, PartialEq, serde::Serialize, serde::Deserialize)]
+pub struct PhysicsFault {
+    /// The world's step count at the fault.
+    pub step: u64,
+    /// Simulation time of the fault (s).
+    pub time_s: f64,
+    /// What the cell was doing.
+    pub during: FaultDuring,
+    /// Every problem the monitor found in that step (at least one).
+    pub problems: Vec<HealthEvent>,
+}
+
+impl PhysicsFault {
+    /// The fault of `error`, found while the cell did `during`.
+    pub fn new(error: &crate::physics::HealthError, during: FaultDuring) -> Self {
+        PhysicsFault {
+            step: error.step,
+            time_s: error.time_s,
+            during,
+            problems: error.events.clone(),
+        }
+    }
+}
+
+impl fmt::Display for PhysicsFault {
+    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
+        let during = match self.during {
+            FaultDuring::Pour => "pouring a pile",
+            FaultDuring::Cycle => "picking",
+        };
+        let problems: Vec<String> = self.problems.iter().map(ToString::to_string).collect();
+        write!(
+            f,
+            "physics fault at step {} ({during}): {}",
+            self.step,
+            problems.join("; ")
+        )
+    }
+}

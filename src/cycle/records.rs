@@ -20,7 +20,7 @@
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
 use super::events::EndReason;
-use super::outcome::Outcome;
+use super::outcome::{Outcome, PhysicsFault};
 use crate::sensor::{RecognitionReport, RecognitionTotals, TruthMatch};
 
 /// One pick (or one capture that found nothing to pick).
@@ -290,12 +290,13 @@ mod ended_text {
     use super::EndReason;
     use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-    const ALL: [EndReason; 5] = [
+    const ALL: [EndReason; 6] = [
         EndReason::PicksDone,
         EndReason::TrayEmpty,
         EndReason::NothingGraspableInFullTray,
         EndReason::NoPathOutOfView,
         EndReason::Interrupted,
+        EndReason::PhysicsFault,
     ];
 
     pub fn serialize<S: Serializer>(e: &Option<EndReason>, s: S) -> Result<S::Ok, S::Error> {
@@ -349,7 +350,7 @@ impl<A: Merge, B: Merge> Merge for (A, B) {
     }
 }
 
-impl Merge for Vec<f64> {
+impl<T: Clone> Merge for Vec<T> {
     fn merge(&mut self, o: &Self) {
         self.extend_from_slice(o);
     }
@@ -516,6 +517,10 @@ pub struct Tally {
     /// its picks done).
     #[serde(with = "ended_text")]
     pub ended: Option<EndReason> => ended,
+    /// The physics faults that ended runs, one per such run, in run order (left out of a file
+    /// when none).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub physics_faults: Vec<PhysicsFault> => sum,
 }
 }
 

@@ -167,7 +167,8 @@ impl Run<'_, '_> {
         let obs = &mut *self.obs;
         self.st
             .world
-            .build_pile_observed(&PileOptions::new(self.cell.pile_count, seed), &mut |w| obs.stepped(w))?;
+            .build_pile_observed(&PileOptions::new(self.cell.pile_count, seed), &mut |w| obs.stepped(w))
+            .map_err(CycleError::Pour)?;
         self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
         self.st.arm.free_s = self.st.world.time_s();
         self.st.compute_from_s = self.st.world.time_s();

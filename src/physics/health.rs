@@ -14,8 +14,10 @@ use rapier3d::prelude::*;
 
 use super::{PartState, SIM_UNITS_PER_M, Tag, World, overlap, point_from_sim, to_isometry};
 
-/// One problem the health monitor found in a step.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+/// One problem the health monitor found in a step. Written (in a run's fault record) as an
+/// object whose `kind` names the variant.
+#[derive(Debug, Clone, PartialEq, thiserror::Error, serde::Serialize)]
+#[serde(tag = "kind", rename_all = "snake_case")]
 pub enum HealthEvent {
     /// A body's pose or velocity became NaN or infinite.
     #[error("t = {time_s:.4} s: {body} has a non-finite {what}")]
@@ -69,10 +71,108 @@ pub enum HealthEvent {
     },
 }
 
+/// A [`HealthEvent`] read back from a written record: its fixed texts checked against the ones
+/// the monitor writes.
+mod known_text {
+    use super::HealthEvent;
+
+    /// As written.
+    #[derive(serde::Deserialize)]
+    #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
+    pub enum Written {
+        NonFinite {
+            time_s: f64,
+            body: String,
+            what: String,
+        },
+        LeftVolume {
+            time_s: f64,
+            body: String,
+            volume: String,
+            x: f64,
+            y: f64,
+            z: f64,
+        },
+        DeepPenetration {
+            time_s: f64,
+            a: String,
+            b: String,
+            depth_mm: f64,
+        },
+        ArmCollision {
+            time_s: f64,
+            robot: String,
+            obstacle: String,
+            depth_mm: f64,
+        },
+    }
+
+    fn one_of(text: &str, known: &[&'static str]) -> Result<&'static str, String> {
+        known
+            .iter()
+            .find(|k| **k == text)
+            .copied()
+            .ok_or_else(|| format!("{text:?} is not one of {known:?}"))
+    }
+
+    impl<'de> serde::Deserialize<'de> for HealthEvent {
+        fn deserialize<D: serde::Deserializer<'de>>(d: D) -> Result<Self, D::Error> {
+            HealthEvent::try_from(Written::deserialize(d)?).map_err(serde::de::Error::custom)
+        }
+    }
+
+    impl TryFrom<Written> for HealthEvent {
+        type Error = String;
+
+        fn try_from(w: Written) -> Result<Self, String> {
+            Ok(match w {
+                Written::NonFinite { time_s, body, what } => HealthEvent::NonFinite {
+                    time_s,
+                    body,
+                    what: one_of(&what, &["pose", "velocity"])?,
+                },
+                Written::LeftVolume {
+                    time_s,
+                    body,
+                    volume,
+                    x,
+                    y,
+                    z,
+                } => HealthEvent::LeftVolume {
+                    time_s,
+                    body,
+                    volume: one_of(&volume, &["pick tray", "place tray"])?,
+                    x,
+                    y,
+                    z,
+                },
+                Written::DeepPenetration { time_s, a, b, depth_mm } => {
+                    HealthEvent::DeepPenetration { time_s, a, b, depth_mm }
+                }
+                Written::ArmCollision {
+                    time_s,
+                    robot,
+                    obstacle,
+                    depth_mm,
+                } => HealthEvent::ArmCollision {
+                    time_s,
+                    robot,
+                    obstacle,
+                    depth_mm,
+                },
+            })
+        }
+    }
+}
+
 /// Every problem of one step (at least one), in the monitor's order: parts first (non-finite
 /// states, parts out of their tray, in part order), then contacts (in the narrow phase's order).
 #[derive(Debug, Clone, PartialEq)]
 pub struct HealthError {
+    /// The world's step at which they were found (its count of steps taken).
+    pub step: u64,
+    /// Simulation time after that step (s).
+    pub time_s: f64,
     /// The problems.
     pub events: Vec<HealthEvent>,
 }

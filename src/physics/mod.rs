@@ -449,7 +449,11 @@ impl World {
         if events.is_empty() {
             Ok(())
         } else {
-            Err(HealthError { events })
+            Err(HealthError {
+                step: self.steps,
+                time_s: self.time_s,
+                events,
+            })
         }
     }
 
@@ -613,6 +617,11 @@ impl World {
     /// The health monitor's limits.
     pub fn health_limits(&self) -> HealthLimits {
         self.health.limits
+    }
+
+    /// Checks every step against `limits` from now on.
+    pub fn set_health_limits(&mut self, limits: HealthLimits) {
+        self.health.limits = limits;
     }
 
     /// Steps with `solver`'s settings from now on.

@@ -54,9 +54,20 @@ pub const COLUMNS: &[Column] = &[
         md: &[("part", false, |s| s.tally.workpiece.clone())],
     },
     Column {
-        json: &[("runs", |s| val(s.tally.runs))],
+        // Runs that ended on a physics fault are marked (the JSON key and the Markdown mark only
+        // when there are some, so tables without faults read as before).
+        json: &[
+            ("runs", |s| val(s.tally.runs)),
+            ("runs_ended_on_physics_fault", |s| {
+                let n = s.tally.physics_faults.len();
+                (n > 0).then(|| json!(n))
+            }),
+        ],
         csv: &[("runs", |s| s.tally.runs.to_string())],
-        md: &[("runs", true, |s| s.tally.runs.to_string())],
+        md: &[("runs", true, |s| match s.tally.physics_faults.len() {
+            0 => s.tally.runs.to_string(),
+            n => format!("{} ({n} ended on a physics fault)", s.tally.runs),
+        })],
     },
     Column {
         json: &[

@@ -1,0 +1,153 @@
+//! Long runs lose nothing: a physics fault ends its run with a typed record and the run's tally
+//! so far, not the caller; a batch with a faulted run writes every run and its table, marks
+//! the run and exits 3.
+//!
+//! The real fault: D's pile of seed 13 (60 parts) fails the monitor as it is poured: parts 1 and
+//! 59 creep into each other over 1.3 s (0.21 mm at 1.38 s, 1.08 mm at 1.65 s, 2.03 mm at 2.68 s).
+
+use binpick::config::{LoadedScene, LoadedWorkpiece};
+use binpick::cycle::{self, Cell, EndReason, FaultDuring, RunOptions};
+use binpick::physics::{HealthEvent, HealthLimits, PartState};
+use binpick::robot::RobotModel;
+
+fn opts(picks: usize, seed: u64) -> RunOptions {
+    RunOptions {
+        picks,
+        seed,
+        deterministic: true,
+        stop: None,
+        keep_records: false,
+    }
+}
+
+/// A run of D whose pick tray is emptied before its first capture, so the cell shakes the empty
+/// tray, then refills it; with `limit_m` as the monitor's deep-penetration limit from then on.
+fn run_into_refill(limit_m: Option<f64>) -> binpick::cycle::RunResult {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("D").unwrap();
+    let cell = Cell::new(&scene, &robot, &wp, opts(6, 5)).unwrap();
+    let mut st = cell.start(&mut ()).unwrap();
+    for i in st.world.parts_in_state(PartState::Free) {
+        st.world.remove_part(i);
+    }
+    if let Some(l) = limit_m {
+        st.world.set_health_limits(HealthLimits {
+            deep_penetration_m: l,
+            ..st.world.health_limits()
+        });
+    }
+    cycle::run_from(&cell, st, &mut ()).unwrap()
+}
+
+#[test]
+fn a_fault_in_a_refill_pour_ends_the_run_with_its_typed_record_and_keeps_the_tally() {
+    // 1 micrometre: the parts of a pour landing on the floor and on each other press deeper.
+    let r = run_into_refill(Some(1e-6));
+    let t = &r.tally;
+    assert_eq!(t.ended, Some(EndReason::PhysicsFault));
+    assert_eq!(t.physics_faults.len(), 1);
+    let f = &t.physics_faults[0];
+    assert_eq!(f.during, FaultDuring::Pour);
+    assert!(f.step > 0 && f.time_s > 0.0);
+    // The record names the bodies and the depth; it is deeper than the limit.
+    let deep: Vec<_> = f
+        .problems
+        .iter()
+        .filter_map(|p| match p {
+            HealthEvent::DeepPenetration { a, b, depth_mm, .. } => Some((a, b, *depth_mm)),
+            _ => None,
+        })
+        .collect();
+    assert!(!deep.is_empty(), "{:?}", f.problems);
+    assert!(deep.iter().all(|(a, b, d)| !a.is_empty() && !b.is_empty() && *d > 1e-3));
+    // The tally up to the fault is kept: the empty tray was captured and shaken before.
+    assert!(t.captures.0 > 0 && t.agitations == 3, "{t:?}");
+    assert_eq!(t.runs, 1);
+    assert!(t.sim_time_s >= f.time_s);
+    // The record survives a shard file and reads back as it was.
+    let back: binpick::cycle::Tally = serde_json::from_value(serde_json::to_value(t).unwrap()).unwrap();
+    assert_eq!((&back.physics_faults, back.ended), (&t.physics_faults, t.ended));
+    // A merge of a faulted run with a run that ended well keeps the fault and its count.
+    let mut merged = binpick::cycle::Tally {
+        ended: Some(EndReason::PicksDone),
+        runs: 1,
+        ..Default::default()
+    };
+    merged.merge(t);
+    assert_eq!((merged.runs, merged.physics_faults.len()), (2, 1));
+    assert_eq!(merged.ended, Some(EndReason::PhysicsFault));
+}
+
+#[test]
+fn negative_control_the_same_refill_at_the_monitors_limit_ends_without_a_fault() {
+    let r = run_into_refill(None);
+    let t = &r.tally;
+    assert!(t.physics_faults.is_empty(), "{:?}", t.physics_faults);
+    assert_ne!(t.ended, Some(EndReason::PhysicsFault));
+    assert_eq!(t.refills, 1);
+}
+
+/// `binpick batch` of D over `seeds`, deterministic, 2 picks: its exit code, stderr and the
+/// written takt.md and takt.json.
+fn batch_d(seeds: &str) -> (Option<i32>, String, String, serde_json::Value) {
+    let tmp = crate::support::tempdir().unwrap();
+    let out = tmp.path().to_str().unwrap();
+    let o = crate::support::binpick(&[
+        "batch",
+        "--workpieces",
+        "D",
+        "--seeds",
+        seeds,
+        "--picks",
+        "2",
+        "--deterministic",
+        "--out",
+        out,
+    ]);
+    let dir = std::fs::read_dir(tmp.path())
+        .unwrap()
+        .map(|e| e.unwrap().path())
+        .find(|p| p.join("takt.md").is_file())
+        .unwrap_or_else(|| panic!("no results folder: {}", crate::support::stderr(&o)));
+    let md = std::fs::read_to_string(dir.join("takt.md")).unwrap();
+    let json = serde_json::from_str(&std::fs::read_to_string(dir.join("takt.json")).unwrap()).unwrap();
+    (o.status.code(), crate::support::stderr(&o), md, json)
+}
+
+#[test]
+fn a_batch_with_a_faulted_run_writes_every_run_marks_it_and_exits_3() {
+    let (code, err, md, json) = batch_d("12,13");
+    assert_eq!(code, Some(3), "{err}");
+    assert!(
+        err.contains("workpiece D seed 13") && err.contains("deep penetration"),
+        "{err}"
+    );
+    assert!(md.contains("| D | 2 (1 ended on a physics fault) |"), "{md}");
+    let row = &json["table"][0];
+    assert_eq!(
+        (row["runs"].as_u64(), row["runs_ended_on_physics_fault"].as_u64()),
+        (Some(2), Some(1))
+    );
+    let runs = json["batch"]["runs"].as_array().unwrap();
+    assert_eq!(runs.len(), 2);
+    // Seed 12's run is whole; seed 13's is marked, with its record.
+    assert_eq!(runs[0]["ended"], "picks done");
+    assert!(runs[0].get("physics_faults").is_none());
+    assert_eq!(runs[1]["ended"], "physics fault");
+    let f = &runs[1]["physics_faults"][0];
+    assert_eq!(
+        (f["during"].as_str(), f["problems"][0]["kind"].as_str()),
+        (Some("pour"), Some("deep_penetration"))
+    );
+    assert!(f["problems"][0]["depth_mm"].as_f64().unwrap() > 2.0);
+}
+
+#[test]
+fn negative_control_a_batch_without_a_fault_exits_0_unmarked() {
+    let (code, err, md, json) = batch_d("12");
+    assert_eq!(code, Some(0), "{err}");
+    assert!(md.contains("| D | 1 |"), "{md}");
+    assert!(!md.contains("physics fault"));
+    assert!(json["table"][0].get("runs_ended_on_physics_fault").is_none());
+}
