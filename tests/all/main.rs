@@ -5,6 +5,7 @@ mod cli_bad_input;
 mod cli_pile;
 mod cli_robot;
 mod cli_sense;
+mod expect;
 mod fuzz;
 mod golden;
 mod mesh_export;
