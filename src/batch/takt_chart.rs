@@ -62,14 +62,17 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
         let cx = plot.x(i as f64 + 0.5);
         let _ = writeln!(
             svg,
-            r#"<g class="series" data-workpiece="{}"><title>{}: takt mean {:.3} s, p5–p95 {:.3}–{:.3} s, min–max {:.3}–{:.3} s</title>"#,
+            r#"<g class="series" data-workpiece="{}"><title>{}: {}</title>"#,
             escape(&b.workpiece),
             escape(&b.workpiece),
-            b.mean_s,
-            b.p5_s,
-            b.p95_s,
-            b.min_s,
-            b.max_s
+            if b.mean_s.is_finite() {
+                format!(
+                    "takt mean {:.3} s, p5–p95 {:.3}–{:.3} s, min–max {:.3}–{:.3} s",
+                    b.mean_s, b.p5_s, b.p95_s, b.min_s, b.max_s
+                )
+            } else {
+                "no takt (fewer than two parts placed in a run)".into()
+            }
         );
         if b.min_s.is_finite() && b.max_s.is_finite() {
             let _ = writeln!(

@@ -1,12 +1,16 @@
 //! `binpick batch`: the takt-time table over many runs of the cell as given (or a shard of
-//! them), with a progress bar: a study of one variant ([`super::study`]).
+//! them), with a progress bar: a study of one variant ([`super::study`]); with `--expect`, the
+//! table checked against the user's limits ([`binpick::results::expect`]).
+
+use std::path::PathBuf;
 
 use anyhow::Result;
 use clap::Args;
 
-use super::study::{StudyArgs, finish, results_dir};
+use super::study::{Finish, StudyArgs, finish, results_dir};
 use super::{CellArgs, InputError, OutArgs, SkipFormats, load_workpiece};
 use binpick::config::LoadedWorkpiece;
+use binpick::results::expect::Expectations;
 use binpick::study::{Resolved, StudySpec};
 
 /// Arguments of `binpick batch`.
@@ -17,6 +21,14 @@ pub struct BatchArgs {
     /// Record every run: `run-<workpiece>-seed<seed>.rrd` and `.mcap` in the batch folder.
     #[arg(long)]
     pub record: bool,
+    /// Print the full table (every column of takt.md) instead of the terminal's short one.
+    #[arg(long)]
+    pub wide: bool,
+    /// Per-workpiece limits (TOML: `[E]` with `takt_max_s = 1.8`, `success_min = 0.95`,
+    /// `collisions_max = 0`, ...) checked after the runs: writes takt.junit.xml, exits 1 when a
+    /// limit is missed.
+    #[arg(long, value_name = "EXPECT.toml")]
+    pub expect: Option<PathBuf>,
     #[command(flatten)]
     pub skip: SkipFormats,
     #[command(flatten)]
@@ -44,6 +56,19 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
         a.study.picks,
         a.study.mode.deterministic,
     );
+    // The limits are checked against the batch's workpieces before anything runs.
+    let expect = match &a.expect {
+        Some(path) => {
+            if study.shard.1 > 1 {
+                return Err(InputError(
+                    "--expect checks the whole batch's table; a shard (--shard) holds part of it".into(),
+                )
+                .into());
+            }
+            Some(Expectations::load(path, &spec.workpieces).map_err(|e| InputError(e.to_string()))?)
+        }
+        None => None,
+    };
     let dir = results_dir(&a.out.out, &spec, study.shard)?;
     let resolved = Resolved::single(loaded, robot, workpieces);
     let record = a.record.then(|| a.skip.formats(true));
@@ -53,5 +78,10 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     for wp in &variant.workpieces {
         dir.write_workpiece(wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
     }
-    finish(dir, &file, &times, a.out.json)
+    let how = Finish {
+        json: a.out.json,
+        wide: a.wide,
+        expect: expect.as_ref(),
+    };
+    finish(dir, &file, &times, how)
 }

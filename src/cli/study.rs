@@ -11,6 +11,7 @@ use clap::Args;
 use super::{InputError, Interrupted, ModeArgs, RunsFailed, check_picks, stop_on_ctrl_c};
 use binpick::cycle::EndReason;
 use binpick::report::RunDir;
+use binpick::results::expect::{Expectations, junit_xml};
 use binpick::study::{Outputs, RecordTo, Resolved, RunSettings, StudyError, StudyFile, StudySpec};
 
 /// Which runs a study makes, and how: the arguments batch and sweep share.
@@ -144,10 +145,52 @@ pub fn run(
     Ok((StudyFile::new(spec, study.shard, runs), times))
 }
 
-/// Writes the study's files (a batch's `takt.*`, a sweep's `sweep.*`), moves the folder into
-/// place and prints the table; an interrupted run makes it exit 130, a run ended on a physics
-/// fault exit 3.
-pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> Result<()> {
+/// How a study's results are printed and checked: `--json`, `--wide` and a batch's `--expect`.
+#[derive(Default)]
+pub struct Finish<'a> {
+    /// Machine-readable JSON instead of the table.
+    pub json: bool,
+    /// A batch's full table instead of the terminal's short one.
+    pub wide: bool,
+    /// A batch's limits, checked after its runs (`takt.junit.xml`; exit 1 when one is missed).
+    pub expect: Option<&'a Expectations>,
+}
+
+/// Limits of a batch that its results missed (exit 1).
+#[derive(Debug, thiserror::Error)]
+#[error("{missed} of {total} limits of {file} missed")]
+pub struct LimitsMissed {
+    /// Limits missed.
+    pub missed: usize,
+    /// Limits checked.
+    pub total: usize,
+    /// The limits file.
+    pub file: String,
+}
+
+/// `text` in lines of at most `width` characters, broken at spaces (a word longer than the
+/// width keeps a line of its own).
+pub fn wrap(text: &str, width: usize) -> String {
+    let mut out = String::new();
+    let mut line = String::new();
+    for word in text.split(' ') {
+        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > width {
+            out += &line;
+            out.push('\n');
+            line.clear();
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line += word;
+    }
+    out + &line
+}
+
+/// Writes the study's files (a batch's `takt.*`, a sweep's `sweep.*`; with limits, a batch's
+/// `takt.junit.xml`), moves the folder into place and prints the table; an interrupted run makes
+/// it exit 130, a run ended on a physics fault 3, a missed limit 1.
+pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, how: Finish) -> Result<()> {
     let Outputs {
         files,
         markdown: md,
@@ -160,18 +203,50 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> R
     for (name, text) in &files {
         dir.write(name, text)?;
     }
+    let rows = file.spec.is_batch().then(|| binpick::batch::table(file));
+    let checks = match (how.expect, &rows) {
+        (Some(e), Some(rows)) => {
+            let checks = e.check(rows);
+            dir.write("takt.junit.xml", junit_xml(&file.spec.name(), &e.file, &checks))?;
+            checks
+        }
+        _ => Vec::new(),
+    };
     let dest = dir.finish()?;
     let done = || -> Result<()> {
         if file.runs.iter().any(|r| r.tally.ended == Some(EndReason::Interrupted)) {
-            Err(Interrupted(dest.display().to_string()).into())
-        } else if let Some(failed) = RunsFailed::of(file.runs.iter().map(|r| &r.tally), &dest.display().to_string()) {
-            Err(failed.into())
-        } else {
-            Ok(())
+            return Err(Interrupted(dest.display().to_string()).into());
+        }
+        if let Some(failed) = RunsFailed::of(file.runs.iter().map(|r| &r.tally), &dest.display().to_string()) {
+            return Err(failed.into());
+        }
+        let missed = checks.iter().filter(|c| !c.met).count();
+        match how.expect {
+            Some(e) if missed > 0 => Err(LimitsMissed {
+                missed,
+                total: checks.len(),
+                file: e.file.clone(),
+            }
+            .into()),
+            _ => Ok(()),
         }
     };
-    if json {
-        let out = serde_json::json!({"table": table, "wall_s": times.study_s, "dir": dest.display().to_string()});
+    if how.json {
+        let mut out = serde_json::json!({"table": table, "wall_s": times.study_s, "dir": dest.display().to_string()});
+        if how.expect.is_some() {
+            out["limits"] = checks
+                .iter()
+                .map(|c| {
+                    serde_json::json!({
+                        "workpiece": c.limit.workpiece,
+                        "key": c.limit.figure.key,
+                        "limit": c.limit.limit,
+                        "value": c.value,
+                        "met": c.met,
+                    })
+                })
+                .collect();
+        }
         println!("{}", serde_json::to_string_pretty(&out)?);
         return done();
     }
@@ -194,21 +269,50 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> R
     } else {
         String::new()
     };
-    if spec.is_batch() {
+    let width = binpick::results::table::TERMINAL_WIDTH;
+    if let Some(rows) = &rows {
         println!(
-            "{} runs of {} picks{mode}{shard}, seeds {:?}\n",
-            file.runs.len(),
-            spec.picks,
-            spec.seeds
+            "{}",
+            wrap(
+                &format!(
+                    "{} runs of {} picks{mode}{shard}, seeds {:?}",
+                    file.runs.len(),
+                    spec.picks,
+                    spec.seeds
+                ),
+                width
+            )
         );
-        print!("{md}");
-        println!(
-            "\ntakt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; grasps sealed / attempted; recognition against the truth at each trigger (correct = within 2 mm and 5 deg of a part; recall over the top layer); torque demand before saturation; {sim_s:.1} s simulated{}{wall}",
-            times.runs_s.map_or(String::new(), |w| format!(
+        println!();
+        if how.wide {
+            print!("{md}");
+        } else {
+            print!("{}", binpick::results::table::terminal(rows));
+        }
+        println!();
+        let guide = if how.wide {
+            "takt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; grasps sealed / attempted; recognition against the truth at each trigger (correct = within 2 mm and 5 deg of a part; recall over the top layer); torque demand before saturation;"
+        } else {
+            "takt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included; success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; waits = the share of the takt spent waiting for the sensor or compute; faults = protective stops + collisions + drops + parts lost; every column is in takt.md, takt.csv and takt.json (--wide prints them all);"
+        };
+        let runs = times.runs_s.map_or(String::new(), |w| {
+            format!(
                 " in {w:.1} s of run time ({:.0}x real time per core)",
                 sim_s / w.max(1e-9)
-            )),
+            )
+        });
+        println!(
+            "{}",
+            wrap(&format!("{guide} {sim_s:.1} s simulated{runs}{wall}"), width)
         );
+        if let Some(e) = how.expect {
+            println!("\n{}", wrap(&format!("limits of {}:", e.file), width));
+            for c in &checks {
+                for line in wrap(&c.message(), width - 2).lines() {
+                    println!("  {line}");
+                }
+            }
+        }
     } else {
         println!(
             "{} variants x {} workpieces x {} seeds: {} runs of {} picks{mode}{shard}\n",
@@ -220,7 +324,13 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, json: bool) -> R
         );
         print!("{md}");
         println!(
-            "\ntakt as the reference defines it (see `binpick batch`); p5 and p95 are the 5th and 95th percentiles of every interval; faults = protective stops + collisions + drops + parts lost; every column of the batch table is in sweep.csv; {sim_s:.1} s simulated{wall}"
+            "\n{}",
+            wrap(
+                &format!(
+                    "takt as the reference defines it (see `binpick batch`); p5 and p95 are the 5th and 95th percentiles of every interval; faults = protective stops + collisions + drops + parts lost; every column of the batch table is in sweep.csv; {sim_s:.1} s simulated{wall}"
+                ),
+                width
+            )
         );
     }
     println!("wrote {}", dest.display());
@@ -276,5 +386,13 @@ pub fn merge(dirs: &[PathBuf], out: &Path, json: bool) -> Result<()> {
         runs_s,
         threads: 1,
     };
-    finish(dir, &merged, &times, json)
+    finish(
+        dir,
+        &merged,
+        &times,
+        Finish {
+            json,
+            ..Finish::default()
+        },
+    )
 }

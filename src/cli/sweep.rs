@@ -60,7 +60,15 @@ pub fn sweep(a: &SweepArgs) -> Result<()> {
     let dir = results_dir(&a.out.out, &spec, study.shard)?;
     let (file, times) = super::study::run(&resolved, spec, &study, &dir, None)?;
     write_variants(&dir, &resolved)?;
-    finish(dir, &file, &times, a.out.json)
+    finish(
+        dir,
+        &file,
+        &times,
+        super::study::Finish {
+            json: a.out.json,
+            ..Default::default()
+        },
+    )
 }
 
 /// Each variant's resolved cell (with its URDF) and workpieces, in `variant-N/`, so a variant

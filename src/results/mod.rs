@@ -3,7 +3,9 @@
 //! Job: from one [`Tally`] (a run's, or the merge of several runs': see
 //! [`crate::cycle::records`]) derive its [`Summary`] (rates, means, takt statistics,
 //! percentiles), and write it: the takt table's columns ([`table`]: one list gives the
-//! Markdown, the CSV and the JSON of a row) and a run's `summary.json` ([`run_summary`]).
+//! Markdown, the CSV and the JSON of a row; and the terminal's short table) and a run's
+//! `summary.json` ([`run_summary`]); check a batch's rows against a user's limits ([`expect`]:
+//! `binpick batch --expect`, `takt.junit.xml`).
 //!
 //! Takt, as the reference system defines it (its Table 5: the mean of consecutive Pick-and-Place
 //! cycles, only the very first cycle's sensing and motion generation excluded): the intervals
@@ -15,6 +17,7 @@
 //!
 //! Units: s (ms in the Markdown's compute column), mm and deg where a name says so, counts.
 
+pub mod expect;
 pub mod run_summary;
 pub mod table;
 

@@ -3,8 +3,12 @@
 //! list's names) and its Markdown columns (`takt.md`). Adding a metric to the table is one entry
 //! here.
 //!
+//! The terminal's table ([`terminal`], what `binpick batch` prints) is a short list of its own:
+//! the figures a user decides on, aligned, at most [`TERMINAL_WIDTH`] characters wide.
+//!
 //! Units: as the names say (s; ms in the Markdown's compute column; % in its rates); CSV numbers
-//! with 6 decimals, empty where absent; Markdown `-` where absent.
+//! with 6 decimals, empty where absent; Markdown `-` where absent, and the takt cell says why
+//! there is no takt ("nothing placed", "too few placed").
 
 use serde::{Serialize, Serializer};
 use serde_json::{Value, json};
@@ -40,6 +44,130 @@ pub fn f6(v: f64) -> String {
     } else {
         String::new()
     }
+}
+
+/// The takt cell's text: `v` with 3 decimals, or why a row has no takt (a takt is an interval
+/// between two releases of one run).
+pub fn takt_text(s: &Summary, v: f64) -> String {
+    if v.is_finite() {
+        format!("{v:.3}")
+    } else if s.tally.placed == 0 {
+        "nothing placed".into()
+    } else {
+        "too few placed".into()
+    }
+}
+
+/// Faults of a row: protective stops + collisions + drops + parts lost (grasp failures are
+/// counted in success, not here).
+pub fn faults(s: &Summary) -> usize {
+    let f = s.tally.faults;
+    f.protective_stops + f.collisions + f.drops + f.parts_lost
+}
+
+/// The share of the takt spent waiting for the sensor or for compute: the waits within the takt
+/// intervals over the intervals' sum (NaN without a takt).
+pub fn wait_share(s: &Summary) -> f64 {
+    let takts_s: f64 = s.tally.takts_s.iter().sum();
+    if takts_s > 0.0 {
+        (s.tally.sensor_waits.total_s + s.tally.compute_waits.total_s) / takts_s
+    } else {
+        f64::NAN
+    }
+}
+
+/// A share as a percentage with `d` decimals; `-` when not finite.
+fn pct(v: f64, d: usize) -> String {
+    if v.is_finite() {
+        format!("{:.d$} %", 100.0 * v)
+    } else {
+        "-".into()
+    }
+}
+
+/// The widest line the terminal's table may print (characters).
+pub const TERMINAL_WIDTH: usize = 110;
+
+/// The terminal's columns: header, right-aligned, text.
+const TERMINAL: &[MdCell] = &[
+    ("part", false, |s| s.tally.workpiece.clone()),
+    ("takt [s]", true, |s| takt_text(s, s.takt.mean_s)),
+    ("reference [s]", true, |s| {
+        s.reference_takt_s.map_or("-".into(), |t| num(t, 1))
+    }),
+    ("success", true, |s| {
+        format!("{} ({}/{})", pct(s.success_rate, 1), s.tally.placed, s.tally.attempts)
+    }),
+    ("motion floor [s]", true, |s| num(s.motion_floor_s, 3)),
+    ("waits", true, |s| pct(wait_share(s), 0)),
+    ("faults", true, |s| faults(s).to_string()),
+];
+
+/// The table as the terminal prints it: the figures a user decides on (part, takt mean, the
+/// reference's takt, success, motion floor, the share of the takt spent waiting, faults), as an
+/// aligned Markdown table; the full table is [`markdown`] (`takt.md`, `--wide`). A part name
+/// too long for [`TERMINAL_WIDTH`] is cut, ending in `…`.
+pub fn terminal(rows: &[Summary]) -> String {
+    let mut cells: Vec<Vec<String>> = rows
+        .iter()
+        .map(|s| TERMINAL.iter().map(|c| (c.2)(s)).collect())
+        .collect();
+    let others: usize = (1..TERMINAL.len())
+        .map(|i| {
+            cells
+                .iter()
+                .map(|r| r[i].chars().count())
+                .chain([TERMINAL[i].0.chars().count(), 3])
+                .max()
+                .unwrap_or(3)
+        })
+        .sum();
+    // "| " + cells joined by " | " + " |".
+    let part_chars = TERMINAL_WIDTH
+        .saturating_sub(others + 3 * (TERMINAL.len() - 1) + 4)
+        .max(8);
+    for r in &mut cells {
+        if r[0].chars().count() > part_chars {
+            r[0] = r[0].chars().take(part_chars - 1).chain(['…']).collect();
+        }
+    }
+    let width = |i: usize| {
+        cells
+            .iter()
+            .map(|r| r[i].chars().count())
+            .chain([TERMINAL[i].0.chars().count(), 3])
+            .max()
+            .unwrap_or(3)
+    };
+    let widths: Vec<usize> = (0..TERMINAL.len()).map(width).collect();
+    let pad = |text: &str, i: usize| {
+        let fill = " ".repeat(widths[i] - text.chars().count());
+        if TERMINAL[i].1 {
+            format!("{fill}{text}")
+        } else {
+            format!("{text}{fill}")
+        }
+    };
+    let line = |texts: Vec<String>| format!("| {} |\n", texts.join(" | "));
+    let mut out = line(TERMINAL.iter().enumerate().map(|(i, c)| pad(c.0, i)).collect());
+    out += &line(
+        TERMINAL
+            .iter()
+            .enumerate()
+            .map(|(i, c)| {
+                let dashes = "-".repeat(widths[i] - 1);
+                if c.1 {
+                    format!("{dashes}:")
+                } else {
+                    format!("{dashes}-")
+                }
+            })
+            .collect(),
+    );
+    for r in &cells {
+        out += &line(r.iter().enumerate().map(|(i, t)| pad(t, i)).collect());
+    }
+    out
 }
 
 fn val(v: impl Serialize) -> Option<Value> {
@@ -97,7 +225,7 @@ pub const COLUMNS: &[Column] = &[
             ("takt_count", |s| s.takt.count.to_string()),
         ],
         md: &[
-            ("takt mean [s]", true, |s| num(s.takt.mean_s, 3)),
+            ("takt mean [s]", true, |s| takt_text(s, s.takt.mean_s)),
             ("p95", true, |s| num(s.takt.p95_s, 3)),
             ("min", true, |s| num(s.takt.min_s, 3)),
             ("max", true, |s| num(s.takt.max_s, 3)),
@@ -390,12 +518,42 @@ mod tests {
         assert!(bars.windows(2).all(|w| w[0] == w[1]), "{md}");
         // Empty figures: `-` in Markdown, empty in CSV, null in JSON; the wall time left out.
         assert!(
-            md.lines().nth(2).unwrap().starts_with("| A | 1 | 0/0 | - % | - |"),
+            md.lines()
+                .nth(2)
+                .unwrap()
+                .starts_with("| A | 1 | 0/0 | - % | nothing placed | - |"),
             "{md}"
         );
         let row = serde_json::to_value(&s).unwrap();
         assert!(row["success_rate"].is_null() && row.get("wall_s").is_none());
         // Negative control: the check finds a name given twice.
         assert_eq!(repeated(&["a", "b", "a"]), vec!["a".to_string()]);
+    }
+
+    #[test]
+    fn the_terminal_table_fits_110_characters_and_says_nothing_was_placed() {
+        let long = Summary::of(&Tally {
+            workpiece: "a-connector-with-a-very-long-file-name-from-cad".into(),
+            runs: 3,
+            attempts: 63,
+            placed: 60,
+            takts_s: vec![1.5, 12345.25],
+            ..Tally::default()
+        });
+        let none = Summary::of(&Tally {
+            workpiece: "E".into(),
+            runs: 1,
+            attempts: 2,
+            ..Tally::default()
+        });
+        let rows = [long, none];
+        let t = terminal(&rows);
+        let widest = |s: &str| s.lines().map(|l| l.chars().count()).max().unwrap();
+        assert!(widest(&t) <= TERMINAL_WIDTH, "{t}");
+        assert!(t.contains("a-connector-with") && t.contains('…'), "{t}");
+        assert!(t.contains("| nothing placed |") && t.contains("6173.375"), "{t}");
+        assert!(!t.contains("NaN") && !markdown(&rows).contains("NaN"), "{t}");
+        // Negative control: the full table does not fit.
+        assert!(widest(&markdown(&rows)) > TERMINAL_WIDTH);
     }
 }
