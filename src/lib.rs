@@ -4,7 +4,10 @@
 //! The modules follow one pick through the data flow:
 //!
 //! 1. [`config`]: the cell (scene) file and the workpiece files: strict parsing and validation.
-//! 2. [`part`]: the part model, one description of a workpiece's geometry for every stage;
+//! 2. [`part`]: the part model, one description of a workpiece's geometry for every stage: CAD
+//!    import (STL, OBJ, KiCad VRML) and repair, and what is derived once from the mesh (mass
+//!    properties, planar faces and their cup-fit regions, stable poses, symmetry); the built-in
+//!    primitives and their tessellation;
 //!    [`geometry`]: the cell's solid shapes (trays, table, obstacles as named boxes, the hand's
 //!    cylinders) and the suction cup's force model, defined once for every stage below.
 //! 3. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
@@ -23,7 +26,8 @@
 //!     trays), its events and the observer interface through which a run is watched.
 //! 11. [`recording`]: the run written to Rerun (`.rrd`) and MCAP files.
 //! 12. [`results`]: the one results type's figures (a run's or many runs' [`cycle::Tally`]
-//!     summarised) and the takt table's columns, listed once for Markdown, CSV and JSON;
+//!     summarised), the takt table's columns, listed once for Markdown, CSV and JSON, and a
+//!     batch's expected limits (`--expect`, JUnit XML);
 //!     [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
 //!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG).
 //! 13. [`study`]: many cell runs, one table: the spec (variants x workpieces x seeds x picks x
