@@ -17,7 +17,8 @@ pub fn colour(i: usize) -> &'static str {
     COLOURS[i % COLOURS.len()]
 }
 
-/// Escapes the XML special characters `& < > " '` for SVG text and attributes.
+/// Escapes the XML special characters `& < > " '` for text and attributes of any XML file we
+/// write (SVG, JUnit); characters XML 1.0 does not allow are written as U+FFFD.
 pub fn escape(text: &str) -> String {
     let mut out = String::with_capacity(text.len());
     for c in text.chars() {
@@ -27,6 +28,7 @@ pub fn escape(text: &str) -> String {
             '>' => out.push_str("&gt;"),
             '"' => out.push_str("&quot;"),
             '\'' => out.push_str("&apos;"),
+            c if (c as u32) < 0x20 && !matches!(c, '\t' | '\n' | '\r') => out.push('\u{fffd}'),
             _ => out.push(c),
         }
     }

@@ -23,6 +23,7 @@ use std::path::Path;
 
 use super::Summary;
 use super::table::{faults, wait_share};
+use crate::svg::escape;
 
 /// Which side of a limit a figure must stay on.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
@@ -362,24 +363,6 @@ impl Check {
             self.name()
         )
     }
-}
-
-/// `text` escaped for XML attribute values and character data.
-fn escape(text: &str) -> String {
-    let mut out = String::with_capacity(text.len());
-    for c in text.chars() {
-        match c {
-            '&' => out.push_str("&amp;"),
-            '<' => out.push_str("&lt;"),
-            '>' => out.push_str("&gt;"),
-            '"' => out.push_str("&quot;"),
-            '\'' => out.push_str("&apos;"),
-            // Characters XML 1.0 does not allow are written as U+FFFD.
-            c if (c as u32) < 0x20 && !matches!(c, '\t' | '\n' | '\r') => out.push('\u{fffd}'),
-            c => out.push(c),
-        }
-    }
-    out
 }
 
 /// The checks as JUnit XML: one `testsuite` named `suite` (the batch), one `testcase` per
