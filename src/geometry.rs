@@ -23,7 +23,7 @@ pub struct NamedBox {
     pub name: String,
     /// `world_from_box`: the box's own frame (its centre, its axes).
     pub world_from_box: Isometry3<f64>,
-    /// Half extents along the box's axes [m].
+    /// Half extents along the box's axes (m).
     pub half_m: Vector3<f64>,
 }
 
@@ -71,7 +71,7 @@ pub fn table_box(scene: &Scene) -> NamedBox {
 pub const TRAY_PIECES: [&str; 5] = ["floor", "wall +x", "wall -x", "wall +y", "wall -y"];
 
 /// A tray's floor and four walls in the tray frame (origin at the centre of the inner floor
-/// surface), in [`TRAY_PIECES`] order: (centre, half extents) [m]. The floor reaches under the
+/// surface), in [`TRAY_PIECES`] order: (centre, half extents) (m). The floor reaches under the
 /// walls; the x walls span the whole outer length, the y walls fit between them.
 pub fn tray_pieces_m(t: &TrayConfig) -> [(Vector3<f64>, Vector3<f64>); 5] {
     let [lx, ly] = t.inner_size_m;
@@ -158,11 +158,11 @@ pub fn cell_boxes(scene: &Scene) -> Vec<(BoxRole, NamedBox)> {
 pub struct TrayVolume {
     /// `world_from_tray`.
     pub world_from_tray: Isometry3<f64>,
-    /// Half the inner size plus the wall thickness [m].
+    /// Half the inner size plus the wall thickness (m).
     pub half_xy_m: [f64; 2],
-    /// Wall height above the inner floor [m].
+    /// Wall height above the inner floor (m).
     pub wall_height_m: f64,
-    /// Wall thickness [m].
+    /// Wall thickness (m).
     pub wall_thickness_m: f64,
 }
 
@@ -200,15 +200,15 @@ impl TrayVolume {
 /// along the flange z axis, ending at the tool frame (the cup lip).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct HandGeometry {
-    /// Flange face to cup lip [m].
+    /// Flange face to cup lip (m).
     pub tool_length_m: f64,
-    /// Radius of the body cylinder [m].
+    /// Radius of the body cylinder (m).
     pub body_radius_m: f64,
-    /// Length of the body cylinder, from the flange face [m].
+    /// Length of the body cylinder, from the flange face (m).
     pub body_length_m: f64,
-    /// Radius of the cup [m].
+    /// Radius of the cup (m).
     pub cup_radius_m: f64,
-    /// Length of the cup, ending at the lip [m].
+    /// Length of the cup, ending at the lip (m).
     pub cup_length_m: f64,
 }
 
@@ -226,7 +226,7 @@ impl HandGeometry {
         }
     }
 
-    /// The two cylinders as (radius, z from, z to) along the flange z axis [m]: body, then cup.
+    /// The two cylinders as (radius, z from, z to) along the flange z axis (m): body, then cup.
     pub fn cylinders(&self) -> [(f64, f64, f64); 2] {
         [
             (self.body_radius_m, 0.0, self.body_length_m),
@@ -241,9 +241,9 @@ impl HandGeometry {
 /// diameter.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SuctionModel {
-    /// Cup lip radius [m].
+    /// Cup lip radius (m).
     pub cup_radius_m: f64,
-    /// Holding force of a full seal [N].
+    /// Holding force of a full seal (N).
     pub holding_n: f64,
 }
 
@@ -257,12 +257,12 @@ impl SuctionModel {
         }
     }
 
-    /// The peel amplification (1 + 4 e / d) for a centre-of-mass offset `offset_m` [m].
+    /// The peel amplification (1 + 4 e / d) for a centre-of-mass offset `offset_m` (m).
     pub fn peel_factor(&self, offset_m: f64) -> f64 {
         1.0 + 4.0 * offset_m / (2.0 * self.cup_radius_m)
     }
 
-    /// The force the cup must exert [N] to hold `mass_kg` under a tool specific force of
+    /// The force the cup must exert (N) to hold `mass_kg` under a tool specific force of
     /// magnitude `specific_force_m_s2` (|a - g|), with the centre of mass `offset_m` off the axis.
     pub fn required_n(&self, mass_kg: f64, specific_force_m_s2: f64, offset_m: f64) -> f64 {
         mass_kg * specific_force_m_s2 * self.peel_factor(offset_m)

@@ -23,17 +23,17 @@ use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
 
 /// How far the cloud may stand above a face's plane over the face before something counts as
-/// lying on it [m]: depth noise (0.5 mm-class), the cell's highest point, and the face's tilt
+/// lying on it (m): depth noise (0.5 mm-class), the cell's highest point, and the face's tilt
 /// across a cell, well below the thinnest part (C: 5 mm).
 pub const COVER_TOLERANCE_M: f64 = 0.003;
 
 /// Where on a detected part's face the cup would go, in the world.
 struct FacePoint {
-    /// The grasp point on the face [m].
+    /// The grasp point on the face (m).
     point: Vector3<f64>,
     /// The face's outward normal.
     normal: Vector3<f64>,
-    /// Height the approach pose must lift the part's bottom to, clear of the pile [m].
+    /// Height the approach pose must lift the part's bottom to, clear of the pile (m).
     clear_z: f64,
 }
 
@@ -85,11 +85,11 @@ pub struct GraspCandidate {
     /// The tool when the part touches down in its slot.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
     pub world_from_tool_place: Isometry3<f64>,
-    /// Joint positions at the approach pose [rad].
+    /// Joint positions at the approach pose (rad).
     pub q_approach: [f64; 6],
-    /// Joint positions at the grasp [rad].
+    /// Joint positions at the grasp (rad).
     pub q_grasp: [f64; 6],
-    /// Joint positions at the place pose [rad].
+    /// Joint positions at the place pose (rad).
     pub q_place: [f64; 6],
     /// Score components and total (higher is better).
     pub score: Score,
@@ -100,11 +100,11 @@ pub struct GraspCandidate {
 pub struct Score {
     /// Face height in the pile (0 floor, 1 top of the pile) and how much of the part was visible.
     pub exposure: f64,
-    /// Free radius around the grasp point in the cloud [m] (capped at 20 mm).
+    /// Free radius around the grasp point in the cloud (m) (capped at 20 mm).
     pub clearance_m: f64,
     /// Expected grasp success (tilt, face margin, centre-of-mass offset, pose certainty), 0..1.
     pub success: f64,
-    /// Estimated time of the place motion at full speed [s].
+    /// Estimated time of the place motion at full speed (s).
     pub motion_s: f64,
     /// exposure + clearance/20 mm + 2 success - motion time.
     pub total: f64,
@@ -156,15 +156,15 @@ pub struct GraspSelector {
     tray: Isometry3<f64>,
     tray_inner_half_m: [f64; 2],
     rim_height_m: f64,
-    /// Height of the approach pose above the tray rim [m].
+    /// Height of the approach pose above the tray rim (m).
     pub approach_above_rim_m: f64,
     size_m: [f64; 3],
     yaw_symmetry_rad: f64,
-    /// Cloud points within this of the face plane belong to it (noise) [m].
+    /// Cloud points within this of the face plane belong to it (noise) (m).
     pub height_tolerance_m: f64,
 }
 
-/// Trapezoidal single-joint move time at top speed and acceleration [s].
+/// Trapezoidal single-joint move time at top speed and acceleration (s).
 fn joint_move_s(d: f64, v: f64, a: f64) -> f64 {
     let d = d.abs();
     if d * a <= v * v {
@@ -290,7 +290,7 @@ impl GraspSelector {
         false
     }
 
-    /// Estimated time of a joint move at top speed and half the specification acceleration [s].
+    /// Estimated time of a joint move at top speed and half the specification acceleration (s).
     pub fn motion_time_s(&self, a: &JointVector, b: &JointVector) -> f64 {
         (0..6)
             .map(|i| {
@@ -445,7 +445,7 @@ impl GraspSelector {
     }
 
     /// Free radius around (x, y) in the tray frame: distance to the nearest cell higher than the
-    /// face (plus tolerance), up to 20 mm [m].
+    /// face (plus tolerance), up to 20 mm (m).
     fn clearance_radius(&self, hm: &HeightMap, x: f64, y: f64, face_h: f64) -> f64 {
         let mut r = self.cup_radius_m + 0.001;
         while r < 0.02 {

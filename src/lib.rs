@@ -38,7 +38,7 @@
 //!
 //! Beside the flow: [`mod@reference`] (the reference system's cases and tables), [`svg`] (the
 //! drawing helpers every chart shares), [`stats`]
-//! (statistics), [`rng`] (named seeded random streams), [`bench`] (the benchmarks).
+//! (statistics), [`rng`] (named seeded random streams), [`bench`](mod@bench) (the benchmarks).
 //!
 //! Units are SI inside the crate (m, rad, s, kg, N m); degrees appear only at the file and
 //! command-line boundary. Frame names read `target_from_source` (e.g. `world_from_tool`).

@@ -26,13 +26,13 @@ use crate::planning::{CollisionModel, Environment, PileColumns, PlanStats, Robot
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Capture, Detection, HeightMap};
 
-/// Height-map cell edge [m].
+/// Height-map cell edge (m).
 pub const HEIGHT_MAP_CELL_M: f64 = 0.002;
 /// Height-map cells per planning column side (the columns keep the highest point of 5 x 5).
 pub const PILE_POOL_CELLS: usize = 5;
-/// Radius of the disc around the grasp point whose columns the planner ignores [m].
+/// Radius of the disc around the grasp point whose columns the planner ignores (m).
 pub const CUT_OUT_RADIUS_M: f64 = 0.02;
-/// A grasp within this distance of a spot where one failed in the same pile is not tried [m].
+/// A grasp within this distance of a spot where one failed in the same pile is not tried (m).
 pub const FAILED_SPOT_RADIUS_M: f64 = 0.004;
 /// How many of the best-ranked grasps are tried for a clear approach.
 pub const APPROACH_CANDIDATES: usize = 8;
@@ -48,7 +48,7 @@ pub struct GraspContext<'a> {
     pub selector: &'a GraspSelector,
     /// The pick tray's volume (height map extent).
     pub pick_tray: &'a TrayVolume,
-    /// Half extents of the part's bounding box [m] (the held part in the planner's model).
+    /// Half extents of the part's bounding box (m) (the held part in the planner's model).
     pub part_half_extents_m: Vector3<f64>,
 }
 

@@ -16,7 +16,7 @@ use crate::geometry::NamedBox;
 use crate::planning::{CollisionModel, Environment, RobotSpheres};
 use crate::robot::{JointVector, RobotModel, tool_down_pose};
 
-/// The reference's Table 5: takt per workpiece [s].
+/// The reference's Table 5: takt per workpiece (s).
 ///
 /// Definition (the reference's): the mean of 20 consecutive Pick-and-Place pairs of one
 /// workpiece type, only the very first cycle's sensing and motion generation excluded.
@@ -29,7 +29,7 @@ pub const TABLE5_TAKT_S: [(&str, &str, f64); 6] = [
     ("F", "1 x 1 x 0.5 cm", 3.0),
 ];
 
-/// The reference system's takt for workpieces A..F [s] (its Table 5), `None` for others.
+/// The reference system's takt for workpieces A..F (s) (its Table 5), `None` for others.
 pub fn reference_takt(name: &str) -> Option<f64> {
     TABLE5_TAKT_S.iter().find(|(w, _, _)| *w == name).map(|(_, _, t)| *t)
 }
@@ -40,9 +40,9 @@ pub fn reference_takt(name: &str) -> Option<f64> {
 pub struct PlannerFigures {
     /// Planner.
     pub name: &'static str,
-    /// Mean planning time [ms].
+    /// Mean planning time (ms).
     pub mean_ms: f64,
-    /// Maximum planning time [ms].
+    /// Maximum planning time (ms).
     pub max_ms: f64,
     /// Success rate [%].
     pub success_pct: f64,
@@ -103,7 +103,7 @@ fn table_only(scene: &Scene) -> Environment {
     }
 }
 
-/// An axis-aligned box centred at `c` of full size `size` [m].
+/// An axis-aligned box centred at `c` of full size `size` (m).
 fn bx(name: &str, c: [f64; 3], size: [f64; 3]) -> NamedBox {
     NamedBox {
         name: name.into(),
@@ -113,7 +113,7 @@ fn bx(name: &str, c: [f64; 3], size: [f64; 3]) -> NamedBox {
 }
 
 /// An open container standing on z = 0: a 1 cm floor and four 1 cm walls around (x, y), inner
-/// size `inner` square, wall height `h` [m].
+/// size `inner` square, wall height `h` (m).
 fn container(name: &str, x: f64, y: f64, inner: f64, h: f64) -> Vec<NamedBox> {
     let t = 0.01;
     let o = inner / 2.0 + t / 2.0;
@@ -130,7 +130,7 @@ fn container(name: &str, x: f64, y: f64, inner: f64, h: f64) -> Vec<NamedBox> {
     ]
 }
 
-/// The tool pointing straight down at `p` [m], solved nearest the cell's home.
+/// The tool pointing straight down at `p` (m), solved nearest the cell's home.
 fn tool_down_ik(robot: &RobotModel, scene: &Scene, p: [f64; 3]) -> Result<JointVector, String> {
     let home = JointVector::from(scene.robot.home_rad());
     robot
@@ -191,7 +191,7 @@ pub struct AccelCase {
     pub goal: JointVector,
     /// The reference's Table 4: motion time improvement over default parameters [%].
     pub table4_improvement_pct: f64,
-    /// The reference's Table 4: maximum compute time, planning included [ms].
+    /// The reference's Table 4: maximum compute time, planning included (ms).
     pub table4_compute_ms: f64,
 }
 

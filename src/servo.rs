@@ -19,7 +19,7 @@ use crate::config::SimConfig;
 use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
 use crate::trajectory::Motion;
 
-/// In-position window at the end of a motion: every joint this close to its target [rad] ...
+/// In-position window at the end of a motion: every joint this close to its target (rad) ...
 pub const IN_POSITION_RAD: f64 = 1e-4;
 /// ... and slower than this [rad/s] (about 5 mm/s at the tool: the cup lands and lets go softly;
 /// with friction the model does not know, the last tenths of a milliradian per second take the
@@ -29,7 +29,7 @@ pub const IN_POSITION_RAD_S: f64 = 0.01;
 /// Servo settings.
 #[derive(Debug, Clone, Copy)]
 pub struct Servo {
-    /// Control period [s].
+    /// Control period (s).
     pub dt_s: f64,
     /// Proportional gain of the error dynamics [1/s^2].
     pub kp: f64,
@@ -39,9 +39,9 @@ pub struct Servo {
     pub kd: f64,
     /// Share of the model's friction the controller compensates (1 - the friction's uncertainty).
     pub friction_compensation: f64,
-    /// Tracking error that trips a protective stop [rad].
+    /// Tracking error that trips a protective stop (rad).
     pub tolerance_rad: f64,
-    /// Saturation time that trips a protective stop [s].
+    /// Saturation time that trips a protective stop (s).
     pub saturation_trip_s: f64,
 }
 
@@ -79,14 +79,14 @@ pub enum Trip {
     TrackingError {
         /// Joint index (0-based).
         joint: usize,
-        /// Error [rad].
+        /// Error (rad).
         error_rad: f64,
     },
     /// A joint stayed at its torque limit too long.
     Saturation {
         /// Joint index (0-based).
         joint: usize,
-        /// How long [s].
+        /// How long (s).
         for_s: f64,
     },
 }
@@ -94,9 +94,9 @@ pub enum Trip {
 /// One servo tick.
 #[derive(Debug, Clone, Copy)]
 pub struct Tick {
-    /// Time [s].
+    /// Time (s).
     pub t_s: f64,
-    /// Measured positions [rad].
+    /// Measured positions (rad).
     pub q: JointVector,
     /// Measured velocities [rad/s].
     pub qd: JointVector,
@@ -104,7 +104,7 @@ pub struct Tick {
     pub demand_nm: JointVector,
     /// Applied (saturated) torques [N m].
     pub tau_nm: JointVector,
-    /// Tracking error q_d - q [rad].
+    /// Tracking error q_d - q (rad).
     pub error_rad: JointVector,
 }
 
@@ -112,7 +112,7 @@ pub struct Tick {
 /// last one left the arm and with the integral the servo had built up.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct ServoState {
-    /// Joint positions [rad].
+    /// Joint positions (rad).
     pub q: JointVector,
     /// Joint velocities [rad/s].
     pub qd: JointVector,
@@ -136,14 +136,14 @@ impl ServoState {
 pub struct Execution {
     /// Every tick.
     pub ticks: Vec<Tick>,
-    /// Largest tracking error per joint [rad].
+    /// Largest tracking error per joint (rad).
     pub max_error_rad: [f64; DOF],
     /// Ticks with some joint saturated.
     pub saturated_ticks: usize,
     /// Largest |demanded torque| / limit per joint: what the trajectory and the feedback asked
     /// for, before the drive's saturation clipped it.
     pub peak_demand_ratio: [f64; DOF],
-    /// The protective stop, if one tripped, and when [s].
+    /// The protective stop, if one tripped, and when (s).
     pub trip: Option<(f64, Trip)>,
     /// The arm and the servo after the last tick (at rest, the integral cleared, after a trip).
     pub end_state: ServoState,
@@ -177,7 +177,7 @@ pub enum Settle {
     AtEnd,
 }
 
-/// The servo's target at `t` [s] into `motion`: past the end, the end at rest (the trajectory's
+/// The servo's target at `t` (s) into `motion`: past the end, the end at rest (the trajectory's
 /// last sample still carries the final blend's deceleration).
 #[inline]
 fn target_at(motion: &impl Motion, t: f64) -> crate::trajectory::Sample {
@@ -194,7 +194,7 @@ fn target_at(motion: &impl Motion, t: f64) -> crate::trajectory::Sample {
 }
 
 impl Servo {
-    /// The protective stop the tracking errors `e` [rad] and the joints' saturation times [s]
+    /// The protective stop the tracking errors `e` (rad) and the joints' saturation times (s)
     /// trip, if any: a tracking error first, then a saturation, the lowest joint first.
     #[inline]
     fn trip(&self, e: &JointVector, saturated_for: &[f64; DOF]) -> Option<Trip> {

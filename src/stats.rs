@@ -67,7 +67,7 @@ pub struct Summary {
 }
 
 impl Summary {
-    /// From a sample of durations [s] (NaN statistics when empty).
+    /// From a sample of durations (s) (NaN statistics when empty).
     pub fn of(values: &[f64]) -> Self {
         let v = sorted(values);
         Summary {

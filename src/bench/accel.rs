@@ -17,19 +17,19 @@ use crate::stats::median_min_max;
 pub struct AccelRow {
     /// Case (A->a ... E->e).
     pub case: String,
-    /// Motion time with the controller's default parameters [s].
+    /// Motion time with the controller's default parameters (s).
     pub default_s: f64,
-    /// After the acceleration search (§4.2) [s].
+    /// After the acceleration search (§4.2) (s).
     pub accelerated_s: f64,
-    /// After path correction alternated with the search (§4.3) [s].
+    /// After path correction alternated with the search (§4.3) (s).
     pub corrected_s: f64,
-    /// Time-optimal (TOPP-RA) along the final path under torque and speed limits alone [s]: the
+    /// Time-optimal (TOPP-RA) along the final path under torque and speed limits alone (s): the
     /// bound, full limits, no acceleration cap.
     pub optimal_s: f64,
-    /// The same with the specification accelerations as caps too [s]: the bound the accelerator
+    /// The same with the specification accelerations as caps too (s): the bound the accelerator
     /// was measured against while it kept to them (`robot.drives.accel_cap = "spec"`).
     pub optimal_capped_s: f64,
-    /// TOPP-RA selected as the accelerator: the executable retiming with margins [s].
+    /// TOPP-RA selected as the accelerator: the executable retiming with margins (s).
     pub toppra_executable_s: f64,
     /// 1 - corrected / default, for the median run.
     pub improvement: f64,
@@ -45,9 +45,9 @@ pub struct AccelRow {
     pub accel_cap: String,
     /// Folds kept / tried by the path correction.
     pub folds: (usize, usize),
-    /// Max over runs of planning + acceleration + correction wall time [ms].
+    /// Max over runs of planning + acceleration + correction wall time (ms).
     pub compute_max_ms: f64,
-    /// Median over runs of the same [ms].
+    /// Median over runs of the same (ms).
     pub compute_median_ms: f64,
     /// Whether the final trajectory's blends stay clear (every 1 ms edge certified).
     pub corridor_clear: bool,
@@ -55,7 +55,7 @@ pub struct AccelRow {
     pub peak_ratio: [f64; 6],
     /// Energy (integral of squared torques) of the default and the final motion [N^2 m^2 s].
     pub energy: (f64, f64),
-    /// The reference's Table 4: improvement and max compute time [ms].
+    /// The reference's Table 4: improvement and max compute time (ms).
     pub reference: (f64, f64),
 }
 

@@ -3,7 +3,7 @@
 //! beside primitives: piles of a workpiece as a mesh (its primitives tessellated,
 //! [`crate::part::tessellate`]) beside the same workpiece as primitives, and a hex standoff blank
 //! (a 6-sided prism mesh, 14 mm across corners, 6 mm thick) beside a primitive can of its size
-//! (a 16-sided prism, 14 mm across, 6 mm) and beside its collider before issue 29 (parry's VHACD
+//! (a 16-sided prism, 14 mm across, 6 mm) and beside its collider before the part model (parry's VHACD
 //! of the raw mesh with default parameters); a CAD can of that size tessellated with 64 sides
 //! beside the same primitive can.
 //!
@@ -23,18 +23,18 @@ pub struct PileTiming {
     pub workpiece: String,
     /// Parts in the pile.
     pub count: usize,
-    /// Wall time to build and settle, median of runs [s].
+    /// Wall time to build and settle, median of runs (s).
     pub median_wall_s: f64,
-    /// Fastest and slowest run [s].
+    /// Fastest and slowest run (s).
     pub min_max_wall_s: (f64, f64),
-    /// Simulated settle time [s].
+    /// Simulated settle time (s).
     pub settle_sim_s: f64,
-    /// Deepest overlap after settling, independent check [m].
+    /// Deepest overlap after settling, independent check (m).
     pub max_penetration_m: f64,
     /// Whether it settled.
     pub settled: bool,
     /// The same pile with rapier's default contact stiffness and solver iterations, no adaptive
-    /// substeps: wall time [s], deepest overlap [m], or the health error that stopped it.
+    /// substeps: wall time (s), deepest overlap (m), or the health error that stopped it.
     pub rapier_defaults: Result<(f64, f64), String>,
 }
 
@@ -43,13 +43,13 @@ pub struct PileTiming {
 pub struct PhysicsBench {
     /// Per workpiece.
     pub piles: Vec<PileTiming>,
-    /// Step time with 100 resting parts and the arm moving, median of runs [ms].
+    /// Step time with 100 resting parts and the arm moving, median of runs (ms).
     pub step_ms_median: f64,
-    /// Fastest and slowest run [ms].
+    /// Fastest and slowest run (ms).
     pub step_ms_min_max: (f64, f64),
     /// Parts in the resting pile, and which workpiece.
     pub step_pile: (usize, String),
-    /// Targets: settle wall time per pile [s] and step time [ms].
+    /// Targets: settle wall time per pile (s) and step time (ms).
     pub targets: (f64, f64),
     /// CAD parts beside primitives of similar size and count.
     pub meshes: Vec<MeshPileTiming>,

@@ -20,13 +20,13 @@ pub struct PlannerRow {
     pub trials: usize,
     /// Fraction solved.
     pub success: f64,
-    /// Mean, p95 and max planning time of the solved queries [ms].
+    /// Mean, p95 and max planning time of the solved queries (ms).
     pub time_ms: (f64, f64, f64),
     /// Mean samples per plan.
     pub samples_mean: f64,
-    /// Mean time per clearance (collision) check [us].
+    /// Mean time per clearance (collision) check (us).
     pub us_per_check: f64,
-    /// Mean time per sample [ms] (0 where no sample was needed).
+    /// Mean time per sample (ms) (0 where no sample was needed).
     pub ms_per_sample: f64,
     /// Failures by reason.
     pub failures: Vec<String>,

@@ -17,7 +17,7 @@ use crate::robot::{JointVector, Payload, RobotModel};
 pub struct Timing {
     /// What was timed.
     pub name: String,
-    /// Median over runs of the mean time per call [ns].
+    /// Median over runs of the mean time per call (ns).
     pub median_ns: f64,
     /// Fastest run [ns per call].
     pub min_ns: f64,
@@ -27,7 +27,7 @@ pub struct Timing {
     pub calls_per_run: usize,
     /// Runs.
     pub runs: usize,
-    /// Target per call, if the issue sets one [ns].
+    /// Target per call, if the issue sets one (ns).
     pub target_ns: Option<f64>,
     /// Free-form note (success rate of a baseline, ...).
     pub note: String,

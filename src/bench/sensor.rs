@@ -18,7 +18,7 @@ use crate::stats::median_min_max;
 pub struct RecognitionBench {
     /// Recall, precision and pose errors against the truth at the trigger.
     pub quality: RecognitionSummary,
-    /// Wall time per capture: median and max over the captures (each the median of the runs) [ms].
+    /// Wall time per capture: median and max over the captures (each the median of the runs) (ms).
     pub compute_ms: (f64, f64),
 }
 
@@ -29,11 +29,11 @@ pub struct SenseTiming {
     pub workpiece: String,
     /// Parts in the pile.
     pub parts: usize,
-    /// Capture wall time on all cores, median [ms] and min..max.
+    /// Capture wall time on all cores, median (ms) and min..max.
     pub capture_ms: (f64, f64, f64),
-    /// The same capture on one thread, median [ms] (the peer).
+    /// The same capture on one thread, median (ms) (the peer).
     pub capture_one_thread_ms: f64,
-    /// Grasp selection (height map, candidates, IK, ranking) wall time, median [ms] and min..max.
+    /// Grasp selection (height map, candidates, IK, ranking) wall time, median (ms) and min..max.
     pub grasp_ms: (f64, f64, f64),
     /// Recognition from the point cloud (the cell's default), over the seeds.
     pub cloud: RecognitionBench,
@@ -52,7 +52,7 @@ pub struct SenseBench {
     pub threads: usize,
     /// Seeds of the default pile per workpiece (captures per recognition row).
     pub seeds: u64,
-    /// Targets [ms]: capture, grasp selection, recognition.
+    /// Targets (ms): capture, grasp selection, recognition.
     pub targets_ms: (f64, f64, f64),
 }
 

@@ -43,22 +43,22 @@ pub enum RobotCommand {
     Info,
     /// Forward kinematics: every link frame, the flange and the tool in the world frame.
     Fk {
-        /// Joint positions q1..q6 [deg].
+        /// Joint positions q1..q6 (deg).
         #[arg(long, num_args = 6, allow_negative_numbers = true, required = true)]
         deg: Vec<f64>,
     },
     /// Inverse kinematics of a tool (or flange) pose in the world frame.
     Ik {
-        /// Position x y z [m].
+        /// Position x y z (m).
         #[arg(long, num_args = 3, allow_negative_numbers = true, required = true)]
         xyz: Vec<f64>,
-        /// Orientation roll pitch yaw, fixed axes x, y, z [deg].
+        /// Orientation roll pitch yaw, fixed axes x, y, z (deg).
         #[arg(long, num_args = 3, allow_negative_numbers = true, required = true)]
         rpy_deg: Vec<f64>,
         /// List every in-limit solution instead of the one nearest the seed.
         #[arg(long)]
         all: bool,
-        /// Seed configuration q1..q6 [deg] (default: the cell's home).
+        /// Seed configuration q1..q6 (deg) (default: the cell's home).
         #[arg(long, num_args = 6, allow_negative_numbers = true)]
         seed_deg: Option<Vec<f64>>,
         /// The pose is the flange's, not the tool's.
@@ -72,7 +72,7 @@ pub enum RobotCommand {
 /// Arguments of `binpick robot torque`.
 #[derive(Args)]
 pub struct TorqueArgs {
-    /// Joint positions q1..q6 [deg].
+    /// Joint positions q1..q6 (deg).
     #[arg(long, num_args = 6, allow_negative_numbers = true, required = true)]
     deg: Vec<f64>,
     /// Joint velocities [deg/s] (default 0).
@@ -81,7 +81,7 @@ pub struct TorqueArgs {
     /// Joint accelerations [deg/s^2] (default 0).
     #[arg(long, num_args = 6, allow_negative_numbers = true)]
     acc_deg: Option<Vec<f64>>,
-    /// Held part: a point mass at the tool tip [kg] (default 0).
+    /// Held part: a point mass at the tool tip (kg) (default 0).
     #[arg(long, default_value_t = 0.0, allow_negative_numbers = true)]
     payload_kg: f64,
     /// Leave the hand off the flange.

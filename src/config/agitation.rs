@@ -22,13 +22,13 @@ use super::Checker;
 pub struct AgitationConfig {
     /// Agitations in a row (without a pick between) before the `on_empty` policy; 0: none.
     pub max_tries: u32,
-    /// Vibration amplitude along the tray's x, y and z [m].
+    /// Vibration amplitude along the tray's x, y and z (m).
     pub amplitude_m: [f64; 3],
-    /// Vibration frequency [Hz].
+    /// Vibration frequency (Hz).
     pub frequency_hz: f64,
-    /// How long the tray vibrates [s].
+    /// How long the tray vibrates (s).
     pub duration_s: f64,
-    /// How long the pile is left to settle afterwards, the tray at rest [s].
+    /// How long the pile is left to settle afterwards, the tray at rest (s).
     pub settle_s: f64,
 }
 
@@ -45,9 +45,9 @@ impl Default for AgitationConfig {
     }
 }
 
-/// Largest amplitude accepted [m]: strokes bigger than this are not a vibrating base's
+/// Largest amplitude accepted (m): strokes bigger than this are not a vibrating base's
 const MAX_AMPLITUDE_M: f64 = 0.02;
-/// Highest frequency accepted [Hz]: the physics step (2 ms) samples a period in 10 steps.
+/// Highest frequency accepted (Hz): the physics step (2 ms) samples a period in 10 steps.
 const MAX_FREQUENCY_HZ: f64 = 50.0;
 
 impl AgitationConfig {
@@ -75,7 +75,7 @@ impl AgitationConfig {
         }
     }
 
-    /// The tray's offset from its rest pose at `t_s` into the vibration, in the tray frame [m]:
+    /// The tray's offset from its rest pose at `t_s` into the vibration, in the tray frame (m):
     /// x and y a quarter period apart, z in phase with x; ramped in and out over a period each
     /// end so the stroke starts and ends at rest.
     pub fn offset_m(&self, t_s: f64) -> [f64; 3] {

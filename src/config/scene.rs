@@ -61,11 +61,11 @@ pub struct RobotConfig {
     pub urdf: String,
     /// The URDF link whose frame is the flange (tool mounting face).
     pub flange_link: String,
-    /// Base position in the world [m].
+    /// Base position in the world (m).
     pub world_from_base_xyz_m: [f64; 3],
-    /// Base orientation in the world, roll-pitch-yaw (fixed axes x, y, z) [deg].
+    /// Base orientation in the world, roll-pitch-yaw (fixed axes x, y, z) (deg).
     pub world_from_base_rpy_deg: [f64; 3],
-    /// A parking configuration clear of trays and sensor view [deg].
+    /// A parking configuration clear of trays and sensor view (deg).
     pub home_deg: [f64; 6],
     /// Drive data per joint.
     pub drives: DrivesConfig,
@@ -144,31 +144,31 @@ pub enum GripperKind {
 pub struct GripperConfig {
     /// Kind of hand.
     pub kind: GripperKind,
-    /// Distance from the flange face to the cup lip along the flange z axis [m] (the tool frame).
+    /// Distance from the flange face to the cup lip along the flange z axis (m) (the tool frame).
     pub tool_length_m: f64,
-    /// Diameter of the tool body (for collision) [m].
+    /// Diameter of the tool body (for collision) (m).
     pub body_diameter_m: f64,
-    /// Suction cup outer diameter at the lip [m].
+    /// Suction cup outer diameter at the lip (m).
     pub cup_diameter_m: f64,
-    /// Flatness the cup lip tolerates across its diameter [m].
+    /// Flatness the cup lip tolerates across its diameter (m).
     pub cup_flatness_tolerance_m: f64,
-    /// Largest tilt of the approach from the face normal at which the cup still seals [deg].
+    /// Largest tilt of the approach from the face normal at which the cup still seals (deg).
     pub max_tilt_deg: f64,
-    /// Vacuum level once sealed (below ambient) [kPa].
+    /// Vacuum level once sealed (below ambient) (kPa).
     pub vacuum_kpa: f64,
-    /// Time from valve open to full vacuum [s].
+    /// Time from valve open to full vacuum (s).
     pub vacuum_build_up_s: f64,
-    /// Time from valve closed to part released [s].
+    /// Time from valve closed to part released (s).
     pub release_s: f64,
-    /// Hand mass [kg].
+    /// Hand mass (kg).
     pub mass_kg: f64,
-    /// Hand centre of mass in the flange frame [m].
+    /// Hand centre of mass in the flange frame (m).
     pub com_m: [f64; 3],
     /// Hand principal moments of inertia about its centre of mass, axes along the flange frame [kg m^2].
     pub inertia_kg_m2: [f64; 3],
 }
 
-/// A silhouette fit whose consistent yaws span more than this does not pin the yaw down [rad]
+/// A silhouette fit whose consistent yaws span more than this does not pin the yaw down (rad)
 /// (the default of `sensor.max_yaw_ambiguity_deg`; precision first: half of it is the largest
 /// yaw error reported).
 pub const YAW_SPAN_MAX_RAD: f64 = 8.0 * std::f64::consts::PI / 180.0;
@@ -214,29 +214,29 @@ impl std::str::FromStr for RecognitionMode {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SensorConfig {
-    /// Optical centre in the world [m].
+    /// Optical centre in the world (m).
     pub position_m: [f64; 3],
-    /// A world point on the optical axis [m].
+    /// A world point on the optical axis (m).
     pub look_at_m: [f64; 3],
     /// World direction that appears toward the top of the image (must not be parallel to the view).
     pub image_up: [f64; 3],
-    /// Image size, width and height [px].
+    /// Image size, width and height (px).
     pub resolution_px: [u32; 2],
-    /// Focal lengths fx, fy [px].
+    /// Focal lengths fx, fy (px).
     pub focal_px: [f64; 2],
-    /// Principal point cx, cy [px].
+    /// Principal point cx, cy (px).
     pub principal_point_px: [f64; 2],
-    /// Nearest measurable range [m].
+    /// Nearest measurable range (m).
     pub min_range_m: f64,
-    /// Farthest measurable range [m].
+    /// Farthest measurable range (m).
     pub max_range_m: f64,
-    /// From trigger to recognition result available [s] (1.1 s in the reference system).
+    /// From trigger to recognition result available (s) (1.1 s in the reference system).
     pub latency_s: f64,
-    /// Exposure window during which the scene must be still and the arm out of view [s].
+    /// Exposure window during which the scene must be still and the arm out of view (s).
     pub exposure_s: f64,
-    /// Depth noise standard deviation at 1 m range; grows with range squared [m].
+    /// Depth noise standard deviation at 1 m range; grows with range squared (m).
     pub depth_noise_at_1m_m: f64,
-    /// Surfaces seen more obliquely than this return nothing [deg].
+    /// Surfaces seen more obliquely than this return nothing (deg).
     pub dropout_grazing_deg: f64,
     /// Probability that a valid pixel drops out anyway.
     pub dropout_probability: f64,
@@ -246,15 +246,15 @@ pub struct SensorConfig {
     #[serde(default)]
     pub recognition: RecognitionMode,
     /// Cloud recognition: a face whose outline leaves its yaw open by more than this is not
-    /// reported [deg] (default 8: precision first; half of it is the largest yaw error reported).
+    /// reported (deg) (default 8: precision first; half of it is the largest yaw error reported).
     #[serde(default = "default_max_yaw_ambiguity_deg")]
     pub max_yaw_ambiguity_deg: f64,
     /// Oracle recognition: a part counts as detected when at least this fraction of its camera-facing surface is visible.
     pub detect_min_visible_fraction: f64,
-    /// Oracle recognition pose noise, position standard deviation [m]; also the recognition
+    /// Oracle recognition pose noise, position standard deviation (m); also the recognition
     /// accuracy the place release height allows for.
     pub pose_noise_m: f64,
-    /// Oracle recognition pose noise, rotation standard deviation [deg]; also the recognition
+    /// Oracle recognition pose noise, rotation standard deviation (deg); also the recognition
     /// accuracy the place release height allows for.
     pub pose_noise_deg: f64,
 }
@@ -264,17 +264,17 @@ pub struct SensorConfig {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TrayConfig {
-    /// Centre of the inner floor surface in the world [m].
+    /// Centre of the inner floor surface in the world (m).
     pub center_m: [f64; 3],
-    /// Rotation about world z [deg].
+    /// Rotation about world z (deg).
     pub yaw_deg: f64,
-    /// Inner length and width [m].
+    /// Inner length and width (m).
     pub inner_size_m: [f64; 2],
-    /// Wall height above the inner floor [m].
+    /// Wall height above the inner floor (m).
     pub wall_height_m: f64,
-    /// Wall thickness [m].
+    /// Wall thickness (m).
     pub wall_thickness_m: f64,
-    /// Floor thickness [m].
+    /// Floor thickness (m).
     pub floor_thickness_m: f64,
 }
 
@@ -296,10 +296,10 @@ pub struct PlaceTrayConfig {
     pub tray: TrayConfig,
     /// Grid or list.
     pub pattern: SlotPattern,
-    /// Grid: clearance between neighbouring parts and to the walls [m].
+    /// Grid: clearance between neighbouring parts and to the walls (m).
     #[serde(default)]
     pub gap_m: Option<f64>,
-    /// Grid: yaw of every placed part in the tray frame [deg].
+    /// Grid: yaw of every placed part in the tray frame (deg).
     #[serde(default)]
     pub slot_yaw_deg: Option<f64>,
     /// List: placement poses in the tray frame, each `[x_m, y_m, yaw_deg]`.
@@ -311,13 +311,13 @@ pub struct PlaceTrayConfig {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct TableConfig {
-    /// Height of the table top in the world [m].
+    /// Height of the table top in the world (m).
     pub top_z_m: f64,
-    /// Centre of the table top in x, y [m].
+    /// Centre of the table top in x, y (m).
     pub center_xy_m: [f64; 2],
-    /// Table top length and width [m].
+    /// Table top length and width (m).
     pub size_m: [f64; 2],
-    /// Table top thickness [m].
+    /// Table top thickness (m).
     pub thickness_m: f64,
 }
 
@@ -327,11 +327,11 @@ pub struct TableConfig {
 pub struct ObstacleConfig {
     /// What it is.
     pub name: String,
-    /// Box centre in the world [m].
+    /// Box centre in the world (m).
     pub center_m: [f64; 3],
-    /// Box edge lengths [m].
+    /// Box edge lengths (m).
     pub size_m: [f64; 3],
-    /// Rotation about world z [deg].
+    /// Rotation about world z (deg).
     #[serde(default)]
     pub yaw_deg: f64,
 }
@@ -340,9 +340,9 @@ pub struct ObstacleConfig {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct ComputeConfig {
-    /// Grasp estimation per capture [s] (reference: 0.050).
+    /// Grasp estimation per capture (s) (reference: 0.050).
     pub grasp_estimation_s: f64,
-    /// Motion generation per motion, planning and acceleration [s] (reference: 0.100).
+    /// Motion generation per motion, planning and acceleration (s) (reference: 0.100).
     pub motion_generation_s: f64,
 }
 
@@ -364,23 +364,23 @@ pub struct CycleConfig {
     pub empty_after_captures: u32,
     /// What to do then.
     pub on_empty: OnEmpty,
-    /// Time to exchange the pick tray for a full one [s] (the arm waits).
+    /// Time to exchange the pick tray for a full one (s) (the arm waits).
     pub refill_s: f64,
     /// The place tray is exchanged for an empty one when its slots are used up, outside the
     /// arm's cycle (a conveyor) [s of arm time: 0 when buffered].
     pub place_tray_exchange_s: f64,
     /// Height of the Pick's approach pose (where the straight descent starts) above the pick
-    /// tray's rim [m].
+    /// tray's rim (m).
     pub approach_above_rim_m: f64,
     /// Top tool speed of the straight descents, lifts and retreats [m/s].
     pub line_speed_m_s: f64,
     /// Tool acceleration of the straight lines before the torque and suction checks [m/s^2].
     pub line_accel_m_s2: f64,
     /// The vacuum is switched on this long before the descent ends, so it builds up while the
-    /// cup closes the last millimetres [s] (0: at contact).
+    /// cup closes the last millimetres (s) (0: at contact).
     pub vacuum_lead_s: f64,
     /// The vacuum is switched off this long before the Place's descent ends, so it vents while
-    /// the cup brings the part down the last millimetres [s] (0: when the cup has stopped; at
+    /// the cup brings the part down the last millimetres (s) (0: when the cup has stopped; at
     /// most `gripper.release_s`). The holding force falls as the vacuum vents, and the physics
     /// decides when the part comes off (README: the suction cup); the retreat starts no earlier
     /// than `release_s` after the valve closed. Absent: 0.
@@ -430,21 +430,21 @@ fn default_torque_margin() -> f64 {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct SimConfig {
-    /// Physics (rapier) timestep [s].
+    /// Physics (rapier) timestep (s).
     pub physics_dt_s: f64,
-    /// Joint servo period [s].
+    /// Joint servo period (s).
     pub control_dt_s: f64,
-    /// Closed-loop bandwidth of the joint servo's PD feedback [Hz].
+    /// Closed-loop bandwidth of the joint servo's PD feedback (Hz).
     pub servo_bandwidth_hz: f64,
-    /// Tracking error beyond which the controller trips a protective stop [deg].
+    /// Tracking error beyond which the controller trips a protective stop (deg).
     pub tracking_tolerance_deg: f64,
-    /// Torque saturation lasting longer than this trips a protective stop [s].
+    /// Torque saturation lasting longer than this trips a protective stop (s).
     pub saturation_trip_s: f64,
-    /// Time to reset after a protective stop before the cycle resumes [s].
+    /// Time to reset after a protective stop before the cycle resumes (s).
     pub protective_stop_reset_s: f64,
 }
 
-/// Largest sensor image [px]: 4 MP, e.g. 2048 x 2048, twelve times the default cell's 320 x 256 and
+/// Largest sensor image (px): 4 MP, e.g. 2048 x 2048, twelve times the default cell's 320 x 256 and
 /// above the 3 MP class of the 3D sensors used for bin picking. A capture holds per pixel an f32
 /// depth, three f32 world coordinates and a hit tag (24 bytes), the sensor keeps per pixel what the
 /// fixed cell shows, and a run keeps a few captures at once, in every parallel run of a batch: at
@@ -455,7 +455,7 @@ pub const MAX_SENSOR_PIXELS: u64 = 1 << 22;
 /// Bytes a capture holds per pixel: depth (f32), world point (3 x f32), hit tag (8).
 pub(super) const CAPTURE_BYTES_PER_PIXEL: u64 = 24;
 
-/// How far the camera's optical centre must be above the pick tray's rim plane at least [m]. The
+/// How far the camera's optical centre must be above the pick tray's rim plane at least (m). The
 /// view frustum over the tray (apex at the optical centre, base the tray's outer rim at floor
 /// level) is then a pyramid of positive height, and the view over the rim reaches into the tray; a
 /// camera level with the tray would flatten the pyramid into a plane.
@@ -468,7 +468,7 @@ pub const MIN_CAMERA_ABOVE_RIM_M: f64 = 0.05;
 pub const MIN_VIEW_BASE_PER_DISTANCE: f64 = 0.01;
 
 /// The camera and the pick tray must lie within this distance of the world origin along each axis
-/// [m]: the physics queries the view frustum in single precision (millimetres), where a cell
+/// (m): the physics queries the view frustum in single precision (millimetres), where a cell
 /// farther out would lose its shape.
 pub const MAX_CELL_EXTENT_M: f64 = 1000.0;
 
@@ -495,7 +495,7 @@ impl RobotConfig {
         pose_from_xyz_rpy(self.world_from_base_xyz_m, [deg(r[0]), deg(r[1]), deg(r[2])])
     }
 
-    /// Home configuration [rad].
+    /// Home configuration (rad).
     pub fn home_rad(&self) -> [f64; 6] {
         self.home_deg.map(deg)
     }
@@ -543,8 +543,8 @@ impl SensorConfig {
 }
 
 impl PlaceTrayConfig {
-    /// The grid pattern for a footprint: gap [m], slot yaw [rad], the rotated footprint's extent
-    /// along the tray's x and y [m], and the slot counts along them (whole numbers, as f64 so a
+    /// The grid pattern for a footprint: gap (m), slot yaw (rad), the rotated footprint's extent
+    /// along the tray's x and y (m), and the slot counts along them (whole numbers, as f64 so a
     /// tiny footprint cannot overflow them).
     fn grid(&self, footprint_m: [f64; 2]) -> (f64, f64, [f64; 2], [f64; 2]) {
         let gap = self.gap_m.unwrap_or(0.0);

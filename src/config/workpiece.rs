@@ -31,11 +31,11 @@ pub struct Workpiece {
     pub name: String,
     /// What electronic part this is.
     pub kind: String,
-    /// Bounding box of the whole part (body and leads) in the part frame [m]. Required for box
+    /// Bounding box of the whole part (body and leads) in the part frame (m). Required for box
     /// and compound shapes; derived from the mesh for mesh shapes (absent reads as zeros).
     #[serde(default)]
     pub size_m: [f64; 3],
-    /// Part mass [kg].
+    /// Part mass (kg).
     pub mass_kg: f64,
     /// Coulomb friction coefficient against trays and other parts.
     pub friction: f64,
@@ -155,15 +155,15 @@ pub struct ShapePart {
     pub primitive: Primitive,
     /// Body or lead.
     pub role: PartRole,
-    /// Centre in the part frame [m].
+    /// Centre in the part frame (m).
     pub center_m: [f64; 3],
-    /// Box: edge lengths [m].
+    /// Box: edge lengths (m).
     #[serde(default)]
     pub size_m: Option<[f64; 3]>,
-    /// Cylinder: radius [m].
+    /// Cylinder: radius (m).
     #[serde(default)]
     pub radius_m: Option<f64>,
-    /// Cylinder: length [m].
+    /// Cylinder: length (m).
     #[serde(default)]
     pub length_m: Option<f64>,
     /// Cylinder: axis.
@@ -172,7 +172,7 @@ pub struct ShapePart {
 }
 
 impl ShapePart {
-    /// Half extents of the primitive's axis-aligned bounding box [m].
+    /// Half extents of the primitive's axis-aligned bounding box (m).
     pub fn half_extents_m(&self) -> Option<[f64; 3]> {
         match self.primitive {
             Primitive::Box => self.size_m.map(|s| [s[0] / 2.0, s[1] / 2.0, s[2] / 2.0]),
@@ -238,12 +238,12 @@ impl Workpiece {
 #[derive(Debug, Clone, Serialize, Deserialize, PartialEq)]
 #[serde(deny_unknown_fields)]
 pub struct GraspHints {
-    /// The part looks the same after this yaw about its top face normal [deg]
+    /// The part looks the same after this yaw about its top face normal (deg)
     /// (90 for a square top, 180 for a rectangle, 360 for none, 0 for a round top: any yaw).
     pub yaw_symmetry_deg: f64,
-    /// Yaw of the part's x axis in its place slot, relative to the slot [deg].
+    /// Yaw of the part's x axis in its place slot, relative to the slot (deg).
     pub place_yaw_deg: f64,
-    /// Smallest margin between cup edge and face edge that still seals [m].
+    /// Smallest margin between cup edge and face edge that still seals (m).
     pub face_margin_m: f64,
 }
 
@@ -295,7 +295,7 @@ impl Workpiece {
         ]
     }
 
-    /// Edge lengths of the body's bounding box (without leads) [m].
+    /// Edge lengths of the body's bounding box (without leads) (m).
     pub fn body_size_m(&self) -> [f64; 3] {
         if self.shape.kind != ShapeKind::Compound {
             return self.size_m;

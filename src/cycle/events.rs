@@ -112,7 +112,7 @@ pub enum PartLoss {
     PressedDeep {
         /// Part index.
         part: usize,
-        /// Overlap [m].
+        /// Overlap (m).
         depth_m: f64,
     },
 }
@@ -120,26 +120,26 @@ pub enum PartLoss {
 /// A generated motion of one pick, as the event log reports it.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Planned {
-    /// The Pick motion: transfer to the approach pose and straight descent [s], compute [s].
+    /// The Pick motion: transfer to the approach pose and straight descent (s), compute (s).
     Pick {
-        /// Transfer duration [s].
+        /// Transfer duration (s).
         transfer_s: f64,
-        /// Descent duration [s].
+        /// Descent duration (s).
         descent_s: f64,
-        /// Compute charged [s].
+        /// Compute charged (s).
         compute_s: f64,
     },
-    /// The Place motion: lift, transfer, descent and retreat [s], compute [s].
+    /// The Place motion: lift, transfer, descent and retreat (s), compute (s).
     Place {
-        /// Lift duration [s].
+        /// Lift duration (s).
         lift_s: f64,
-        /// Transfer duration [s].
+        /// Transfer duration (s).
         transfer_s: f64,
-        /// Descent duration [s].
+        /// Descent duration (s).
         descent_s: f64,
-        /// Retreat duration [s].
+        /// Retreat duration (s).
         retreat_s: f64,
-        /// Compute charged [s].
+        /// Compute charged (s).
         compute_s: f64,
     },
     /// The motion (`Pick` or `Place`) could not be generated, and why.
@@ -180,7 +180,7 @@ pub enum Event {
     Stall {
         /// For what.
         cause: StallCause,
-        /// How long [s].
+        /// How long (s).
         duration_s: f64,
     },
     /// The Pick motion started.
@@ -191,9 +191,9 @@ pub enum Event {
         part: usize,
         /// The part nearest to the chosen detection at the trigger (evaluation only).
         aimed_at: Option<usize>,
-        /// Cup axis to the part's centre of mass [m].
+        /// Cup axis to the part's centre of mass (m).
         com_offset_m: f64,
-        /// Tilt of the tool axis from the face normal [rad].
+        /// Tilt of the tool axis from the face normal (rad).
         tilt_rad: f64,
     },
     /// The Place motion started.
@@ -227,7 +227,7 @@ pub enum Event {
     PlaceTrayExchange,
     /// A pick ended.
     Outcome(Outcome),
-    /// A motion did not start where the arm was (jump [rad]).
+    /// A motion did not start where the arm was (jump (rad)).
     MotionStartMismatch(f64),
 }
 
@@ -348,7 +348,7 @@ impl fmt::Display for Event {
 /// One entry of the event log (`events.json`, the recordings' log).
 #[derive(Debug, Clone, Serialize)]
 pub struct CycleEvent {
-    /// Simulation time [s].
+    /// Simulation time (s).
     pub t_s: f64,
     /// Pick index, if the event belongs to one.
     pub pick: Option<usize>,
@@ -364,7 +364,7 @@ pub struct CycleEvent {
 /// A capture, a recognition result and the grasps ranked on it, as the cycle used them.
 #[derive(Debug, Clone, Copy)]
 pub struct Recognised<'a> {
-    /// When the result arrived [s].
+    /// When the result arrived (s).
     pub t_s: f64,
     /// The recognised parts.
     pub detections: &'a [Detection],

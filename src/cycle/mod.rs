@@ -111,7 +111,7 @@ pub enum SetupError {
     /// The tool cannot point down at the waiting pose.
     #[error("cycle.waiting_tool_m = {at_m:?}: the tool cannot point down there ({why})")]
     WaitingPoseUnreachable {
-        /// `cycle.waiting_tool_m` [m].
+        /// `cycle.waiting_tool_m` (m).
         at_m: [f64; 3],
         /// The inverse kinematics' answer.
         why: crate::robot::IkError,
@@ -119,7 +119,7 @@ pub enum SetupError {
     /// The arm at the waiting pose is in the sensor's view.
     #[error("cycle.waiting_tool_m = {at_m:?}: the arm's {what} is in the sensor's view there")]
     WaitingPoseInView {
-        /// `cycle.waiting_tool_m` [m].
+        /// `cycle.waiting_tool_m` (m).
         at_m: [f64; 3],
         /// The arm's body in the view.
         what: String,
@@ -168,7 +168,7 @@ pub struct Cell<'a> {
     pub suction: SuctionModel,
     /// The place slots in the world, in filling order.
     pub slots: Vec<Isometry3<f64>>,
-    /// The part's yaw symmetry [rad] (0: none), for the placement error.
+    /// The part's yaw symmetry (rad) (0: none), for the placement error.
     pub yaw_symmetry_rad: f64,
     /// Compute budgets charged in deterministic mode: grasp selection, Pick and Place motion.
     pub budgets: StageCompute,
@@ -187,13 +187,13 @@ pub struct Cell<'a> {
 pub struct ArmState {
     /// The arm's actual joint state and the servo's integral after the last motion.
     pub servo: crate::servo::ServoState,
-    /// When the arm has nothing to do from [s].
+    /// When the arm has nothing to do from (s).
     pub free_s: f64,
-    /// Largest tracking error since the pick's motions began [rad].
+    /// Largest tracking error since the pick's motions began (rad).
     pub max_error_rad: f64,
     /// Largest |demanded torque| / limit per joint since the pick's motions began.
     pub peak_demand_ratio: [f64; crate::robot::DOF],
-    /// Time some joint was saturated since the pick's motions began [s].
+    /// Time some joint was saturated since the pick's motions began (s).
     pub saturated_s: f64,
 }
 
@@ -231,7 +231,7 @@ pub struct CellState {
     /// When and where each pick went into the pile since the last pour or agitation [s, m
     /// world]: a result is only picked from clear of the picks made after its trigger.
     pub pick_spots: Vec<(f64, Vector3<f64>)>,
-    /// When compute for the next pick may start [s]: the start of the last Place that went as
+    /// When compute for the next pick may start (s): the start of the last Place that went as
     /// planned (the arm's remaining motion and where it ends are known then), else when the
     /// last pick ended.
     pub compute_from_s: f64,
@@ -240,7 +240,7 @@ pub struct CellState {
     pub planned_end_q: Option<crate::robot::JointVector>,
     /// Recognition results taken into hand so far.
     pub results_collected: usize,
-    /// No capture is triggered before this [s]: a part let go over the pick tray is still
+    /// No capture is triggered before this (s): a part let go over the pick tray is still
     /// falling into the pile and would blur the image.
     pub capture_hold_until_s: f64,
     /// Captures in a row taken for a pile in motion (at most [`sensing::MOTION_RECAPTURES`] are).
@@ -465,7 +465,7 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
 }
 
 /// After the cell lets a part go over the pick tray (a pick that cannot be placed), no capture
-/// is triggered for this long [s]: the part drops a few centimetres, bounces and comes to rest in
+/// is triggered for this long (s): the part drops a few centimetres, bounces and comes to rest in
 /// about 0.2 s; an exposure meanwhile sees the pile moving (a C strip let go 90 ms before a
 /// trigger blurred four detections, and the grasp on one of them pressed a part 2.6 mm into
 /// another).

@@ -36,16 +36,16 @@ use crate::trajectory::{
 
 /// Fraction of the cup's holding force a held-part motion may use.
 pub const SUCTION_MARGIN: f64 = 0.75;
-/// The part is released at least this far above its resting height in the slot [m] (the
-/// recognised pose is a little off; the part drops the rest). See [`Cell::release_above_m`].
+/// The part is released at least this far above its resting height in the slot (m) (the
+/// recognised pose is a little off; the part drops the rest). See `Cell::release_above_m`.
 pub const RELEASE_ABOVE_M: f64 = 0.003;
 /// The tilt a part may hang at on the cup, in standard deviations of the recognition's angular
 /// noise per axis (the tilt of two axes' Gaussian errors is Rayleigh: 3.5 sigma covers 99.8 %).
 pub const RELEASE_TILT_SIGMAS: f64 = 3.5;
-/// Time step of the release-lead check along the end of the Place's descent [s].
+/// Time step of the release-lead check along the end of the Place's descent (s).
 const LEAD_CHECK_DT_S: f64 = 0.001;
 
-/// The Place transfer ends this far above the release pose [m].
+/// The Place transfer ends this far above the release pose (m).
 pub const PLACE_APPROACH_M: f64 = 0.03;
 
 /// The Place transfer's goal for a grasp: the tool [`PLACE_APPROACH_M`] above where the part
@@ -72,14 +72,14 @@ pub(super) struct PlaceMotion {
     pub lift_blend: Option<Overlapped>,
     /// The transfer and the descent overlapped, likewise.
     pub descent_blend: Option<Overlapped<Trajectory, LineMotion>>,
-    /// The vacuum valve closes this long before the descent ends [s]: at most the cell file's
+    /// The vacuum valve closes this long before the descent ends (s): at most the cell file's
     /// `release_lead_s`, and no longer than keeps the part on the venting cup, by the
     /// controller's model, until the cup stops ([`release_lead_s`]).
     pub release_lead_s: f64,
 }
 
 impl PlaceMotion {
-    /// From the transfer's start to the end of the descent [s] (with the descent's overlap).
+    /// From the transfer's start to the end of the descent (s) (with the descent's overlap).
     pub fn carry_s(&self) -> f64 {
         match &self.descent_blend {
             Some(d) => d.duration_s(),
@@ -142,11 +142,11 @@ pub const OVERLAP_TORQUE_SHARE: f64 = 0.9;
 pub(super) struct RetreatBlend {
     /// The retreat, and the Pick started `motion.start_s()` into it.
     pub motion: Overlapped<LineMotion, Overlapped<Trajectory, LineMotion>>,
-    /// When the Pick's descent starts, from the Pick's start [s].
+    /// When the Pick's descent starts, from the Pick's start (s).
     pub descent_from_s: f64,
 }
 
-/// A placed part's box in the planning model grows by this on every side [m] (its placement
+/// A placed part's box in the planning model grows by this on every side (m) (its placement
 /// error is a few tenths of a millimetre).
 pub const PLACED_PART_MARGIN_M: f64 = 0.002;
 
@@ -209,7 +209,7 @@ impl Prepared {
 }
 
 impl Cell<'_> {
-    /// How far above its resting height the part is released [m]: [`RELEASE_ABOVE_M`] plus how
+    /// How far above its resting height the part is released (m): [`RELEASE_ABOVE_M`] plus how
     /// far a tilt of the part on the cup ([`RELEASE_TILT_SIGMAS`] of the recognition's angular
     /// noise) lowers its farthest corner. The cup is aligned with the recognised face, so a
     /// part hangs as tilted as the recognition was wrong: a 150 mm strip 2.7 deg off dips 3.5 mm
@@ -430,7 +430,7 @@ impl Run<'_, '_> {
     /// Grasp selection and motion generation for one recognition result, from `t_s`, the part
     /// to go to place slot `slot_index`; with `retreat` (the last Place's retreat, not started
     /// yet, from the part released in the slot before `slot_index`), the Pick overlapped with it
-    /// where it can be. Returns the motions and the wall time of each stage [s], or why nothing
+    /// where it can be. Returns the motions and the wall time of each stage (s), or why nothing
     /// can be picked.
     pub(super) fn prepare(
         &mut self,

@@ -24,9 +24,9 @@ pub(super) struct Prefetched {
     pub(super) result: SensedResult,
     pub(super) taken: usize,
     pub(super) since: usize,
-    /// When its compute started [s].
+    /// When its compute started (s).
     pub(super) compute_from_s: f64,
-    /// Its motions (with the retreat overlapped) and the wall time of each stage [s].
+    /// Its motions (with the retreat overlapped) and the wall time of each stage (s).
     pub(super) prep: Prepared,
     pub(super) wall: StageCompute,
     /// The retreat it overlaps, not played yet.
@@ -50,14 +50,14 @@ pub(super) struct LatePlacement {
 pub(super) struct PlacementFix {
     /// The pick's record index.
     pub record: usize,
-    /// Horizontal error [m].
+    /// Horizontal error (m).
     pub error_m: f64,
-    /// Yaw error [rad].
+    /// Yaw error (rad).
     pub yaw_rad: f64,
 }
 
 /// A later pick from the same result takes only a part whose centre is this much farther from
-/// every earlier pick's than both parts' bounding radii (or the tool's, whichever is larger) [m].
+/// every earlier pick's than both parts' bounding radii (or the tool's, whichever is larger) (m).
 pub const BLIND_PICK_MARGIN_M: f64 = 0.005;
 
 impl Run<'_, '_> {
@@ -130,7 +130,7 @@ impl Run<'_, '_> {
     /// would start, no exposure is still running then, and nothing else happens before it (this
     /// part does not fill the place tray: its exchange would take the part away before its
     /// placement error is measured, and could take time). Returns how long the retreat runs
-    /// alone [s] with that pick; the retreat is then played with its Pick. Otherwise the retreat
+    /// alone (s) with that pick; the retreat is then played with its Pick. Otherwise the retreat
     /// is played as before; a next pick prepared here is dropped and prepared again after it.
     pub(super) fn prefetch_next(&mut self, up: &LineMotion) -> Option<(Prefetched, f64)> {
         let cell = self.cell;

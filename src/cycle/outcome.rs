@@ -157,9 +157,9 @@ impl fmt::Display for NoSeal {
 pub struct WrongPose {
     /// The part nearest to the detection.
     pub part: usize,
-    /// Distance of the believed origin from the part's [m].
+    /// Distance of the believed origin from the part's (m).
     pub position_error_m: f64,
-    /// Rotation from the part to the believed pose [rad].
+    /// Rotation from the part to the believed pose (rad).
     pub rotation_error_rad: f64,
 }
 
@@ -207,7 +207,7 @@ impl fmt::Display for MotionFailure {
 pub struct Stop {
     /// What tripped.
     pub trip: Trip,
-    /// From the motion's start [s].
+    /// From the motion's start (s).
     pub after_s: f64,
 }
 
@@ -222,16 +222,16 @@ impl fmt::Display for Stop {
 pub enum Slip {
     /// While the arm stood still (as the vacuum built up).
     AtRest {
-        /// Force the seal had to hold [N].
+        /// Force the seal had to hold (N).
         required_n: f64,
     },
     /// While a motion played.
     Moving {
-        /// From the motion's start [s].
+        /// From the motion's start (s).
         after_s: f64,
-        /// Force the seal had to hold [N].
+        /// Force the seal had to hold (N).
         required_n: f64,
-        /// Force it held [N].
+        /// Force it held (N).
         holding_n: f64,
     },
 }

@@ -9,7 +9,7 @@
 //! closing the plan's `release_lead_s` before its end, the release as the vacuum vents, retreat
 //! `release_s` after the valve closed), and record the pick: its stages' times, its outcome, the
 //! takt since the last release (when the part came off). Each motion is played as a
-//! [`Segment`] (its motion, payload, valve switch, how it ends and whether a capture may run),
+//! `Segment` (its motion, payload, valve switch, how it ends and whether a capture may run),
 //! the Pick's and the Place's carry as lists built once from the prepared motions.
 //!
 //! Units: s, m, rad. Frames: world.
@@ -117,7 +117,7 @@ impl Run<'_, '_> {
 
     /// The compute of the pick on the simulation clock from `ready_s`: its spans, the grasp
     /// chosen, the motions generated and the stalls before the Pick, recorded. Returns when the
-    /// Pick and when the Place are ready [s].
+    /// Pick and when the Place are ready (s).
     fn charge(&mut self, prep: &Prepared, charged: StageCompute, ready_s: f64, rec: &mut PickRecord) -> (f64, f64) {
         rec.compute = charged;
         let grasp_done = ready_s + charged.grasp_s;
@@ -432,7 +432,7 @@ impl Run<'_, '_> {
 
     /// The release at the end of the Place's descent: the part comes off as the vacuum vents;
     /// the arm stays until it has surely vented, `release_s` after the valve closed (the
-    /// controller's timing, not what the part did). Returns when the part came off [s].
+    /// controller's timing, not what the part did). Returns when the part came off (s).
     fn release(&mut self) -> Result<f64, CycleError> {
         self.st.world.vacuum_off();
         let closed_s = self

@@ -33,7 +33,7 @@ pub(super) enum Played {
     Failed(Outcome),
 }
 
-/// A switch of the vacuum valve during a motion, at a time from the motion's start [s].
+/// A switch of the vacuum valve during a motion, at a time from the motion's start (s).
 #[derive(Debug, Clone, Copy)]
 pub(super) enum Valve {
     /// The valve opens: the vacuum builds up (the Pick's descent).
@@ -43,7 +43,7 @@ pub(super) enum Valve {
 }
 
 impl Valve {
-    /// When it switches, from the motion's start [s].
+    /// When it switches, from the motion's start (s).
     pub fn at_s(self) -> f64 {
         match self {
             Valve::OpenAt(t) | Valve::CloseAt(t) => t,
@@ -56,7 +56,7 @@ impl Valve {
 pub(super) enum Capture {
     /// Never: the arm is over the pile or heading there.
     Never,
-    /// If the exposure ends by this simulation time [s]: the arm's plan takes it into the view
+    /// If the exposure ends by this simulation time (s): the arm's plan takes it into the view
     /// then (infinite: no motion into the view is planned).
     EndingBy(f64),
 }

@@ -30,14 +30,14 @@ pub const MOTION_RECAPTURES: usize = 2;
 pub struct SensedResult {
     /// The capture job (its image and timing).
     pub job: CaptureJob,
-    /// When the capture was triggered [s].
+    /// When the capture was triggered (s).
     pub capture_s: f64,
     /// The recognised parts (`None` if the result was not available).
     pub detections: Option<Vec<Detection>>,
     /// The detections against the ground truth at the trigger: evaluation only, never read by
     /// a decision.
     pub evaluation: Option<RecognitionReport>,
-    /// Wall time the recognition took [s] (not charged: it runs inside the sensor's latency).
+    /// Wall time the recognition took (s) (not charged: it runs inside the sensor's latency).
     pub recognition_wall_s: f64,
 }
 

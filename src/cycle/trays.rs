@@ -40,7 +40,7 @@ pub struct TrayState {
     pub exchanges: usize,
     /// A pick-tray refill happened since the last release.
     pub refilled_since_release: bool,
-    /// The last release [s].
+    /// The last release (s).
     pub last_release_s: Option<f64>,
 }
 

@@ -44,7 +44,7 @@ impl Axis {
     }
 }
 
-/// A workpiece primitive resolved to its geometry, in the part frame [m].
+/// A workpiece primitive resolved to its geometry, in the part frame (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub enum Piece {
     /// A box.
@@ -69,7 +69,7 @@ pub enum Piece {
 
 impl Piece {
     /// How far the piece reaches along the part-frame unit direction `n` from the part origin:
-    /// the largest `p . n` over its points [m].
+    /// the largest `p . n` over its points (m).
     pub fn support_m(&self, n: &Vector3<f64>) -> f64 {
         match self {
             Piece::Box { center_m, half_m } => {
@@ -91,19 +91,19 @@ impl Piece {
 /// A flat face of a workpiece's body, in the part frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Face {
-    /// Centre [m].
+    /// Centre (m).
     pub center: Vector3<f64>,
     /// Outward normal (unit).
     pub normal: Vector3<f64>,
     /// Direction of the face's first extent (unit, in the face).
     pub along: Vector3<f64>,
-    /// Extents along `along` and across it [m]; equal for a disc (its diameter).
+    /// Extents along `along` and across it (m); equal for a disc (its diameter).
     pub extent_m: [f64; 2],
     /// A round face (cylinder cap).
     pub disc: bool,
 }
 
-/// The centre of a piece in the part frame [m].
+/// The centre of a piece in the part frame (m).
 fn piece_center(piece: &Piece) -> Vector3<f64> {
     match piece {
         Piece::Box { center_m, .. } | Piece::Cylinder { center_m, .. } => *center_m,

@@ -86,7 +86,7 @@ impl World {
         self.colliders.insert_with_parent(cup, flange, &mut self.bodies);
     }
 
-    /// Joint positions of the arm now [rad].
+    /// Joint positions of the arm now (rad).
     pub fn joints(&self) -> JointVector {
         self.q
     }
@@ -106,7 +106,7 @@ impl World {
         self.refresh_queries();
     }
 
-    /// Sets the joint positions the arm reaches at the end of the next step [rad]. The link
+    /// Sets the joint positions the arm reaches at the end of the next step (rad). The link
     /// bodies sweep there during the step, pushing what they meet.
     pub fn set_joint_target(&mut self, q: &JointVector) {
         self.q_target = *q;

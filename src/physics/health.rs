@@ -22,7 +22,7 @@ pub enum HealthEvent {
     /// A body's pose or velocity became NaN or infinite.
     #[error("t = {time_s:.4} s: {body} has a non-finite {what}")]
     NonFinite {
-        /// Simulation time [s].
+        /// Simulation time (s).
         time_s: f64,
         /// Which body.
         body: String,
@@ -32,41 +32,41 @@ pub enum HealthEvent {
     /// A part left the tray it should be in.
     #[error("t = {time_s:.4} s: {body} left the {volume} volume, now at ({x:.4}, {y:.4}, {z:.4}) m")]
     LeftVolume {
-        /// Simulation time [s].
+        /// Simulation time (s).
         time_s: f64,
         /// Which part.
         body: String,
         /// Which tray's volume.
         volume: &'static str,
-        /// Position [m].
+        /// Position (m).
         x: f64,
-        /// Position [m].
+        /// Position (m).
         y: f64,
-        /// Position [m].
+        /// Position (m).
         z: f64,
     },
     /// Two bodies overlap far more than the solver allows.
     #[error("t = {time_s:.4} s: deep penetration {depth_mm:.2} mm between {a} and {b}")]
     DeepPenetration {
-        /// Simulation time [s].
+        /// Simulation time (s).
         time_s: f64,
         /// First body.
         a: String,
         /// Second body.
         b: String,
-        /// Overlap [mm].
+        /// Overlap (mm).
         depth_mm: f64,
     },
     /// The arm, its tool or the held part ran into the table, a tray or an obstacle.
     #[error("t = {time_s:.4} s: collision: {robot} penetrates {obstacle} by {depth_mm:.2} mm")]
     ArmCollision {
-        /// Simulation time [s].
+        /// Simulation time (s).
         time_s: f64,
         /// Which link, the tool or the held part.
         robot: String,
         /// What it hit.
         obstacle: String,
-        /// Overlap [mm].
+        /// Overlap (mm).
         depth_mm: f64,
     },
 }
@@ -201,9 +201,9 @@ impl HealthError {
 /// Limits of the health monitor.
 #[derive(Debug, Clone, Copy)]
 pub struct HealthLimits {
-    /// Part-part or part-environment overlap that counts as a failure [m].
+    /// Part-part or part-environment overlap that counts as a failure (m).
     pub deep_penetration_m: f64,
-    /// Arm-environment overlap that counts as a collision [m].
+    /// Arm-environment overlap that counts as a collision (m).
     pub arm_collision_m: f64,
 }
 
@@ -319,7 +319,7 @@ impl HealthMonitor {
 }
 
 impl World {
-    /// Deepest overlap between two parts, or a part and a tray [m], with the bodies involved.
+    /// Deepest overlap between two parts, or a part and a tray (m), with the bodies involved.
     /// Computed independently of the solver: exact separating-axis depths between the workpiece's
     /// convex pieces ([`overlap`]); for mesh workpieces, parry's contact query on the colliders.
     pub fn max_penetration_m(&self) -> (f64, Option<(Tag, Tag)>) {
@@ -364,7 +364,7 @@ impl World {
         worst
     }
 
-    /// Exact overlap depth of two colliders now [m]: separating axes on the workpiece's convex
+    /// Exact overlap depth of two colliders now (m): separating axes on the workpiece's convex
     /// pieces against a part or a box, else parry's contact query.
     pub fn exact_depth_m(&self, a: ColliderHandle, b: ColliderHandle) -> f64 {
         let piece_sets = |h: ColliderHandle| -> Option<(Isometry3<f64>, Vec<overlap::Polytope>)> {

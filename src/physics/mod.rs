@@ -7,7 +7,7 @@
 //! health problem of each step ([`health`]); answer scene queries in metres ([`query`]).
 //!
 //! The API is in metres and SI units: rapier runs in f32 millimetres inside this module
-//! ([`SIM_UNITS_PER_M`]), and nothing outside it sees a rapier length, handle or collider.
+//! (`SIM_UNITS_PER_M`), and nothing outside it sees a rapier length, handle or collider.
 //! Frames: the rapier frame is the world frame of the cell file (z up).
 //!
 //! Solver tuning for 5-150 mm parts of a few grams (see README, "Physics"): rapier runs in
@@ -43,20 +43,20 @@ pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
 /// edge. In millimetres it is 1 um.
 pub(crate) const SIM_UNITS_PER_M: f64 = 1000.0;
 
-/// A length [m] in rapier units.
+/// A length (m) in rapier units.
 #[inline]
 pub(crate) fn sim(v: f64) -> f32 {
     (v * SIM_UNITS_PER_M) as f32
 }
 
-/// Our f64 isometry [m] as a rapier pose [rapier units].
+/// Our f64 isometry (m) as a rapier pose [rapier units].
 pub(crate) fn to_pose(iso: &Isometry3<f64>) -> Pose {
     let mut p: Pose = iso.cast::<f32>().into();
     p.translation = sim_point(&iso.translation.vector);
     p
 }
 
-/// A rapier pose [rapier units] as our f64 isometry [m].
+/// A rapier pose [rapier units] as our f64 isometry (m).
 pub(crate) fn to_isometry(p: &Pose) -> Isometry3<f64> {
     let i: Isometry3<f32> = (*p).into();
     let mut i = i.cast::<f64>();
@@ -84,7 +84,7 @@ pub(crate) fn dir_from_sim(v: Vector) -> Vector3<f64> {
     Vector3::new(v.x as f64, v.y as f64, v.z as f64)
 }
 
-/// Largest travel of any point of an awake part per physics substep [m].
+/// Largest travel of any point of an awake part per physics substep (m).
 pub const MAX_SUBSTEP_MOTION_M: f64 = 0.0005;
 /// Most substeps one physics step is divided into.
 pub const MAX_SUBSTEPS: usize = 8;
@@ -97,7 +97,7 @@ const PARTS: Group = Group::GROUP_3;
 /// What a collider belongs to (stored in its `user_data`).
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub enum Tag {
-    /// A fixed environment object, index into [`World::env_names`].
+    /// A fixed environment object, index into `World::env_names`.
     Env(u32),
     /// An arm link (0 = base ... 6 = flange).
     Link(u8),
@@ -105,7 +105,7 @@ pub enum Tag {
     Tool,
     /// The suction cup.
     Cup,
-    /// A part, index into [`World::parts`].
+    /// A part, index into `World::parts`.
     Part(u32),
 }
 
@@ -174,21 +174,21 @@ pub struct PartBody {
     view_collider: ColliderHandle,
     /// Where it is in its life.
     pub state: PartState,
-    /// A placed part's pose at the start of its current rest window: (time [s], pose).
+    /// A placed part's pose at the start of its current rest window: (time (s), pose).
     rest_ref: Option<(f64, Isometry3<f64>)>,
 }
 
 /// A placed part whose pose changes less than [`PLACED_REST_M`] and [`PLACED_REST_RAD`] over
-/// this window is put to sleep [s]. A real part resting in the place tray is held by static
+/// this window is put to sleep (s). A real part resting in the place tray is held by static
 /// friction; in rapier, D's can resting on its 16-sided cap keeps a solver velocity of ~4 cm/s
 /// that jitters it across the floor at ~1.3 mm/s, 22 mm over a run, into the next slot, where
 /// the next part was pressed onto it (a collision). Asleep it stays put until something touches
 /// it, which wakes it.
 pub const PLACED_REST_WINDOW_S: f64 = 0.2;
-/// See [`PLACED_REST_WINDOW_S`] [m]: 2.5 mm/s, faster than the solver's creep, slower than
+/// See [`PLACED_REST_WINDOW_S`] (m): 2.5 mm/s, faster than the solver's creep, slower than
 /// anything a falling, sliding or toppling part does.
 pub const PLACED_REST_M: f64 = 0.0005;
-/// See [`PLACED_REST_WINDOW_S`] [rad].
+/// See [`PLACED_REST_WINDOW_S`] (rad).
 pub const PLACED_REST_RAD: f64 = 0.02;
 
 /// The simulated cell.
@@ -206,7 +206,7 @@ pub struct World {
     multibody_joints: MultibodyJointSet,
     soft_bodies: SoftBodySet,
     ccd_solver: CCDSolver,
-    /// Simulation time [s].
+    /// Simulation time (s).
     time_s: f64,
     /// Steps taken.
     steps: u64,
@@ -216,9 +216,9 @@ pub struct World {
     max_substeps: usize,
     /// The arm.
     robot: RobotModel,
-    /// Joint positions the arm bodies are at after the last step [rad].
+    /// Joint positions the arm bodies are at after the last step (rad).
     q: JointVector,
-    /// Joint positions the arm reaches at the end of the next step [rad].
+    /// Joint positions the arm reaches at the end of the next step (rad).
     q_target: JointVector,
     link_bodies: Vec<RigidBodyHandle>,
     /// The pick tray's floor and walls hang on this body: fixed at the world origin, kinematic
@@ -243,7 +243,7 @@ pub struct World {
     health: HealthMonitor,
     /// Tool positions after the last steps, newest last, for the tool's acceleration.
     tool_history: [Vector3<f64>; 3],
-    /// The physics step [s] (`params.dt` holds the substep's while a step runs).
+    /// The physics step (s) (`params.dt` holds the substep's while a step runs).
     step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
     tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
@@ -403,7 +403,7 @@ impl World {
         );
     }
 
-    /// Physics timestep [s]: one [`World::step`], also while it runs in substeps (the
+    /// Physics timestep (s): one [`World::step`], also while it runs in substeps (the
     /// gripper's tool acceleration and release velocity are differences over whole steps).
     pub fn dt_s(&self) -> f64 {
         self.step_dt_s
@@ -553,7 +553,7 @@ impl World {
         self.colliders.get(c).and_then(|c| Tag::decode(c.user_data))
     }
 
-    /// Simulation time [s].
+    /// Simulation time (s).
     pub fn time_s(&self) -> f64 {
         self.time_s
     }

@@ -16,7 +16,7 @@ pub const CYLINDER_SIDES: usize = 16;
 /// A convex polytope: vertices, face normals and edge directions, in its own frame.
 #[derive(Debug, Clone)]
 pub struct Polytope {
-    /// Vertices [m].
+    /// Vertices (m).
     pub vertices: Vec<Point3<f64>>,
     /// Outward face normals (unit; opposite faces may share one).
     pub normals: Vec<Vector3<f64>>,
@@ -99,7 +99,7 @@ impl Polytope {
 }
 
 /// Penetration depth of two posed polytopes: 0 when they are apart, else the smallest overlap
-/// over every separating-axis candidate (face normals of both, cross products of edges) [m].
+/// over every separating-axis candidate (face normals of both, cross products of edges) (m).
 pub fn depth(pa: &Isometry3<f64>, a: &Polytope, pb: &Isometry3<f64>, b: &Polytope) -> f64 {
     let ra = pa.rotation;
     let rb = pb.rotation;
@@ -149,7 +149,7 @@ pub fn tray_pieces(t: &TrayConfig) -> Vec<(Isometry3<f64>, Polytope)> {
         .collect()
 }
 
-/// Deepest overlap among parts at `poses` and between parts and the tray pieces [m], with the
+/// Deepest overlap among parts at `poses` and between parts and the tray pieces (m), with the
 /// indices involved (`usize::MAX` for a tray piece).
 pub fn max_depth(
     poses: &[Isometry3<f64>],

@@ -118,8 +118,8 @@ impl World {
         })
     }
 
-    /// How far part `i` landed from where it should be: horizontal distance of the centres [m]
-    /// and yaw difference [rad], the latter modulo the part's yaw symmetry (0: any yaw).
+    /// How far part `i` landed from where it should be: horizontal distance of the centres (m)
+    /// and yaw difference (rad), the latter modulo the part's yaw symmetry (0: any yaw).
     pub fn placement_error(&self, i: usize, world_from_slot: &Isometry3<f64>, yaw_symmetry_rad: f64) -> (f64, f64) {
         let p = self.part_pose(i);
         let d = p.translation.vector - world_from_slot.translation.vector;

@@ -26,7 +26,7 @@ pub struct PileOptions {
     pub count: usize,
     /// Run seed (the `pile` stream is drawn from it).
     pub seed: u64,
-    /// Give up settling after this much simulated time [s].
+    /// Give up settling after this much simulated time (s).
     pub max_settle_s: f64,
 }
 
@@ -46,7 +46,7 @@ impl PileOptions {
 pub struct PartPose {
     /// Index of the part in the world.
     pub part: usize,
-    /// Position in the world [m].
+    /// Position in the world (m).
     pub xyz_m: [f64; 3],
     /// Orientation as a unit quaternion (w, x, y, z).
     pub quat_wxyz: [f64; 4],
@@ -59,13 +59,13 @@ pub struct PileReport {
     pub spawned: usize,
     /// Parts whose centre rests inside the tray's walls.
     pub in_tray: usize,
-    /// Highest point of the pile above the tray floor [m].
+    /// Highest point of the pile above the tray floor (m).
     pub pile_height_m: f64,
-    /// Simulated time from the first drop to settled [s].
+    /// Simulated time from the first drop to settled (s).
     pub settle_sim_s: f64,
     /// Whether every part came to rest within `max_settle_s`.
     pub settled: bool,
-    /// Deepest part-part or part-tray overlap after settling, exact (independent check) [m].
+    /// Deepest part-part or part-tray overlap after settling, exact (independent check) (m).
     pub max_penetration_m: f64,
     /// Between which bodies the deepest overlap is.
     pub max_penetration_between: String,
@@ -73,7 +73,7 @@ pub struct PileReport {
     pub waves: usize,
     /// Settled poses, in part order.
     pub poses: Vec<PartPose>,
-    /// Wall-clock time to build and settle [s] (not part of any result file).
+    /// Wall-clock time to build and settle (s) (not part of any result file).
     #[serde(skip)]
     pub wall_s: f64,
 }
@@ -92,7 +92,7 @@ fn random_rotation(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
 }
 
 impl World {
-    /// Highest point of any free part, or the tray floor [m].
+    /// Highest point of any free part, or the tray floor (m).
     fn pile_top_z(&self) -> f64 {
         let floor = self.pick_tray.world_from_tray.translation.vector.z;
         self.parts
@@ -232,7 +232,7 @@ impl World {
     }
 
     /// Steps until the pile has settled (`true`) or `max_settle_s` have passed since
-    /// `start_time` [s].
+    /// `start_time` (s).
     fn settle_pile(
         &mut self,
         start_time: f64,

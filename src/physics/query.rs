@@ -25,7 +25,7 @@ use crate::robot::JointVector;
 pub struct RayHit {
     /// What it is.
     pub tag: Tag,
-    /// Distance along the (unit) ray [m].
+    /// Distance along the (unit) ray (m).
     pub distance_m: f64,
     /// Surface normal at the hit (unit, world frame).
     pub normal: Vector3<f64>,
@@ -48,17 +48,17 @@ pub struct RayCaster<'w> {
     pipeline: QueryPipeline<'w>,
     /// The arm's cylinders the pipeline leaves out, cast in closed form.
     cylinders: Vec<ArmCylinder>,
-    /// The box around all of them (min, max corners) [m]: most rays miss it.
+    /// The box around all of them (min, max corners) (m): most rays miss it.
     cylinders_box_m: (Vector3<f64>, Vector3<f64>),
 }
 
 impl RayCaster<'_> {
-    /// The first hit of the ray from `origin` along the unit `dir` within `max_m` [m].
+    /// The first hit of the ray from `origin` along the unit `dir` within `max_m` (m).
     pub fn cast(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, max_m: f64) -> Option<RayHit> {
         self.cast_among(origin, dir, max_m, u64::MAX)
     }
 
-    /// World-frame bounding boxes (min, max corners) [m] of the arm's cylinders this caster
+    /// World-frame bounding boxes (min, max corners) (m) of the arm's cylinders this caster
     /// intersects in closed form, in the order of [`RayCaster::cast_among`]'s bits.
     pub fn arm_cylinder_boxes_m(&self) -> Vec<(Vector3<f64>, Vector3<f64>)> {
         self.cylinders.iter().map(|c| c.aabb_m).collect()
@@ -181,7 +181,7 @@ impl RayTargetBox {
     }
 }
 
-/// One of the arm's cylinders (a link, the tool, the cup) where it is now [m]: its axis along
+/// One of the arm's cylinders (a link, the tool, the cup) where it is now (m): its axis along
 /// the local y axis (rapier's convention), for closed-form ray casts.
 #[derive(Debug, Clone, Copy)]
 pub(crate) struct ArmCylinder {
@@ -210,7 +210,7 @@ impl ArmCylinder {
     }
 
     /// The first point of the solid cylinder the ray from `origin` along the unit `dir` meets
-    /// within `max_m`: its distance [m] and the outward surface normal (world frame; zero when
+    /// within `max_m`: its distance (m) and the outward surface normal (world frame; zero when
     /// the ray starts inside, at distance 0).
     pub(crate) fn cast(&self, origin: &Vector3<f64>, dir: &Vector3<f64>, max_m: f64) -> Option<(f64, Vector3<f64>)> {
         // The bounding box first: most rays that reach here miss it.
@@ -257,7 +257,7 @@ impl ArmCylinder {
     }
 }
 
-/// Where the ray from `origin` along `dir` enters the box `(lo, hi)` [m], if within `max_m` (0
+/// Where the ray from `origin` along `dir` enters the box `(lo, hi)` (m), if within `max_m` (0
 /// when it starts inside): the slab test.
 fn ray_box_entry(
     (lo, hi): &(Vector3<f64>, Vector3<f64>),
@@ -370,7 +370,7 @@ impl World {
         out
     }
 
-    /// Casts one ray into the world: the first hit along the unit `dir` within `max_m` [m] that
+    /// Casts one ray into the world: the first hit along the unit `dir` within `max_m` (m) that
     /// `skip` does not pass through.
     pub fn cast_ray(
         &self,
@@ -415,13 +415,13 @@ impl World {
         None
     }
 
-    /// The world-frame bounding box (min, max corners) [m] of part `i` as rays see it.
+    /// The world-frame bounding box (min, max corners) (m) of part `i` as rays see it.
     pub fn part_view_box_m(&self, i: usize) -> (Vector3<f64>, Vector3<f64>) {
         let a = self.colliders[self.parts[i].view_collider].compute_aabb();
         (point_from_sim(a.mins), point_from_sim(a.maxs))
     }
 
-    /// Whether the ray from `origin` along the unit `dir` meets part `i` within `max_m` [m], with
+    /// Whether the ray from `origin` along the unit `dir` meets part `i` within `max_m` (m), with
     /// nothing else in the world (its silhouette, occlusion ignored).
     pub fn part_meets_ray(&self, i: usize, origin: &Vector3<f64>, dir: &Vector3<f64>, max_m: f64) -> bool {
         let c = &self.colliders[self.parts[i].view_collider];
@@ -466,7 +466,7 @@ mod tests {
     /// `half_height_m` and `radius_m` at the same pose, on rays from around it toward random
     /// points near it: rays where only one hits; rays whose closed-form hit is not where the
     /// ray enters the solid (outside 1 micrometre before it, inside 1 micrometre after);
-    /// where both hit, the largest difference in distance [m] and in normal.
+    /// where both hit, the largest difference in distance (m) and in normal.
     fn compare(cyl: &ArmCylinder, half_height_m: f64, radius_m: f64, seed: u64) -> (usize, usize, (f64, f64)) {
         let mut rng = crate::rng::stream(seed, "test");
         let parry = rapier3d::parry::shape::Cylinder::new(sim(half_height_m), sim(radius_m));

@@ -29,13 +29,13 @@ use crate::robot::Payload;
 
 /// Lip points probed around the cup.
 const LIP_RAYS: usize = 16;
-/// Probe rays start this far behind the lip, inside the cup [m].
+/// Probe rays start this far behind the lip, inside the cup (m).
 const PROBE_BACK_M: f64 = 0.01;
-/// A lip point whose surface normal differs from the centre's by more than this is on another face [rad].
+/// A lip point whose surface normal differs from the centre's by more than this is on another face (rad).
 const SAME_FACE_RAD: f64 = 0.087;
-/// The cup must touch: the face may be at most this far beyond the lip [m].
+/// The cup must touch: the face may be at most this far beyond the lip (m).
 const TOUCH_GAP_M: f64 = 0.0008;
-/// The bellows take up at most this much overlap of the part with the tray at the seal [m].
+/// The bellows take up at most this much overlap of the part with the tray at the seal (m).
 const BELLOWS_TAKE_UP_M: f64 = 0.001;
 
 /// Why a grasp failed.
@@ -47,23 +47,23 @@ pub enum GraspFailure {
     /// The cup does not touch the face (its nearest lip point is too far from it).
     #[error("cup does not touch the part: face {gap_mm:.2} mm beyond the lip")]
     NotTouching {
-        /// Gap [mm].
+        /// Gap (mm).
         gap_mm: f64,
     },
     /// The tool axis is tilted too far from the face normal.
     #[error("approach tilted {tilt_deg:.1} deg from the face normal, the cup seals up to {max_deg:.1} deg")]
     Tilted {
-        /// Tilt [deg].
+        /// Tilt (deg).
         tilt_deg: f64,
-        /// Allowed [deg].
+        /// Allowed (deg).
         max_deg: f64,
     },
     /// The face under the cup is narrower than the cup.
     #[error("face {width_mm:.1} mm wide is smaller than the {cup_mm:.1} mm cup")]
     FaceTooSmall {
-        /// Narrowest width of the face through the cup centre [mm].
+        /// Narrowest width of the face through the cup centre (mm).
         width_mm: f64,
-        /// Cup diameter [mm].
+        /// Cup diameter (mm).
         cup_mm: f64,
     },
     /// The face is large enough but the cup overhangs its edge.
@@ -85,9 +85,9 @@ pub enum GraspFailure {
 pub struct Seal {
     /// The part.
     pub part: usize,
-    /// Tilt of the tool axis from the face normal [rad].
+    /// Tilt of the tool axis from the face normal (rad).
     pub tilt_rad: f64,
-    /// Distance of the part's centre of mass from the cup axis [m].
+    /// Distance of the part's centre of mass from the cup axis (m).
     pub com_offset_m: f64,
 }
 
@@ -96,32 +96,32 @@ pub struct Seal {
 pub enum GripperEvent {
     /// The vacuum built up on a sealed part: it now moves with the tool.
     Grasped {
-        /// Time [s].
+        /// Time (s).
         time_s: f64,
         /// The seal.
         seal: Seal,
     },
     /// The vacuum did not build up.
     GraspFailed {
-        /// Time [s].
+        /// Time (s).
         time_s: f64,
         /// Why.
         reason: GraspFailure,
     },
     /// A held part tore off the cup.
     Slipped {
-        /// Time [s].
+        /// Time (s).
         time_s: f64,
         /// The part.
         part: usize,
-        /// Force the cup had to exert, peel-amplified [N].
+        /// Force the cup had to exert, peel-amplified (N).
         required_n: f64,
-        /// Force the vacuum holds [N].
+        /// Force the vacuum holds (N).
         holding_n: f64,
     },
     /// The part came off the cup after the vacuum was switched off.
     Released {
-        /// Time [s].
+        /// Time (s).
         time_s: f64,
         /// The part.
         part: usize,
@@ -135,7 +135,7 @@ pub enum GripperState {
     Idle,
     /// Vacuum on since `since_s`, not yet built up.
     BuildingUp {
-        /// When the valve opened [s].
+        /// When the valve opened (s).
         since_s: f64,
     },
     /// Holding a part rigidly.
@@ -147,7 +147,7 @@ pub enum GripperState {
     },
     /// Vacuum off since `since_s`, the part still on the cup.
     Releasing {
-        /// When the valve closed [s].
+        /// When the valve closed (s).
         since_s: f64,
         /// The seal.
         seal: Seal,
@@ -159,21 +159,21 @@ pub enum GripperState {
 /// The suction gripper: configuration, state and the events it produced.
 #[derive(Debug, Clone)]
 pub struct SuctionGripper {
-    /// Cup lip radius [m].
+    /// Cup lip radius (m).
     pub cup_radius_m: f64,
-    /// Largest tilt that seals [rad].
+    /// Largest tilt that seals (rad).
     pub max_tilt_rad: f64,
-    /// Flatness the lip tolerates [m].
+    /// Flatness the lip tolerates (m).
     pub flatness_m: f64,
-    /// Holding force of a full seal [N].
+    /// Holding force of a full seal (N).
     pub holding_n: f64,
     /// The cup's force model.
     pub model: crate::geometry::SuctionModel,
-    /// Vacuum build-up time [s].
+    /// Vacuum build-up time (s).
     pub build_up_s: f64,
-    /// Release time [s].
+    /// Release time (s).
     pub release_s: f64,
-    /// When the valve was last commanded closed, while it stays closed [s] (the controller's
+    /// When the valve was last commanded closed, while it stays closed (s) (the controller's
     /// command, whatever the part did).
     closed_since_s: Option<f64>,
     /// Current state.
@@ -297,7 +297,7 @@ impl SuctionGripper {
         self.events.push(GripperEvent::Released { time_s: now_s, part });
     }
 
-    /// When the valve was commanded closed [s], while it stays closed (`None` after an open
+    /// When the valve was commanded closed (s), while it stays closed (`None` after an open
     /// command, and before the first close).
     pub fn valve_closed_since_s(&self) -> Option<f64> {
         self.closed_since_s
@@ -539,7 +539,7 @@ impl World {
     }
 
     /// The force the cup must exert on the sealed part against gravity and the tool's
-    /// acceleration now, amplified for peeling [N].
+    /// acceleration now, amplified for peeling (N).
     fn required_holding_n(&self, seal: &Seal) -> f64 {
         let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
         let specific_force = (self.tool_acceleration() - g).norm();

@@ -10,10 +10,10 @@
 use crate::robot::DOF;
 
 /// How far each link's spheres reach from each joint's axis at one configuration: `reach_m[k][i]`
-/// is the largest distance from joint i's axis to a point of link k's spheres (0 for i ≥ k) [m].
+/// is the largest distance from joint i's axis to a point of link k's spheres (0 for i ≥ k) (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct AxisReach {
-    /// Per link (base first), per joint [m].
+    /// Per link (base first), per joint (m).
     pub reach_m: [[f64; DOF]; DOF + 1],
 }
 
@@ -27,7 +27,7 @@ impl AxisReach {
     }
 
     /// A: the fastest any sphere point moves per unit of t when the joints move by `dq_abs` per
-    /// unit of t, here [m]. Inlined: the edge certification's hot path calls it at every
+    /// unit of t, here (m). Inlined: the edge certification's hot path calls it at every
     /// examined configuration.
     #[inline]
     pub fn speed_m(&self, dq_abs: &[f64; DOF]) -> f64 {

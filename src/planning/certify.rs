@@ -32,7 +32,7 @@ use super::model::{CollisionModel, Probe, SELF_PAIRS};
 use super::search::PlanStats;
 use crate::robot::{DOF, JointVector};
 
-/// A configuration clear by less than the margin plus this is a collision [m] (a certified step
+/// A configuration clear by less than the margin plus this is a collision (m) (a certified step
 /// must make progress).
 const MIN_PROGRESS_M: f64 = 1e-6;
 
@@ -40,11 +40,11 @@ const MIN_PROGRESS_M: f64 = 1e-6;
 /// motion and the second-order terms (B) of the environment and of each self pair.
 #[derive(Debug, Clone, Copy)]
 struct EdgeRates {
-    /// |Δq_i| per unit of t [rad].
+    /// |Δq_i| per unit of t (rad).
     dq_abs: [f64; DOF],
-    /// B for the environment: the largest over the links [m].
+    /// B for the environment: the largest over the links (m).
     growth_env_m: f64,
-    /// B for each pair of [`SELF_PAIRS`]: only the joints between its links [m].
+    /// B for each pair of [`SELF_PAIRS`]: only the joints between its links (m).
     growth_pairs_m: [f64; SELF_PAIRS.len()],
 }
 
@@ -84,7 +84,7 @@ impl EdgeRates {
 /// B for link k's points moved by joints `from..k` only (the environment: from 0; a self pair
 /// (a, k): from a, the joints between its links): how fast their speed bound can grow per unit of
 /// t, from link k's configuration-independent levers `lever_m[j]` (largest distance of link k's
-/// points from joint j's axis) [m].
+/// points from joint j's axis) (m).
 pub fn speed_growth_m(lever_m: &[f64; DOF], dq_abs: &[f64; DOF], from: usize, k: usize) -> f64 {
     let upto = k.min(DOF);
     (from..upto)
@@ -184,7 +184,7 @@ mod tests {
 
     /// The largest excess, over random configurations and joint motions, of any sphere point's
     /// displacement (centre and six surface points per sphere, 100 steps of t on either side) over
-    /// `factor` times the bound A |t| + B t^2 / 2 [m]. With `pair` None: every link's points in
+    /// `factor` times the bound A |t| + B t^2 / 2 (m). With `pair` None: every link's points in
     /// the world, against the environment's A and B; with the index of a self pair (a, b): link
     /// b's points in link a's frame, against the pair's A and B (joints a .. b - 1 only).
     fn worst_excess(model: &CollisionModel, seed: u64, pair: Option<usize>, factor: f64) -> f64 {

@@ -32,12 +32,12 @@ use crate::config::Scene;
 use crate::geometry::NamedBox;
 use crate::robot::{DOF, JointVector, LinkPrimitive, RobotModel};
 
-/// A sphere [m].
+/// A sphere (m).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sphere {
-    /// Centre in its frame [m].
+    /// Centre in its frame (m).
     pub center_m: Vector3<f64>,
-    /// Radius [m].
+    /// Radius (m).
     pub radius_m: f64,
 }
 
@@ -77,7 +77,7 @@ pub struct RobotSpheres {
     /// Upper bound on how far any robot point moves per radian of each joint [m/rad].
     pub lever_m: [f64; DOF],
     /// Per link k (base first) and joint j < k: upper bound on the distance of link k's sphere
-    /// points from joint j's axis in every configuration (0 for j >= k) [m].
+    /// points from joint j's axis in every configuration (0 for j >= k) (m).
     pub chain_lever_m: Vec<[f64; DOF]>,
 }
 
@@ -190,7 +190,7 @@ impl RobotSpheres {
     }
 }
 
-/// Signed distance from a point to a box (negative inside) [m]: the plain formula, the reference
+/// Signed distance from a point to a box (negative inside) (m): the plain formula, the reference
 /// [`box_distance_below`] is tested against.
 #[cfg(test)]
 fn point_box_distance(p_world: &Vector3<f64>, b: &NamedBox) -> f64 {
@@ -217,7 +217,7 @@ impl Environment {
     }
 
     /// The environment near a link's bounding sphere (world centre `c`, radius `r`) given the best
-    /// clearance so far `best` [m]: whether anything is nearer than `best` (the link's spheres must
+    /// clearance so far `best` (m): whether anything is nearer than `best` (the link's spheres must
     /// then be examined), and which boxes, and whether the pile, could be nearer than `best` to any
     /// sphere inside the bounding sphere (the others cannot: a sphere inside it is no nearer to
     /// anything than the bounding sphere is, up to [`BOUND_SLACK_M`]).
@@ -247,7 +247,7 @@ impl Environment {
     }
 }
 
-/// Slack on lower bounds [m]: far above the rounding of distances of a few metres, far below
+/// Slack on lower bounds (m): far above the rounding of distances of a few metres, far below
 /// anything the planner resolves. Work is skipped only when a bound exceeds the best distance by
 /// this much, so rounding never skips a distance that would have been the nearest.
 const BOUND_SLACK_M: f64 = 1e-9;
@@ -333,9 +333,9 @@ struct Posed {
 /// What the edge certification needs at one configuration ([`CollisionModel::probe`]).
 #[derive(Debug, Clone, Copy)]
 pub struct Probe {
-    /// Clearance to the environment, capped at the horizon [m], and what is nearest.
+    /// Clearance to the environment, capped at the horizon (m), and what is nearest.
     pub env: (f64, Nearest),
-    /// Clearance of each pair of [`SELF_PAIRS`], capped at the horizon [m].
+    /// Clearance of each pair of [`SELF_PAIRS`], capped at the horizon (m).
     pub pairs_m: [f64; SELF_PAIRS.len()],
     /// How far each link reaches from each joint's axis.
     pub reach: AxisReach,
@@ -393,9 +393,9 @@ pub struct CollisionModel {
     pub spheres: RobotSpheres,
     /// The environment.
     pub env: Environment,
-    /// Required clearance [m]: configurations closer than this count as colliding.
+    /// Required clearance (m): configurations closer than this count as colliding.
     pub margin_m: f64,
-    /// Distances beyond this are not resolved further [m].
+    /// Distances beyond this are not resolved further (m).
     pub horizon_m: f64,
 }
 
@@ -411,7 +411,7 @@ impl CollisionModel {
         }
     }
 
-    /// Lower bound on the robot's clearance at `q` (environment and self) [m], capped at the
+    /// Lower bound on the robot's clearance at `q` (environment and self) (m), capped at the
     /// horizon, and what is nearest, unnamed: the hot path of [`CollisionModel::free`] and the
     /// edge checks, which never need the name ([`CollisionModel::describe`] gives it).
     pub fn nearest(&self, q: &JointVector, stats: &mut PlanStats) -> (f64, Nearest) {
@@ -524,7 +524,7 @@ impl CollisionModel {
         }
     }
 
-    /// The clearance of the `p`-th pair of [`SELF_PAIRS`], capped at the horizon [m].
+    /// The clearance of the `p`-th pair of [`SELF_PAIRS`], capped at the horizon (m).
     fn pair_distance(&self, posed: &Posed, centers: &[Vector3<f64>], p: usize) -> f64 {
         let (links, bounds, first) = (&self.spheres.links, &self.spheres.bounds, &posed.first);
         let (a, b) = SELF_PAIRS[p];

@@ -18,12 +18,12 @@ use nalgebra::{Point3, Vector3};
 
 use crate::sensor::HeightMap;
 
-/// Slack on a block's lower bound [m]: far above the rounding of distances of a few metres, far
+/// Slack on a block's lower bound (m): far above the rounding of distances of a few metres, far
 /// below anything the planner resolves. A block is skipped only if its bound exceeds the best
 /// distance by this much, so rounding never skips a column the plain loop would have taken.
 const BOUND_SLACK_M: f64 = 1e-9;
 
-/// Columns no higher than this above the floor are no obstacle (the floor itself) [m].
+/// Columns no higher than this above the floor are no obstacle (the floor itself) (m).
 const FLOOR_COLUMN_M: f64 = 0.001;
 
 /// The pile as the sensor saw it: height-map columns, with a disc around the grasp cut out.
@@ -40,16 +40,16 @@ const FLOOR_COLUMN_M: f64 = 0.001;
 pub struct PileColumns {
     /// The height map (heights above the tray floor), max-pooled to planning cells.
     map: HeightMap,
-    /// Tray-frame disc (x, y, radius) whose columns are ignored (the part to be grasped) [m].
+    /// Tray-frame disc (x, y, radius) whose columns are ignored (the part to be grasped) (m).
     cut_out: Option<(f64, f64, f64)>,
-    /// Highest column above the tray floor [m].
+    /// Highest column above the tray floor (m).
     max_height_m: f64,
-    /// Column centres along x, per column index i [m] (tray frame).
+    /// Column centres along x, per column index i (m) (tray frame).
     center_x_m: Vec<f64>,
-    /// Column centres along y, per row index j [m] (tray frame).
+    /// Column centres along y, per row index j (m) (tray frame).
     center_y_m: Vec<f64>,
     /// Level k: per block of 2^k x 2^k columns, the highest column that counts (above the floor
-    /// threshold, outside the cut-out), `-inf` where none does [m]. Level 0 is the columns.
+    /// threshold, outside the cut-out), `-inf` where none does (m). Level 0 is the columns.
     levels: Vec<Level>,
 }
 
@@ -130,18 +130,18 @@ impl PileColumns {
         &self.map
     }
 
-    /// Tray-frame disc (x, y, radius) whose columns are ignored (the part to be grasped) [m].
+    /// Tray-frame disc (x, y, radius) whose columns are ignored (the part to be grasped) (m).
     pub fn cut_out(&self) -> Option<(f64, f64, f64)> {
         self.cut_out
     }
 
-    /// Highest column above the tray floor [m].
+    /// Highest column above the tray floor (m).
     pub fn max_height_m(&self) -> f64 {
         self.max_height_m
     }
 
     /// Signed distance from the sphere (world centre `c`, radius `r`) to the nearest column, if it
-    /// is below `best` [m]; `None` when no column is nearer than `best`. The same number as
+    /// is below `best` (m); `None` when no column is nearer than `best`. The same number as
     /// [`PileColumns::sphere_distance_brute`] gives, bit for bit.
     pub fn sphere_distance(&self, c: &Vector3<f64>, r: f64, best: f64) -> Option<f64> {
         let l = self
@@ -246,7 +246,7 @@ impl PileColumns {
 }
 
 /// Signed distance from a sphere (tray-frame centre `l`, radius `r`) to the column over the cell
-/// centred at (`cx`, `cy`) of edge `cell`, from the floor to `h` [m].
+/// centred at (`cx`, `cy`) of edge `cell`, from the floor to `h` (m).
 #[inline]
 fn column_distance(l: &Vector3<f64>, r: f64, cx: f64, cy: f64, cell: f64, h: f64) -> f64 {
     // Column box from the floor to h, in the tray frame.

@@ -58,7 +58,7 @@ pub enum PlanError {
     BudgetExhausted {
         /// Samples drawn.
         samples: usize,
-        /// Time spent [ms].
+        /// Time spent (ms).
         elapsed_ms: f64,
     },
 }
@@ -72,7 +72,7 @@ pub struct Plan {
     pub how: &'static str,
     /// Counters.
     pub stats: PlanStats,
-    /// Wall time [s].
+    /// Wall time (s).
     pub time_s: f64,
 }
 
@@ -81,13 +81,13 @@ pub struct Plan {
 pub struct PlanOptions {
     /// The algorithm.
     pub algorithm: Algorithm,
-    /// Wall-time budget [s].
+    /// Wall-time budget (s).
     pub budget_s: f64,
     /// Sample budget.
     pub max_samples: usize,
-    /// Tree extension step (max-norm) [rad].
+    /// Tree extension step (max-norm) (rad).
     pub step_rad: f64,
-    /// Discrete edge check interval for the baselines (max-norm) [rad].
+    /// Discrete edge check interval for the baselines (max-norm) (rad).
     pub check_step_rad: f64,
 }
 
@@ -198,7 +198,7 @@ impl EdgeValidity<JointVector> for CertifiedEdges<'_> {
 pub struct DiscreteEdges<'a> {
     /// The collision model.
     pub model: &'a CollisionModel,
-    /// Check interval (max-norm) [rad].
+    /// Check interval (max-norm) (rad).
     pub step_rad: f64,
 }
 
@@ -368,7 +368,7 @@ impl CollisionModel {
 /// Longest escape line [steps of [`ESCAPE_STEP_M`]].
 const ESCAPE_STEPS: usize = 25;
 
-/// Tool travel per escape step [m].
+/// Tool travel per escape step (m).
 const ESCAPE_STEP_M: f64 = 0.01;
 
 /// Steps an escape line must make in a direction for it to be taken.

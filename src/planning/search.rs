@@ -56,9 +56,9 @@ pub trait EdgeValidity<C> {
 /// A box of joint positions: each of `N` joints between its limits.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct JointBox<const N: usize> {
-    /// Lower limit per joint [rad].
+    /// Lower limit per joint (rad).
     pub lower_rad: SVector<f64, N>,
-    /// Upper limit per joint [rad].
+    /// Upper limit per joint (rad).
     pub upper_rad: SVector<f64, N>,
 }
 
@@ -93,7 +93,7 @@ impl<const N: usize> ConfigSpace for JointBox<N> {
 pub struct Budget {
     /// Samples allowed (counted in [`PlanStats::samples`], from the query's start).
     pub max_samples: usize,
-    /// Wall time allowed from `started` [s].
+    /// Wall time allowed from `started` (s).
     pub wall_s: f64,
     /// When the query started.
     pub started: Instant,

@@ -21,7 +21,7 @@ use crate::sensor::{Camera, Capture, RecognitionReport, TruthAtTrigger};
 use crate::servo::Tick;
 use crate::trajectory::Motion;
 
-/// Period of the part-pose snapshots [s].
+/// Period of the part-pose snapshots (s).
 pub const SCENE_FRAME_S: f64 = 0.1;
 /// Recorded point clouds keep every this many pixels in each image direction (a quarter of the
 /// points: 0.4 MB instead of 1 MB per capture). The depth image keeps every pixel.
@@ -29,7 +29,7 @@ pub const CLOUD_EVERY_PX: usize = 2;
 /// The sparse cloud (the Rerun file's: its viewer draws the depth image itself in 3D at every
 /// pixel) keeps every this many pixels in each image direction.
 pub const SPARSE_CLOUD_EVERY_PX: usize = 4;
-/// Recorded cloud coordinates are rounded to this grid [m]: a quarter of the depth image's 1 mm
+/// Recorded cloud coordinates are rounded to this grid (m): a quarter of the depth image's 1 mm
 /// steps, its rounding error (0.07 mm rms) well below the sensor's noise (0.3 mm at 1 m), and it
 /// lets the files' compressors find repeats (1.4 instead of 4.6 MB of points in a 20-pick MCAP).
 pub const CLOUD_GRID_M: f64 = 2.5e-4;
@@ -40,9 +40,9 @@ pub const RECORDED_CANDIDATES: usize = 20;
 /// poses beside the detections (evaluation only).
 #[derive(Debug, Clone)]
 pub struct TruthRecord {
-    /// When the result arrived [s].
+    /// When the result arrived (s).
     pub t_s: f64,
-    /// When the capture was triggered [s].
+    /// When the capture was triggered (s).
     pub trigger_s: f64,
     /// The parts the capture showed: index and `world_from_part` at the trigger.
     pub parts: Vec<(usize, Isometry3<f64>)>,
@@ -51,7 +51,7 @@ pub struct TruthRecord {
 /// Every part's state and pose at one time.
 #[derive(Debug, Clone)]
 pub struct SceneFrame {
-    /// Simulation time [s].
+    /// Simulation time (s).
     pub t_s: f64,
     /// Per part, in insertion order: state and `world_from_part`.
     pub parts: Vec<(PartState, Isometry3<f64>)>,
@@ -60,9 +60,9 @@ pub struct SceneFrame {
 /// One motion's tool-tip path: as planned and as executed.
 #[derive(Debug, Clone)]
 pub struct ToolPath {
-    /// Start of the motion [s].
+    /// Start of the motion (s).
     pub t_s: f64,
-    /// Duration as planned [s].
+    /// Duration as planned (s).
     pub duration_s: f64,
     /// Planned tool-tip positions every 10 ms [m, world].
     pub planned_m: Vec<Vector3<f64>>,
@@ -73,13 +73,13 @@ pub struct ToolPath {
 /// A capture's depth image and point cloud.
 #[derive(Debug, Clone)]
 pub struct CaptureImage {
-    /// Trigger time [s].
+    /// Trigger time (s).
     pub t_s: f64,
-    /// Image width and height [px].
+    /// Image width and height (px).
     pub size_px: (usize, usize),
-    /// Depth per pixel [mm], 0 where there is no return.
+    /// Depth per pixel (mm), 0 where there is no return.
     pub depth_mm: Vec<u16>,
-    /// The world points [m] of every [`CLOUD_EVERY_PX`]-th pixel in each direction that has a
+    /// The world points (m) of every [`CLOUD_EVERY_PX`]-th pixel in each direction that has a
     /// return, row-major, on the [`CLOUD_GRID_M`] grid.
     pub points_world_m: Vec<[f32; 3]>,
     /// The same of every [`SPARSE_CLOUD_EVERY_PX`]-th pixel.
@@ -103,12 +103,12 @@ fn cloud_on_grid(c: &Capture, every_px: usize) -> Vec<[f32; 3]> {
 /// A recognition result as the grasp selector saw it.
 #[derive(Debug, Clone)]
 pub struct RecognitionRecord {
-    /// When the result arrived [s].
+    /// When the result arrived (s).
     pub t_s: f64,
     /// Recognised parts: estimated `world_from_part` and the visible fraction.
     pub detections: Vec<(Isometry3<f64>, f64)>,
-    /// Per detection, against the truth at the trigger (evaluation only): its position [m] and
-    /// rotation [rad] error from the nearest part, and whether that is within 2 mm and 5 deg.
+    /// Per detection, against the truth at the trigger (evaluation only): its position (m) and
+    /// rotation (rad) error from the nearest part, and whether that is within 2 mm and 5 deg.
     pub detection_errors: Vec<Option<(f64, f64, bool)>>,
     /// The best feasible grasps, best first (at most [`RECORDED_CANDIDATES`]): the tool at the
     /// grasp and the score.
@@ -138,7 +138,7 @@ pub struct Recording {
     pub records: Vec<PickRecord>,
     /// The depth camera (pose and intrinsics).
     pub camera: Camera,
-    /// The parts' bounding box [m].
+    /// The parts' bounding box (m).
     pub part_size_m: [f64; 3],
     /// The cell's fixed boxes (table, trays, obstacles), as the world was built.
     pub cell_boxes: Vec<NamedBox>,

@@ -151,7 +151,7 @@ pub(crate) const TRANSFORMS_EVERY: usize = 20;
 /// The arm's joint positions at which its link frames are recorded: from time 0 (the arm at its
 /// start pose while the first pile is poured: the trace begins with the first motion), then
 /// every [`TRANSFORMS_EVERY`] servo ticks. Between motions the arm stands still, so the last
-/// frames hold. (simulation time [s], joint positions [rad])
+/// frames hold. (simulation time (s), joint positions (rad))
 pub(crate) fn arm_samples(result: &Recording) -> Vec<(f64, crate::robot::JointVector)> {
     let start = result.trace.first().filter(|t| t.t_s > 0.0).map(|t| (0.0, t.q));
     start
@@ -184,11 +184,11 @@ pub(crate) fn event_text(e: &CycleEvent) -> String {
     }
 }
 
-/// The tip of a grasp-candidate arrow: this far above the grasp point, pointing down to it [m].
+/// The tip of a grasp-candidate arrow: this far above the grasp point, pointing down to it (m).
 pub(crate) const CANDIDATE_ARROW_M: f64 = 0.03;
 
 /// The camera frustum's corner rays out to `range_m`, in the world frame: apex, then the four
-/// far corners (top-left, top-right, bottom-right, bottom-left in the image) [m].
+/// far corners (top-left, top-right, bottom-right, bottom-left in the image) (m).
 pub(crate) fn frustum_corners(c: &crate::sensor::Camera, range_m: f64) -> [nalgebra::Vector3<f64>; 5] {
     let apex = c.world_from_camera.translation.vector;
     let corner = |u: f64, v: f64| {

@@ -20,9 +20,9 @@ use crate::config::GripperConfig;
 /// A rigid payload on the flange: mass, centre of mass and inertia in the flange frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Payload {
-    /// Mass [kg] (0 for none).
+    /// Mass (kg) (0 for none).
     pub mass_kg: f64,
-    /// Centre of mass in the flange frame [m].
+    /// Centre of mass in the flange frame (m).
     pub com_flange_m: Vector3<f64>,
     /// Inertia about the centre of mass, flange axes [kg m^2].
     pub inertia_com_kg_m2: Matrix3<f64>,
@@ -439,7 +439,7 @@ impl DynamicsModel {
         m.cholesky().map(|c| c.solve(&(tau - bias)))
     }
 
-    /// Kinetic energy of links, payload and rotors, by propagating link velocities [J].
+    /// Kinetic energy of links, payload and rotors, by propagating link velocities (J).
     pub fn kinetic_energy(&self, q: &JointVector, qd: &JointVector) -> f64 {
         let mut w = Vector3::zeros();
         let mut v = Vector3::zeros();
@@ -460,7 +460,7 @@ impl DynamicsModel {
         e
     }
 
-    /// Potential energy of links and payload in gravity, relative to the base origin [J].
+    /// Potential energy of links and payload in gravity, relative to the base origin (J).
     pub fn potential_energy(&self, q: &JointVector) -> f64 {
         let mut frame = Frame::identity();
         let mut e = 0.0;

@@ -18,7 +18,7 @@ use super::{DOF, Joint, JointVector, RobotModel};
 
 /// Below this |sin(q5)| the wrist is singular.
 pub const WRIST_SINGULAR_EPS: f64 = 1e-9;
-/// Below this radial distance [m] of the wrist centre from the J1 axis the shoulder is singular.
+/// Below this radial distance (m) of the wrist centre from the J1 axis the shoulder is singular.
 pub const SHOULDER_SINGULAR_EPS_M: f64 = 1e-9;
 const STRUCTURE_TOL: f64 = 1e-9;
 
@@ -33,11 +33,11 @@ pub enum IkError {
         "target out of reach: wrist centre {distance_m:.4} m from the shoulder axis point, arm reaches {min_m:.4} to {max_m:.4} m"
     )]
     Unreachable {
-        /// Shoulder to wrist-centre distance of the nearer J1 branch [m].
+        /// Shoulder to wrist-centre distance of the nearer J1 branch (m).
         distance_m: f64,
-        /// Shortest reachable distance [m].
+        /// Shortest reachable distance (m).
         min_m: f64,
-        /// Longest reachable distance [m].
+        /// Longest reachable distance (m).
         max_m: f64,
     },
     /// The wrist centre lies on the J1 axis: J1 is not determined.
@@ -70,7 +70,7 @@ pub struct Branch {
 /// One inverse kinematics solution.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IkSolution {
-    /// Joint positions [rad], within limits.
+    /// Joint positions (rad), within limits.
     pub q: JointVector,
     /// The principal branch it came from.
     pub branch: Branch,
@@ -79,15 +79,15 @@ pub struct IkSolution {
 /// Arm geometry for the closed-form solution, read off the URDF joint origins.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct IkGeometry {
-    /// Height of the J2 axis above the base frame origin [m].
+    /// Height of the J2 axis above the base frame origin (m).
     pub shoulder_height_m: f64,
-    /// Radial offset of the J2 axis from the J1 axis [m].
+    /// Radial offset of the J2 axis from the J1 axis (m).
     pub shoulder_offset_m: f64,
-    /// J2 to J3 in the link-2 frame, (x, z) [m].
+    /// J2 to J3 in the link-2 frame, (x, z) (m).
     pub upper_arm_m: [f64; 2],
-    /// J3 to the wrist centre in the link-3 frame, (x, z) [m].
+    /// J3 to the wrist centre in the link-3 frame, (x, z) (m).
     pub forearm_m: [f64; 2],
-    /// Wrist centre to flange along the flange z axis [m].
+    /// Wrist centre to flange along the flange z axis (m).
     pub wrist_to_flange_m: f64,
 }
 

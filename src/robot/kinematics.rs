@@ -1,6 +1,6 @@
 //! Forward kinematics, the geometric Jacobian and manipulability.
 //!
-//! Job: joint positions [rad] to the pose of every link frame, the flange and the tool, in the
+//! Job: joint positions (rad) to the pose of every link frame, the flange and the tool, in the
 //! base frame (`base_from_link`) or the world frame (`world_from_tool`); the tool-point Jacobian.
 //! Units: m, rad. A [`Frame`] is a rotation matrix and a translation, the fast form the hot loops
 //! (planning, dynamics) use; the public pose API returns nalgebra isometries.
@@ -14,7 +14,7 @@ use super::{DOF, JointVector, RobotModel};
 pub struct Frame {
     /// Rotation (columns: child axes in the parent frame).
     pub rot: Matrix3<f64>,
-    /// Child origin in the parent frame [m].
+    /// Child origin in the parent frame (m).
     pub pos: Vector3<f64>,
 }
 

@@ -30,7 +30,7 @@ pub use ik::{IkError, IkSolution};
 /// Number of joints.
 pub const DOF: usize = 6;
 
-/// Joint-space vector (positions [rad], velocities [rad/s], accelerations [rad/s^2] or torques [N m]).
+/// Joint-space vector (positions (rad), velocities [rad/s], accelerations [rad/s^2] or torques [N m]).
 pub type JointVector = Vector6<f64>;
 
 /// Standard gravity [m/s^2].
@@ -47,13 +47,13 @@ pub struct Joint {
     pub parent_from_origin: Isometry3<f64>,
     /// Rotation part of `parent_from_origin` as a matrix (cached for the hot paths).
     pub origin_rot: Matrix3<f64>,
-    /// Translation part of `parent_from_origin` [m] (cached for the hot paths).
+    /// Translation part of `parent_from_origin` (m) (cached for the hot paths).
     pub origin_pos_m: Vector3<f64>,
     /// Rotation axis, unit, in the child link frame.
     pub axis: Vector3<f64>,
-    /// Lower position limit [rad].
+    /// Lower position limit (rad).
     pub lower_rad: f64,
-    /// Upper position limit [rad].
+    /// Upper position limit (rad).
     pub upper_rad: f64,
     /// Maximum speed [rad/s].
     pub max_vel_rad_s: f64,
@@ -73,9 +73,9 @@ pub struct Joint {
 /// Mass properties of a rigid body in its own frame.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Inertial {
-    /// Mass [kg].
+    /// Mass (kg).
     pub mass_kg: f64,
-    /// Centre of mass in the body frame [m].
+    /// Centre of mass in the body frame (m).
     pub com_m: Vector3<f64>,
     /// Inertia about the centre of mass, axes along the body frame [kg m^2].
     pub inertia_com_kg_m2: Matrix3<f64>,
@@ -84,28 +84,28 @@ pub struct Inertial {
 /// A collision/visual primitive in a link frame.
 #[derive(Debug, Clone, PartialEq)]
 pub enum LinkPrimitive {
-    /// Box with half extents [m].
+    /// Box with half extents (m).
     Box {
-        /// Half extents [m].
+        /// Half extents (m).
         half_extents_m: Vector3<f64>,
     },
     /// Cylinder along the local z axis.
     Cylinder {
-        /// Radius [m].
+        /// Radius (m).
         radius_m: f64,
-        /// Half length [m].
+        /// Half length (m).
         half_length_m: f64,
     },
     /// Sphere.
     Sphere {
-        /// Radius [m].
+        /// Radius (m).
         radius_m: f64,
     },
     /// Capsule along the local z axis.
     Capsule {
-        /// Radius [m].
+        /// Radius (m).
         radius_m: f64,
-        /// Half length of the segment [m].
+        /// Half length of the segment (m).
         half_length_m: f64,
     },
 }
@@ -154,12 +154,12 @@ pub struct RobotModel {
 }
 
 impl RobotModel {
-    /// Lower position limits [rad].
+    /// Lower position limits (rad).
     pub fn lower_rad(&self) -> JointVector {
         JointVector::from_fn(|i, _| self.joints[i].lower_rad)
     }
 
-    /// Upper position limits [rad].
+    /// Upper position limits (rad).
     pub fn upper_rad(&self) -> JointVector {
         JointVector::from_fn(|i, _| self.joints[i].upper_rad)
     }
@@ -206,7 +206,7 @@ impl RobotModel {
             .all(|(j, v)| *v >= j.lower_rad - tol_rad && *v <= j.upper_rad + tol_rad)
     }
 
-    /// Total mass of the moving links [kg].
+    /// Total mass of the moving links (kg).
     pub fn moving_mass_kg(&self) -> f64 {
         self.links[1..].iter().map(|l| l.inertial.mass_kg).sum()
     }

@@ -13,25 +13,25 @@ use crate::config::SensorConfig;
 pub struct Camera {
     /// `world_from_camera` (optical frame).
     pub world_from_camera: Isometry3<f64>,
-    /// Image width [px].
+    /// Image width (px).
     pub width_px: usize,
-    /// Image height [px].
+    /// Image height (px).
     pub height_px: usize,
-    /// Focal length along the image x axis [px].
+    /// Focal length along the image x axis (px).
     pub fx_px: f64,
-    /// Focal length along the image y axis [px].
+    /// Focal length along the image y axis (px).
     pub fy_px: f64,
-    /// Principal point, x [px].
+    /// Principal point, x (px).
     pub cx_px: f64,
-    /// Principal point, y [px].
+    /// Principal point, y (px).
     pub cy_px: f64,
-    /// Measurable range [m].
+    /// Measurable range (m).
     pub min_range_m: f64,
-    /// Measurable range [m].
+    /// Measurable range (m).
     pub max_range_m: f64,
-    /// Depth noise sigma at 1 m [m]; grows with depth squared.
+    /// Depth noise sigma at 1 m (m); grows with depth squared.
     pub depth_noise_at_1m_m: f64,
-    /// Returns at incidence angles beyond this are lost [rad].
+    /// Returns at incidence angles beyond this are lost (rad).
     pub dropout_grazing_rad: f64,
     /// Random dropout probability.
     pub dropout_probability: f64,
@@ -78,7 +78,7 @@ impl Camera {
         })
     }
 
-    /// Size of a pixel at depth `z` [m].
+    /// Size of a pixel at depth `z` (m).
     pub fn pixel_size_at_m(&self, z: f64) -> f64 {
         z / self.fx_px.min(self.fy_px)
     }

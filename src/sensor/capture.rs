@@ -30,17 +30,17 @@ use crate::physics::{RayHit, RayTargetBox, RayTargets, Tag, World};
 pub struct Capture {
     /// Capture number within the run.
     pub id: u64,
-    /// Simulation time of the trigger [s].
+    /// Simulation time of the trigger (s).
     pub trigger_s: f64,
-    /// The camera's optical centre in the world [m].
+    /// The camera's optical centre in the world (m).
     pub camera_position_m: Vector3<f64>,
-    /// Image width [px].
+    /// Image width (px).
     pub width_px: usize,
-    /// Image height [px].
+    /// Image height (px).
     pub height_px: usize,
-    /// Depth along the optical axis per pixel, row-major; 0 where there is no return [m].
+    /// Depth along the optical axis per pixel, row-major; 0 where there is no return (m).
     pub depth_m: Vec<f32>,
-    /// World point per pixel (NaN where there is no return) [m]: the organised point cloud.
+    /// World point per pixel (NaN where there is no return) (m): the organised point cloud.
     pub points_world: Vec<[f32; 3]>,
     /// What each valid pixel's ray hit: ground truth for the recognition model's visibility
     /// counts and for evaluation only (see [`super::recognition`]).
@@ -143,7 +143,7 @@ fn image_rect(camera: &Camera, lo: &Vector3<f64>, hi: &Vector3<f64>) -> Option<(
     ))
 }
 
-/// Side of the square image tiles the ray targets are binned into [px].
+/// Side of the square image tiles the ray targets are binned into (px).
 const TILE_PX: usize = 8;
 
 /// The ray targets binned by the image rectangles of their boxes ([`image_rect`]), per

@@ -12,15 +12,15 @@ use super::Capture;
 pub struct HeightMap {
     /// `world_from_tray` of the pick tray.
     pub world_from_tray: Isometry3<f64>,
-    /// Cell edge [m].
+    /// Cell edge (m).
     pub cell_m: f64,
     /// Cells along x and y.
     pub nx: usize,
     /// Cells along y.
     pub ny: usize,
-    /// Lower corner of cell (0, 0) in the tray frame [m].
+    /// Lower corner of cell (0, 0) in the tray frame (m).
     pub origin_xy_m: [f64; 2],
-    /// Highest point per cell above the tray floor, NaN where nothing was seen [m].
+    /// Highest point per cell above the tray floor, NaN where nothing was seen (m).
     pub height_m: Vec<f64>,
 }
 
@@ -152,7 +152,7 @@ impl HeightMap {
             .then(|| j as usize * self.nx + i as usize)
     }
 
-    /// Stored heights [m] (NaN where unseen) of the cells whose centres lie within `radius_m` of
+    /// Stored heights (m) (NaN where unseen) of the cells whose centres lie within `radius_m` of
     /// tray point (x, y), in row-major order.
     fn heights_within(&self, x: f64, y: f64, radius_m: f64) -> impl Iterator<Item = f64> + '_ {
         let r = (radius_m / self.cell_m).ceil() as isize + 1;
@@ -170,7 +170,7 @@ impl HeightMap {
     }
 
     /// Median of the cell heights within `radius_m` of tray point (x, y) and within `band_m` of
-    /// `expected_m` [m] (NaN if none): the surface under a small disc near where it should be,
+    /// `expected_m` (m) (NaN if none): the surface under a small disc near where it should be,
     /// robust to depth noise (which the maximum picks up) and, by the band, to neighbouring
     /// surfaces. (Cells hold their highest point, already +0.15 mm on a flat face; an upper
     /// quartile on top put the cup 0.4 mm high on average and up to 1.1 mm, beyond the seal's
@@ -183,7 +183,7 @@ impl HeightMap {
         crate::stats::median_sorted(&crate::stats::sorted(&v))
     }
 
-    /// Highest seen point above the tray floor within `radius_m` of tray point (x, y) [m]
+    /// Highest seen point above the tray floor within `radius_m` of tray point (x, y) (m)
     /// (NaN if nothing was seen there). Cells count when any part of them may lie in the disc
     /// (centre within `radius_m` plus half a cell diagonal).
     pub fn max_within(&self, x: f64, y: f64, radius_m: f64) -> f64 {

@@ -1,6 +1,6 @@
 //! The fixed overhead 3D sensor: depth capture by ray casting, exposure timing, recognition.
 //!
-//! Files: [`camera`] (the pinhole camera), [`capture`] (ray-cast depth images), [`recognition`]
+//! Files: [`camera`] (the pinhole camera), [`capture`](mod@capture) (ray-cast depth images), [`recognition`]
 //! (parts found in a capture, and their evaluation against ground truth), [`heightmap`] (the
 //! point cloud binned over the pick tray); this file: the sensor's timing (trigger, exposure,
 //! latency) and its view frustum.
@@ -93,15 +93,15 @@ pub const MOTION_HOLE_MIN_PX: usize = 20;
 pub struct CaptureJob {
     /// The image taken at the trigger.
     pub capture: Capture,
-    /// End of the exposure window [s].
+    /// End of the exposure window (s).
     pub exposure_end_s: f64,
-    /// When the recognition result is available [s].
+    /// When the recognition result is available (s).
     pub ready_s: f64,
     /// Set if the exposure was spoiled.
     pub spoiled: Option<CaptureProblem>,
     /// Ground truth at the trigger (evaluation and the oracle recognition only).
     pub truth: TruthAtTrigger,
-    /// How far each part's farthest point moved during the exposure [m]: its centre's travel
+    /// How far each part's farthest point moved during the exposure (m): its centre's travel
     /// plus its turn times its bounding radius (a 15 cm strip turning about its centre moves its
     /// ends).
     moved_m: Vec<f64>,
@@ -144,7 +144,7 @@ impl CaptureJob {
     }
 }
 
-/// A part any point of which moves more than this during the exposure is blurred [m]: a third
+/// A part any point of which moves more than this during the exposure is blurred (m): a third
 /// of a pixel at the tray floor. Motion, not velocity: a part resting on a flat face can keep a small solver
 /// velocity that moves nothing.
 pub const STILL_MOTION_M: f64 = 0.0005;
@@ -160,15 +160,15 @@ pub struct Sensor {
     background: std::sync::Arc<Background>,
     /// The fixed pick tray (the cloud recognition's background model).
     pub pick_tray: TrayVolume,
-    /// Trigger to recognition result [s].
+    /// Trigger to recognition result (s).
     pub latency_s: f64,
-    /// Exposure window [s].
+    /// Exposure window (s).
     pub exposure_s: f64,
     /// Detection threshold on the visible fraction.
     pub detect_min_visible_fraction: f64,
-    /// Pose noise, position sigma [m].
+    /// Pose noise, position sigma (m).
     pub pose_noise_m: f64,
-    /// Pose noise, rotation sigma [rad].
+    /// Pose noise, rotation sigma (rad).
     pub pose_noise_rad: f64,
     /// Cloud-based recognition or the oracle.
     pub recognition: RecognitionMode,
@@ -265,7 +265,7 @@ impl Sensor {
     }
 
     /// The recognition result of a job, once `ready_s` has come (`now_s`) and if it was not
-    /// spoiled: the image as exposed (blurred parts emptied, see [`CaptureJob::apply_blur`]),
+    /// spoiled: the image as exposed (blurred parts emptied, see `CaptureJob::apply_blur`),
     /// recognised by the cell's recognition. Reads nothing of the world: what the picture showed
     /// at the trigger.
     pub fn result(&self, job: &mut CaptureJob, now_s: f64) -> Option<Vec<Detection>> {

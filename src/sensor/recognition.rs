@@ -37,7 +37,7 @@ use crate::stats::{median_sorted, percentile_sorted, sorted};
 pub struct TruthAtTrigger {
     /// The capture's number.
     pub capture_id: u64,
-    /// The trigger [s].
+    /// The trigger (s).
     pub t_s: f64,
     /// Every part's `world_from_part` at the trigger.
     pub world_from_part: Vec<Isometry3<f64>>,
@@ -190,9 +190,9 @@ pub struct Detection {
     pub face_up: Option<usize>,
 }
 
-/// A detection counts as correct within this position error of a part [m] (issue 15's definition).
+/// A detection counts as correct within this position error of a part (m) (the recognition target's definition).
 pub const CORRECT_WITHIN_M: f64 = 0.002;
-/// ... and within this rotation error, the part's symmetries allowed [rad] (5 deg).
+/// ... and within this rotation error, the part's symmetries allowed (rad) (5 deg).
 pub const CORRECT_WITHIN_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 
 /// A detection matched with the part it is nearest to at its capture's trigger (evaluation only).
@@ -200,9 +200,9 @@ pub const CORRECT_WITHIN_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 pub struct TruthMatch {
     /// The part.
     pub part: usize,
-    /// Distance of the detection's origin from the part's at the trigger [m].
+    /// Distance of the detection's origin from the part's at the trigger (m).
     pub position_error_m: f64,
-    /// Rotation from the part to the detection, the least over the part's symmetries [rad].
+    /// Rotation from the part to the detection, the least over the part's symmetries (rad).
     pub rotation_error_rad: f64,
     /// Within [`CORRECT_WITHIN_M`] and [`CORRECT_WITHIN_RAD`].
     pub correct: bool,
@@ -320,9 +320,9 @@ pub struct RecognitionTotals {
     pub detected: usize,
     /// Correct detections.
     pub correct: usize,
-    /// Position errors of the correct detections [m].
+    /// Position errors of the correct detections (m).
     pub position_errors_m: Vec<f64>,
-    /// Rotation errors of the correct detections [rad].
+    /// Rotation errors of the correct detections (rad).
     pub rotation_errors_rad: Vec<f64>,
 }
 
@@ -391,8 +391,8 @@ pub struct RecognitionSummary {
     pub recall: f64,
     /// correct / detected (NaN without detections).
     pub precision: f64,
-    /// Position error of the correct detections, median and p95 [mm].
+    /// Position error of the correct detections, median and p95 (mm).
     pub position_error_mm: [f64; 2],
-    /// Rotation error of the correct detections, median and p95 [deg].
+    /// Rotation error of the correct detections, median and p95 (deg).
     pub rotation_error_deg: [f64; 2],
 }

@@ -2,7 +2,7 @@
 //! [`StudySpec`], each one [`crate::cycle::run`] of the same number of picks in the same mode.
 //! A batch is a study of one variant (the cell as given); a sweep's variants are the cell and
 //! workpiece files with `--set` values applied ([`crate::sweep`]). Both are front ends of this
-//! one pipeline: the same spec, the same [`runner`], the same shards and merge ([`file`]), the
+//! one pipeline: the same spec, the same [`runner`], the same shards and merge ([`file`](mod@file)), the
 //! same error type.
 //!
 //! Job: describe a study's runs (variant-major, then workpiece, then seed), parse its seeds and

@@ -4,9 +4,9 @@
 //! with the prefix `workpiece.`; values in the file's own TOML types, arrays allowed; numeric
 //! ranges `start:stop:step`), form the variants (the product of the lists, the first key
 //! slowest), and describe the sweep's runs: every (variant, workpiece, seed), variant-major, each a
-//! run like `batch`'s. The variants are resolved and checked in [`resolve`] (before anything
+//! run like `batch`'s. The variants are resolved and checked in [`resolve`](mod@resolve) (before anything
 //! runs); the runs, shards and merges are the study's ([`crate::study`]: a sweep is a study of
-//! several variants); the table, its files and the chart are [`table`]'s and
+//! several variants); the table, its files and the chart are [`table`](mod@table)'s and
 //! [`sweep_chart`]'s.
 //!
 //! Units: the file's own (the key names carry them); s and counts in the results.

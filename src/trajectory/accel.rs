@@ -19,13 +19,13 @@ use super::torque::{TorqueProfile, torques};
 use super::{Motion, MotionLimits, Trajectory};
 use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
 
-/// §4.2 step 1: torques are evaluated on the trajectory sampled every millisecond [s].
+/// §4.2 step 1: torques are evaluated on the trajectory sampled every millisecond (s).
 pub const TORQUE_DT_S: f64 = 0.001;
 /// §4.2 step 2: a joint's acceleration is settled when its peak torque is within this fraction
 /// of its limit below the limit (and no joint is above).
 pub const TORQUE_THRESHOLD: f64 = 0.05;
 /// Longest time between the configurations whose chords [`check_corridor`] certifies in the
-/// cell's cycle [s].
+/// cell's cycle (s).
 ///
 /// Between two samples dt apart, a joint whose acceleration stays within a deviates from the
 /// chord by at most a dt^2 / 8 ([`chord_deviation_rad`]). At 10 ms with the default cell's
@@ -41,7 +41,7 @@ pub const TORQUE_THRESHOLD: f64 = 0.05;
 /// are, is at most [`CORRIDOR_BEND_BUDGET_M`] of robot motion, each certified with the margin
 /// raised by its own deviation bound: the blended trajectory itself keeps the margin.
 pub const CORRIDOR_CHECK_DT_S: f64 = 0.01;
-/// Largest deviation of robot motion [m] between a bent blend and the chords [`check_corridor`]
+/// Largest deviation of robot motion (m) between a bent blend and the chords [`check_corridor`]
 /// certifies in its place (each chord's own bound is added to the margin it is certified with).
 pub const CORRIDOR_BEND_BUDGET_M: f64 = 0.0002;
 /// §4.2 step 1: the search starts from this share of each joint's specification acceleration.
@@ -65,9 +65,9 @@ const FOLD_SPEED_SHARE: f64 = 0.8;
 /// §4.3: the full fold, half and a quarter of it are tried; the fastest that is safe and helps
 /// is kept.
 const FOLD_SHARES: [f64; 3] = [1.0, 0.5, 0.25];
-/// Step of the central differences of J1's inertia M11 in J2 and J3 [rad].
+/// Step of the central differences of J1's inertia M11 in J2 and J3 (rad).
 const M11_STEP_RAD: f64 = 1e-4;
-/// A fold is kept only if it shortens the motion by more than this [s].
+/// A fold is kept only if it shortens the motion by more than this (s).
 const MIN_FOLD_GAIN_S: f64 = 1e-6;
 
 /// The controller's default parameters: top speeds from the data sheet, and one acceleration
@@ -369,7 +369,7 @@ pub fn correct_path(
     }
 }
 
-/// Per joint, the largest deviation [rad] from its chord of a motion sampled `dt_s` apart whose
+/// Per joint, the largest deviation (rad) from its chord of a motion sampled `dt_s` apart whose
 /// accelerations stay within `accel_rad_s2`: a dt^2 / 8 (the interpolation error of a function
 /// with a bounded second derivative, reached by a constant acceleration over the interval).
 pub fn chord_deviation_rad(accel_rad_s2: &JointVector, dt_s: f64) -> JointVector {
@@ -564,7 +564,7 @@ mod tests {
         assert!(top[0] > robot.joints[0].max_accel_rad_s2, "{top}");
     }
 
-    /// Issue 16: where the specification cap held J1 back, the search without it goes above the
+    /// Above the specification caps: where the cap held J1 back, the search without it goes above the
     /// cap, its peak torque lands within the threshold below the limit, and the motion is faster;
     /// the negative control: 10 % more acceleration than found exceeds a torque limit.
     #[test]

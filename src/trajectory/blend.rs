@@ -71,15 +71,15 @@ pub struct Trajectory {
     pub via: Vec<JointVector>,
     /// Velocity of each linear segment [rad/s].
     seg_vel: Vec<JointVector>,
-    /// Duration of each linear segment between via points, blends included [s].
+    /// Duration of each linear segment between via points, blends included (s).
     seg_time: Vec<f64>,
-    /// Blend duration at each via point [s].
+    /// Blend duration at each via point (s).
     blend: Vec<f64>,
-    /// When each via point is reached on the linear extension of its segments [s].
+    /// When each via point is reached on the linear extension of its segments (s).
     via_t: Vec<f64>,
     /// How smooth the blends are.
     pub continuity: Continuity,
-    /// Total duration [s].
+    /// Total duration (s).
     pub duration_s: f64,
 }
 

@@ -12,7 +12,7 @@
 use super::{Motion, MotionLimits, Sample, Trajectory};
 use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
 
-/// A straight line is sampled (inverse kinematics, finite differences) every millisecond [s].
+/// A straight line is sampled (inverse kinematics, finite differences) every millisecond (s).
 const LINE_DT_S: f64 = 0.001;
 /// Length of the line per radian of tool rotation, so a pure turn takes time too [m/rad].
 const ROTATION_LENGTH_M_PER_RAD: f64 = 0.05;
@@ -22,15 +22,15 @@ const LINE_TRIES: usize = 12;
 const LINE_SLOWDOWN: f64 = 0.75;
 /// Lowest tool acceleration a force limit may leave [m/s^2].
 const MIN_LINE_ACCEL_M_S2: f64 = 0.5;
-/// Largest joint step between 1 ms samples before it counts as a branch change [rad].
+/// Largest joint step between 1 ms samples before it counts as a branch change (rad).
 const MAX_JOINT_STEP_RAD: f64 = 0.05;
-/// Below this |J5| the wrist is near its singularity and J4 is kept [rad].
+/// Below this |J5| the wrist is near its singularity and J4 is kept (rad).
 const WRIST_SINGULAR_RAD: f64 = 0.02;
-/// A wrist fix is kept only if the tool pose still matches to this position [m] ...
+/// A wrist fix is kept only if the tool pose still matches to this position (m) ...
 const WRIST_FIX_POSITION_M: f64 = 2e-5;
-/// ... and this rotation [rad].
+/// ... and this rotation (rad).
 const WRIST_FIX_ANGLE_RAD: f64 = 2e-4;
-/// The tool's specific force is checked on samples this far apart [s].
+/// The tool's specific force is checked on samples this far apart (s).
 const FORCE_CHECK_DT_S: f64 = 0.004;
 /// Slowest uniform time scale [`limit_tool_force`] tries.
 const MIN_TIME_SCALE: f64 = 0.05;
@@ -225,7 +225,7 @@ pub fn peak_tool_specific_force(robot: &RobotModel, motion: &impl Motion, dt_s: 
 }
 
 /// The longest lead, at most `max_lead_s`, by which a suction cup's valve may close before
-/// `motion` ends [s] with the part predicted to stay on the cup until the cup stops. Once the
+/// `motion` ends (s) with the part predicted to stay on the cup until the cup stops. Once the
 /// valve closes the holding force falls linearly to zero over `release_s`; at every instant
 /// from then to the end the tool's specific force |a - g| (forward kinematics, second
 /// differences every `dt_s`) must stay within `max_specific_force_m_s2` (what the plans allow

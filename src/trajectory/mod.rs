@@ -51,9 +51,9 @@ use crate::robot::JointVector;
 /// One sample of a trajectory.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Sample {
-    /// Time [s].
+    /// Time (s).
     pub t_s: f64,
-    /// Positions [rad].
+    /// Positions (rad).
     pub q: JointVector,
     /// Velocities [rad/s].
     pub qd: JointVector,
@@ -64,9 +64,9 @@ pub struct Sample {
 /// A stretch of a motion in time, for certifying the corridor it sweeps ([`check_corridor`]).
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct Stretch {
-    /// Start [s].
+    /// Start (s).
     pub t0_s: f64,
-    /// End [s].
+    /// End (s).
     pub t1_s: f64,
     /// Per joint, a bound on the acceleration that bends the motion off a straight joint-space
     /// line over the stretch [rad/s^2]; all zero: the stretch runs monotonically along the straight
@@ -82,7 +82,7 @@ pub trait Motion {
     fn stretches(&self) -> Option<Vec<Stretch>> {
         None
     }
-    /// Duration [s].
+    /// Duration (s).
     fn duration_s(&self) -> f64;
     /// Position, velocity and acceleration at `t`.
     fn at(&self, t: f64) -> Sample;

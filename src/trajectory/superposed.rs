@@ -32,7 +32,7 @@ pub struct OverlapCheck<'a> {
     /// Each joint's torque stays within this share of the accelerator's limits, or within what
     /// either motion alone demands there if that is more.
     pub torque_share: f64,
-    /// Start times are rounded to this grid [s] (the physics step).
+    /// Start times are rounded to this grid (s) (the physics step).
     pub grid_s: f64,
 }
 
@@ -95,7 +95,7 @@ impl<A: Motion + Clone, B: Motion + Clone> Overlapped<A, B> {
         }
     }
 
-    /// When the second motion starts, from the first's start [s].
+    /// When the second motion starts, from the first's start (s).
     pub fn start_s(&self) -> f64 {
         self.start_s
     }

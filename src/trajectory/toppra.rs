@@ -10,8 +10,8 @@
 //! times. The algorithm knows nothing of robots or joint counts: [`PathConstraints`] is all it
 //! reads (the robot's constraints are one implementation, in the `retime` module).
 //!
-//! Units: s in the path's own unit (written [p]: a fraction, metres, radians), u [p/s^2],
-//! x [p^2/s^2], times [s]. Frames: none (a scalar path parameter).
+//! Units: s in the path's own unit (written (p): a fraction, metres, radians), u [p/s^2],
+//! x [p^2/s^2], times (s). Frames: none (a scalar path parameter).
 
 /// One linear constraint of a grid stage: `a u + b x <= r` in (u, x) = (s'', s'^2).
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -34,9 +34,9 @@ impl StageRow {
 /// The constraints a path is retimed under: linear in (u, x) = (s'', s'^2) at every path
 /// position s in [0, [`PathConstraints::end_s`]].
 pub trait PathConstraints {
-    /// End of the path parameter's range [p]; it starts at 0.
+    /// End of the path parameter's range (p); it starts at 0.
     fn end_s(&self) -> f64;
-    /// The constraint rows at path position `s` [p]. `x >= 0` is implied (the algorithm adds it);
+    /// The constraint rows at path position `s` (p). `x >= 0` is implied (the algorithm adds it);
     /// an upper bound on x (a speed limit) must be given as a row when the other rows do not
     /// bound x.
     fn rows(&self, s: f64) -> Vec<StageRow>;
@@ -46,20 +46,20 @@ pub trait PathConstraints {
 /// points, u constant between them.
 #[derive(Debug, Clone)]
 pub struct PathTiming {
-    /// Grid positions s_i [p].
+    /// Grid positions s_i (p).
     s: Vec<f64>,
     /// Squared path speeds x_i = (ds/dt)^2 at the grid points [p^2/s^2].
     x: Vec<f64>,
-    /// Times at the grid points [s].
+    /// Times at the grid points (s).
     t: Vec<f64>,
 }
 
 /// Where the path is at one instant of a [`PathTiming`].
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PathPoint {
-    /// Time, clamped to the timing [s].
+    /// Time, clamped to the timing (s).
     pub t_s: f64,
-    /// Path position [p].
+    /// Path position (p).
     pub s: f64,
     /// Path speed s' [p/s].
     pub s_dot: f64,
@@ -68,12 +68,12 @@ pub struct PathPoint {
 }
 
 impl PathTiming {
-    /// Duration from rest to rest [s].
+    /// Duration from rest to rest (s).
     pub fn duration_s(&self) -> f64 {
         *self.t.last().unwrap_or(&0.0)
     }
 
-    /// Grid positions [p].
+    /// Grid positions (p).
     pub fn grid_s(&self) -> &[f64] {
         &self.s
     }
@@ -83,12 +83,12 @@ impl PathTiming {
         &self.x
     }
 
-    /// Times at the grid [s].
+    /// Times at the grid (s).
     pub fn times_s(&self) -> &[f64] {
         &self.t
     }
 
-    /// Path position, speed and acceleration at time `t` [s] (clamped to the timing): constant
+    /// Path position, speed and acceleration at time `t` (s) (clamped to the timing): constant
     /// acceleration between grid points.
     pub fn at(&self, t: f64) -> PathPoint {
         let t = t.clamp(0.0, self.duration_s());

@@ -4,7 +4,7 @@
 //! Job: check the varied keys against the resolved files (a key the cell or workpiece file does
 //! not hold, or holds as anything but a number, is bad input; an integer there makes the key an
 //! integer key, whose bounds must be whole); resolve each candidate through
-//! [`crate::sweep::resolve`] (the checks a cell file goes through: a candidate they refuse is
+//! [`crate::sweep::resolve`](mod@crate::sweep::resolve) (the checks a cell file goes through: a candidate they refuse is
 //! [`Outcome::Refused`], never run); run the round's new candidates as one study through
 //! [`crate::study::run_study`] (in parallel), answer repeated candidates and those in the
 //! [`Journal`] without running them, and append each candidate to the journal as soon as all its

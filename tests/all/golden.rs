@@ -2,7 +2,7 @@
 //!
 //! `tests/golden/` holds what `binpick batch --deterministic --seeds 1-2` (`takt.csv`,
 //! `takt.json`) and `binpick run --workpiece C --deterministic --picks 10` (`summary.json`,
-//! `picks.csv`, `events.json`) wrote before the architecture redesign (issue 13), with two
+//! `picks.csv`, `events.json`) wrote before the architecture redesign, with two
 //! stated differences: `picks.csv` quotes a reason that holds commas (the old file replaced the
 //! commas by spaces) and `takt.json` has no wall times in deterministic mode (they are
 //! measurements, not results). A refactoring must leave them byte-identical; a change that is

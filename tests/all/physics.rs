@@ -544,8 +544,8 @@ fn the_bellows_take_up_the_cups_overtravel_at_the_seal() {
 /// The arm's link boxes are in the world at their full size: a small volume just inside a box
 /// corner that no other shape of the arm covers finds the link there (checked against the robot
 /// model's primitives, in metres, by code independent of the physics' unit conversion), and the
-/// same volume just outside the corner finds nothing (negative control). Until issue 18 the boxes
-/// were built in metres in the millimetre world, a thousand times too small.
+/// same volume just outside the corner finds nothing (negative control). An earlier version built the boxes
+/// in metres in the millimetre world, a thousand times too small.
 #[test]
 fn the_arms_link_boxes_are_full_size_in_the_world() {
     use binpick::physics::ViewVolume;

@@ -319,7 +319,7 @@ fn the_nearest_pair_is_named_only_on_request_and_the_same() {
     assert!(named > 20, "only {named} configurations near anything");
 }
 
-/// Issue 14: the planner does not assume what it did not see. A hole in the height map (an
+/// The planner does not assume what it did not see. A hole in the height map (an
 /// occlusion: nothing seen over a 6 x 6 cm patch of the pick tray) with the top of a 5 cm part
 /// seen at its border hides that part. Left as a hole, the pile model certifies the tool's
 /// descent into it (the negative control: the old behaviour); filled, it refuses it, as the

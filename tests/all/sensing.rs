@@ -209,7 +209,7 @@ fn cloud_recognition_finds_the_top_layer_and_chosen_grasps_are_reachable_and_cle
 }
 
 /// The cloud recognition's floors on the pooled top-layer recall and the precision of seeds 1
-/// and 2, per workpiece A..F: regression guards a little below what it reaches. Issue 15's
+/// and 2, per workpiece A..F: regression guards a little below what it reaches. The recognition
 /// targets (recall 90 %, precision 99 %) are not all reached: flat E and F parts show a 7 px top
 /// face whose outline leaves the yaw open, and D's lying cans come out 5-7 deg off in yaw now and
 /// then; the README states both.

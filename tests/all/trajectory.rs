@@ -313,11 +313,11 @@ fn the_generic_retiming_takes_the_robots_constraints_and_more() {
     assert!(capped.path_speeds().iter().all(|x| x.sqrt() <= per_s * (1.0 + 1e-9)));
 }
 
-/// Issue 14: the chord bound that `CORRIDOR_CHECK_DT_S` documents holds on real accelerated
+/// The chord bound that `CORRIDOR_CHECK_DT_S` documents holds on real accelerated
 /// trajectories. Measured densely (every 0.1 ms), each joint's deviation from the chord between
 /// samples 10 ms apart stays within a dt^2 / 8 of the trajectory's own accelerations, and, with
 /// the specification caps, within the documented per-joint numbers for them. Without the caps
-/// (issue 16) the accelerations go above the specification somewhere, so only the trajectory's
+/// the accelerations go above the specification somewhere, so only the trajectory's
 /// own bound holds, and it does. The negative control: the bound is not loose (half of it is
 /// exceeded somewhere), and the old claim, "below 1 mrad", does not hold.
 #[test]
@@ -382,7 +382,7 @@ fn blends_deviate_from_their_chords_within_the_stated_bound() {
     assert!(worst_mrad > 1.0, "no joint strays 1 mrad from its chord: {worst_mrad}");
 }
 
-/// Issue 16 on the reference's five acceleration cases (`bench accel`'s paths, J1 turning
+/// Above the specification caps, on the reference's five acceleration cases (`bench accel`'s paths, J1 turning
 /// 180 deg, the hand with a 30 g part): with the specification caps some joint sits at its cap
 /// with torque to spare; without them the search takes that joint above its cap, the motion is
 /// faster, and re-checked at 1 kHz by Lagrange's equations every torque stays within its limit.

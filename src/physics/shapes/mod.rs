@@ -51,15 +51,15 @@ pub struct PartShape {
     /// The same geometry for rays (sensor, suction probes): boxes as cuboids, whose ray test is
     /// analytic and twice as fast as a polyhedron's.
     pub(super) view_shape: SharedShape,
-    /// Mass [kg].
+    /// Mass (kg).
     pub mass_kg: f64,
-    /// Centre of mass in the part frame [m].
+    /// Centre of mass in the part frame (m).
     pub com_m: Vector3<f64>,
     /// Inertia about the centre of mass, part axes [kg m^2].
     pub inertia_com_kg_m2: Matrix3<f64>,
-    /// Radius of the bounding sphere about the part origin [m].
+    /// Radius of the bounding sphere about the part origin (m).
     pub bounding_radius_m: f64,
-    /// Half extents of the bounding box [m].
+    /// Half extents of the bounding box (m).
     pub half_extents_m: Vector3<f64>,
     /// The convex pieces for the independent overlap check: the primitives' polytopes, or a
     /// mesh collider's convex pieces.
@@ -485,7 +485,7 @@ impl PartShape {
         Ok(built)
     }
 
-    /// The collider mesh workpieces had before issue 29, kept as the physics benchmark's
+    /// The collider mesh workpieces had before the part model, kept as the physics benchmark's
     /// baseline: parry's VHACD of the whole raw mesh with its default parameters (up to 1024
     /// pieces), the same pieces for rays, no pieces for the overlap check.
     pub fn from_mesh_raw_vhacd(workpiece: &Workpiece, mesh: &Mesh) -> Result<Self, ShapeError> {

@@ -1,11 +1,11 @@
 //! Silhouette fits in a patch's plane: the minimum-area rectangle's yaw, and the placements of a
 //! face's rectangle or disc that hold every inside point and no outside point. Coordinates are
-//! in the plane's basis [m]; yaws [rad].
+//! in the plane's basis (m); yaws (rad).
 
 use super::{FIT_AMBIGUITY_M, FIT_VIOLATION_M};
 
 /// Yaw of the minimum-area rectangle around the points (rotating calipers on the convex hull)
-/// [rad], in (-pi/2, pi/2].
+/// (rad), in (-pi/2, pi/2].
 pub(super) fn min_area_theta(pts: &[[f64; 2]]) -> f64 {
     let hull = convex_hull(pts);
     let mut best = (f64::INFINITY, 0.0);
@@ -21,8 +21,8 @@ pub(super) fn min_area_theta(pts: &[[f64; 2]]) -> f64 {
     best.1
 }
 
-/// The bounds of the points in the frame turned by `theta` [rad]: lowest and highest coordinate
-/// along each of its two axes [m].
+/// The bounds of the points in the frame turned by `theta` (rad): lowest and highest coordinate
+/// along each of its two axes (m).
 pub(super) fn bounds_at(pts: &[[f64; 2]], theta: f64) -> ([f64; 2], [f64; 2]) {
     let (c, s) = (theta.cos(), theta.sin());
     let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
@@ -67,18 +67,18 @@ pub(super) fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
 /// A rectangle's silhouette fit: the mean of the placements consistent with the silhouette.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct RectFit {
-    /// Centre in the plane basis [m].
+    /// Centre in the plane basis (m).
     pub center: [f64; 2],
-    /// Yaw of the rectangle's first axis in the plane basis [rad].
+    /// Yaw of the rectangle's first axis in the plane basis (rad).
     pub yaw_rad: f64,
-    /// Width of the range of consistent yaws [rad] (the scan's whole width if it reaches an end).
+    /// Width of the range of consistent yaws (rad) (the scan's whole width if it reaches an end).
     pub yaw_span_rad: f64,
 }
 
-/// Yaw step of the rectangle fit's scan [rad] and its half width in steps.
+/// Yaw step of the rectangle fit's scan (rad) and its half width in steps.
 const YAW_STEP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 const YAW_STEPS: i32 = 20;
-/// Grid of candidate centres of the rectangle fit [m].
+/// Grid of candidate centres of the rectangle fit (m).
 const CELL_M: f64 = 0.0001;
 /// ... coarser if the centres' box would need more cells than this per axis.
 const MAX_CELLS: usize = 40;

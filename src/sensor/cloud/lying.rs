@@ -12,21 +12,21 @@ use rayon::prelude::*;
 use super::CloudModel;
 use crate::config::Piece;
 
-/// A point this close to the cylinder's surface is on it [m] (the fit starts looser).
+/// A point this close to the cylinder's surface is on it (m) (the fit starts looser).
 const ON_SURFACE_M: f64 = 0.0008;
-/// Length left out at each end of the points along the axis (a base that is not round) [m].
+/// Length left out at each end of the points along the axis (a base that is not round) (m).
 const END_TRIM_M: f64 = 0.0015;
 /// Points farther along the axis than the part's half length and this from the start are not
-/// on it [m].
+/// on it (m).
 const ALONG_MARGIN_M: f64 = 0.001;
 /// Fewest points for a fit.
 const MIN_POINTS: usize = 12;
 /// Gauss-Newton iterations of the fit.
 const ITERATIONS: usize = 10;
-/// Turns about the axis tried [rad] (a quarter turn in these steps: D's base is square).
+/// Turns about the axis tried (rad) (a quarter turn in these steps: D's base is square).
 pub(super) const ROLL_STEP_RAD: f64 = 15.0 * std::f64::consts::PI / 180.0;
 
-/// The body cylinder of a model: centre, unit axis, radius (part frame) [m].
+/// The body cylinder of a model: centre, unit axis, radius (part frame) (m).
 pub(super) fn body_cylinder(model: &CloudModel) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
     model.pieces.iter().zip(&model.lead).find_map(|(p, lead)| match *p {
         Piece::Cylinder {
@@ -42,15 +42,15 @@ pub(super) fn body_cylinder(model: &CloudModel) -> Option<(Vector3<f64>, Vector3
 /// A cylinder's axis fitted to measured points.
 #[derive(Debug, Clone, Copy)]
 pub(super) struct AxisFit {
-    /// A point on the axis (world) [m].
+    /// A point on the axis (world) (m).
     pub point: Vector3<f64>,
     /// The axis direction (unit, world).
     pub axis: Vector3<f64>,
-    /// Standard error of the axis direction [rad] (both turns across it, root sum of squares).
+    /// Standard error of the axis direction (rad) (both turns across it, root sum of squares).
     pub sigma_rad: f64,
-    /// RMS distance of the points on the surface to it [m].
+    /// RMS distance of the points on the surface to it (m).
     pub rms_m: f64,
-    /// Range along the axis of the points on (or near) the surface, from `point` [m].
+    /// Range along the axis of the points on (or near) the surface, from `point` (m).
     pub along_m: [f64; 2],
     /// Points on the surface used.
     pub count: usize,
@@ -60,7 +60,7 @@ pub(super) struct AxisFit {
 
 /// The fits of different axes (one lying part makes several patches): the fits in order of
 /// points used (then given order), less those whose axis is within 3 degrees of and passes
-/// within 1.5 mm of a kept one's point, that point within the part's length [m].
+/// within 1.5 mm of a kept one's point, that point within the part's length (m).
 pub(super) fn distinct(mut fits: Vec<AxisFit>, length_m: f64) -> Vec<AxisFit> {
     fits.sort_by_key(|f| std::cmp::Reverse(f.count));
     let mut kept: Vec<AxisFit> = Vec::new();
@@ -78,7 +78,7 @@ pub(super) fn distinct(mut fits: Vec<AxisFit>, length_m: f64) -> Vec<AxisFit> {
     kept
 }
 
-/// Two axes closer than these are one [rad], [m].
+/// Two axes closer than these are one (rad), (m).
 const SAME_AXIS_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
 const SAME_AXIS_M: f64 = 0.0015;
 
@@ -166,7 +166,7 @@ pub(super) fn fit_axis(
     Some(fit)
 }
 
-/// The part's extent along its body cylinder's axis, from its origin [m].
+/// The part's extent along its body cylinder's axis, from its origin (m).
 pub(super) fn extent_along(model: &CloudModel, a_part: &Vector3<f64>) -> [f64; 2] {
     let lo = -model
         .pieces
@@ -207,17 +207,17 @@ pub(super) fn pose_on_axis(
     Isometry3::from_parts(Translation3::from(t), rot)
 }
 
-/// Largest standard error of a lying part's fitted axis reported [rad] (precision first: the
+/// Largest standard error of a lying part's fitted axis reported (rad) (precision first: the
 /// error bar is 5 degrees).
 pub const AXIS_SIGMA_MAX_RAD: f64 = 4.0 * std::f64::consts::PI / 180.0;
-/// Largest RMS distance of the points to the fitted cylinder [m].
+/// Largest RMS distance of the points to the fitted cylinder (m).
 const FIT_RMS_MAX_M: f64 = 0.0003;
-/// The station along the axis must be pinned: moved by this either way [m] ...
+/// The station along the axis must be pinned: moved by this either way (m) ...
 const STATION_PROBE_M: f64 = 0.0015;
-/// ... the evidence must drop by at least this [px]; and the part the other way round must
+/// ... the evidence must drop by at least this (px); and the part the other way round must
 /// have this much less.
 pub const PIN_MARGIN_PX: i64 = 3;
-/// Step of the station scan along the axis [m] and its half width in steps.
+/// Step of the station scan along the axis (m) and its half width in steps.
 const STATION_STEP_M: f64 = 0.0005;
 const STATION_STEPS: i32 = 3;
 

@@ -1,5 +1,5 @@
 //! Recognition from the point cloud: parts found in a depth capture from the capture alone, the
-//! workpiece model and the fixed cell (issue 15). It never sees the physics world: its inputs are
+//! workpiece model and the fixed cell. It never sees the physics world: its inputs are
 //! [`Capture`] (depth and organised points), [`Camera`], [`TrayVolume`] and [`CloudModel`].
 //!
 //! Pipeline: (1) background removal: points within [`FLOOR_TOL_M`] of the tray floor or outside
@@ -30,7 +30,7 @@
 //! turn about the axis and the station along it, reported only if the other way round and the
 //! station moved either way have `lying::PIN_MARGIN_PX` less evidence ([`CloudDetection::curved_side_up`]).
 //!
-//! Precision first: a pose the image does not pin down is not reported. Limits (issue 15):
+//! Precision first: a pose the image does not pin down is not reported. Limits:
 //! - a flat-lying E or F shows one 7 px face and no side (its sides are past the sensor's
 //!   grazing dropout): its yaw is open by 5-20 degrees in most cases, so most are not reported;
 //! - a relay (A) on its back whose 1 mm pins no pixel hit looks like one on its face: it is
@@ -56,28 +56,28 @@ use crate::config::{PartRole, Piece, ShapeKind, Workpiece};
 use crate::geometry::TrayVolume;
 use crate::part::primitive::{Face, body_faces};
 
-/// Points lower than this above the tray floor are background [m]: depth noise is 0.3 mm at 1 m.
+/// Points lower than this above the tray floor are background (m): depth noise is 0.3 mm at 1 m.
 pub const FLOOR_TOL_M: f64 = 0.0012;
-/// A pixel joins a patch when its point lies this close to the patch's plane [m].
+/// A pixel joins a patch when its point lies this close to the patch's plane (m).
 pub const PLANE_TOL_M: f64 = 0.001;
-/// ... and its local normal lies within this of the plane's [rad].
+/// ... and its local normal lies within this of the plane's (rad).
 pub const NORMAL_TOL_RAD: f64 = 0.6;
-/// A neighbour measured this far behind a patch's plane shows the ray passed the face [m].
+/// A neighbour measured this far behind a patch's plane shows the ray passed the face (m).
 pub const BEHIND_TOL_M: f64 = 0.0015;
-/// Rendered and measured depth agree within this [m].
+/// Rendered and measured depth agree within this (m).
 pub const AGREE_TOL_M: f64 = 0.001;
-/// Smallest patch considered [px].
+/// Smallest patch considered (px).
 pub const MIN_PATCH_PX: usize = 8;
-/// A silhouette fit may violate its constraints by this much (plane error) [m].
+/// A silhouette fit may violate its constraints by this much (plane error) (m).
 pub const FIT_VIOLATION_M: f64 = 0.0006;
-/// A silhouette fit whose feasible interval is wider than this does not pin the part down [m].
+/// A silhouette fit whose feasible interval is wider than this does not pin the part down (m).
 pub const FIT_AMBIGUITY_M: f64 = 0.0025;
 pub use crate::config::YAW_SPAN_MAX_RAD;
-/// Two hypotheses closer than this (and [`SAME_POSE_RAD`]) are the same [m].
+/// Two hypotheses closer than this (and [`SAME_POSE_RAD`]) are the same (m).
 pub const SAME_POSE_M: f64 = 0.002;
-/// Two hypotheses closer than this (and [`SAME_POSE_M`]) are the same [rad].
+/// Two hypotheses closer than this (and [`SAME_POSE_M`]) are the same (rad).
 pub const SAME_POSE_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
-/// A hypothesis reaching this far under the tray floor is impossible [m].
+/// A hypothesis reaching this far under the tray floor is impossible (m).
 pub const UNDER_FLOOR_M: f64 = 0.001;
 /// A different pose supported by at most this many fewer pixels than the best makes a patch
 /// ambiguous. 0: ties only (on A over seeds 1-8, 3 trades 6 wrong detections for 3 and recall
@@ -98,7 +98,7 @@ pub struct CloudModel {
     pieces: Vec<Piece>,
     /// Per piece: a lead (thin: a ray grazing it may miss it when the pose is slightly off).
     lead: Vec<bool>,
-    /// Half the bounding box [m].
+    /// Half the bounding box (m).
     half_size_m: Vector3<f64>,
     /// Whether a half turn about a face's normal can change the part (compounds: leads, bases).
     half_turn_matters: bool,
@@ -106,7 +106,7 @@ pub struct CloudModel {
     symmetry: Symmetry,
     /// Its body has a cylinder it can lie on: hypotheses on the curved side are tried.
     round_side: bool,
-    /// A face whose outline leaves its yaw open by more than this is no hypothesis [rad].
+    /// A face whose outline leaves its yaw open by more than this is no hypothesis (rad).
     pub yaw_span_max_rad: f64,
     /// A mesh workpiece's surface, rendered instead of `pieces` (which are then empty).
     mesh: Option<std::sync::Arc<render::MeshView>>,
@@ -261,7 +261,7 @@ impl CloudModel {
         dp <= SAME_POSE_M && dr <= SAME_POSE_RAD
     }
 
-    /// Smallest edge of the bounding box [m].
+    /// Smallest edge of the bounding box (m).
     fn min_size_m(&self) -> f64 {
         2.0 * self.half_size_m.min()
     }
@@ -327,20 +327,20 @@ struct Cloud<'a> {
     optical: Vector3<f64>,
     /// World point per pixel (NaN: no return).
     pts: Vec<Vector3<f64>>,
-    /// Depth per pixel, 0 where no return [m].
+    /// Depth per pixel, 0 where no return (m).
     depth: Vec<f64>,
     /// Foreground: a return inside the tray's inner walls, above the floor.
     fg: Vec<bool>,
     /// Local normal toward the camera (zero where not computable).
     normal: Vec<Vector3<f64>>,
-    /// Height above the tray floor [m].
+    /// Height above the tray floor (m).
     height: Vec<f64>,
     /// The tray floor: a point and the upward normal (world).
     floor: Plane,
 }
 
 /// A patch's plane, its in-plane basis (e1, e2), the in-plane points of its pixels' rays (inside)
-/// and of the neighbours seen behind the plane (outside) [m].
+/// and of the neighbours seen behind the plane (outside) (m).
 type Silhouette = (Plane, [Vector3<f64>; 2], Vec<[f64; 2]>, Vec<[f64; 2]>);
 
 /// A smooth surface patch: its pixels.

@@ -1,6 +1,6 @@
 //! Rendering of the workpiece model by ray casting: the entry distance of a ray into the model's
 //! boxes and cylinders, or into a mesh workpiece's triangle mesh (parry's bounding-volume tree,
-//! in millimetres and single precision), in the part frame [m].
+//! in millimetres and single precision), in the part frame (m).
 
 use nalgebra::{Point3, Vector3};
 

@@ -112,7 +112,7 @@ impl Symmetry {
         }
     }
 
-    /// Position [m] and rotation [rad] error of `estimate` against `truth`, the least over the
+    /// Position (m) and rotation (rad) error of `estimate` against `truth`, the least over the
     /// symmetries.
     pub fn pose_error(&self, truth: &Isometry3<f64>, estimate: &Isometry3<f64>) -> (f64, f64) {
         let dp = (truth.translation.vector - estimate.translation.vector).norm();

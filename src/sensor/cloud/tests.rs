@@ -304,7 +304,7 @@ fn recognition_is_deterministic() {
 }
 
 /// D's can lying on its side alone on the floor, at yaws and turns about its axis: found on its
-/// curved side within 2 mm and 5 degrees (issue 15's bar; the can's axis and which end is the
+/// curved side within 2 mm and 5 degrees (the recognition bar; the can's axis and which end is the
 /// base count, its turn about the axis does not).
 #[test]
 fn a_can_lying_on_its_side_is_found() {
