@@ -1,7 +1,7 @@
 #!/bin/bash
-# Runs the README's Slurm job-array example for sweeps on a real scheduler: a single-node Slurm
+# Runs the Slurm job-array example for sweeps (docs/studies.md) on a real scheduler: a single-node Slurm
 # (Debian's slurm-wlm, with munge) on this machine, set up here if it is not running; then the
-# job array (scripts/slurm-sweep-job.sh, as the README shows it), the merge as a dependent job,
+# job array (scripts/slurm-sweep-job.sh, as docs/studies.md shows it), the merge as a dependent job,
 # and one local run of the same sweep; the merged sweep.csv must equal the local one byte for byte.
 #
 # Usage (as root, on Debian 12): scripts/slurm-sweep-example.sh [BINPICK_BINARY]
@@ -56,7 +56,7 @@ CONF
 fi
 sinfo
 
-# --- the README's example, as written -------------------------------------------------------------
+# --- the documented example, as written ----------------------------------------------------------
 work=$(mktemp -d /tmp/binpick-slurm.XXXXXX)
 mkdir -p "$work/runs" "$work/bin"
 mkdir -p /shared

@@ -1,5 +1,5 @@
 #!/bin/bash
-# The README's job-array example for sweeps (README "Batches, shards and merges"): four shards of
+# The job-array example for sweeps (docs/studies.md, "Slurm"): four shards of
 # one sweep, one array task each; `binpick merge` joins them once all four have finished.
 #SBATCH --job-name=binpick-sweep
 #SBATCH --array=1-4

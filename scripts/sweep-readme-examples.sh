@@ -1,5 +1,6 @@
 #!/bin/bash
-# The README's three sweep examples (README "Sweeps"), as they were run for its tables and charts.
+# The three sweep examples of docs/studies.md ("Sweep examples"), as they were run for its tables
+# and charts (each folder's sweep.svg is copied to docs/sweep/).
 # Usage: scripts/sweep-readme-examples.sh [OUT_DIR] (default runs/); binpick on PATH or $BINPICK.
 set -euo pipefail
 bp=${BINPICK:-binpick}
