@@ -167,6 +167,7 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
             seed: *seed,
             deterministic: spec.deterministic,
             picks: spec.picks,
+            robot_description: variant.scene.urdf_text.clone(),
         };
         let name = if several {
             format!("run-v{}-{w}-seed{seed}", v + 1)

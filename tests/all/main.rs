@@ -14,6 +14,7 @@ mod mesh_export;
 mod physics;
 mod planning;
 mod recording;
+mod recording_urdf;
 mod scenario;
 mod sensing;
 mod servo;
