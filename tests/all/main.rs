@@ -15,6 +15,7 @@ mod physics;
 mod planning;
 mod recording;
 mod recording_urdf;
+mod report_html;
 mod scenario;
 mod sensing;
 mod servo;
