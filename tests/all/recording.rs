@@ -579,7 +579,7 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let summary = mcap::read::Summary::read(&bytes)
         .unwrap()
         .expect("finished: a summary section");
-    assert_eq!(summary.channels.len(), 16);
+    assert_eq!(summary.channels.len(), 17);
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1);
