@@ -201,8 +201,8 @@ fn markdown_html(md: &str) -> String {
             continue;
         }
         if let Some(h) = line.strip_prefix('#') {
-            // `#` -> h2 (the page's h1 is its title), `##` -> h3, deeper -> h4.
-            let level = 2 + h.chars().take_while(|c| *c == '#').count().min(2);
+            // Under the page's section headings (h2): `#` -> h3, deeper -> h4.
+            let level = 3 + h.chars().take_while(|c| *c == '#').count().min(1);
             let _ = writeln!(out, "<h{level}>{}</h{level}>", inline(h.trim_start_matches('#').trim()));
         } else if is_item {
             if !list {
@@ -298,7 +298,7 @@ pub fn page_html(p: &Page<'_>) -> String {
     if !p.runs.is_empty() {
         out += "<section id=\"runs\">\n<h2>Runs</h2>\n";
         if p.runs.iter().all(|r| r.files.is_empty()) {
-            out += "<p class=\"empty\">No run kept its time chart or recordings (a batch keeps them with <code>--record</code>; <code>binpick run</code> writes them for one run).</p>\n";
+            out += "<p class=\"empty\">No run of this study kept its time chart or recordings (<code>binpick batch --record</code> keeps them for each run; <code>binpick run</code> writes them for one run).</p>\n";
         } else {
             runs_table(&mut out, p.runs);
         }
@@ -327,7 +327,7 @@ mod tests {
     fn markdown_tables_lists_and_headings_become_html() {
         let md = "# tune of A\n\nsome `key` text & more\n\n| a | b |\n|---|--:|\n| 1 | <2> |\n\n- one\n- two\n";
         let h = markdown_html(md);
-        assert!(h.contains("<h2>tune of A</h2>"), "{h}");
+        assert!(h.contains("<h3>tune of A</h3>"), "{h}");
         assert!(h.contains("<p>some <code>key</code> text &amp; more</p>"), "{h}");
         assert!(h.contains("<thead><tr><th>a</th><th>b</th></tr></thead>"), "{h}");
         assert!(h.contains("<tr><td>1</td><td>&lt;2&gt;</td></tr>"), "{h}");

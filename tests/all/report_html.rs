@@ -226,7 +226,7 @@ fn batch_sweep_and_tune_pages_are_well_formed_and_link_what_exists() {
     let (html, facts) = page(&dir);
     assert_eq!(facts.sections, ["guide", "tables", "charts", "runs", "files"]);
     assert_eq!(facts.elements["svg"], 1, "sweep.svg inline");
-    assert!(html.contains("No run kept its time chart"));
+    assert!(html.contains("No run of this study kept its time chart"));
     assert!(
         facts.links.iter().any(|l| l == "variant-2/scene.toml"),
         "{:?}",
