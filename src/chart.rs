@@ -107,23 +107,59 @@ impl crate::cycle::Observer for TimeChart {
     }
 }
 
+/// Whether a span keeps a window from showing the steady state: a refill, an agitation and the
+/// pile's settling, a wait for the sensor (at the waiting pose or stalled), a fault's reset.
+/// Short waits for compute are part of the steady state and do not count.
+fn disturbs_steady_state(span: &Span) -> bool {
+    match span.lane {
+        Lane::Agitation | Lane::WaitingPose => true,
+        Lane::Stall => span.label != "waiting for compute",
+        _ => false,
+    }
+}
+
+/// Margin drawn before the first and after the last release of a steady-state window (s).
+const STEADY_MARGIN_S: f64 = 0.2;
+
 impl TimeChart {
     /// The run's time chart over its whole length (`end_s` of simulation time), and a close-up
-    /// of three takts in the steady state (from the release before the middle one of
-    /// `releases_s`), as SVG documents.
+    /// of three takts in the steady state, as SVG documents. The close-up spans four
+    /// consecutive releases of `releases_s` (after the first takt) in which the cell neither
+    /// refills, agitates, waits for the sensor nor resets a fault, the one nearest the middle of
+    /// the run; a run without such a window shows its middle three takts and says so in the
+    /// title. No close-up for a run of fewer than five releases.
     pub fn svgs(&self, title: &str, end_s: f64, releases_s: &[f64]) -> (String, Option<String>) {
         let whole = time_chart_svg(title, &self.spans, &self.markers, 0.0, end_s);
         let steady = (releases_s.len() >= 5).then(|| {
-            let i = releases_s.len() / 2 - 1;
-            let t0 = releases_s[i] - 0.2;
-            let t1 = releases_s[(i + 3).min(releases_s.len() - 1)] + 0.2;
-            time_chart_svg(
-                &format!("{title}: three takts in the steady state"),
-                &self.spans,
-                &self.markers,
-                t0,
-                t1,
-            )
+            let window = |i: usize| {
+                (
+                    releases_s[i] - STEADY_MARGIN_S,
+                    releases_s[(i + 3).min(releases_s.len() - 1)] + STEADY_MARGIN_S,
+                )
+            };
+            let clean = |i: usize| {
+                let (t0, t1) = window(i);
+                !self
+                    .spans
+                    .iter()
+                    .any(|s| disturbs_steady_state(s) && s.end_s > t0 && s.start_s < t1 && s.end_s > s.start_s)
+                    && !self
+                        .markers
+                        .iter()
+                        .any(|m| m.label == "fault" && m.t_s > t0 && m.t_s < t1)
+            };
+            let middle = releases_s.len() / 2 - 1;
+            let mut starts: Vec<usize> = (1..releases_s.len() - 3).collect();
+            starts.sort_by_key(|i| i.abs_diff(middle));
+            let (i, caption) = match starts.into_iter().find(|i| clean(*i)) {
+                Some(i) => (i, "three takts in the steady state (no refill, agitation or wait for the sensor)"),
+                None => (
+                    middle,
+                    "three takts in the middle of the run (it has none without a refill, an agitation or a wait for the sensor)",
+                ),
+            };
+            let (t0, t1) = window(i);
+            time_chart_svg(&format!("{title}: {caption}"), &self.spans, &self.markers, t0, t1)
         });
         (whole, steady)
     }
@@ -384,6 +420,48 @@ mod tests {
         let svg = time_chart_svg("", &spans, &[], 3.0, 3.0);
         assert!(svg.contains(">3.0</text>") && svg.contains(">4.0</text>") && !svg.contains(">4.1</text>"));
         assert_eq!(svg.matches("class=\"span\"").count(), 1);
+    }
+
+    /// Releases every 2 s from 1 s; a chart with an agitation in `disturbed` takts' windows.
+    fn steady_title(disturbed: &[(f64, f64)], releases: usize) -> String {
+        let releases_s: Vec<f64> = (0..releases).map(|k| 1.0 + 2.0 * k as f64).collect();
+        let mut chart = TimeChart::default();
+        for (a, b) in disturbed {
+            chart.spans.push(span(Lane::Agitation, *a, *b, "agitation"));
+        }
+        chart.spans.push(span(Lane::Stall, 4.0, 4.1, "waiting for compute"));
+        let (_, steady) = chart.svgs("t", 30.0, &releases_s);
+        let steady = steady.expect("a close-up");
+        let title = &steady[steady.find("font-size=\"16\">").unwrap() + 16..];
+        title[..title.find('<').unwrap()].to_string()
+    }
+
+    #[test]
+    fn the_steady_close_up_avoids_disturbances_or_says_there_is_none() {
+        // Nine releases (1, 3, ..., 17 s): windows start at releases 1 to 5; the middle is 3 (7 s).
+        let clean = steady_title(&[], 9);
+        assert!(
+            clean.ends_with("(no refill, agitation or wait for the sensor)"),
+            "{clean}"
+        );
+        // An agitation at 8 s spoils the windows from releases 1 to 3 (3-9, 5-11, 7-13 s):
+        // the close-up moves to release 4 (9 s).
+        let chart = {
+            let mut c = TimeChart::default();
+            c.spans.push(span(Lane::Agitation, 8.0, 8.5, "agitation"));
+            c
+        };
+        let releases_s: Vec<f64> = (0..9).map(|k| 1.0 + 2.0 * k as f64).collect();
+        let (_, steady) = chart.svgs("t", 30.0, &releases_s);
+        let steady = steady.unwrap();
+        assert!(
+            steady.contains(">9.0</text>") && !steady.contains(">8.0</text>"),
+            "starts after 8 s"
+        );
+        assert!(!steady.contains("class=\"span\""), "nothing disturbs the window shown");
+        // Disturbances everywhere: the middle three takts, and the title says so.
+        let none = steady_title(&[(5.0, 5.5), (10.0, 10.5), (12.5, 13.5)], 9);
+        assert!(none.contains("it has none without a refill"), "{none}");
     }
 
     #[test]

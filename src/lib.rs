@@ -29,10 +29,12 @@
 //!     summarised), the takt table's columns, listed once for Markdown, CSV and JSON, and a
 //!     batch's expected limits (`--expect`, JUnit XML);
 //!     [`report`]: run folders, written all-or-nothing with the resolved inputs beside the
-//!     results, and the per-pick tables; [`chart`]: the cycle's time chart (SVG).
+//!     results, the per-pick tables and a study's page (`report.html`); [`chart`]: the cycle's
+//!     time chart (SVG).
 //! 13. [`study`]: many cell runs, one table: the spec (variants x workpieces x seeds x picks x
-//!     mode), the parallel runner, shards and their merge; its front ends [`batch`] (the cell
-//!     as given: the takt-time table) and [`sweep`] (variants of the cell and workpiece files);
+//!     mode), the parallel runner, shards and their merge, its page; its front ends [`batch`]
+//!     (the cell as given: the takt-time table) and [`sweep`] (variants of the cell and workpiece
+//!     files);
 //!     [`tune`], the third front end: an optimizer picks each round's variants, judged on test
 //!     seeds it never evaluated.
 //!

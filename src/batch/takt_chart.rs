@@ -2,6 +2,13 @@
 //! min–max, the reference's takt and the physical floor as marks; success beside it), drawn
 //! with the shared helpers of [`crate::svg`].
 //!
+//! The takt axis is scaled to the means, the references and the floors, not to the longest
+//! interval: one interval that spans a tray refill (ten times the takt) would squash the means
+//! at the bottom. When a maximum or a 95th percentile lies beyond 1.25 times that scale
+//! ([`CUT_FACTOR`] times the largest mean, reference or floor), the axis is cut there: whisker
+//! and box end at the top edge, a red triangle marks a maximum beyond it with its value written
+//! above, and a note under the chart says where the axis is cut.
+//!
 //! Units: s on the takt axis, % on the success axis; SVG user units (px) for the drawing.
 
 use std::fmt::Write;
@@ -31,6 +38,12 @@ pub struct TaktBar {
     pub success: f64,
 }
 
+/// The takt axis reaches this many times the largest mean, reference or floor when it is cut.
+pub const CUT_FACTOR: f64 = 1.6;
+
+/// The plots' top edge (px): room above for the legend and the values beyond a cut axis.
+const PLOT_TOP: f64 = 84.0;
+
 /// `takt.svg`: per workpiece the takt (mean as a dot, p5–p95 as a box, min–max as a whisker),
 /// the reference's takt (a black diamond) and the physical floor (a dashed bar); success [%] in
 /// a panel beside it.
@@ -39,17 +52,26 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
     let slot = 90.0;
     let takt_w = (slot * n).max(360.0);
     let width = 90.0 + takt_w + 90.0 + (48.0 * n).max(200.0) + 40.0;
-    let height = 460.0;
+    let height = PLOT_TOP + 400.0;
     let mut svg = open(width, height, title);
-    let top = bars
+    let finite = |v: &f64| v.is_finite();
+    let data_top = bars
         .iter()
         .flat_map(|b| [b.max_s, b.p95_s, b.reference_s.unwrap_or(0.0), b.floor_s.unwrap_or(0.0)])
-        .filter(|v| v.is_finite())
+        .filter(finite)
         .fold(1.0, f64::max);
-    let (yt, _, y_hi) = ticks(0.0, top * 1.05, 6.0);
+    let core_top = CUT_FACTOR
+        * bars
+            .iter()
+            .flat_map(|b| [b.mean_s, b.reference_s.unwrap_or(0.0), b.floor_s.unwrap_or(0.0)])
+            .filter(finite)
+            .fold(0.0, f64::max);
+    // Cut only when something lies well beyond the means' scale.
+    let cut = core_top > 0.0 && data_top > 1.25 * core_top;
+    let (yt, _, y_hi) = ticks(0.0, if cut { core_top } else { data_top * 1.05 }, 6.0);
     let plot = Plot {
         x0: 90.0,
-        y0: 70.0,
+        y0: PLOT_TOP,
         w: takt_w,
         h: 320.0,
         x_range: (0.0, n),
@@ -74,12 +96,13 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
                 "no takt (fewer than two parts placed in a run)".into()
             }
         );
+        let clip = |v: f64| v.min(y_hi);
         if b.min_s.is_finite() && b.max_s.is_finite() {
             let _ = writeln!(
                 svg,
                 r##"<line x1="{cx:.1}" y1="{:.1}" x2="{cx:.1}" y2="{:.1}" stroke="#666"/>"##,
-                plot.y(b.min_s),
-                plot.y(b.max_s)
+                plot.y(clip(b.min_s)),
+                plot.y(clip(b.max_s))
             );
         }
         if b.p5_s.is_finite() && b.p95_s.is_finite() {
@@ -87,8 +110,27 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
                 svg,
                 r##"<rect x="{:.1}" y="{:.1}" width="28" height="{:.1}" fill="{c}" fill-opacity="0.35" stroke="{c}"/>"##,
                 cx - 14.0,
-                plot.y(b.p95_s),
-                (plot.y(b.p5_s) - plot.y(b.p95_s)).max(1.0)
+                plot.y(clip(b.p95_s)),
+                (plot.y(clip(b.p5_s)) - plot.y(clip(b.p95_s))).max(1.0)
+            );
+        }
+        // Values beyond the cut axis: a triangle on the top edge, the maximum written above it
+        // (the box reaching the edge shows a 95th percentile beyond it; the tooltip says which).
+        if b.max_s.is_finite() && b.max_s > y_hi {
+            let _ = writeln!(
+                svg,
+                r##"<g class="beyond"><title>{}: beyond the axis: {}max {:.2} s</title><path d="M{:.1} {:.1} l7 10 l-14 0 z" fill="#c00"/><text x="{cx:.1}" y="{:.1}" text-anchor="middle" class="note" fill="#c00">max {:.1}</text></g>"##,
+                escape(&b.workpiece),
+                if b.p95_s > y_hi {
+                    format!("p95 {:.2} s, ", b.p95_s)
+                } else {
+                    String::new()
+                },
+                b.max_s,
+                cx,
+                plot.y0 - 1.0,
+                plot.y0 - 5.0,
+                b.max_s
             );
         }
         if b.mean_s.is_finite() {
@@ -127,6 +169,14 @@ pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
     }
     success_panel(&mut svg, &plot, bars);
     legend(&mut svg);
+    if cut {
+        let _ = writeln!(
+            svg,
+            r##"<text x="{:.1}" y="{:.1}" class="note" fill="#c00">Axis cut at {y_hi:.0} s to keep the means readable: a red triangle marks a maximum beyond it (its value above), e.g. an interval spanning a tray refill.</text>"##,
+            plot.x0,
+            height - 10.0
+        );
+    }
     svg += "</svg>\n";
     svg
 }
@@ -154,7 +204,7 @@ fn success_panel(svg: &mut String, plot: &Plot, bars: &[TaktBar]) {
     let (st, _, _) = ticks(0.0, 100.0, 5.0);
     let sp = Plot {
         x0: plot.x0 + plot.w + 90.0,
-        y0: 70.0,
+        y0: PLOT_TOP,
         w: (48.0 * n).max(200.0),
         h: 320.0,
         x_range: (0.0, n),
@@ -201,4 +251,59 @@ fn legend(svg: &mut String) {
         ly + 4.0,
         ly + 4.0
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn bar(w: &str, mean_s: f64, max_s: f64) -> TaktBar {
+        TaktBar {
+            workpiece: w.into(),
+            mean_s,
+            p5_s: mean_s * 0.8,
+            p95_s: mean_s * 1.3,
+            min_s: mean_s * 0.7,
+            max_s,
+            reference_s: Some(2.7),
+            floor_s: Some(mean_s * 0.8),
+            success: 1.0,
+        }
+    }
+
+    /// The label of the takt axis's top tick (its ticks come bottom to top, before its label).
+    fn top_tick(svg: &str) -> f64 {
+        let axis = svg.find(">takt [s]<").expect("the takt axis");
+        let last = svg[..axis].rfind("class=\"tick\">").expect("ticks");
+        let rest = &svg[last + 13..];
+        rest[..rest.find('<').unwrap()].parse().unwrap()
+    }
+
+    #[test]
+    fn a_refill_interval_ten_times_the_takt_cuts_the_axis_and_is_marked() {
+        // Means 1.4 to 3.9 s, one maximum of 20 s: the axis stops near the means.
+        let bars = [bar("A", 1.4, 2.0), bar("B", 3.9, 20.3), bar("C", 2.0, 2.6)];
+        let svg = takt_svg("t", &bars);
+        let top = top_tick(&svg);
+        assert!((3.9..=8.0).contains(&top), "axis top {top} s");
+        assert_eq!(svg.matches("class=\"beyond\"").count(), 1, "one bar has a value beyond");
+        assert!(svg.contains(">max 20.3</text>"), "the value is written");
+        assert!(svg.contains("Axis cut at"));
+        // No whisker runs above the plot's top edge.
+        for line in svg
+            .lines()
+            .filter(|l| l.starts_with("<line x1=\"") && l.contains("stroke=\"#666\""))
+        {
+            for k in ["y1=\"", "y2=\""] {
+                let i = line.find(k).unwrap() + k.len();
+                let y: f64 = line[i..i + line[i..].find('"').unwrap()].parse().unwrap();
+                assert!(y >= PLOT_TOP - 1e-9, "{line}");
+            }
+        }
+        // Negative control: without the outlier the axis is not cut and nothing is marked.
+        let calm = [bar("A", 1.4, 2.0), bar("B", 3.9, 5.0), bar("C", 2.0, 2.6)];
+        let svg = takt_svg("t", &calm);
+        assert!(!svg.contains("class=\"beyond\"") && !svg.contains("Axis cut at"));
+        assert!(top_tick(&svg) >= 5.0, "the whole range is shown");
+    }
 }

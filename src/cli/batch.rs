@@ -18,7 +18,8 @@ use binpick::study::{Resolved, StudySpec};
 pub struct BatchArgs {
     #[command(flatten)]
     pub study: StudyArgs,
-    /// Record every run: `run-<workpiece>-seed<seed>.rrd` and `.mcap` in the batch folder.
+    /// Record every run: `run-<workpiece>-seed<seed>.rrd` and `.mcap`, and its time charts
+    /// (`.timechart.svg`, `.timechart-steady.svg`), in the batch folder (linked from report.html).
     #[arg(long)]
     pub record: bool,
     /// Print the full table (every column of takt.md) instead of the terminal's short one.

@@ -96,6 +96,7 @@ pub fn run(a: &RunArgs) -> Result<()> {
             seed,
             deterministic,
             picks: a.picks,
+            robot_description: loaded.urdf_text.clone(),
         };
         binpick::recording::write_recordings(
             run.staging_dir(),

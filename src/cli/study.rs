@@ -191,16 +191,12 @@ pub fn wrap(text: &str, width: usize) -> String {
 /// `takt.junit.xml`), moves the folder into place and prints the table; an interrupted run makes
 /// it exit 130, a run ended on a physics fault 3, a missed limit 1.
 pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, how: Finish) -> Result<()> {
-    let Outputs {
-        files,
-        markdown: md,
-        table,
-    } = if file.spec.is_batch() {
+    let outputs = if file.spec.is_batch() {
         binpick::batch::outputs(file)
     } else {
         binpick::sweep::outputs(file)
     };
-    for (name, text) in &files {
+    for (name, text) in &outputs.files {
         dir.write(name, text)?;
     }
     let rows = file.spec.is_batch().then(|| binpick::batch::table(file));
@@ -212,6 +208,14 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, how: Finish) -> 
         }
         _ => Vec::new(),
     };
+    // The page last: it links the files written before it.
+    dir.write(
+        "report.html",
+        binpick::study::report_html(file, &outputs, dir.staging_dir()),
+    )?;
+    let Outputs {
+        markdown: md, table, ..
+    } = outputs;
     let dest = dir.finish()?;
     let done = || -> Result<()> {
         if file.runs.iter().any(|r| r.tally.ended == Some(EndReason::Interrupted)) {
@@ -351,7 +355,9 @@ fn copy_inputs(from: &Path, dir: &RunDir, sub: &str) -> Result<()> {
         if entry.file_type()?.is_dir() {
             std::fs::create_dir_all(dir.path(&rel))?;
             copy_inputs(&entry.path(), dir, &rel)?;
-        } else if !(sub.is_empty() && (name.starts_with("takt.") || name.starts_with("sweep."))) {
+        } else if !(sub.is_empty()
+            && (name.starts_with("takt.") || name.starts_with("sweep.") || name == "report.html"))
+        {
             dir.write(&rel, std::fs::read(entry.path())?)?;
         }
     }

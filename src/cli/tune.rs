@@ -6,8 +6,8 @@
 //! constraints. Each round is one study; each finished evaluation goes to the journal
 //! `<out>/<name>.journal.jsonl`, and the same command re-run (after Ctrl-C, or with a larger
 //! `--budget`) resumes from it. The folder `<out>/<name>/` holds `tune.md`, `tune.json`,
-//! `tune.svg`, the tuned cell and workpiece files in `tuned/` and the untuned ones in
-//! `untuned/`. When no candidate meets the constraints, the files are written without a best
+//! `tune.svg`, `report.html` (the page of all of it), the tuned cell and workpiece files in
+//! `tuned/` and the untuned ones in `untuned/`. When no candidate meets the constraints, the files are written without a best
 //! and the command fails (exit 1).
 
 use std::path::PathBuf;
@@ -225,12 +225,37 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
     dir.write_json("tune.json", &doc)?;
     let md = binpick::tune::output::markdown(&report);
     dir.write("tune.md", &md)?;
-    dir.write("tune.svg", binpick::tune::output::svg(&report))?;
+    let svg = binpick::tune::output::svg(&report);
+    dir.write("tune.svg", &svg)?;
     super::sweep::write_variant(&dir, "untuned", untuned)?;
     if let Some(b) = best {
         let tuned = cell.resolve(&b.values).map_err(study_error)?;
         super::sweep::write_variant(&dir, "tuned", &tuned.variants[0])?;
     }
+    // The page last: it links the files written before it.
+    let files = binpick::report::html::folder_files(dir.staging_dir(), &[]);
+    let about = format!(
+        "{} evaluations of {} on training seeds {} ({} picks each, {}); the best measured on test seeds {} beside the untuned cell.",
+        evaluations.len(),
+        header.workpiece,
+        seeds_name(&train),
+        a.picks,
+        if a.mode.deterministic {
+            "deterministic compute budgets"
+        } else {
+            "measured compute"
+        },
+        seeds_name(&test)
+    );
+    let page = binpick::report::html::Page {
+        title: &format!("binpick tune: {name}"),
+        about: &about,
+        markdown: &md,
+        charts: &[("tune.svg", svg.as_str())],
+        runs: &[],
+        files: &files,
+    };
+    dir.write("report.html", binpick::report::html::page_html(&page))?;
     let dest = dir.finish()?;
     if a.out.json {
         let out = serde_json::json!({"tune": doc["tune"]["best"], "test": doc["tune"]["test"], "dir": dest.display().to_string()});

@@ -5,7 +5,12 @@
 //! - `/cell` (`foxglove.SceneUpdate`, once): table, trays, obstacles, the camera's frustum;
 //! - `/robot/geometry` (`foxglove.SceneUpdate`, once): each link's collision primitives, locked to
 //!   the link's frame;
-//! - `/tf` (`foxglove.FrameTransforms`, 50 Hz): `world` -> each link, `world` -> `camera`;
+//! - `/robot_description` (`std_msgs/String` as JSON, once at time 0): the URDF the arm was built
+//!   from, its text in `data`, where Foxglove's 3D panel looks for a robot description (it draws
+//!   the URDF's visuals on the link frames `/tf` moves; turn the topic on in the panel);
+//! - `/tf` (`foxglove.FrameTransforms`, 50 Hz): the URDF's tree, as a robot state publisher
+//!   sends it: `world` -> the root link (where the base stands), then each joint's parent link ->
+//!   child link at the joint's recorded position; and `world` -> `camera`;
 //! - `/robot/joint_states` (`foxglove.JointStates`, 100 Hz): per joint (named as in the URDF) its
 //!   position, velocity and applied torque (`effort`);
 //! - `/robot/servo` (`binpick.ServoState`, 100 Hz, at the same times): what `foxglove.JointStates`
@@ -63,6 +68,9 @@ const TAKT_SCHEMA: &str = r#"{"title":"binpick.Takt","type":"object","properties
 "t_s":{"type":"number","description":"release time [s]"},"pick":{"type":"integer"},
 "takt_s":{"type":"number"},"spans_refill":{"type":"boolean"}}}"#;
 
+/// The JSON form of ROS's `std_msgs/String`: what Foxglove's 3D panel reads a URDF from.
+const STRING_SCHEMA: &str = r#"{"title":"std_msgs/String","type":"object","properties":{"data":{"type":"string"}}}"#;
+
 const PROPERTIES_SCHEMA: &str =
     r#"{"title":"binpick.Properties","type":"object","additionalProperties":{"type":"string"}}"#;
 
@@ -71,6 +79,7 @@ const PROPERTIES_SCHEMA: &str =
 enum Topic {
     Cell,
     RobotGeometry,
+    RobotDescription,
     Tf,
     JointStates,
     Servo,
@@ -96,12 +105,17 @@ enum Encoding {
 }
 
 /// The topics, in the order their channels are declared (the order of [`Topic`]).
-const TOPICS: [(Topic, &str, Encoding); 16] = [
+const TOPICS: [(Topic, &str, Encoding); 17] = [
     (Topic::Cell, "/cell", Encoding::Protobuf(fg::SceneUpdate::get_schema)),
     (
         Topic::RobotGeometry,
         "/robot/geometry",
         Encoding::Protobuf(fg::SceneUpdate::get_schema),
+    ),
+    (
+        Topic::RobotDescription,
+        "/robot_description",
+        Encoding::Json("std_msgs/String", STRING_SCHEMA),
     ),
     (Topic::Tf, "/tf", Encoding::Protobuf(fg::FrameTransforms::get_schema)),
     (
@@ -306,6 +320,11 @@ pub fn write_mcap<W: Write + Seek>(
 ) -> Result<(), RecordError> {
     let mut m = Messages::default();
     cell_messages(&mut m, result, scene)?;
+    m.json(
+        0.0,
+        Topic::RobotDescription,
+        &serde_json::json!({"data": info.robot_description}),
+    )?;
     arm_messages(&mut m, result, robot)?;
     part_messages(&mut m, result)?;
     sensing_messages(&mut m, result)?;
@@ -485,22 +504,31 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
             },
         )?;
     }
-    let transform = |t_s: f64, child: String, p: &Isometry3<f64>| fg::FrameTransform {
+    let transform = |t_s: f64, parent: String, child: String, p: &Isometry3<f64>| fg::FrameTransform {
         timestamp: stamp(t_s),
-        parent_frame_id: "world".into(),
+        parent_frame_id: parent,
         child_frame_id: child,
         translation: xyz(&p.translation.vector),
         rotation: quaternion(p),
     };
+    // The serial chain's tree: link i's parent is link i - 1 (the model is built from the URDF's
+    // chain, base to flange), so a URDF drawn from `/robot_description` moves with the arm.
     for (t_s, q) in arm_samples(result) {
-        let mut transforms: Vec<fg::FrameTransform> = robot
-            .world_from_links(&q)
-            .iter()
-            .enumerate()
-            .take(DOF + 1)
-            .map(|(i, f)| transform(t_s, name(i), f))
-            .collect();
-        transforms.push(transform(t_s, "camera".into(), &result.camera.world_from_camera));
+        let world_from_links = robot.world_from_links(&q);
+        let mut transforms = Vec::with_capacity(DOF + 2);
+        for (i, world_from_link) in world_from_links.iter().enumerate().take(DOF + 1) {
+            let (parent, parent_from_link) = match i {
+                0 => ("world".to_string(), *world_from_link),
+                _ => (name(i - 1), world_from_links[i - 1].inv_mul(world_from_link)),
+            };
+            transforms.push(transform(t_s, parent, name(i), &parent_from_link));
+        }
+        transforms.push(transform(
+            t_s,
+            "world".into(),
+            "camera".into(),
+            &result.camera.world_from_camera,
+        ));
         m.proto(t_s, Topic::Tf, &fg::FrameTransforms { transforms })?;
     }
     Ok(())

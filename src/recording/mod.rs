@@ -73,6 +73,8 @@ pub struct RunInfo {
     pub deterministic: bool,
     /// Picks asked for.
     pub picks: usize,
+    /// The URDF text the arm was built from (the MCAP's `/robot_description`).
+    pub robot_description: String,
 }
 
 impl RunInfo {

@@ -3,8 +3,10 @@
 //! Job: stage every file of a run in a hidden folder beside its destination and move it into
 //! place only when the run has finished, so an error never leaves a half-written output; write
 //! the fully resolved inputs (scene, URDF, workpiece) next to the results, so a run folder is
-//! self-contained and can be re-run as it is; the per-pick table and CSV files (`tables`).
+//! self-contained and can be re-run as it is; the per-pick table and CSV files (`tables`); a
+//! study's page, `report.html` ([`html`]).
 
+pub mod html;
 mod tables;
 
 use std::path::{Path, PathBuf};

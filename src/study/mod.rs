@@ -12,12 +12,14 @@
 //! Units: s, counts.
 
 pub mod file;
+pub mod page;
 pub mod runner;
 
 use serde::{Deserialize, Serialize};
 
 pub use file::{Outputs, StudyFile, StudyRun, merge};
-pub use runner::{RecordTo, Resolved, RunSettings, Variant, run_study};
+pub use page::report_html;
+pub use runner::{RecordTo, Resolved, RunSettings, Variant, run_stem, run_study};
 
 /// Why a study's specification, a variant, a shard or a merge is invalid, or a run failed.
 #[derive(Debug, thiserror::Error)]

@@ -17,8 +17,9 @@ use std::sync::atomic::AtomicBool;
 use rayon::prelude::*;
 
 use super::{Job, StudyError, StudyRun, StudySpec};
+use crate::chart::TimeChart;
 use crate::config::{LoadedScene, LoadedWorkpiece};
-use crate::cycle::{Observer, RunOptions, Tally};
+use crate::cycle::{Observer, Observers, RunOptions, Tally};
 use crate::recording::{Formats, Recorder, RunInfo};
 use crate::robot::RobotModel;
 use crate::sensor::Camera;
@@ -63,8 +64,8 @@ impl Resolved {
     }
 }
 
-/// Where and how to record each run: `<dir>/run-<workpiece>-seed<seed>.rrd` and `.mcap`
-/// (`run-v<variant>-...` when the study has several variants).
+/// Where and how to record each run: `<dir>/run-<workpiece>-seed<seed>.rrd` and `.mcap`, and
+/// its time charts `.timechart.svg` and `.timechart-steady.svg` ([`run_stem`]).
 #[derive(Clone, Copy)]
 pub struct RecordTo<'a> {
     /// The folder.
@@ -111,7 +112,18 @@ pub fn run_study(
     results.into_iter().map(|r| r.map_err(StudyError::Run)).collect()
 }
 
-/// One run of the study, recorded if asked.
+/// The name a run's files start with: `run-<workpiece>-seed<seed>`, `run-v<variant>-...` when
+/// the study has several variants.
+pub fn run_stem(several_variants: bool, job: &Job) -> String {
+    let (v, w, seed) = (job.variant + 1, &job.workpiece, job.seed);
+    if several_variants {
+        format!("run-v{v}-{w}-seed{seed}")
+    } else {
+        format!("run-{w}-seed{seed}")
+    }
+}
+
+/// One run of the study, recorded if asked (its recordings and its time charts).
 fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSettings<'_>) -> Result<StudyRun, String> {
     let Job {
         variant: v,
@@ -135,6 +147,7 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
         .ok_or_else(|| format!("workpiece {w} is not loaded"))?;
     let robot = &resolved.robots[variant.robot];
     let record = settings.record;
+    let stem = run_stem(several, job);
     let opts = RunOptions {
         picks: spec.picks,
         seed: *seed,
@@ -150,16 +163,32 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
         }
         _ => None,
     };
+    // A recorded run also keeps its time chart.
+    let mut chart = record.map(|_| TimeChart::default());
     let t = std::time::Instant::now();
-    let obs: &mut dyn Observer = match recorder.as_mut() {
-        Some(r) => r,
-        None => &mut (),
-    };
-    let result = crate::cycle::run(&variant.scene, robot, wp, &opts, obs).map_err(|e| format!("{what}: {e}"))?;
+    let mut watchers: Vec<&mut dyn Observer> = Vec::new();
+    if let Some(r) = recorder.as_mut() {
+        watchers.push(r);
+    }
+    if let Some(c) = chart.as_mut() {
+        watchers.push(c);
+    }
+    let result = crate::cycle::run(&variant.scene, robot, wp, &opts, &mut Observers(watchers))
+        .map_err(|e| format!("{what}: {e}"))?;
     let tally = Tally {
         wall_s: Some(t.elapsed().as_secs_f64()),
         ..result.tally.clone()
     };
+    if let (Some(chart), Some(to)) = (chart, record) {
+        let title = format!("binpick {what}");
+        let releases: Vec<f64> = result.records.iter().filter_map(|r| r.release_s).collect();
+        let (whole, steady) = chart.svgs(&title, result.tally.sim_time_s, &releases);
+        let steady = steady.map(|s| ("timechart-steady.svg", s));
+        for (suffix, svg) in std::iter::once(("timechart.svg", whole)).chain(steady) {
+            let path = to.dir.join(format!("{stem}.{suffix}"));
+            std::fs::write(&path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
+        }
+    }
     if let (Some(rec), Some(to)) = (recorder, record) {
         let info = RunInfo {
             scene: variant.scene.label.clone(),
@@ -167,15 +196,11 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
             seed: *seed,
             deterministic: spec.deterministic,
             picks: spec.picks,
-        };
-        let name = if several {
-            format!("run-v{}-{w}-seed{seed}", v + 1)
-        } else {
-            format!("run-{w}-seed{seed}")
+            robot_description: variant.scene.urdf_text.clone(),
         };
         crate::recording::write_recordings(
             to.dir,
-            &name,
+            &stem,
             to.formats,
             &rec.finish(&result),
             robot,

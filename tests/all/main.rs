@@ -14,6 +14,8 @@ mod mesh_export;
 mod physics;
 mod planning;
 mod recording;
+mod recording_urdf;
+mod report_html;
 mod scenario;
 mod sensing;
 mod servo;

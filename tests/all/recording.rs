@@ -124,10 +124,10 @@ fn proto_json(m: &prost_reflect::DynamicMessage) -> serde_json::Value {
 /// Decodes MCAP messages by their channel's encoding: JSON as is, protobuf from the descriptor
 /// set in the channel's schema (the message named as the schema).
 #[derive(Default)]
-struct McapDecoder(BTreeMap<u16, prost_reflect::MessageDescriptor>);
+pub(crate) struct McapDecoder(BTreeMap<u16, prost_reflect::MessageDescriptor>);
 
 impl McapDecoder {
-    fn decode(&mut self, m: &mcap::Message) -> Result<serde_json::Value, String> {
+    pub(crate) fn decode(&mut self, m: &mcap::Message) -> Result<serde_json::Value, String> {
         let schema = m.channel.schema.as_ref().ok_or("no schema")?;
         match (m.channel.message_encoding.as_str(), schema.encoding.as_str()) {
             ("json", "jsonschema") => serde_json::from_slice(&m.data).map_err(|e| e.to_string()),
@@ -201,7 +201,8 @@ fn run_mcap_holds_what_the_run_did() {
             "foxglove.Log",
             "foxglove.PointCloud",
             "foxglove.RawImage",
-            "foxglove.SceneUpdate"
+            "foxglove.SceneUpdate",
+            "std_msgs/String"
         ]
     );
     let mut topics: Vec<&str> = summary.channels.values().map(|c| c.topic.as_str()).collect();
@@ -224,6 +225,7 @@ fn run_mcap_holds_what_the_run_did() {
             "/robot/geometry",
             "/robot/joint_states",
             "/robot/servo",
+            "/robot_description",
             "/tf"
         ]
     );
@@ -577,7 +579,7 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let summary = mcap::read::Summary::read(&bytes)
         .unwrap()
         .expect("finished: a summary section");
-    assert_eq!(summary.channels.len(), 16);
+    assert_eq!(summary.channels.len(), 17);
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1);
@@ -616,6 +618,7 @@ fn a_failed_write_is_reported_and_leaves_nothing() {
         seed: 1,
         deterministic: true,
         picks: 1,
+        robot_description: scene.urdf_text.clone(),
     };
     let ws = Workspace::new();
     let formats = Formats { rrd: true, mcap: true };
