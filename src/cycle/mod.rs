@@ -64,7 +64,7 @@ pub use events::{
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
-pub use records::{Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
+pub use records::{FIRST_PICKS, Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
@@ -402,6 +402,7 @@ pub fn run(
             let mut tally = Tally {
                 workpiece: workpiece.workpiece.name.clone(),
                 seed: opts.seed,
+                pile_count: cell.pile_count,
                 sim_time_s: e.time_s,
                 runs: 1,
                 ended: Some(EndReason::PhysicsFault),
@@ -437,6 +438,7 @@ pub fn run_from(cell: &Cell<'_>, st: CellState, obs: &mut dyn Observer) -> Resul
     let mut tally = std::mem::take(&mut st.tally);
     tally.workpiece = cell.workpiece.name.clone();
     tally.seed = opts.seed;
+    tally.pile_count = cell.pile_count;
     tally.faults.parts_lost = st.parts_lost;
     tally.captures = (st.sensor.triggered, st.sensor.spoiled);
     tally.refills = st.trays.refills;

@@ -18,6 +18,7 @@ mod scenario;
 mod sensing;
 mod servo;
 mod support;
+mod sustained;
 mod sweep;
 mod trajectory;
 mod tune;
