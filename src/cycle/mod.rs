@@ -442,6 +442,7 @@ pub fn run_from(cell: &Cell<'_>, st: CellState, obs: &mut dyn Observer) -> Resul
     tally.faults.parts_lost = st.parts_lost;
     tally.captures = (st.sensor.triggered, st.sensor.spoiled);
     tally.refills = st.trays.refills;
+    tally.doses = st.trays.doses;
     tally.agitations = st.trays.agitations;
     tally.place_tray_exchanges = st.trays.exchanges;
     tally.peak_demand_ratio = st.run_peak_demand_ratio;
@@ -509,6 +510,16 @@ impl Run<'_, '_> {
                     let Some((result, taken, since)) = self.result_for_pick()? else {
                         return Ok(EndReason::NoPathOutOfView);
                     };
+                    // A fresh result whose image shows few parts (the sensor's count, before
+                    // the detections near picks made since are set aside): the hopper doses (if
+                    // the cell has one), and the cell looks again.
+                    let seen = self.st.in_hand.as_ref().and_then(|h| h.result.detections.as_ref());
+                    if taken == 0
+                        && let Some(seen) = seen.map(Vec::len)
+                        && self.dose_if_low(seen)?
+                    {
+                        continue;
+                    }
                     self.event(Event::ResultUsed {
                         taken,
                         since_capture: since,

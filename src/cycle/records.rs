@@ -500,6 +500,9 @@ pub struct Tally {
     /// Agitations of the pick tray.
     #[serde(default)]
     pub agitations: usize => sum,
+    /// Hopper doses into the pick tray.
+    #[serde(default)]
+    pub doses: usize => sum,
     /// Place-tray exchanges (not written in shard files: no table shows it).
     #[serde(skip)]
     pub place_tray_exchanges: usize => sum,

@@ -93,9 +93,6 @@ const TERMINAL: &[MdCell] = &[
     ("part", false, |s| s.tally.workpiece.clone()),
     ("takt [s]", true, |s| takt_text(s, s.takt.mean_s)),
     ("first 20 [s]", true, |s| num(s.takt_first.mean_s, 3)),
-    ("ref [s]", true, |s| {
-        s.reference_takt_s.map_or("-".into(), |t| num(t, 1))
-    }),
     ("parts/h", true, |s| num(s.parts_per_hour, 0)),
     ("success", true, |s| {
         format!("{} ({}/{})", pct(s.success_rate, 1), s.tally.placed, s.tally.attempts)
@@ -106,7 +103,7 @@ const TERMINAL: &[MdCell] = &[
 ];
 
 /// The table as the terminal prints it: the figures a user decides on (part, takt mean over
-/// every pick, the reference's 20-pick takt, the reference system's takt, parts per hour, success, motion floor, the share of the takt spent waiting, faults), as an
+/// every pick, the reference's 20-pick takt, parts per hour, success, motion floor, the share of the takt spent waiting, faults), as an
 /// aligned Markdown table; the full table is [`markdown`] (`takt.md`, `--wide`). A part name
 /// too long for [`TERMINAL_WIDTH`] is cut, ending in `…`.
 pub fn terminal(rows: &[Summary]) -> String {
@@ -359,6 +356,11 @@ pub const COLUMNS: &[Column] = &[
         json: &[("agitations", |s| val(s.tally.agitations))],
         csv: &[("agitations", |s| s.tally.agitations.to_string())],
         md: &[("agitations", true, |s| s.tally.agitations.to_string())],
+    },
+    Column {
+        json: &[("doses", |s| val(s.tally.doses))],
+        csv: &[("doses", |s| s.tally.doses.to_string())],
+        md: &[("doses", true, |s| s.tally.doses.to_string())],
     },
     Column {
         json: &[("refills", |s| val(s.tally.refills))],

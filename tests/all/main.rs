@@ -10,6 +10,7 @@ mod expect;
 mod faults;
 mod fuzz;
 mod golden;
+mod hopper;
 mod mesh_export;
 mod physics;
 mod planning;
