@@ -54,7 +54,7 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     let spec = StudySpec::batch(
         workpieces.iter().map(|w| w.workpiece.name.clone()).collect(),
         study.seeds.clone(),
-        a.study.picks,
+        study.picks,
         a.study.mode.deterministic,
     );
     // The limits are checked against the batch's workpieces before anything runs.

@@ -23,6 +23,11 @@ pub struct StudyArgs {
     /// Picks per run (the first of each run follows the initial sensing and has no takt).
     #[arg(long, default_value_t = 21)]
     pub picks: usize,
+    /// Sustained operation: 180 picks per run (three piles of the largest part A..F), so the
+    /// takt and parts per hour span several pile cycles; the first-20 column keeps the
+    /// reference's 20-pick figure beside it.
+    #[arg(long, conflicts_with = "picks")]
+    pub sustained: bool,
     /// Seeds: 1-3, or 1,2,5.
     #[arg(long, default_value = "1")]
     pub seeds: String,
@@ -38,6 +43,8 @@ pub struct StudyArgs {
 
 /// [`StudyArgs`] checked: seeds, shard (k of n), threads and workpiece names.
 pub struct Study {
+    /// Picks per run (`--picks`, or the sustained count).
+    pub picks: usize,
     /// Seeds.
     pub seeds: Vec<u64>,
     /// This shard, k of n (1 of 1: all).
@@ -61,6 +68,11 @@ impl StudyArgs {
     /// The arguments checked; a bad one is an input error naming the option.
     pub fn checked(&self) -> Result<Study> {
         check_picks(self.picks)?;
+        let picks = if self.sustained {
+            binpick::results::SUSTAINED_PICKS
+        } else {
+            self.picks
+        };
         let seeds = binpick::study::parse_seeds(&self.seeds).map_err(study_error)?;
         let shard = match &self.shard {
             Some(t) => binpick::study::parse_shard(t).map_err(study_error)?,
@@ -79,6 +91,7 @@ impl StudyArgs {
             workpieces.push(name.to_string());
         }
         Ok(Study {
+            picks,
             seeds,
             shard,
             threads,
@@ -295,9 +308,9 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, how: Finish) -> 
         }
         println!();
         let guide = if how.wide {
-            "takt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; grasps sealed / attempted; recognition against the truth at each trigger (correct = within 2 mm and 5 deg of a part; recall over the top layer); torque demand before saturation;"
+            "takt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (\"excl. tray refills\" leaves out the intervals spanning a refill); the sustained takt when the runs span several piles (--sustained), parts/h = 3600 s / takt; first 20 = the reference's 20-pick figure, the intervals of each run's first 21 picks; pile loads placed = placed per run / the pile's size; success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; grasps sealed / attempted; recognition against the truth at each trigger (correct = within 2 mm and 5 deg of a part; recall over the top layer); torque demand before saturation;"
         } else {
-            "takt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included; success = placed / attempts, re-captures counted; motion floor = mean Pick + Place, the takt with instantaneous sensing and compute; waits = the share of the takt spent waiting for the sensor or compute; faults = protective stops + collisions + drops + parts lost; every column is in takt.md, takt.csv and takt.json (--wide prints them all);"
+            "takt as the reference defines it: every release-to-release interval after a run's first release, failures, re-captures and refills included (sustained when the runs span several piles: --sustained); first 20 = the reference's 20-pick figure (each run's first 21 picks); parts/h = 3600 s / takt; success = placed / attempts, re-captures counted; floor = the motion floor, mean Pick + Place, the takt with instantaneous sensing and compute; waits = the share of the takt spent waiting for the sensor or compute; faults = protective stops + collisions + drops + parts lost; every column (the reference system's takt too) is in takt.md, takt.csv and takt.json (--wide prints them all);"
         };
         let runs = times.runs_s.map_or(String::new(), |w| {
             format!(

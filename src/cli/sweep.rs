@@ -54,7 +54,7 @@ pub fn sweep(a: &SweepArgs) -> Result<()> {
             .map(|w| w.workpiece.name.clone())
             .collect(),
         seeds: study.seeds.clone(),
-        picks: a.study.picks,
+        picks: study.picks,
         deterministic: a.study.mode.deterministic,
     };
     let dir = results_dir(&a.out.out, &spec, study.shard)?;

@@ -21,7 +21,7 @@ use super::{InputError, Interrupted, ModeArgs, OutArgs, check_picks, stop_on_ctr
 use binpick::report::RunDir;
 use binpick::tune::journal::{Header, Journal};
 use binpick::tune::output::Report;
-use binpick::tune::{Constraints, Settings};
+use binpick::tune::{Constraints, Objective, Settings};
 
 /// Arguments of `binpick tune`.
 #[derive(Args)]
@@ -46,9 +46,15 @@ pub struct TuneArgs {
     /// Seeds the best and the untuned cell are measured on afterwards (none of the training seeds).
     #[arg(long)]
     pub test_seeds: String,
-    /// Picks per run.
-    #[arg(long, default_value_t = 21)]
-    pub picks: usize,
+    /// Picks per run (default: 180, the sustained count, with `--objective sustained`; 21 with
+    /// `first20`).
+    #[arg(long)]
+    pub picks: Option<usize>,
+    /// The takt minimised: `sustained` (every interval of the runs: what the line keeps up,
+    /// pile running low and refills included) or `first20` (the reference's 20-pick figure,
+    /// each run's first 21 picks).
+    #[arg(long, default_value = "sustained", value_parser = ["sustained", "first20"])]
+    pub objective: String,
     /// The optimizer's seed (its random numbers come from this seed's `tune-optimizer` stream).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -88,7 +94,13 @@ fn seeds_name(s: &[u64]) -> String {
 
 /// `binpick tune`.
 pub fn tune(a: &TuneArgs) -> Result<()> {
-    check_picks(a.picks)?;
+    let objective = Objective::parse(&a.objective)
+        .ok_or_else(|| InputError(format!("--objective: {:?} is not sustained or first20", a.objective)))?;
+    let picks = a.picks.unwrap_or(match objective {
+        Objective::Sustained => binpick::results::SUSTAINED_PICKS,
+        Objective::First20 => binpick::cycle::FIRST_PICKS,
+    });
+    check_picks(picks)?;
     if a.budget == 0 || a.budget > 10_000 {
         return Err(InputError(format!("--budget must be within [1, 10000], got {}", a.budget)).into());
     }
@@ -128,10 +140,11 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         workpiece: a.workpiece.clone(),
         keys: dims.clone(),
         train_seeds: train.clone(),
-        picks: a.picks,
+        picks,
         deterministic: a.mode.deterministic,
         seed: a.seed,
         population: a.population,
+        objective,
     };
     let keys: String = dims
         .iter()
@@ -142,10 +155,14 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         .collect::<Vec<_>>()
         .join("+");
     let name = format!(
-        "tune-{wp_name}-{keys}-train{}-test{}-picks{}-seed{}{}",
+        "tune-{wp_name}-{keys}-train{}-test{}-picks{}{}-seed{}{}",
         seeds_name(&train),
         seeds_name(&test),
-        a.picks,
+        picks,
+        match objective {
+            Objective::Sustained => "",
+            Objective::First20 => "-first20",
+        },
         a.seed,
         if a.mode.deterministic { "-det" } else { "" }
     );
@@ -178,13 +195,14 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         a.workpiece.clone(),
         dims.clone(),
         train.clone(),
-        a.picks,
+        picks,
         a.mode.deterministic,
         threads,
         &journal,
         &progress,
     );
     cell.stop = Some(stop);
+    cell.objective = objective;
     let interrupted = || {
         Interrupted(format!(
             "{}: it keeps every finished evaluation; the same command resumes from it",

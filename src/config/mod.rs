@@ -21,12 +21,14 @@ use std::fmt;
 use std::path::{Path, PathBuf};
 
 pub mod agitation;
+pub mod feeder;
 pub mod model_error;
 pub mod scene;
 mod scene_checks;
 pub mod workpiece;
 
 pub use agitation::AgitationConfig;
+pub use feeder::FeederConfig;
 pub use model_error::ModelErrorConfig;
 pub use scene::*;
 pub use workpiece::*;

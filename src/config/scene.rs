@@ -51,6 +51,9 @@ pub struct Scene {
     /// How the pick tray is shaken when nothing in it can be picked (absent: never).
     #[serde(default)]
     pub agitation: super::AgitationConfig,
+    /// The hopper that doses parts into the pick tray when the sensor sees few (absent: none).
+    #[serde(default)]
+    pub feeder: super::FeederConfig,
 }
 
 /// The arm: its URDF, where it stands, and the drive data a URDF cannot hold.

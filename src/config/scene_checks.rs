@@ -246,6 +246,7 @@ impl Scene {
         c.within("cycle.torque_margin", self.cycle.torque_margin, 0.0, 0.5);
         self.model_error.check(c);
         self.agitation.check(c);
+        self.feeder.check(c);
         if self.cycle.vacuum_lead_s > self.gripper.vacuum_build_up_s {
             c.fail(
                 "cycle.vacuum_lead_s",

@@ -64,7 +64,7 @@ pub use events::{
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
-pub use records::{Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
+pub use records::{FIRST_PICKS, Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
@@ -402,6 +402,7 @@ pub fn run(
             let mut tally = Tally {
                 workpiece: workpiece.workpiece.name.clone(),
                 seed: opts.seed,
+                pile_count: cell.pile_count,
                 sim_time_s: e.time_s,
                 runs: 1,
                 ended: Some(EndReason::PhysicsFault),
@@ -437,9 +438,11 @@ pub fn run_from(cell: &Cell<'_>, st: CellState, obs: &mut dyn Observer) -> Resul
     let mut tally = std::mem::take(&mut st.tally);
     tally.workpiece = cell.workpiece.name.clone();
     tally.seed = opts.seed;
+    tally.pile_count = cell.pile_count;
     tally.faults.parts_lost = st.parts_lost;
     tally.captures = (st.sensor.triggered, st.sensor.spoiled);
     tally.refills = st.trays.refills;
+    tally.doses = st.trays.doses;
     tally.agitations = st.trays.agitations;
     tally.place_tray_exchanges = st.trays.exchanges;
     tally.peak_demand_ratio = st.run_peak_demand_ratio;
@@ -507,6 +510,16 @@ impl Run<'_, '_> {
                     let Some((result, taken, since)) = self.result_for_pick()? else {
                         return Ok(EndReason::NoPathOutOfView);
                     };
+                    // A fresh result whose image shows few parts (the sensor's count, before
+                    // the detections near picks made since are set aside): the hopper doses (if
+                    // the cell has one), and the cell looks again.
+                    let seen = self.st.in_hand.as_ref().and_then(|h| h.result.detections.as_ref());
+                    if taken == 0
+                        && let Some(seen) = seen.map(Vec::len)
+                        && self.dose_if_low(seen)?
+                    {
+                        continue;
+                    }
                     self.event(Event::ResultUsed {
                         taken,
                         since_capture: since,

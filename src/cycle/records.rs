@@ -12,7 +12,14 @@
 //! cycles, only the very first cycle's sensing and motion generation excluded): the intervals
 //! between consecutive releases after the run's first release, everything in between included
 //! (failed picks, re-captures, waits, tray refills). The takt "excluding tray refills" leaves out
-//! the intervals that span a refill: a labelled side figure, not the headline. Success = placed /
+//! the intervals that span a refill: a labelled side figure, not the headline.
+//!
+//! Two spans of a run give two takts. The reference's 20-pick figure: the intervals ending at
+//! the releases of the run's first [`FIRST_PICKS`] picks (attempts), exactly what a
+//! `--picks 21` run measures (20 intervals when every pick succeeds). The sustained figure: every
+//! interval of the run, so a run long enough to empty and refill the pile several times
+//! (`batch --sustained`) measures what the line keeps up, refills and agitations included;
+//! parts per hour are 3600 s over it. Success = placed /
 //! attempts, where every pick counts as an attempt: a re-capture (nothing detected, nothing
 //! graspable), a grasp failure, a drop and a missing motion too. Units: s, mm and deg where a
 //! name says so.
@@ -22,6 +29,11 @@ use serde::{Deserialize, Deserializer, Serialize, Serializer};
 use super::events::EndReason;
 use super::outcome::{Outcome, PhysicsFault};
 use crate::sensor::{RecognitionReport, RecognitionTotals, TruthMatch};
+
+/// Picks (attempts) at the start of a run whose takt intervals make the reference's 20-pick
+/// figure: 21, as the reference's Table 5 (20 consecutive Pick-and-Place cycles after the first
+/// pick's sensing and motion generation) and `binpick batch`'s default `--picks`.
+pub const FIRST_PICKS: usize = 21;
 
 /// One pick (or one capture that found nothing to pick).
 #[derive(Debug, Clone, Serialize)]
@@ -458,6 +470,14 @@ pub struct Tally {
     pub takts_s: Vec<f64> => sum,
     /// The intervals that span no pick-tray refill (s).
     pub takts_excl_refills_s: Vec<f64> => sum,
+    /// The intervals ending at a release among a run's first [`FIRST_PICKS`] picks (s): the
+    /// reference's 20-pick takt (all of `takts_s` in a run of at most 21 picks).
+    #[serde(default)]
+    pub takts_first_s: Vec<f64> => sum,
+    /// Parts the pick tray's pile holds when poured (the workpiece's `pile_count`; 0 in shard
+    /// files written before it was kept).
+    #[serde(default)]
+    pub pile_count: usize => keep,
     /// Pick times of the placed picks (s).
     pub pick_s: Vec<f64> => sum,
     /// Place times of the placed picks (s).
@@ -480,6 +500,9 @@ pub struct Tally {
     /// Agitations of the pick tray.
     #[serde(default)]
     pub agitations: usize => sum,
+    /// Hopper doses into the pick tray.
+    #[serde(default)]
+    pub doses: usize => sum,
     /// Place-tray exchanges (not written in shard files: no table shows it).
     #[serde(skip)]
     pub place_tray_exchanges: usize => sum,
@@ -531,6 +554,9 @@ impl Tally {
         let placed = r.outcome == Outcome::Placed;
         if let Some(t) = r.takt_s {
             self.takts_s.push(t);
+            if r.index < FIRST_PICKS {
+                self.takts_first_s.push(t);
+            }
             if !r.spans_refill {
                 self.takts_excl_refills_s.push(t);
             }

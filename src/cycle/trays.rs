@@ -9,7 +9,9 @@
 //! unless a refilled tray gave nothing either. Fill the place
 //! tray's slots in order; when they are used up, exchange it for an empty one
 //! (`place_tray_exchange_s`). Keep the bookkeeping the takt needs: the last release, and whether
-//! a refill happened since.
+//! a refill happened since. With a hopper (the cell file's `[feeder]`, see
+//! [`crate::config::feeder`]): dose parts onto the pile when a result the cell takes up shows
+//! fewer detections than `dose_below`, unless the dose could fill the tray beyond its pile.
 //!
 //! Units: s. Frames: none.
 
@@ -42,6 +44,12 @@ pub struct TrayState {
     pub refilled_since_release: bool,
     /// The last release (s).
     pub last_release_s: Option<f64>,
+    /// Hopper doses, in all.
+    pub doses: usize,
+    /// Parts dosed since the last pour of a whole pile.
+    pub dosed_since_fill: usize,
+    /// Parts placed (the run's count) at the last pour of a whole pile.
+    pub placed_at_fill: usize,
 }
 
 impl Default for TrayState {
@@ -57,6 +65,9 @@ impl Default for TrayState {
             exchanges: 0,
             refilled_since_release: false,
             last_release_s: None,
+            doses: 0,
+            dosed_since_fill: 0,
+            placed_at_fill: 0,
         }
     }
 }
@@ -105,9 +116,12 @@ impl Run<'_, '_> {
                 trays.attempts_since_fill = 0;
                 let fill = trays.fills;
                 self.refill(fill)?;
+                let placed = self.st.tally.placed;
                 let trays = &mut self.st.trays;
                 trays.fills += 1;
                 trays.refills += 1;
+                trays.dosed_since_fill = 0;
+                trays.placed_at_fill = placed;
                 trays.refilled_since_release = true;
                 Ok(None)
             }
@@ -170,6 +184,56 @@ impl Run<'_, '_> {
             .build_pile_observed(&PileOptions::new(self.cell.pile_count, seed), &mut |w| obs.stepped(w))
             .map_err(CycleError::Pour)?;
         self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
+        self.st.arm.free_s = self.st.world.time_s();
+        self.st.compute_from_s = self.st.world.time_s();
+        Ok(())
+    }
+
+    /// A result the cell takes up showed `detected` parts: with a hopper, dose when that is below
+    /// its threshold and the dose cannot fill the tray beyond the pile (by the feeder's own count:
+    /// the pile poured, plus the parts dosed since, less the parts placed since). Returns whether
+    /// it dosed (the results in hand are then gone: the pile changed).
+    pub(super) fn dose_if_low(&mut self, detected: usize) -> Result<bool, CycleError> {
+        let f = self.cell.scene.feeder;
+        if !f.on() || detected >= f.dose_below as usize {
+            return Ok(false);
+        }
+        let t = &self.st.trays;
+        let placed_since = self.st.tally.placed.saturating_sub(t.placed_at_fill);
+        let at_most = (self.cell.pile_count + t.dosed_since_fill).saturating_sub(placed_since);
+        if at_most + f.dose_parts as usize > self.cell.pile_count {
+            return Ok(false);
+        }
+        self.dose(f.dose_parts as usize, f.dose_s)?;
+        Ok(true)
+    }
+
+    /// Pours `parts` parts from the hopper onto the pile (through the physics, above the pile as
+    /// it lies), the arm waiting out of the view until they have settled and at least `dose_s`
+    /// has passed.
+    fn dose(&mut self, parts: usize, dose_s: f64) -> Result<(), CycleError> {
+        self.forget_pile();
+        let t0 = self.st.world.time_s();
+        let n = self.st.trays.doses as u64 + 1;
+        // Its own seed per dose, apart from the refills' (which add multiples of another odd
+        // constant to the run seed).
+        let seed = self
+            .cell
+            .opts
+            .seed
+            .wrapping_add(n.wrapping_mul(0xD1B5_4A32_D192_ED03))
+            .rotate_left(17);
+        let obs = &mut *self.obs;
+        self.st
+            .world
+            .build_pile_observed(&PileOptions::new(parts, seed), &mut |w| obs.stepped(w))
+            .map_err(CycleError::Pour)?;
+        self.idle_until(t0 + dose_s)?;
+        self.span(Stage::Stall, t0, self.st.world.time_s(), "hopper dose");
+        let trays = &mut self.st.trays;
+        trays.doses += 1;
+        trays.dosed_since_fill += parts;
+        self.st.failed_spots.clear();
         self.st.arm.free_s = self.st.world.time_s();
         self.st.compute_from_s = self.st.world.time_s();
         Ok(())

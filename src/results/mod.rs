@@ -15,6 +15,12 @@
 //! attempts, where every pick counts as an attempt: a re-capture (nothing detected, nothing
 //! graspable), a grasp failure, a drop and a missing motion too.
 //!
+//! Sustained operation: the takt over every interval of a run is the sustained takt when the run
+//! spans several pile cycles (`batch --sustained`: [`SUSTAINED_PICKS`] picks); parts per hour
+//! are 3600 s over it (one release per takt). Beside it, the reference's 20-pick figure: the
+//! intervals of each run's first 21 picks ([`crate::cycle::FIRST_PICKS`]). Pile loads placed:
+//! the parts placed per run over the pile's size, how many pile cycles the runs spanned.
+//!
 //! Units: s (ms in the Markdown's compute column), mm and deg where a name says so, counts.
 
 pub mod expect;
@@ -26,6 +32,13 @@ pub use run_summary::RunSummary;
 
 use crate::sensor::RecognitionSummary;
 use crate::stats::{Summary as Stats, mean, median_min_max, percentile_sorted, sorted};
+
+/// Picks per run of `batch --sustained` (and `tune`'s default with the sustained objective):
+/// three times the largest pile of the parts A..F (60), so at a success of 2/3 or more a run
+/// places at least two full piles of every part (A's 30 and B's 16 many more): the figure
+/// includes the pile running low, its agitations and refills, not only a full pile's first
+/// third.
+pub const SUSTAINED_PICKS: usize = 180;
 
 /// What a tally comes to: the tally itself (its counts are read from it) and the figures derived
 /// from it.
@@ -39,6 +52,12 @@ pub struct Summary {
     pub takt: Stats,
     /// The same, leaving out the intervals that span a pick-tray refill (a side figure).
     pub takt_excl_refills: Stats,
+    /// The reference's 20-pick takt: the intervals of each run's first 21 picks.
+    pub takt_first: Stats,
+    /// Parts per hour the runs sustained: 3600 s / the takt's mean (NaN without a takt).
+    pub parts_per_hour: f64,
+    /// Pile loads placed per run: placed / (runs x the pile's size) (NaN when not known).
+    pub pile_loads: f64,
     /// 5th percentile of the takt (nearest rank) (s): the lower edge of the charts' band.
     pub takt_p5_s: f64,
     /// The reference system's takt for this workpiece (s), if it is one of A..F.
@@ -67,15 +86,24 @@ fn ratio(a: usize, b: usize) -> f64 {
     if b == 0 { f64::NAN } else { a as f64 / b as f64 }
 }
 
+/// Releases per hour at a mean takt of `takt_s` seconds (NaN when not a positive number).
+fn per_hour(takt_s: f64) -> f64 {
+    if takt_s > 0.0 { 3600.0 / takt_s } else { f64::NAN }
+}
+
 impl Summary {
     /// The figures of `tally`.
     pub fn of(tally: &Tally) -> Summary {
         let t = tally;
         let (mean_pick_s, mean_place_s) = (mean(&t.pick_s), mean(&t.place_s));
+        let takt = Stats::of(&t.takts_s);
         Summary {
             success_rate: ratio(t.placed, t.attempts),
-            takt: Stats::of(&t.takts_s),
+            parts_per_hour: per_hour(takt.mean_s),
+            takt,
             takt_excl_refills: Stats::of(&t.takts_excl_refills_s),
+            takt_first: Stats::of(&t.takts_first_s),
+            pile_loads: ratio(t.placed, t.runs * t.pile_count),
             takt_p5_s: percentile_sorted(&sorted(&t.takts_s), 0.05),
             reference_takt_s: crate::reference::reference_takt(&t.workpiece),
             mean_pick_s,

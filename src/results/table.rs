@@ -92,19 +92,18 @@ pub const TERMINAL_WIDTH: usize = 110;
 const TERMINAL: &[MdCell] = &[
     ("part", false, |s| s.tally.workpiece.clone()),
     ("takt [s]", true, |s| takt_text(s, s.takt.mean_s)),
-    ("reference [s]", true, |s| {
-        s.reference_takt_s.map_or("-".into(), |t| num(t, 1))
-    }),
+    ("first 20 [s]", true, |s| num(s.takt_first.mean_s, 3)),
+    ("parts/h", true, |s| num(s.parts_per_hour, 0)),
     ("success", true, |s| {
         format!("{} ({}/{})", pct(s.success_rate, 1), s.tally.placed, s.tally.attempts)
     }),
-    ("motion floor [s]", true, |s| num(s.motion_floor_s, 3)),
+    ("floor [s]", true, |s| num(s.motion_floor_s, 3)),
     ("waits", true, |s| pct(wait_share(s), 0)),
     ("faults", true, |s| faults(s).to_string()),
 ];
 
-/// The table as the terminal prints it: the figures a user decides on (part, takt mean, the
-/// reference's takt, success, motion floor, the share of the takt spent waiting, faults), as an
+/// The table as the terminal prints it: the figures a user decides on (part, takt mean over
+/// every pick, the reference's 20-pick takt, parts per hour, success, motion floor, the share of the takt spent waiting, faults), as an
 /// aligned Markdown table; the full table is [`markdown`] (`takt.md`, `--wide`). A part name
 /// too long for [`TERMINAL_WIDTH`] is cut, ending in `…`.
 pub fn terminal(rows: &[Summary]) -> String {
@@ -232,6 +231,24 @@ pub const COLUMNS: &[Column] = &[
         ],
     },
     Column {
+        json: &[("takt_first20", |s| val(s.takt_first))],
+        csv: &[
+            ("takt_first20_mean_s", |s| f6(s.takt_first.mean_s)),
+            ("takt_first20_count", |s| s.takt_first.count.to_string()),
+        ],
+        md: &[("takt first 20 [s]", true, |s| takt_text(s, s.takt_first.mean_s))],
+    },
+    Column {
+        json: &[("parts_per_hour", |s| val(s.parts_per_hour))],
+        csv: &[("parts_per_hour", |s| f6(s.parts_per_hour))],
+        md: &[("parts/h", true, |s| num(s.parts_per_hour, 0))],
+    },
+    Column {
+        json: &[("pile_loads_placed", |s| val(s.pile_loads))],
+        csv: &[("pile_loads_placed", |s| f6(s.pile_loads))],
+        md: &[("pile loads placed / run", true, |s| num(s.pile_loads, 2))],
+    },
+    Column {
         json: &[("reference_takt_s", |s| val(s.reference_takt_s))],
         csv: &[("reference_takt_s", |s| s.reference_takt_s.map_or(String::new(), f6))],
         md: &[("reference [s]", true, |s| {
@@ -339,6 +356,11 @@ pub const COLUMNS: &[Column] = &[
         json: &[("agitations", |s| val(s.tally.agitations))],
         csv: &[("agitations", |s| s.tally.agitations.to_string())],
         md: &[("agitations", true, |s| s.tally.agitations.to_string())],
+    },
+    Column {
+        json: &[("doses", |s| val(s.tally.doses))],
+        csv: &[("doses", |s| s.tally.doses.to_string())],
+        md: &[("doses", true, |s| s.tally.doses.to_string())],
     },
     Column {
         json: &[("refills", |s| val(s.tally.refills))],
@@ -528,6 +550,37 @@ mod tests {
         assert!(row["success_rate"].is_null() && row.get("wall_s").is_none());
         // Negative control: the check finds a name given twice.
         assert_eq!(repeated(&["a", "b", "a"]), vec!["a".to_string()]);
+    }
+
+    #[test]
+    fn parts_per_hour_are_3600_s_over_the_mean_takt_beside_the_first_20() {
+        let s = Summary::of(&Tally {
+            workpiece: "E".into(),
+            runs: 1,
+            attempts: 4,
+            placed: 4,
+            pile_count: 2,
+            takts_s: vec![2.0, 4.0, 3.0],
+            takts_first_s: vec![2.0],
+            ..Tally::default()
+        });
+        // 3 intervals over 9 s: 1200 releases per hour; two pile loads placed.
+        assert_eq!(
+            (s.parts_per_hour, s.takt_first.mean_s, s.pile_loads),
+            (1200.0, 2.0, 2.0)
+        );
+        let md = markdown(std::slice::from_ref(&s));
+        assert!(
+            md.contains("| 3.000 |") && md.contains("| 2.000 |") && md.contains("| 1200 |"),
+            "{md}"
+        );
+        assert!(terminal(std::slice::from_ref(&s)).contains("1200"));
+        // Negative control: without a takt there is no rate, and no pile size no pile loads.
+        let none = Summary::of(&Tally {
+            workpiece: "E".into(),
+            ..Tally::default()
+        });
+        assert!(none.parts_per_hour.is_nan() && none.pile_loads.is_nan());
     }
 
     #[test]

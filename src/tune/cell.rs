@@ -18,7 +18,7 @@ use std::sync::Mutex;
 use std::sync::atomic::AtomicBool;
 
 use super::journal::Journal;
-use super::{Dim, Evaluator, Figures, Outcome};
+use super::{Dim, Evaluator, Figures, Objective, Outcome};
 use crate::cycle::{EndReason, Tally};
 use crate::study::{Resolved, RunSettings, StudyError, StudyRun, StudySpec, run_study};
 use crate::sweep::{Segment, SetArg};
@@ -122,6 +122,8 @@ pub struct Cell<'a> {
     pub threads: usize,
     /// Set by Ctrl-C.
     pub stop: Option<&'static AtomicBool>,
+    /// The takt the figures' `takt_s` is (the objective).
+    pub objective: Objective,
     /// The journal.
     pub journal: &'a Journal,
     /// Called after each run.
@@ -159,6 +161,7 @@ impl<'a> Cell<'a> {
             deterministic,
             threads,
             stop: None,
+            objective: Objective::default(),
             journal,
             progress,
             replayed: 0,
@@ -210,6 +213,7 @@ impl<'a> Cell<'a> {
         let failed: Mutex<Option<StudyError>> = Mutex::new(None);
         let progress = self.progress;
         let journal_to = self.journal;
+        let objective = self.objective;
         let on_run = |r: &StudyRun| {
             progress(r);
             let Ok(mut done) = done.lock() else { return };
@@ -217,7 +221,7 @@ impl<'a> Cell<'a> {
             mine.push(r.tally.clone());
             let interrupted = mine.iter().any(|t| t.ended == Some(EndReason::Interrupted));
             if journal && mine.len() == seeds.len() && !interrupted {
-                let f = Figures::of(&Tally::merged(mine.iter()).expect("one run at least"));
+                let f = Figures::of(&Tally::merged(mine.iter()).expect("one run at least"), objective);
                 if let Err(e) = journal_to.append(&rows[r.variant], &f)
                     && let Ok(mut slot) = failed.lock()
                 {
@@ -241,7 +245,7 @@ impl<'a> Cell<'a> {
         Ok((0..rows.len())
             .map(|v| {
                 let t = Tally::merged(runs.iter().filter(|r| r.variant == v).map(|r| &r.tally));
-                Figures::of(&t.expect("every variant has runs"))
+                Figures::of(&t.expect("every variant has runs"), self.objective)
             })
             .collect())
     }

@@ -43,6 +43,10 @@ pub struct Header {
     pub seed: u64,
     /// Candidates per round.
     pub population: usize,
+    /// The takt optimised (journals written before it was kept optimised every interval:
+    /// sustained).
+    #[serde(default)]
+    pub objective: super::Objective,
 }
 
 #[derive(Serialize, Deserialize)]

@@ -120,12 +120,16 @@ pub fn markdown(r: &Report<'_>) -> String {
     let h = r.header;
     let c = &r.constraints;
     let mut md = format!(
-        "# tune: workpiece {} in {}\n\n{} candidates ({} per round), {} picks per run, training seeds {}, test seeds {}, {}; optimizer: argmin particle swarm, seed {}.\n\nConstraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}.\n\n",
+        "# tune: workpiece {} in {}\n\n{} candidates ({} per round), {} picks per run, objective: the {} takt, training seeds {}, test seeds {}, {}; optimizer: argmin particle swarm, seed {}.\n\nConstraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}.\n\n",
         h.workpiece,
         h.scene,
         r.evaluations.len(),
         h.population,
         h.picks,
+        match h.objective {
+            super::Objective::Sustained => "sustained (every interval)",
+            super::Objective::First20 => "reference's 20-pick (each run's first 21 picks)",
+        },
         seeds_text(&h.train_seeds),
         seeds_text(r.test_seeds),
         if h.deterministic {

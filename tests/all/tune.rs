@@ -74,6 +74,7 @@ fn bad_tunes_exit_2_and_write_nothing() {
         (vec!["--vary", "agitation.max_tries=1.5:8"], "whole numbers"),
         (vec!["--vary", KEY, "--min-success", "1.5"], "--min-success"),
         (vec!["--vary", KEY, "--budget", "0"], "--budget"),
+        (vec!["--vary", KEY, "--objective", "fastest"], "--objective"),
     ] {
         let tmp = crate::support::tempdir().unwrap();
         let out = tmp.path().join("runs");

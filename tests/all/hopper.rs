@@ -1,0 +1,173 @@
+//! The hopper on the flexible feeder (`[feeder]` in the cell file): its keys refused with file,
+//! key and value; in a run it doses only when the result the cell takes up shows fewer parts
+//! than the threshold (checked from the run's own events by an observer: the detections the
+//! sensor reported before each dose), and never above it.
+
+use crate::support::{Workspace, binpick_in, stderr};
+use binpick::config::{FeederConfig, LoadedScene, LoadedWorkpiece};
+use binpick::cycle::{Event, Observer, RunOptions, Stage, Tally};
+use binpick::robot::RobotModel;
+
+#[test]
+fn bad_feeder_keys_exit_2_naming_file_key_and_value_and_write_nothing() {
+    let ws = Workspace::new();
+    for (from, to, why) in [
+        (
+            "dose_parts = 10",
+            "dose_parts = 0",
+            "feeder.dose_parts must be at least 1 while dose_below > 0, got 0",
+        ),
+        (
+            "dose_s = 2.0",
+            "dose_s = -1.0",
+            "feeder.dose_s must be within [0, 60], got -1",
+        ),
+        (
+            "dose_parts = 10",
+            "dose_parts = 5000",
+            "feeder.dose_parts must be within [0, 1000], got 5000",
+        ),
+        ("dose_below = 0", "dose_below = 2.5", "dose_below"),
+        ("dose_below = 0", "dose_below = -3", "dose_below"),
+        ("dose_s = 2.0", "dose_s = 2.0\ndose_rate = 3", "dose_rate"),
+    ] {
+        // The first case needs the hopper on to be wrong.
+        let on = ws.edit(
+            "scenes/default.toml",
+            "scenes/on.toml",
+            "dose_below = 0",
+            "dose_below = 4",
+        );
+        let base = if from == "dose_below = 0" {
+            "scenes/default.toml"
+        } else {
+            "scenes/on.toml"
+        };
+        assert!(on.exists());
+        let bad = ws.edit(base, "scenes/bad.toml", from, to);
+        let out = ws.path("runs");
+        let o = binpick_in(
+            ws.dir.path(),
+            &[
+                "batch",
+                "--scene",
+                bad.to_str().unwrap(),
+                "--workpieces",
+                "E",
+                "--picks",
+                "2",
+                "--deterministic",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+        );
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{to}: {err}");
+        assert!(
+            err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
+            "{to}: {err}"
+        );
+        assert!(!out.exists(), "{to} wrote {}", out.display());
+    }
+    // Negative control: the hopper on with valid keys runs, and writes its batch.
+    let on = ws.path("scenes/on.toml");
+    let out = ws.path("runs-on");
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "batch",
+            "--scene",
+            on.to_str().unwrap(),
+            "--workpieces",
+            "E",
+            "--picks",
+            "2",
+            "--deterministic",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    assert!(out.exists());
+}
+
+/// Keeps, for each hopper dose, the detections of the last recognition result reported before
+/// it, and every result's detections.
+#[derive(Default)]
+struct Doses {
+    last_detected: Option<usize>,
+    detected: Vec<usize>,
+    before_dose: Vec<Option<usize>>,
+}
+
+impl Observer for Doses {
+    fn event(&mut self, _t_s: f64, _pick: Option<usize>, event: &Event) {
+        if let Event::RecognitionReady { detected, .. } = event {
+            self.last_detected = Some(*detected);
+            self.detected.push(*detected);
+        }
+    }
+    fn span(&mut self, stage: Stage, _start_s: f64, _end_s: f64, label: &str) {
+        if stage == Stage::Stall && label == "hopper dose" {
+            self.before_dose.push(self.last_detected);
+        }
+    }
+}
+
+/// A deterministic run of `picks` picks of `workpiece`, seed 1, with the hopper `feeder`.
+fn run(workpiece: &str, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    scene.scene.feeder = feeder;
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve(workpiece).unwrap();
+    let opts = RunOptions {
+        picks,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: false,
+    };
+    let mut doses = Doses::default();
+    let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut doses).unwrap();
+    (r.tally, doses)
+}
+
+#[test]
+fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry() {
+    let hopper = |dose_below| FeederConfig {
+        dose_below,
+        dose_parts: 6,
+        dose_s: 1.5,
+    };
+    // B's 16-part pile over 60 picks: without a hopper it runs dry and is exchanged.
+    let (without, _) = run("B", 60, FeederConfig::default());
+    assert!(without.refills >= 2 && without.doses == 0, "{without:?}");
+    let threshold = 6;
+    let (with, seen) = run("B", 60, hopper(threshold));
+    assert!(with.doses >= 2, "doses {}", with.doses);
+    assert_eq!(seen.before_dose.len(), with.doses);
+    // Every dose followed a result that showed fewer parts than the threshold.
+    for d in &seen.before_dose {
+        assert!(
+            d.is_some_and(|n| n < threshold as usize),
+            "a dose after {d:?} detections"
+        );
+    }
+    // Results at or above the threshold happened too, and no dose followed them.
+    assert!(
+        seen.detected.iter().any(|&n| n >= threshold as usize),
+        "{:?}",
+        seen.detected
+    );
+    assert!(
+        with.refills < without.refills,
+        "refills {} vs {}",
+        with.refills,
+        without.refills
+    );
+    // Negative control: with the threshold 1 the hopper doses only on an empty view; E's 60-part
+    // pile over 20 picks always shows parts, so no dose, though the feeder's count leaves room.
+    let (full, seen_full) = run("E", 20, hopper(1));
+    assert!(seen_full.detected.iter().all(|&n| n >= 1), "{:?}", seen_full.detected);
+    assert_eq!((full.doses, seen_full.before_dose.len()), (0, 0));
+}
