@@ -13,6 +13,7 @@ mod golden;
 mod mesh_export;
 mod physics;
 mod planning;
+mod quiet;
 mod recording;
 mod scenario;
 mod sensing;
