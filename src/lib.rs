@@ -12,7 +12,8 @@
 //!    cylinders) and the suction cup's force model, defined once for every stage below.
 //! 3. [`robot`]: the arm: URDF model, forward and inverse kinematics, dynamics with payload.
 //! 4. [`physics`]: the rapier world behind an API in metres: trays, piles of parts, the arm's
-//!    bodies, the suction gripper, the health monitor, scene queries.
+//!    bodies, the suction gripper, the health monitor, scene queries, event-driven stepping (no
+//!    solver step where nothing can move).
 //! 5. [`sensor`]: the fixed overhead 3D sensor: ray-cast depth capture, exposure timing,
 //!    recognition, the height map.
 //! 6. [`grasp`]: the grasp selector: suction grasps from detections and the point cloud, ranked;

@@ -445,6 +445,26 @@ pub struct SimConfig {
     pub saturation_trip_s: f64,
     /// Time to reset after a protective stop before the cycle resumes (s).
     pub protective_stop_reset_s: f64,
+    /// How the physics is stepped: `"event-driven"` (the default: no solver step where nothing
+    /// can move, continuous collision detection only for poured, dropped and shaken parts) or
+    /// `"always"` (every step solved with continuous collision detection on, as before event
+    /// stepping; for comparing the two).
+    #[serde(default)]
+    pub stepping: Stepping,
+}
+
+/// How the physics world is stepped (`sim.stepping`).
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "kebab-case")]
+pub enum Stepping {
+    /// A step where every part sleeps, the pick tray rests, the gripper holds or is idle and
+    /// no kinematic body (arm, tool, cup, held part) can come near a part or the cell within
+    /// it only moves the kinematic bodies and advances the clock; continuous collision detection
+    /// runs only while a poured, dropped or shaken part is awake, or the tray moves.
+    #[default]
+    EventDriven,
+    /// Every step solved, continuous collision detection on every step.
+    Always,
 }
 
 /// Largest sensor image (px): 4 MP, e.g. 2048 x 2048, twelve times the default cell's 320 x 256 and

@@ -12,8 +12,9 @@
 //!
 //! Solver tuning for 5-150 mm parts of a few grams (see README, "Physics"): rapier runs in
 //! millimetres; length unit 1 cm (allowed penetration 0.05 mm, prediction distance 0.2 mm);
-//! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; CCD on every part;
-//! the cell file's timestep.
+//! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; CCD for parts
+//! poured, dropped or shaken until they sleep; the cell file's timestep. Steps in which nothing
+//! can move are not solved ([`quiet`], the cell file's `sim.stepping`).
 
 mod arm;
 pub mod health;
@@ -21,6 +22,7 @@ pub mod overlap;
 mod parts;
 pub mod pile;
 pub mod query;
+pub mod quiet;
 pub mod script;
 pub mod shapes;
 pub mod suction;
@@ -29,7 +31,7 @@ use nalgebra::{Isometry3, Vector3};
 use rapier3d::math::{Pose, Vector};
 use rapier3d::prelude::*;
 
-use crate::config::Scene;
+use crate::config::{Scene, Stepping};
 pub use crate::geometry::TrayVolume;
 use crate::robot::{DOF, JointVector, RobotModel};
 pub use health::{HealthError, HealthEvent, HealthLimits, HealthMonitor};
@@ -176,6 +178,11 @@ pub struct PartBody {
     pub state: PartState,
     /// A placed part's pose at the start of its current rest window: (time (s), pose).
     rest_ref: Option<(f64, Isometry3<f64>)>,
+    /// Poured, dropped, let go or shaken since it last slept: its steps need continuous
+    /// collision detection while it is awake (see [`quiet::CCD_REST_M_S`]).
+    ccd: bool,
+    /// Solved steps in a row the part has been at rest for CCD's purpose.
+    slow_steps: u32,
 }
 
 /// A placed part whose pose changes less than [`PLACED_REST_M`] and [`PLACED_REST_RAD`] over
@@ -212,6 +219,12 @@ pub struct World {
     steps: u64,
     /// Substeps taken (more than `steps` while parts move fast).
     substeps: u64,
+    /// Steps taken without the solver ([`quiet`]).
+    quiet_steps: u64,
+    /// How the world is stepped.
+    stepping: Stepping,
+    /// What kinematic bodies must keep clear of in a quiet step, gathered while nothing moves.
+    quiet_targets: Option<quiet::QuietTargets>,
     /// Most substeps a step may be divided into (1 turns adaptive substepping off).
     max_substeps: usize,
     /// The arm.
@@ -288,6 +301,9 @@ impl World {
             time_s: 0.0,
             steps: 0,
             substeps: 0,
+            quiet_steps: 0,
+            stepping: scene.sim.stepping,
+            quiet_targets: None,
             max_substeps: MAX_SUBSTEPS,
             robot: robot.clone(),
             q: JointVector::from(scene.robot.home_rad()),
@@ -367,6 +383,15 @@ impl World {
         if moving && body.is_fixed() {
             body.set_body_type(RigidBodyType::KinematicPositionBased, true);
         }
+        if moving {
+            // Shaken parts need CCD until they sleep again.
+            for p in &mut self.parts {
+                if p.state == PartState::Free {
+                    p.ccd = true;
+                    p.slow_steps = 0;
+                }
+            }
+        }
     }
 
     /// Whether the pick tray is away from its rest pose or moving (an agitation under way).
@@ -386,6 +411,7 @@ impl World {
     }
 
     fn pipeline_step(&mut self) {
+        self.quiet_targets = None;
         self.pipeline.step(
             self.gravity,
             &self.params,
@@ -412,6 +438,24 @@ impl World {
     /// Advances the world by one step: arm bodies sweep to the joint target, the gripper's timers
     /// run, the solver steps, and the health monitor checks every body.
     pub fn step(&mut self) -> Result<(), HealthError> {
+        let mut gripper_ran = false;
+        if self.stepping == Stepping::EventDriven {
+            let world_from_links = self.robot.world_from_links(&self.q_target);
+            if self.step_is_quiet(&world_from_links) {
+                if self.quiet_step(&world_from_links) {
+                    self.time_s += self.params.dt as f64;
+                    self.q = self.q_target;
+                    self.steps += 1;
+                    self.quiet_steps += 1;
+                    self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
+                    self.rest_placed_parts();
+                    return Ok(());
+                }
+                // The gripper let its part go: this step is solved (the gripper has run).
+                gripper_ran = true;
+            }
+        }
+        self.params.max_ccd_substeps = usize::from(self.ccd_needed());
         let n = self.substeps_needed();
         let dt = self.params.dt;
         let dt_s = dt as f64;
@@ -434,7 +478,16 @@ impl World {
                 self.bodies[self.pick_tray_body].set_next_kinematic_position(pose);
             }
             let world_from_tool_next = world_from_links[DOF] * self.robot.flange_from_tool;
-            self.update_gripper(&world_from_tool_next);
+            if gripper_ran {
+                gripper_ran = false;
+                // The held part's pose at the step's end, as the gripper would have set it.
+                if let Some((seal, tool_from_part)) = self.gripper.held() {
+                    let body = self.parts[seal.part].body;
+                    self.bodies[body].set_next_kinematic_position(to_pose(&(world_from_tool_next * tool_from_part)));
+                }
+            } else {
+                self.update_gripper(&world_from_tool_next);
+            }
             self.pipeline_step();
             self.time_s += dt_s / n as f64;
             self.q = q_k;
@@ -442,6 +495,7 @@ impl World {
         self.params.dt = dt;
         self.steps += 1;
         self.substeps += n as u64;
+        self.clear_ccd_flags();
         self.settle_pick_tray();
         self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
         self.rest_placed_parts();

@@ -19,6 +19,8 @@ impl World {
             let p = &mut self.parts[idx];
             p.state = PartState::Free;
             p.rest_ref = None;
+            p.ccd = true;
+            p.slow_steps = 0;
             let b = &mut self.bodies[p.body];
             b.set_enabled(true);
             b.set_body_type(RigidBodyType::Dynamic, false);
@@ -74,6 +76,8 @@ impl World {
             view_collider,
             state: PartState::Free,
             rest_ref: None,
+            ccd: true,
+            slow_steps: 0,
         });
         idx
     }

@@ -14,6 +14,7 @@ mod hopper;
 mod mesh_export;
 mod physics;
 mod planning;
+mod quiet;
 mod recording;
 mod recording_urdf;
 mod report_html;

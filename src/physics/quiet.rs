@@ -1,0 +1,263 @@
+//! Event-driven stepping: which steps need the solver, and the quiet step that replaces the
+//! others.
+//!
+//! Job: decide before each step whether anything can move in it. A step is quiet when every
+//! part in both trays sleeps, the pick tray rests, the gripper is idle or holds its part (no
+//! seal, no release due) and no kinematic collider (the arm's links, tool and cup, the held
+//! part) can come within [`QUIET_MARGIN_M`] of a part or of the cell's boxes (table, trays,
+//! obstacles) during the step: its pose at the end of the step, its exact distance to every
+//! target whose box it may reach, less the farthest any of its points travels in the step (the
+//! translation plus the turn times its bounding radius). A quiet step moves the kinematic
+//! bodies to where the step ends and keeps scene queries up to date (collider poses, the query
+//! tree) but runs no solver: sleeping parts would not have moved and nothing could have woken
+//! them. The check runs every step, so the solver resumes on the first step in which a contact
+//! becomes possible, wherever the arm's planned motion takes it.
+//!
+//! Continuous collision detection (CCD) runs only while it is needed: while a part that was
+//! poured, dropped, let go or shaken since it last slept is awake, or the pick tray moves.
+//! Parts at rest, and parts the arm nudges while picking, are stepped without it.
+//!
+//! What may differ from stepping always: rapier's internal order (its query tree, contact
+//! graph, solver caches) after a quiet spell, so a contact resumed later may come out
+//! differently in the last bits. Sleeping bodies themselves are never integrated by rapier, so
+//! the parts do not move in a quiet step either way.
+//!
+//! Units: m and s at the API; rapier's millimetres inside. Frames: world.
+
+use nalgebra::Isometry3;
+use rapier3d::parry::bounding_volume::{Aabb, BoundingVolume};
+use rapier3d::prelude::*;
+
+use super::*;
+
+/// The clearance a kinematic collider must keep from every part and cell box throughout a
+/// step for the step to be quiet (m): ten times rapier's prediction distance, so no contact,
+/// speculative or not, can start in it.
+pub const QUIET_MARGIN_M: f64 = 0.002;
+
+/// A poured, dropped or shaken part whose every point has moved slower than this for
+/// [`CCD_REST_S`] is at rest for CCD's purpose (m/s): 0.1 mm a step, a small fraction of the
+/// thinnest part's half thickness that makes rapier sweep a body. A falling part passes this
+/// speed within 5 ms of letting go.
+pub const CCD_REST_M_S: f64 = 0.05;
+/// See [`CCD_REST_M_S`] (s).
+pub const CCD_REST_S: f64 = 0.1;
+
+/// Most exact distance queries one quiet check makes: beyond, the arm is among parts and the
+/// step is solved.
+const MAX_EXACT_QUERIES: usize = 12;
+
+/// The colliders a kinematic body may not come near in a quiet step, with their boxes (rapier
+/// units): gathered once while nothing moves, dropped after every solved step.
+pub(super) struct QuietTargets {
+    /// The cell's boxes.
+    env: Vec<(ColliderHandle, Aabb)>,
+    /// The free and placed parts' colliders.
+    parts: Vec<(ColliderHandle, Aabb)>,
+    /// The box around all parts, if any.
+    parts_box: Option<Aabb>,
+}
+
+/// One kinematic collider where the step would take it.
+struct Mover {
+    handle: ColliderHandle,
+    /// Pose at the end of the step.
+    end: Pose,
+    /// Farthest any of its points travels in the step (m).
+    travel_m: f64,
+}
+
+impl World {
+    /// How the world is stepped.
+    pub fn stepping(&self) -> Stepping {
+        self.stepping
+    }
+
+    /// Steps as `stepping` says from now on.
+    pub fn set_stepping(&mut self, stepping: Stepping) {
+        self.stepping = stepping;
+    }
+
+    /// Steps taken without the solver (quiet steps), of [`World::steps`].
+    pub fn quiet_steps(&self) -> u64 {
+        self.quiet_steps
+    }
+
+    /// Whether part `i` is asleep (a part taken out of the cell counts as asleep).
+    pub fn part_sleeping(&self, i: usize) -> bool {
+        let p = &self.parts[i];
+        p.state == PartState::Removed || self.bodies[p.body].is_sleeping()
+    }
+
+    /// Whether the next step needs continuous collision detection: a part poured, dropped or
+    /// shaken since it last slept is awake, or the pick tray moves.
+    pub(super) fn ccd_needed(&self) -> bool {
+        self.stepping == Stepping::Always
+            || self.pick_tray_moving()
+            || self.pick_tray_offset_m.1 != nalgebra::Vector3::zeros()
+            || self
+                .parts
+                .iter()
+                .any(|p| p.ccd && p.state != PartState::Removed && !self.bodies[p.body].is_sleeping())
+    }
+
+    /// After a solved step: parts that sleep again, or have moved slower than
+    /// [`CCD_REST_M_S`] (every point) for [`CCD_REST_S`], no longer need CCD.
+    pub(super) fn clear_ccd_flags(&mut self) {
+        let r = self.part_shape.bounding_radius_m;
+        let rest_steps = (CCD_REST_S / self.step_dt_s).round() as u32;
+        for p in &mut self.parts {
+            if !p.ccd {
+                continue;
+            }
+            let b = &self.bodies[p.body];
+            if p.state == PartState::Removed || b.is_sleeping() {
+                p.ccd = false;
+                continue;
+            }
+            let speed_m_s = b.linvel().length() as f64 / SIM_UNITS_PER_M + b.angvel().length() as f64 * r;
+            p.slow_steps = if speed_m_s < CCD_REST_M_S { p.slow_steps + 1 } else { 0 };
+            if p.slow_steps >= rest_steps {
+                p.ccd = false;
+            }
+        }
+    }
+
+    /// Whether the next step, with the arm's links going to `world_from_links`, is quiet (see
+    /// the module header): checked before the gripper runs.
+    pub(super) fn step_is_quiet(&mut self, world_from_links: &[Isometry3<f64>]) -> bool {
+        if self.stepping != Stepping::EventDriven
+            || self.pick_tray_moving()
+            || self.pick_tray_offset_m.1 != nalgebra::Vector3::zeros()
+        {
+            return false;
+        }
+        if !matches!(
+            self.gripper.due(self.time_s),
+            suction::GripperDue::Nothing | suction::GripperDue::CheckHold(_)
+        ) {
+            return false;
+        }
+        if !self
+            .parts
+            .iter()
+            .all(|p| matches!(p.state, PartState::Removed | PartState::Held) || self.bodies[p.body].is_sleeping())
+        {
+            return false;
+        }
+        let movers = self.movers(world_from_links);
+        if self.quiet_targets.is_none() {
+            self.quiet_targets = Some(self.gather_targets());
+        }
+        let Some(targets) = self.quiet_targets.as_ref() else {
+            return false;
+        };
+        let mut exact = 0;
+        for m in &movers {
+            let c = &self.colliders[m.handle];
+            let reach_m = m.travel_m + QUIET_MARGIN_M;
+            let reach = c.shape().compute_aabb(&m.end).loosened(sim(reach_m));
+            let near_parts = targets.parts_box.is_some_and(|b| b.intersects(&reach));
+            let candidates = targets
+                .env
+                .iter()
+                .chain(targets.parts.iter().filter(|_| near_parts))
+                .filter(|(_, b)| b.intersects(&reach));
+            for (h, _) in candidates {
+                exact += 1;
+                if exact > MAX_EXACT_QUERIES {
+                    return false;
+                }
+                let t = &self.colliders[*h];
+                let d = rapier3d::parry::query::distance(&m.end, c.shape(), t.position(), t.shape());
+                match d {
+                    Ok(d) if (d.distance as f64) / SIM_UNITS_PER_M > reach_m => {}
+                    _ => return false,
+                }
+            }
+        }
+        true
+    }
+
+    /// The kinematic colliders (the arm's moving links with tool and cup, the held part) and
+    /// where the step takes them.
+    fn movers(&self, world_from_links: &[Isometry3<f64>]) -> Vec<Mover> {
+        let mut out = Vec::with_capacity(16);
+        let mut push = |handle: ColliderHandle, body_end: &Isometry3<f64>, radius_m: f64| {
+            let c = &self.colliders[handle];
+            let end = to_pose(body_end) * c.position_wrt_parent().copied().unwrap_or(Pose::IDENTITY);
+            let (a, b) = (to_isometry(c.position()), to_isometry(&end));
+            let travel_m =
+                (b.translation.vector - a.translation.vector).norm() + a.rotation.angle_to(&b.rotation) * radius_m;
+            out.push(Mover { handle, end, travel_m });
+        };
+        for (i, body) in self.link_bodies.iter().enumerate().skip(1) {
+            for h in self.bodies[*body].colliders() {
+                let c = &self.colliders[*h];
+                let sphere = c.shape().compute_local_bounding_sphere();
+                let radius_m = (sphere.center().length() + sphere.radius()) as f64 / SIM_UNITS_PER_M;
+                push(*h, &world_from_links[i], radius_m);
+            }
+        }
+        if let Some((seal, tool_from_part)) = self.gripper.held() {
+            let end = world_from_links[DOF] * self.robot.flange_from_tool * tool_from_part;
+            push(self.parts[seal.part].collider, &end, self.part_shape.bounding_radius_m);
+        }
+        out
+    }
+
+    /// The cell's boxes and the free and placed parts, with their boxes now.
+    fn gather_targets(&self) -> QuietTargets {
+        let mut env = Vec::new();
+        for (h, c) in self.colliders.iter() {
+            if matches!(Tag::decode(c.user_data), Some(Tag::Env(_))) {
+                env.push((h, c.compute_aabb()));
+            }
+        }
+        let parts: Vec<(ColliderHandle, Aabb)> = self
+            .parts
+            .iter()
+            .filter(|p| matches!(p.state, PartState::Free | PartState::Placed))
+            .map(|p| (p.collider, self.colliders[p.collider].compute_aabb()))
+            .collect();
+        let parts_box = parts.iter().map(|(_, b)| *b).reduce(|a, b| a.merged(&b));
+        QuietTargets { env, parts, parts_box }
+    }
+
+    /// A quiet step: the arm's bodies (and the held part) go to where the step ends, the
+    /// gripper's timers run, scene queries see the new poses, the clock advances; no solver.
+    /// Returns `false` (having done nothing but run the gripper) if the gripper let its part
+    /// go, so the step must be solved.
+    pub(super) fn quiet_step(&mut self, world_from_links: &[Isometry3<f64>]) -> bool {
+        let world_from_tool_next = world_from_links[DOF] * self.robot.flange_from_tool;
+        self.update_gripper(&world_from_tool_next);
+        if !matches!(
+            self.gripper.due(self.time_s),
+            suction::GripperDue::Nothing | suction::GripperDue::CheckHold(_)
+        ) || self
+            .parts
+            .iter()
+            .any(|p| p.state != PartState::Removed && p.state != PartState::Held && !self.bodies[p.body].is_sleeping())
+        {
+            return false;
+        }
+        let mut moved = Vec::with_capacity(16);
+        for (i, h) in self.link_bodies.iter().enumerate().skip(1) {
+            self.bodies[*h].set_position(to_pose(&world_from_links[i]), false);
+            moved.extend_from_slice(self.bodies[*h].colliders());
+        }
+        if let Some((seal, tool_from_part)) = self.gripper.held() {
+            let body = self.parts[seal.part].body;
+            self.bodies[body].set_position(to_pose(&(world_from_tool_next * tool_from_part)), false);
+            moved.extend_from_slice(self.bodies[body].colliders());
+        }
+        self.bodies
+            .propagate_modified_body_positions_to_colliders(&mut self.colliders);
+        let prediction = self.params.prediction_distance();
+        for h in moved {
+            let aabb = self.colliders[h].compute_aabb().loosened(prediction);
+            self.broad_phase.set_aabb(&self.params, h, aabb);
+        }
+        true
+    }
+}
