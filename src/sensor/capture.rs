@@ -5,7 +5,7 @@
 //! Job: render everything in the cell as the physics world holds it (the arm's links, tool and
 //! cup, the held part, the parts through their view shapes, the trays and table: the colliders'
 //! shapes at their poses, [`World::view_meshes`], never the recognised parts) into a z-buffer
-//! ([`super::raster`]), so the arm and the parts really hide what lies beneath them; each
+//! (`sensor/raster.rs`), so the arm and the parts really hide what lies beneath them; each
 //! pixel's depth is its ray cut with the nearest facet's plane. Round surfaces are faceted within
 //! [`FACET_CHORD_M`] (a simplification: a ray cast met the true cylinder). Then add depth noise
 //! growing with range squared and drop returns at grazing angles and at random. What the fixed
