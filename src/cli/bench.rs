@@ -19,7 +19,13 @@ pub fn run(command: BenchCommand) -> Result<()> {
             seed,
             json,
         } => bench_planner(trials, baseline_trials, seed, json),
-        BenchCommand::Sensor { runs, seeds, json } => bench_sensor(runs, seeds, json),
+        BenchCommand::Sensor {
+            runs,
+            seeds,
+            scene,
+            workpieces,
+            json,
+        } => bench_sensor(runs, seeds, scene.as_deref(), workpieces.as_deref(), json),
         BenchCommand::Robot { runs, calls, json } => {
             let loaded = LoadedScene::embedded_default()?;
             let robot = RobotModel::from_scene(&loaded)?;
@@ -72,6 +78,13 @@ pub enum BenchCommand {
         /// Recognition over the default pile of seeds 1..=N per workpiece.
         #[arg(long, default_value_t = 8)]
         seeds: u64,
+        /// Scene file (default: the embedded default cell), e.g. another sensor resolution.
+        #[arg(long)]
+        scene: Option<std::path::PathBuf>,
+        /// Workpieces, comma-separated: A ... F (embedded) or paths to workpiece files (default:
+        /// A to F).
+        #[arg(long)]
+        workpieces: Option<String>,
         /// Machine-readable JSON output.
         #[arg(long)]
         json: bool,
@@ -218,8 +231,22 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
     Ok(())
 }
 
-fn bench_sensor(runs: usize, seeds: u64, json: bool) -> Result<()> {
-    let (loaded, robot, workpieces) = embedded_cell()?;
+fn bench_sensor(
+    runs: usize,
+    seeds: u64,
+    scene: Option<&std::path::Path>,
+    names: Option<&str>,
+    json: bool,
+) -> Result<()> {
+    let loaded = LoadedScene::load(scene)?;
+    let robot = RobotModel::from_scene(&loaded)?;
+    let workpieces = match names {
+        Some(list) => list
+            .split(',')
+            .map(|n| LoadedWorkpiece::resolve(n.trim()))
+            .collect::<Result<Vec<_>, _>>()?,
+        None => LoadedWorkpiece::all_embedded()?,
+    };
     let b =
         binpick::bench::sense_bench(&loaded, &robot, &workpieces, runs, seeds).map_err(|e| anyhow::anyhow!("{e}"))?;
     if json {

@@ -467,8 +467,8 @@ pub enum Stepping {
     Always,
 }
 
-/// Largest sensor image (px): 4 MP, e.g. 2048 x 2048, twelve times the default cell's 320 x 256 and
-/// above the 3 MP class of the 3D sensors used for bin picking. A capture holds per pixel an f32
+/// Largest sensor image (px): 4 MP, e.g. 2048 x 2048, five times the default cell's 1032 x 772 and
+/// above the 3.2 MP of the 3D sensors' class used for bin picking (2064 x 1544). A capture holds per pixel an f32
 /// depth, three f32 world coordinates and a hit tag (24 bytes), the sensor keeps per pixel what the
 /// fixed cell shows, and a run keeps a few captures at once, in every parallel run of a batch: at
 /// this cap a capture takes about 100 MB and a run under a gigabyte, while the 8192 x 8192 that

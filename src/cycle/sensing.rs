@@ -18,7 +18,7 @@ use super::play::{Capture, Segment};
 use super::{CycleError, Run};
 use crate::planning::{CollisionModel, Environment, PlanOptions, RobotSpheres};
 use crate::robot::JointVector;
-use crate::sensor::{CaptureJob, CaptureProblem, Detection, MOTION_HOLE_MIN_PX, RecognitionReport, evaluate};
+use crate::sensor::{CaptureJob, CaptureProblem, Detection, RecognitionReport, evaluate};
 use crate::trajectory::{CORRIDOR_CHECK_DT_S, Motion, Trajectory, accelerate_in_corridor};
 
 /// The most captures in a row the cell takes for a pile in motion and looks at again; the next
@@ -189,7 +189,7 @@ impl Run<'_, '_> {
         // New holes in the image: something moved during the exposure. Looked at again, up to
         // [`MOTION_RECAPTURES`] times in a row; a hole that stays put is a steep face.
         let new_holes = self.st.sensor.new_hole_px(&job.capture);
-        if new_holes >= MOTION_HOLE_MIN_PX && self.st.moving_in_a_row < MOTION_RECAPTURES {
+        if new_holes >= self.st.sensor.motion_hole_min_px() && self.st.moving_in_a_row < MOTION_RECAPTURES {
             self.st.moving_in_a_row += 1;
             self.st.sensor.spoiled += 1;
             let problem = CaptureProblem::PileMoving(new_holes);

@@ -26,6 +26,7 @@ pub mod quiet;
 pub mod script;
 pub mod shapes;
 pub mod suction;
+mod view;
 
 use nalgebra::{Isometry3, Vector3};
 use rapier3d::math::{Pose, Vector};
@@ -38,6 +39,7 @@ pub use health::{HealthError, HealthEvent, HealthLimits, HealthMonitor};
 pub use query::{RayCaster, RayHit, RayTargetBox, RayTargets, ViewVolume};
 pub use shapes::{PartShape, ShapeError};
 pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
+pub use view::ViewMesh;
 
 /// rapier units per metre: the physics runs in millimetres. parry reuses a pair's contact points
 /// while they drift less than a hard-coded 1e-3 units (`ContactManifold::try_update_contacts`);

@@ -1,13 +1,14 @@
-//! The fixed overhead 3D sensor: depth capture by ray casting, exposure timing, recognition.
+//! The fixed overhead 3D sensor: depth capture by rasterization, exposure timing, recognition.
 //!
-//! Files: [`camera`] (the pinhole camera), [`capture`](mod@capture) (ray-cast depth images), [`recognition`]
+//! Files: [`camera`] (the pinhole camera), [`capture`](mod@capture) (rasterized depth images),
+//! `raster` (the z-buffer), [`recognition`]
 //! (parts found in a capture, and their evaluation against ground truth), [`heightmap`] (the
 //! point cloud binned over the pick tray); this file: the sensor's timing (trigger, exposure,
 //! latency) and its view frustum.
 //!
-//! Job: capture the pile exactly as a fixed pinhole camera sees it: one ray per pixel into the
-//! physics world (arm links, held part, parts, trays), so the arm and the parts really hide what
-//! lies beneath them; add depth noise growing with range squared and drop returns at grazing
+//! Job: capture the pile exactly as a fixed pinhole camera sees it: the physics world's solids
+//! (arm links, held part, parts, trays) rasterized into a z-buffer, so the arm and the parts
+//! really hide what lies beneath them; add depth noise growing with range squared and drop returns at grazing
 //! angles and at random. A capture needs an exposure window in which the arm stays out of the view
 //! frustum over the pick tray (else it is spoiled and repeated); a part that moves more than
 //! [`STILL_MOTION_M`] during the exposure is blurred and not recognised (the others are). The
@@ -25,6 +26,7 @@ pub mod camera;
 pub mod capture;
 pub mod cloud;
 pub mod heightmap;
+mod raster;
 pub mod recognition;
 
 use nalgebra::Point3;
@@ -76,17 +78,19 @@ pub enum CaptureProblem {
     /// The arm entered the view frustum during exposure.
     ArmEnteredDuringExposure(String),
     /// The image shows this many new hole pixels over the tray floor
-    /// ([`Sensor::new_hole_px`], at least [`MOTION_HOLE_MIN_PX`]): something moved during the
+    /// ([`Sensor::new_hole_px`], at least [`Sensor::motion_hole_min_px`]): something moved during the
     /// exposure, and the pile may still be moving. Found once the image is processed; the cell
     /// does not pick from it.
     PileMoving(usize),
 }
 
-/// A capture whose image shows at least this many new hole pixels over the tray floor is taken
-/// for a pile in motion ([`CaptureProblem::PileMoving`]). On deterministic seeds 1-4 of A, C, D
-/// and E, captures with no part blurred had at most 18 hole pixels (A: steep faces beyond the
-/// grazing angle), captures with a part blurred at least 25 (D) and up to 5,210 (C).
-pub const MOTION_HOLE_MIN_PX: usize = 20;
+/// A capture whose image shows new holes over the tray floor covering at least this area at the
+/// floor ([`Sensor::motion_hole_min_px`] pixels) is taken for a pile in motion
+/// ([`CaptureProblem::PileMoving`]) (m^2): 20 pixels of 1.43 mm. With that sensor, on
+/// deterministic seeds 1-4 of A, C, D and E, captures with no part blurred had at most 18 hole
+/// pixels (A: steep faces beyond the grazing angle), captures with a part blurred at least 25 (D)
+/// and up to 5,210 (C).
+pub const MOTION_HOLE_MIN_M2: f64 = 20.0 * 0.00143 * 0.00143;
 
 /// A capture in progress: exposing, then processing, then ready (or spoiled).
 #[derive(Debug, Clone)]
@@ -320,6 +324,16 @@ impl Sensor {
             }
         }
         holes
+    }
+
+    /// New hole pixels that show a pile in motion: [`MOTION_HOLE_MIN_M2`] at the tray floor in
+    /// this camera's pixels there.
+    pub fn motion_hole_min_px(&self) -> usize {
+        let floor = self.pick_tray.world_from_tray.translation.vector;
+        let z = (floor - self.camera.world_from_camera.translation.vector)
+            .dot(&(self.camera.world_from_camera.rotation * nalgebra::Vector3::z()));
+        let pixel_m = self.camera.pixel_size_at_m(z);
+        ((MOTION_HOLE_MIN_M2 / (pixel_m * pixel_m)).round() as usize).max(1)
     }
 
     /// The hole pixels of `capture` ([`Sensor::hole_px`]) that were not holes in the last image

@@ -522,7 +522,7 @@ fn sensor_resolution_needing_gigabytes_per_capture() {
     ws.edit(
         "scenes/default.toml",
         "scenes/huge.toml",
-        "resolution_px = [320, 256]",
+        "resolution_px = [1032, 772]",
         "resolution_px = [8192, 8192]",
     );
     let err = rejects(
@@ -538,7 +538,7 @@ fn sensor_resolution_needing_gigabytes_per_capture() {
     ws.edit(
         "scenes/default.toml",
         "scenes/cap.toml",
-        "resolution_px = [320, 256]",
+        "resolution_px = [1032, 772]",
         "resolution_px = [2048, 2048]",
     );
     let out = binpick_in(ws.dir.path(), &["check", "scenes/cap.toml"]);

@@ -33,11 +33,11 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
     let info = reader.info().clone();
     assert_eq!(
         (info.width, info.height, info.bit_depth),
-        (320, 256, png::BitDepth::Sixteen)
+        (1032, 772, png::BitDepth::Sixteen)
     );
     let mut buf = vec![0; reader.output_buffer_size().unwrap()];
     reader.next_frame(&mut buf).unwrap();
-    let centre = (128 * 320 + 160) * 2;
+    let centre = (386 * 1032 + 516) * 2;
     let mm = u16::from_be_bytes([buf[centre], buf[centre + 1]]);
     assert!((950..=1001).contains(&mm), "depth at the image centre {mm} mm");
     // PLY header and size agree.

@@ -6,6 +6,7 @@ mod cli_bad_input;
 mod cli_pile;
 mod cli_robot;
 mod cli_sense;
+mod depth;
 mod expect;
 mod faults;
 mod fuzz;

@@ -209,24 +209,24 @@ fn cloud_recognition_finds_the_top_layer_and_chosen_grasps_are_reachable_and_cle
 }
 
 /// The cloud recognition's floors on the pooled top-layer recall and the precision of seeds 1
-/// and 2, per workpiece A..F: regression guards a little below what it reaches. The recognition
-/// targets (recall 90 %, precision 99 %) are not all reached: flat E and F parts show a 7 px top
-/// face whose outline leaves the yaw open, and D's lying cans come out 5-7 deg off in yaw now and
-/// then; the README states both.
+/// and 2, per workpiece A..F: regression guards a little below what it reaches. With the 0.85 mm
+/// pixels of the default sensor, flat E and F parts show a 12 px top face that pins the yaw
+/// (`bench sensor`, seeds 1-8: recall 92.0 and 92.8 %, precision 99.5 and 100 %; with 1.43 mm
+/// pixels 54 and 51 %); D's lying cans still come out 5-7 deg off in yaw now and then.
 const FLOORS: [(f64, f64); 6] = [
-    (0.85, 0.90),
+    (0.85, 0.95),
     (0.90, 0.99),
-    (0.90, 0.95),
-    (0.75, 0.95),
-    (0.20, 0.95),
-    (0.15, 0.90),
+    (0.90, 0.97),
+    (0.85, 0.95),
+    (0.85, 0.97),
+    (0.85, 0.97),
 ];
 
-/// The sensor's fast capture (the fixed cell's hits cached, rays cast only where something that
-/// moves can be) gives the same image as casting every ray into the whole world: with the arm
-/// away, with it over the pile, and with a part held in view.
+/// The sensor's fast capture (the fixed cell rasterized once, only what moves rasterized per
+/// capture) gives the same image as rasterizing the whole world: with the arm away and with it
+/// over the pile.
 #[test]
-fn cached_background_captures_equal_full_ray_casts() {
+fn cached_background_captures_equal_full_captures() {
     for (name, seed) in [("E", 3), ("C", 2)] {
         let (mut w, scene, wp, _) = cell(name, seed);
         let sensor = Sensor::new(&scene.scene.sensor, &w, seed, &wp.workpiece).unwrap();
@@ -297,8 +297,9 @@ fn recognition_reports_the_trigger_and_blurs_a_turning_strip() {
         near(&at_trigger) < binpick::sensor::CORRECT_WITHIN_M,
         "not reported where it was"
     );
-    // Negative control: the part really is elsewhere now, and nothing is reported there.
-    assert!(near(&moved) > 0.02);
+    // Negative control: the part really is elsewhere now, and nothing is reported there (a
+    // neighbour may lie a centimetre or two away).
+    assert!(near(&moved) > binpick::sensor::CORRECT_WITHIN_M);
 
     // A strip turning 0.05 rad about its own centre during the exposure: its centre does not
     // move, its ends move 3.7 mm. Blurred: its pixels come back empty and it is not recognised.
@@ -485,19 +486,19 @@ fn a_part_that_would_hang_into_the_wall_when_lifted_is_not_chosen() {
 
 /// A pile in motion as the cell can tell it from the image alone: a strip turning during the
 /// exposure leaves a hole over the tray floor (its pixels return nothing), at least
-/// `MOTION_HOLE_MIN_PX` pixels that were not holes in the last image looked at. Negative
+/// `Sensor::motion_hole_min_px` pixels that were not holes in the last image looked at. Negative
 /// controls: the same pile standing still shows none; and the same image looked at twice shows
 /// no new hole the second time (a hole that stays put is a steep face, not motion).
 #[test]
 fn a_strip_moving_during_the_exposure_leaves_new_holes_and_a_still_pile_none() {
-    use binpick::sensor::MOTION_HOLE_MIN_PX;
     let (mut w, scene, wp, _) = cell("C", 3);
     let mut sensor = Sensor::new(&scene.scene.sensor, &w, 3, &wp.workpiece).unwrap();
+    let min_px = sensor.motion_hole_min_px();
     let mut still = sensor.trigger(&w).unwrap();
     let ready_s = still.ready_s;
     sensor.result(&mut still, ready_s).expect("ready");
     let first = sensor.new_hole_px(&still.capture);
-    assert!(first < MOTION_HOLE_MIN_PX, "a still pile shows {first} hole pixels");
+    assert!(first < min_px, "a still pile shows {first} hole pixels");
     assert_eq!(
         sensor.new_hole_px(&still.capture),
         0,
@@ -511,9 +512,6 @@ fn a_strip_moving_during_the_exposure_leaves_new_holes_and_a_still_pile_none() {
     let ready_s = job.ready_s;
     sensor.result(&mut job, ready_s).expect("ready");
     let moved = sensor.new_hole_px(&job.capture);
-    assert!(
-        moved >= MOTION_HOLE_MIN_PX,
-        "a turning strip leaves only {moved} new hole pixels"
-    );
+    assert!(moved >= min_px, "a turning strip leaves only {moved} new hole pixels");
     assert_eq!(sensor.new_hole_px(&job.capture), 0, "the hole is new twice");
 }

@@ -1,0 +1,236 @@
+//! Depth by rasterization: a z-buffer of triangles seen through the pinhole camera, each pixel
+//! keeping the nearest facet whose triangle covers its centre.
+//!
+//! Job: project every triangle of the solids the world shows ([`crate::physics::ViewMesh`]) into
+//! the image, clipped at a near plane; test each pixel centre (u + 0.5, v + 0.5, the centre of
+//! [`Camera::pixel_dir`]) inside it by edge functions, interpolate 1/z (exact for a plane under
+//! perspective) and keep the nearest facet. The buffer only decides which facet each pixel sees;
+//! the capture then cuts the pixel's ray with that facet's plane in f64, so depths are the exact
+//! ray-plane distances. Rows are split into bands rasterized in parallel: the result does not
+//! depend on the threads (each pixel takes the first facet, in the meshes' order, of the
+//! largest inverse depth as f32).
+//!
+//! Units: m, px. Frames: world (facet planes), camera optical frame (z along the view).
+
+use nalgebra::Vector3;
+use rayon::prelude::*;
+
+use super::Camera;
+use crate::physics::{Tag, ViewMesh};
+
+/// A triangle's plane and what it belongs to.
+#[derive(Debug, Clone, Copy)]
+pub(crate) struct Facet {
+    /// Unit normal (world; either side).
+    pub normal: Vector3<f64>,
+    /// `normal . p` for the points p of the plane (m).
+    pub offset_m: f64,
+    /// The solid.
+    pub tag: Tag,
+}
+
+/// Nearest facet per pixel.
+#[derive(Debug, Clone)]
+pub(crate) struct ZBuffer {
+    /// Inverse depth along the optical axis per pixel, row-major; 0 where nothing covers it
+    /// (1/m): the nearest surface has the largest.
+    pub inv_depth: Vec<f32>,
+    /// Facet index per pixel; [`NO_FACET`] where nothing covers it.
+    pub facet: Vec<u32>,
+}
+
+/// No facet covers the pixel.
+pub(crate) const NO_FACET: u32 = u32::MAX;
+
+/// Triangles closer to the optical centre than this are clipped (m).
+const NEAR_M: f64 = 1e-3;
+
+/// Rows per band rasterized by one thread.
+const BAND_ROWS: usize = 16;
+
+impl ZBuffer {
+    /// An empty buffer for `camera`'s image.
+    pub fn empty(camera: &Camera) -> Self {
+        let n = camera.width_px * camera.height_px;
+        ZBuffer {
+            inv_depth: vec![0.0; n],
+            facet: vec![NO_FACET; n],
+        }
+    }
+}
+
+/// A triangle in the image: pixel coordinates and inverse depth per vertex, its facet, and the
+/// pixel rows it may cover (inclusive).
+struct ScreenTri {
+    x: [f64; 3],
+    y: [f64; 3],
+    inv_z: [f64; 3],
+    facet: u32,
+    rows: (usize, usize),
+}
+
+/// Rasterizes `meshes` into `zb` (over what it holds), appending their facets to `facets`. A
+/// convex mesh's facets facing away from the camera are skipped: a ray from outside enters a
+/// convex solid through a facet facing it.
+pub(crate) fn rasterize(camera: &Camera, meshes: &[ViewMesh], zb: &mut ZBuffer, facets: &mut Vec<Facet>) {
+    let (w, h) = (camera.width_px, camera.height_px);
+    let camera_from_world = camera.world_from_camera.inverse();
+    let eye = camera.world_from_camera.translation.vector;
+    let mut tris: Vec<ScreenTri> = Vec::new();
+    for mesh in meshes {
+        let cam: Vec<Vector3<f64>> = mesh
+            .vertices_m
+            .iter()
+            .map(|p| camera_from_world.transform_point(&(*p).into()).coords)
+            .collect();
+        let centre = mesh.vertices_m.iter().sum::<Vector3<f64>>() / mesh.vertices_m.len().max(1) as f64;
+        for t in &mesh.triangles {
+            let [a, b, c] = t.map(|i| mesh.vertices_m[i as usize]);
+            let n = (b - a).cross(&(c - a));
+            let len = n.norm();
+            if len < 1e-18 {
+                continue;
+            }
+            let mut normal = n / len;
+            if mesh.convex {
+                if normal.dot(&(a - centre)) < 0.0 {
+                    normal = -normal;
+                }
+                if normal.dot(&(a - eye)) >= 0.0 {
+                    continue;
+                }
+            }
+            let facet = facets.len() as u32;
+            let before = tris.len();
+            clip_and_project(
+                camera,
+                [cam[t[0] as usize], cam[t[1] as usize], cam[t[2] as usize]],
+                facet,
+                &mut tris,
+            );
+            if tris.len() > before {
+                facets.push(Facet {
+                    normal,
+                    offset_m: normal.dot(&a),
+                    tag: mesh.tag,
+                });
+            }
+        }
+    }
+    // Bin the triangles by bands of rows, in their order.
+    let bands = h.div_ceil(BAND_ROWS);
+    let mut binned: Vec<Vec<u32>> = vec![Vec::new(); bands];
+    for (k, t) in tris.iter().enumerate() {
+        for band in binned
+            .iter_mut()
+            .take(t.rows.1 / BAND_ROWS + 1)
+            .skip(t.rows.0 / BAND_ROWS)
+        {
+            band.push(k as u32);
+        }
+    }
+    zb.inv_depth
+        .par_chunks_mut(BAND_ROWS * w)
+        .zip(zb.facet.par_chunks_mut(BAND_ROWS * w))
+        .zip(binned.par_iter())
+        .enumerate()
+        .for_each(|(band, ((depth, facet), list))| {
+            let v0 = band * BAND_ROWS;
+            let v1 = (v0 + BAND_ROWS).min(h) - 1;
+            for &k in list {
+                draw(&tris[k as usize], w, v0, v1, depth, facet);
+            }
+        });
+}
+
+/// Draws one triangle into the rows `v0..=v1` of a band (`depth`, `facet` start at row `v0`).
+fn draw(t: &ScreenTri, w: usize, v0: usize, v1: usize, inv_depth: &mut [f32], facet: &mut [u32]) {
+    let [x0, x1, x2] = t.x;
+    let [y0, y1, y2] = t.y;
+    let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
+    if area.abs() < 1e-12 {
+        return;
+    }
+    let inv = 1.0 / area;
+    // Barycentric weight i = (a_i x + b_i y + c_i) / area, the edge function of the opposite edge.
+    let edge =
+        |(xa, ya): (f64, f64), (xb, yb): (f64, f64)| ((ya - yb) * inv, (xb - xa) * inv, (xa * yb - xb * ya) * inv);
+    let e0 = edge((x1, y1), (x2, y2));
+    let e1 = edge((x2, y2), (x0, y0));
+    let e2 = edge((x0, y0), (x1, y1));
+    let xmin = x0.min(x1).min(x2);
+    let xmax = x0.max(x1).max(x2);
+    let u_lo = (xmin - 0.5).ceil().max(0.0);
+    let u_hi = (xmax - 0.5).floor().min(w as f64 - 1.0);
+    if u_lo > u_hi {
+        return;
+    }
+    let (u_lo, u_hi) = (u_lo as usize, u_hi as usize);
+    // Inclusive edges, a hair wide: a pixel centre on an edge shared by two triangles is covered.
+    const EPS: f64 = -1e-12;
+    for v in t.rows.0.max(v0)..=t.rows.1.min(v1) {
+        let py = v as f64 + 0.5;
+        let row = (v - v0) * w;
+        for u in u_lo..=u_hi {
+            let px = u as f64 + 0.5;
+            let b0 = e0.0 * px + e0.1 * py + e0.2;
+            let b1 = e1.0 * px + e1.1 * py + e1.2;
+            let b2 = e2.0 * px + e2.1 * py + e2.2;
+            if b0 < EPS || b1 < EPS || b2 < EPS {
+                continue;
+            }
+            let inv_z = (b0 * t.inv_z[0] + b1 * t.inv_z[1] + b2 * t.inv_z[2]) as f32;
+            let i = row + u;
+            if inv_z > inv_depth[i] {
+                inv_depth[i] = inv_z;
+                facet[i] = t.facet;
+            }
+        }
+    }
+}
+
+/// Clips a triangle (camera frame, m) at the near plane and projects what is left into the
+/// image as one or two screen triangles.
+fn clip_and_project(camera: &Camera, v: [Vector3<f64>; 3], facet: u32, out: &mut Vec<ScreenTri>) {
+    if v.iter().all(|p| p.z < NEAR_M) || v.iter().all(|p| p.z > camera.max_range_m) {
+        return;
+    }
+    let mut poly: Vec<Vector3<f64>> = Vec::with_capacity(4);
+    for k in 0..3 {
+        let (a, b) = (v[k], v[(k + 1) % 3]);
+        if a.z >= NEAR_M {
+            poly.push(a);
+        }
+        if (a.z >= NEAR_M) != (b.z >= NEAR_M) {
+            let s = (NEAR_M - a.z) / (b.z - a.z);
+            poly.push(a + (b - a) * s);
+        }
+    }
+    let (w, h) = (camera.width_px as f64, camera.height_px as f64);
+    let project = |p: &Vector3<f64>| {
+        (
+            camera.fx_px * p.x / p.z + camera.cx_px,
+            camera.fy_px * p.y / p.z + camera.cy_px,
+            1.0 / p.z,
+        )
+    };
+    let pts: Vec<(f64, f64, f64)> = poly.iter().map(project).collect();
+    for k in 1..pts.len().saturating_sub(1) {
+        let tri = [pts[0], pts[k], pts[k + 1]];
+        let ymin = tri.iter().map(|p| p.1).fold(f64::INFINITY, f64::min);
+        let ymax = tri.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
+        let xmin = tri.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
+        let xmax = tri.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
+        let (v_lo, v_hi) = ((ymin - 0.5).ceil().max(0.0), (ymax - 0.5).floor().min(h - 1.0));
+        if v_lo > v_hi || xmax < 0.0 || xmin > w {
+            continue;
+        }
+        out.push(ScreenTri {
+            x: tri.map(|p| p.0),
+            y: tri.map(|p| p.1),
+            inv_z: tri.map(|p| p.2),
+            facet,
+            rows: (v_lo as usize, v_hi as usize),
+        });
+    }
+}
