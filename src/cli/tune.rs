@@ -257,7 +257,7 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         evaluations.len(),
         header.workpiece,
         seeds_name(&train),
-        a.picks,
+        picks,
         if a.mode.deterministic {
             "deterministic compute budgets"
         } else {
