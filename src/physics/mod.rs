@@ -16,6 +16,7 @@
 //! the cell file's timestep.
 
 mod arm;
+pub mod drops;
 pub mod health;
 pub mod overlap;
 mod parts;
