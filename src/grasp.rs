@@ -5,7 +5,8 @@
 //! vertical; drop those the tool would not clear (height map), whose straight approach or retreat
 //! would meet the tray walls (cell geometry), or that the arm cannot reach within its limits along
 //! the whole straight descent (a mesh workpiece's faces are its part model's planar faces that
-//! take the cup, each grasped at the centre of its cup-fit region farthest from its edges); pick the tool yaw that makes the place motion quickest; rank by
+//! take the cup, each grasped at the centre of its cup-fit region farthest from its edges whose
+//! approach, cup and tool body, misses the part's own features above the face: pins, tabs); pick the tool yaw that makes the place motion quickest; rank by
 //! exposure, clearance, expected grasp success and expected motion time. Nothing here reads the
 //! world's ground truth.
 //!
@@ -18,6 +19,7 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 use crate::config::{Scene, Workpiece};
+use crate::part::approach::{ColumnPiece, clear_site};
 use crate::part::primitive::{Face, body_faces};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
@@ -146,6 +148,13 @@ pub struct GraspSelector {
     sites: Vec<(Vector3<f64>, f64)>,
     /// The faces are a part model's (their cup-fit regions decide which take the cup).
     model_faces: bool,
+    /// The centre of mass the peel model reads (part frame, m): a mesh workpiece's part model's;
+    /// the part frame's origin (the bounding box's centre) for primitives, as before the part
+    /// model (their results unchanged).
+    peel_com_m: Vector3<f64>,
+    /// A part model's faces that take the cup but on which every cup site's approach meets the
+    /// part's own geometry (pins, tabs, a can above its base): not offered.
+    blocked_faces: usize,
     /// The workpiece's own face margin, for which the part model's cup-fit regions were made (m).
     fit_margin_m: f64,
     cup_radius_m: f64,
@@ -162,6 +171,26 @@ pub struct GraspSelector {
     yaw_symmetry_rad: f64,
     /// Cloud points within this of the face plane belong to it (noise) (m).
     pub height_tolerance_m: f64,
+}
+
+/// The hand's solid above a cup site, as the approach sweeps it down the face normal: the cup
+/// from the lip up its length, then the tool body, each widened by two standard deviations of
+/// the recognised pose's noise (the site lands that far off).
+fn approach_column(scene: &Scene) -> [ColumnPiece; 2] {
+    let hand = crate::geometry::HandGeometry::new(&scene.gripper);
+    let slack = 2.0 * scene.sensor.pose_noise_m;
+    [
+        ColumnPiece {
+            radius_m: hand.cup_radius_m + slack,
+            from_m: 0.0,
+            to_m: hand.cup_length_m,
+        },
+        ColumnPiece {
+            radius_m: hand.body_radius_m + slack,
+            from_m: hand.cup_length_m,
+            to_m: hand.tool_length_m,
+        },
+    ]
 }
 
 /// Trapezoidal single-joint move time at top speed and acceleration (s).
@@ -188,6 +217,8 @@ impl GraspSelector {
                 .collect(),
             faces,
             model_faces: false,
+            peel_com_m: Vector3::zeros(),
+            blocked_faces: 0,
             fit_margin_m: workpiece.grasp.face_margin_m,
             cup_radius_m: g.cup_diameter_m / 2.0,
             // The recognised pose is off by up to two standard deviations of its noise: the cup
@@ -219,18 +250,41 @@ impl GraspSelector {
         };
         sel.faces.clear();
         sel.sites.clear();
+        let column = approach_column(scene);
         for f in pm.grasp_faces() {
-            let Some(best) = f.fit.best else { continue };
+            // The clearest cup centre whose approach (cup, then tool body) misses the part's own
+            // features above the face.
+            let Some((site, clearance)) = clear_site(&pm.mesh, &f.face, &f.fit.centres, &column) else {
+                sel.blocked_faces += 1;
+                continue;
+            };
             sel.faces.push(crate::sensor::cloud::face_of_planar(&f.face));
-            sel.sites.push((f.face.to_part(&best).coords, f.fit.best_clearance_m));
+            sel.sites.push((f.face.to_part(&site).coords, clearance));
         }
         sel.model_faces = true;
+        sel.peel_com_m = pm.com_m().coords;
         sel
     }
 
     /// The faces the selector proposes grasps on.
     pub fn faces(&self) -> &[Face] {
         &self.faces
+    }
+
+    /// Where on each face the cup goes (part frame, m), in the order of [`Self::faces`].
+    pub fn sites_m(&self) -> Vec<Vector3<f64>> {
+        self.sites.iter().map(|s| s.0).collect()
+    }
+
+    /// The part model's faces that take the cup but were not offered: every cup site's approach
+    /// meets the part's own geometry.
+    pub fn blocked_faces(&self) -> usize {
+        self.blocked_faces
+    }
+
+    /// The centre of mass the peel model reads (part frame, m): see the field.
+    pub fn peel_com_m(&self) -> Vector3<f64> {
+        self.peel_com_m
     }
 
     /// Whether the cloud stands above the face anywhere over it: a cell whose centre lies on the
@@ -408,7 +462,7 @@ impl GraspSelector {
                     Some(mut c) => {
                         c.detection = di;
                         c.face = fi;
-                        let com = det.world_from_part.translation.vector;
+                        let com = (det.world_from_part * Point3::from(self.peel_com_m)).coords;
                         let lateral = {
                             let r = com - point.coords;
                             (r - n * r.dot(&n)).norm()
