@@ -136,3 +136,48 @@ fn the_peel_model_reads_the_true_centre_of_mass() {
         nalgebra::Vector3::zeros()
     );
 }
+
+/// A mesh part's place slots come from its footprint in its place orientation, a stable pose:
+/// the hex standoff grasped on a flat lies on the opposite flat, its axis level, so it needs
+/// 20 mm along its axis and 16.17 mm (across corners) beside it, where its bounding box's
+/// 16.17 x 14 mm (standing on its end) would let neighbours overlap. Independent: the hexagon's
+/// across-corners width is 14 / cos 30 deg, and the flat-down part's axis is 7 mm above the
+/// floor (half the 14 mm across flats).
+#[test]
+fn place_slots_fit_the_footprint_of_a_stable_pose() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let hex = LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/hex-standoff.toml")).unwrap();
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &hex);
+    let corners = 0.014 / (30f64.to_radians()).cos();
+    let mut fp = sel.place_footprint_m();
+    fp.sort_by(f64::total_cmp);
+    assert!((fp[0] - corners).abs() < 1e-6 && (fp[1] - 0.02).abs() < 1e-6, "{fp:?}");
+    for fi in 0..sel.faces().len() {
+        let p = sel.place_pose(fi).expect("a flat has a place pose");
+        assert!((p.origin_height_m - 0.007).abs() < 1e-6, "{p:?}");
+        // The grasped flat looks straight up in the slot.
+        let up = p.slot_from_part * sel.faces()[fi].normal;
+        assert!(up.z > 1.0 - 1e-9, "{up:?}");
+    }
+    // The slots are spaced for it: neighbours' centres at least the footprint apart.
+    let slots = scene
+        .scene
+        .world_from_slots_for(&hex.workpiece, sel.place_footprint_m());
+    assert!(!slots.is_empty());
+    for (i, a) in slots.iter().enumerate() {
+        for b in &slots[i + 1..] {
+            let d = (a.translation.vector - b.translation.vector).abs();
+            let fpr = sel.place_footprint_m();
+            assert!(d.x >= fpr[0] - 1e-9 || d.y >= fpr[1] - 1e-9, "{d:?}");
+        }
+    }
+    // Negative control: the bounding box's footprint is 4 mm short of the lying part's length.
+    let bbox = [hex.workpiece.size_m[0], hex.workpiece.size_m[1]];
+    assert!(bbox[0].max(bbox[1]) < 0.02 - 0.003, "{bbox:?}");
+    // Built-in primitives keep their box's footprint and the old placement.
+    let a = LoadedWorkpiece::resolve("A").unwrap();
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &a);
+    assert_eq!(sel.place_footprint_m(), [a.workpiece.size_m[0], a.workpiece.size_m[1]]);
+    assert!(sel.place_pose(0).is_none());
+}
