@@ -243,8 +243,9 @@ impl PlacePose {
     }
 
     /// The footprint the slots must hold for every place pose in `place` (m): the largest
-    /// extents along x and y; both the larger of the two when the part may be turned in its slot
-    /// by a yaw that is not a multiple of a half turn (`yaw_symmetry_rad`, 0: a quarter turn).
+    /// extents along x and y; when the part may be turned in its slot by its yaw symmetry
+    /// (`yaw_symmetry_rad`, 0: a quarter turn), both the larger of the two for quarter turns and
+    /// the diagonal for finer ones.
     /// `None` when no face has a place pose.
     fn footprint_m(place: &[Option<PlacePose>], yaw_symmetry_rad: f64) -> Option<[f64; 2]> {
         let mut fp: Option<[f64; 2]> = None;
@@ -259,12 +260,10 @@ impl PlacePose {
             std::f64::consts::FRAC_PI_2
         };
         let turns = (std::f64::consts::TAU / sym).round().max(1.0) as usize;
-        fp.map(|[x, y]| {
-            if turns % 2 == 0 && turns > 2 {
-                [x.max(y); 2]
-            } else {
-                [x, y]
-            }
+        fp.map(|[x, y]| match turns {
+            1 | 2 => [x, y],
+            4 => [x.max(y); 2],
+            _ => [x.hypot(y); 2],
         })
     }
 }
