@@ -5,7 +5,8 @@
 //! vertical; drop those the tool would not clear (height map), whose straight approach or retreat
 //! would meet the tray walls (cell geometry), or that the arm cannot reach within its limits along
 //! the whole straight descent (a mesh workpiece's faces are its part model's planar faces that
-//! take the cup, each grasped at the centre of its cup-fit region farthest from its edges); pick the tool yaw that makes the place motion quickest; rank by
+//! take the cup, each grasped at the centre of its cup-fit region farthest from its edges whose
+//! approach, cup and tool body, misses the part's own features above the face: pins, tabs); pick the tool yaw that makes the place motion quickest; rank by
 //! exposure, clearance, expected grasp success and expected motion time. Nothing here reads the
 //! world's ground truth.
 //!
@@ -18,6 +19,7 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 use crate::config::{Scene, Workpiece};
+use crate::part::approach::{ColumnPiece, clear_site};
 use crate::part::primitive::{Face, body_faces};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
@@ -146,6 +148,19 @@ pub struct GraspSelector {
     sites: Vec<(Vector3<f64>, f64)>,
     /// The faces are a part model's (their cup-fit regions decide which take the cup).
     model_faces: bool,
+    /// The centre of mass the peel model reads (part frame, m): a mesh workpiece's part model's;
+    /// the part frame's origin (the bounding box's centre) for primitives, as before the part
+    /// model (their results unchanged).
+    peel_com_m: Vector3<f64>,
+    /// A part model's faces that take the cup but on which every cup site's approach meets the
+    /// part's own geometry (pins, tabs, a can above its base): not offered.
+    blocked_faces: usize,
+    /// Per face, how a part model's part lies in its slot when grasped there: the stable pose
+    /// whose support is opposite the face (`None`: a primitive's face, placed face up on the
+    /// opposite side of its box).
+    place: Vec<Option<PlacePose>>,
+    /// The part's footprint in its place orientations, along the slot's x and y (m).
+    place_footprint_m: [f64; 2],
     /// The workpiece's own face margin, for which the part model's cup-fit regions were made (m).
     fit_margin_m: f64,
     cup_radius_m: f64,
@@ -164,6 +179,115 @@ pub struct GraspSelector {
     pub height_tolerance_m: f64,
 }
 
+/// How a part model's part lies in its place slot: resting on the floor in one of its stable
+/// poses, turned so that the pose's support normal points straight down and, about the
+/// vertical, so that its footprint's box is smallest (before the slot's yaw).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlacePose {
+    /// The part's rotation in the slot frame (before the slot's yaw).
+    pub slot_from_part: UnitQuaternion<f64>,
+    /// Height of the part frame's origin above the floor (m): its hull's lowest point on it.
+    pub origin_height_m: f64,
+    /// Its footprint along the slot's x and y (m).
+    pub footprint_m: [f64; 2],
+}
+
+impl PlacePose {
+    /// The stable pose in which the part rests with the face of outward normal `face_normal`
+    /// (part frame) up: the pose whose support normal is most nearly opposite it, if the face
+    /// then tilts within `max_tilt_rad` (the cup must press straight down on it).
+    pub fn of_face(pm: &crate::part::PartModel, face_normal: &Vector3<f64>, max_tilt_rad: f64) -> Option<Self> {
+        let pose = pm
+            .poses
+            .iter()
+            .max_by(|a, b| (-a.normal.dot(face_normal)).total_cmp(&(-b.normal.dot(face_normal))))?;
+        if -pose.normal.dot(face_normal) < max_tilt_rad.cos() {
+            return None;
+        }
+        let down = -Vector3::z();
+        let tip = UnitQuaternion::rotation_between(&pose.normal, &down)
+            .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+        let bounds = |rot: &UnitQuaternion<f64>| {
+            let placed = pm.hull.vertices_m.iter().map(|v| rot * v.coords);
+            placed.fold(
+                (Vector3::repeat(f64::INFINITY), Vector3::repeat(f64::NEG_INFINITY)),
+                |(lo, hi), v| (lo.inf(&v), hi.sup(&v)),
+            )
+        };
+        // Turned about the vertical so that its footprint's box is smallest (whole degrees),
+        // its longer side along the slot's x.
+        let turned = |deg: u32| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), f64::from(deg).to_radians()) * tip;
+        let extent = |deg: u32| {
+            let (lo, hi) = bounds(&turned(deg));
+            (hi.x - lo.x, hi.y - lo.y)
+        };
+        let area = |deg: u32| {
+            let (x, y) = extent(deg);
+            x * y
+        };
+        let least = (0..180).map(area).fold(f64::INFINITY, f64::min);
+        let deg = (0..180)
+            .filter(|d| area(*d) <= least * (1.0 + 1e-6))
+            .max_by(|a, b| {
+                let (ea, eb) = (extent(*a), extent(*b));
+                (ea.0 - ea.1).total_cmp(&(eb.0 - eb.1)).then(b.cmp(a))
+            })
+            .unwrap_or(0);
+        let rot = turned(deg);
+        let (lo, hi) = bounds(&rot);
+        Some(PlacePose {
+            slot_from_part: rot,
+            origin_height_m: -lo.z,
+            footprint_m: [hi.x - lo.x, hi.y - lo.y],
+        })
+    }
+
+    /// The footprint the slots must hold for every place pose in `place` (m): the largest
+    /// extents along x and y; when the part may be turned in its slot by its yaw symmetry
+    /// (`yaw_symmetry_rad`, 0: a quarter turn), both the larger of the two for quarter turns and
+    /// the diagonal for finer ones.
+    /// `None` when no face has a place pose.
+    fn footprint_m(place: &[Option<PlacePose>], yaw_symmetry_rad: f64) -> Option<[f64; 2]> {
+        let mut fp: Option<[f64; 2]> = None;
+        for p in place.iter().flatten() {
+            let f = fp.get_or_insert([0.0, 0.0]);
+            f[0] = f[0].max(p.footprint_m[0]);
+            f[1] = f[1].max(p.footprint_m[1]);
+        }
+        let sym = if yaw_symmetry_rad > 0.0 {
+            yaw_symmetry_rad
+        } else {
+            std::f64::consts::FRAC_PI_2
+        };
+        let turns = (std::f64::consts::TAU / sym).round().max(1.0) as usize;
+        fp.map(|[x, y]| match turns {
+            1 | 2 => [x, y],
+            4 => [x.max(y); 2],
+            _ => [x.hypot(y); 2],
+        })
+    }
+}
+
+/// The hand's solid above a cup site, as the approach sweeps it down the face normal: the cup
+/// from the lip up its length, then the tool body, each widened by two standard deviations of
+/// the recognised pose's noise (the site lands that far off).
+fn approach_column(scene: &Scene) -> [ColumnPiece; 2] {
+    let hand = crate::geometry::HandGeometry::new(&scene.gripper);
+    let slack = 2.0 * scene.sensor.pose_noise_m;
+    [
+        ColumnPiece {
+            radius_m: hand.cup_radius_m + slack,
+            from_m: 0.0,
+            to_m: hand.cup_length_m,
+        },
+        ColumnPiece {
+            radius_m: hand.body_radius_m + slack,
+            from_m: hand.cup_length_m,
+            to_m: hand.tool_length_m,
+        },
+    ]
+}
+
 /// Trapezoidal single-joint move time at top speed and acceleration (s).
 fn joint_move_s(d: f64, v: f64, a: f64) -> f64 {
     let d = d.abs();
@@ -180,6 +304,7 @@ impl GraspSelector {
         let g = &scene.gripper;
         let t = &scene.pick_tray;
         let faces = body_faces(&workpiece.pieces());
+        let face_count = faces.len();
         GraspSelector {
             robot: robot.clone(),
             sites: faces
@@ -188,6 +313,10 @@ impl GraspSelector {
                 .collect(),
             faces,
             model_faces: false,
+            peel_com_m: Vector3::zeros(),
+            blocked_faces: 0,
+            place: vec![None; face_count],
+            place_footprint_m: [workpiece.size_m[0], workpiece.size_m[1]],
             fit_margin_m: workpiece.grasp.face_margin_m,
             cup_radius_m: g.cup_diameter_m / 2.0,
             // The recognised pose is off by up to two standard deviations of its noise: the cup
@@ -219,18 +348,60 @@ impl GraspSelector {
         };
         sel.faces.clear();
         sel.sites.clear();
+        sel.place.clear();
+        let column = approach_column(scene);
         for f in pm.grasp_faces() {
-            let Some(best) = f.fit.best else { continue };
+            // The clearest cup centre whose approach (cup, then tool body) misses the part's own
+            // features above the face.
+            let Some((site, clearance)) = clear_site(&pm.mesh, &f.face, &f.fit.centres, &column) else {
+                sel.blocked_faces += 1;
+                continue;
+            };
             sel.faces.push(crate::sensor::cloud::face_of_planar(&f.face));
-            sel.sites.push((f.face.to_part(&best).coords, f.fit.best_clearance_m));
+            sel.sites.push((f.face.to_part(&site).coords, clearance));
+            sel.place
+                .push(PlacePose::of_face(&pm, &f.face.normal, sel.max_tilt_rad));
         }
         sel.model_faces = true;
+        if let Some(fp) = PlacePose::footprint_m(&sel.place, sel.yaw_symmetry_rad) {
+            sel.place_footprint_m = fp;
+        }
+        sel.peel_com_m = pm.com_m().coords;
         sel
     }
 
     /// The faces the selector proposes grasps on.
     pub fn faces(&self) -> &[Face] {
         &self.faces
+    }
+
+    /// Where on each face the cup goes (part frame, m), in the order of [`Self::faces`].
+    pub fn sites_m(&self) -> Vec<Vector3<f64>> {
+        self.sites.iter().map(|s| s.0).collect()
+    }
+
+    /// The part model's faces that take the cup but were not offered: every cup site's approach
+    /// meets the part's own geometry.
+    pub fn blocked_faces(&self) -> usize {
+        self.blocked_faces
+    }
+
+    /// The part's footprint in its place orientations, along the slot's x and y (m): a part
+    /// model's stable poses with a grasp face up (the largest extents over the faces offered);
+    /// a primitive's box, lying on its -z face.
+    pub fn place_footprint_m(&self) -> [f64; 2] {
+        self.place_footprint_m
+    }
+
+    /// How the part lies in its slot when grasped on face `fi` (`None`: face up on the opposite
+    /// side of its box, as for primitives).
+    pub fn place_pose(&self, fi: usize) -> Option<&PlacePose> {
+        self.place.get(fi).and_then(Option::as_ref)
+    }
+
+    /// The centre of mass the peel model reads (part frame, m): see the field.
+    pub fn peel_com_m(&self) -> Vector3<f64> {
+        self.peel_com_m
     }
 
     /// Whether the cloud stands above the face anywhere over it: a cell whose centre lies on the
@@ -404,11 +575,11 @@ impl GraspSelector {
                     normal: n,
                     clear_z,
                 };
-                match self.best_yaw(det, face, &at, world_from_slot, q_now) {
+                match self.best_yaw(det, fi, &at, world_from_slot, q_now) {
                     Some(mut c) => {
                         c.detection = di;
                         c.face = fi;
-                        let com = det.world_from_part.translation.vector;
+                        let com = (det.world_from_part * Point3::from(self.peel_com_m)).coords;
                         let lateral = {
                             let r = com - point.coords;
                             (r - n * r.dot(&n)).norm()
@@ -487,11 +658,12 @@ impl GraspSelector {
     fn best_yaw(
         &self,
         det: &Detection,
-        face: &Face,
+        fi: usize,
         at: &FacePoint,
         world_from_slot: &Isometry3<f64>,
         q_now: &JointVector,
     ) -> Option<GraspCandidate> {
+        let face = &self.faces[fi];
         let (point, clear_z) = (&at.point, at.clear_z);
         let z_tool = -at.normal;
         let along_world = det.world_from_part.rotation * face.along;
@@ -503,12 +675,17 @@ impl GraspSelector {
             let k = face.normal.iamax();
             self.size_m[k]
         };
-        let slot_rot = world_from_slot.rotation * face_up;
         let floor_z = world_from_slot.translation.z - self.size_m[2] / 2.0;
+        // A part model's part rests in its slot in the stable pose with this face up; a
+        // primitive's face up on the opposite side of its box.
+        let (slot_rot, origin_height) = match self.place_pose(fi) {
+            Some(p) => (world_from_slot.rotation * p.slot_from_part, p.origin_height_m),
+            None => (world_from_slot.rotation * face_up, height_along_normal / 2.0),
+        };
         let part_center_in_slot = Vector3::new(
             world_from_slot.translation.x,
             world_from_slot.translation.y,
-            floor_z + height_along_normal / 2.0 + 0.0005,
+            floor_z + origin_height + 0.0005,
         );
         let mut best: Option<(f64, GraspCandidate)> = None;
         for k in 0..4 {

@@ -35,6 +35,85 @@ pub struct PartArgs {
     /// Where the SVG picture is written (default: NAME.part.svg in the current folder).
     #[arg(long)]
     pub svg: Option<PathBuf>,
+    /// Simulated piles (seeds 1..N, the workpiece's pile count each) from which the share of
+    /// settled parts that offer a graspable face is measured (0: none).
+    #[arg(long, default_value_t = 3)]
+    pub piles: u64,
+}
+
+/// What a few simulated piles offer the cup.
+#[derive(Debug, Clone, Copy, Default)]
+struct PileShare {
+    /// Piles built.
+    piles: u64,
+    /// Parts settled inside the pick tray, over all piles.
+    in_tray: usize,
+    /// Of those, the parts with a grasp face up whose cup disc is uncovered.
+    offered: usize,
+}
+
+impl PileShare {
+    fn share(&self) -> f64 {
+        if self.in_tray == 0 {
+            0.0
+        } else {
+            self.offered as f64 / self.in_tray as f64
+        }
+    }
+}
+
+/// Builds `piles` piles (seeds 1..=piles) and counts the settled parts in the tray that offer a
+/// graspable face: a face that takes the cup looks up within the cup's tilt, and a vertical ray
+/// from above at its cup-fit centre and at eight points of the cup's rim about it meets this part
+/// first, within 1 mm of the face (nothing lies on the cup's disc). Read from the simulated
+/// world: a prediction for the user, not a decision of the cell.
+fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: u64, tilt: f64) -> Result<PileShare> {
+    use binpick::physics::{PartShape, Tag, World, pile::PileOptions};
+    use nalgebra::{Point3, Vector3};
+    let mut out = PileShare::default();
+    if piles == 0 {
+        return Ok(out);
+    }
+    let robot = binpick::robot::RobotModel::from_scene(loaded)?;
+    let shape = PartShape::build(&wp.workpiece, &wp.source)?;
+    let r_cup = 0.5 * m.cup.diameter_m;
+    // Each grasp face's cup disc in the part frame: its centre and eight rim points.
+    let discs: Vec<(Vector3<f64>, Vec<Point3<f64>>)> = m
+        .grasp_faces()
+        .filter_map(|f| {
+            let c = f.fit.best?;
+            let pts = std::iter::once(c)
+                .chain((0..8).map(|k| {
+                    let a = std::f64::consts::TAU * k as f64 / 8.0;
+                    c + nalgebra::Vector2::new(a.cos(), a.sin()) * r_cup
+                }))
+                .map(|p| f.face.to_part(&p))
+                .collect();
+            Some((f.face.normal, pts))
+        })
+        .collect();
+    for seed in 1..=piles {
+        let mut world = World::new(&loaded.scene, &robot, shape.clone());
+        world.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed))?;
+        let down = -Vector3::z();
+        for i in world.parts_in_pick_tray() {
+            out.in_tray += 1;
+            let pose = world.part_pose(i);
+            let offered = discs.iter().any(|(n, pts)| {
+                (pose.rotation * n).z >= tilt.cos()
+                    && pts.iter().all(|p| {
+                        let w = pose * p;
+                        let origin = w.coords + Vector3::z() * 0.2;
+                        world
+                            .cast_ray(&origin, &down, 0.3, &|t: Tag| t.is_robot())
+                            .is_some_and(|h| h.tag == Tag::Part(i as u32) && (h.distance_m - 0.2).abs() < 0.001)
+                    })
+            });
+            out.offered += usize::from(offered);
+        }
+        out.piles += 1;
+    }
+    Ok(out)
 }
 
 /// The part model of a loaded mesh workpiece for the scene's cup; `None` for primitives.
@@ -116,12 +195,24 @@ pub fn part(a: &PartArgs) -> Result<()> {
         w.kind
     );
     write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title))?;
+    let piles = pile_share(&scene, &wp, &m, a.piles, tilt)?;
     if a.json {
-        print_json(&wp, &m, report, tilt, &svg_path)
+        print_json(&wp, &m, report, tilt, &svg_path, &piles)
     } else {
         print_summary(&wp, &m, report);
         print_faces(&m);
         print_poses(&m, tilt);
+        if piles.piles > 0 {
+            println!(
+                "simulated piles: {} of {} settled parts ({:.1} %) offer a cup face up with nothing on the cup's disc ({} piles of {}, seeds 1-{})",
+                piles.offered,
+                piles.in_tray,
+                100.0 * piles.share(),
+                piles.piles,
+                w.pile_count,
+                piles.piles
+            );
+        }
         if let Some(why) = no_cup_face(&m) {
             println!("warning: {why}");
         }
@@ -136,7 +227,14 @@ fn mm(v: f64) -> f64 {
 }
 
 /// The `--json` output: the part model with every face and pose.
-fn print_json(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport, tilt: f64, svg_path: &Path) -> Result<()> {
+fn print_json(
+    wp: &LoadedWorkpiece,
+    m: &PartModel,
+    report: &RepairReport,
+    tilt: f64,
+    svg_path: &Path,
+    piles: &PileShare,
+) -> Result<()> {
     let w = &wp.workpiece;
     let out = json!({
         "workpiece": wp.label,
@@ -156,6 +254,12 @@ fn print_json(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport, tilt: 
         "faces": m.faces.iter().map(face_json).collect::<Vec<_>>(),
         "poses": m.poses.iter().map(pose_json).collect::<Vec<_>>(),
         "graspable_share": round(m.graspable_share(tilt), 6),
+        "pile": {
+            "piles": piles.piles,
+            "parts_in_tray": piles.in_tray,
+            "parts_offering_a_cup_face": piles.offered,
+            "share": round(piles.share(), 6),
+        },
         "warning": no_cup_face(m),
         "svg": svg_path.display().to_string(),
     });

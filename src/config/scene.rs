@@ -620,10 +620,17 @@ impl Scene {
     /// Where each placed part should end up: `world_from_part` per slot, the part lying on its
     /// -z face on the place tray floor, turned by the slot's yaw plus the part's `place_yaw_deg`.
     pub fn world_from_slots(&self, w: &Workpiece) -> Vec<Isometry3<f64>> {
+        self.world_from_slots_for(w, [w.size_m[0], w.size_m[1]])
+    }
+
+    /// As [`Self::world_from_slots`], the slots spaced for a part whose footprint in its place
+    /// orientation is `footprint_m` (along the slot's x and y) (m): a part model's, whose place
+    /// orientation is one of its stable poses ([`crate::grasp::GraspSelector::place_footprint_m`]).
+    pub fn world_from_slots_for(&self, w: &Workpiece, footprint_m: [f64; 2]) -> Vec<Isometry3<f64>> {
         let world_from_tray = self.place_tray.tray.world_from_tray();
         let place_yaw = deg(w.grasp.place_yaw_deg);
         self.place_tray
-            .slots_in_tray([w.size_m[0], w.size_m[1]])
+            .slots_in_tray(footprint_m)
             .into_iter()
             .map(|(x, y, yaw)| {
                 world_from_tray

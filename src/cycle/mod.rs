@@ -291,7 +291,8 @@ impl<'a> Cell<'a> {
     ) -> Result<Self, CycleError> {
         let wp = &workpiece.workpiece;
         let s = &scene.scene;
-        let slots = s.world_from_slots(wp);
+        let selector = GraspSelector::for_workpiece(s, robot, workpiece);
+        let slots = s.world_from_slots_for(wp, selector.place_footprint_m());
         if slots.is_empty() {
             return Err(SetupError::NoPlaceSlot.into());
         }
@@ -311,7 +312,7 @@ impl<'a> Cell<'a> {
             plant: robot.with_model_error(&s.model_error, opts.seed),
             accel_robot: robot.with_torque_share(1.0 - s.cycle.torque_margin),
             scene: s,
-            selector: GraspSelector::for_workpiece(s, robot, workpiece),
+            selector,
             // The controller compensates the share of its friction model it is sure of.
             servo: Servo::from_config(&s.sim).with_friction_compensation(1.0 - s.model_error.joint_friction_fraction),
             hand: Payload::from_gripper(&s.gripper),

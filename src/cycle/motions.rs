@@ -486,8 +486,10 @@ impl Run<'_, '_> {
         let wall = Instant::now();
         let world_from_part = detections[grasp.detection].world_from_part;
         let tool_from_part = grasp.world_from_tool.inverse() * world_from_part;
-        // The recognised pose is off by up to three standard deviations of its noise.
-        let offset = tool_from_part.translation.vector.xy().norm() + 3.0 * self.st.sensor.pose_noise_m;
+        // The recognised pose is off by up to three standard deviations of its noise. The peel
+        // arm: the centre of mass the selector's peel model reads (a mesh part's true one).
+        let com_in_tool = tool_from_part * nalgebra::Point3::from(cell.selector.peel_com_m());
+        let offset = com_in_tool.coords.xy().norm() + 3.0 * self.st.sensor.pose_noise_m;
         let max_force = cell
             .suction
             .max_specific_force_m_s2(SUCTION_MARGIN, cell.shape.mass_kg, offset);

@@ -15,6 +15,7 @@
 //! Units: m. Frame: the part frame (origin at the centre of the part's bounding box, axes along
 //! its edges).
 
+pub mod approach;
 pub mod faces;
 pub mod import;
 pub mod mass;

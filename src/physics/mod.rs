@@ -17,6 +17,7 @@
 //! can move are not solved ([`quiet`], the cell file's `sim.stepping`).
 
 mod arm;
+pub mod drops;
 pub mod health;
 pub mod overlap;
 mod parts;

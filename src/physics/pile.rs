@@ -79,7 +79,7 @@ pub struct PileReport {
 }
 
 /// Uniformly random rotation (Shoemake).
-fn random_rotation(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
+pub(super) fn random_rotation(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
     let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
     let tau = std::f64::consts::TAU;
     let (a, b) = ((1.0 - u1).sqrt(), u1.sqrt());
@@ -233,7 +233,7 @@ impl World {
 
     /// Steps until the pile has settled (`true`) or `max_settle_s` have passed since
     /// `start_time` (s).
-    fn settle_pile(
+    pub(super) fn settle_pile(
         &mut self,
         start_time: f64,
         max_settle_s: f64,

@@ -365,6 +365,17 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     assert!((sum - 1.0).abs() < 1e-5);
     assert_eq!(poses.len(), 8, "{poses:?}");
     assert_eq!(hex["symmetry_orders"][2], 6);
+    // Three simulated piles: every part is counted, and most offer a flat with nothing on it
+    // (a flat looks up in 81 % of the single-part poses; a pile covers some).
+    let pile = &hex["pile"];
+    assert_eq!(pile["piles"], 3);
+    assert!(pile["parts_in_tray"].as_u64().unwrap() >= 3 * 30 - 3, "{pile}");
+    let share = pile["share"].as_f64().unwrap();
+    assert!(share > 0.3 && share < 0.9, "{pile}");
+    // Negative control: the DIP-8 has no face for the cup, so no part of its piles offers one.
+    let dip = part("dip8");
+    assert_eq!(dip["pile"]["parts_offering_a_cup_face"], 0, "{}", dip["pile"]);
+    assert!(dip["pile"]["parts_in_tray"].as_u64().unwrap() > 0);
 
     // The TO-220: three bodies and more (body, tab, leads), the tab's hole found; its body's top
     // and back take the cup.
@@ -445,6 +456,8 @@ fn a_mesh_near_the_cap_is_modelled_within_the_bound() {
             "part",
             toml.to_str().unwrap(),
             "--json",
+            "--piles",
+            "0",
             "--svg",
             d.join("cyl.svg").to_str().unwrap(),
         ],

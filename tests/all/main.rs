@@ -1,5 +1,7 @@
 //! Integration tests, one binary: the command line end to end on good and bad input.
 
+mod cad_drops;
+mod cad_grasp;
 mod cad_parts;
 mod cad_run;
 mod cli_bad_input;

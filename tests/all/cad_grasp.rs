@@ -1,0 +1,183 @@
+//! Grasps on CAD parts read the part model: the hand's approach stays clear of the part's own
+//! features above a face (a face whose every cup site would bring the cup or the tool body onto
+//! a post of the part is not offered), and the suction peel model reads the part model's true
+//! centre of mass, not the bounding box's centre.
+//!
+//! The parts are written here as OBJ files (mm) of boxes; the expected centres of mass are
+//! computed from the boxes' volumes, independently of the part model's mass properties.
+
+use std::path::{Path, PathBuf};
+
+use binpick::config::{LoadedScene, LoadedWorkpiece};
+use binpick::grasp::GraspSelector;
+use binpick::robot::RobotModel;
+
+use crate::support::tempdir;
+
+/// OBJ text (mm) of axis-aligned boxes given by their corners, each a closed body.
+fn boxes_obj(boxes: &[([f64; 3], [f64; 3])]) -> String {
+    let mut s = String::new();
+    let tris = [
+        [0, 2, 3],
+        [0, 3, 1],
+        [4, 5, 7],
+        [4, 7, 6],
+        [0, 1, 5],
+        [0, 5, 4],
+        [2, 6, 7],
+        [2, 7, 3],
+        [0, 4, 6],
+        [0, 6, 2],
+        [1, 3, 7],
+        [1, 7, 5],
+    ];
+    for (k, (lo, hi)) in boxes.iter().enumerate() {
+        for i in 0..8 {
+            let x = if i & 1 == 0 { lo[0] } else { hi[0] };
+            let y = if (i >> 1) & 1 == 0 { lo[1] } else { hi[1] };
+            let z = if (i >> 2) & 1 == 0 { lo[2] } else { hi[2] };
+            s += &format!("v {x} {y} {z}\n");
+        }
+        for t in &tris {
+            s += &format!("f {} {} {}\n", 8 * k + t[0] + 1, 8 * k + t[2] + 1, 8 * k + t[1] + 1);
+        }
+    }
+    s
+}
+
+/// A mesh workpiece of `boxes` (mm) in `dir`, loaded.
+fn workpiece(dir: &Path, name: &str, boxes: &[([f64; 3], [f64; 3])]) -> LoadedWorkpiece {
+    std::fs::write(dir.join(format!("{name}.obj")), boxes_obj(boxes)).unwrap();
+    let p: PathBuf = dir.join(format!("{name}.toml"));
+    std::fs::write(
+        &p,
+        format!(
+            "name = \"{name}\"\nkind = \"grasp test part\"\nmass_kg = 0.004\nfriction = 0.4\nrestitution = 0.1\n\
+             pile_count = 10\n\n[shape]\nkind = \"mesh\"\nmesh_file = \"{name}.obj\"\nunits = \"mm\"\n\n\
+             [grasp]\nyaw_symmetry_deg = 360.0\nplace_yaw_deg = 0.0\nface_margin_m = 0.0005\n"
+        ),
+    )
+    .unwrap();
+    LoadedWorkpiece::resolve(p.to_str().unwrap()).unwrap()
+}
+
+/// A 20 x 20 x 2 mm plate with a 2 x 2 mm post of height `post_mm` standing in its middle.
+fn plate_with_post(post_mm: f64) -> Vec<([f64; 3], [f64; 3])> {
+    vec![
+        ([0.0, 0.0, 0.0], [20.0, 20.0, 2.0]),
+        ([9.0, 9.0, 2.0], [11.0, 11.0, 2.0 + post_mm]),
+    ]
+}
+
+#[test]
+fn a_face_under_a_tall_post_of_the_part_is_not_offered() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let tmp = tempdir().unwrap();
+    // A 12 mm post: the tool body (15 mm radius from 9 mm above the cup lip) would meet it from
+    // every cup site on the 20 mm plate's top, so only the bottom is offered. Independent: the
+    // farthest a cup site can be from the post's axis is the plate's corner region, under
+    // 10 sqrt(2) = 14.1 mm, less than the body's radius.
+    let tall = workpiece(tmp.path(), "tall", &plate_with_post(12.0));
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &tall);
+    assert_eq!(sel.blocked_faces(), 1, "{:?}", sel.faces());
+    assert_eq!(sel.faces().len(), 1);
+    assert!(sel.faces()[0].normal.z < -0.999, "{:?}", sel.faces());
+    // Negative control: a 6 mm post stays under the tool body and 3.5 mm from the cup's site:
+    // both the top (around the post) and the bottom are offered.
+    let short = workpiece(tmp.path(), "short", &plate_with_post(6.0));
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &short);
+    assert_eq!(sel.blocked_faces(), 0);
+    assert_eq!(sel.faces().len(), 2, "{:?}", sel.faces());
+    let top = sel.faces().iter().position(|f| f.normal.z > 0.999).unwrap();
+    let site = sel.sites_m()[top];
+    // The top's site keeps the cup (3 mm, plus the pose's noise) off the post's sides, which
+    // stand 1 mm from its axis: independently, its distance from the axis in the plane.
+    let post_axis = nalgebra::Vector3::new(0.0, 0.0, 0.0);
+    let d = (site - post_axis).xy().norm();
+    assert!(d >= 0.001 + 0.003, "site {site:?} is {d} m from the post's axis");
+}
+
+#[test]
+fn the_peel_model_reads_the_true_centre_of_mass() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let tmp = tempdir().unwrap();
+    // A 40 x 20 x 2 mm plate with a 10 x 20 x 8 mm block on one end (x from 30 to 40 mm). The
+    // bounding box is 40 x 20 x 10 mm, centred at (20, 10, 5) mm. Independent centre of mass:
+    // plate 1600 mm^3 at (20, 10, 1), block 1600 mm^3 at (35, 10, 6): (27.5, 10, 3.5) mm,
+    // 7.5 mm along x and -1.5 mm along z from the box's centre.
+    let heavy_end = workpiece(
+        tmp.path(),
+        "heavy",
+        &[
+            ([0.0, 0.0, 0.0], [40.0, 20.0, 2.0]),
+            ([30.0, 0.0, 2.0], [40.0, 20.0, 10.0]),
+        ],
+    );
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &heavy_end);
+    let com = sel.peel_com_m();
+    let want = nalgebra::Vector3::new(0.0075, 0.0, -0.0015);
+    assert!((com - want).norm() < 1e-6, "{com:?} vs {want:?}");
+    // Negative control: the bounding box's centre, which the peel model read before, is 7.6 mm
+    // off; and a symmetric part's centre of mass is its box's centre.
+    assert!(com.norm() > 0.007);
+    let plate = workpiece(tmp.path(), "plate", &[([0.0, 0.0, 0.0], [40.0, 20.0, 2.0])]);
+    assert!(
+        GraspSelector::for_workpiece(&scene.scene, &robot, &plate)
+            .peel_com_m()
+            .norm()
+            < 1e-9
+    );
+    // Built-in primitives keep the part frame's origin (their results are unchanged).
+    let a = LoadedWorkpiece::resolve("A").unwrap();
+    assert_eq!(
+        GraspSelector::for_workpiece(&scene.scene, &robot, &a).peel_com_m(),
+        nalgebra::Vector3::zeros()
+    );
+}
+
+/// A mesh part's place slots come from its footprint in its place orientation, a stable pose:
+/// the hex standoff grasped on a flat lies on the opposite flat, its axis level, so it needs
+/// 20 mm along its axis and 16.17 mm (across corners) beside it, where its bounding box's
+/// 16.17 x 14 mm (standing on its end) would let neighbours overlap. Independent: the hexagon's
+/// across-corners width is 14 / cos 30 deg, and the flat-down part's axis is 7 mm above the
+/// floor (half the 14 mm across flats).
+#[test]
+fn place_slots_fit_the_footprint_of_a_stable_pose() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let hex = LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/hex-standoff.toml")).unwrap();
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &hex);
+    let corners = 0.014 / (30f64.to_radians()).cos();
+    let mut fp = sel.place_footprint_m();
+    fp.sort_by(f64::total_cmp);
+    assert!((fp[0] - corners).abs() < 1e-6 && (fp[1] - 0.02).abs() < 1e-6, "{fp:?}");
+    for fi in 0..sel.faces().len() {
+        let p = sel.place_pose(fi).expect("a flat has a place pose");
+        assert!((p.origin_height_m - 0.007).abs() < 1e-6, "{p:?}");
+        // The grasped flat looks straight up in the slot.
+        let up = p.slot_from_part * sel.faces()[fi].normal;
+        assert!(up.z > 1.0 - 1e-9, "{up:?}");
+    }
+    // The slots are spaced for it: neighbours' centres at least the footprint apart.
+    let slots = scene
+        .scene
+        .world_from_slots_for(&hex.workpiece, sel.place_footprint_m());
+    assert!(!slots.is_empty());
+    for (i, a) in slots.iter().enumerate() {
+        for b in &slots[i + 1..] {
+            let d = (a.translation.vector - b.translation.vector).abs();
+            let fpr = sel.place_footprint_m();
+            assert!(d.x >= fpr[0] - 1e-9 || d.y >= fpr[1] - 1e-9, "{d:?}");
+        }
+    }
+    // Negative control: the bounding box's footprint is 4 mm short of the lying part's length.
+    let bbox = [hex.workpiece.size_m[0], hex.workpiece.size_m[1]];
+    assert!(bbox[0].max(bbox[1]) < 0.02 - 0.003, "{bbox:?}");
+    // Built-in primitives keep their box's footprint and the old placement.
+    let a = LoadedWorkpiece::resolve("A").unwrap();
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &a);
+    assert_eq!(sel.place_footprint_m(), [a.workpiece.size_m[0], a.workpiece.size_m[1]]);
+    assert!(sel.place_pose(0).is_none());
+}
