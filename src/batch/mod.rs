@@ -158,7 +158,8 @@ mod tests {
         let whole = table(&whole_file);
         let file = |k: usize| StudyFile::new(spec.clone(), (k, 2), crate::study::shard(&runs, k, 2));
         let merged = merge(&[("s2".into(), file(2)), ("s1".into(), file(1))]).unwrap();
-        assert_eq!(table(&merged), whole);
+        // Debug text, not `==`: a column with no values (the first-20 takt here) is NaN on both sides.
+        assert_eq!(format!("{:?}", table(&merged)), format!("{whole:?}"));
         assert_eq!(whole[0].takt.count, 4);
         assert_eq!(whole[0].tally.runs, 2);
         assert!((whole[0].takt.mean_s - (2.1 + 2.5 + 2.2 + 2.5) / 4.0).abs() < 1e-12);

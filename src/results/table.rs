@@ -93,7 +93,9 @@ const TERMINAL: &[MdCell] = &[
     ("part", false, |s| s.tally.workpiece.clone()),
     ("takt [s]", true, |s| takt_text(s, s.takt.mean_s)),
     ("first 20 [s]", true, |s| num(s.takt_first.mean_s, 3)),
-    ("parts/h", true, |s| num(s.parts_per_hour, 0)),
+    ("ref. [s]", true, |s| {
+        s.reference_takt_s.map_or("-".into(), |t| num(t, 1))
+    }),
     ("success", true, |s| {
         format!("{} ({}/{})", pct(s.success_rate, 1), s.tally.placed, s.tally.attempts)
     }),
@@ -103,9 +105,10 @@ const TERMINAL: &[MdCell] = &[
 ];
 
 /// The table as the terminal prints it: the figures a user decides on (part, takt mean over
-/// every pick, the reference's 20-pick takt, parts per hour, success, motion floor, the share of the takt spent waiting, faults), as an
-/// aligned Markdown table; the full table is [`markdown`] (`takt.md`, `--wide`). A part name
-/// too long for [`TERMINAL_WIDTH`] is cut, ending in `…`.
+/// every pick, the takt of each run's first 20 picks, the reference system's takt, success,
+/// motion floor, the share of the takt spent waiting, faults), as an aligned Markdown table;
+/// the full table is [`markdown`] (`takt.md`, `--wide`). A part name too long for
+/// [`TERMINAL_WIDTH`] is cut, ending in `…`.
 pub fn terminal(rows: &[Summary]) -> String {
     let mut cells: Vec<Vec<String>> = rows
         .iter()
@@ -574,7 +577,8 @@ mod tests {
             md.contains("| 3.000 |") && md.contains("| 2.000 |") && md.contains("| 1200 |"),
             "{md}"
         );
-        assert!(terminal(std::slice::from_ref(&s)).contains("1200"));
+        // The terminal keeps the reference's columns; parts per hour is in the full table.
+        assert!(terminal(std::slice::from_ref(&s)).contains(" 2.000 |"));
         // Negative control: without a takt there is no rate, and no pile size no pile loads.
         let none = Summary::of(&Tally {
             workpiece: "E".into(),
