@@ -235,7 +235,7 @@ impl HandGeometry {
     }
 }
 
-/// The cup's holding-force model (simplified, stated in the README): a full seal holds
+/// The cup's holding-force model (simplified, stated in docs/model.md, "Physics"): a full seal holds
 /// vacuum x cup area; the force the cup must exert on a part, m |a_tool - g|, is amplified for
 /// peeling by (1 + 4 e / d), e the part's centre-of-mass offset from the cup axis and d the cup
 /// diameter.

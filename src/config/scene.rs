@@ -385,7 +385,7 @@ pub struct CycleConfig {
     /// The vacuum is switched off this long before the Place's descent ends, so it vents while
     /// the cup brings the part down the last millimetres (s) (0: when the cup has stopped; at
     /// most `gripper.release_s`). The holding force falls as the vacuum vents, and the physics
-    /// decides when the part comes off (README: the suction cup); the retreat starts no earlier
+    /// decides when the part comes off (docs/model.md, "Physics"); the retreat starts no earlier
     /// than `release_s` after the valve closed. Absent: 0.
     #[serde(default)]
     pub release_lead_s: f64,
@@ -396,7 +396,7 @@ pub struct CycleConfig {
     pub torque_margin: f64,
     /// Most picks from one recognition result (1: a capture per pick). A later pick takes only
     /// a part recognised clear of every earlier pick's footprint and the tool's swept column
-    /// (README: several picks per capture); the seal check tells whether it was still there.
+    /// (docs/model.md, "The cell cycle"); the seal check tells whether it was still there.
     #[serde(default = "default_max_picks_per_capture")]
     pub max_picks_per_capture: u32,
     /// Where the arm waits when it has nothing to do but wait for a recognition result: the
@@ -422,7 +422,7 @@ fn default_max_picks_per_capture() -> u32 {
 /// The default torque margin: 15 % was the smallest of 0 / 5 / 10 / 15 % at which no pick of
 /// the six workpieces demanded more than a limit with the default model error, but only just
 /// (C: 99.9 %, and 100.2 % in a deterministic batch); 20 % leaves headroom at no measurable
-/// takt cost (README: trade-off).
+/// takt cost (docs/model.md, "The torque margin").
 pub const DEFAULT_TORQUE_MARGIN: f64 = 0.20;
 
 fn default_torque_margin() -> f64 {

@@ -10,7 +10,7 @@
 //! (`SIM_UNITS_PER_M`), and nothing outside it sees a rapier length, handle or collider.
 //! Frames: the rapier frame is the world frame of the cell file (z up).
 //!
-//! Solver tuning for 5-150 mm parts of a few grams (see README, "Physics"): rapier runs in
+//! Solver tuning for 5-150 mm parts of a few grams (see docs/model.md, "Physics"): rapier runs in
 //! millimetres; length unit 1 cm (allowed penetration 0.05 mm, prediction distance 0.2 mm);
 //! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; CCD for parts
 //! poured, dropped or shaken until they sleep; the cell file's timestep. Steps in which nothing

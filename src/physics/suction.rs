@@ -6,7 +6,7 @@
 //! made when the vacuum has built up (`vacuum_build_up_s` later). A sealed part then moves rigidly
 //! with the tool until it slips, or until the vacuum is switched off and has vented.
 //!
-//! Model (simplified, stated in the README): the seal is probed with rays along the tool axis at
+//! Model (simplified, stated in docs/model.md, "Physics"): the seal is probed with rays along the tool axis at
 //! the cup centre and 16 points of the lip circle. Holding force = vacuum x cup area. A part slips
 //! when the force the cup must exert, m |a_tool - g|, amplified for peeling by (1 + 4 e / d)
 //! (e: centre-of-mass offset from the cup axis, d: cup diameter), exceeds the holding force.

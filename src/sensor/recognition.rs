@@ -11,7 +11,7 @@
 //! Nothing is read from the world after the trigger: a part that slides after the exposure is
 //! reported where the picture showed it.
 //!
-//! The oracle model (simplified, stated in the README): a part counts as detected when at least
+//! The oracle model (simplified, stated in docs/model.md, "Recognition"): a part counts as detected when at least
 //! `detect_min_visible_fraction` of the pixels it would cover, unoccluded, show it in the
 //! capture; its pose at the trigger then comes with Gaussian noise. The ground-truth body per
 //! pixel is used only for that visibility count, never to reveal a hidden part. Evaluation
