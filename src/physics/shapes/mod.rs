@@ -389,6 +389,25 @@ fn polytope_of(shape: &SharedShape) -> super::overlap::Polytope {
     p
 }
 
+/// Mesh workpieces' shapes built in this process, by [`built_mesh_key`].
+static BUILT_MESHES: std::sync::LazyLock<std::sync::Mutex<std::collections::HashMap<String, PartShape>>> =
+    std::sync::LazyLock::new(Default::default);
+
+/// What a mesh workpiece's shape depends on: the workpiece as read, where it was read from, and the
+/// mesh file's length and modification time (a file rewritten while the process runs is read
+/// again). `None` when the file cannot be inspected: the build then reports why.
+fn built_mesh_key(workpiece: &Workpiece, source: &Source) -> Option<String> {
+    let (Source::File(p), Some(f)) = (source, &workpiece.shape.mesh_file) else {
+        return None;
+    };
+    let meta = std::fs::metadata(p.parent().unwrap_or(std::path::Path::new(".")).join(f)).ok()?;
+    Some(format!(
+        "{workpiece:?}|{source:?}|{}|{:?}",
+        meta.len(),
+        meta.modified().ok()
+    ))
+}
+
 impl PartShape {
     /// Builds the shape of a workpiece. Mesh paths resolve against the workpiece file's folder.
     pub fn build(workpiece: &Workpiece, source: &Source) -> Result<Self, ShapeError> {
@@ -424,6 +443,13 @@ impl PartShape {
                 if matches!(source, Source::Embedded) {
                     return Err(ShapeError::EmbeddedMesh(workpiece.name.clone()));
                 }
+                // A mesh's collider is decomposed once per process: the check before a study and
+                // every run of it share it (the decomposition is deterministic, so this changes
+                // no result, only the set-up time of each run).
+                let key = built_mesh_key(workpiece, source);
+                if let Some(s) = key.as_ref().and_then(|k| BUILT_MESHES.lock().ok()?.get(k).cloned()) {
+                    return Ok(s);
+                }
                 // The part model's reader and repair: closed, outward-wound, in metres.
                 let mesh_error = |file: String, reason: String| ShapeError::Mesh { file, reason };
                 let (mesh, _) = workpiece
@@ -431,10 +457,14 @@ impl PartShape {
                     .map_err(|e| mesh_error(e.file.clone(), e.defect.to_string()))?
                     .ok_or_else(|| ShapeError::Degenerate(workpiece.name.clone()))?;
                 let file = workpiece.shape.mesh_file.clone().unwrap_or_default();
-                return Self::from_mesh(workpiece, &mesh).map_err(|e| match e {
+                let built = Self::from_mesh(workpiece, &mesh).map_err(|e| match e {
                     ShapeError::Mesh { reason, .. } => mesh_error(file.clone(), reason),
                     e => e,
-                });
+                })?;
+                if let (Some(k), Ok(mut m)) = (key, BUILT_MESHES.lock()) {
+                    m.insert(k, built.clone());
+                }
+                return Ok(built);
             }
         };
         let pieces = super::overlap::workpiece_pieces(workpiece);
