@@ -131,29 +131,57 @@ pub fn run(a: &RunArgs) -> Result<()> {
     done()
 }
 
+/// A duration for the summary line: "-" where there is none (never `NaN`).
+fn seconds(v: f64) -> String {
+    if v.is_finite() { format!("{v:.3} s") } else { "-".into() }
+}
+
+/// The takt's statistics, or what there is instead: with fewer than two parts placed there is no
+/// release-to-release interval, and the line says so and which faults the picks ended in.
+fn takt_text(s: &binpick::results::Summary) -> String {
+    let t = &s.takt;
+    if t.count > 0 {
+        return format!(
+            "mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} intervals",
+            t.mean_s, t.p95_s, t.min_s, t.max_s, t.count
+        );
+    }
+    let f = &s.tally.faults;
+    format!(
+        "none: {} placed, no release-to-release interval (of {} attempts: {} drops, {} grasps failed, {} \
+         protective stops, {} collisions; each pick's reason is in picks.csv)",
+        if s.tally.placed == 0 {
+            "nothing".to_string()
+        } else {
+            format!("only {}", s.tally.placed)
+        },
+        s.tally.attempts,
+        f.drops,
+        f.grasp_failures,
+        f.protective_stops,
+        f.collisions
+    )
+}
+
 /// Prints a run's summary: takt, success, waits, faults, the servo's figures, recognition.
 fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) {
     let t = &s.tally;
     println!(
         "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \
-         defines it) mean {:.3} s, p95 {:.3}, min {:.3}, max {:.3} over {} intervals (reference {}); excluding \
-         tray refills {:.3} s; Pick {:.3} s, Place {:.3} s (motion floor {:.3} s); waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
+         defines it) {} (reference {}); excluding \
+         tray refills {}; Pick {}, Place {} (motion floor {}); waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
          stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), agitations {}, refills {}; \
          peak torque demand {:.0} % of a limit, saturated {:.3} s, max tracking error {:.3} deg; \
          {:.1} s simulated in {:.2} s wall ({:.0}x real time)",
         t.placed,
         t.attempts,
         100.0 * s.success_rate,
-        s.takt.mean_s,
-        s.takt.p95_s,
-        s.takt.min_s,
-        s.takt.max_s,
-        s.takt.count,
+        takt_text(s),
         s.reference_takt_s.map_or("-".to_string(), |t| format!("{t:.1} s")),
-        s.takt_excl_refills.mean_s,
-        s.mean_pick_s,
-        s.mean_place_s,
-        s.mean_pick_s + s.mean_place_s,
+        seconds(s.takt_excl_refills.mean_s),
+        seconds(s.mean_pick_s),
+        seconds(s.mean_place_s),
+        seconds(s.mean_pick_s + s.mean_place_s),
         t.sensor_waits.count,
         t.sensor_waits.total_s,
         t.compute_waits.count,
@@ -193,4 +221,41 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
         t.grasps.0,
         t.misrecognised
     );
+}
+
+#[cfg(test)]
+mod tests {
+    use binpick::results::{Faults, Summary, Tally};
+
+    /// A run that placed nothing says so, and which faults its picks ended in; never `NaN`.
+    /// Negative control: a run with intervals prints their statistics.
+    #[test]
+    fn a_run_with_nothing_placed_says_so_without_nan() {
+        let none = Summary::of(&Tally {
+            workpiece: "C".into(),
+            runs: 1,
+            attempts: 3,
+            faults: Faults {
+                drops: 3,
+                ..Faults::default()
+            },
+            ..Tally::default()
+        });
+        let text = super::takt_text(&none);
+        assert!(text.contains("nothing placed") && text.contains("3 drops"), "{text}");
+        assert!(!text.contains("NaN") && super::seconds(none.mean_pick_s) == "-");
+        let some = Summary::of(&Tally {
+            workpiece: "E".into(),
+            runs: 1,
+            attempts: 3,
+            placed: 3,
+            takts_s: vec![1.5, 1.25],
+            ..Tally::default()
+        });
+        let text = super::takt_text(&some);
+        assert!(
+            text.contains("mean 1.375 s") && text.contains("over 2 intervals"),
+            "{text}"
+        );
+    }
 }
