@@ -17,20 +17,7 @@ use crate::support::tempdir;
 /// OBJ text (mm) of axis-aligned boxes given by their corners, each a closed body.
 fn boxes_obj(boxes: &[([f64; 3], [f64; 3])]) -> String {
     let mut s = String::new();
-    let tris = [
-        [0, 2, 3],
-        [0, 3, 1],
-        [4, 5, 7],
-        [4, 7, 6],
-        [0, 1, 5],
-        [0, 5, 4],
-        [2, 6, 7],
-        [2, 7, 3],
-        [0, 4, 6],
-        [0, 6, 2],
-        [1, 3, 7],
-        [1, 7, 5],
-    ];
+    let tris = crate::support::BOX_TRIANGLES;
     for (k, (lo, hi)) in boxes.iter().enumerate() {
         for i in 0..8 {
             let x = if i & 1 == 0 { lo[0] } else { hi[0] };

@@ -43,20 +43,7 @@ fn box_obj(skip: &[usize]) -> String {
         let (x, y, z) = (10 * (i & 1), 20 * ((i >> 1) & 1), 30 * ((i >> 2) & 1));
         s += &format!("v {x} {y} {z}\n");
     }
-    let tris = [
-        [0, 2, 3],
-        [0, 3, 1],
-        [4, 5, 7],
-        [4, 7, 6],
-        [0, 1, 5],
-        [0, 5, 4],
-        [2, 6, 7],
-        [2, 7, 3],
-        [0, 4, 6],
-        [0, 6, 2],
-        [1, 3, 7],
-        [1, 7, 5],
-    ];
+    let tris = crate::support::BOX_TRIANGLES;
     for (k, t) in tris.iter().enumerate() {
         if !skip.contains(&k) {
             s += &format!("f {} {} {}\n", t[0] + 1, t[1] + 1, t[2] + 1);

@@ -178,3 +178,20 @@ pub fn demand_check(
     }
     Ok((demand, error))
 }
+
+/// The twelve outward-wound triangles of a box whose eight corners are numbered by their bits
+/// (bit 0: +x, bit 1: +y, bit 2: +z), as the mesh tests write boxes into OBJ files.
+pub const BOX_TRIANGLES: [[usize; 3]; 12] = [
+    [0, 2, 3],
+    [0, 3, 1],
+    [4, 5, 7],
+    [4, 7, 6],
+    [0, 1, 5],
+    [0, 5, 4],
+    [2, 6, 7],
+    [2, 7, 3],
+    [0, 4, 6],
+    [0, 6, 2],
+    [1, 3, 7],
+    [1, 7, 5],
+];
