@@ -146,21 +146,8 @@ fn takt_text(s: &binpick::results::Summary) -> String {
             t.mean_s, t.p95_s, t.min_s, t.max_s, t.count
         );
     }
-    let f = &s.tally.faults;
-    format!(
-        "none: {} placed, no release-to-release interval (of {} attempts: {} drops, {} grasps failed, {} \
-         protective stops, {} collisions; each pick's reason is in picks.csv)",
-        if s.tally.placed == 0 {
-            "nothing".to_string()
-        } else {
-            format!("only {}", s.tally.placed)
-        },
-        s.tally.attempts,
-        f.drops,
-        f.grasp_failures,
-        f.protective_stops,
-        f.collisions
-    )
+    let why = binpick::results::table::no_takt_why(s).unwrap_or_default();
+    format!("none ({why}; each pick's reason is in picks.csv)")
 }
 
 /// Prints a run's summary: takt, success, waits, faults, the servo's figures, recognition.

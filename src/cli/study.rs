@@ -181,24 +181,7 @@ pub struct LimitsMissed {
     pub file: String,
 }
 
-/// `text` in lines of at most `width` characters, broken at spaces (a word longer than the
-/// width keeps a line of its own).
-pub fn wrap(text: &str, width: usize) -> String {
-    let mut out = String::new();
-    let mut line = String::new();
-    for word in text.split(' ') {
-        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > width {
-            out += &line;
-            out.push('\n');
-            line.clear();
-        }
-        if !line.is_empty() {
-            line.push(' ');
-        }
-        line += word;
-    }
-    out + &line
-}
+pub use binpick::results::table::wrap;
 
 /// Writes the study's files (a batch's `takt.*`, a sweep's `sweep.*`; with limits, a batch's
 /// `takt.junit.xml`), moves the folder into place and prints the table; an interrupted run makes

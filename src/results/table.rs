@@ -58,6 +58,39 @@ pub fn takt_text(s: &Summary, v: f64) -> String {
     }
 }
 
+/// Why a row has no takt, for the line under a table: what its picks ended in, or, when no pick
+/// was attempted, what the sensor found; `None` for a row with a takt.
+pub fn no_takt_why(s: &Summary) -> Option<String> {
+    if s.takt.mean_s.is_finite() && s.takt.count > 0 {
+        return None;
+    }
+    let t = &s.tally;
+    let f = &t.faults;
+    let placed = if t.placed == 0 {
+        "nothing placed".to_string()
+    } else {
+        format!("only {} placed, no release-to-release interval", t.placed)
+    };
+    let r = &t.recognition;
+    let sensed = format!(
+        "{} detections in {} captures ({} of {} top-layer parts found), {} agitations, {} refills",
+        r.detected, r.captures, r.top_layer_found, r.top_layer, t.agitations, t.refills
+    );
+    let ended = t
+        .ended
+        .map_or(String::new(), |e| format!("; the run ended: {}", e.text()));
+    let why = if t.attempts == 0 {
+        format!("no pick was attempted: no detection offered a grasp the cup takes; {sensed}")
+    } else {
+        format!(
+            "of {} attempts, {} grasps sealed of {} tried, {} drops, {} grasps failed, {} protective stops, {} \
+             collisions; {sensed}",
+            t.attempts, t.grasps.1, t.grasps.0, f.drops, f.grasp_failures, f.protective_stops, f.collisions
+        )
+    };
+    Some(format!("{}: {placed}: {why}{ended}", t.workpiece))
+}
+
 /// Faults of a row: protective stops + collisions + drops + parts lost (grasp failures are
 /// counted in success, not here).
 pub fn faults(s: &Summary) -> usize {
@@ -169,7 +202,35 @@ pub fn terminal(rows: &[Summary]) -> String {
     for r in &cells {
         out += &line(r.iter().enumerate().map(|(i, t)| pad(t, i)).collect());
     }
-    out
+    out + &no_takt_notes(rows)
+}
+
+/// The lines under a table that say why rows have no takt (empty when every row has one), in
+/// lines of at most [`TERMINAL_WIDTH`] characters.
+pub fn no_takt_notes(rows: &[Summary]) -> String {
+    rows.iter()
+        .filter_map(no_takt_why)
+        .map(|w| format!("\n{}\n", wrap(&w, TERMINAL_WIDTH)))
+        .collect()
+}
+
+/// `text` in lines of at most `width` characters, broken at spaces (a word longer than the
+/// width keeps a line of its own).
+pub fn wrap(text: &str, width: usize) -> String {
+    let mut out = String::new();
+    let mut line = String::new();
+    for word in text.split(' ') {
+        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > width {
+            out += &line;
+            out.push('\n');
+            line.clear();
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line += word;
+    }
+    out + &line
 }
 
 fn val(v: impl Serialize) -> Option<Value> {
@@ -496,7 +557,7 @@ pub fn markdown(rows: &[Summary]) -> String {
         }
         md += "\n";
     }
-    md
+    md + &no_takt_notes(rows)
 }
 
 /// A row as JSON: every key of the list (the order is the map's).
@@ -539,7 +600,11 @@ mod tests {
         let json_keys: Vec<&str> = COLUMNS.iter().flat_map(|c| c.json.iter().map(|j| j.0)).collect();
         assert_eq!(repeated(&json_keys), Vec::<String>::new());
         let md = markdown(std::slice::from_ref(&s));
-        let bars: Vec<usize> = md.lines().map(|l| l.matches('|').count()).collect();
+        let bars: Vec<usize> = md
+            .lines()
+            .filter(|l| l.starts_with('|'))
+            .map(|l| l.matches('|').count())
+            .collect();
         assert!(bars.windows(2).all(|w| w[0] == w[1]), "{md}");
         // Empty figures: `-` in Markdown, empty in CSV, null in JSON; the wall time left out.
         assert!(
@@ -585,6 +650,60 @@ mod tests {
             ..Tally::default()
         });
         assert!(none.parts_per_hour.is_nan() && none.pile_loads.is_nan());
+    }
+
+    #[test]
+    fn a_row_without_a_takt_says_why_under_the_table() {
+        use crate::cycle::Faults;
+        // Picks tried and dropped.
+        let dropped = Summary::of(&Tally {
+            workpiece: "C-mesh".into(),
+            runs: 1,
+            attempts: 5,
+            grasps: (5, 5),
+            faults: Faults {
+                drops: 5,
+                ..Faults::default()
+            },
+            ..Tally::default()
+        });
+        let why = no_takt_why(&dropped).unwrap();
+        assert!(
+            why.starts_with("C-mesh: nothing placed: of 5 attempts, 5 grasps sealed of 5 tried, 5 drops"),
+            "{why}"
+        );
+        // No pick tried: what the sensor found.
+        let mut blind = Tally {
+            workpiece: "dip8".into(),
+            runs: 1,
+            agitations: 4,
+            ..Tally::default()
+        };
+        blind.recognition.captures = 6;
+        blind.recognition.top_layer = 120;
+        let why = no_takt_why(&Summary::of(&blind)).unwrap();
+        assert!(
+            why.contains("no pick was attempted")
+                && why.contains("0 detections in 6 captures")
+                && why.contains("4 agitations"),
+            "{why}"
+        );
+        let table = terminal(&[Summary::of(&blind)]);
+        assert!(
+            table.contains("no pick was attempted") && table.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH),
+            "{table}"
+        );
+        // Negative control: a row with a takt has no note.
+        let fine = Summary::of(&Tally {
+            workpiece: "E".into(),
+            runs: 1,
+            attempts: 3,
+            placed: 3,
+            takts_s: vec![1.5, 1.25],
+            ..Tally::default()
+        });
+        assert_eq!(no_takt_why(&fine), None);
+        assert_eq!(no_takt_notes(&[fine]), "");
     }
 
     #[test]
