@@ -7,6 +7,10 @@
 //! for rays is the same pieces, axis-aligned boxes among them as cuboids. So a box or compound
 //! workpiece exported as a mesh gets the same convex pieces as its primitives.
 //!
+//! Every large flat face of more than four corners gets a support slab inside the solid
+//! ([`supports`]: parry's contact clipper sees only four corners of a face), so a can rests on
+//! its whole cap.
+//!
 //! Mass properties are the collider's (volume of its pieces at the density that gives the file's
 //! mass; overlapping pieces count twice, a hull counts its bridged concavities): the mesh's own
 //! centroid and inertia are to come from the part model.
@@ -553,7 +557,8 @@ impl PartShape {
         let aabb = shape.compute_local_aabb();
         let corner = aabb.mins.abs().max(aabb.maxs.abs());
         PartShape {
-            shape,
+            // The solid's mass properties above; contacts through the support slabs.
+            shape: supports::with_support_slabs(&shape),
             view_shape,
             mass_kg: workpiece.mass_kg,
             com_m: super::point_from_sim(mp.local_com),
@@ -574,5 +579,6 @@ impl PartShape {
     }
 }
 
+pub mod supports;
 #[cfg(test)]
 mod tests;
