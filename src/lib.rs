@@ -14,7 +14,7 @@
 //! 4. [`physics`]: the rapier world behind an API in metres: trays, piles of parts, the arm's
 //!    bodies, the suction gripper, the health monitor, scene queries, event-driven stepping (no
 //!    solver step where nothing can move).
-//! 5. [`sensor`]: the fixed overhead 3D sensor: ray-cast depth capture, exposure timing,
+//! 5. [`sensor`]: the fixed overhead 3D sensor: rasterized depth capture, exposure timing,
 //!    recognition, the height map.
 //! 6. [`grasp`]: the grasp selector: suction grasps from detections and the point cloud, ranked;
 //!    [`pipeline`]: sense and grasp, from one capture to the grasp tried and its planning scene.
