@@ -77,7 +77,9 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     let variant = &resolved.variants[0];
     dir.write_inputs(&variant.scene, None)?;
     for wp in &variant.workpieces {
-        dir.write_workpiece(wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
+        // A workpiece's own cup, written in full.
+        let wp = wp.with_tool_completed(&variant.scene.scene.gripper);
+        dir.write_workpiece(&wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
     }
     let how = Finish {
         json: a.out.json,

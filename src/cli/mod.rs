@@ -146,13 +146,14 @@ impl SkipFormats {
 }
 
 /// Loads a scene and a workpiece and checks that they go together (and that the workpiece's
-/// shape builds), so a bad file is bad input before anything runs.
+/// shape builds), so a bad file is bad input before anything runs. The scene comes back
+/// resolved for the workpiece's own cup, if it brings one ([`LoadedScene::for_workpiece`]).
 pub fn load_cell(scene: Option<&Path>, workpiece: &str) -> Result<(LoadedScene, LoadedWorkpiece, RobotModel)> {
     let loaded = LoadedScene::load(scene)?;
     let robot = RobotModel::from_scene(&loaded)?;
     robot.check_scene_reach(&loaded.label, &loaded.scene)?;
     let wp = load_workpiece(workpiece, &loaded)?;
-    Ok((loaded, wp, robot))
+    Ok((loaded.for_workpiece(&wp), wp, robot))
 }
 
 /// Applies `--recognition` to the cell (so the resolved scene a run writes says which it used).

@@ -124,6 +124,10 @@ pub enum SetupError {
         /// The arm's body in the view.
         what: String,
     },
+    /// The cell was not resolved for the workpiece's own cup ([`LoadedScene::for_workpiece`]):
+    /// its stages would read the cell's cup instead of the one the workpiece runs with.
+    #[error("the cell is not resolved for the workpiece's own gripper (LoadedScene::for_workpiece)")]
+    ToolNotResolved,
 }
 
 /// Options of a run.
@@ -282,7 +286,8 @@ impl Run<'_, '_> {
 }
 
 impl<'a> Cell<'a> {
-    /// The cell of `scene` for `workpiece`.
+    /// The cell of `scene` for `workpiece`. `scene` must be resolved for the workpiece's own cup
+    /// ([`LoadedScene::for_workpiece`], as [`run`] does): every stage reads its one gripper.
     pub fn new(
         scene: &'a LoadedScene,
         robot: &'a RobotModel,
@@ -291,6 +296,9 @@ impl<'a> Cell<'a> {
     ) -> Result<Self, CycleError> {
         let wp = &workpiece.workpiece;
         let s = &scene.scene;
+        if !s.carries_tool_of(wp) {
+            return Err(SetupError::ToolNotResolved.into());
+        }
         let selector = GraspSelector::for_workpiece(s, robot, workpiece);
         let slots = s.world_from_slots_for(wp, selector.place_footprint_m());
         if slots.is_empty() {
@@ -385,7 +393,8 @@ impl<'a> Cell<'a> {
     }
 }
 
-/// Runs `opts.picks` picks of `workpiece` in the cell of `scene`, watched by `obs`. A physics
+/// Runs `opts.picks` picks of `workpiece` in the cell of `scene` (resolved for the cup the
+/// workpiece brings, if any: [`LoadedScene::for_workpiece`]), watched by `obs`. A physics
 /// fault (a pour's deep penetration, a non-finite state) ends the run, not the caller: its
 /// tally so far is returned, `ended` [`EndReason::PhysicsFault`] and the fault in
 /// `physics_faults`.
@@ -396,7 +405,8 @@ pub fn run(
     opts: &RunOptions,
     obs: &mut dyn Observer,
 ) -> Result<RunResult, CycleError> {
-    let cell = Cell::new(scene, robot, workpiece, *opts)?;
+    let scene = scene.for_workpiece(workpiece);
+    let cell = Cell::new(&scene, robot, workpiece, *opts)?;
     match cell.start(obs) {
         Ok(st) => run_from(&cell, st, obs),
         Err(CycleError::Pour(e)) => {

@@ -47,7 +47,11 @@ pub fn check_keys(base: &Resolved, dims: &mut [Dim]) -> Result<(), StudyError> {
         r.map_err(|e| StudyError::Run(format!("the resolved {what} does not serialise: {e}")))
     };
     let scene = as_tree("cell", toml::Value::try_from(&v.scene.scene))?;
-    let wp = as_tree("workpiece", toml::Value::try_from(&v.workpieces[0].workpiece))?;
+    // The workpiece's cup keys hold the cell's values where it brings none of its own, so a
+    // `workpiece.gripper.` key can be varied on any workpiece.
+    let mut w = v.workpieces[0].workpiece.clone();
+    w.gripper = Some(w.gripper.unwrap_or_default().completed(&v.scene.scene.gripper));
+    let wp = as_tree("workpiece", toml::Value::try_from(&w))?;
     for d in dims.iter_mut() {
         let (target, path) = d.target();
         let (tree, file) = match target {
@@ -296,5 +300,22 @@ impl Evaluator for Cell<'_> {
             .zip(outcomes)
             .map(|(c, o)| o.unwrap_or_else(|| Outcome::Measured(self.memo[&texts(&self.dims, c)].clone())))
             .collect())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_workpiece_cup_key_can_be_varied_on_a_workpiece_that_brings_no_cup() {
+        let base = base(None, "B").unwrap();
+        let mut dims = vec![super::super::parse_vary("workpiece.gripper.cup_diameter_m=0.004:0.02").unwrap()];
+        check_keys(&base, &mut dims).unwrap();
+        assert!(!dims[0].integer);
+        // Negative control: the tool body is the cell's, not a workpiece key.
+        let mut dims = vec![super::super::parse_vary("workpiece.gripper.tool_length_m=0.1:0.2").unwrap()];
+        let e = check_keys(&base, &mut dims).unwrap_err().to_string();
+        assert!(e.contains("has no such key"), "{e}");
     }
 }

@@ -27,5 +27,6 @@ mod servo;
 mod support;
 mod sustained;
 mod sweep;
+mod tool;
 mod trajectory;
 mod tune;
