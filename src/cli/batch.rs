@@ -45,7 +45,7 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     let (loaded, robot) = a.cell.load()?;
     let mut workpieces: Vec<LoadedWorkpiece> = Vec::new();
     for name in &study.workpieces {
-        let wp = load_workpiece(name, &loaded)?;
+        let wp = load_workpiece(name, &loaded, &robot)?;
         if workpieces.iter().any(|w| w.workpiece.name == wp.workpiece.name) {
             return Err(InputError(format!("--workpieces: {} appears twice", wp.workpiece.name)).into());
         }

@@ -116,11 +116,13 @@ impl CellArgs {
     }
 }
 
-/// A workpiece loaded and checked against the cell: it fits, its shape builds.
-pub fn load_workpiece(name: &str, loaded: &LoadedScene) -> Result<LoadedWorkpiece> {
+/// A workpiece loaded and checked against the cell: it fits, its shape builds, and the cell's
+/// waiting pose is reachable and out of the sensor's view.
+pub fn load_workpiece(name: &str, loaded: &LoadedScene, robot: &RobotModel) -> Result<LoadedWorkpiece> {
     let wp = LoadedWorkpiece::resolve(name)?;
     wp.workpiece.check_fits_scene(&wp.label, &loaded.scene)?;
-    binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    binpick::cycle::check_waiting_pose(&loaded.label, &loaded.scene, robot, &shape)?;
     Ok(wp)
 }
 
@@ -152,7 +154,7 @@ pub fn load_cell(scene: Option<&Path>, workpiece: &str) -> Result<(LoadedScene, 
     let loaded = LoadedScene::load(scene)?;
     let robot = RobotModel::from_scene(&loaded)?;
     robot.check_scene_reach(&loaded.label, &loaded.scene)?;
-    let wp = load_workpiece(workpiece, &loaded)?;
+    let wp = load_workpiece(workpiece, &loaded, &robot)?;
     Ok((loaded.for_workpiece(&wp), wp, robot))
 }
 

@@ -377,6 +377,16 @@ impl Workpiece {
             );
         }
         let footprint = [self.size_m[0], self.size_m[1]];
+        if scene.place_tray.pattern == SlotPattern::Grid
+            && let Some((key, pitch, extent)) = scene.place_tray.pitch_below_footprint(footprint)
+        {
+            c.fail(
+                key,
+                format!(
+                    "(the cell's) must not be below this part's place footprint, {extent} m along it (the parts would overlap), got {pitch}"
+                ),
+            );
+        }
         let slots = scene.place_tray.slot_count(footprint);
         if scene.place_tray.pattern == SlotPattern::Grid && slots > MAX_PLACE_SLOTS {
             c.fail(

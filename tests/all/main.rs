@@ -4,6 +4,7 @@ mod cad_drops;
 mod cad_grasp;
 mod cad_parts;
 mod cad_run;
+mod cell_keys;
 mod cli_bad_input;
 mod cli_pile;
 mod cli_robot;
