@@ -8,7 +8,16 @@
 //! [`Outcome::Refused`], never run); run the round's new candidates as one study through
 //! [`crate::study::run_study`] (in parallel), answer repeated candidates and those in the
 //! [`Journal`] without running them, and append each candidate to the journal as soon as all its
-//! runs finished. A run ended by Ctrl-C is not journalled.
+//! runs finished. A run ended by Ctrl-C is not journalled. The varied keys the files may leave
+//! out are checked against the values the untuned cell runs with: a workpiece's cup keys
+//! (`workpiece.gripper.*`, the cell's cup where it brings none) and the grid's slot spacing
+//! (`place_tray.pitch_x_m`, `pitch_y_m`: the footprint plus the gap where the cell gives none).
+//!
+//! Shards ([`Cell::shard`], `tune --shard K/N`): of each round's new candidates, shard K runs
+//! those at places K-1, K-1+N, ... in the round (as [`crate::study::shard`] splits a study's
+//! runs) and waits for the others' figures in its peers' journals ([`Peers`]); the two test
+//! measurements are split the same way. Every shard thus answers every candidate with the same
+//! figures (read back exactly) and its optimizer asks for the same next round.
 //!
 //! Units: the files' own; s and counts in the figures.
 
