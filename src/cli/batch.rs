@@ -45,7 +45,7 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     let (loaded, robot) = a.cell.load()?;
     let mut workpieces: Vec<LoadedWorkpiece> = Vec::new();
     for name in &study.workpieces {
-        let wp = load_workpiece(name, &loaded)?;
+        let wp = load_workpiece(name, &loaded, &robot)?;
         if workpieces.iter().any(|w| w.workpiece.name == wp.workpiece.name) {
             return Err(InputError(format!("--workpieces: {} appears twice", wp.workpiece.name)).into());
         }
@@ -77,7 +77,9 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     let variant = &resolved.variants[0];
     dir.write_inputs(&variant.scene, None)?;
     for wp in &variant.workpieces {
-        dir.write_workpiece(wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
+        // A workpiece's own cup, written in full.
+        let wp = wp.with_tool_completed(&variant.scene.scene.gripper);
+        dir.write_workpiece(&wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
     }
     let how = Finish {
         json: a.out.json,

@@ -116,11 +116,13 @@ impl CellArgs {
     }
 }
 
-/// A workpiece loaded and checked against the cell: it fits, its shape builds.
-pub fn load_workpiece(name: &str, loaded: &LoadedScene) -> Result<LoadedWorkpiece> {
+/// A workpiece loaded and checked against the cell: it fits, its shape builds, and the cell's
+/// waiting pose is reachable and out of the sensor's view.
+pub fn load_workpiece(name: &str, loaded: &LoadedScene, robot: &RobotModel) -> Result<LoadedWorkpiece> {
     let wp = LoadedWorkpiece::resolve(name)?;
     wp.workpiece.check_fits_scene(&wp.label, &loaded.scene)?;
-    binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
+    binpick::cycle::check_waiting_pose(&loaded.label, &loaded.scene, robot, &shape)?;
     Ok(wp)
 }
 
@@ -146,13 +148,14 @@ impl SkipFormats {
 }
 
 /// Loads a scene and a workpiece and checks that they go together (and that the workpiece's
-/// shape builds), so a bad file is bad input before anything runs.
+/// shape builds), so a bad file is bad input before anything runs. The scene comes back
+/// resolved for the workpiece's own cup, if it brings one ([`LoadedScene::for_workpiece`]).
 pub fn load_cell(scene: Option<&Path>, workpiece: &str) -> Result<(LoadedScene, LoadedWorkpiece, RobotModel)> {
     let loaded = LoadedScene::load(scene)?;
     let robot = RobotModel::from_scene(&loaded)?;
     robot.check_scene_reach(&loaded.label, &loaded.scene)?;
-    let wp = load_workpiece(workpiece, &loaded)?;
-    Ok((loaded, wp, robot))
+    let wp = load_workpiece(workpiece, &loaded, &robot)?;
+    Ok((loaded.for_workpiece(&wp), wp, robot))
 }
 
 /// Applies `--recognition` to the cell (so the resolved scene a run writes says which it used).

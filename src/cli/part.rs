@@ -174,6 +174,8 @@ pub fn part(a: &PartArgs) -> Result<()> {
     let scene = LoadedScene::load(a.scene.as_deref())?;
     let wp = LoadedWorkpiece::resolve(&a.workpiece)?;
     wp.workpiece.check_fits_scene(&wp.label, &scene.scene)?;
+    // The workpiece's own cup, if it brings one.
+    let scene = scene.for_workpiece(&wp);
     let Some(m) = model_of(&wp, &scene.scene)? else {
         return Err(InputError(format!(
             "{}: binpick part reads mesh workpieces (shape.kind = \"mesh\"); this one is built from primitives",

@@ -39,7 +39,10 @@ pub struct RunArgs {
 pub fn run(a: &RunArgs) -> Result<()> {
     check_picks(a.picks)?;
     let (loaded, robot) = a.cell.load()?;
-    let wp = load_workpiece(&a.workpiece, &loaded)?;
+    let wp = load_workpiece(&a.workpiece, &loaded, &robot)?;
+    // The cell with the workpiece's own cup, if it brings one: the run, its recordings and the
+    // resolved scene written beside it all show the one tool.
+    let loaded = loaded.for_workpiece(&wp);
     let (seed, deterministic, out, json) = (a.seed, a.mode.deterministic, a.out.out.as_path(), a.out.json);
     let formats = a.skip.formats(true);
     let opts = RunOptions {

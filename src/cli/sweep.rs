@@ -97,8 +97,9 @@ pub fn write_variant(dir: &binpick::report::RunDir, sub: &str, v: &binpick::stud
     dir.write(&format!("{sub}/scene.toml"), header + &toml::to_string(&scene)?)?;
     dir.write(&format!("{sub}/{urdf_name}"), &v.scene.urdf_text)?;
     for wp in &v.workpieces {
-        // A mesh goes beside the variant's workpiece file, which names it by its bare name.
-        let mut wp = wp.clone();
+        // A mesh goes beside the variant's workpiece file, which names it by its bare name; a
+        // cup the workpiece brings is written in full.
+        let mut wp = wp.with_tool_completed(&v.scene.scene.gripper);
         if let (ShapeKind::Mesh, Source::File(p), Some(mesh)) = (
             wp.workpiece.shape.kind,
             &wp.source,

@@ -9,6 +9,11 @@
 //! `tune.svg`, `report.html` (the page of all of it), the tuned cell and workpiece files in
 //! `tuned/` and the untuned ones in `untuned/`. When no candidate meets the constraints, the files are written without a best
 //! and the command fails (exit 1).
+//!
+//! `--shard K/N` splits each round's evaluations (and the two test measurements) across N
+//! processes sharing the `--out` folder: each appends to `<name>.shardKofN.journal.jsonl`, reads
+//! the other shards' journals for the rest of the round, and writes `<name>-shardKofN/`, whose
+//! `tune.json` is the one a single process writes (the same optimizer on the same figures).
 
 use std::path::PathBuf;
 use std::sync::atomic::Ordering;
@@ -73,6 +78,15 @@ pub struct TuneArgs {
     /// Runs in parallel (default: the machine's cores).
     #[arg(long)]
     pub jobs: Option<usize>,
+    /// Run the K-th of N shards of each round's evaluations (1-based), e.g. 2/4, on machines
+    /// sharing the `--out` folder: each shard appends to its own journal there, reads the
+    /// others', and writes `<name>-shardKofN/` with the tune's outputs (the same `tune.json` as
+    /// one machine's).
+    #[arg(long, value_name = "K/N")]
+    pub shard: Option<String>,
+    /// With `--shard`: how long to wait for the other shards' evaluations at most (s).
+    #[arg(long, default_value_t = 86_400.0)]
+    pub shard_wait_s: f64,
     /// Scene file the candidates start from (default: the embedded default cell).
     #[arg(long)]
     pub scene: Option<PathBuf>,
@@ -115,6 +129,13 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         Some(j) => j,
         None => std::thread::available_parallelism().map_or(1, |n| n.get()),
     };
+    let shard = match &a.shard {
+        Some(t) => binpick::study::parse_shard(t).map_err(study_error)?,
+        None => (1, 1),
+    };
+    if !(a.shard_wait_s.is_finite() && a.shard_wait_s >= 0.0) {
+        return Err(InputError(format!("--shard-wait-s must be >= 0, got {}", a.shard_wait_s)).into());
+    }
     let parse = |t: &str, opt: &str| {
         binpick::study::parse_seeds(t)
             .map_err(|e| InputError(format!("{opt}{}", e.to_string().trim_start_matches("--seeds"))))
@@ -166,8 +187,18 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         a.seed,
         if a.mode.deterministic { "-det" } else { "" }
     );
-    let dir = RunDir::create(&a.out.out, &name)?;
-    let journal_path = a.out.out.join(format!("{name}.journal.jsonl"));
+    let (k, n) = shard;
+    let dir_name = if n > 1 {
+        format!("{name}-shard{k}of{n}")
+    } else {
+        name.clone()
+    };
+    let dir = RunDir::create(&a.out.out, &dir_name)?;
+    let journal_path = a.out.out.join(if n > 1 {
+        format!("{name}.shard{k}of{n}.journal.jsonl")
+    } else {
+        format!("{name}.journal.jsonl")
+    });
     let journal = Journal::open(&journal_path, &header).map_err(study_error)?;
     let settings = Settings {
         budget: a.budget,
@@ -203,6 +234,16 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
     );
     cell.stop = Some(stop);
     cell.objective = objective;
+    cell.shard = shard;
+    if n > 1 {
+        cell.peers = Some(binpick::tune::cell::Peers {
+            dir: a.out.out.clone(),
+            stem: name.clone(),
+            header: header.clone(),
+            poll: std::time::Duration::from_millis(500),
+            timeout_s: a.shard_wait_s,
+        });
+    }
     let interrupted = || {
         Interrupted(format!(
             "{}: it keeps every finished evaluation; the same command resumes from it",

@@ -25,12 +25,14 @@ pub mod feeder;
 pub mod model_error;
 pub mod scene;
 mod scene_checks;
+pub mod tool;
 pub mod workpiece;
 
 pub use agitation::AgitationConfig;
 pub use feeder::FeederConfig;
 pub use model_error::ModelErrorConfig;
 pub use scene::*;
+pub use tool::CupConfig;
 pub use workpiece::*;
 
 /// One problem found in an input file: which file, which key, what is wrong.
@@ -374,6 +376,15 @@ impl LoadedScene {
         match path {
             Some(p) => Self::from_file(p),
             None => Self::embedded_default(),
+        }
+    }
+
+    /// The cell as it runs `wp`: with the cup `wp` brings in place of the cell's
+    /// ([`Scene::with_tool_of`]); the same cell when it brings none.
+    pub fn for_workpiece(&self, wp: &LoadedWorkpiece) -> LoadedScene {
+        LoadedScene {
+            scene: self.scene.with_tool_of(&wp.workpiece),
+            ..self.clone()
         }
     }
 }

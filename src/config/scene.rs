@@ -305,6 +305,14 @@ pub struct PlaceTrayConfig {
     /// Grid: yaw of every placed part in the tray frame (deg).
     #[serde(default)]
     pub slot_yaw_deg: Option<f64>,
+    /// Grid: centre-to-centre spacing of the slots along the tray's x axis (m); absent: the
+    /// part's place footprint along x plus `gap_m`. It must not be below that footprint (the
+    /// parts would overlap); `gap_m` stays the clearance to the walls.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pitch_x_m: Option<f64>,
+    /// Grid: the same along the tray's y axis (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub pitch_y_m: Option<f64>,
     /// List: placement poses in the tray frame, each `[x_m, y_m, yaw_deg]`.
     #[serde(default)]
     pub poses: Option<Vec<[f64; 3]>>,
@@ -566,20 +574,52 @@ impl SensorConfig {
 }
 
 impl PlaceTrayConfig {
-    /// The grid pattern for a footprint: gap (m), slot yaw (rad), the rotated footprint's extent
-    /// along the tray's x and y (m), and the slot counts along them (whole numbers, as f64 so a
-    /// tiny footprint cannot overflow them).
-    fn grid(&self, footprint_m: [f64; 2]) -> (f64, f64, [f64; 2], [f64; 2]) {
+    /// The extent of a part of `footprint_m` (along the slot's x and y) turned by the grid's slot
+    /// yaw, along the tray's x and y (m).
+    pub fn rotated_footprint_m(&self, footprint_m: [f64; 2]) -> [f64; 2] {
+        let yaw = deg(self.slot_yaw_deg.unwrap_or(0.0));
+        let (c, s) = (yaw.cos().abs(), yaw.sin().abs());
+        [
+            footprint_m[0] * c + footprint_m[1] * s,
+            footprint_m[0] * s + footprint_m[1] * c,
+        ]
+    }
+
+    /// The grid's slot spacing for a footprint along the tray's x and y (m): `pitch_x_m` and
+    /// `pitch_y_m` where given, else the rotated footprint plus the gap.
+    pub fn pitch_m(&self, footprint_m: [f64; 2]) -> [f64; 2] {
+        let gap = self.gap_m.unwrap_or(0.0);
+        let [fx, fy] = self.rotated_footprint_m(footprint_m);
+        [self.pitch_x_m.unwrap_or(fx + gap), self.pitch_y_m.unwrap_or(fy + gap)]
+    }
+
+    /// A given pitch below the rotated footprint, the parts overlapping: its key, the pitch and
+    /// the footprint's extent along it (m).
+    pub fn pitch_below_footprint(&self, footprint_m: [f64; 2]) -> Option<(&'static str, f64, f64)> {
+        let f = self.rotated_footprint_m(footprint_m);
+        [
+            ("place_tray.pitch_x_m", self.pitch_x_m, f[0]),
+            ("place_tray.pitch_y_m", self.pitch_y_m, f[1]),
+        ]
+        .into_iter()
+        .find_map(|(key, p, extent)| p.filter(|p| *p < extent).map(|p| (key, p, extent)))
+    }
+
+    /// The grid pattern for a footprint: slot yaw (rad), the slot spacing along the tray's x and y
+    /// (m), and the slot counts along them (whole numbers, as f64 so a tiny footprint cannot
+    /// overflow them).
+    fn grid(&self, footprint_m: [f64; 2]) -> (f64, [f64; 2], [f64; 2]) {
         let gap = self.gap_m.unwrap_or(0.0);
         let yaw = deg(self.slot_yaw_deg.unwrap_or(0.0));
-        // Footprint of the part rotated by yaw, as an axis-aligned box in the tray frame.
-        let (c, s) = (yaw.cos().abs(), yaw.sin().abs());
-        let fx = footprint_m[0] * c + footprint_m[1] * s;
-        let fy = footprint_m[0] * s + footprint_m[1] * c;
-        let [lx, ly] = self.tray.inner_size_m;
-        let nx = ((lx - gap) / (fx + gap)).floor().max(0.0);
-        let ny = ((ly - gap) / (fy + gap)).floor().max(0.0);
-        (gap, yaw, [fx, fy], [nx, ny])
+        let f = self.rotated_footprint_m(footprint_m);
+        let pitch = self.pitch_m(footprint_m);
+        let l = self.tray.inner_size_m;
+        let count = |a: usize, given: Option<f64>| match given {
+            // As many slots as fit between the walls' clearances.
+            Some(p) => ((l[a] - 2.0 * gap - f[a]) / p + 1.0).floor().max(0.0),
+            None => ((l[a] - gap) / (f[a] + gap)).floor().max(0.0),
+        };
+        (yaw, pitch, [count(0, self.pitch_x_m), count(1, self.pitch_y_m)])
     }
 
     /// How many placement slots [`Self::slots_in_tray`] gives for a footprint, without building
@@ -588,7 +628,7 @@ impl PlaceTrayConfig {
         match self.pattern {
             SlotPattern::List => self.poses.as_ref().map_or(0, Vec::len) as f64,
             SlotPattern::Grid => {
-                let [nx, ny] = self.grid(footprint_m).3;
+                let [nx, ny] = self.grid(footprint_m).2;
                 nx * ny
             }
         }
@@ -600,13 +640,13 @@ impl PlaceTrayConfig {
         match self.pattern {
             SlotPattern::List => self.poses.iter().flatten().map(|p| (p[0], p[1], deg(p[2]))).collect(),
             SlotPattern::Grid => {
-                let (gap, yaw, [fx, fy], [nx, ny]) = self.grid(footprint_m);
+                let (yaw, [px, py], [nx, ny]) = self.grid(footprint_m);
                 let (nx, ny) = (nx as usize, ny as usize);
                 let mut out = Vec::with_capacity(nx.saturating_mul(ny));
                 for j in 0..ny {
                     for i in 0..nx {
-                        let x = (i as f64 - (nx as f64 - 1.0) / 2.0) * (fx + gap);
-                        let y = (j as f64 - (ny as f64 - 1.0) / 2.0) * (fy + gap);
+                        let x = (i as f64 - (nx as f64 - 1.0) / 2.0) * px;
+                        let y = (j as f64 - (ny as f64 - 1.0) / 2.0) * py;
                         out.push((x, y, yaw));
                     }
                 }

@@ -177,9 +177,20 @@ impl Scene {
                 if let Some(y) = p.slot_yaw_deg {
                     c.finite("place_tray.slot_yaw_deg", y);
                 }
+                for (key, pitch) in [
+                    ("place_tray.pitch_x_m", p.pitch_x_m),
+                    ("place_tray.pitch_y_m", p.pitch_y_m),
+                ] {
+                    if let Some(v) = pitch {
+                        c.positive(key, v);
+                    }
+                }
                 if p.poses.is_some() {
                     c.fail("place_tray.poses", "is only allowed when pattern = \"list\"");
                 }
+            }
+            SlotPattern::List if p.pitch_x_m.is_some() || p.pitch_y_m.is_some() => {
+                c.fail("place_tray.pitch_x_m", "is only allowed when pattern = \"grid\"");
             }
             SlotPattern::List => match &p.poses {
                 None => c.fail("place_tray.poses", "is required when pattern = \"list\""),

@@ -43,6 +43,10 @@ pub struct Workpiece {
     pub restitution: f64,
     /// Default number of parts in a pile.
     pub pile_count: u32,
+    /// The cup this workpiece runs with, overriding the cell's `gripper` keys of the same name
+    /// for this workpiece only (absent: the cell's cup; [`super::tool`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gripper: Option<super::CupConfig>,
     /// Collision shape.
     pub shape: ShapeConfig,
     /// Grasp hints.
@@ -281,6 +285,9 @@ impl Workpiece {
         c.finite("grasp.place_yaw_deg", self.grasp.place_yaw_deg);
         c.non_negative("grasp.face_margin_m", self.grasp.face_margin_m);
         self.shape.validate(&mut c, &self.size_m);
+        if let Some(cup) = &self.gripper {
+            cup.check(&mut c);
+        }
         c.finish()
     }
 
@@ -313,10 +320,23 @@ impl Workpiece {
         [hi[0] - lo[0], hi[1] - lo[1], hi[2] - lo[2]]
     }
 
-    /// Checks that the workpiece fits the scene: it fits in both trays, and the gripper's cup fits
-    /// on at least one face of the body.
+    /// Checks that the workpiece fits the scene: it fits in both trays, and the gripper's cup (its
+    /// own, if it brings one) fits on at least one face of the body. A cup it brings must also
+    /// agree with the cell's cycle (the valve leads within its build-up and release times).
     pub fn check_fits_scene(&self, file: &str, scene: &Scene) -> Result<(), ConfigError> {
         let mut c = Checker::new(file);
+        let resolved;
+        let scene = if self.gripper.is_some() {
+            resolved = scene.with_tool_of(self);
+            if let Err(e) = resolved.validate(file) {
+                for p in e.problems {
+                    c.fail(&p.key, format!("{} (with this workpiece's gripper)", p.message));
+                }
+            }
+            &resolved
+        } else {
+            scene
+        };
         // Lying flat, the part's two longest edges must fit the tray's inner floor.
         let mut dims = self.size_m;
         dims.sort_by(|a, b| b.total_cmp(a));
@@ -357,6 +377,16 @@ impl Workpiece {
             );
         }
         let footprint = [self.size_m[0], self.size_m[1]];
+        if scene.place_tray.pattern == SlotPattern::Grid
+            && let Some((key, pitch, extent)) = scene.place_tray.pitch_below_footprint(footprint)
+        {
+            c.fail(
+                key,
+                format!(
+                    "(the cell's) must not be below this part's place footprint, {extent} m along it (the parts would overlap), got {pitch}"
+                ),
+            );
+        }
         let slots = scene.place_tray.slot_count(footprint);
         if scene.place_tray.pattern == SlotPattern::Grid && slots > MAX_PLACE_SLOTS {
             c.fail(

@@ -124,6 +124,20 @@ pub enum SetupError {
         /// The arm's body in the view.
         what: String,
     },
+    /// The cell was not resolved for the workpiece's own cup ([`LoadedScene::for_workpiece`]):
+    /// its stages would read the cell's cup instead of the one the workpiece runs with.
+    #[error("the cell is not resolved for the workpiece's own gripper (LoadedScene::for_workpiece)")]
+    ToolNotResolved,
+    /// A slot spacing of the place tray's grid below the part's place footprint.
+    #[error("{key} = {pitch_m} m is below the part's place footprint, {extent_m} m along it: the parts would overlap")]
+    SlotPitchBelowFootprint {
+        /// `place_tray.pitch_x_m` or `place_tray.pitch_y_m`.
+        key: &'static str,
+        /// The spacing (m).
+        pitch_m: f64,
+        /// The footprint's extent along it (m).
+        extent_m: f64,
+    },
 }
 
 /// Options of a run.
@@ -282,7 +296,8 @@ impl Run<'_, '_> {
 }
 
 impl<'a> Cell<'a> {
-    /// The cell of `scene` for `workpiece`.
+    /// The cell of `scene` for `workpiece`. `scene` must be resolved for the workpiece's own cup
+    /// ([`LoadedScene::for_workpiece`], as [`run`] does): every stage reads its one gripper.
     pub fn new(
         scene: &'a LoadedScene,
         robot: &'a RobotModel,
@@ -291,22 +306,21 @@ impl<'a> Cell<'a> {
     ) -> Result<Self, CycleError> {
         let wp = &workpiece.workpiece;
         let s = &scene.scene;
+        if !s.carries_tool_of(wp) {
+            return Err(SetupError::ToolNotResolved.into());
+        }
         let selector = GraspSelector::for_workpiece(s, robot, workpiece);
+        if s.place_tray.pattern == crate::config::SlotPattern::Grid
+            && let Some((key, pitch_m, extent_m)) = s.place_tray.pitch_below_footprint(selector.place_footprint_m())
+        {
+            return Err(SetupError::SlotPitchBelowFootprint { key, pitch_m, extent_m }.into());
+        }
         let slots = s.world_from_slots_for(wp, selector.place_footprint_m());
         if slots.is_empty() {
             return Err(SetupError::NoPlaceSlot.into());
         }
-        let waiting_q = match s.cycle.waiting_tool_m {
-            None => None,
-            Some(w) => {
-                let home = crate::robot::JointVector::from(s.robot.home_rad());
-                let pose = crate::robot::tool_down_pose(Vector3::from(w), 0.0);
-                let q = robot
-                    .ik_tool_nearest(&pose, &home)
-                    .map_err(|why| SetupError::WaitingPoseUnreachable { at_m: w, why })?;
-                Some(q.q)
-            }
-        };
+        let shape = PartShape::build(wp, &workpiece.source)?;
+        let waiting_q = waiting_joints(s, robot, &shape)?;
         Ok(Cell {
             robot,
             plant: robot.with_model_error(&s.model_error, opts.seed),
@@ -317,7 +331,7 @@ impl<'a> Cell<'a> {
             servo: Servo::from_config(&s.sim).with_friction_compensation(1.0 - s.model_error.joint_friction_fraction),
             hand: Payload::from_gripper(&s.gripper),
             nominal_part: Payload::point(wp.mass_kg, robot.flange_from_tool.translation.vector),
-            shape: PartShape::build(wp, &workpiece.source)?,
+            shape,
             suction: SuctionModel::new(&s.gripper),
             slots,
             yaw_symmetry_rad: wp.grasp.yaw_symmetry_deg.to_radians(),
@@ -343,18 +357,6 @@ impl<'a> Cell<'a> {
             .map_err(CycleError::Pour)?;
         let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed, &self.workpiece)
             .ok_or(SetupError::DegenerateSensorPose)?;
-        if let Some(q) = &self.waiting_q {
-            // The waiting pose must leave the view free: checked on a scratch world.
-            let mut scratch = World::new(self.scene, self.robot, self.shape.clone());
-            scratch.place_arm(q);
-            if let Some(what) = sensor.frustum.arm_inside(&scratch) {
-                return Err(SetupError::WaitingPoseInView {
-                    at_m: self.scene.cycle.waiting_tool_m.unwrap_or_default(),
-                    what,
-                }
-                .into());
-            }
-        }
         Ok(CellState {
             arm: ArmState {
                 servo: crate::servo::ServoState::at_rest(world.joints()),
@@ -385,7 +387,56 @@ impl<'a> Cell<'a> {
     }
 }
 
-/// Runs `opts.picks` picks of `workpiece` in the cell of `scene`, watched by `obs`. A physics
+/// The joints of the cell's waiting pose (`cycle.waiting_tool_m`; `None` when the cell sets
+/// none), checked: the tool can point straight down there (nearest to home), and the arm there
+/// leaves the sensor's view over the pick tray free (on a scratch world of `shape`'s parts).
+pub fn waiting_joints(
+    scene: &Scene,
+    robot: &RobotModel,
+    shape: &PartShape,
+) -> Result<Option<crate::robot::JointVector>, SetupError> {
+    let Some(w) = scene.cycle.waiting_tool_m else {
+        return Ok(None);
+    };
+    let home = crate::robot::JointVector::from(scene.robot.home_rad());
+    let pose = crate::robot::tool_down_pose(Vector3::from(w), 0.0);
+    let q = robot
+        .ik_tool_nearest(&pose, &home)
+        .map_err(|why| SetupError::WaitingPoseUnreachable { at_m: w, why })?
+        .q;
+    let mut scratch = World::new(scene, robot, shape.clone());
+    scratch.place_arm(&q);
+    let camera = crate::sensor::Camera::from_config(&scene.sensor).ok_or(SetupError::DegenerateSensorPose)?;
+    let frustum =
+        crate::sensor::ViewFrustum::over_tray(scratch.pick_tray(), &camera).ok_or(SetupError::DegenerateSensorPose)?;
+    if let Some(what) = frustum.arm_inside(&scratch) {
+        return Err(SetupError::WaitingPoseInView { at_m: w, what });
+    }
+    Ok(Some(q))
+}
+
+/// [`waiting_joints`] as a check of the cell file `label` before anything runs: a waiting pose
+/// the tool cannot reach pointing down, or one that puts the arm in the sensor's view, is
+/// refused naming the file, `cycle.waiting_tool_m` and its value.
+pub fn check_waiting_pose(
+    label: &str,
+    scene: &Scene,
+    robot: &RobotModel,
+    shape: &PartShape,
+) -> Result<(), crate::config::ConfigError> {
+    match waiting_joints(scene, robot, shape) {
+        Ok(_) => Ok(()),
+        Err(e @ (SetupError::WaitingPoseUnreachable { .. } | SetupError::WaitingPoseInView { .. })) => {
+            let text = e.to_string();
+            let msg = text.strip_prefix("cycle.waiting_tool_m ").unwrap_or(&text);
+            Err(crate::config::ConfigError::one(label, "cycle.waiting_tool_m", msg))
+        }
+        Err(e) => Err(crate::config::ConfigError::one(label, "", e.to_string())),
+    }
+}
+
+/// Runs `opts.picks` picks of `workpiece` in the cell of `scene` (resolved for the cup the
+/// workpiece brings, if any: [`LoadedScene::for_workpiece`]), watched by `obs`. A physics
 /// fault (a pour's deep penetration, a non-finite state) ends the run, not the caller: its
 /// tally so far is returned, `ended` [`EndReason::PhysicsFault`] and the fault in
 /// `physics_faults`.
@@ -396,7 +447,8 @@ pub fn run(
     opts: &RunOptions,
     obs: &mut dyn Observer,
 ) -> Result<RunResult, CycleError> {
-    let cell = Cell::new(scene, robot, workpiece, *opts)?;
+    let scene = scene.for_workpiece(workpiece);
+    let cell = Cell::new(&scene, robot, workpiece, *opts)?;
     match cell.start(obs) {
         Ok(st) => run_from(&cell, st, obs),
         Err(CycleError::Pour(e)) => {

@@ -125,7 +125,9 @@ impl RunDir {
         self.write("scene.toml", header + &text)?;
         self.write(&urdf_name, &scene.urdf_text)?;
         if let Some(wp) = workpiece {
-            self.write_workpiece(wp, "workpiece.toml")?;
+            // The cup it runs with, in full (the scene written is resolved for it).
+            let wp = wp.with_tool_completed(&scene.scene.with_tool_of(&wp.workpiece).gripper);
+            self.write_workpiece(&wp, "workpiece.toml")?;
         }
         Ok(())
     }

@@ -146,6 +146,8 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
         .find(|x| &x.workpiece.name == w)
         .ok_or_else(|| format!("workpiece {w} is not loaded"))?;
     let robot = &resolved.robots[variant.robot];
+    // The cell with the workpiece's own cup, if it brings one: the run and its recordings read it.
+    let scene = variant.scene.for_workpiece(wp);
     let record = settings.record;
     let stem = run_stem(several, job);
     let opts = RunOptions {
@@ -158,7 +160,7 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
     };
     let mut recorder = match record {
         Some(r) if r.formats.any() => {
-            let camera = Camera::from_config(&variant.scene.scene.sensor).ok_or("the sensor's pose is degenerate")?;
+            let camera = Camera::from_config(&scene.scene.sensor).ok_or("the sensor's pose is degenerate")?;
             Some(Recorder::new(robot, camera, wp.workpiece.size_m))
         }
         _ => None,
@@ -173,8 +175,8 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
     if let Some(c) = chart.as_mut() {
         watchers.push(c);
     }
-    let result = crate::cycle::run(&variant.scene, robot, wp, &opts, &mut Observers(watchers))
-        .map_err(|e| format!("{what}: {e}"))?;
+    let result =
+        crate::cycle::run(&scene, robot, wp, &opts, &mut Observers(watchers)).map_err(|e| format!("{what}: {e}"))?;
     let tally = Tally {
         wall_s: Some(t.elapsed().as_secs_f64()),
         ..result.tally.clone()
@@ -204,7 +206,7 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
             to.formats,
             &rec.finish(&result),
             robot,
-            &variant.scene.scene,
+            &scene.scene,
             &info,
         )
         .map_err(|(path, e)| format!("{}: {e}", path.display()))?;

@@ -125,8 +125,9 @@ pub fn resolve(
             }
             let wp = LoadedWorkpiece::from_table(&wl, source.clone(), t)?;
             wp.workpiece.check_fits_scene(&wl, &loaded.scene)?;
-            crate::physics::PartShape::build(&wp.workpiece, &wp.source)
+            let shape = crate::physics::PartShape::build(&wp.workpiece, &wp.source)
                 .map_err(|e| ConfigError::one(&wl, "shape", e.to_string()))?;
+            crate::cycle::check_waiting_pose(&label, &loaded.scene, &robots[robot].1, &shape)?;
             if wps.iter().any(|w| w.workpiece.name == wp.workpiece.name) {
                 return Err(StudyError::Input(format!(
                     "--workpieces: {} appears twice",

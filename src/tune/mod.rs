@@ -38,10 +38,12 @@
 //! steers toward the feasible region.
 //!
 //! The budget counts candidates asked for; the last round is cut short when the budget ends in
-//! it (its remaining particles are never run). Rounds beyond the first depend on the figures of
-//! the ones before, so rounds cannot be split across machines; instead each finished evaluation
-//! goes to the journal and a re-run resumes from it (the same seed asks for the same candidates,
-//! whose figures the journal already has).
+//! it (its remaining particles are never run). Each finished evaluation goes to the journal and a
+//! re-run resumes from it (the same seed asks for the same candidates, whose figures the journal
+//! already has). Rounds beyond the first depend on the figures of the ones before, so a round is
+//! split across machines rather than the rounds: shards ([`cell::Cell::shard`]) each run their
+//! share of every round and read the rest from each other's journals in a shared folder; every
+//! shard's optimizer sees the same figures and asks for the same next round.
 //!
 //! The objective ([`Objective`], `--objective`): the sustained takt by default, every interval
 //! of runs long enough to span several pile cycles (`--picks` defaults to

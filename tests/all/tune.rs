@@ -162,7 +162,8 @@ fn a_tiny_deterministic_tune_repeats_resumes_and_its_files_reproduce_its_test_fi
 
     // Resume: a larger budget in the same folder answers the 4 journalled candidates from the
     // journal and gives what a fresh run with that budget gives.
-    assert_eq!(journal_lines(&a), 1 + 4);
+    // The header, 4 evaluations, and the best's and the untuned cell's test figures.
+    assert_eq!(journal_lines(&a), 1 + 4 + 2);
     let more = ["--vary", KEY, "--budget", "7", "--population", "4"];
     let o = tune(&a, &more);
     assert!(o.status.success(), "{}", stderr(&o));
@@ -229,4 +230,76 @@ fn a_tune_without_a_feasible_candidate_writes_its_table_and_fails() {
         evals[0]
     );
     assert!(!folder(&out).join("tuned").exists());
+}
+
+/// `binpick tune` as [`tune`] does, started and not waited for.
+fn spawn_tune(out: &Path, extra: &[&str]) -> std::process::Child {
+    let mut args = vec![
+        "tune",
+        "--workpiece",
+        "B",
+        "--train-seeds",
+        "1",
+        "--test-seeds",
+        "2",
+        "--picks",
+        "3",
+        "--deterministic",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    args.extend_from_slice(extra);
+    std::process::Command::new(env!("CARGO_BIN_EXE_binpick"))
+        .args(&args)
+        .stdout(std::process::Stdio::piped())
+        .stderr(std::process::Stdio::piped())
+        .spawn()
+        .expect("binpick starts")
+}
+
+#[test]
+fn the_shards_of_a_tune_write_the_tune_json_one_process_writes() {
+    let tmp = crate::support::tempdir().unwrap();
+    let (one, shared, lone) = (
+        tmp.path().join("one"),
+        tmp.path().join("shared"),
+        tmp.path().join("lone"),
+    );
+    let small = ["--vary", KEY, "--budget", "4", "--population", "4", "--jobs", "1"];
+    let o = tune(&one, &small);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let whole = std::fs::read(folder(&one).join("tune.json")).unwrap();
+    // Two shards at once in one shared folder, as two machines of a job array would run them.
+    let shards: Vec<_> = ["1/2", "2/2"]
+        .iter()
+        .map(|k| {
+            let mut args = small.to_vec();
+            args.extend_from_slice(&["--shard", k]);
+            spawn_tune(&shared, &args)
+        })
+        .collect();
+    for s in shards {
+        let o = s.wait_with_output().unwrap();
+        assert!(o.status.success(), "{}", stderr(&o));
+    }
+    let name = folder(&one).file_name().unwrap().to_string_lossy().into_owned();
+    for k in 1..=2 {
+        let got = std::fs::read(shared.join(format!("{name}-shard{k}of2/tune.json"))).unwrap();
+        assert!(got == whole, "shard {k}'s tune.json differs from one process's");
+        // Each shard ran its share: two of the four candidates and one of the two test rows.
+        let j = std::fs::read_to_string(shared.join(format!("{name}.shard{k}of2.journal.jsonl"))).unwrap();
+        assert_eq!(j.lines().count(), 1 + 2 + 1, "{j}");
+    }
+    // Negative control: a shard alone has only its share; it waits for the others' and fails.
+    let mut args = small.to_vec();
+    args.extend_from_slice(&["--shard", "2/3", "--shard-wait-s", "1"]);
+    let o = tune(&lone, &args);
+    assert!(!o.status.success());
+    assert!(
+        stderr(&o).contains("evaluation(s) of the other shards did not appear"),
+        "{}",
+        stderr(&o)
+    );
+    let j = std::fs::read_to_string(lone.join(format!("{name}.shard2of3.journal.jsonl"))).unwrap();
+    assert_eq!(j.lines().count(), 1 + 1, "{j}");
 }

@@ -1,0 +1,190 @@
+//! The tool per workpiece: the suction cup a workpiece file may bring, overriding the cell's for
+//! that workpiece only.
+//!
+//! Job: the workpiece file's optional `[gripper]` section ([`CupConfig`]), its checks, and the one
+//! resolution every stage reads: [`Scene::with_tool_of`] gives the cell with the workpiece's cup
+//! in place of its own, [`crate::config::LoadedScene::for_workpiece`] the same for a loaded cell.
+//! A run resolves its cell once ([`crate::cycle::run`]); the grasp selector's cup fit, the
+//! suction force model, the hand's collision model, the physics gripper, the recordings and the
+//! resolved inputs written beside the run all read that resolved cell.
+//!
+//! The design (docs/formats.md, "The tool per workpiece"): one tool per workpiece, not a tool
+//! changer with the grasp selector choosing. A cell runs one part type at a time and a real line
+//! changes the cup with the product; a changer would add change time to the cycle and a second
+//! decision (which cup) to the grasp selector, for a gain only mixed piles would see. What a cup
+//! change changes is the cup's: its diameter, the flatness its lip tolerates, the tilt at which
+//! it still seals, and the time the vacuum takes to build up in it and to vent. The tool body
+//! (its length, diameter, mass and inertia) and the vacuum generator's level stay the cell's: a
+//! cup is screwed onto the same tool, so the arm's model (flange to tool frame) is the same for
+//! every workpiece.
+//!
+//! Units: metres, seconds, degrees (as read; the cell's accessors convert). Frames: none.
+
+use serde::{Deserialize, Serialize};
+
+use super::{Checker, GripperConfig, Scene, Workpiece};
+
+/// The cup a workpiece brings (`[gripper]` in a workpiece file): each key given replaces the
+/// cell's `gripper.` key of the same name for this workpiece; a key left out keeps the cell's.
+#[derive(Debug, Clone, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct CupConfig {
+    /// Suction cup outer diameter at the lip (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cup_diameter_m: Option<f64>,
+    /// Flatness the cup lip tolerates across its diameter (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub cup_flatness_tolerance_m: Option<f64>,
+    /// Largest tilt of the approach from the face normal at which the cup still seals (deg).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_tilt_deg: Option<f64>,
+    /// Time from valve open to full vacuum in this cup (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub vacuum_build_up_s: Option<f64>,
+    /// Time from valve closed to part released from this cup (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub release_s: Option<f64>,
+}
+
+impl CupConfig {
+    /// Checks each key given, as the cell file's `gripper.` key of the same name is checked.
+    pub fn check(&self, c: &mut Checker) {
+        if let Some(v) = self.cup_diameter_m {
+            c.positive("gripper.cup_diameter_m", v);
+        }
+        if let Some(v) = self.cup_flatness_tolerance_m {
+            c.non_negative("gripper.cup_flatness_tolerance_m", v);
+        }
+        if let Some(v) = self.max_tilt_deg {
+            c.within("gripper.max_tilt_deg", v, 0.0, 90.0);
+        }
+        if let Some(v) = self.vacuum_build_up_s {
+            c.non_negative("gripper.vacuum_build_up_s", v);
+        }
+        if let Some(v) = self.release_s {
+            c.non_negative("gripper.release_s", v);
+        }
+    }
+
+    /// This cup with every key the workpiece left out filled in from the cell's `gripper`: the
+    /// tool the workpiece runs with, written in full beside a run.
+    pub fn completed(&self, g: &GripperConfig) -> CupConfig {
+        let r = g.with_cup(self);
+        CupConfig {
+            cup_diameter_m: Some(r.cup_diameter_m),
+            cup_flatness_tolerance_m: Some(r.cup_flatness_tolerance_m),
+            max_tilt_deg: Some(r.max_tilt_deg),
+            vacuum_build_up_s: Some(r.vacuum_build_up_s),
+            release_s: Some(r.release_s),
+        }
+    }
+}
+
+impl super::LoadedWorkpiece {
+    /// The workpiece as written beside a run in cell `g`'s gripper: a cup it brings with every key
+    /// filled in ([`CupConfig::completed`]); unchanged when it brings none.
+    pub fn with_tool_completed(&self, g: &GripperConfig) -> super::LoadedWorkpiece {
+        let mut w = self.clone();
+        if let Some(cup) = &mut w.workpiece.gripper {
+            *cup = cup.completed(g);
+        }
+        w
+    }
+}
+
+impl GripperConfig {
+    /// The gripper with `cup`'s keys in place of its own.
+    pub fn with_cup(&self, cup: &CupConfig) -> GripperConfig {
+        GripperConfig {
+            cup_diameter_m: cup.cup_diameter_m.unwrap_or(self.cup_diameter_m),
+            cup_flatness_tolerance_m: cup.cup_flatness_tolerance_m.unwrap_or(self.cup_flatness_tolerance_m),
+            max_tilt_deg: cup.max_tilt_deg.unwrap_or(self.max_tilt_deg),
+            vacuum_build_up_s: cup.vacuum_build_up_s.unwrap_or(self.vacuum_build_up_s),
+            release_s: cup.release_s.unwrap_or(self.release_s),
+            ..self.clone()
+        }
+    }
+}
+
+impl Scene {
+    /// The cell as it runs workpiece `w`: with `w`'s cup, if it brings one, in place of the
+    /// cell's (the same cell otherwise). Applying it twice gives the same cell.
+    pub fn with_tool_of(&self, w: &Workpiece) -> Scene {
+        match &w.gripper {
+            Some(cup) => Scene {
+                gripper: self.gripper.with_cup(cup),
+                ..self.clone()
+            },
+            None => self.clone(),
+        }
+    }
+
+    /// Whether this cell already carries `w`'s cup (it was resolved for `w`, or `w` brings none).
+    pub fn carries_tool_of(&self, w: &Workpiece) -> bool {
+        w.gripper
+            .as_ref()
+            .is_none_or(|cup| self.gripper.with_cup(cup) == self.gripper)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use crate::config::{LoadedScene, LoadedWorkpiece, parse_toml};
+
+    fn b_with(section: &str) -> Result<LoadedWorkpiece, crate::config::ConfigError> {
+        let text = format!("{}\n{section}", crate::config::embedded::WORKPIECES[1].1);
+        LoadedWorkpiece::from_text("B.toml", crate::config::Source::Embedded, &text)
+    }
+
+    #[test]
+    fn a_workpiece_cup_overrides_the_cells_for_that_workpiece_only() {
+        let cell = LoadedScene::embedded_default().unwrap();
+        let b = b_with("[gripper]\ncup_diameter_m = 0.016\nmax_tilt_deg = 15.0\n").unwrap();
+        let s = cell.scene.with_tool_of(&b.workpiece);
+        assert_eq!(s.gripper.cup_diameter_m, 0.016);
+        assert_eq!(s.gripper.max_tilt_deg, 15.0);
+        // The rest of the tool is the cell's, and so is the rest of the cell.
+        assert_eq!(s.gripper.tool_length_m, cell.scene.gripper.tool_length_m);
+        assert_eq!(s.gripper.vacuum_kpa, cell.scene.gripper.vacuum_kpa);
+        assert_eq!(s.gripper.release_s, cell.scene.gripper.release_s);
+        assert_eq!(s.sensor, cell.scene.sensor);
+        assert_eq!(s.with_tool_of(&b.workpiece), s, "resolving twice changes nothing");
+        assert!(s.carries_tool_of(&b.workpiece));
+        // Negative control: the cell itself does not carry B's cup; E brings none.
+        assert!(!cell.scene.carries_tool_of(&b.workpiece));
+        let e = LoadedWorkpiece::resolve("E").unwrap();
+        assert_eq!(cell.scene.with_tool_of(&e.workpiece), cell.scene);
+        assert!(cell.scene.carries_tool_of(&e.workpiece));
+    }
+
+    #[test]
+    fn a_workpiece_cup_is_strict_and_checked_naming_file_key_and_value() {
+        let e = b_with("[gripper]\ncup_diameter_m = -0.01\n").unwrap_err().to_string();
+        assert_eq!(e, "B.toml: gripper.cup_diameter_m must be > 0, got -0.01");
+        let e = b_with("[gripper]\nmax_tilt_deg = 95.0\n").unwrap_err().to_string();
+        assert!(e.contains("gripper.max_tilt_deg must be within [0, 90], got 95"), "{e}");
+        // The tool body is the cell's: a workpiece cannot bring one.
+        let e = b_with("[gripper]\ntool_length_m = 0.2\n").unwrap_err().to_string();
+        assert!(e.contains("gripper") && e.contains("tool_length_m"), "{e}");
+        // A cup whose release is shorter than the cell's release lead is refused against the cell.
+        let cell = LoadedScene::embedded_default().unwrap();
+        let b = b_with("[gripper]\nrelease_s = 0.01\n").unwrap();
+        let e = b
+            .workpiece
+            .check_fits_scene("B.toml", &cell.scene)
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.contains("B.toml: cycle.release_lead_s must not exceed gripper.release_s (0.01 s)"),
+            "{e}"
+        );
+        // The six built-in workpieces bring no cup, and their files round-trip without one.
+        for w in LoadedWorkpiece::all_embedded().unwrap() {
+            assert!(w.workpiece.gripper.is_none());
+            let text = toml::to_string(&w.workpiece).unwrap();
+            assert!(!text.contains("[gripper]"), "{text}");
+            let back: crate::config::Workpiece = parse_toml("w", &text).unwrap();
+            assert_eq!(back, w.workpiece);
+        }
+    }
+}

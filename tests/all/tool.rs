@@ -1,0 +1,147 @@
+//! The tool per workpiece (`[gripper]` in a workpiece file): the cup it brings is the one every
+//! stage of a run reads. A cell whose own cup fits none of B's faces places B parts when B brings
+//! a cup that fits, and places none when B brings none (negative control); the other way round,
+//! B bringing a cup too large for its faces places nothing in a cell whose cup fits. On the
+//! command line the cup that fits no face is refused naming the file, the key and the value, and
+//! `sweep --set workpiece.gripper.cup_diameter_m` reaches it.
+
+use binpick::config::{LoadedScene, LoadedWorkpiece, OnEmpty, Source};
+use binpick::cycle::RunOptions;
+use binpick::robot::RobotModel;
+
+use crate::support::{Workspace, binpick_in, stderr};
+
+/// B (30 x 30 x 20 mm) with `section` appended.
+fn b_with(section: &str) -> LoadedWorkpiece {
+    let text = format!("{}\n{section}", binpick::config::embedded::WORKPIECES[1].1);
+    LoadedWorkpiece::from_text("B-cup.toml", Source::Embedded, &text).unwrap()
+}
+
+/// Parts placed in 3 deterministic picks of `wp` in the default cell with a cup of `cell_cup_m`,
+/// the run ending when nothing is graspable.
+fn placed(cell_cup_m: f64, wp: &LoadedWorkpiece) -> usize {
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    scene.scene.gripper.cup_diameter_m = cell_cup_m;
+    scene.scene.cycle.on_empty = OnEmpty::End;
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let opts = RunOptions {
+        picks: 3,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: false,
+    };
+    let r = binpick::cycle::run(&scene, &robot, wp, &opts, &mut ()).unwrap();
+    r.tally.placed
+}
+
+#[test]
+fn the_cup_a_workpiece_brings_decides_what_the_cell_can_place() {
+    // The cell's 35 mm cup fits none of B's faces (30 x 30 and 30 x 20 mm).
+    let own_fits = b_with("[gripper]\ncup_diameter_m = 0.006\n");
+    assert!(placed(0.035, &own_fits) > 0, "B's own 6 mm cup must place parts");
+    // Negative control: the same cell, B without a cup of its own.
+    let plain = LoadedWorkpiece::resolve("B").unwrap();
+    assert_eq!(placed(0.035, &plain), 0, "the cell's 35 mm cup fits no face of B");
+    // And the other way: B's own 35 mm cup in a cell whose 6 mm cup fits.
+    let own_too_large = b_with("[gripper]\ncup_diameter_m = 0.035\n");
+    assert_eq!(placed(0.006, &own_too_large), 0, "B's own 35 mm cup fits no face");
+}
+
+#[test]
+fn a_cell_not_resolved_for_the_workpieces_cup_is_refused_by_the_cycle() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let b = b_with("[gripper]\ncup_diameter_m = 0.012\n");
+    let opts = RunOptions {
+        picks: 1,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: false,
+    };
+    let e = binpick::cycle::Cell::new(&scene, &robot, &b, opts)
+        .err()
+        .expect("refused");
+    assert!(e.to_string().contains("not resolved"), "{e}");
+    // Negative control: resolved, the same cell sets up, with the workpiece's cup in its models.
+    let resolved = scene.for_workpiece(&b);
+    let cell = binpick::cycle::Cell::new(&resolved, &robot, &b, opts).unwrap();
+    assert_eq!(cell.scene.gripper.cup_diameter_m, 0.012);
+    assert!((cell.suction.cup_radius_m - 0.006).abs() < 1e-12);
+}
+
+#[test]
+fn a_workpiece_cup_that_fits_no_face_exits_2_and_a_sweep_reaches_the_key() {
+    let ws = Workspace::new();
+    let big = ws.path("workpieces/B-big.toml");
+    let text = std::fs::read_to_string(ws.path("workpieces/B.toml")).unwrap();
+    std::fs::write(&big, format!("{text}\n[gripper]\ncup_diameter_m = 0.035\n")).unwrap();
+    let out = ws.path("runs");
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "run",
+            "--workpiece",
+            big.to_str().unwrap(),
+            "--picks",
+            "1",
+            "--deterministic",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("B-big.toml: size_m has no face the suction cup fits on: cup 0.035 m"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // The same through a sweep of B's own cup: the variant with 35 mm is refused, naming it.
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "sweep",
+            "--workpieces",
+            "B",
+            "--set",
+            "workpiece.gripper.cup_diameter_m=0.008,0.035",
+            "--picks",
+            "1",
+            "--deterministic",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("sweep variant 2: workpiece.gripper.cup_diameter_m=0.035") && err.contains("cup 0.035 m"),
+        "{err}"
+    );
+    assert!(!out.exists());
+    // Negative control: a cup that fits runs, and the variant's workpiece file names it in full.
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "sweep",
+            "--workpieces",
+            "B",
+            "--set",
+            "workpiece.gripper.cup_diameter_m=0.012",
+            "--seeds",
+            "1",
+            "--picks",
+            "1",
+            "--deterministic",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let dir = std::fs::read_dir(&out).unwrap().next().unwrap().unwrap().path();
+    let w = std::fs::read_to_string(dir.join("variant-1/workpiece-B.toml")).unwrap();
+    assert!(w.contains("[gripper]") && w.contains("cup_diameter_m = 0.012"), "{w}");
+    assert!(w.contains("release_s = 0.06"), "the cup is written in full: {w}");
+}
