@@ -8,7 +8,7 @@
 //!
 //! Units: m, kg. Frame: the part frame (origin at the bounding box's centre).
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 
 use super::faces::{CupFit, PlanarFace, planar_faces};
 use super::mass::{MassProperties, MassSpec, mass_properties};
@@ -138,6 +138,119 @@ impl PartModel {
     pub fn com_m(&self) -> Point3<f64> {
         self.mass.com_m
     }
+
+    /// The part's round body, if it has one: the largest regular prism of at least
+    /// [`ROUND_MIN_SIDES`] side faces about a part axis (a cylinder as CAD and the tessellation
+    /// draw it: a can, a round standoff), on whose curved side the part can lie.
+    pub fn round_body(&self) -> Option<RoundBody> {
+        let cos_tol = super::faces::FACE_ANGLE_TOL_RAD.cos();
+        let tol = 1e-4 * self.size_m.iter().map(|e| e * e).sum::<f64>().sqrt();
+        let mut best: Option<RoundBody> = None;
+        for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+            // Side faces: normal across the axis.
+            let sides: Vec<usize> = (0..self.faces.len())
+                .filter(|&i| self.faces[i].face.normal.dot(&axis).abs() < (1.0 - cos_tol * cos_tol).sqrt())
+                .collect();
+            // Each face's span along the axis.
+            let span = |i: usize| {
+                let f = &self.faces[i].face;
+                f.outer
+                    .iter()
+                    .map(|p| f.to_part(p).coords.dot(&axis))
+                    .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| (lo.min(t), hi.max(t)))
+            };
+            // Prisms: side faces of the same span along the axis and the same distance from the
+            // axis through their centroids' mean, with normals turned in equal steps.
+            let mut left = sides;
+            while let Some(&seed) = left.first() {
+                let (lo, hi) = span(seed);
+                let same_span: Vec<usize> = left
+                    .iter()
+                    .copied()
+                    .filter(|&i| {
+                        let (l, h) = span(i);
+                        (l - lo).abs() < tol && (h - hi).abs() < tol
+                    })
+                    .collect();
+                left.retain(|i| !same_span.contains(i));
+                if same_span.len() < ROUND_MIN_SIDES as usize {
+                    continue;
+                }
+                let mean = same_span
+                    .iter()
+                    .map(|&i| self.faces[i].face.centroid_m.coords)
+                    .sum::<Vector3<f64>>()
+                    / same_span.len() as f64;
+                let centre = mean - axis * axis.dot(&mean) + axis * (0.5 * (lo + hi));
+                let apothem = |i: usize| {
+                    self.faces[i]
+                        .face
+                        .normal
+                        .dot(&(self.faces[i].face.centroid_m.coords - centre))
+                };
+                let d0 = apothem(same_span[0]);
+                if d0 <= 0.0 || same_span.iter().any(|&i| (apothem(i) - d0).abs() > tol) {
+                    continue;
+                }
+                let k = same_span.len();
+                let mut angles: Vec<f64> = same_span
+                    .iter()
+                    .map(|&i| {
+                        let n = self.faces[i].face.normal;
+                        let (e1, e2) = (axis.cross(&Vector3::new(axis.z, axis.x, axis.y)), axis);
+                        let e3 = e2.cross(&e1);
+                        n.dot(&e1).atan2(n.dot(&e3))
+                    })
+                    .collect();
+                angles.sort_by(f64::total_cmp);
+                let step = std::f64::consts::TAU / k as f64;
+                let regular = (0..k).all(|j| {
+                    let next = if j + 1 < k {
+                        angles[j + 1]
+                    } else {
+                        angles[0] + std::f64::consts::TAU
+                    };
+                    (next - angles[j] - step).abs() < 0.01
+                });
+                if !regular {
+                    continue;
+                }
+                let body = RoundBody {
+                    center_m: centre,
+                    axis,
+                    radius_m: d0 / (std::f64::consts::PI / k as f64).cos(),
+                    half_length_m: 0.5 * (hi - lo),
+                    faces: same_span,
+                };
+                if best
+                    .as_ref()
+                    .is_none_or(|b| body.radius_m * body.half_length_m > b.radius_m * b.half_length_m)
+                {
+                    best = Some(body);
+                }
+            }
+        }
+        best
+    }
+}
+
+/// Fewest side faces of a regular prism taken as a round body.
+pub const ROUND_MIN_SIDES: u32 = 8;
+
+/// A part's round body ([`PartModel::round_body`]): a regular prism about a part axis, taken as
+/// the cylinder through its corners.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoundBody {
+    /// Centre of the prism (part frame, m).
+    pub center_m: Vector3<f64>,
+    /// Its axis (a part axis, unit).
+    pub axis: Vector3<f64>,
+    /// The radius of the circle through its corners (m).
+    pub radius_m: f64,
+    /// Half its length along the axis (m).
+    pub half_length_m: f64,
+    /// Its side faces (indices into [`PartModel::faces`]).
+    pub faces: Vec<usize>,
 }
 
 #[cfg(test)]
