@@ -121,6 +121,10 @@ pub struct CloudModel {
     /// A mesh workpiece's round body (centre, unit axis, radius; part frame, m): its part
     /// model's [`crate::part::model::RoundBody`], the cylinder a lying part is fitted to.
     round: Option<(Vector3<f64>, Vector3<f64>, f64)>,
+    /// Hypotheses are verified at every pixel, not on the [`VERIFY_SPACING_M`] grid: the part
+    /// has features thinner than the grid (a primitive's leads; a part model's round bodies
+    /// narrower than the grid: pins), which decide between poses.
+    fine_verify: bool,
 }
 
 /// A planar face of a part model smaller than this share of the largest is not matched.
@@ -200,6 +204,7 @@ impl CloudModel {
                 .any(|(r, p)| *r == PartRole::Body && matches!(p, Piece::Cylinder { .. })),
             mesh: None,
             round: None,
+            fine_verify: w.pieces().iter().any(|(r, _)| *r == PartRole::Lead),
         }
     }
 
@@ -237,6 +242,7 @@ impl CloudModel {
             yaw_span_max_rad: YAW_SPAN_MAX_RAD,
             mesh: render::MeshView::new(&pm.mesh).map(std::sync::Arc::new),
             round: round.map(|r| (r.center_m, r.axis, r.radius_m)),
+            fine_verify: pm.round.iter().any(|r| 2.0 * r.radius_m < VERIFY_SPACING_M),
         }
     }
 
@@ -718,9 +724,10 @@ impl<'a> Cloud<'a> {
 
     /// Every how many pixels (along rows and columns) a hypothesis at `pose` is verified: a
     /// grid about [`VERIFY_SPACING_M`] apart at its depth, or every pixel; every pixel for a part
-    /// with leads, whose thin pins decide between poses (a relay on its back or its face).
+    /// with thin features ([`CloudModel`]'s `fine_verify`: leads, pins), which decide between
+    /// poses (a relay on its back or its face).
     fn verify_stride(&self, model: &CloudModel, pose: &Isometry3<f64>) -> usize {
-        if model.lead.iter().any(|l| *l) {
+        if model.fine_verify {
             return 1;
         }
         let z = (pose.translation.vector - self.origin).dot(&self.optical);
