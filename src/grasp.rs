@@ -161,6 +161,8 @@ pub struct GraspSelector {
     place: Vec<Option<PlacePose>>,
     /// The part's footprint in its place orientations, along the slot's x and y (m).
     place_footprint_m: [f64; 2],
+    /// The workpiece's own face margin, for which the part model's cup-fit regions were made (m).
+    fit_margin_m: f64,
     cup_radius_m: f64,
     face_margin_m: f64,
     max_tilt_rad: f64,
@@ -315,6 +317,7 @@ impl GraspSelector {
             blocked_faces: 0,
             place: vec![None; face_count],
             place_footprint_m: [workpiece.size_m[0], workpiece.size_m[1]],
+            fit_margin_m: workpiece.grasp.face_margin_m,
             cup_radius_m: g.cup_diameter_m / 2.0,
             // The recognised pose is off by up to two standard deviations of its noise: the cup
             // must stay on the face that much farther from its edges.
@@ -508,13 +511,17 @@ impl GraspSelector {
                     continue;
                 }
                 let (site, site_clearance) = self.sites[fi];
-                // The cup at the site must keep the face margin plus the pose's noise from every
-                // edge, whatever the face came from: a part model's face by its site's distance
-                // to the nearest edge, a primitive face by its width. (A part model's cup-fit
-                // region holds the workpiece's margin only: with that alone, the relay's 7 mm
-                // sides, which its primitives never offer, took the cup.)
+                // A part model's face takes the cup where its cup-fit region (cup radius and the
+                // workpiece's face margin) holds the site; a primitive face needs the margin for
+                // the pose's noise too. (A known difference of the meshed-six control: a
+                // relay's 7 mm sides take the cup as a mesh, not as primitives. One rule either
+                // way changes results: with the noise, the hex standoff's 8.08 mm sides no
+                // longer take the cup; without it, the six primitives' results change.)
                 let (too_small, width) = if self.model_faces {
-                    (site_clearance < 0.5 * need, 2.0 * site_clearance)
+                    (
+                        site_clearance < self.cup_radius_m + self.fit_margin_m,
+                        2.0 * site_clearance,
+                    )
                 } else {
                     let w = face.extent_m[0].min(face.extent_m[1]);
                     (w < need, w)
