@@ -2,7 +2,8 @@
 //! as a CAD part: `DIR/<name>.stl` (binary STL in millimetres, the tessellation of
 //! [`binpick::part::tessellate`]) and `DIR/<name>-mesh.toml`, a workpiece of `kind = "mesh"` that
 //! points at it with the same mass, friction, restitution, grasp hints and pile count, named
-//! `<name>-mesh` so a batch can run both side by side:
+//! `<name>-mesh` so a batch can run both side by side (a compound's declared symmetry becomes the
+//! mesh workpiece's `shape.symmetry_orders`):
 //! `binpick batch --workpieces A,DIR/A-mesh.toml ...`.
 //!
 //! Every file is written to a temporary name in DIR first and renamed once all are written.
@@ -15,6 +16,8 @@ use clap::Args;
 use super::InputError;
 use binpick::config::{LoadedWorkpiece, ShapeKind, Workpiece};
 use binpick::part::mesh::Mesh;
+use binpick::part::symmetry::MAX_ORDER;
+use binpick::sensor::Symmetry;
 
 /// Arguments of `binpick export-mesh`.
 #[derive(Args)]
@@ -75,7 +78,24 @@ fn mesh_workpiece(w: &Workpiece, stl_name: &str) -> Workpiece {
     m.shape.parts.clear();
     m.shape.mesh_file = Some(stl_name.to_string());
     m.shape.mesh_scale = Some(1.0 / STL_UNITS_PER_M);
+    m.shape.symmetry_orders = declared_symmetry_orders(w);
     m
+}
+
+/// The symmetry a compound workpiece declares (its `grasp.yaw_symmetry_deg` turns about z, or
+/// any turn about z when its body has a cylinder along z: the rule recognition applies to the
+/// primitives, [`Symmetry::of`]) as the mesh workpiece's `shape.symmetry_orders` override, so
+/// the meshed part is recognised with the same symmetry as its primitives. `None` for a box,
+/// whose symmetry the part model detects from the mesh as the box's own (the same turns).
+fn declared_symmetry_orders(w: &Workpiece) -> Option<[u32; 3]> {
+    if w.shape.kind != ShapeKind::Compound {
+        return None;
+    }
+    match Symmetry::of(w) {
+        Symmetry::AboutZ => Some([1, 1, MAX_ORDER]),
+        // The turns about z by the yaw step: their count is the order about z.
+        Symmetry::Finite(turns) => Some([1, 1, (turns.len() as u32).clamp(1, MAX_ORDER)]),
+    }
 }
 
 /// The mesh as binary STL in millimetres, each facet's normal from its winding.

@@ -120,9 +120,10 @@ fn distance_to_polygon(poly: &[Vector2<f64>]) -> f64 {
 
 /// The cup site on `face` whose approach is clear of the part's own geometry: among the face's
 /// admissible cup centres (`centres`, face frame), the one farthest from the face's edges whose
-/// column is clear; with its distance to the nearest edge (m). `None` when every centre's
-/// approach meets the part. At most [`MAX_SITES_TRIED`] centres are tried, evenly spread over
-/// the centres ranked by their distance to the edges.
+/// column is clear; of centres equally far (within [`SITE_TIE_M`]: the middle line of a long
+/// strip), the one nearest the face's centroid, as [`PlanarFace::cup_fit`]'s best; with its
+/// distance to the nearest edge (m). `None` when every centre's approach meets the part. At most
+/// [`MAX_SITES_TRIED`] centres are tried, evenly spread over the centres so ranked.
 pub fn clear_site(
     mesh: &Mesh,
     face: &PlanarFace,
@@ -130,7 +131,15 @@ pub fn clear_site(
     column: &[ColumnPiece],
 ) -> Option<(Point2<f64>, f64)> {
     let mut ranked: Vec<(Point2<f64>, f64)> = centres.iter().map(|c| (*c, face.clearance_m(c))).collect();
-    ranked.sort_by(|a, b| b.1.total_cmp(&a.1));
+    // Clearances compared on a grid of SITE_TIE_M: the centres of a strip's middle line differ
+    // only by rounding, and the first of them in grid order sat at the strip's end, far from
+    // the centre of mass (C as a mesh: no lift held).
+    let key = |c: f64| (c / SITE_TIE_M).round() as i64;
+    ranked.sort_by(|a, b| {
+        key(b.1)
+            .cmp(&key(a.1))
+            .then(a.0.coords.norm_squared().total_cmp(&b.0.coords.norm_squared()))
+    });
     let step = ranked.len().div_ceil(MAX_SITES_TRIED).max(1);
     ranked
         .into_iter()
@@ -140,6 +149,9 @@ pub fn clear_site(
 
 /// The most cup centres [`clear_site`] tries on one face.
 pub const MAX_SITES_TRIED: usize = 200;
+/// Clearances to the face's edges closer than this are equal when [`clear_site`] ranks cup
+/// centres (m).
+pub const SITE_TIE_M: f64 = 1e-6;
 
 #[cfg(test)]
 mod tests {
@@ -215,6 +227,29 @@ mod tests {
         let (site, _) = clear_site(&mid, &face_m, &fit.centres, &column).unwrap();
         let p = face_m.to_part(&site);
         assert!((p.x - 0.005).abs() >= 0.016 - 1e-9, "{p:?}");
+        // A long strip (150 x 10 mm): the centres of its middle line are equally far from its
+        // edges; the site is the one nearest the face's centroid (the primitive's face centre),
+        // not the first of the line. Checked in the part frame: the strip's middle is x = 0.
+        let strip = box_mesh([-0.075, -0.005, -0.0025], [0.075, 0.005, 0.0025]);
+        let face_t = top_of(&strip);
+        let fit = face_t.cup_fit(0.0035);
+        let (site, clearance) = clear_site(&strip, &face_t, &fit.centres, &column).unwrap();
+        let p = face_t.to_part(&site);
+        assert!(p.x.abs() <= fit.spacing_m && (clearance - 0.005).abs() < 1e-9, "{p:?}");
+        // Negative control: a tall post across the strip's middle moves the site off it, to the
+        // nearest clear centre (16 mm from the post's axis, within a grid step), not to the end.
+        let blocked = union(
+            strip.clone(),
+            box_mesh([-0.001, -0.001, 0.0025], [0.001, 0.001, 0.0145]),
+        );
+        let face_b = top_of(&blocked);
+        let fit = face_b.cup_fit(0.0035);
+        let (site, _) = clear_site(&blocked, &face_b, &fit.centres, &column).unwrap();
+        let p = face_b.to_part(&site);
+        assert!(
+            p.x.abs() >= 0.016 - 1e-9 && p.x.abs() <= 0.016 + 2.0 * fit.spacing_m,
+            "{p:?}"
+        );
         // With no room left on the face (a 20 mm plate with a tall post in its middle), no site.
         let small = union(
             box_mesh([-0.01, -0.01, -0.001], [0.01, 0.01, 0.001]),

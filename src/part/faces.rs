@@ -217,9 +217,241 @@ pub fn planar_faces(mesh: &Mesh, dist_tol_m: f64) -> Vec<PlanarFace> {
         }
         faces.push(members);
     }
-    let mut out: Vec<PlanarFace> = faces.into_iter().map(|m| build_face(mesh, m, &normals)).collect();
+    let built: Vec<PlanarFace> = faces.into_iter().map(|m| build_face(mesh, m, &normals)).collect();
+    let mut out = merge_coplanar(mesh, built, dist_tol_m);
     out.sort_by(|a, b| b.area_m2.total_cmp(&a.area_m2));
     out
+}
+
+/// Faces of different bodies (not edge-connected) in one plane, as the solid's surface shows
+/// them: faces of the same outward direction that touch or overlap are one face (their polygon
+/// union: a transistor's tab and package backs), and where a face of the opposite direction
+/// lies on them (two bodies in contact: a relay's pins on its body, a can on its base), that
+/// region is inside the solid and is cut out (polygon difference). A face wholly covered goes;
+/// a face cut in pieces becomes one face per piece. Faces nothing coplanar touches stay as
+/// they were. Polygon booleans: `i_overlay`, non-zero fill, in one 2D frame per plane.
+fn merge_coplanar(mesh: &Mesh, faces: Vec<PlanarFace>, dist_tol_m: f64) -> Vec<PlanarFace> {
+    let cos_tol = FACE_ANGLE_TOL_RAD.cos();
+    let n = faces.len();
+    // Planes: faces whose normals are parallel (either way) within the angle tolerance and whose
+    // centroids lie within the distance tolerance of each other's plane. Union-find.
+    let mut root: Vec<usize> = (0..n).collect();
+    fn find(root: &mut [usize], mut i: usize) -> usize {
+        while root[i] != i {
+            root[i] = root[root[i]];
+            i = root[i];
+        }
+        i
+    }
+    // Sorted by the offset along the face's dominant normal axis, so only near offsets compare.
+    let offset = |f: &PlanarFace| {
+        let k = f.normal.iamax();
+        f.centroid_m.coords.dot(&f.normal) * f.normal[k].signum()
+    };
+    let mut order: Vec<usize> = (0..n).collect();
+    order.sort_by(|&a, &b| offset(&faces[a]).total_cmp(&offset(&faces[b])).then(a.cmp(&b)));
+    // Two coplanar faces' offsets differ by at most the tolerance plus the tilt (within the
+    // angle tolerance) times the distance between their centroids (at most the mesh's size).
+    let reach = dist_tol_m + mesh.extent_m().iter().map(|e| e * e).sum::<f64>().sqrt() * FACE_ANGLE_TOL_RAD.sin();
+    for (x, &i) in order.iter().enumerate() {
+        for &j in &order[x + 1..] {
+            if offset(&faces[j]) - offset(&faces[i]) > reach {
+                break;
+            }
+            let (a, b) = (&faces[i], &faces[j]);
+            if a.normal.dot(&b.normal).abs() >= cos_tol
+                && (b.centroid_m - a.centroid_m).dot(&a.normal).abs() <= dist_tol_m
+                && (a.centroid_m - b.centroid_m).dot(&b.normal).abs() <= dist_tol_m
+            {
+                let (ra, rb) = (find(&mut root, i), find(&mut root, j));
+                root[ra.max(rb)] = ra.min(rb);
+            }
+        }
+    }
+    let mut groups: HashMap<usize, Vec<usize>> = HashMap::new();
+    for i in 0..n {
+        let r = find(&mut root, i);
+        groups.entry(r).or_default().push(i);
+    }
+    let mut keys: Vec<usize> = groups.keys().copied().collect();
+    keys.sort_unstable();
+    let mut slots: Vec<Option<PlanarFace>> = faces.into_iter().map(Some).collect();
+    let mut out = Vec::with_capacity(n);
+    for r in keys {
+        let members = &groups[&r];
+        if members.len() == 1 {
+            out.extend(slots[members[0]].take());
+            continue;
+        }
+        let group: Vec<PlanarFace> = members.iter().filter_map(|&i| slots[i].take()).collect();
+        out.extend(merge_plane(mesh, group));
+    }
+    out
+}
+
+/// The faces of one plane (see [`merge_coplanar`]).
+fn merge_plane(mesh: &Mesh, group: Vec<PlanarFace>) -> Vec<PlanarFace> {
+    use i_overlay::core::fill_rule::FillRule;
+    use i_overlay::core::overlay_rule::OverlayRule;
+    use i_overlay::float::single::SingleFloatOverlay;
+
+    // The plane's 2D frame: the first face's.
+    let (o, e1, n0) = (group[0].centroid_m, group[0].u, group[0].normal);
+    let e2 = n0.cross(&e1);
+    let to2 = |p: &Point3<f64>| [(p - o).dot(&e1), (p - o).dot(&e2)];
+    // A face's region in the plane's frame: outer counter-clockwise, holes clockwise (non-zero
+    // fill then unites overlapping faces).
+    let region = |f: &PlanarFace| -> Vec<Vec<[f64; 2]>> {
+        std::iter::once((&f.outer, true))
+            .chain(f.holes.iter().map(|h| (h, false)))
+            .map(|(ring, outer)| {
+                let mut r: Vec<[f64; 2]> = ring.iter().map(|p| to2(&f.to_part(p))).collect();
+                if (ring_area(&r) > 0.0) != outer {
+                    r.reverse();
+                }
+                r
+            })
+            .collect()
+    };
+    let mut out = Vec::new();
+    for dir in [1.0, -1.0] {
+        let n = n0 * dir;
+        let (same, other): (Vec<&PlanarFace>, Vec<&PlanarFace>) = group.iter().partition(|f| f.normal.dot(&n) > 0.0);
+        if same.is_empty() {
+            continue;
+        }
+        let subject: Vec<Vec<Vec<[f64; 2]>>> = same.iter().map(|f| region(f)).collect();
+        let clip: Vec<Vec<Vec<[f64; 2]>>> = other.iter().map(|f| region(f)).collect();
+        let shapes = subject.overlay(&clip, OverlayRule::Difference, FillRule::NonZero);
+        let area = |shape: &Vec<Vec<[f64; 2]>>| shape.iter().map(|r| ring_area(r)).sum::<f64>().abs();
+        let before: f64 = same.iter().map(|f| f.area_m2).sum();
+        let after: f64 = shapes.iter().map(area).sum();
+        // Nothing touched: the faces as they were.
+        if shapes.len() == same.len() && (after - before).abs() <= 1e-9 * before.max(1e-30) {
+            out.extend(same.into_iter().cloned());
+            continue;
+        }
+        // Area-weighted normal of the faces united.
+        let normal = same
+            .iter()
+            .fold(nalgebra::Vector3::zeros(), |acc, f| acc + f.normal * f.area_m2)
+            .try_normalize(0.0)
+            .unwrap_or(n);
+        for shape in shapes {
+            let rings: Vec<Vec<Point3<f64>>> = shape
+                .iter()
+                .map(|r| r.iter().map(|q| o + e1 * q[0] + e2 * q[1]).collect())
+                .collect();
+            // The mesh triangles of the united faces whose centroid lies in this piece.
+            let mut triangles: Vec<usize> = same
+                .iter()
+                .flat_map(|f| f.triangles.iter().copied())
+                .filter(|&k| {
+                    let [a, b, c] = mesh.corners(k);
+                    let m = to2(&Point3::from((a.coords + b.coords + c.coords) / 3.0));
+                    contains_even_odd(&shape, &m)
+                })
+                .collect();
+            triangles.sort_unstable();
+            if let Some(f) = face_of_rings(triangles, normal, &rings) {
+                out.push(f);
+            }
+        }
+    }
+    out
+}
+
+/// Signed area of a ring (positive: counter-clockwise) (m^2).
+fn ring_area(r: &[[f64; 2]]) -> f64 {
+    (0..r.len())
+        .map(|k| {
+            let (a, b) = (r[k], r[(k + 1) % r.len()]);
+            a[0] * b[1] - b[0] * a[1]
+        })
+        .sum::<f64>()
+        / 2.0
+}
+
+/// Whether `p` lies inside the rings (even-odd).
+fn contains_even_odd(rings: &[Vec<[f64; 2]>], p: &[f64; 2]) -> bool {
+    let mut inside = false;
+    for r in rings {
+        for k in 0..r.len() {
+            let (a, b) = (r[k], r[(k + 1) % r.len()]);
+            if (a[1] > p[1]) != (b[1] > p[1]) && p[0] < a[0] + (p[1] - a[1]) / (b[1] - a[1]) * (b[0] - a[0]) {
+                inside = !inside;
+            }
+        }
+    }
+    inside
+}
+
+/// A face from its region's rings in the part frame (the first the outer boundary, the others
+/// holes), its outward `normal` and its mesh triangles: the frame as [`build_face`] sets it
+/// (origin at the region's centroid, `u` along its longest boundary edge). `None` for a region
+/// without area.
+fn face_of_rings(triangles: Vec<usize>, normal: Vector3<f64>, rings: &[Vec<Point3<f64>>]) -> Option<PlanarFace> {
+    let outer3 = rings.first()?;
+    let p0 = *outer3.first()?;
+    let longest = rings
+        .iter()
+        .flat_map(|r| (0..r.len()).map(move |k| r[(k + 1) % r.len()] - r[k]))
+        .fold(None::<Vector3<f64>>, |best, d| match best {
+            Some(b) if b.norm() + 1e-12 >= d.norm() => Some(b),
+            _ => Some(d),
+        })?;
+    let u = (longest - normal * longest.dot(&normal)).try_normalize(1e-12)?;
+    let v = normal.cross(&u);
+    let flat =
+        |r: &Vec<Point3<f64>>| -> Vec<[f64; 2]> { r.iter().map(|p| [(p - p0).dot(&u), (p - p0).dot(&v)]).collect() };
+    let flats: Vec<Vec<[f64; 2]>> = rings.iter().map(flat).collect();
+    // Area and centroid: the outer ring's, less the holes'.
+    let moments = |r: &Vec<[f64; 2]>| {
+        let (mut a2, mut mx, mut my) = (0.0, 0.0, 0.0);
+        for i in 0..r.len() {
+            let (a, b) = (r[i], r[(i + 1) % r.len()]);
+            let c = a[0] * b[1] - b[0] * a[1];
+            a2 += c;
+            mx += (a[0] + b[0]) * c;
+            my += (a[1] + b[1]) * c;
+        }
+        // |area|, and the area times the centroid (the signs cancel).
+        let area = (a2 / 2.0).abs();
+        if a2 == 0.0 {
+            (0.0, 0.0, 0.0)
+        } else {
+            (area, mx / (3.0 * a2) * area, my / (3.0 * a2) * area)
+        }
+    };
+    let (mut area, mut sx, mut sy) = moments(&flats[0]);
+    for h in &flats[1..] {
+        let (a, x, y) = moments(h);
+        area -= a;
+        sx -= x;
+        sy -= y;
+    }
+    if area <= 0.0 {
+        return None;
+    }
+    let (cx, cy) = (sx / area, sy / area);
+    let centroid = p0 + u * cx + v * cy;
+    let ring2 = |r: &Vec<[f64; 2]>, ccw: bool| -> Vec<Point2<f64>> {
+        let mut q: Vec<Point2<f64>> = r.iter().map(|p| Point2::new(p[0] - cx, p[1] - cy)).collect();
+        if (ring_area(r) > 0.0) != ccw {
+            q.reverse();
+        }
+        q
+    };
+    Some(PlanarFace {
+        triangles,
+        area_m2: area,
+        normal,
+        centroid_m: centroid,
+        u,
+        v,
+        outer: ring2(&flats[0], true),
+        holes: flats[1..].iter().map(|h| ring2(h, false)).collect(),
+    })
 }
 
 /// A face from its triangles: normal, centroid, frame and boundary rings.
@@ -363,6 +595,118 @@ mod tests {
             vertices_m: v,
             triangles: t,
         }
+    }
+
+    /// Boxes as one mesh of separate bodies (shells), as CAD exports them.
+    fn bodies(boxes: &[([f64; 3], [f64; 3])]) -> Mesh {
+        let mut m = Mesh::default();
+        for (lo, hi) in boxes {
+            crate::part::tessellate::append(&mut m, &box_mesh(*lo, *hi));
+        }
+        m
+    }
+
+    /// The faces whose outward normal is +z, largest first: (height, area) (m, m^2).
+    fn up_faces(m: &Mesh) -> Vec<(f64, f64)> {
+        planar_faces(m, 1e-9)
+            .iter()
+            .filter(|f| f.normal.z > 0.999)
+            .map(|f| (f.centroid_m.z, f.area_m2))
+            .collect()
+    }
+
+    #[test]
+    fn coplanar_faces_of_touching_bodies_are_one_face_and_apart_they_stay_two() {
+        // A tab 10 x 6 mm and a package 10 x 8 mm, both 2 mm thick, backs (z = 0) coplanar,
+        // overlapping by 1 mm along y (the package's tab end sits on the tab's edge).
+        let (tab, pkg) = (
+            ([0.0, 0.0, 0.0], [0.01, 0.006, 0.002]),
+            ([0.0, 0.005, 0.0], [0.01, 0.013, 0.002]),
+        );
+        let m = bodies(&[tab, pkg]);
+        let backs: Vec<PlanarFace> = planar_faces(&m, 1e-9)
+            .into_iter()
+            .filter(|f| f.normal.z < -0.999)
+            .collect();
+        assert_eq!(backs.len(), 1, "one back");
+        let back = &backs[0];
+        // Independent: the union of two rectangles is 10 x 13 mm.
+        assert!((back.area_m2 - 0.01 * 0.013).abs() < 1e-12, "{}", back.area_m2);
+        let e = back.extent_m();
+        assert!(
+            (e[0].max(e[1]) - 0.013).abs() < 1e-9 && (e[0].min(e[1]) - 0.01).abs() < 1e-9,
+            "{e:?}"
+        );
+        // The union's centroid: the middle of the 13 mm span.
+        assert!((back.centroid_m - Point3::new(0.005, 0.0065, 0.0)).norm() < 1e-9);
+        // A 9 mm disc fits only on the united face: the tab (6 mm) and the package (8 mm) are
+        // each too narrow for it, their union (10 x 13 mm) is not.
+        assert!(back.cup_fit(0.0045).takes_cup());
+        // Both tops (z = 2 mm) touch too: one face.
+        assert_eq!(up_faces(&m).len(), 1);
+        // Negative controls: 1 mm apart, the backs stay two faces, each too narrow for the disc.
+        let apart = bodies(&[tab, ([0.0, 0.007, 0.0], [0.01, 0.015, 0.002])]);
+        let backs: Vec<PlanarFace> = planar_faces(&apart, 1e-9)
+            .into_iter()
+            .filter(|f| f.normal.z < -0.999)
+            .collect();
+        assert_eq!(backs.len(), 2);
+        assert!(backs.iter().all(|f| !f.cup_fit(0.0045).takes_cup()));
+        // Parallel faces at different heights (the package 0.5 mm lower) stay apart.
+        let stepped = bodies(&[tab, ([0.0, 0.005, -0.0005], [0.01, 0.013, 0.0015])]);
+        let backs = planar_faces(&stepped, 1e-9)
+            .into_iter()
+            .filter(|f| f.normal.z < -0.999)
+            .count();
+        assert_eq!(backs, 2);
+    }
+
+    #[test]
+    fn where_one_body_stands_on_another_the_contact_is_cut_out_of_both_faces() {
+        // A 20 x 20 x 2 mm plate with a 4 x 4 mm post, 3 mm tall, on the middle of its top.
+        let m = bodies(&[
+            ([-0.01, -0.01, -0.002], [0.01, 0.01, 0.0]),
+            ([-0.002, -0.002, 0.0], [0.002, 0.002, 0.003]),
+        ]);
+        let up = up_faces(&m);
+        // The plate's top less the post's footprint, and the post's top: two faces up; the
+        // post's bottom (inside the solid) is no face.
+        assert_eq!(up.len(), 2, "{up:?}");
+        assert!(
+            (up[0].0 - 0.0).abs() < 1e-12 && (up[0].1 - (4e-4 - 1.6e-5)).abs() < 1e-12,
+            "{up:?}"
+        );
+        assert!(
+            (up[1].0 - 0.003).abs() < 1e-12 && (up[1].1 - 1.6e-5).abs() < 1e-12,
+            "{up:?}"
+        );
+        let faces = planar_faces(&m, 1e-9);
+        assert!(
+            !faces.iter().any(|f| f.normal.z < -0.999 && f.centroid_m.z.abs() < 1e-9),
+            "the post's bottom is inside"
+        );
+        let top = faces
+            .iter()
+            .find(|f| f.normal.z > 0.999 && f.centroid_m.z.abs() < 1e-9)
+            .unwrap();
+        assert_eq!(top.holes.len(), 1);
+        // The cup stays off the post: no admissible centre within 2 + 3.5 mm of the middle
+        // along both axes (checked in the part frame).
+        let fit = top.cup_fit(0.0035);
+        assert!(fit.takes_cup());
+        for c in &fit.centres {
+            let p = top.to_part(c);
+            let (dx, dy) = ((p.x.abs() - 0.002).max(0.0), (p.y.abs() - 0.002).max(0.0));
+            assert!(dx.hypot(dy) >= 0.0035 - 1e-9, "{p}");
+        }
+        // Negative control: the post lifted 1 mm off the plate touches nothing: the plate's
+        // top keeps its full 20 x 20 mm.
+        let lifted = bodies(&[
+            ([-0.01, -0.01, -0.002], [0.01, 0.01, 0.0]),
+            ([-0.002, -0.002, 0.001], [0.002, 0.002, 0.004]),
+        ]);
+        let up = up_faces(&lifted);
+        assert!((up[0].1 - 4e-4).abs() < 1e-12, "{up:?}");
     }
 
     #[test]

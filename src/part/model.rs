@@ -8,7 +8,7 @@
 //!
 //! Units: m, kg. Frame: the part frame (origin at the bounding box's centre).
 
-use nalgebra::Point3;
+use nalgebra::{Point3, Vector3};
 
 use super::faces::{CupFit, PlanarFace, planar_faces};
 use super::mass::{MassProperties, MassSpec, mass_properties};
@@ -76,6 +76,10 @@ pub struct PartModel {
     pub symmetry_detected: bool,
     /// The cup the faces were fitted for.
     pub cup: CupSpec,
+    /// Its round bodies (regular prisms about a part axis: a can, pins), found among all its
+    /// planar faces (the smallest included); each one's side faces as indices into `faces`
+    /// (those kept there).
+    pub round: Vec<RoundBody>,
 }
 
 impl PartModel {
@@ -87,10 +91,28 @@ impl PartModel {
         let tol = 1e-5 * diag;
         let raw = planar_faces(&mesh, tol.max(1e-9));
         let largest = raw.first().map_or(0.0, |f| f.area_m2);
+        let mut round = round_bodies(&raw, size_m);
+        let kept: Vec<bool> = raw
+            .iter()
+            .map(|f| f.area_m2 >= MIN_FACE_SHARE * largest && !f.outer.is_empty())
+            .collect();
+        // Raw face indices to kept ones.
+        let index: Vec<Option<usize>> = kept
+            .iter()
+            .scan(0, |n, &k| {
+                let i = k.then_some(*n);
+                *n += usize::from(k);
+                Some(i)
+            })
+            .collect();
+        for r in &mut round {
+            r.faces = r.faces.iter().filter_map(|&i| index[i]).collect();
+        }
         let faces = raw
             .into_iter()
-            .filter(|f| f.area_m2 >= MIN_FACE_SHARE * largest && !f.outer.is_empty())
-            .map(|face| {
+            .zip(kept)
+            .filter(|(_, k)| *k)
+            .map(|(face, _)| {
                 let fit = face.cup_fit(cup.disc_radius_m());
                 ModelFace { face, fit }
             })
@@ -111,6 +133,7 @@ impl PartModel {
             symmetry,
             symmetry_detected,
             cup,
+            round,
         })
     }
 
@@ -138,6 +161,125 @@ impl PartModel {
     pub fn com_m(&self) -> Point3<f64> {
         self.mass.com_m
     }
+
+    /// The part's round body, if it has one: the largest of its `round` bodies (a can, a
+    /// round standoff), on whose curved side the part can lie.
+    pub fn round_body(&self) -> Option<&RoundBody> {
+        self.round
+            .iter()
+            .fold(None, |best: Option<&RoundBody>, body| match best {
+                Some(b) if b.radius_m * b.half_length_m >= body.radius_m * body.half_length_m => Some(b),
+                _ => Some(body),
+            })
+    }
+}
+
+/// The round bodies among `faces`: each regular prism of at least [`ROUND_MIN_SIDES`] side faces
+/// about a part axis (a cylinder as CAD and the tessellation draw it: a can, a pin). Side
+/// faces of one prism: normal across the axis, the same span along it, each next to the
+/// next (centroids within 1.5 face widths), the same distance from the axis through their
+/// centroids' mean, normals turned in equal steps.
+fn round_bodies(faces: &[PlanarFace], size_m: [f64; 3]) -> Vec<RoundBody> {
+    let cos_tol = super::faces::FACE_ANGLE_TOL_RAD.cos();
+    let tol = 1e-4 * size_m.iter().map(|e| e * e).sum::<f64>().sqrt();
+    let mut found: Vec<RoundBody> = Vec::new();
+    for axis in [Vector3::x(), Vector3::y(), Vector3::z()] {
+        let face = |i: usize| &faces[i];
+        let span = |i: usize| {
+            let f = face(i);
+            f.outer
+                .iter()
+                .map(|p| f.to_part(p).coords.dot(&axis))
+                .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), t| (lo.min(t), hi.max(t)))
+        };
+        let width = |i: usize| {
+            let e = face(i).extent_m();
+            e[0].min(e[1])
+        };
+        let mut left: Vec<usize> = (0..faces.len())
+            .filter(|&i| face(i).normal.dot(&axis).abs() < (1.0 - cos_tol * cos_tol).sqrt())
+            .collect();
+        while let Some(&seed) = left.first() {
+            let (lo, hi) = span(seed);
+            // Grown from the seed through neighbours of the same span.
+            let mut prism = vec![seed];
+            left.retain(|&i| i != seed);
+            let mut k = 0;
+            while k < prism.len() {
+                let a = prism[k];
+                let near: Vec<usize> = left
+                    .iter()
+                    .copied()
+                    .filter(|&i| {
+                        let (l, h) = span(i);
+                        (l - lo).abs() < tol
+                            && (h - hi).abs() < tol
+                            && (face(i).centroid_m - face(a).centroid_m).norm() < 1.5 * width(a).max(width(i))
+                    })
+                    .collect();
+                left.retain(|i| !near.contains(i));
+                prism.extend(near);
+                k += 1;
+            }
+            if prism.len() < ROUND_MIN_SIDES as usize {
+                continue;
+            }
+            let mean = prism.iter().map(|&i| face(i).centroid_m.coords).sum::<Vector3<f64>>() / prism.len() as f64;
+            let centre = mean - axis * axis.dot(&mean) + axis * (0.5 * (lo + hi));
+            let apothem = |i: usize| face(i).normal.dot(&(face(i).centroid_m.coords - centre));
+            let d0 = apothem(prism[0]);
+            if d0 <= 0.0 || prism.iter().any(|&i| (apothem(i) - d0).abs() > tol) {
+                continue;
+            }
+            let n = prism.len();
+            let e1 = axis.cross(&Vector3::new(axis.z, axis.x, axis.y));
+            let e2 = axis.cross(&e1);
+            let mut angles: Vec<f64> = prism
+                .iter()
+                .map(|&i| face(i).normal.dot(&e1).atan2(face(i).normal.dot(&e2)))
+                .collect();
+            angles.sort_by(f64::total_cmp);
+            let step = std::f64::consts::TAU / n as f64;
+            let regular = (0..n).all(|j| {
+                let next = if j + 1 < n {
+                    angles[j + 1]
+                } else {
+                    angles[0] + std::f64::consts::TAU
+                };
+                (next - angles[j] - step).abs() < 0.01
+            });
+            if regular {
+                prism.sort_unstable();
+                found.push(RoundBody {
+                    center_m: centre,
+                    axis,
+                    radius_m: d0 / (std::f64::consts::PI / n as f64).cos(),
+                    half_length_m: 0.5 * (hi - lo),
+                    faces: prism,
+                });
+            }
+        }
+    }
+    found
+}
+
+/// Fewest side faces of a regular prism taken as a round body.
+pub const ROUND_MIN_SIDES: u32 = 8;
+
+/// A part's round body ([`PartModel::round_body`]): a regular prism about a part axis, taken as
+/// the cylinder through its corners.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RoundBody {
+    /// Centre of the prism (part frame, m).
+    pub center_m: Vector3<f64>,
+    /// Its axis (a part axis, unit).
+    pub axis: Vector3<f64>,
+    /// The radius of the circle through its corners (m).
+    pub radius_m: f64,
+    /// Half its length along the axis (m).
+    pub half_length_m: f64,
+    /// Its side faces kept among the model's faces (indices into [`PartModel::faces`]).
+    pub faces: Vec<usize>,
 }
 
 #[cfg(test)]
@@ -177,5 +319,68 @@ mod tests {
         let pm = PartModel::derive(pm.mesh.clone(), MassSpec::MassKg(0.002), big, None).unwrap();
         assert_eq!(pm.grasp_faces().count(), 0);
         assert_eq!(pm.graspable_share(0.1), 0.0);
+    }
+
+    #[test]
+    fn round_bodies_are_the_regular_prisms_a_can_and_its_pins() {
+        use crate::part::primitive::{Axis, Piece};
+        use crate::part::tessellate::pieces_mesh;
+        use nalgebra::Vector3;
+        let cup = CupSpec {
+            diameter_m: 0.006,
+            face_margin_m: 0.0005,
+        };
+        // A 10 mm can (16-sided prism, 8.5 mm long) on a 9.8 mm square base, two 1 mm pins
+        // under the base along z, and a 1 mm pin along x out of the can's side.
+        let pin = |c: [f64; 3], axis| Piece::Cylinder {
+            center_m: Vector3::from(c),
+            radius_m: 0.0005,
+            half_length_m: 0.0015,
+            axis,
+        };
+        let pieces = [
+            Piece::Cylinder {
+                center_m: Vector3::new(0.0, 0.0, 0.00075),
+                radius_m: 0.005,
+                half_length_m: 0.00425,
+                axis: Axis::Z,
+            },
+            Piece::Box {
+                center_m: Vector3::new(0.0, 0.0, -0.00425),
+                half_m: Vector3::new(0.0049, 0.0049, 0.00075),
+            },
+            pin([0.003, 0.0, -0.0065], Axis::Z),
+            pin([-0.003, 0.0, -0.0065], Axis::Z),
+            pin([0.0065, 0.0, 0.002], Axis::X),
+        ];
+        let pm = PartModel::derive(pieces_mesh(pieces.iter()), MassSpec::MassKg(0.002), cup, None).unwrap();
+        let mut found: Vec<(f64, [f64; 3])> = pm
+            .round
+            .iter()
+            .map(|r| (r.radius_m, [r.axis.x, r.axis.y, r.axis.z]))
+            .collect();
+        found.sort_by(|a, b| a.0.total_cmp(&b.0));
+        assert_eq!(found.len(), 4, "{found:?}");
+        assert!(found[..3].iter().all(|(r, _)| (r - 0.0005).abs() < 1e-9), "{found:?}");
+        assert!(
+            (found[3].0 - 0.005).abs() < 1e-9 && found[3].1 == [0.0, 0.0, 1.0],
+            "{found:?}"
+        );
+        let can = pm.round_body().unwrap();
+        assert!(
+            (can.center_m - Vector3::new(0.0, 0.0, 0.00075)).norm() < 1e-9,
+            "{:?}",
+            can.center_m
+        );
+        assert!((can.half_length_m - 0.00425).abs() < 1e-9);
+        // Its 16 side faces are kept faces, each normal across z.
+        assert_eq!(can.faces.len(), 16);
+        assert!(can.faces.iter().all(|&i| pm.faces[i].face.normal.z.abs() < 1e-9));
+        // Negative controls: a box and a hexagonal prism (6 sides) have no round body.
+        let hex = crate::part::tessellate::prism_mesh(Vector3::zeros(), 0.007, 0.002, Axis::Z, 6);
+        for m in [box_mesh([-0.01, -0.0075, -0.0025], [0.01, 0.0075, 0.0025]), hex] {
+            let pm = PartModel::derive(m, MassSpec::MassKg(0.002), cup, None).unwrap();
+            assert!(pm.round.is_empty() && pm.round_body().is_none());
+        }
     }
 }

@@ -28,6 +28,9 @@ pub(super) const ROLL_STEP_RAD: f64 = 15.0 * std::f64::consts::PI / 180.0;
 
 /// The body cylinder of a model: centre, unit axis, radius (part frame) (m).
 pub(super) fn body_cylinder(model: &CloudModel) -> Option<(Vector3<f64>, Vector3<f64>, f64)> {
+    if model.round.is_some() {
+        return model.round;
+    }
     model.pieces.iter().zip(&model.lead).find_map(|(p, lead)| match *p {
         Piece::Cylinder {
             center_m,
@@ -168,6 +171,13 @@ pub(super) fn fit_axis(
 
 /// The part's extent along its body cylinder's axis, from its origin (m).
 pub(super) fn extent_along(model: &CloudModel, a_part: &Vector3<f64>) -> [f64; 2] {
+    if let Some(m) = &model.mesh {
+        return m
+            .vertices_m
+            .iter()
+            .map(|v| v.dot(a_part))
+            .fold([f64::INFINITY, f64::NEG_INFINITY], |[lo, hi], t| [lo.min(t), hi.max(t)]);
+    }
     let lo = -model
         .pieces
         .iter()

@@ -118,6 +118,13 @@ pub struct CloudModel {
     pub yaw_span_max_rad: f64,
     /// A mesh workpiece's surface, rendered instead of `pieces` (which are then empty).
     mesh: Option<std::sync::Arc<render::MeshView>>,
+    /// A mesh workpiece's round body (centre, unit axis, radius; part frame, m): its part
+    /// model's [`crate::part::model::RoundBody`], the cylinder a lying part is fitted to.
+    round: Option<(Vector3<f64>, Vector3<f64>, f64)>,
+    /// Hypotheses are verified at every pixel, not on the [`VERIFY_SPACING_M`] grid: the part
+    /// has features thinner than the grid (a primitive's leads; a part model's round bodies
+    /// narrower than the grid: pins), which decide between poses.
+    fine_verify: bool,
 }
 
 /// A planar face of a part model smaller than this share of the largest is not matched.
@@ -196,6 +203,8 @@ impl CloudModel {
                 .iter()
                 .any(|(r, p)| *r == PartRole::Body && matches!(p, Piece::Cylinder { .. })),
             mesh: None,
+            round: None,
+            fine_verify: w.pieces().iter().any(|(r, _)| *r == PartRole::Lead),
         }
     }
 
@@ -203,13 +212,15 @@ impl CloudModel {
     /// matched ([`MESH_FACE_MIN_SHARE`], [`MESH_FACE_MIN_WIDTH_M`]) as [`face_of_planar`] fits
     /// them, less the faces a symmetry of the part maps onto an earlier one; hypotheses are
     /// rendered from the mesh. Both half turns about a face are tried (the symmetry decides
-    /// whether they differ).
+    /// whether they differ). A round body's side faces are its curved side, fitted as a lying
+    /// part's cylinder (as a primitive's body cylinder), not matched as flat faces.
     pub fn of_part_model(pm: &crate::part::PartModel) -> Self {
         let symmetry = Symmetry::of_orders(pm.symmetry.orders);
         let largest = pm.faces.first().map_or(0.0, |f| f.face.area_m2);
+        let round = pm.round_body();
         let mut faces: Vec<Face> = Vec::new();
-        for mf in &pm.faces {
-            if mf.face.area_m2 < MESH_FACE_MIN_SHARE * largest {
+        for (i, mf) in pm.faces.iter().enumerate() {
+            if mf.face.area_m2 < MESH_FACE_MIN_SHARE * largest || round.as_ref().is_some_and(|r| r.faces.contains(&i)) {
                 continue;
             }
             let f = face_of_planar(&mf.face);
@@ -227,9 +238,11 @@ impl CloudModel {
             half_size_m: Vector3::from(pm.size_m) / 2.0,
             half_turn_matters: true,
             symmetry,
-            round_side: false,
+            round_side: round.is_some(),
             yaw_span_max_rad: YAW_SPAN_MAX_RAD,
             mesh: render::MeshView::new(&pm.mesh).map(std::sync::Arc::new),
+            round: round.map(|r| (r.center_m, r.axis, r.radius_m)),
+            fine_verify: pm.round.iter().any(|r| 2.0 * r.radius_m < VERIFY_SPACING_M),
         }
     }
 
@@ -711,9 +724,10 @@ impl<'a> Cloud<'a> {
 
     /// Every how many pixels (along rows and columns) a hypothesis at `pose` is verified: a
     /// grid about [`VERIFY_SPACING_M`] apart at its depth, or every pixel; every pixel for a part
-    /// with leads, whose thin pins decide between poses (a relay on its back or its face).
+    /// with thin features ([`CloudModel`]'s `fine_verify`: leads, pins), which decide between
+    /// poses (a relay on its back or its face).
     fn verify_stride(&self, model: &CloudModel, pose: &Isometry3<f64>) -> usize {
-        if model.lead.iter().any(|l| *l) {
+        if model.fine_verify {
             return 1;
         }
         let z = (pose.translation.vector - self.origin).dot(&self.optical);
