@@ -37,7 +37,7 @@ use crate::config::{Scene, Stepping};
 pub use crate::geometry::TrayVolume;
 use crate::robot::{DOF, JointVector, RobotModel};
 pub use health::{HealthError, HealthEvent, HealthLimits, HealthMonitor};
-pub use query::{RayCaster, RayHit, RayTargetBox, RayTargets, ViewVolume};
+pub use query::{RayCaster, RayHit, RayTargets, ViewVolume};
 pub use shapes::{PartShape, ShapeError};
 pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
 pub use view::ViewMesh;

@@ -82,6 +82,8 @@ const YAW_STEPS: i32 = 20;
 const CELL_M: f64 = 0.0001;
 /// ... coarser if the centres' box would need more cells than this per axis.
 const MAX_CELLS: usize = 40;
+// A row of centres is one 64-bit mask (a box's side may round to two cells more).
+const _: () = assert!(MAX_CELLS + 2 <= 64);
 
 /// Silhouette fit of a rectangle of extents `ext`: the placements consistent with the silhouette,
 /// yaws within 10 degrees of `theta0` in [`YAW_STEP_RAD`] steps; the estimate is the middle of
@@ -96,7 +98,7 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
         // (weight, weighted sum of centres (plane basis), range of consistent yaw steps).
         let (mut wsum, mut csum) = (0.0, [0.0; 2]);
         let (mut k0, mut k1) = (i32::MAX, i32::MIN);
-        let mut grid: Vec<i32> = Vec::new();
+        let mut rows: Vec<u64> = Vec::new();
         for k in -YAW_STEPS..=YAW_STEPS {
             let t = theta0 + k as f64 * YAW_STEP_RAD;
             let (c, s) = (t.cos(), t.sin());
@@ -124,16 +126,21 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
                 ((bhi[1] - blo[1]) / cell[1]) as usize + 1,
             ];
             // Less the centres that would hold an outside point: each excludes a box of
-            // centres, summed in a difference array (one more row and column).
-            let w = n[0] + 1;
-            grid.clear();
-            grid.resize(w * (n[1] + 1), 0);
+            // centres, marked row by row in a bit mask per row (bit i: column i).
+            rows.clear();
+            rows.resize(n[1], 0);
             for p in outside {
                 let q = rot(p);
                 let mut range = [[0usize; 2]; 2];
                 let mut hit = true;
                 for a in 0..2 {
                     let (l, h) = (q[a] - half[a] + tol, q[a] + half[a] - tol);
+                    // Wholly before the first centre or past the last: no cell (as the bounds
+                    // below would find, without their divisions).
+                    if h < blo[a] || l - blo[a] > n[a] as f64 * cell[a] {
+                        hit = false;
+                        break;
+                    }
                     let il = ((l - blo[a]) / cell[a]).ceil().max(0.0);
                     let ih = ((h - blo[a]) / cell[a]).floor().min((n[a] - 1) as f64);
                     if il > ih {
@@ -144,32 +151,36 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
                 }
                 if hit {
                     let ([i0, i1], [j0, j1]) = (range[0], range[1]);
-                    grid[j0 * w + i0] += 1;
-                    grid[j0 * w + i1] -= 1;
-                    grid[j1 * w + i0] -= 1;
-                    grid[j1 * w + i1] += 1;
-                }
-            }
-            // The prefix sums row by row (each row's running sum plus the row above, already
-            // summed), and the centres no outside point excludes (a zero) counted on the way.
-            let (mut cnt, mut m) = (0usize, [0.0; 2]);
-            let (mut glo, mut ghi) = ([usize::MAX; 2], [0usize; 2]);
-            for j in 0..n[1] {
-                let (above, row) = grid.split_at_mut(j * w);
-                let above = if j > 0 { &above[(j - 1) * w..j * w] } else { &[][..] };
-                let mut run = 0;
-                for (i, cell) in row[..n[0]].iter_mut().enumerate() {
-                    run += *cell;
-                    let v = run + above.get(i).copied().unwrap_or(0);
-                    *cell = v;
-                    if v == 0 {
-                        cnt += 1;
-                        m[0] += i as f64;
-                        m[1] += j as f64;
-                        glo = [glo[0].min(i), glo[1].min(j)];
-                        ghi = [ghi[0].max(i), ghi[1].max(j)];
+                    let columns = (u64::MAX >> (64 - (i1 - i0))) << i0;
+                    for row in &mut rows[j0..j1] {
+                        *row |= columns;
                     }
                 }
+            }
+            // The centres no outside point excludes (a clear bit), counted row by row.
+            let all = u64::MAX >> (64 - n[0]);
+            let (mut cnt, mut m) = (0usize, [0.0; 2]);
+            let (mut glo, mut ghi) = ([usize::MAX; 2], [0usize; 2]);
+            for (j, row) in rows.iter().enumerate() {
+                // The consistent centres only spread as rows are added: once wider than
+                // FIT_AMBIGUITY_M they are not pinned down, whatever the rows left.
+                if cnt > 0
+                    && ((ghi[0] - glo[0]) as f64 * cell[0]).max((ghi[1] - glo[1]) as f64 * cell[1]) > FIT_AMBIGUITY_M
+                {
+                    return None;
+                }
+                let free = !row & all;
+                if free == 0 {
+                    continue;
+                }
+                // Sums of small integers: exact in any order.
+                let count = free.count_ones() as usize;
+                cnt += count;
+                m[0] += bit_index_sum(free) as f64;
+                m[1] += (j * count) as f64;
+                let (first, last) = (free.trailing_zeros() as usize, 63 - free.leading_zeros() as usize);
+                glo = [glo[0].min(first), glo[1].min(j)];
+                ghi = [ghi[0].max(last), ghi[1].max(j)];
             }
             if cnt == 0 {
                 continue;
@@ -205,6 +216,24 @@ pub(super) fn fit_rect(inside: &[[f64; 2]], outside: &[[f64; 2]], ext: [f64; 2],
     None
 }
 
+/// The sum of the indices of the set bits of `x`: per bit k of an index, the set bits whose index
+/// has it, times 2^k.
+pub(super) fn bit_index_sum(x: u64) -> u64 {
+    const HAS_BIT: [u64; 6] = [
+        0xAAAA_AAAA_AAAA_AAAA,
+        0xCCCC_CCCC_CCCC_CCCC,
+        0xF0F0_F0F0_F0F0_F0F0,
+        0xFF00_FF00_FF00_FF00,
+        0xFFFF_0000_FFFF_0000,
+        0xFFFF_FFFF_0000_0000,
+    ];
+    HAS_BIT
+        .iter()
+        .enumerate()
+        .map(|(k, mask)| u64::from((x & mask).count_ones()) << k)
+        .sum()
+}
+
 /// Silhouette fit of a disc of radius `r` (`inside` may be just its convex hull): the mean of the centres holding every inside point and
 /// no outside point (within half [`FIT_VIOLATION_M`]), on a 0.2 mm grid around the centroid. `None` if infeasible
 /// or ambiguous (the feasible centres spread wider than [`FIT_AMBIGUITY_M`]).
@@ -214,11 +243,12 @@ pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Opt
         inside.iter().map(|p| p[0]).sum::<f64>() / n,
         inside.iter().map(|p| p[1]).sum::<f64>() / n,
     ];
-    let room = |c: [f64; 2]| {
+    // Whether every inside point lies in the disc centred at `c` and every outside point out
+    // of it, each within the tolerance: the first point that violates it decides.
+    let tol = -FIT_VIOLATION_M / 2.0;
+    let feasible = |c: [f64; 2]| {
         let d = |p: &[f64; 2]| ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2)).sqrt();
-        let a = inside.iter().map(|p| r - d(p)).fold(f64::INFINITY, f64::min);
-        let b = outside.iter().map(|p| d(p) - r).fold(f64::INFINITY, f64::min);
-        a.min(b)
+        inside.iter().all(|p| r - d(p) >= tol) && outside.iter().all(|p| d(p) - r >= tol)
     };
     let step = 0.0002;
     let (mut sum, mut cnt) = ([0.0; 2], 0.0);
@@ -226,7 +256,7 @@ pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Opt
     for i in -10..=10 {
         for j in -10..=10 {
             let c = [c0[0] + i as f64 * step, c0[1] + j as f64 * step];
-            if room(c) >= -FIT_VIOLATION_M / 2.0 {
+            if feasible(c) {
                 for a in 0..2 {
                     sum[a] += c[a];
                     lo[a] = lo[a].min(c[a]);

@@ -232,16 +232,33 @@ const STATION_STEP_M: f64 = 0.0005;
 const STATION_STEPS: i32 = 3;
 
 impl super::Cloud<'_> {
-    /// The foreground pixels within `k` pixels (chessboard distance) of `pixels`, sorted.
-    fn dilate(&self, pixels: &[usize], k: i64) -> Vec<usize> {
-        let mut out: Vec<usize> = pixels
-            .iter()
-            .flat_map(|&i| (-k..=k).flat_map(move |dv| (-k..=k).filter_map(move |du| self.neighbour(i, du, dv))))
-            .filter(|&j| self.fg[j])
-            .collect();
-        out.sort_unstable();
-        out.dedup();
-        out
+    /// The pixels within `k` pixels (chessboard distance) of `pixels` that `keep` keeps, sorted.
+    pub(super) fn dilate(&self, pixels: &[usize], k: usize, keep: impl Fn(usize) -> bool) -> Vec<usize> {
+        let Some(u_lo) = pixels.iter().map(|&i| i % self.w).min() else {
+            return Vec::new();
+        };
+        let u_hi = pixels.iter().map(|&i| i % self.w).max().unwrap_or(u_lo);
+        let v_lo = pixels.iter().map(|&i| i / self.w).min().unwrap_or(0);
+        let v_hi = pixels.iter().map(|&i| i / self.w).max().unwrap_or(v_lo);
+        // A mask over the pixels' box grown by k (within the window), marked around each pixel,
+        // read row by row: in increasing index, each pixel once.
+        let (u0, v0) = (u_lo.saturating_sub(k), v_lo.saturating_sub(k));
+        let (u1, v1) = ((u_hi + k).min(self.w - 1), (v_hi + k).min(self.h - 1));
+        let bw = u1 - u0 + 1;
+        let mut near = vec![false; bw * (v1 - v0 + 1)];
+        for &i in pixels {
+            let (u, v) = (i % self.w, i / self.w);
+            for nv in v.saturating_sub(k).max(v0)..=(v + k).min(v1) {
+                let row = (nv - v0) * bw;
+                near[row + u.saturating_sub(k).max(u0) - u0..=row + (u + k).min(u1) - u0].fill(true);
+            }
+        }
+        (v0..=v1)
+            .flat_map(|v| (u0..=u1).map(move |u| v * self.w + u))
+            .zip(near)
+            .filter(|&(j, marked)| marked && keep(j))
+            .map(|(j, _)| j)
+            .collect()
     }
 
     /// The axes of the part lying on its body cylinder's side that fit the points around `patch`
@@ -260,7 +277,11 @@ impl super::Cloud<'_> {
         let n = plane.normal;
         let m = patch.pixels.len() as f64;
         let p0 = patch.pixels.iter().map(|&i| self.pts[i]).sum::<Vector3<f64>>() / m;
-        let around: Vec<Vector3<f64>> = self.dilate(&patch.pixels, 4).into_iter().map(|i| self.pts[i]).collect();
+        let around: Vec<Vector3<f64>> = self
+            .dilate(&patch.pixels, 4, |j| self.fg[j])
+            .into_iter()
+            .map(|i| self.pts[i])
+            .collect();
         let ext = extent_along(model, &a_part);
         let mut out: Vec<AxisFit> = Vec::new();
         for u0 in axes {

@@ -16,10 +16,11 @@
 //! rectangle; the estimate is the middle of the consistent yaws and the mean of the consistent
 //! centres; a face whose centre is not pinned down (both edges of an axis hidden) or whose yaw is
 //! open by more than the model's `yaw_span_max_rad` (the cell file's
-//! `sensor.max_yaw_ambiguity_deg`, [`YAW_SPAN_MAX_RAD`] by default) is no hypothesis; (6) a hypothesis reaching under the
-//! tray floor is impossible; the others are rendered by ray casting the model into the depth
-//! image and compared: agreeing within [`AGREE_TOL_M`] (3 sigma of the depth noise), measured in
-//! front (occluded, allowed) or measured behind (a contradiction, unless the ray only grazes a
+//! `sensor.max_yaw_ambiguity_deg`, [`YAW_SPAN_MAX_RAD`] by default) is no hypothesis; (6) a
+//! hypothesis reaching under the tray floor is impossible; the others are rendered by ray casting
+//! the model into the depth image (each ray at the pieces whose image box holds its pixel) and
+//! compared: agreeing within [`AGREE_TOL_M`] (3 sigma of the depth noise), measured in front
+//! (occluded, allowed) or measured behind (a contradiction, unless the ray only grazes a
 //! lead); score = agree / (agree + contradict), evidence = agree - 3 contradict; (7) per patch
 //! the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no different
 //! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much,
@@ -91,6 +92,9 @@ pub const TIE_MARGIN_PX: i64 = 0;
 /// A part with leads is verified at every pixel: on the grid, A's recall in the cycle fell from
 /// 80 to 63 % (its 1 mm pins decide between on its back and on its face).
 pub const VERIFY_SPACING_M: f64 = 0.0014;
+/// Verification casts a pixel's ray only at the pieces whose image box, this much wider each
+/// side (px), holds the pixel's centre: a margin for the box's and the ray's rounding.
+const PIECE_BOX_MARGIN_PX: f64 = 1.0;
 /// Lowest verification score kept.
 pub const MIN_SCORE: f64 = 0.8;
 /// A patch with a flat-face hypothesis verified this well is not tried as a lying part's top.
@@ -406,25 +410,36 @@ impl<'a> Cloud<'a> {
             tray.half_xy_m[1] - tray.wall_thickness_m,
         ];
         let (u0, v0, w, h) = tray_window(camera, tray, c.width_px, c.height_px);
-        let mut pts = Vec::with_capacity(w * h);
-        let mut depth = Vec::with_capacity(w * h);
-        let mut fg = Vec::with_capacity(w * h);
-        let mut height = Vec::with_capacity(w * h);
-        let window = (v0..v0 + h).flat_map(|v| (u0..u0 + w).map(move |u| v * c.width_px + u));
-        for (p, d) in window.map(|k| (&c.points_world[k], &c.depth_m[k])) {
-            let v = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            let ok = *d > 0.0 && v.x.is_finite();
-            let l = tray_from_world * Point3::from(v);
-            let inside = ok
-                && l.z > FLOOR_TOL_M
-                && l.z < tray.wall_height_m + 0.05
-                && l.x.abs() < inner[0] - 0.0005
-                && l.y.abs() < inner[1] - 0.0005;
-            pts.push(v);
-            depth.push(if ok { *d as f64 } else { 0.0 });
-            fg.push(inside);
-            height.push(if ok { l.z } else { f64::NAN });
-        }
+        let mut pts = vec![Vector3::zeros(); w * h];
+        let mut depth = vec![0.0; w * h];
+        let mut fg = vec![false; w * h];
+        let mut height = vec![0.0; w * h];
+        // Row by row in parallel (each pixel on its own).
+        pts.par_chunks_mut(w)
+            .zip(depth.par_chunks_mut(w))
+            .zip(fg.par_chunks_mut(w))
+            .zip(height.par_chunks_mut(w))
+            .enumerate()
+            .for_each(|(row, (((pts, depth), fg), height))| {
+                let first = (v0 + row) * c.width_px + u0;
+                let image = c.points_world[first..first + w]
+                    .iter()
+                    .zip(&c.depth_m[first..first + w]);
+                for (k, (p, d)) in image.enumerate() {
+                    let v = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+                    let ok = *d > 0.0 && v.x.is_finite();
+                    let l = tray_from_world * Point3::from(v);
+                    let inside = ok
+                        && l.z > FLOOR_TOL_M
+                        && l.z < tray.wall_height_m + 0.05
+                        && l.x.abs() < inner[0] - 0.0005
+                        && l.y.abs() < inner[1] - 0.0005;
+                    pts[k] = v;
+                    depth[k] = if ok { *d as f64 } else { 0.0 };
+                    fg[k] = inside;
+                    height[k] = if ok { l.z } else { f64::NAN };
+                }
+            });
         let mut cloud = Cloud {
             camera,
             u0,
@@ -443,52 +458,62 @@ impl<'a> Cloud<'a> {
                 normal: tray.world_from_tray.rotation * Vector3::z(),
             },
         };
-        cloud.normals();
+        cloud.normal = cloud.normals();
         cloud
     }
 
-    fn neighbour(&self, i: usize, du: i64, dv: i64) -> Option<usize> {
-        let (u, v) = ((i % self.w) as i64 + du, (i / self.w) as i64 + dv);
+    /// The pixel `du` columns and `dv` rows from the pixel in column `u` and row `v` of the
+    /// window, if within it.
+    #[inline]
+    fn neighbour_at(&self, u: usize, v: usize, du: i64, dv: i64) -> Option<usize> {
+        let (u, v) = (u as i64 + du, v as i64 + dv);
         (u >= 0 && v >= 0 && (u as usize) < self.w && (v as usize) < self.h).then(|| v as usize * self.w + u as usize)
     }
 
     /// Local normals: the summed cross products of consecutive ring neighbours that are
     /// foreground and within 4 mm of depth.
-    fn normals(&mut self) {
-        for i in 0..self.w * self.h {
-            if !self.fg[i] {
-                continue;
-            }
-            let c = self.pts[i];
-            let ring: [Option<Vector3<f64>>; 8] = RING.map(|(du, dv)| {
-                self.neighbour(i, du, dv)
-                    .filter(|&j| self.fg[j] && (self.depth[j] - self.depth[i]).abs() < 0.004)
-                    .map(|j| self.pts[j] - c)
-            });
-            let mut n = Vector3::zeros();
-            let mut pairs = 0;
-            for k in 0..8 {
-                if let (Some(a), Some(b)) = (ring[k], ring[(k + 1) % 8]) {
-                    n += a.cross(&b);
-                    pairs += 1;
+    fn normals(&self) -> Vec<Vector3<f64>> {
+        let mut normal = vec![Vector3::zeros(); self.w * self.h];
+        // Row by row in parallel (each pixel on its own).
+        normal.par_chunks_mut(self.w).enumerate().for_each(|(v, row)| {
+            for (u, out) in row.iter_mut().enumerate() {
+                let i = v * self.w + u;
+                if !self.fg[i] {
+                    continue;
+                }
+                let c = self.pts[i];
+                let ring: [Option<Vector3<f64>>; 8] = RING.map(|(du, dv)| {
+                    self.neighbour_at(u, v, du, dv)
+                        .filter(|&j| self.fg[j] && (self.depth[j] - self.depth[i]).abs() < 0.004)
+                        .map(|j| self.pts[j] - c)
+                });
+                let mut n = Vector3::zeros();
+                let mut pairs = 0;
+                for k in 0..8 {
+                    if let (Some(a), Some(b)) = (ring[k], ring[(k + 1) % 8]) {
+                        n += a.cross(&b);
+                        pairs += 1;
+                    }
+                }
+                if pairs >= 4 && n.norm() > 0.0 {
+                    n.normalize_mut();
+                    if n.dot(&(self.origin - c)) < 0.0 {
+                        n = -n;
+                    }
+                    *out = n;
                 }
             }
-            if pairs >= 4 && n.norm() > 0.0 {
-                n.normalize_mut();
-                if n.dot(&(self.origin - c)) < 0.0 {
-                    n = -n;
-                }
-                self.normal[i] = n;
-            }
-        }
+        });
+        normal
     }
 
     /// Whether pixel `i` can seed a region: all 8 neighbours foreground, on its local plane.
     fn smooth(&self, i: usize) -> bool {
         let n = self.normal[i];
+        let (u, v) = (i % self.w, i / self.w);
         n != Vector3::zeros()
             && RING.iter().all(|&(du, dv)| {
-                self.neighbour(i, du, dv)
+                self.neighbour_at(u, v, du, dv)
                     .is_some_and(|j| self.fg[j] && n.dot(&(self.pts[j] - self.pts[i])).abs() < 0.8 * PLANE_TOL_M)
             })
     }
@@ -496,8 +521,13 @@ impl<'a> Cloud<'a> {
     /// Region growing into smooth patches, seeds highest first.
     fn segment(&self) -> Vec<Patch> {
         let n = self.w * self.h;
-        let mut seeds: Vec<usize> = (0..n).filter(|&i| self.fg[i] && self.smooth(i)).collect();
-        seeds.sort_by(|&a, &b| self.height[b].total_cmp(&self.height[a]).then(a.cmp(&b)));
+        // In parallel: the seeds in index order, then sorted by a total order (the same whatever
+        // the threads).
+        let mut seeds: Vec<usize> = (0..n)
+            .into_par_iter()
+            .filter(|&i| self.fg[i] && self.smooth(i))
+            .collect();
+        seeds.par_sort_unstable_by(|&a, &b| self.height[b].total_cmp(&self.height[a]).then(a.cmp(&b)));
         let mut label = vec![u32::MAX; n];
         let mut patches = Vec::new();
         let mut queue = std::collections::VecDeque::new();
@@ -526,8 +556,11 @@ impl<'a> Cloud<'a> {
                     plane = plane_from_sums(cnt, &sum, &sum2, &origin, &self.origin);
                     refit_at *= 2.0;
                 }
+                let (u, v) = (i % self.w, i / self.w);
                 for (du, dv) in [(1, 0), (-1, 0), (0, 1), (0, -1)] {
-                    let Some(j) = self.neighbour(i, du, dv) else { continue };
+                    let Some(j) = self.neighbour_at(u, v, du, dv) else {
+                        continue;
+                    };
                     if label[j] != u32::MAX || !self.fg[j] {
                         continue;
                     }
@@ -585,14 +618,10 @@ impl<'a> Cloud<'a> {
             .collect();
         let mut member = patch.pixels.clone();
         member.sort_unstable();
-        let mut ring: Vec<usize> = patch
-            .pixels
-            .iter()
-            .flat_map(|&i| RING.iter().filter_map(move |&(du, dv)| self.neighbour(i, du, dv)))
-            .filter(|j| member.binary_search(j).is_err() && self.depth[*j] > 0.0)
-            .collect();
-        ring.sort_unstable();
-        ring.dedup();
+        // The 8-neighbours of the patch's pixels with a return, not in it, sorted.
+        let ring = self.dilate(&patch.pixels, 1, |j| {
+            self.depth[j] > 0.0 && member.binary_search(&j).is_err()
+        });
         let outside: Vec<[f64; 2]> = ring
             .into_iter()
             .filter_map(|j| {
@@ -607,10 +636,11 @@ impl<'a> Cloud<'a> {
     fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> (Option<CloudDetection>, Vec<lying::AxisFit>) {
         let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
         let n = plane.normal;
-        let theta0 = min_area_theta(&inside);
-        // The fits need only the inside points' convex hull; a face smaller than the patch's
-        // bounding rectangle (at `theta0`) by more than a pixel cannot be it.
+        // The fits need only the inside points' convex hull (and so does the minimum-area
+        // rectangle); a face smaller than the patch's bounding rectangle (at `theta0`) by more
+        // than a pixel cannot be it.
         let hull = convex_hull(&inside);
+        let theta0 = min_area_theta(&hull);
         let dims = {
             let (lo, hi) = fit::bounds_at(&hull, theta0);
             let d = [hi[0] - lo[0], hi[1] - lo[1]];
@@ -735,6 +765,31 @@ impl<'a> Cloud<'a> {
         ((VERIFY_SPACING_M / pixel_m).round() as usize).max(1)
     }
 
+    /// Each piece's image box at `pose`, `margin_px` wider each side: (u, v) lowest, then
+    /// highest, in continuous pixel coordinates (pixel u spans u to u + 1). A ray through a pixel
+    /// centre outside a piece's box (margin 0 or more) cannot meet the piece, whose points project
+    /// inside the box of its bounding box's corners (all in front of the camera, else the box is
+    /// the whole image).
+    fn piece_boxes(&self, model: &CloudModel, pose: &Isometry3<f64>, margin_px: f64) -> Vec<[f64; 4]> {
+        model
+            .pieces
+            .iter()
+            .map(|piece| {
+                let reach = |axis: Vector3<f64>| [-piece.support_m(&-axis), piece.support_m(&axis)];
+                let [x, y, z] = [reach(Vector3::x()), reach(Vector3::y()), reach(Vector3::z())];
+                let mut b = [f64::MAX, f64::MAX, f64::MIN, f64::MIN];
+                for k in 0..8 {
+                    let p = pose * Point3::new(x[k & 1], y[(k >> 1) & 1], z[(k >> 2) & 1]);
+                    let Some((u, v, _)) = self.camera.project(&p) else {
+                        return [f64::MIN, f64::MIN, f64::MAX, f64::MAX];
+                    };
+                    b = [b[0].min(u), b[1].min(v), b[2].max(u), b[3].max(v)];
+                }
+                [b[0] - margin_px, b[1] - margin_px, b[2] + margin_px, b[3] + margin_px]
+            })
+            .collect()
+    }
+
     /// Renders the model at `pose` into the image and compares with the measured depth: (score,
     /// visible fraction, evidence = agreeing less 3 x contradicting pixels), `None` if it renders
     /// too few agreeing pixels.
@@ -758,6 +813,9 @@ impl<'a> Cloud<'a> {
         };
         let inv = pose.inverse();
         let o = inv * Point3::from(self.origin);
+        // Rays are cast only at the pieces whose image box holds the pixel's centre.
+        let boxes = self.piece_boxes(model, pose, PIECE_BOX_MARGIN_PX);
+        let mut in_row: Vec<usize> = Vec::with_capacity(boxes.len());
         let (mut agree, mut contradict, mut rendered) = (0usize, 0usize, 0usize);
         let (vs, ve) = (
             clamp(v0, self.v0, self.h),
@@ -768,9 +826,24 @@ impl<'a> Cloud<'a> {
             clamp(u1, self.u0, self.w).min(self.u0 + self.w - 1),
         );
         for v in (vs..=ve).step_by(stride) {
+            let y = v as f64 + 0.5;
+            in_row.clear();
+            in_row.extend((0..boxes.len()).filter(|&k| boxes[k][1] <= y && y <= boxes[k][3]));
+            if in_row.is_empty() && model.mesh.is_none() {
+                continue;
+            }
             for u in (us..=ue).step_by(stride) {
+                let x = u as f64 + 0.5;
+                let mut among = in_row
+                    .iter()
+                    .copied()
+                    .filter(|&k| boxes[k][0] <= x && x <= boxes[k][2])
+                    .peekable();
+                if model.mesh.is_none() && among.peek().is_none() {
+                    continue;
+                }
                 let d = self.camera.pixel_dir(u, v);
-                let Some((t, graze)) = render::ray_model_graze(model, &o, &(inv.rotation * d)) else {
+                let Some((t, graze)) = render::ray_among_graze(model, &o, &(inv.rotation * d), among) else {
                     continue;
                 };
                 rendered += 1;

@@ -55,18 +55,22 @@ pub(crate) fn ray_model(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -
         .min_by(|a, b| a.total_cmp(b))
 }
 
-/// As [`ray_model`], and whether the ray only grazes a thin piece (a lead): it passes it farther
-/// from its axis than [`THIN_CORE`] of its radius, where a pose a fraction of a millimetre off
-/// decides whether it hits.
-pub(super) fn ray_model_graze(model: &CloudModel, o: &Point3<f64>, d: &Vector3<f64>) -> Option<(f64, bool)> {
+/// Nearest entry distance of a ray (part frame, unit direction) into the pieces `among` of the
+/// model (indices, in increasing order: the caller leaves out pieces the ray cannot meet; a mesh
+/// workpiece's surface is met whatever `among` says), and whether the ray only grazes a thin
+/// piece (a lead): it passes it farther from its axis than [`THIN_CORE`] of its radius, where a
+/// pose a fraction of a millimetre off decides whether it hits.
+pub(super) fn ray_among_graze(
+    model: &CloudModel,
+    o: &Point3<f64>,
+    d: &Vector3<f64>,
+    among: impl Iterator<Item = usize>,
+) -> Option<(f64, bool)> {
     if let Some(m) = &model.mesh {
         return m.ray(o, d).map(|t| (t, false));
     }
-    let (t, k) = model
-        .pieces
-        .iter()
-        .enumerate()
-        .filter_map(|(k, p)| ray_piece(p, &o.coords, d).map(|t| (t, k)))
+    let (t, k) = among
+        .filter_map(|k| ray_piece(&model.pieces[k], &o.coords, d).map(|t| (t, k)))
         .min_by(|a, b| a.0.total_cmp(&b.0))?;
     let graze = match model.pieces[k] {
         Piece::Cylinder {

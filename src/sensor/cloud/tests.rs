@@ -514,3 +514,77 @@ fn a_cad_part_is_found_through_its_planar_faces() {
     let found = recognize(&capture, &cell.camera, &cell.tray, &CloudModel::of_part_model(&pb));
     assert_eq!(found.len(), 1, "{found:?}");
 }
+
+/// The pieces whose image box (margin `margin_px`) holds the centre of pixel (u, v), in order.
+fn held_by(cloud: &Cloud, m: &CloudModel, pose: &Isometry3<f64>, margin_px: f64, u: usize, v: usize) -> Vec<usize> {
+    let (x, y) = (u as f64 + 0.5, v as f64 + 0.5);
+    let boxes = cloud.piece_boxes(m, pose, margin_px);
+    (0..boxes.len())
+        .filter(|&k| boxes[k][0] <= x && x <= boxes[k][2] && boxes[k][1] <= y && y <= boxes[k][3])
+        .collect()
+}
+
+/// Verification casts a pixel's ray only at the pieces whose image box holds the pixel: for A
+/// and D (leads) at six poses each, every pixel around the part meets the same piece at the same
+/// distance, grazing or not, as a ray cast at every piece. Negative control: boxes 3 px narrower
+/// than the pieces' images lose hits.
+#[test]
+fn rays_cast_at_the_pieces_whose_box_holds_the_pixel_meet_what_all_pieces_meet() {
+    let cell = cell();
+    let cap = synthetic(&cell, &[]);
+    let cloud = Cloud::new(&cap, &cell.camera, &cell.tray);
+    let origin = Point3::from(cell.camera.world_from_camera.translation.vector);
+    for name in ["A", "D"] {
+        let w = workpiece(name);
+        let m = CloudModel::new(&w);
+        let (mut hits, mut lost) = (0, 0);
+        for k in 0..6 {
+            let r = yaw(29.0 * k as f64) * roll(55.0 * k as f64);
+            let pose = resting(&cell, &w, -0.05 + 0.02 * k as f64, -0.02 + 0.01 * k as f64, 0.0, r);
+            let inv = pose.inverse();
+            let o = inv * origin;
+            let (uc, vc, _) = cell.camera.project(&Point3::from(pose.translation.vector)).unwrap();
+            let (uc, vc) = (uc as usize, vc as usize);
+            for v in vc - 40..=vc + 40 {
+                for u in uc - 40..=uc + 40 {
+                    let d = inv.rotation * cell.camera.pixel_dir(u, v);
+                    let all = render::ray_among_graze(&m, &o, &d, 0..m.pieces.len());
+                    let culled = held_by(&cloud, &m, &pose, PIECE_BOX_MARGIN_PX, u, v);
+                    assert_eq!(
+                        render::ray_among_graze(&m, &o, &d, culled.into_iter()),
+                        all,
+                        "{name}, pose {k}, pixel ({u}, {v})"
+                    );
+                    if all.is_some() {
+                        hits += 1;
+                        let narrow = held_by(&cloud, &m, &pose, -3.0, u, v);
+                        if render::ray_among_graze(&m, &o, &d, narrow.into_iter()) != all {
+                            lost += 1;
+                        }
+                    }
+                }
+            }
+        }
+        assert!(hits > 500, "{name}: {hits} pixels meet the part");
+        assert!(lost > 0, "{name}: boxes 3 px narrower lost no hit");
+    }
+}
+
+/// The sum of the set bits' indices, as the rectangle fit counts its free centres, against a
+/// count bit by bit. Negative control: a mask with one more bit sums differently.
+#[test]
+fn bit_index_sums_count_every_set_bit() {
+    let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(3);
+    for _ in 0..1000 {
+        let x: u64 = rand::RngExt::random(&mut rng);
+        let naive: u64 = (0..64).filter(|k| x >> k & 1 == 1).sum();
+        assert_eq!(fit::bit_index_sum(x), naive, "{x:#x}");
+        // The highest clear bit (not bit 0, whose index adds nothing).
+        let clear = 63 - (!x).leading_zeros();
+        if x != u64::MAX && clear > 0 {
+            let more = x | (1 << clear);
+            assert_ne!(fit::bit_index_sum(more), naive, "{more:#x}");
+        }
+    }
+    assert_eq!(fit::bit_index_sum(u64::MAX), 63 * 64 / 2);
+}
