@@ -511,12 +511,10 @@ impl GraspSelector {
                     continue;
                 }
                 let (site, site_clearance) = self.sites[fi];
-                // A part model's face takes the cup where its cup-fit region (cup radius and the
-                // workpiece's face margin) holds the site; a primitive face needs the margin for
-                // the pose's noise too. (A known difference of the meshed-six control: a
-                // relay's 7 mm sides take the cup as a mesh, not as primitives. One rule either
-                // way changes results: with the noise, the hex standoff's 8.08 mm sides no
-                // longer take the cup; without it, the six primitives' results change.)
+                // A face takes the cup where its cup-fit region (cup radius and the workpiece's
+                // face margin) holds the site, a part model's face and a primitive face alike.
+                // Where the recognised pose is off, the lip may overhang the edge: the plant's
+                // seal probes decide, and the pick counts as a grasp failure.
                 let (too_small, width) = if self.model_faces {
                     (
                         site_clearance < self.cup_radius_m + self.fit_margin_m,
@@ -524,7 +522,7 @@ impl GraspSelector {
                     )
                 } else {
                     let w = face.extent_m[0].min(face.extent_m[1]);
-                    (w < need, w)
+                    (w < 2.0 * (self.cup_radius_m + self.fit_margin_m), w)
                 };
                 if too_small {
                     plan.rejected.push((di, fi, Rejection::FaceTooSmall));
