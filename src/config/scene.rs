@@ -459,6 +459,18 @@ pub struct SimConfig {
     /// stepping; for comparing the two).
     #[serde(default)]
     pub stepping: Stepping,
+    /// Overlap between two parts, or a part and the cell, beyond which the physics health
+    /// monitor ends the run on a physics fault (m). Default 2 mm.
+    #[serde(default = "default_deep_penetration_limit_m")]
+    pub deep_penetration_limit_m: f64,
+}
+
+/// The physics health monitor's default deep-penetration limit (m): parts of a few grams
+/// resting on each other sink well under 0.3 mm; 2 mm is a solver failure.
+pub const DEFAULT_DEEP_PENETRATION_LIMIT_M: f64 = 0.002;
+
+fn default_deep_penetration_limit_m() -> f64 {
+    DEFAULT_DEEP_PENETRATION_LIMIT_M
 }
 
 /// How the physics world is stepped (`sim.stepping`).

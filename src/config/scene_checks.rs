@@ -286,6 +286,12 @@ impl Scene {
         c.positive("sim.tracking_tolerance_deg", self.sim.tracking_tolerance_deg);
         c.positive("sim.saturation_trip_s", self.sim.saturation_trip_s);
         c.non_negative("sim.protective_stop_reset_s", self.sim.protective_stop_reset_s);
+        c.within(
+            "sim.deep_penetration_limit_m",
+            self.sim.deep_penetration_limit_m,
+            1e-6,
+            0.01,
+        );
         if self.sim.control_dt_s.is_finite()
             && self.sim.physics_dt_s.is_finite()
             && self.sim.control_dt_s > self.sim.physics_dt_s

@@ -210,7 +210,7 @@ pub struct HealthLimits {
 impl Default for HealthLimits {
     fn default() -> Self {
         HealthLimits {
-            deep_penetration_m: 0.002,
+            deep_penetration_m: crate::config::DEFAULT_DEEP_PENETRATION_LIMIT_M,
             arm_collision_m: 0.0002,
         }
     }

@@ -320,7 +320,12 @@ impl World {
             pick_tray: TrayVolume::new(&scene.pick_tray),
             place_tray: TrayVolume::new(&scene.place_tray.tray),
             gripper: SuctionGripper::new(&scene.gripper),
-            health: HealthMonitor::default(),
+            health: HealthMonitor {
+                limits: HealthLimits {
+                    deep_penetration_m: scene.sim.deep_penetration_limit_m,
+                    ..HealthLimits::default()
+                },
+            },
             tool_history: [Vector3::zeros(); 3],
             step_dt_s: f64::from(scene.sim.physics_dt_s as f32),
             tray_pieces: overlap::tray_pieces(&scene.pick_tray)

@@ -79,6 +79,11 @@ pub fn markdown(spec: &StudySpec, rows: &[SweepRow]) -> String {
             faults,
         );
     }
+    for r in rows {
+        if let Some(why) = crate::results::table::no_takt_why(&r.row) {
+            md += &format!("\nvariant {}, {why}\n", r.variant + 1);
+        }
+    }
     md
 }
 

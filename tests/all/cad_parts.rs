@@ -290,11 +290,21 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     let o = binpick_in(ws.dir.path(), &args);
     assert!(o.status.success(), "{}", stderr(&o));
     assert_eq!(stdout(&o).matches("ok: ").count(), 4, "{}", stdout(&o));
-    // Only the DIP-8 (6.35 mm body) has no face for the 6 mm cup: check says so, and why.
+    // The DIP-8 (6.35 mm body) brings its own 4 mm cup: every shipped part has a face for its cup.
+    assert_eq!(stderr(&o).matches("warning: ").count(), 0, "{}", stderr(&o));
+    // Negative control: without its own cup, the cell's 6 mm cup fits no face, and check says so.
+    let bare = ws.edit(
+        "workpieces/dip8.toml",
+        "workpieces/dip8-cell-cup.toml",
+        "[gripper]\ncup_diameter_m = 0.004\n",
+        "",
+    );
+    let o = binpick_in(ws.dir.path(), &["check", &bare.display().to_string()]);
+    assert!(o.status.success(), "{}", stderr(&o));
     let err = stderr(&o);
     assert_eq!(err.matches("warning: ").count(), 1, "{err}");
     assert!(
-        err.contains("dip8.toml: no planar face takes the cell's 6.0 mm cup"),
+        err.contains("dip8-cell-cup.toml: no planar face takes the cell's 6.0 mm cup"),
         "{err}"
     );
 

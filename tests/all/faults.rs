@@ -2,8 +2,9 @@
 //! so far, not the caller; a batch with a faulted run writes every run and its table, marks
 //! the run and exits 3.
 //!
-//! The real fault: D's pile of seed 13 (60 parts) fails the monitor as it is poured: parts 1 and
-//! 59 creep into each other over 1.3 s (0.21 mm at 1.38 s, 1.08 mm at 1.65 s, 2.03 mm at 2.68 s).
+//! The fault is made on purpose: a monitor limit of 1 micrometre (`sim.deep_penetration_limit_m`),
+//! which any pour's landing parts press past. (The real fault these tests were first written on,
+//! D's pile of seed 13, was cured: its cans sank into each other cap on cap.)
 
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::cycle::{self, Cell, EndReason, FaultDuring, RunOptions};
@@ -88,66 +89,66 @@ fn negative_control_the_same_refill_at_the_monitors_limit_ends_without_a_fault()
     assert_eq!(t.refills, 1);
 }
 
-/// `binpick batch` of D over `seeds`, deterministic, 2 picks: its exit code, stderr and the
-/// written takt.md and takt.json.
-fn batch_d(seeds: &str) -> (Option<i32>, String, String, serde_json::Value) {
+/// `binpick sweep` of D, seed 12, deterministic, 2 picks, over the monitor limits `limits`: its
+/// exit code, stderr and the written sweep.md and sweep.json.
+fn sweep_d(limits: &str) -> (Option<i32>, String, String, serde_json::Value) {
     let tmp = crate::support::tempdir().unwrap();
     let out = tmp.path().to_str().unwrap();
+    let set = format!("sim.deep_penetration_limit_m={limits}");
     let o = crate::support::binpick(&[
-        "batch",
+        "sweep",
         "--workpieces",
         "D",
         "--seeds",
-        seeds,
+        "12",
         "--picks",
         "2",
         "--deterministic",
+        "--set",
+        &set,
         "--out",
         out,
     ]);
     let dir = std::fs::read_dir(tmp.path())
         .unwrap()
         .map(|e| e.unwrap().path())
-        .find(|p| p.join("takt.md").is_file())
+        .find(|p| p.join("sweep.md").is_file())
         .unwrap_or_else(|| panic!("no results folder: {}", crate::support::stderr(&o)));
-    let md = std::fs::read_to_string(dir.join("takt.md")).unwrap();
-    let json = serde_json::from_str(&std::fs::read_to_string(dir.join("takt.json")).unwrap()).unwrap();
+    let md = std::fs::read_to_string(dir.join("sweep.md")).unwrap();
+    let json = serde_json::from_str(&std::fs::read_to_string(dir.join("sweep.json")).unwrap()).unwrap();
     (o.status.code(), crate::support::stderr(&o), md, json)
 }
 
 #[test]
-fn a_batch_with_a_faulted_run_writes_every_run_marks_it_and_exits_3() {
-    let (code, err, md, json) = batch_d("12,13");
+fn a_study_with_a_faulted_run_writes_every_run_marks_it_and_exits_3() {
+    let (code, err, md, json) = sweep_d("0.000001,0.002");
     assert_eq!(code, Some(3), "{err}");
+    assert!(err.contains("deep penetration"), "{err}");
+    // The faulted variant is marked under the table, with why; the other is whole.
     assert!(
-        err.contains("workpiece D seed 13") && err.contains("deep penetration"),
-        "{err}"
+        md.contains("| 2 | 0.002 | D | 2/2 |")
+            && md.contains("variant 1, D: nothing placed")
+            && md.contains("physics fault"),
+        "{md}"
     );
-    assert!(md.contains("| D | 2 (1 ended on a physics fault) |"), "{md}");
-    let row = &json["table"][0];
-    assert_eq!(
-        (row["runs"].as_u64(), row["runs_ended_on_physics_fault"].as_u64()),
-        (Some(2), Some(1))
-    );
-    let runs = json["batch"]["runs"].as_array().unwrap();
+    let runs = json["sweep"]["runs"].as_array().unwrap();
     assert_eq!(runs.len(), 2);
-    // Seed 12's run is whole; seed 13's is marked, with its record.
-    assert_eq!(runs[0]["ended"], "picks done");
-    assert!(runs[0].get("physics_faults").is_none());
-    assert_eq!(runs[1]["ended"], "physics fault");
-    let f = &runs[1]["physics_faults"][0];
+    assert_eq!(runs[1]["run"]["ended"], "picks done");
+    assert!(runs[1]["run"].get("physics_faults").is_none());
+    assert_eq!(runs[0]["run"]["ended"], "physics fault");
+    let f = &runs[0]["run"]["physics_faults"][0];
     assert_eq!(
         (f["during"].as_str(), f["problems"][0]["kind"].as_str()),
         (Some("pour"), Some("deep_penetration"))
     );
-    assert!(f["problems"][0]["depth_mm"].as_f64().unwrap() > 2.0);
+    assert!(f["problems"][0]["depth_mm"].as_f64().unwrap() > 0.001);
 }
 
 #[test]
-fn negative_control_a_batch_without_a_fault_exits_0_unmarked() {
-    let (code, err, md, json) = batch_d("12");
+fn negative_control_a_study_without_a_fault_exits_0_unmarked() {
+    let (code, err, md, json) = sweep_d("0.002");
     assert_eq!(code, Some(0), "{err}");
-    assert!(md.contains("| D | 1 |"), "{md}");
-    assert!(!md.contains("physics fault"));
-    assert!(json["table"][0].get("runs_ended_on_physics_fault").is_none());
+    assert!(md.contains("| 1 | 0.002 | D | 2/2 |"), "{md}");
+    assert!(!md.contains("physics fault") && !md.contains("nothing placed"), "{md}");
+    assert!(json["sweep"]["runs"][0]["run"].get("physics_faults").is_none());
 }
