@@ -41,7 +41,8 @@
 //!   ([`CloudModel::of_part_model`]): each face's outline is fitted as its minimum-area bounding
 //!   rectangle (or as a disc when it is round), and hypotheses are verified by rendering the real
 //!   mesh, so a rectangle that is not the face's true outline is caught there. A part whose
-//!   visible surface is not a large planar face (no point-pair features yet) is not recognised.
+//!   visible surface is not a large planar face is recognised by point-pair features instead
+//!   ([`ppf`], chosen by the workpiece's `recognition.method`).
 //!
 //! Units: m, rad, px. Frames: world (`world_from_part`), the pick tray frame for the background,
 //! a patch's plane basis (e1, e2, normal toward the camera) for the silhouette fits.
@@ -118,6 +119,8 @@ pub struct CloudModel {
     pub yaw_span_max_rad: f64,
     /// A mesh workpiece's surface, rendered instead of `pieces` (which are then empty).
     mesh: Option<std::sync::Arc<render::MeshView>>,
+    /// Set: recognised by point-pair features ([`ppf`]) instead of planar faces.
+    ppf: Option<std::sync::Arc<ppf::PpfModel>>,
 }
 
 /// A planar face of a part model smaller than this share of the largest is not matched.
@@ -196,6 +199,7 @@ impl CloudModel {
                 .iter()
                 .any(|(r, p)| *r == PartRole::Body && matches!(p, Piece::Cylinder { .. })),
             mesh: None,
+            ppf: None,
         }
     }
 
@@ -230,6 +234,7 @@ impl CloudModel {
             round_side: false,
             yaw_span_max_rad: YAW_SPAN_MAX_RAD,
             mesh: render::MeshView::new(&pm.mesh).map(std::sync::Arc::new),
+            ppf: None,
         }
     }
 
@@ -296,6 +301,9 @@ pub struct CloudDetection {
 /// workpiece model only (no physics world, no ground truth). Best first.
 pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &CloudModel) -> Vec<CloudDetection> {
     let cloud = Cloud::new(capture, camera, tray);
+    if let Some(p) = &model.ppf {
+        return ppf::detect(&cloud, model, p);
+    }
     let patches = cloud.segment();
     // Patches in parallel, collected in their order: deterministic.
     let per_patch: Vec<(Option<CloudDetection>, Vec<lying::AxisFit>)> = patches
@@ -823,6 +831,7 @@ fn pose_from_face(face: &Face, center: &Vector3<f64>, n: &Vector3<f64>, u: &Vect
 
 mod fit;
 mod lying;
+pub mod ppf;
 mod render;
 mod symmetry;
 
