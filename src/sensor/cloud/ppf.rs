@@ -600,7 +600,7 @@ fn vote(
 /// Greedy pose clusters, most votes first; each keeps its first pose and sums its votes. Sorted
 /// by votes, most first.
 fn cluster(model: &CloudModel, ppf: &PpfModel, mut votes: Vec<Vote>) -> Vec<Vote> {
-    votes.sort_by(|a, b| b.votes.cmp(&a.votes));
+    votes.sort_by_key(|v| std::cmp::Reverse(v.votes));
     let near_m = 0.1 * ppf.diameter_m;
     let mut out: Vec<Vote> = Vec::new();
     for v in votes {
@@ -613,7 +613,7 @@ fn cluster(model: &CloudModel, ppf: &PpfModel, mut votes: Vec<Vote>) -> Vec<Vote
             None => out.push(v),
         }
     }
-    out.sort_by(|a, b| b.votes.cmp(&a.votes));
+    out.sort_by_key(|v| std::cmp::Reverse(v.votes));
     out
 }
 
