@@ -13,7 +13,7 @@
 //! angle `alpha_m` of the second point about the first's normal once the first sits at the origin
 //! with its normal along x.
 //!
-//! Scene ([`detect`]): the foreground pixels thinned to one per `step_m` voxel (the first in the
+//! Scene (`detect`): the foreground pixels thinned to one per `step_m` voxel (the first in the
 //! image's row order), each with a normal fitted (least squares) to the foreground pixels within
 //! [`NORMAL_RADIUS_PX`] whose depth is within [`NORMAL_DEPTH_M`] of its own, turned toward the
 //! camera. Every [`REF_EVERY`]-th scene point is a reference: paired with every scene point within
@@ -32,7 +32,7 @@
 //! closer than half the part's smallest size to a kept one is the same part; a different pose
 //! (beyond [`super::SAME_POSE_M`] and [`super::SAME_POSE_RAD`], symmetries allowed) within
 //! [`TIE_MARGIN`] of its evidence leaves the place unreported. Each kept pose is then settled
-//! ([`settle`]): turned about the part's axes through its surface centroid (quarter and half turns
+//! (`settle`): turned about the part's axes through its surface centroid (quarter and half turns
 //! refined by ICP, 15 and 45 degrees as they are), the best supported of them wins, and nothing is
 //! reported when a different one comes within [`TIE_MARGIN`] (precision first, as the face
 //! method: a pose the image does not decide is not reported). Last, the rendered outline must
