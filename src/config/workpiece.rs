@@ -51,6 +51,40 @@ pub struct Workpiece {
     pub shape: ShapeConfig,
     /// Grasp hints.
     pub grasp: GraspHints,
+    /// How recognition matches the part (`[recognition]`; absent: `method = "auto"`, which the
+    /// resolved workpiece leaves out).
+    #[serde(default, skip_serializing_if = "RecognitionHints::is_auto")]
+    pub recognition: RecognitionHints,
+}
+
+/// The workpiece's `[recognition]` table.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct RecognitionHints {
+    /// `"faces"`, `"ppf"` or `"auto"` (the default).
+    #[serde(default)]
+    pub method: RecognitionMethod,
+}
+
+impl RecognitionHints {
+    /// Whether the method is left to the part model.
+    pub fn is_auto(&self) -> bool {
+        self.method == RecognitionMethod::Auto
+    }
+}
+
+/// How the cloud recognition matches the part.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum RecognitionMethod {
+    /// Planar patches of the cloud matched to the model's planar faces.
+    Faces,
+    /// Point-pair features of the model's surface voted for by the cloud.
+    Ppf,
+    /// Chosen from the part model: point-pair features for a mesh part without a planar face the
+    /// face method matches, planar faces otherwise (and always for primitives).
+    #[default]
+    Auto,
 }
 
 /// Kinds of workpiece shape.

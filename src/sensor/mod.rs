@@ -196,13 +196,26 @@ impl Sensor {
         let camera = Camera::from_config(cfg)?;
         // A mesh workpiece is recognised through its part model (the cup does not matter for
         // recognition: its faces are matched whatever takes the cup).
-        let mut model = world
+        let pm = world
             .part_shape()
             .mesh
             .as_ref()
-            .and_then(|mesh| workpiece.part_model(mesh, 0.0).ok())
-            .map_or_else(|| CloudModel::new(workpiece), |pm| CloudModel::of_part_model(&pm));
+            .and_then(|mesh| workpiece.part_model(mesh, 0.0).ok());
+        let mut model = pm
+            .as_ref()
+            .map_or_else(|| CloudModel::new(workpiece), CloudModel::of_part_model);
         model.yaw_span_max_rad = cfg.max_yaw_ambiguity_deg.to_radians();
+        // Point-pair features where the workpiece's recognition.method asks for them, sampled at
+        // a step of `ppf::STEP_PX` pixels at the tray floor.
+        let primitive = workpiece.primitive_mesh();
+        if let Some(mesh) = cloud::ppf::ppf_mesh(workpiece.recognition.method, &model, pm.as_ref(), primitive.as_ref())
+        {
+            let floor =
+                world.pick_tray().world_from_tray.translation.vector - camera.world_from_camera.translation.vector;
+            let z = floor.dot(&(camera.world_from_camera.rotation * nalgebra::Vector3::z()));
+            let step_m = cloud::ppf::STEP_PX * camera.pixel_size_at_m(z);
+            model = model.with_ppf(mesh, step_m);
+        }
         Some(Sensor {
             frustum: ViewFrustum::over_tray(world.pick_tray(), &camera)?,
             background: std::sync::Arc::new(Background::new(world, &camera)),

@@ -42,7 +42,8 @@
 //!   ([`CloudModel::of_part_model`]): each face's outline is fitted as its minimum-area bounding
 //!   rectangle (or as a disc when it is round), and hypotheses are verified by rendering the real
 //!   mesh, so a rectangle that is not the face's true outline is caught there. A part whose
-//!   visible surface is not a large planar face (no point-pair features yet) is not recognised.
+//!   visible surface is not a large planar face is recognised by point-pair features instead
+//!   ([`ppf`], chosen by the workpiece's `recognition.method`).
 //!
 //! Units: m, rad, px. Frames: world (`world_from_part`), the pick tray frame for the background,
 //! a patch's plane basis (e1, e2, normal toward the camera) for the silhouette fits.
@@ -129,6 +130,8 @@ pub struct CloudModel {
     /// has features thinner than the grid (a primitive's leads; a part model's round bodies
     /// narrower than the grid: pins), which decide between poses.
     fine_verify: bool,
+    /// Set: recognised by point-pair features ([`ppf`]) instead of planar faces.
+    ppf: Option<std::sync::Arc<ppf::PpfModel>>,
 }
 
 /// A planar face of a part model smaller than this share of the largest is not matched.
@@ -209,6 +212,7 @@ impl CloudModel {
             mesh: None,
             round: None,
             fine_verify: w.pieces().iter().any(|(r, _)| *r == PartRole::Lead),
+            ppf: None,
         }
     }
 
@@ -247,6 +251,7 @@ impl CloudModel {
             mesh: render::MeshView::new(&pm.mesh).map(std::sync::Arc::new),
             round: round.map(|r| (r.center_m, r.axis, r.radius_m)),
             fine_verify: pm.round.iter().any(|r| 2.0 * r.radius_m < VERIFY_SPACING_M),
+            ppf: None,
         }
     }
 
@@ -313,6 +318,9 @@ pub struct CloudDetection {
 /// workpiece model only (no physics world, no ground truth). Best first.
 pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &CloudModel) -> Vec<CloudDetection> {
     let cloud = Cloud::new(capture, camera, tray);
+    if let Some(p) = &model.ppf {
+        return ppf::detect(&cloud, model, p);
+    }
     let patches = cloud.segment();
     // Patches in parallel, collected in their order: deterministic.
     let per_patch: Vec<(Option<CloudDetection>, Vec<lying::AxisFit>)> = patches
@@ -910,6 +918,7 @@ fn pose_from_face(face: &Face, center: &Vector3<f64>, n: &Vector3<f64>, u: &Vect
 
 mod fit;
 mod lying;
+pub mod ppf;
 mod render;
 mod symmetry;
 

@@ -8,12 +8,12 @@ use super::*;
 use crate::config::{LoadedScene, LoadedWorkpiece};
 use crate::sensor::capture::gaussian;
 
-struct Cell {
-    camera: Camera,
-    tray: TrayVolume,
+pub(super) struct Cell {
+    pub(super) camera: Camera,
+    pub(super) tray: TrayVolume,
 }
 
-fn cell() -> Cell {
+pub(super) fn cell() -> Cell {
     let s = LoadedScene::embedded_default().unwrap().scene;
     Cell {
         camera: Camera::from_config(&s.sensor).unwrap(),
@@ -21,13 +21,13 @@ fn cell() -> Cell {
     }
 }
 
-fn workpiece(name: &str) -> Workpiece {
+pub(super) fn workpiece(name: &str) -> Workpiece {
     LoadedWorkpiece::resolve(name).unwrap().workpiece
 }
 
 /// A capture of `parts` (model, `world_from_part`) lying over the tray floor, noise as the
 /// default sensor's (seeded).
-fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) -> Capture {
+pub(super) fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) -> Capture {
     let cam = &cell.camera;
     let origin = cam.world_from_camera.translation.vector;
     let optical = cam.world_from_camera.rotation * Vector3::z();
@@ -67,7 +67,14 @@ fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) -> Capture {
 
 /// `world_from_part` for a part whose lowest point rests `lift_m` above the tray floor at tray
 /// (x, y), rotated by `r` (world).
-fn resting(cell: &Cell, w: &Workpiece, x: f64, y: f64, lift_m: f64, r: UnitQuaternion<f64>) -> Isometry3<f64> {
+pub(super) fn resting(
+    cell: &Cell,
+    w: &Workpiece,
+    x: f64,
+    y: f64,
+    lift_m: f64,
+    r: UnitQuaternion<f64>,
+) -> Isometry3<f64> {
     let hs = Vector3::from(w.size_m) / 2.0;
     let low = (0..8)
         .map(|k| {
@@ -79,11 +86,11 @@ fn resting(cell: &Cell, w: &Workpiece, x: f64, y: f64, lift_m: f64, r: UnitQuate
     Isometry3::from_parts(Translation3::new(base.x, base.y, base.z - low + lift_m), r)
 }
 
-fn yaw(deg: f64) -> UnitQuaternion<f64> {
+pub(super) fn yaw(deg: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::from_axis_angle(&Vector3::z_axis(), deg.to_radians())
 }
 
-fn roll(deg: f64) -> UnitQuaternion<f64> {
+pub(super) fn roll(deg: f64) -> UnitQuaternion<f64> {
     UnitQuaternion::from_axis_angle(&Vector3::x_axis(), deg.to_radians())
 }
 
@@ -373,7 +380,7 @@ type WorldMesh = (Vec<[Vector3<f64>; 3]>, Vector3<f64>, f64);
 /// A capture of triangle meshes (part frame, m) at `world_from_part` over the tray floor, ray
 /// cast triangle by triangle (Moller-Trumbore, independent of the renderer recognition verifies
 /// with), noise as the default sensor's (seeded).
-fn synthetic_meshes(cell: &Cell, parts: &[(&crate::part::mesh::Mesh, Isometry3<f64>)]) -> Capture {
+pub(super) fn synthetic_meshes(cell: &Cell, parts: &[(&crate::part::mesh::Mesh, Isometry3<f64>)]) -> Capture {
     let cam = &cell.camera;
     let origin = cam.world_from_camera.translation.vector;
     let optical = cam.world_from_camera.rotation * Vector3::z();
@@ -441,7 +448,13 @@ fn synthetic_meshes(cell: &Cell, parts: &[(&crate::part::mesh::Mesh, Isometry3<f
 
 /// `world_from_part` for a mesh whose lowest vertex rests on the tray floor at tray (x, y),
 /// rotated by `r` (world).
-fn resting_mesh(cell: &Cell, m: &crate::part::mesh::Mesh, x: f64, y: f64, r: UnitQuaternion<f64>) -> Isometry3<f64> {
+pub(super) fn resting_mesh(
+    cell: &Cell,
+    m: &crate::part::mesh::Mesh,
+    x: f64,
+    y: f64,
+    r: UnitQuaternion<f64>,
+) -> Isometry3<f64> {
     let low = m.vertices_m.iter().map(|p| (r * p).z).fold(f64::INFINITY, f64::min);
     let base = cell.tray.world_from_tray * Point3::new(x, y, 0.0);
     Isometry3::from_parts(Translation3::new(base.x, base.y, base.z - low), r)
