@@ -465,7 +465,8 @@ fn outline_is_an_edge(cloud: &Cloud, model: &CloudModel, pose: &Isometry3<f64>) 
             let d = cloud
                 .camera
                 .pixel_dir(cloud.u0 + x0 as usize + x, cloud.v0 + y0 as usize + y);
-            if let Some((t, _)) = super::render::ray_model_graze(model, &o, &(inv.rotation * d)) {
+            if let Some((t, _)) = super::render::ray_among_graze(model, &o, &(inv.rotation * d), 0..model.pieces.len())
+            {
                 rendered[y * w + x] = t * d.dot(&cloud.optical);
             }
         }
@@ -527,7 +528,9 @@ fn pixel_normal(cloud: &Cloud, i: usize) -> Option<Vector3<f64>> {
     let c = cloud.pts[i];
     for dv in -NORMAL_RADIUS_PX..=NORMAL_RADIUS_PX {
         for du in -NORMAL_RADIUS_PX..=NORMAL_RADIUS_PX {
-            let Some(j) = cloud.neighbour(i, du, dv) else { continue };
+            let Some(j) = cloud.neighbour_at(i % cloud.w, i / cloud.w, du, dv) else {
+                continue;
+            };
             if !cloud.fg[j] || (cloud.depth[j] - cloud.depth[i]).abs() > NORMAL_DEPTH_M {
                 continue;
             }
