@@ -369,10 +369,13 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     assert!(pile["parts_in_tray"].as_u64().unwrap() >= 3 * 30 - 3, "{pile}");
     let share = pile["share"].as_f64().unwrap();
     assert!(share > 0.3 && share < 0.9, "{pile}");
-    // Negative control: the DIP-8 has no face for the cup, so no part of its piles offers one.
-    let dip = part("dip8");
+    // Negative control: the DIP-8 with the cell's 6 mm cup has no face for it, so no part of
+    // its piles offers one; with its own 4 mm cup most do.
+    let dip = part("dip8-cell-cup");
     assert_eq!(dip["pile"]["parts_offering_a_cup_face"], 0, "{}", dip["pile"]);
     assert!(dip["pile"]["parts_in_tray"].as_u64().unwrap() > 0);
+    let dip = part("dip8");
+    assert!(dip["pile"]["share"].as_f64().unwrap() > 0.3, "{}", dip["pile"]);
 
     // The TO-220: three bodies and more (body, tab, leads), the tab's hole found; its body's top
     // and back take the cup.
