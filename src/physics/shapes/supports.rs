@@ -118,7 +118,6 @@ pub fn with_support_slabs(shape: &SharedShape) -> SharedShape {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use rapier3d::parry::query::PointQuery;
 
     fn prism(sides: usize, radius: f32, half_height: f32) -> SharedShape {
         let mut pts = Vec::new();
