@@ -82,9 +82,17 @@ pub fn no_takt_why(s: &Summary) -> Option<String> {
     let why = if t.attempts == 0 {
         format!("no pick was attempted: no detection offered a grasp the cup takes; {sensed}")
     } else {
+        // An attempt whose cup never reached a part ended on no feasible grasp, or on a fault
+        // on the way there.
+        let short = t.attempts.saturating_sub(t.grasps.0);
+        let short = if short > 0 {
+            format!(" {short} ended before the cup reached a part (no feasible grasp, or a fault on the way),")
+        } else {
+            String::new()
+        };
         format!(
-            "of {} attempts, {} grasps sealed of {} tried, {} drops, {} grasps failed, {} protective stops, {} \
-             collisions; {sensed}",
+            "of {} attempts,{short} {} grasps sealed of {} tried, {} drops, {} grasps failed, {} protective stops, \
+             {} collisions; {sensed}",
             t.attempts, t.grasps.1, t.grasps.0, f.drops, f.grasp_failures, f.protective_stops, f.collisions
         )
     };
@@ -670,6 +678,18 @@ mod tests {
         let why = no_takt_why(&dropped).unwrap();
         assert!(
             why.starts_with("C-mesh: nothing placed: of 5 attempts, 5 grasps sealed of 5 tried, 5 drops"),
+            "{why}"
+        );
+        // Picks whose cup never reached a part: said so.
+        let short = Summary::of(&Tally {
+            workpiece: "R".into(),
+            runs: 1,
+            attempts: 3,
+            ..Tally::default()
+        });
+        let why = no_takt_why(&short).unwrap();
+        assert!(
+            why.contains("of 3 attempts, 3 ended before the cup reached a part"),
             "{why}"
         );
         // No pick tried: what the sensor found.
