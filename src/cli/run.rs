@@ -56,9 +56,30 @@ pub fn run(a: &RunArgs) -> Result<()> {
         .ok_or_else(|| anyhow::anyhow!("the sensor's pose is degenerate"))?;
     let mut log = EventLog::default();
     let mut chart = TimeChart::default();
-    let mut recorder = formats
-        .any()
-        .then(|| Recorder::new(&robot, camera, wp.workpiece.size_m));
+    let name = format!(
+        "run-{}-seed{seed}{}",
+        wp.workpiece.name,
+        if deterministic { "-det" } else { "" }
+    );
+    // The run folder first: the recordings stream into it as the run goes.
+    let run = binpick::report::RunDir::create(out, &name)?;
+    let mut recorder = match formats.any() {
+        true => {
+            let info = binpick::recording::RunInfo {
+                scene: loaded.label.clone(),
+                workpiece: wp.workpiece.name.clone(),
+                seed,
+                deterministic,
+                picks: a.picks,
+                robot_description: loaded.urdf_text.clone(),
+            };
+            let files =
+                binpick::recording::RecordingFiles::create(run.staging_dir(), "run", formats, &loaded.scene, &info)
+                    .map_err(|(path, e)| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+            Some(Recorder::streaming(&robot, camera, wp.workpiece.size_m, files))
+        }
+        false => None,
+    };
     let wall = std::time::Instant::now();
     let result = {
         let mut watchers: Vec<&mut dyn Observer> = vec![&mut log, &mut chart];
@@ -69,12 +90,6 @@ pub fn run(a: &RunArgs) -> Result<()> {
             .map_err(|e| anyhow::anyhow!("cell run failed: {e}"))?
     };
     let wall_s = wall.elapsed().as_secs_f64();
-    let name = format!(
-        "run-{}-seed{seed}{}",
-        wp.workpiece.name,
-        if deterministic { "-det" } else { "" }
-    );
-    let run = binpick::report::RunDir::create(out, &name)?;
     run.write_inputs(&loaded, Some(&wp))?;
     run.write("picks.csv", binpick::report::picks_csv(&result.records))?;
     let summary = binpick::results::Summary::of(&result.tally);
@@ -93,24 +108,9 @@ pub fn run(a: &RunArgs) -> Result<()> {
         run.write("timechart-steady.svg", steady)?;
     }
     if let Some(recorder) = recorder {
-        let info = binpick::recording::RunInfo {
-            scene: loaded.label.clone(),
-            workpiece: wp.workpiece.name.clone(),
-            seed,
-            deterministic,
-            picks: a.picks,
-            robot_description: loaded.urdf_text.clone(),
-        };
-        binpick::recording::write_recordings(
-            run.staging_dir(),
-            "run",
-            formats,
-            &recorder.finish(&result),
-            &robot,
-            &loaded.scene,
-            &info,
-        )
-        .map_err(|(path, e)| anyhow::anyhow!("writing {}: {e}", path.display()))?;
+        recorder
+            .finish_files()
+            .map_err(|(path, e)| anyhow::anyhow!("writing {}: {e}", path.display()))?;
     }
     let dest = run.finish()?;
     let done = || -> Result<()> {

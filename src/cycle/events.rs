@@ -262,6 +262,12 @@ impl Event {
         }
     }
 
+    /// Whether it is an incident a tally lists ([`super::Incident`]): a fault, a lost part, a
+    /// physics fault.
+    pub fn is_incident(&self) -> bool {
+        matches!(self, Event::Fault(_) | Event::PartLost(_) | Event::PhysicsFault(_))
+    }
+
     /// Whether a log shows it as a warning: faults, lost parts, picks that were not placed.
     pub fn is_warning(&self) -> bool {
         match self {
@@ -374,6 +380,19 @@ pub struct Recognised<'a> {
     pub chosen: Option<usize>,
 }
 
+/// A placed pick's takt by the reference's definition: the interval from the release before.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct Takt {
+    /// The pick.
+    pub pick: usize,
+    /// Its release (s).
+    pub release_s: f64,
+    /// Release to release (s).
+    pub takt_s: f64,
+    /// Whether a refill of the pick tray fell into the interval.
+    pub spans_refill: bool,
+}
+
 /// Watches a cell run. Every method does nothing by default: a run keeps nothing for a watcher
 /// that does not ask for it.
 pub trait Observer {
@@ -396,6 +415,8 @@ pub trait Observer {
     /// execution (times from the motion's start) and how many of them the world played before
     /// a fault stopped it (all of them otherwise).
     fn executed(&mut self, _t0_s: f64, _planned: &dyn Motion, _ticks: &[Tick], _played: usize) {}
+    /// A placed pick's takt, when its pick ended (after its release).
+    fn takt(&mut self, _takt: &Takt) {}
 }
 
 /// The observer that keeps nothing.
@@ -429,6 +450,9 @@ impl Observer for Observers<'_> {
     fn executed(&mut self, t0_s: f64, planned: &dyn Motion, ticks: &[Tick], played: usize) {
         self.0.iter_mut().for_each(|o| o.executed(t0_s, planned, ticks, played));
     }
+    fn takt(&mut self, takt: &Takt) {
+        self.0.iter_mut().for_each(|o| o.takt(takt));
+    }
 }
 
 /// The event log: every event as a [`CycleEvent`], in time order (stable) when taken.
@@ -443,6 +467,16 @@ impl EventLog {
     pub fn into_sorted(mut self) -> Vec<CycleEvent> {
         self.events.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
         self.events
+    }
+
+    /// Takes the events at or before `until_s`, in time order (stable); later ones stay.
+    pub fn take_until(&mut self, until_s: f64) -> Vec<CycleEvent> {
+        let (mut taken, kept) = std::mem::take(&mut self.events)
+            .into_iter()
+            .partition(|e: &CycleEvent| e.t_s <= until_s);
+        self.events = kept;
+        taken.sort_by(|a, b| a.t_s.total_cmp(&b.t_s));
+        taken
     }
 }
 

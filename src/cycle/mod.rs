@@ -60,11 +60,11 @@ pub mod trays;
 use nalgebra::{Isometry3, Vector3};
 
 pub use events::{
-    CycleEvent, EndReason, Event, EventLog, Observer, Observers, PartLoss, Planned, Recognised, Stage, StallCause,
+    CycleEvent, EndReason, Event, EventLog, Observer, Observers, PartLoss, Planned, Recognised, Stage, StallCause, Takt,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
-pub use records::{FIRST_PICKS, Faults, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
+pub use records::{FIRST_PICKS, Faults, Incident, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
@@ -231,6 +231,8 @@ pub struct CellState {
     pub pick: Option<usize>,
     /// Parts lost out of the trays.
     pub parts_lost: usize,
+    /// The run's incidents so far.
+    pub incidents: Vec<Incident>,
     /// Largest |demanded torque| / limit per joint over the run.
     pub run_peak_demand_ratio: [f64; crate::robot::DOF],
     /// The picks so far, and every recognition result evaluated against the truth at its
@@ -279,11 +281,20 @@ struct Run<'a, 'o> {
 impl Run<'_, '_> {
     /// Reports an event now.
     fn event(&mut self, event: Event) {
-        self.obs.event(self.st.world.time_s(), self.st.pick, &event);
+        self.event_at(self.st.world.time_s(), event);
     }
 
-    /// Reports an event at time `t_s`.
+    /// Reports an event at time `t_s`; an incident is also listed for the tally.
     fn event_at(&mut self, t_s: f64, event: Event) {
+        if event.is_incident() {
+            self.st.incidents.push(Incident {
+                seed: self.cell.opts.seed,
+                pick: self.st.pick,
+                t_s,
+                kind: event.kind().to_string(),
+                detail: event.to_string(),
+            });
+        }
         self.obs.event(t_s, self.st.pick, &event);
     }
 
@@ -373,6 +384,7 @@ impl<'a> Cell<'a> {
             trays: trays::TrayState::default(),
             pick: None,
             parts_lost: 0,
+            incidents: Vec::new(),
             run_peak_demand_ratio: [0.0; crate::robot::DOF],
             tally: Tally::default(),
             recognitions: Vec::new(),
@@ -461,7 +473,15 @@ pub fn run(
                 ended: Some(EndReason::PhysicsFault),
                 ..Tally::default()
             };
-            tally.physics_faults.push(PhysicsFault::new(&e, FaultDuring::Pour));
+            let fault = PhysicsFault::new(&e, FaultDuring::Pour);
+            tally.incidents.push(Incident {
+                seed: opts.seed,
+                pick: None,
+                t_s: e.time_s,
+                kind: "physics_fault".into(),
+                detail: Event::PhysicsFault(fault.clone()).to_string(),
+            });
+            tally.physics_faults.push(fault);
             Ok(RunResult {
                 records: Vec::new(),
                 tally,
@@ -503,6 +523,7 @@ pub fn run_from(cell: &Cell<'_>, st: CellState, obs: &mut dyn Observer) -> Resul
     tally.runs = 1;
     tally.ended = Some(ended);
     tally.physics_faults.extend(fault);
+    tally.incidents = std::mem::take(&mut st.incidents);
     Ok(RunResult {
         records,
         tally,
@@ -531,6 +552,14 @@ impl Run<'_, '_> {
     /// Tallies a finished pick, and keeps its record if the run keeps them.
     fn keep(&mut self, records: &mut Vec<PickRecord>, rec: PickRecord) {
         self.st.tally.add(&rec);
+        if let (Some(release_s), Some(takt_s)) = (rec.release_s, rec.takt_s) {
+            self.obs.takt(&Takt {
+                pick: rec.index,
+                release_s,
+                takt_s,
+                spans_refill: rec.spans_refill,
+            });
+        }
         if self.cell.opts.keep_records {
             records.push(rec);
         }

@@ -544,7 +544,26 @@ pub struct Tally {
     /// when none).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub physics_faults: Vec<PhysicsFault> => sum,
+    /// Every collision, protective stop, lost part and physics fault, in run order (left out of
+    /// a file when none): a long run's faults, each with what the event log says of it.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub incidents: Vec<Incident> => sum,
 }
+}
+
+/// A fault the cell met: a collision, a protective stop, a lost part or a physics fault.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Incident {
+    /// The run's seed.
+    pub seed: u64,
+    /// The pick under way, if any.
+    pub pick: Option<usize>,
+    /// Simulation time (s).
+    pub t_s: f64,
+    /// The event's kind (`fault`, `part_lost`, `physics_fault`).
+    pub kind: String,
+    /// The event log's line for it.
+    pub detail: String,
 }
 
 impl Tally {

@@ -1,19 +1,30 @@
 //! Record stage, collection: the observer that keeps what the recordings show while a run goes,
-//! and the finished [`Recording`] the writers turn into files.
+//! and hands it on as [`Recording`]s (a whole run's, or a streamed run's parts) the writers turn
+//! into files.
 //!
 //! Job: watch a cell run ([`crate::cycle::Observer`]) and keep, decimated where a viewer needs
 //! no more: every servo tick (joint states are decimated by the writers), every part's state and
 //! pose every [`SCENE_FRAME_S`] from the first pile pour on, each capture's depth image and a
-//! quarter (and, for the .rrd, a sixteenth) of its point cloud on a [`CLOUD_GRID_M`] grid, each
+//! sixteenth of its point cloud on a [`CLOUD_GRID_M`] grid, each
 //! recognition result with its best grasp candidates and, for evaluation, the true poses at its
 //! trigger and each detection's error, each motion's tool path as planned and as executed, and
-//! the event log. Nothing is kept unless a run is watched by a recorder.
+//! the event log, and the takt of every placed pick. Nothing is kept unless a run is watched by a
+//! recorder.
+//!
+//! Streaming: a recorder with files ([`Recorder::streaming`]) hands everything older than
+//! [`STREAM_LAG_S`] of simulation time to a writer thread every [`STREAM_EVERY_S`], so its memory
+//! stays flat however long the run is. The lag lets what is reported late (a motion's ticks after
+//! it played, a takt after its release) join its time range first: every part handed on holds
+//! one time range, and the files get their messages in time order.
 //!
 //! Units: s, m, rad, N m; depth images in mm. Frames: world.
 
 use nalgebra::{Isometry3, Vector3};
 
-use crate::cycle::{CycleEvent, Event, EventLog, Observer, PickRecord, Recognised, RunResult};
+use std::path::PathBuf;
+use std::sync::mpsc;
+
+use crate::cycle::{CycleEvent, Event, EventLog, Observer, Recognised, Takt};
 use crate::geometry::NamedBox;
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
@@ -23,18 +34,27 @@ use crate::trajectory::Motion;
 
 /// Period of the part-pose snapshots (s).
 pub const SCENE_FRAME_S: f64 = 0.1;
-/// Recorded point clouds keep every this many pixels in each image direction (a quarter of the
-/// points: 0.4 MB instead of 1 MB per capture). The depth image keeps every pixel.
-pub const CLOUD_EVERY_PX: usize = 2;
-/// The sparse cloud (the Rerun file's: its viewer draws the depth image itself in 3D at every
-/// pixel) keeps every this many pixels in each image direction.
-pub const SPARSE_CLOUD_EVERY_PX: usize = 4;
+/// Recorded point clouds keep every this many pixels in each image direction: a sixteenth of the
+/// points (0.6 instead of 9.6 MB per capture at the default 1032 x 772 px, 1.8 mm apart at the
+/// tray), enough to see the pile in 3D; the depth image beside it keeps every pixel, and Rerun's
+/// viewer draws that in 3D too. Every fourth rather than every second pixel takes the recording's
+/// extra CPU from +31 % to about +18 % of the run's.
+pub const CLOUD_EVERY_PX: usize = 4;
 /// Recorded cloud coordinates are rounded to this grid (m): a quarter of the depth image's 1 mm
 /// steps, its rounding error (0.07 mm rms) well below the sensor's noise (0.3 mm at 1 m), and it
 /// lets the files' compressors find repeats (1.4 instead of 4.6 MB of points in a 20-pick MCAP).
 pub const CLOUD_GRID_M: f64 = 2.5e-4;
 /// Most grasp candidates a [`RecognitionRecord`] keeps.
 pub const RECORDED_CANDIDATES: usize = 20;
+/// A streaming recorder keeps this much simulation time behind the newest step before it hands
+/// data on (s). What is reported after its time is at most a motion (its ticks arrive when it has
+/// played, about 1 s) or a pick (its takt arrives when the pick ends, a few seconds after the
+/// release) late: a wide margin. Data that still comes later is written out of time order and
+/// counted ([`Recorder::late`]).
+pub const STREAM_LAG_S: f64 = 20.0;
+/// A streaming recorder hands data on every this much simulation time (s): about four picks'
+/// worth, up to 10 s of captures in memory beside the lag's.
+pub const STREAM_EVERY_S: f64 = 10.0;
 
 /// The ground truth at a capture's trigger, shown when its recognition result arrived: the true
 /// poses beside the detections (evaluation only).
@@ -60,6 +80,8 @@ pub struct SceneFrame {
 /// One motion's tool-tip path: as planned and as executed.
 #[derive(Debug, Clone)]
 pub struct ToolPath {
+    /// The run's motion number (from 0).
+    pub motion: usize,
     /// Start of the motion (s).
     pub t_s: f64,
     /// Duration as planned (s).
@@ -82,8 +104,6 @@ pub struct CaptureImage {
     /// The world points (m) of every [`CLOUD_EVERY_PX`]-th pixel in each direction that has a
     /// return, row-major, on the [`CLOUD_GRID_M`] grid.
     pub points_world_m: Vec<[f32; 3]>,
-    /// The same of every [`SPARSE_CLOUD_EVERY_PX`]-th pixel.
-    pub sparse_points_world_m: Vec<[f32; 3]>,
 }
 
 /// The points of every `every_px`-th pixel of `c` in each direction that has a return, row-major,
@@ -117,9 +137,17 @@ pub struct RecognitionRecord {
     pub chosen: Option<usize>,
 }
 
-/// Everything a recording shows of a finished run.
+/// Everything a recording shows of a run, or of one time range of it (a streamed part).
 #[derive(Debug, Clone)]
 pub struct Recording {
+    /// Whether this opens the recording (a whole run's recording does): the writers add what is
+    /// written once (the cell, the arm's geometry, the robot description, the properties).
+    pub opening: bool,
+    /// The arm's joint positions at time 0 (rad), in the opening part.
+    pub start_q: Option<JointVector>,
+    /// The run's index of `trace[0]` among all its servo ticks: the writers decimate on the run's
+    /// tick grid, not the part's.
+    pub trace_start: usize,
     /// Servo ticks of every motion, in time order (`t` is simulation time).
     pub trace: Vec<Tick>,
     /// Part poses over time.
@@ -134,8 +162,8 @@ pub struct Recording {
     pub truths: Vec<TruthRecord>,
     /// The cycle's events in time order.
     pub events: Vec<CycleEvent>,
-    /// The run's picks.
-    pub records: Vec<PickRecord>,
+    /// The takt of every placed pick (that has one), in pick order.
+    pub takts: Vec<Takt>,
     /// The depth camera (pose and intrinsics).
     pub camera: Camera,
     /// The parts' bounding box (m).
@@ -144,79 +172,235 @@ pub struct Recording {
     pub cell_boxes: Vec<NamedBox>,
 }
 
-/// The observer that collects a [`Recording`].
-pub struct Recorder<'a> {
-    robot: &'a RobotModel,
-    camera: Camera,
-    part_size_m: [f64; 3],
-    cell_boxes: Vec<NamedBox>,
-    trace: Vec<Tick>,
-    scene_frames: Vec<SceneFrame>,
-    captures: Vec<CaptureImage>,
-    tool_paths: Vec<ToolPath>,
-    recognitions: Vec<RecognitionRecord>,
-    truths: Vec<TruthRecord>,
-    /// The last evaluation (its result time and the per-detection matches), for the detections
-    /// that follow it.
-    last_matches: Option<(f64, Vec<Option<crate::sensor::TruthMatch>>)>,
-    events: EventLog,
-}
-
-impl<'a> Recorder<'a> {
-    /// A recorder for a run of `robot` seen by `camera`, of parts with bounding box `part_size_m`.
-    pub fn new(robot: &'a RobotModel, camera: Camera, part_size_m: [f64; 3]) -> Self {
-        Recorder {
-            robot,
-            camera,
-            part_size_m,
-            cell_boxes: Vec::new(),
+impl Recording {
+    /// An empty recording of parts with bounding box `part_size_m` seen by `camera`.
+    fn empty(camera: Camera, part_size_m: [f64; 3]) -> Self {
+        Recording {
+            opening: true,
+            start_q: None,
+            trace_start: 0,
             trace: Vec::new(),
             scene_frames: Vec::new(),
             captures: Vec::new(),
             tool_paths: Vec::new(),
             recognitions: Vec::new(),
             truths: Vec::new(),
-            last_matches: None,
-            events: EventLog::default(),
+            events: Vec::new(),
+            takts: Vec::new(),
+            camera,
+            part_size_m,
+            cell_boxes: Vec::new(),
         }
     }
 
-    /// The recording of the finished run `result`.
-    pub fn finish(self, result: &RunResult) -> Recording {
-        Recording {
-            trace: self.trace,
-            scene_frames: self.scene_frames,
-            captures: self.captures,
-            tool_paths: self.tool_paths,
-            recognitions: self.recognitions,
-            truths: self.truths,
-            events: self.events.into_sorted(),
-            records: result.records.clone(),
-            camera: self.camera,
+    /// Takes out what happened at or before `until_s` (s), as a part that follows the ones taken
+    /// before; the rest stays. `events` is the event log the recorder keeps beside.
+    fn take_until(&mut self, until_s: f64, events: &mut EventLog) -> Recording {
+        fn split<T>(v: &mut Vec<T>, until_s: f64, time_s: impl Fn(&T) -> f64) -> Vec<T> {
+            let (taken, kept) = std::mem::take(v).into_iter().partition(|x| time_s(x) <= until_s);
+            *v = kept;
+            taken
+        }
+        let trace = split(&mut self.trace, until_s, |t| t.t_s);
+        let part = Recording {
+            opening: self.opening,
+            start_q: self.start_q.take(),
+            trace_start: self.trace_start,
+            scene_frames: split(&mut self.scene_frames, until_s, |f| f.t_s),
+            captures: split(&mut self.captures, until_s, |c| c.t_s),
+            tool_paths: split(&mut self.tool_paths, until_s, |p| p.t_s),
+            recognitions: split(&mut self.recognitions, until_s, |r| r.t_s),
+            truths: split(&mut self.truths, until_s, |t| t.t_s),
+            events: events.take_until(until_s),
+            takts: split(&mut self.takts, until_s, |t| t.release_s),
+            camera: self.camera.clone(),
             part_size_m: self.part_size_m,
-            cell_boxes: self.cell_boxes,
+            cell_boxes: self.cell_boxes.clone(),
+            trace,
+        };
+        self.opening = false;
+        self.trace_start += part.trace.len();
+        part
+    }
+}
+
+/// What the recorder hands to its writer thread.
+enum Handover {
+    /// The next time range.
+    Part(Box<Recording>),
+    /// The run is over: finish the files.
+    Finish,
+}
+
+/// The writer thread of a streaming recorder and the way to it.
+struct Stream {
+    to_writer: mpsc::SyncSender<Handover>,
+    writer: std::thread::JoinHandle<Result<Vec<PathBuf>, (PathBuf, super::RecordError)>>,
+}
+
+/// The observer that collects a [`Recording`], whole or (with files) streamed.
+pub struct Recorder<'a> {
+    robot: &'a RobotModel,
+    /// What is not handed on yet.
+    buffer: Recording,
+    /// The events not handed on yet.
+    events: EventLog,
+    /// The last evaluation (its result time and the per-detection matches), for the detections
+    /// that follow it.
+    last_matches: Option<(f64, Vec<Option<crate::sensor::TruthMatch>>)>,
+    /// Simulation time of the newest step (s).
+    now_s: f64,
+    /// Everything at or before this time is handed on (s).
+    handed_until_s: Option<f64>,
+    /// Items reported for a time already handed on.
+    late: usize,
+    /// Parts handed on.
+    handed_on: usize,
+    /// Motions executed.
+    motions: usize,
+    /// When the last part-pose snapshot was taken (s).
+    last_frame_s: Option<f64>,
+    stream: Option<Stream>,
+}
+
+impl<'a> Recorder<'a> {
+    /// A recorder for a run of `robot` seen by `camera`, of parts with bounding box `part_size_m`,
+    /// that keeps the whole run in memory ([`Recorder::finish`]).
+    pub fn new(robot: &'a RobotModel, camera: Camera, part_size_m: [f64; 3]) -> Self {
+        Recorder {
+            robot,
+            buffer: Recording::empty(camera, part_size_m),
+            events: EventLog::default(),
+            last_matches: None,
+            now_s: 0.0,
+            handed_until_s: None,
+            late: 0,
+            handed_on: 0,
+            motions: 0,
+            last_frame_s: None,
+            stream: None,
+        }
+    }
+
+    /// A recorder that streams to `files` as the run goes ([`Recorder::finish_files`]): its
+    /// memory holds at most [`STREAM_LAG_S`] + [`STREAM_EVERY_S`] of simulation time.
+    pub fn streaming(
+        robot: &'a RobotModel,
+        camera: Camera,
+        part_size_m: [f64; 3],
+        files: super::RecordingFiles,
+    ) -> Self {
+        // Two parts in flight at most: a slow disk holds the run back instead of filling memory.
+        let (to_writer, from_recorder) = mpsc::sync_channel::<Handover>(1);
+        let writer_robot = robot.clone();
+        let writer = std::thread::spawn(move || {
+            let mut files = files;
+            for handover in from_recorder {
+                match handover {
+                    Handover::Part(part) => files.write(&part, &writer_robot),
+                    Handover::Finish => return files.finish(),
+                }
+            }
+            // The recorder went away without finishing (the run failed): dropping `files` removes
+            // what it began.
+            drop(files);
+            Err((PathBuf::from("recording"), super::RecordError::Unfinished))
+        });
+        let mut recorder = Recorder::new(robot, camera, part_size_m);
+        recorder.stream = Some(Stream { to_writer, writer });
+        recorder
+    }
+
+    /// How many items were reported for a time already handed on (written out of time order).
+    pub fn late(&self) -> usize {
+        self.late
+    }
+
+    /// How many parts were handed on to the files so far.
+    pub fn handed_on(&self) -> usize {
+        self.handed_on
+    }
+
+    /// The recording of the finished run (of a recorder made by [`Recorder::new`]: a streaming
+    /// recorder's [`Recorder::finish_files`] returns what it handed on).
+    pub fn finish(mut self) -> Recording {
+        let mut events = std::mem::take(&mut self.events);
+        self.buffer.take_until(f64::INFINITY, &mut events)
+    }
+
+    /// Hands the rest on and finishes the files: the paths written, or the first file that
+    /// failed and why. A recorder made by [`Recorder::new`] has no files and writes nothing.
+    pub fn finish_files(mut self) -> Result<Vec<PathBuf>, (PathBuf, super::RecordError)> {
+        self.hand_on(f64::INFINITY);
+        let Some(stream) = self.stream.take() else {
+            return Ok(Vec::new());
+        };
+        // A send fails only if the writer is gone: its result says why.
+        let _ = stream.to_writer.send(Handover::Finish);
+        drop(stream.to_writer);
+        stream.writer.join().unwrap_or_else(|_| {
+            Err((
+                PathBuf::from("recording"),
+                super::RecordError::Rerun("the writer thread panicked".into()),
+            ))
+        })
+    }
+
+    /// Hands everything at or before `until_s` to the writer (streaming only).
+    fn hand_on(&mut self, until_s: f64) {
+        let Some(stream) = &self.stream else { return };
+        let part = self.buffer.take_until(until_s, &mut self.events);
+        self.handed_until_s = Some(until_s);
+        self.handed_on += 1;
+        // A failed send means the writer stopped on an error: its join reports it.
+        let _ = stream.to_writer.send(Handover::Part(Box::new(part)));
+    }
+
+    /// Counts an item reported for time `t_s` if that time is handed on already.
+    fn arrived(&mut self, t_s: f64) {
+        if self.handed_until_s.is_some_and(|h| t_s <= h) {
+            self.late += 1;
+        }
+    }
+}
+
+impl Drop for Recorder<'_> {
+    /// A streaming recorder dropped unfinished (the run failed) waits for its writer to remove
+    /// the files it began.
+    fn drop(&mut self) {
+        if let Some(stream) = self.stream.take() {
+            drop(stream.to_writer);
+            let _ = stream.writer.join();
         }
     }
 }
 
 impl Observer for Recorder<'_> {
     fn event(&mut self, t_s: f64, pick: Option<usize>, event: &Event) {
+        self.arrived(t_s);
         self.events.event(t_s, pick, event);
     }
 
-    /// Every step at least [`SCENE_FRAME_S`] after the last snapshot records every part.
+    /// Every step at least [`SCENE_FRAME_S`] after the last snapshot records every part; a
+    /// streaming recorder hands on what is [`STREAM_LAG_S`] old every [`STREAM_EVERY_S`].
     fn stepped(&mut self, world: &World) {
-        if self.cell_boxes.is_empty() {
-            self.cell_boxes = world.cell_boxes().to_vec();
+        if self.buffer.opening && self.buffer.cell_boxes.is_empty() {
+            self.buffer.cell_boxes = world.cell_boxes().to_vec();
+            self.buffer.start_q = Some(world.joints());
+        }
+        self.now_s = self.now_s.max(world.time_s());
+        let handed_s = self.handed_until_s.unwrap_or(0.0);
+        if self.stream.is_some() && self.now_s - STREAM_LAG_S >= handed_s + STREAM_EVERY_S {
+            self.hand_on(self.now_s - STREAM_LAG_S);
         }
         if self
-            .scene_frames
-            .last()
-            .is_some_and(|f| world.time_s() + 1e-9 < f.t_s + SCENE_FRAME_S)
+            .last_frame_s
+            .is_some_and(|t| world.time_s() + 1e-9 < t + SCENE_FRAME_S)
         {
             return;
         }
-        self.scene_frames.push(SceneFrame {
+        self.last_frame_s = Some(world.time_s());
+        self.buffer.scene_frames.push(SceneFrame {
             t_s: world.time_s(),
             parts: (0..world.part_count())
                 .map(|i| (world.part_state(i), world.part_pose(i)))
@@ -225,17 +409,18 @@ impl Observer for Recorder<'_> {
     }
 
     fn captured(&mut self, c: &Capture) {
-        self.captures.push(CaptureImage {
+        self.arrived(c.trigger_s);
+        self.buffer.captures.push(CaptureImage {
             t_s: c.trigger_s,
             size_px: (c.width_px, c.height_px),
             depth_mm: c.depth_m.iter().map(|d| (d * 1000.0).round() as u16).collect(),
             points_world_m: cloud_on_grid(c, CLOUD_EVERY_PX),
-            sparse_points_world_m: cloud_on_grid(c, SPARSE_CLOUD_EVERY_PX),
         });
     }
 
     fn evaluated(&mut self, t_s: f64, truth: &TruthAtTrigger, report: &RecognitionReport) {
-        self.truths.push(TruthRecord {
+        self.arrived(t_s);
+        self.buffer.truths.push(TruthRecord {
             t_s,
             trigger_s: truth.t_s,
             parts: (0..truth.free.len())
@@ -247,12 +432,13 @@ impl Observer for Recorder<'_> {
     }
 
     fn recognised(&mut self, r: &Recognised<'_>) {
+        self.arrived(r.t_s);
         let ranked = &r.ranked[..r.ranked.len().min(RECORDED_CANDIDATES)];
         let matches = self
             .last_matches
             .as_ref()
             .filter(|(t, m)| *t == r.t_s && m.len() == r.detections.len());
-        self.recognitions.push(RecognitionRecord {
+        self.buffer.recognitions.push(RecognitionRecord {
             detection_errors: (0..r.detections.len())
                 .map(|k| {
                     matches
@@ -272,17 +458,26 @@ impl Observer for Recorder<'_> {
     }
 
     fn executed(&mut self, t0_s: f64, planned: &dyn Motion, ticks: &[Tick], played: usize) {
+        self.arrived(t0_s);
         let tip = |q: &JointVector| self.robot.world_from_tool(q).translation.vector;
-        self.tool_paths.push(ToolPath {
+        self.buffer.tool_paths.push(ToolPath {
+            motion: self.motions,
             t_s: t0_s,
             duration_s: planned.duration_s(),
             planned_m: planned.sampled(0.01).iter().map(|s| tip(&s.q)).collect(),
             executed_m: ticks.iter().step_by(10).map(|t| tip(&t.q)).collect(),
         });
-        self.trace
+        self.motions += 1;
+        self.buffer
+            .trace
             .extend(ticks[..played.min(ticks.len())].iter().map(|tk| Tick {
                 t_s: t0_s + tk.t_s,
                 ..*tk
             }));
+    }
+
+    fn takt(&mut self, takt: &Takt) {
+        self.arrived(takt.release_s);
+        self.buffer.takts.push(*takt);
     }
 }

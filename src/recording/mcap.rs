@@ -1,4 +1,4 @@
-//! Record stage, MCAP: a finished run written to `run.mcap` for Foxglove.
+//! Record stage, MCAP: a run written to `run.mcap` for Foxglove, part by part as it goes.
 //!
 //! Topics (Foxglove's well-known schemas where one exists; see the module [`super`] for what is
 //! recorded and why):
@@ -32,14 +32,15 @@
 //!
 //! Encoding: the `foxglove.*` messages are protobuf, with the schemas (file descriptor sets) the
 //! `foxglove` crate carries; the few `binpick.*` messages are JSON with JSON Schemas. Log time is
-//! simulation time (ns); chunks are zstd-compressed; the file's metadata holds the run's
-//! properties. The writer is finished explicitly and its error reported.
+//! simulation time (ns); chunks are zstd-compressed at level 1 on the writer's own thread (the
+//! default level 3 on a pool of threads cost more CPU for a file a fifth smaller); the file's
+//! metadata holds the run's properties. The writer is finished explicitly and its error reported.
 //!
 //! Units: s (ns as log time), rad, rad/s, N m, m (depth in mm). Frames: `world`, `camera` (optical:
 //! x right, y down, z forward), and one frame per link named after it.
 
 use std::collections::BTreeMap;
-use std::io::{Seek, Write};
+use std::io::Write;
 
 use foxglove::Encode;
 use foxglove::messages as fg;
@@ -48,7 +49,7 @@ use serde::Serialize;
 
 use super::Recording;
 use super::{
-    CANDIDATE_ARROW_M, JOINT_STATE_EVERY, RecordError, RunInfo, arm_samples, event_level, event_text, frustum_corners,
+    CANDIDATE_ARROW_M, RecordError, RunInfo, arm_samples, event_level, event_text, frustum_corners, joint_state_ticks,
     part_rgb,
 };
 use crate::config::Scene;
@@ -269,24 +270,6 @@ fn scene_update(entities: Vec<fg::SceneEntity>) -> fg::SceneUpdate {
     }
 }
 
-/// Writes the recording of `result` to a new file at `path` (see [`write_mcap`]): first to
-/// `<path>.partial`, then renamed once finished, so a failed write never leaves a truncated file.
-pub fn write_mcap_file(
-    path: &std::path::Path,
-    result: &Recording,
-    robot: &RobotModel,
-    scene: &Scene,
-    info: &RunInfo,
-) -> Result<(), RecordError> {
-    let partial = path.with_extension("mcap.partial");
-    let file = std::fs::File::create(&partial)?;
-    write_mcap(std::io::BufWriter::new(file), result, robot, scene, info).inspect_err(|_| {
-        let _ = std::fs::remove_file(&partial);
-    })?;
-    std::fs::rename(&partial, path)?;
-    Ok(())
-}
-
 /// Messages of one recording before they are merged in log-time order: (log time ns, topic,
 /// encoded message).
 #[derive(Default)]
@@ -310,83 +293,145 @@ impl Messages {
     }
 }
 
-/// Writes the recording `result` to `out`.
-pub fn write_mcap<W: Write + Seek>(
-    out: W,
-    result: &Recording,
-    robot: &RobotModel,
-    scene: &Scene,
-    info: &RunInfo,
-) -> Result<(), RecordError> {
-    let mut m = Messages::default();
-    cell_messages(&mut m, result, scene)?;
-    m.json(
-        0.0,
-        Topic::RobotDescription,
-        &serde_json::json!({"data": info.robot_description}),
-    )?;
-    arm_messages(&mut m, result, robot)?;
-    part_messages(&mut m, result)?;
-    sensing_messages(&mut m, result)?;
-    path_messages(&mut m, result)?;
-    event_messages(&mut m, result)?;
-    let properties: BTreeMap<String, String> = info.properties().into_iter().map(|(k, v)| (k.to_string(), v)).collect();
-    m.json(0.0, Topic::Properties, &properties)?;
+/// A `.mcap` file being written: to `<path>.partial` until [`McapFile::finish`] writes its
+/// summary and renames it to `path`, so that a failed or abandoned write never leaves a truncated
+/// file (dropped unfinished, it removes the partial file).
+pub struct McapFile {
+    path: std::path::PathBuf,
+    partial: std::path::PathBuf,
+    writer: Option<mcap::Writer<std::io::BufWriter<std::fs::File>>>,
+    /// Channel id per topic, in the order of [`Topic`].
+    channels: Vec<u16>,
+    /// The last sequence number per topic.
+    sequence: [u32; TOPICS.len()],
+    /// The run's properties (a message at time 0 and the file's metadata).
+    properties: BTreeMap<String, String>,
+    /// The URDF text (`/robot_description`).
+    robot_description: String,
+    /// The pick tray's centre (m, world): the camera's frustum is drawn out to its distance.
+    pick_tray_center_m: Vector3<f64>,
+}
 
-    let mut w = mcap::WriteOptions::new()
-        .compression(Some(mcap::Compression::Zstd))
-        .profile("")
-        .create(out)?;
-    let none = BTreeMap::new();
-    let mut channels = Vec::new();
-    for (k, (topic, name, encoding)) in TOPICS.iter().enumerate() {
-        debug_assert_eq!(*topic as usize, k, "TOPICS in the order of Topic");
-        let (schema, message_encoding) = match encoding {
-            Encoding::Protobuf(schema) => {
-                let s = schema().ok_or_else(|| RecordError::Encode(format!("no schema for {name}")))?;
-                (w.add_schema(&s.name, &s.encoding, &s.data)?, "protobuf")
-            }
-            Encoding::Json(schema_name, schema) => {
-                (w.add_schema(schema_name, "jsonschema", schema.as_bytes())?, "json")
-            }
+impl McapFile {
+    /// Starts the recording at `path` of a run in `scene` described by `info`: the schemas and
+    /// the channels of every topic.
+    pub fn create(path: &std::path::Path, scene: &Scene, info: &RunInfo) -> Result<Self, RecordError> {
+        let partial = path.with_extension("mcap.partial");
+        let out = std::io::BufWriter::new(std::fs::File::create(&partial)?);
+        let mut file = McapFile {
+            path: path.to_path_buf(),
+            partial,
+            writer: None,
+            channels: Vec::new(),
+            sequence: [0; TOPICS.len()],
+            properties: info.properties().into_iter().map(|(k, v)| (k.to_string(), v)).collect(),
+            robot_description: info.robot_description.clone(),
+            pick_tray_center_m: Vector3::from(scene.pick_tray.center_m),
         };
-        channels.push(w.add_channel(schema, name, message_encoding, &none)?);
+        let w = file.writer.insert(
+            mcap::WriteOptions::new()
+                .compression(Some(mcap::Compression::Zstd))
+                .compression_level(1)
+                .compression_threads(0)
+                .profile("")
+                .create(out)?,
+        );
+        let none = BTreeMap::new();
+        for (k, (topic, name, encoding)) in TOPICS.iter().enumerate() {
+            debug_assert_eq!(*topic as usize, k, "TOPICS in the order of Topic");
+            let (schema, message_encoding) = match encoding {
+                Encoding::Protobuf(schema) => {
+                    let s = schema().ok_or_else(|| RecordError::Encode(format!("no schema for {name}")))?;
+                    (w.add_schema(&s.name, &s.encoding, &s.data)?, "protobuf")
+                }
+                Encoding::Json(schema_name, schema) => {
+                    (w.add_schema(schema_name, "jsonschema", schema.as_bytes())?, "json")
+                }
+            };
+            file.channels
+                .push(w.add_channel(schema, name, message_encoding, &none)?);
+        }
+        Ok(file)
     }
-    // Messages go in log-time order (stable: same-time messages keep their order).
-    m.0.sort_by_key(|(t, _, _)| *t);
-    let mut sequence = [0u32; TOPICS.len()];
-    for (time, topic, data) in &m.0 {
-        let k = *topic as usize;
-        sequence[k] += 1;
-        w.write_to_known_channel(
-            &mcap::records::MessageHeader {
-                channel_id: channels[k],
-                sequence: sequence[k],
-                log_time: *time,
-                publish_time: *time,
-            },
-            data,
-        )?;
+
+    /// Writes one part of the recording (the first one with the cell, the arm's geometry, the
+    /// robot description and the properties), its messages in log-time order.
+    pub fn write(&mut self, part: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
+        let mut m = Messages::default();
+        if part.opening {
+            cell_messages(&mut m, part, self.pick_tray_center_m)?;
+            m.json(
+                0.0,
+                Topic::RobotDescription,
+                &serde_json::json!({"data": self.robot_description}),
+            )?;
+            arm_geometry_messages(&mut m, robot)?;
+        }
+        arm_messages(&mut m, part, robot)?;
+        part_messages(&mut m, part)?;
+        sensing_messages(&mut m, part)?;
+        path_messages(&mut m, part)?;
+        event_messages(&mut m, part)?;
+        if part.opening {
+            m.json(0.0, Topic::Properties, &self.properties)?;
+        }
+        let w = self
+            .writer
+            .as_mut()
+            .ok_or_else(|| RecordError::Encode("the file is closed".into()))?;
+        // Messages go in log-time order (stable: same-time messages keep their order).
+        m.0.sort_by_key(|(t, _, _)| *t);
+        for (time, topic, data) in &m.0 {
+            let k = *topic as usize;
+            self.sequence[k] += 1;
+            w.write_to_known_channel(
+                &mcap::records::MessageHeader {
+                    channel_id: self.channels[k],
+                    sequence: self.sequence[k],
+                    log_time: *time,
+                    publish_time: *time,
+                },
+                data,
+            )?;
+        }
+        Ok(())
     }
-    w.write_metadata(&mcap::records::Metadata {
-        name: "binpick".into(),
-        metadata: properties,
-    })?;
-    w.finish()?;
-    // Flush what the writer buffered and report it: a full disk shows up here.
-    w.into_inner().flush()?;
-    Ok(())
+
+    /// Writes the metadata and the summary, flushes and renames the file to its final name.
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        let mut w = self
+            .writer
+            .take()
+            .ok_or_else(|| RecordError::Encode("the file is closed".into()))?;
+        w.write_metadata(&mcap::records::Metadata {
+            name: "binpick".into(),
+            metadata: self.properties.clone(),
+        })?;
+        w.finish()?;
+        // Flush what the writer buffered and report it: a full disk shows up here.
+        w.into_inner().flush()?;
+        std::fs::rename(&self.partial, &self.path)?;
+        Ok(())
+    }
+}
+
+impl Drop for McapFile {
+    /// Removes the partial file: a finished file was renamed away.
+    fn drop(&mut self) {
+        drop(self.writer.take());
+        let _ = std::fs::remove_file(&self.partial);
+    }
 }
 
 /// `/cell`: table, trays and obstacles as grey cubes, the camera's frustum out to the pick tray.
-fn cell_messages(m: &mut Messages, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
+fn cell_messages(m: &mut Messages, result: &Recording, pick_tray_center_m: Vector3<f64>) -> Result<(), RecordError> {
     let mut cell = entity(0.0, "cell");
     for b in &result.cell_boxes {
         cell.cubes
             .push(cube(&b.world_from_box, &(2.0 * b.half_m), [0.6, 0.6, 0.6], 1.0));
     }
     let c = &result.camera;
-    let range_m = (Vector3::from(scene.pick_tray.center_m) - c.world_from_camera.translation.vector).norm();
+    let range_m = (pick_tray_center_m - c.world_from_camera.translation.vector).norm();
     let [apex, a, b, cc, d] = frustum_corners(c, range_m);
     cell.lines.push(line(
         fg::line_primitive::Type::LineList,
@@ -412,16 +457,18 @@ fn single(v: &crate::robot::JointVector) -> [f32; DOF] {
     std::array::from_fn(|j| v[j] as f32)
 }
 
-/// `/robot/geometry` once (each link's primitives locked to its frame), `/tf` at 50 Hz,
-/// `/robot/joint_states` and `/robot/servo` at 100 Hz.
-fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
+/// The name of the arm's link `i` (its frame).
+fn link_name(robot: &RobotModel, i: usize) -> String {
+    robot
+        .links
+        .get(i)
+        .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
+}
+
+/// `/robot/geometry` once: each link's primitives locked to its frame.
+fn arm_geometry_messages(m: &mut Messages, robot: &RobotModel) -> Result<(), RecordError> {
     use crate::robot::LinkPrimitive;
-    let name = |i: usize| {
-        robot
-            .links
-            .get(i)
-            .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
-    };
+    let name = |i: usize| link_name(robot, i);
     let colour = [0.9, 0.78, 0.24];
     let diameters = |r: f64, length_m: f64| xyz(&Vector3::new(2.0 * r, 2.0 * r, length_m));
     let mut links = Vec::new();
@@ -465,7 +512,12 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
         }
         links.push(e);
     }
-    m.proto(0.0, Topic::RobotGeometry, &scene_update(links))?;
+    m.proto(0.0, Topic::RobotGeometry, &scene_update(links))
+}
+
+/// `/tf` at 50 Hz, `/robot/joint_states` and `/robot/servo` at 100 Hz.
+fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
+    let name = |i: usize| link_name(robot, i);
     let limit = robot.torque_limit_nm();
     let joint_names: Vec<String> = (0..DOF)
         .map(|j| {
@@ -475,7 +527,7 @@ fn arm_messages(m: &mut Messages, result: &Recording, robot: &RobotModel) -> Res
                 .map_or_else(|| format!("joint_{}", j + 1), |jt| jt.name.clone())
         })
         .collect();
-    for t in result.trace.iter().step_by(JOINT_STATE_EVERY) {
+    for t in joint_state_ticks(result) {
         let joints = (0..DOF)
             .map(|j| fg::JointState {
                 name: joint_names[j].clone(),
@@ -661,8 +713,8 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
 /// `/paths`: each motion's tool path, planned (blue) and executed (orange), shown for the motion's
 /// duration plus a second.
 fn path_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
-    for (k, p) in result.tool_paths.iter().enumerate() {
-        let mut e = entity(p.t_s, format!("motion {k}"));
+    for p in &result.tool_paths {
+        let mut e = entity(p.t_s, format!("motion {}", p.motion));
         let shown_ns = nanos(p.duration_s + 1.0);
         e.lifetime = Some(fg::Duration::new(
             (shown_ns / 1_000_000_000) as i32,
@@ -705,16 +757,14 @@ fn event_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordErro
         )?;
         m.json(e.t_s, Topic::Events, e)?;
     }
-    for r in &result.records {
-        if let (Some(release), Some(takt_s)) = (r.release_s, r.takt_s) {
-            let takt = Takt {
-                t_s: release,
-                pick: r.index,
-                takt_s,
-                spans_refill: r.spans_refill,
-            };
-            m.json(release, Topic::Takt, &takt)?;
-        }
+    for t in &result.takts {
+        let takt = Takt {
+            t_s: t.release_s,
+            pick: t.pick,
+            takt_s: t.takt_s,
+            spans_refill: t.spans_refill,
+        };
+        m.json(t.release_s, Topic::Takt, &takt)?;
     }
     Ok(())
 }

@@ -1,15 +1,17 @@
-//! Record stage: a finished run written to files a user opens days later, offline, to see why a
-//! pick was slow or failed.
+//! Record stage: a run written to files a user opens days later, offline, to see why a pick was
+//! slow or failed.
 //!
-//! Job: from a [`Recording`] (what a [`Recorder`] kept while it watched a run), write
+//! Job: from [`Recording`]s (what a [`Recorder`] kept while it watched a run: the whole run, or
+//! the parts a streaming recorder hands on as the run goes, so that an all-day run's recording
+//! needs no more memory than a minute's), write
 //! - `run.rrd` for the Rerun viewer ([`rrd`]), and
 //! - `run.mcap` for Foxglove ([`mcap`]),
 //!
 //! with the same content: the cell (table, trays, obstacles, the sensor's frustum), the arm (its
 //! collision primitives once, its link frames over time), all parts as one batched entity (bounding
 //! boxes coloured by state: in the pick tray, held, placed) from the first pile pour on, each
-//! capture (camera intrinsics and pose, depth image, point cloud on a 0.25 mm grid; the .rrd's
-//! sparser, as its viewer draws the depth image in 3D) at its trigger time, each
+//! capture (camera intrinsics and pose, depth image, a sixteenth of its point cloud on a 0.25 mm
+//! grid) at its trigger time, each
 //! recognition result (detections, ranked grasp candidates with the chosen one marked) when it
 //! arrived, every motion's tool path as planned and as executed, the joint positions, velocities
 //! and torques beside each joint's torque limit, the cycle's events as log entries and the takt of
@@ -35,10 +37,10 @@ use crate::robot::RobotModel;
 
 pub use self::collect::{
     CLOUD_EVERY_PX, CLOUD_GRID_M, CaptureImage, RECORDED_CANDIDATES, RecognitionRecord, Recorder, Recording,
-    SCENE_FRAME_S, SPARSE_CLOUD_EVERY_PX, SceneFrame, ToolPath,
+    SCENE_FRAME_S, STREAM_EVERY_S, STREAM_LAG_S, SceneFrame, ToolPath,
 };
-pub use self::mcap::{write_mcap, write_mcap_file};
-pub use self::rrd::write_rrd_file;
+pub use self::mcap::McapFile;
+pub use self::rrd::RrdFile;
 
 /// Why a recording could not be written.
 #[derive(Debug, thiserror::Error)]
@@ -58,6 +60,9 @@ pub enum RecordError {
     /// Writing the file failed.
     #[error("{0}")]
     Io(#[from] std::io::Error),
+    /// The run ended before the recording was finished (its files were removed).
+    #[error("the run ended before its recording was finished")]
+    Unfinished,
 }
 
 /// What the recording's metadata (MCAP) and recording properties (Rerun) say about the run.
@@ -107,8 +112,97 @@ impl Formats {
     }
 }
 
-/// Writes the asked-for recordings of `result` as `<dir>/<stem>.rrd` and `<dir>/<stem>.mcap`, the
-/// two files on two threads. Returns the paths written, or the first file that failed and why.
+/// The asked-for recording files of one run, `<dir>/<stem>.rrd` and `<dir>/<stem>.mcap`, being
+/// written part by part. After a failed write the files are removed and later parts ignored;
+/// [`RecordingFiles::finish`] reports the first failure. Dropped unfinished, nothing stays.
+pub struct RecordingFiles {
+    rrd: Option<(PathBuf, RrdFile)>,
+    mcap: Option<(PathBuf, McapFile)>,
+    failed: Option<(PathBuf, RecordError)>,
+}
+
+impl RecordingFiles {
+    /// Starts the files of a run in `scene` described by `info`; or names the file that could
+    /// not be started and why.
+    pub fn create(
+        dir: &Path,
+        stem: &str,
+        formats: Formats,
+        scene: &Scene,
+        info: &RunInfo,
+    ) -> Result<Self, (PathBuf, RecordError)> {
+        let rrd_path = dir.join(format!("{stem}.rrd"));
+        let mcap_path = dir.join(format!("{stem}.mcap"));
+        let rrd = match formats.rrd {
+            true => Some((
+                rrd_path.clone(),
+                RrdFile::create(&rrd_path, scene, info).map_err(|e| (rrd_path, e))?,
+            )),
+            false => None,
+        };
+        let mcap = match formats.mcap {
+            true => Some((
+                mcap_path.clone(),
+                McapFile::create(&mcap_path, scene, info).map_err(|e| (mcap_path, e))?,
+            )),
+            false => None,
+        };
+        Ok(RecordingFiles {
+            rrd,
+            mcap,
+            failed: None,
+        })
+    }
+
+    /// Writes the next part of the recording to both files, on two threads.
+    pub fn write(&mut self, part: &Recording, robot: &RobotModel) {
+        if self.failed.is_some() {
+            return;
+        }
+        let (rrd, mcap) = (&mut self.rrd, &mut self.mcap);
+        let failed = std::thread::scope(|s| {
+            let rrd = rrd
+                .as_mut()
+                .map(|(path, f)| (path.clone(), s.spawn(|| f.write(part, robot))));
+            let mcap = mcap
+                .as_mut()
+                .and_then(|(path, f)| f.write(part, robot).err().map(|e| (path.clone(), e)));
+            let rrd = rrd.and_then(|(path, h)| {
+                h.join()
+                    .unwrap_or_else(|_| Err(RecordError::Rerun("the writer thread panicked".into())))
+                    .err()
+                    .map(|e| (path, e))
+            });
+            rrd.or(mcap)
+        });
+        if failed.is_some() {
+            // Dropping the writers removes their partial files.
+            self.failed = failed;
+            self.rrd = None;
+            self.mcap = None;
+        }
+    }
+
+    /// Finishes both files: the paths written, or the first file that failed and why.
+    pub fn finish(mut self) -> Result<Vec<PathBuf>, (PathBuf, RecordError)> {
+        if let Some(failed) = self.failed.take() {
+            return Err(failed);
+        }
+        let mut written = Vec::new();
+        if let Some((path, f)) = self.rrd.take() {
+            f.finish().map_err(|e| (path.clone(), e))?;
+            written.push(path);
+        }
+        if let Some((path, f)) = self.mcap.take() {
+            f.finish().map_err(|e| (path.clone(), e))?;
+            written.push(path);
+        }
+        Ok(written)
+    }
+}
+
+/// Writes the asked-for recordings of the whole run `result` as `<dir>/<stem>.rrd` and
+/// `<dir>/<stem>.mcap`. Returns the paths written, or the first file that failed and why.
 pub fn write_recordings(
     dir: &Path,
     stem: &str,
@@ -118,31 +212,9 @@ pub fn write_recordings(
     scene: &Scene,
     info: &RunInfo,
 ) -> Result<Vec<PathBuf>, (PathBuf, RecordError)> {
-    let rrd_path = dir.join(format!("{stem}.rrd"));
-    let mcap_path = dir.join(format!("{stem}.mcap"));
-    let (rrd, mcap) = std::thread::scope(|s| {
-        let rrd = s.spawn(|| {
-            formats
-                .rrd
-                .then(|| write_rrd_file(&rrd_path, result, robot, scene, info))
-        });
-        let mcap = formats
-            .mcap
-            .then(|| write_mcap_file(&mcap_path, result, robot, scene, info));
-        let rrd = rrd
-            .join()
-            .unwrap_or_else(|_| Some(Err(RecordError::Rerun("the writer thread panicked".into()))));
-        (rrd, mcap)
-    });
-    let mut written = Vec::new();
-    for (path, outcome) in [(rrd_path, rrd), (mcap_path, mcap)] {
-        match outcome {
-            Some(Ok(())) => written.push(path),
-            Some(Err(e)) => return Err((path, e)),
-            None => {}
-        }
-    }
-    Ok(written)
+    let mut files = RecordingFiles::create(dir, stem, formats, scene, info)?;
+    files.write(result, robot);
+    files.finish()
 }
 
 /// Joint states and series are recorded every this many servo ticks (1 kHz servo: 100 Hz).
@@ -150,15 +222,29 @@ pub(crate) const JOINT_STATE_EVERY: usize = 10;
 /// Link frames are recorded every this many servo ticks (50 Hz).
 pub(crate) const TRANSFORMS_EVERY: usize = 20;
 
+/// The ticks of `result`'s trace on the run's grid of every `every`-th servo tick.
+fn every_nth_tick(result: &Recording, every: usize) -> impl Iterator<Item = &crate::servo::Tick> {
+    let skip = (every - result.trace_start % every) % every;
+    result.trace.iter().skip(skip).step_by(every)
+}
+
+/// The servo ticks whose joint states are recorded: every [`JOINT_STATE_EVERY`]-th of the run.
+pub(crate) fn joint_state_ticks(result: &Recording) -> impl Iterator<Item = &crate::servo::Tick> {
+    every_nth_tick(result, JOINT_STATE_EVERY)
+}
+
 /// The arm's joint positions at which its link frames are recorded: from time 0 (the arm at its
 /// start pose while the first pile is poured: the trace begins with the first motion), then
-/// every [`TRANSFORMS_EVERY`] servo ticks. Between motions the arm stands still, so the last
-/// frames hold. (simulation time (s), joint positions (rad))
+/// every [`TRANSFORMS_EVERY`] servo ticks of the run. Between motions the arm stands still, so
+/// the last frames hold. (simulation time (s), joint positions (rad))
 pub(crate) fn arm_samples(result: &Recording) -> Vec<(f64, crate::robot::JointVector)> {
-    let start = result.trace.first().filter(|t| t.t_s > 0.0).map(|t| (0.0, t.q));
+    let start = result
+        .start_q
+        .filter(|_| result.trace.first().is_none_or(|t| t.t_s > 0.0))
+        .map(|q| (0.0, q));
     start
         .into_iter()
-        .chain(result.trace.iter().step_by(TRANSFORMS_EVERY).map(|t| (t.t_s, t.q)))
+        .chain(every_nth_tick(result, TRANSFORMS_EVERY).map(|t| (t.t_s, t.q)))
         .collect()
 }
 

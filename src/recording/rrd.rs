@@ -1,12 +1,13 @@
-//! Record stage, Rerun: a finished run written to `run.rrd` through the rerun SDK's file sink.
+//! Record stage, Rerun: a run written to `run.rrd` through the rerun SDK's file sink, part by part
+//! as it goes.
 //!
 //! Entities (all in `world`, z up; see the module [`super`] for what is recorded and why):
 //! - `world/cell`: table, trays and obstacles as boxes (static);
 //! - `world/camera`: the camera's pose and pinhole intrinsics (static; the viewer draws its
 //!   frustum), `world/camera/depth` each depth image (mm) at its trigger time;
-//! - `world/cloud`: each capture's sparse point cloud (world frame, every
-//!   [`super::SPARSE_CLOUD_EVERY_PX`]-th pixel each way: under the camera's pinhole the viewer
-//!   draws the depth image itself in 3D at every pixel) at its trigger time;
+//! - `world/cloud`: each capture's point cloud (world frame, every
+//!   [`super::CLOUD_EVERY_PX`]-th pixel each way: under the camera's pinhole the viewer draws the
+//!   depth image itself in 3D at every pixel) at its trigger time;
 //! - `world/arm/<link>`: each link's `world_from_link` over time (50 Hz), its collision primitives
 //!   (static) under `world/arm/<link>/geometry`;
 //! - `world/parts`: all parts as one batch of boxes (10 Hz), coloured by state;
@@ -33,7 +34,7 @@ use rerun::{RecordingStream, TimeColumn};
 
 use super::Recording;
 use super::{
-    CANDIDATE_ARROW_M, JOINT_STATE_EVERY, RecordError, RunInfo, arm_samples, event_level, event_text, part_rgb,
+    CANDIDATE_ARROW_M, RecordError, RunInfo, arm_samples, event_level, event_text, joint_state_ticks, part_rgb,
 };
 use crate::config::Scene;
 use crate::physics::PartState;
@@ -110,45 +111,97 @@ impl Rec {
     }
 }
 
-/// Writes the Rerun recording `result` to `path`:
-/// first to `<path>.partial`, flushed and finalised, then renamed, so that a failed write never
-/// leaves a truncated `run.rrd`.
-pub fn write_rrd_file(
-    path: &Path,
-    result: &Recording,
-    robot: &RobotModel,
-    scene: &Scene,
-    info: &RunInfo,
-) -> Result<(), RecordError> {
-    let partial = path.with_extension("rrd.partial");
-    let stream = rerun::RecordingStreamBuilder::new("binpick")
-        .with_blueprint(layout())
-        .enabled(true)
-        .recording_name(format!("binpick {} seed {}", info.workpiece, info.seed))
-        .save(&partial)
-        .map_err(rr)?;
-    stream.set_log_time_enabled(false);
-    stream.set_log_tick_enabled(false);
-    let mut rec = Rec {
-        stream,
-        step_s: scene.sim.physics_dt_s,
-    };
-    let outcome = log_run(&mut rec, result, robot, scene, info);
-    // Flush whatever was logged and report a failed write; then hand the file sink over to a
-    // buffer, which drops it: its writer thread finishes the file (footer and manifest).
-    let flushed = rec.stream.flush_blocking().map_err(rr);
-    rec.stream.disconnect();
-    drop(rec.stream);
-    // The writer thread's own errors are not returned by the SDK: check that the file ends with
-    // the stream footer the finalised file must end with.
-    outcome
-        .and(flushed)
-        .and_then(|()| check_footer(&partial))
-        .inspect_err(|_| {
-            let _ = std::fs::remove_file(&partial);
-        })?;
-    std::fs::rename(&partial, path)?;
-    Ok(())
+/// A `.rrd` file being written: to `<path>.partial` until [`RrdFile::finish`] flushes and
+/// finalises it and renames it to `path`, so that a failed or abandoned write never leaves a
+/// truncated `run.rrd` (dropped unfinished, it removes the partial file).
+pub struct RrdFile {
+    path: std::path::PathBuf,
+    partial: std::path::PathBuf,
+    rec: Option<Rec>,
+    /// The pick tray's centre (m, world): the camera's image plane is drawn at its distance.
+    pick_tray_center_m: Vector3<f64>,
+}
+
+impl RrdFile {
+    /// Starts the recording at `path` of a run in `scene` described by `info`: the viewer's
+    /// layout and the run's properties.
+    pub fn create(path: &Path, scene: &Scene, info: &RunInfo) -> Result<Self, RecordError> {
+        let partial = path.with_extension("rrd.partial");
+        // The SDK's file sink creates the file on its own thread: a folder that is not there
+        // must fail here.
+        std::fs::File::create(&partial)?;
+        let stream = rerun::RecordingStreamBuilder::new("binpick")
+            .with_blueprint(layout())
+            .enabled(true)
+            .recording_name(format!("binpick {} seed {}", info.workpiece, info.seed))
+            .save(&partial)
+            .map_err(|e| {
+                let _ = std::fs::remove_file(&partial);
+                rr(e)
+            })?;
+        stream.set_log_time_enabled(false);
+        stream.set_log_tick_enabled(false);
+        let mut file = RrdFile {
+            path: path.to_path_buf(),
+            partial,
+            rec: Some(Rec {
+                stream,
+                step_s: scene.sim.physics_dt_s,
+            }),
+            pick_tray_center_m: Vector3::from(scene.pick_tray.center_m),
+        };
+        let mut props = rerun::AnyValues::default();
+        for (k, v) in info.properties() {
+            props = props.with_component::<rerun::components::Text>(k, [v]);
+        }
+        let rec = file.rec.as_mut().expect("just made");
+        rec.stream.send_property("binpick", &props).map_err(rr)?;
+        rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
+        Ok(file)
+    }
+
+    /// Logs one part of the recording (the first one with the static cell and arm geometry).
+    pub fn write(&mut self, part: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
+        let rec = self
+            .rec
+            .as_mut()
+            .ok_or_else(|| RecordError::Rerun("the stream is closed".into()))?;
+        if part.opening {
+            log_cell(rec, part, self.pick_tray_center_m)?;
+            log_arm_geometry(rec, robot)?;
+        }
+        log_arm(rec, part, robot)?;
+        log_parts(rec, part)?;
+        log_sensing(rec, part)?;
+        log_paths(rec, part)?;
+        log_events(rec, part)
+    }
+
+    /// Flushes and finalises the file, checks its footer and renames it to its final name.
+    pub fn finish(mut self) -> Result<(), RecordError> {
+        self.close()?;
+        check_footer(&self.partial)?;
+        std::fs::rename(&self.partial, &self.path)?;
+        Ok(())
+    }
+
+    /// Flushes what was logged and reports a failed write; then hands the file sink over to a
+    /// buffer, which drops it: its writer thread finishes the file (footer and manifest).
+    fn close(&mut self) -> Result<(), RecordError> {
+        let Some(rec) = self.rec.take() else { return Ok(()) };
+        let flushed = rec.stream.flush_blocking().map_err(rr);
+        rec.stream.disconnect();
+        drop(rec.stream);
+        flushed
+    }
+}
+
+impl Drop for RrdFile {
+    /// Closes the stream and removes the partial file: a finished file was renamed away.
+    fn drop(&mut self) {
+        let _ = self.close();
+        let _ = std::fs::remove_file(&self.partial);
+    }
 }
 
 /// The layout the viewer opens with: the cell in 3D beside the
@@ -213,30 +266,8 @@ fn check_footer(path: &Path) -> Result<(), RecordError> {
         .map_err(|e| RecordError::Rerun(format!("{}: not finalised: {e}", path.display())))
 }
 
-fn log_run(
-    rec: &mut Rec,
-    result: &Recording,
-    robot: &RobotModel,
-    scene: &Scene,
-    info: &RunInfo,
-) -> Result<(), RecordError> {
-    let mut props = rerun::AnyValues::default();
-    for (k, v) in info.properties() {
-        props = props.with_component::<rerun::components::Text>(k, [v]);
-    }
-    rec.stream.send_property("binpick", &props).map_err(rr)?;
-    rec.log_static("world", &rerun::ViewCoordinates::RIGHT_HAND_Z_UP())?;
-    log_cell(rec, result, scene)?;
-    log_arm(rec, result, robot)?;
-    log_parts(rec, result)?;
-    log_sensing(rec, result)?;
-    log_paths(rec, result)?;
-    log_events(rec, result)?;
-    Ok(())
-}
-
 /// Table, trays, obstacles and the camera (static).
-fn log_cell(rec: &mut Rec, result: &Recording, scene: &Scene) -> Result<(), RecordError> {
+fn log_cell(rec: &mut Rec, result: &Recording, pick_tray_center_m: Vector3<f64>) -> Result<(), RecordError> {
     let cell = &result.cell_boxes;
     let boxes = rerun::Boxes3D::from_centers_and_half_sizes(
         cell.iter().map(|b| v3(&b.world_from_box.translation.vector)),
@@ -257,7 +288,7 @@ fn log_cell(rec: &mut Rec, result: &Recording, scene: &Scene) -> Result<(), Reco
         "world/camera",
         &rerun::Transform3D::from_translation_rotation(v3(&p.translation.vector), quat(p)),
     )?;
-    let range_m = (Vector3::from(scene.pick_tray.center_m) - p.translation.vector).norm();
+    let range_m = (pick_tray_center_m - p.translation.vector).norm();
     rec.log_static(
         "world/camera",
         &rerun::Pinhole::from_focal_length_and_resolution(
@@ -271,17 +302,20 @@ fn log_cell(rec: &mut Rec, result: &Recording, scene: &Scene) -> Result<(), Reco
     Ok(())
 }
 
-/// The arm: each link's primitives once (static, in the link's frame), the link frames over time.
-fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
-    let link_path = |i: usize| {
-        format!(
-            "world/arm/{}",
-            robot
-                .links
-                .get(i)
-                .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
-        )
-    };
+/// The entity of the arm's link `i`.
+fn link_path(robot: &RobotModel, i: usize) -> String {
+    format!(
+        "world/arm/{}",
+        robot
+            .links
+            .get(i)
+            .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
+    )
+}
+
+/// The arm's static part: each link's primitives (in the link's frame), the series' styles.
+fn log_arm_geometry(rec: &mut Rec, robot: &RobotModel) -> Result<(), RecordError> {
+    let link_path = |i: usize| link_path(robot, i);
     for (i, link) in robot.links.iter().enumerate().take(DOF + 1) {
         let path = format!("{}/geometry", link_path(i));
         let colour = rerun::Color::from_rgb(230, 200, 60);
@@ -332,8 +366,33 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
             }
         }
     }
+    let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
+    rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;
+    rec.log_static("joints/velocity", &rerun::SeriesLines::new().with_names(names.clone()))?;
+    rec.log_static("joints/tracking_error", &rerun::SeriesLines::new().with_names(names))?;
+    for j in 0..DOF {
+        rec.log_static(
+            &format!("joints/torque/J{}", j + 1),
+            &rerun::SeriesLines::new()
+                .with_names(["applied [N m]", "+limit", "-limit", "demanded [N m]"])
+                .with_colors([
+                    rerun::Color::from_rgb(30, 120, 230),
+                    rerun::Color::from_rgb(220, 40, 40),
+                    rerun::Color::from_rgb(220, 40, 40),
+                    rerun::Color::from_rgb(240, 160, 20),
+                ]),
+        )?;
+    }
+    rec.log_static("cycle/takt", &rerun::SeriesPoints::new().with_names(["takt [s]"]))
+}
+
+/// The arm over time: the link frames (50 Hz), the joint series (100 Hz).
+fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), RecordError> {
     // Link frames at 50 Hz, one columnar call per link.
     let samples = arm_samples(result);
+    if samples.is_empty() {
+        return Ok(());
+    }
     let times: Vec<f64> = samples.iter().map(|(t, _)| *t).collect();
     let world_from_links: Vec<Vec<Isometry3<f64>>> = samples.iter().map(|(_, q)| robot.world_from_links(q)).collect();
     for i in 0..=DOF.min(robot.links.len().saturating_sub(1)) {
@@ -342,15 +401,14 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
             .with_many_quaternion(world_from_links.iter().map(|f| quat(&f[i])))
             .columns_of_unit_batches()
             .map_err(rr)?;
-        rec.columns(&link_path(i), &times, columns)?;
+        rec.columns(&link_path(robot, i), &times, columns)?;
     }
     // Joint series at 100 Hz: positions and velocities (six series each), torque beside its limit.
-    let ticks: Vec<&crate::servo::Tick> = result.trace.iter().step_by(JOINT_STATE_EVERY).collect();
+    let ticks: Vec<&crate::servo::Tick> = joint_state_ticks(result).collect();
+    if ticks.is_empty() {
+        return Ok(());
+    }
     let times: Vec<f64> = ticks.iter().map(|t| t.t_s).collect();
-    let names: Vec<String> = (1..=DOF).map(|j| format!("J{j}")).collect();
-    rec.log_static("joints/position", &rerun::SeriesLines::new().with_names(names.clone()))?;
-    rec.log_static("joints/velocity", &rerun::SeriesLines::new().with_names(names.clone()))?;
-    rec.log_static("joints/tracking_error", &rerun::SeriesLines::new().with_names(names))?;
     let position: Vec<f64> = ticks
         .iter()
         .flat_map(|t| t.q.iter().copied().collect::<Vec<_>>())
@@ -369,17 +427,6 @@ fn log_arm(rec: &mut Rec, result: &Recording, robot: &RobotModel) -> Result<(), 
     let limit = robot.torque_limit_nm();
     for j in 0..DOF {
         let path = format!("joints/torque/J{}", j + 1);
-        rec.log_static(
-            &path,
-            &rerun::SeriesLines::new()
-                .with_names(["applied [N m]", "+limit", "-limit", "demanded [N m]"])
-                .with_colors([
-                    rerun::Color::from_rgb(30, 120, 230),
-                    rerun::Color::from_rgb(220, 40, 40),
-                    rerun::Color::from_rgb(220, 40, 40),
-                    rerun::Color::from_rgb(240, 160, 20),
-                ]),
-        )?;
         let values: Vec<f64> = ticks
             .iter()
             .flat_map(|t| [t.tau_nm[j], limit[j], -limit[j], t.demand_nm[j]])
@@ -423,7 +470,7 @@ fn log_sensing(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
         rec.log(
             c.t_s,
             "world/cloud",
-            &rerun::Points3D::new(c.sparse_points_world_m.iter().copied()).with_radii([0.0009]),
+            &rerun::Points3D::new(c.points_world_m.iter().copied()).with_radii([0.0009]),
         )?;
     }
     let half = Vector3::from(result.part_size_m) / 2.0;
@@ -520,11 +567,8 @@ fn log_events(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
         };
         rec.log(e.t_s, "events", &rerun::TextLog::new(event_text(e)).with_level(level))?;
     }
-    rec.log_static("cycle/takt", &rerun::SeriesPoints::new().with_names(["takt [s]"]))?;
-    for r in &result.records {
-        if let (Some(release), Some(t)) = (r.release_s, r.takt_s) {
-            rec.log(release, "cycle/takt", &rerun::Scalars::single(t))?;
-        }
+    for t in &result.takts {
+        rec.log(t.release_s, "cycle/takt", &rerun::Scalars::single(t.takt_s))?;
     }
     Ok(())
 }

@@ -210,7 +210,7 @@ pub fn terminal(rows: &[Summary]) -> String {
     for r in &cells {
         out += &line(r.iter().enumerate().map(|(i, t)| pad(t, i)).collect());
     }
-    out + &no_takt_notes(rows)
+    out + &no_takt_notes(rows) + &incident_notes(rows)
 }
 
 /// The lines under a table that say why rows have no takt (empty when every row has one), in
@@ -220,6 +220,36 @@ pub fn no_takt_notes(rows: &[Summary]) -> String {
         .filter_map(no_takt_why)
         .map(|w| format!("\n{}\n", wrap(&w, TERMINAL_WIDTH)))
         .collect()
+}
+
+/// Most incidents listed under a table per row; the JSON results hold them all.
+pub const INCIDENTS_LISTED: usize = 5;
+
+/// The lines under a table that list each row's incidents (collisions, protective stops, lost
+/// parts, physics faults: when, in which run and pick, what happened), at most
+/// [`INCIDENTS_LISTED`] a row; empty when there are none.
+pub fn incident_notes(rows: &[Summary]) -> String {
+    rows.iter().map(|s| incident_note(&s.tally.workpiece, s)).collect()
+}
+
+/// The lines that list the incidents of the row `label` (see [`incident_notes`]).
+pub fn incident_note(label: &str, s: &Summary) -> String {
+    let list = &s.tally.incidents;
+    if list.is_empty() {
+        return String::new();
+    }
+    let plural = if list.len() == 1 { "" } else { "s" };
+    let mut out = format!("\n{label}: {} incident{plural}\n", list.len());
+    for i in list.iter().take(INCIDENTS_LISTED) {
+        let pick = i.pick.map_or(String::new(), |p| format!(", pick {p}"));
+        let line = format!("- seed {}{pick}, t = {:.1} s: {}", i.seed, i.t_s, i.detail);
+        out += &wrap(&line, TERMINAL_WIDTH);
+        out.push('\n');
+    }
+    if list.len() > INCIDENTS_LISTED {
+        out += &format!("- and {} more in the JSON results\n", list.len() - INCIDENTS_LISTED);
+    }
+    out
 }
 
 /// `text` in lines of at most `width` characters, broken at spaces (a word longer than the
@@ -565,7 +595,7 @@ pub fn markdown(rows: &[Summary]) -> String {
         }
         md += "\n";
     }
-    md + &no_takt_notes(rows)
+    md + &no_takt_notes(rows) + &incident_notes(rows)
 }
 
 /// A row as JSON: every key of the list (the order is the map's).
@@ -724,6 +754,45 @@ mod tests {
         });
         assert_eq!(no_takt_why(&fine), None);
         assert_eq!(no_takt_notes(&[fine]), "");
+    }
+
+    #[test]
+    fn incidents_are_listed_under_the_table_at_most_five_a_row() {
+        use crate::cycle::Incident;
+        let incident = |k: usize| Incident {
+            seed: 3,
+            pick: Some(100 + k),
+            t_s: 250.0 + k as f64,
+            kind: "fault".into(),
+            detail: format!(
+                "collision: link 6 and part {k} during the Place motion, far too long a line to print {}",
+                "x ".repeat(40)
+            ),
+        };
+        let row = |n: usize| {
+            Summary::of(&Tally {
+                workpiece: "B".into(),
+                runs: 1,
+                attempts: 10,
+                placed: 9,
+                takts_s: vec![1.5; 8],
+                incidents: (0..n).map(incident).collect(),
+                ..Tally::default()
+            })
+        };
+        let notes = incident_notes(&[row(7)]);
+        assert!(
+            notes.starts_with("\nB: 7 incidents\n- seed 3, pick 100, t = 250.0 s: collision: link 6"),
+            "{notes}"
+        );
+        assert_eq!(notes.matches("- seed 3").count(), INCIDENTS_LISTED);
+        assert!(notes.ends_with("- and 2 more in the JSON results\n"), "{notes}");
+        assert!(notes.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH), "{notes}");
+        // In both tables.
+        assert!(markdown(&[row(1)]).contains("B: 1 incident\n- seed 3, pick 100"));
+        assert!(terminal(&[row(1)]).contains("B: 1 incident\n"));
+        // Negative control: a row without incidents has no note.
+        assert_eq!(incident_notes(&[row(0)]), "");
     }
 
     #[test]

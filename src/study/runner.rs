@@ -20,7 +20,7 @@ use super::{Job, StudyError, StudyRun, StudySpec};
 use crate::chart::TimeChart;
 use crate::config::{LoadedScene, LoadedWorkpiece};
 use crate::cycle::{Observer, Observers, RunOptions, Tally};
-use crate::recording::{Formats, Recorder, RunInfo};
+use crate::recording::{Formats, Recorder, RecordingFiles, RunInfo};
 use crate::robot::RobotModel;
 use crate::sensor::Camera;
 
@@ -155,13 +155,23 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
         seed: *seed,
         deterministic: spec.deterministic,
         stop: settings.stop,
-        // A recording plays the records; the table needs only the tally.
+        // The time chart marks the releases; the table needs only the tally.
         keep_records: record.is_some(),
     };
     let mut recorder = match record {
         Some(r) if r.formats.any() => {
             let camera = Camera::from_config(&scene.scene.sensor).ok_or("the sensor's pose is degenerate")?;
-            Some(Recorder::new(robot, camera, wp.workpiece.size_m))
+            let info = RunInfo {
+                scene: variant.scene.label.clone(),
+                workpiece: w.clone(),
+                seed: *seed,
+                deterministic: spec.deterministic,
+                picks: spec.picks,
+                robot_description: variant.scene.urdf_text.clone(),
+            };
+            let files = RecordingFiles::create(r.dir, &stem, r.formats, &scene.scene, &info)
+                .map_err(|(path, e)| format!("{}: {e}", path.display()))?;
+            Some(Recorder::streaming(robot, camera, wp.workpiece.size_m, files))
         }
         _ => None,
     };
@@ -191,25 +201,9 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
             std::fs::write(&path, svg).map_err(|e| format!("{}: {e}", path.display()))?;
         }
     }
-    if let (Some(rec), Some(to)) = (recorder, record) {
-        let info = RunInfo {
-            scene: variant.scene.label.clone(),
-            workpiece: w.clone(),
-            seed: *seed,
-            deterministic: spec.deterministic,
-            picks: spec.picks,
-            robot_description: variant.scene.urdf_text.clone(),
-        };
-        crate::recording::write_recordings(
-            to.dir,
-            &stem,
-            to.formats,
-            &rec.finish(&result),
-            robot,
-            &scene.scene,
-            &info,
-        )
-        .map_err(|(path, e)| format!("{}: {e}", path.display()))?;
+    if let Some(rec) = recorder {
+        rec.finish_files()
+            .map_err(|(path, e)| format!("{}: {e}", path.display()))?;
     }
     Ok(StudyRun { variant: *v, tally })
 }

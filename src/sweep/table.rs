@@ -83,6 +83,8 @@ pub fn markdown(spec: &StudySpec, rows: &[SweepRow]) -> String {
         if let Some(why) = crate::results::table::no_takt_why(&r.row) {
             md += &format!("\nvariant {}, {why}\n", r.variant + 1);
         }
+        let label = format!("variant {}, {}", r.variant + 1, r.row.tally.workpiece);
+        md += &crate::results::table::incident_note(&label, &r.row);
     }
     md
 }

@@ -66,6 +66,10 @@ fn a_fault_in_a_refill_pour_ends_the_run_with_its_typed_record_and_keeps_the_tal
     assert!(t.captures.0 > 0 && t.agitations == 3, "{t:?}");
     assert_eq!(t.runs, 1);
     assert!(t.sim_time_s >= f.time_s);
+    // The fault is also the run's last incident, with the log's line for it.
+    let last = t.incidents.last().expect("an incident");
+    assert_eq!((last.kind.as_str(), last.t_s), ("physics_fault", f.time_s), "{last:?}");
+    assert!(last.detail.contains("deep penetration"), "{last:?}");
     // The record survives a shard file and reads back as it was.
     let back: binpick::cycle::Tally = serde_json::from_value(serde_json::to_value(t).unwrap()).unwrap();
     assert_eq!((&back.physics_faults, back.ended), (&t.physics_faults, t.ended));
@@ -142,6 +146,9 @@ fn a_study_with_a_faulted_run_writes_every_run_marks_it_and_exits_3() {
         (Some("pour"), Some("deep_penetration"))
     );
     assert!(f["problems"][0]["depth_mm"].as_f64().unwrap() > 0.001);
+    // Listed as an incident in the JSON and under the table.
+    assert_eq!(runs[0]["run"]["incidents"][0]["kind"], "physics_fault");
+    assert!(md.contains("variant 1, D: 1 incident\n- seed 1"), "{md}");
 }
 
 #[test]
@@ -151,4 +158,6 @@ fn negative_control_a_study_without_a_fault_exits_0_unmarked() {
     assert!(md.contains("| 1 | 0.002 | D | 2/2 |"), "{md}");
     assert!(!md.contains("physics fault") && !md.contains("nothing placed"), "{md}");
     assert!(json["sweep"]["runs"][0]["run"].get("physics_faults").is_none());
+    assert!(json["sweep"]["runs"][0]["run"].get("incidents").is_none());
+    assert!(!md.contains("incident"), "{md}");
 }

@@ -455,25 +455,15 @@ fn run_mcap_holds_what_the_run_did() {
     assert_eq!(rows("/cycle/takt"), takts);
     assert_eq!(rows("/world/camera/depth"), captures);
     assert_eq!(rows("/world/cloud"), captures);
-    // The .rrd's sparse cloud: every 2nd point of the MCAP's each way, so about a quarter of
-    // them, and each one of the MCAP's points of the same capture (both on the same grid).
+    // The same cloud in both files, point for point (both on the same grid).
     assert_eq!(rrd.clouds.len(), mcap_clouds.len());
-    for (sparse, cloud) in rrd.clouds.iter().zip(&mcap_clouds) {
-        let quarter = cloud.len() as f64 / 4.0;
-        assert!(
-            (sparse.len() as f64 - quarter).abs() <= 0.05 * quarter + 10.0,
-            "{} of {}",
-            sparse.len(),
-            cloud.len()
-        );
+    for (rrd_cloud, cloud) in rrd.clouds.iter().zip(&mcap_clouds) {
         let key = |p: &[f32; 3]| p.map(f32::to_bits);
+        assert!(cloud.len() > 1000, "{} points", cloud.len());
+        assert!(rrd_cloud.iter().map(key).eq(cloud.iter().map(key)), "the clouds differ");
+        // Negative control: a point moved by one grid step is not in the cloud.
         let all: std::collections::BTreeSet<[u32; 3]> = cloud.iter().map(key).collect();
-        assert!(
-            sparse.iter().all(|p| all.contains(&key(p))),
-            "a sparse point not in the cloud"
-        );
-        // Negative control: a point moved by one grid step is not found.
-        let mut moved = sparse[0];
+        let mut moved = rrd_cloud[0];
         moved[0] += binpick::recording::CLOUD_GRID_M as f32;
         assert!(!all.contains(&key(&moved)));
     }
@@ -610,8 +600,8 @@ fn a_failed_write_is_reported_and_leaves_nothing() {
         stop: None,
         keep_records: true,
     };
-    let result = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
-    let r = recorder.finish(&result);
+    binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
+    let r = recorder.finish();
     let info = RunInfo {
         scene: scene.label.clone(),
         workpiece: "E".into(),
@@ -641,4 +631,107 @@ fn a_failed_write_is_reported_and_leaves_nothing() {
     assert_eq!(names, ["run.mcap", "run.rrd"]);
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.rows.get("/world/camera/depth").copied(), Some(r.captures.len()));
+}
+
+/// A recording streamed as the run goes (handed on part by part, `STREAM_LAG_S` behind the
+/// simulation, so that an all-day run's memory stays flat) is the recording of the whole run: its
+/// MCAP holds the same bytes as the one written from the whole run at its end, its messages in
+/// log-time order, nothing reported late, and its .rrd the same rows. Negative control: the whole
+/// run's file without its last takt differs.
+#[test]
+fn a_streamed_recording_is_the_whole_runs() {
+    use binpick::config::{LoadedScene, LoadedWorkpiece};
+    use binpick::cycle::RunOptions;
+    use binpick::recording::{Formats, Recorder, RecordingFiles, RunInfo, write_recordings};
+    use binpick::robot::RobotModel;
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("E").unwrap();
+    let camera = binpick::sensor::Camera::from_config(&scene.scene.sensor).unwrap();
+    let opts = RunOptions {
+        picks: 30,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: false,
+    };
+    let info = RunInfo {
+        scene: scene.label.clone(),
+        workpiece: "E".into(),
+        seed: 1,
+        deterministic: true,
+        picks: 30,
+        robot_description: scene.urdf_text.clone(),
+    };
+    let formats = Formats { rrd: true, mcap: true };
+    let ws = Workspace::new();
+    let (whole_dir, streamed_dir) = (ws.path("whole"), ws.path("streamed"));
+    std::fs::create_dir_all(&whole_dir).unwrap();
+    std::fs::create_dir_all(&streamed_dir).unwrap();
+
+    let mut whole = Recorder::new(&robot, camera.clone(), wp.workpiece.size_m);
+    let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut whole).unwrap();
+    let mut whole = whole.finish();
+    write_recordings(&whole_dir, "run", formats, &whole, &robot, &scene.scene, &info).unwrap();
+
+    let files = RecordingFiles::create(&streamed_dir, "run", formats, &scene.scene, &info).unwrap();
+    let mut streamed = Recorder::streaming(&robot, camera, wp.workpiece.size_m, files);
+    let s = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut streamed).unwrap();
+    assert_eq!(s.tally.sim_time_s, r.tally.sim_time_s, "deterministic runs");
+    assert!(
+        s.tally.sim_time_s > 2.0 * binpick::recording::STREAM_LAG_S,
+        "{} s: too short to stream in parts",
+        s.tally.sim_time_s
+    );
+    // Handed on while the run went (the last part is handed on by finish_files).
+    assert!(streamed.handed_on() >= 2, "{} parts", streamed.handed_on());
+    assert_eq!(streamed.late(), 0);
+    streamed.finish_files().unwrap();
+
+    let whole_mcap = std::fs::read(whole_dir.join("run.mcap")).unwrap();
+    let streamed_mcap = std::fs::read(streamed_dir.join("run.mcap")).unwrap();
+    if whole_mcap != streamed_mcap {
+        let list = |bytes: &[u8]| -> Vec<(String, u64, u32, Vec<u8>)> {
+            mcap::MessageStream::new(bytes)
+                .unwrap()
+                .map(|m| {
+                    let m = m.unwrap();
+                    (m.channel.topic.clone(), m.log_time, m.sequence, m.data.to_vec())
+                })
+                .collect()
+        };
+        let (w, s) = (list(&whole_mcap), list(&streamed_mcap));
+        let first = w.iter().zip(&s).position(|(a, b)| a != b);
+        let show = |m: Option<&(String, u64, u32, Vec<u8>)>| m.map(|m| (m.0.clone(), m.1, m.2, m.3.len()));
+        panic!(
+            "the streamed MCAP differs from the whole run's: {} against {} messages; first difference at {first:?}: {:?} against {:?}",
+            w.len(),
+            s.len(),
+            first.and_then(|k| show(w.get(k))),
+            first.and_then(|k| show(s.get(k)))
+        );
+    }
+    let mut last = 0u64;
+    let mut messages = 0;
+    for m in mcap::MessageStream::new(&streamed_mcap).unwrap() {
+        let m = m.unwrap();
+        assert!(m.log_time >= last, "log times go back on {}", m.channel.topic);
+        last = m.log_time;
+        messages += 1;
+    }
+    assert!(messages > 1000, "{messages} messages");
+    let (a, b) = (
+        read_rrd(&whole_dir.join("run.rrd")),
+        read_rrd(&streamed_dir.join("run.rrd")),
+    );
+    assert_eq!(a.rows, b.rows);
+    assert_eq!(a.static_rows, b.static_rows);
+
+    // Negative control: one takt fewer is another file.
+    assert!(!whole.takts.is_empty());
+    whole.takts.pop();
+    let cut_dir = ws.path("cut");
+    std::fs::create_dir_all(&cut_dir).unwrap();
+    write_recordings(&cut_dir, "run", formats, &whole, &robot, &scene.scene, &info).unwrap();
+    assert!(std::fs::read(cut_dir.join("run.mcap")).unwrap() != whole_mcap);
 }

@@ -101,7 +101,7 @@ fn run(workpiece: &str, picks: usize) -> (RunResult, Recording, RobotModel, Load
     let mut recorder = Recorder::new(&robot, camera, wp.workpiece.size_m);
     let opts = deterministic(picks, 1);
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
-    let rec = recorder.finish(&r);
+    let rec = recorder.finish();
     (r, rec, robot, scene, wp)
 }
 
