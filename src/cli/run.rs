@@ -211,6 +211,7 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
         t.grasps.0,
         t.misrecognised
     );
+    print!("{}", binpick::results::table::incident_note(&t.workpiece, s));
 }
 
 #[cfg(test)]

@@ -30,6 +30,9 @@ pub struct TrayState {
     pub fills: u64,
     /// Picks attempted since the last pour.
     pub attempts_since_fill: usize,
+    /// Full trays in a row (the current one included, once it is given up on) on which not one
+    /// pick was attempted.
+    pub fruitless_fills_in_row: u32,
     /// Captures in a row that gave nothing to pick.
     pub empty_in_row: u32,
     /// Pick-tray refills.
@@ -58,6 +61,7 @@ impl Default for TrayState {
             next_slot: 0,
             fills: 1,
             attempts_since_fill: 0,
+            fruitless_fills_in_row: 0,
             empty_in_row: 0,
             refills: 0,
             agitations: 0,
@@ -71,6 +75,12 @@ impl Default for TrayState {
         }
     }
 }
+
+/// Full trays in a row on which not one pick was attempted before the run ends ("nothing
+/// graspable in a full tray"): one such pile is bad luck (a 2,000-pick C run met one at pick
+/// 1619, and the tray exchanged for the next full one would have gone on), three in a row say
+/// the cell cannot take this part.
+pub const FRUITLESS_FILLS_MAX: u32 = 3;
 
 impl TrayState {
     /// A pick was attempted: the pile is not empty.
@@ -107,9 +117,14 @@ impl Run<'_, '_> {
         let trays = &mut self.st.trays;
         trays.empty_in_row = 0;
         trays.agitations_in_row = 0;
+        if trays.attempts_since_fill == 0 {
+            trays.fruitless_fills_in_row += 1;
+        } else {
+            trays.fruitless_fills_in_row = 0;
+        }
         match policy.on_empty {
             OnEmpty::End => Ok(Some(EndReason::TrayEmpty)),
-            OnEmpty::Refill if trays.attempts_since_fill == 0 && trays.fills > 1 => {
+            OnEmpty::Refill if trays.fruitless_fills_in_row >= FRUITLESS_FILLS_MAX => {
                 Ok(Some(EndReason::NothingGraspableInFullTray))
             }
             OnEmpty::Refill => {

@@ -75,3 +75,31 @@ fn batch_sustained_refuses_a_pick_count_beside_it() {
     let help = binpick(&["batch", "--help"]);
     assert!(String::from_utf8_lossy(&help.stdout).contains("--sustained"));
 }
+
+/// A part the cup cannot take (the radial capacitor): the cell exchanges a full tray that gave
+/// it nothing to attempt, and ends the run only after `FRUITLESS_FILLS_MAX` such trays in a row,
+/// not on the first (an all-day line must not stop on one unlucky pile). The picks asked for are
+/// far more than it gets to, so it is the policy that ends the run.
+#[test]
+fn a_run_ends_after_three_fruitless_full_trays_in_a_row_not_one() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp =
+        LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/capacitor-radial.toml")).unwrap();
+    let opts = RunOptions {
+        picks: 200,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: false,
+    };
+    let t = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap().tally;
+    assert_eq!(
+        t.ended,
+        Some(binpick::cycle::EndReason::NothingGraspableInFullTray),
+        "{t:?}"
+    );
+    assert_eq!(t.placed, 0);
+    assert!(t.attempts < 200);
+    assert_eq!(t.refills as u32, binpick::cycle::trays::FRUITLESS_FILLS_MAX - 1);
+}
