@@ -106,6 +106,26 @@ pub struct CaptureImage {
     pub points_world_m: Vec<[f32; 3]>,
 }
 
+impl CaptureImage {
+    /// The depth image as the files carry it: 16-bit little-endian mm per pixel, row-major.
+    pub fn depth_le_bytes(&self) -> Vec<u8> {
+        let mut out = vec![0; 2 * self.depth_mm.len()];
+        for (b, d) in out.chunks_exact_mut(2).zip(&self.depth_mm) {
+            b.copy_from_slice(&d.to_le_bytes());
+        }
+        out
+    }
+
+    /// The point cloud as packed little-endian f32 x, y, z (12 bytes a point).
+    pub fn points_le_bytes(&self) -> Vec<u8> {
+        let mut out = vec![0; 12 * self.points_world_m.len()];
+        for (b, p) in out.chunks_exact_mut(4).zip(self.points_world_m.iter().flatten()) {
+            b.copy_from_slice(&p.to_le_bytes());
+        }
+        out
+    }
+}
+
 /// The points of every `every_px`-th pixel of `c` in each direction that has a return, row-major,
 /// each coordinate rounded to the [`CLOUD_GRID_M`] grid [m, world].
 fn cloud_on_grid(c: &Capture, every_px: usize) -> Vec<[f32; 3]> {
@@ -413,7 +433,9 @@ impl Observer for Recorder<'_> {
         self.buffer.captures.push(CaptureImage {
             t_s: c.trigger_s,
             size_px: (c.width_px, c.height_px),
-            depth_mm: c.depth_m.iter().map(|d| (d * 1000.0).round() as u16).collect(),
+            // Depths are non-negative: adding a half and truncating rounds as `round` does, without
+            // its library call per pixel.
+            depth_mm: c.depth_m.iter().map(|d| (d * 1000.0 + 0.5) as u16).collect(),
             points_world_m: cloud_on_grid(c, CLOUD_EVERY_PX),
         });
     }

@@ -630,7 +630,7 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
                 ],
             },
         )?;
-        let depth: Vec<u8> = cap.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect();
+        let depth = cap.depth_le_bytes();
         m.proto(
             t,
             Topic::Depth,
@@ -644,12 +644,7 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
                 data: depth.into(),
             },
         )?;
-        let points: Vec<u8> = cap
-            .points_world_m
-            .iter()
-            .flatten()
-            .flat_map(|v| v.to_le_bytes())
-            .collect();
+        let points = cap.points_le_bytes();
         m.proto(
             t,
             Topic::Points,

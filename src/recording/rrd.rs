@@ -461,7 +461,7 @@ fn log_parts(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
 /// recognition result arrived.
 fn log_sensing(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
     for c in &result.captures {
-        let bytes: Vec<u8> = c.depth_mm.iter().flat_map(|d| d.to_le_bytes()).collect();
+        let bytes = c.depth_le_bytes();
         rec.log(
             c.t_s,
             "world/camera/depth",
