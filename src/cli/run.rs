@@ -155,8 +155,9 @@ fn takt_text(s: &binpick::results::Summary) -> String {
 
 /// Prints a run's summary: takt, success, waits, faults, the servo's figures, recognition.
 fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) {
+    use binpick::results::table::{TERMINAL_WIDTH, wrap};
     let t = &s.tally;
-    println!(
+    let summary = format!(
         "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \
          defines it) {} (reference {}); excluding \
          tray refills {}; Pick {}, Place {} (motion floor {}); waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
@@ -191,8 +192,9 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
         wall_s,
         t.sim_time_s / wall_s
     );
+    println!("{}", wrap(&summary, TERMINAL_WIDTH));
     let r = &s.recognition;
-    println!(
+    let recognised = format!(
         "recognition ({}), against the truth at each trigger: top layer {} / {} found (recall {:.1} %), \
          {} of {} detections correct (precision {:.1} %; correct = within 2 mm and 5 deg), pose error median \
          {:.2} mm / {:.2} deg, p95 {:.2} mm / {:.2} deg; grasps sealed {} / {}, misrecognised {}",
@@ -211,6 +213,7 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
         t.grasps.0,
         t.misrecognised
     );
+    println!("{}", wrap(&recognised, TERMINAL_WIDTH));
     print!("{}", binpick::results::table::incident_note(&t.workpiece, s));
 }
 
