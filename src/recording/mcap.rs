@@ -50,7 +50,7 @@ use serde::Serialize;
 use super::Recording;
 use super::{
     CANDIDATE_ARROW_M, RecordError, RunInfo, arm_samples, event_level, event_text, frustum_corners, joint_state_ticks,
-    part_rgb,
+    link_name, part_rgb,
 };
 use crate::config::Scene;
 use crate::robot::{DOF, RobotModel};
@@ -455,14 +455,6 @@ struct ServoState {
 /// A joint vector in single precision.
 fn single(v: &crate::robot::JointVector) -> [f32; DOF] {
     std::array::from_fn(|j| v[j] as f32)
-}
-
-/// The name of the arm's link `i` (its frame).
-fn link_name(robot: &RobotModel, i: usize) -> String {
-    robot
-        .links
-        .get(i)
-        .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
 }
 
 /// `/robot/geometry` once: each link's primitives locked to its frame.

@@ -248,6 +248,14 @@ pub(crate) fn arm_samples(result: &Recording) -> Vec<(f64, crate::robot::JointVe
         .collect()
 }
 
+/// The name of the arm's link `i` (its frame in both files; `link_<i>` if the model has none).
+pub(crate) fn link_name(robot: &RobotModel, i: usize) -> String {
+    robot
+        .links
+        .get(i)
+        .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
+}
+
 /// Colour of a part in a state (RGB, 0..1): blue in the pick tray, orange on the cup, green placed.
 pub(crate) fn part_rgb(state: PartState) -> [f32; 3] {
     match state {

@@ -34,7 +34,8 @@ use rerun::{RecordingStream, TimeColumn};
 
 use super::Recording;
 use super::{
-    CANDIDATE_ARROW_M, RecordError, RunInfo, arm_samples, event_level, event_text, joint_state_ticks, part_rgb,
+    CANDIDATE_ARROW_M, RecordError, RunInfo, arm_samples, event_level, event_text, joint_state_ticks, link_name,
+    part_rgb,
 };
 use crate::config::Scene;
 use crate::physics::PartState;
@@ -304,13 +305,7 @@ fn log_cell(rec: &mut Rec, result: &Recording, pick_tray_center_m: Vector3<f64>)
 
 /// The entity of the arm's link `i`.
 fn link_path(robot: &RobotModel, i: usize) -> String {
-    format!(
-        "world/arm/{}",
-        robot
-            .links
-            .get(i)
-            .map_or_else(|| format!("link_{i}"), |l| l.name.clone())
-    )
+    format!("world/arm/{}", link_name(robot, i))
 }
 
 /// The arm's static part: each link's primitives (in the link's frame), the series' styles.
