@@ -209,7 +209,14 @@ fn markdown_html(md: &str) -> String {
                 out += "<ul>\n";
                 list = true;
             }
-            let _ = writeln!(out, "<li>{}</li>", inline(&line[2..]));
+            // An item's continuation lines (indented) belong to it.
+            let mut item = line[2..].to_string();
+            while let Some(next) = lines.get(i + 1).filter(|l| l.starts_with("  ") && !l.trim().is_empty()) {
+                item.push(' ');
+                item += next.trim();
+                i += 1;
+            }
+            let _ = writeln!(out, "<li>{}</li>", inline(&item));
         } else if !line.trim().is_empty() {
             let _ = writeln!(out, "<p>{}</p>", inline(line.trim()));
         }
@@ -325,13 +332,13 @@ mod tests {
 
     #[test]
     fn markdown_tables_lists_and_headings_become_html() {
-        let md = "# tune of A\n\nsome `key` text & more\n\n| a | b |\n|---|--:|\n| 1 | <2> |\n\n- one\n- two\n";
+        let md = "# tune of A\n\nsome `key` text & more\n\n| a | b |\n|---|--:|\n| 1 | <2> |\n\n- one\n- two,\n  continued\n";
         let h = markdown_html(md);
         assert!(h.contains("<h3>tune of A</h3>"), "{h}");
         assert!(h.contains("<p>some <code>key</code> text &amp; more</p>"), "{h}");
         assert!(h.contains("<thead><tr><th>a</th><th>b</th></tr></thead>"), "{h}");
         assert!(h.contains("<tr><td>1</td><td>&lt;2&gt;</td></tr>"), "{h}");
-        assert!(h.contains("<ul>\n<li>one</li>\n<li>two</li>\n</ul>"), "{h}");
+        assert!(h.contains("<ul>\n<li>one</li>\n<li>two, continued</li>\n</ul>"), "{h}");
         assert_eq!(href("run-a b&c.rrd"), "run-a%20b%26c.rrd");
         let svg = "<?xml version=\"1.0\"?>\n<svg xmlns=\"http://www.w3.org/2000/svg\"></svg>\n";
         assert_eq!(inline_svg(svg), "<svg xmlns=\"http://www.w3.org/2000/svg\"></svg>");

@@ -242,8 +242,9 @@ pub fn incident_note(label: &str, s: &Summary) -> String {
     let mut out = format!("\n{label}: {} incident{plural}\n", list.len());
     for i in list.iter().take(INCIDENTS_LISTED) {
         let pick = i.pick.map_or(String::new(), |p| format!(", pick {p}"));
+        // A list item; its continuation lines indented, so Markdown keeps them in the item.
         let line = format!("- seed {}{pick}, t = {:.1} s: {}", i.seed, i.t_s, i.detail);
-        out += &wrap(&line, TERMINAL_WIDTH);
+        out += &wrap(&line, TERMINAL_WIDTH - 2).replace('\n', "\n  ");
         out.push('\n');
     }
     if list.len() > INCIDENTS_LISTED {
@@ -788,6 +789,15 @@ mod tests {
         assert_eq!(notes.matches("- seed 3").count(), INCIDENTS_LISTED);
         assert!(notes.ends_with("- and 2 more in the JSON results\n"), "{notes}");
         assert!(notes.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH), "{notes}");
+        // Every line of an item after its first is indented (Markdown keeps it in the item).
+        assert!(
+            notes
+                .lines()
+                .skip(2) // the blank line and the row's header
+                .all(|l| l.starts_with("- ") || l.starts_with("  ")),
+            "{notes}"
+        );
+        assert!(notes.lines().any(|l| l.starts_with("  ")), "{notes}");
         // In both tables.
         assert!(markdown(&[row(1)]).contains("B: 1 incident\n- seed 3, pick 100"));
         assert!(terminal(&[row(1)]).contains("B: 1 incident\n"));
