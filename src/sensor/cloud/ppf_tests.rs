@@ -34,6 +34,15 @@ fn nearest(sym: &Symmetry, found: &[Isometry3<f64>], truth: &Isometry3<f64>) -> 
         .map(|(dp, dr)| (dp * 1e3, dr.to_degrees()))
 }
 
+/// Three capacitors lying on their sides at different yaws, resting on the tray floor.
+fn three_lying_capacitors(cell: &Cell, w: &crate::config::Workpiece) -> [Isometry3<f64>; 3] {
+    [
+        resting(cell, w, 0.03, -0.02, 0.0, yaw(25.0) * roll(90.0)),
+        resting(cell, w, -0.04, 0.03, 0.0, yaw(-50.0) * roll(90.0) * yaw(40.0)),
+        resting(cell, w, 0.0, 0.0, 0.0, yaw(70.0) * roll(-90.0) * yaw(-20.0)),
+    ]
+}
+
 fn capacitor() -> (crate::config::Workpiece, CloudModel, Symmetry) {
     let cell = cell();
     let w = workpiece(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/capacitor-radial.toml"));
@@ -89,11 +98,7 @@ fn ppf_locates_the_smd_elcap_and_reports_no_turn_the_image_leaves_open() {
 fn ppf_finds_a_lying_capacitor_and_nothing_where_none_is() {
     let cell = cell();
     let (w, m, sym) = capacitor();
-    let poses = [
-        resting(&cell, &w, 0.03, -0.02, 0.0, yaw(25.0) * roll(90.0)),
-        resting(&cell, &w, -0.04, 0.03, 0.0, yaw(-50.0) * roll(90.0) * yaw(40.0)),
-        resting(&cell, &w, 0.0, 0.0, 0.0, yaw(70.0) * roll(-90.0) * yaw(-20.0)),
-    ];
+    let poses = three_lying_capacitors(&cell, &w);
     let parts: Vec<_> = poses.iter().map(|p| (&m, *p)).collect();
     let capture = synthetic(&cell, &parts);
     let found: Vec<Isometry3<f64>> = recognize(&capture, &cell.camera, &cell.tray, &m)
@@ -221,11 +226,7 @@ fn the_recognition_method_key_is_strict() {
 fn ppf_reports_no_lying_capacitor_end_for_end() {
     let cell = cell();
     let (w, m, sym) = capacitor();
-    let poses = [
-        resting(&cell, &w, 0.03, -0.02, 0.0, yaw(25.0) * roll(90.0)),
-        resting(&cell, &w, -0.04, 0.03, 0.0, yaw(-50.0) * roll(90.0) * yaw(40.0)),
-        resting(&cell, &w, 0.0, 0.0, 0.0, yaw(70.0) * roll(-90.0) * yaw(-20.0)),
-    ];
+    let poses = three_lying_capacitors(&cell, &w);
     let parts: Vec<_> = poses.iter().map(|p| (&m, *p)).collect();
     let capture = synthetic(&cell, &parts);
     for d in recognize(&capture, &cell.camera, &cell.tray, &m) {
