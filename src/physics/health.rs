@@ -290,14 +290,26 @@ impl HealthMonitor {
                 .fold(0.0, f64::max);
             let held = |tag: Option<Tag>| matches!(tag, Some(Tag::Part(i)) if w.parts.get(i as usize).is_some_and(|p| p.state == PartState::Held));
             let robotish = |tag: Option<Tag>| tag.is_some_and(Tag::is_robot) || held(tag);
-            let env = |tag: Option<Tag>| matches!(tag, Some(Tag::Env(_)));
+            // A part at rest in its slot is fixed there ([`super::PLACED_REST_WINDOW_S`]): the
+            // arm touching it is a collision, as with the tray it stands in.
+            let placed_at_rest = |tag: Option<Tag>| {
+                matches!(tag, Some(Tag::Part(i)) if w.parts.get(i as usize).is_some_and(|p| {
+                    p.state == PartState::Placed && w.bodies[p.body].is_fixed()
+                }))
+            };
+            let env = |tag: Option<Tag>| matches!(tag, Some(Tag::Env(_))) || placed_at_rest(tag);
             if (robotish(t1) && env(t2)) || (robotish(t2) && env(t1)) {
                 if deepest > self.limits.arm_collision_m {
                     let (r, o) = if robotish(t1) { (t1, t2) } else { (t2, t1) };
+                    let obstacle = if placed_at_rest(o) {
+                        format!("placed {}", w.describe(o))
+                    } else {
+                        w.describe(o)
+                    };
                     events.push(HealthEvent::ArmCollision {
                         time_s: t,
                         robot: w.describe(r),
-                        obstacle: w.describe(o),
+                        obstacle,
                         depth_mm: deepest * 1e3,
                     });
                 }

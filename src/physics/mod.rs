@@ -189,11 +189,20 @@ pub struct PartBody {
 }
 
 /// A placed part whose pose changes less than [`PLACED_REST_M`] and [`PLACED_REST_RAD`] over
-/// this window is put to sleep (s). A real part resting in the place tray is held by static
-/// friction; in rapier, D's can resting on its 16-sided cap keeps a solver velocity of ~4 cm/s
-/// that jitters it across the floor at ~1.3 mm/s, 22 mm over a run, into the next slot, where
-/// the next part was pressed onto it (a collision). Asleep it stays put until something touches
-/// it, which wakes it.
+/// this window has come to rest in its slot (s), and becomes a fixed body there: a real part
+/// resting in the place tray is held by static friction, and nothing in the cell may touch it
+/// again (the arm or held part touching it is a collision, [`health`]). Two rapier behaviours
+/// make a resting dynamic body unsafe there:
+/// - D's can resting on its 16-sided cap kept a solver velocity of ~4 cm/s that jittered it
+///   across the floor at ~1.3 mm/s, 22 mm over a run, into the next slot;
+/// - a body put to sleep by hand (`RigidBody::sleep`) stays in rapier's awake set, so a later
+///   step may integrate it under gravity while its contacts, asleep, are not computed: a B block
+///   resting in its slot for seconds fell 6 mm through the 6 mm floor in 34 ms while the arm
+///   placed another part 90 mm away (the "deep penetration 6.00 mm between place tray floor and
+///   part N" collisions of measured-compute soaks; seed 1, pick 128).
+///
+/// A fixed body is in no island and never integrated; it is also marked asleep, so every
+/// check that a part is at rest ([`World::part_sleeping`], the quiet step) counts it.
 pub const PLACED_REST_WINDOW_S: f64 = 0.2;
 /// See [`PLACED_REST_WINDOW_S`] (m): 2.5 mm/s, faster than the solver's creep, slower than
 /// anything a falling, sliding or toppling part does.
@@ -531,31 +540,41 @@ impl World {
         }
     }
 
-    /// Puts placed parts that have come to rest to sleep ([`PLACED_REST_WINDOW_S`]).
+    /// Fixes placed parts that have come to rest in their slots ([`PLACED_REST_WINDOW_S`]).
     fn rest_placed_parts(&mut self) {
         let now = self.time_s;
         for i in 0..self.parts.len() {
             let body = self.parts[i].body;
-            if self.parts[i].state != PartState::Placed
-                || self.bodies[body].is_sleeping()
-                || !self.bodies[body].is_dynamic()
-            {
+            if self.parts[i].state != PartState::Placed || !self.bodies[body].is_dynamic() {
                 self.parts[i].rest_ref = None;
                 continue;
             }
             let pose = self.part_pose(i);
-            match self.parts[i].rest_ref {
-                Some((t0, before)) if now - t0 >= PLACED_REST_WINDOW_S - 1e-9 => {
-                    let moved = before.inverse() * pose;
-                    if moved.translation.vector.norm() < PLACED_REST_M && moved.rotation.angle() < PLACED_REST_RAD {
-                        self.bodies[body].sleep();
-                        self.parts[i].rest_ref = None;
-                    } else {
-                        self.parts[i].rest_ref = Some((now, pose));
+            // Asleep by rapier's own rule, or still over the window: at rest.
+            let at_rest = self.bodies[body].is_sleeping()
+                || match self.parts[i].rest_ref {
+                    Some((t0, before)) if now - t0 >= PLACED_REST_WINDOW_S - 1e-9 => {
+                        let moved = before.inverse() * pose;
+                        if moved.translation.vector.norm() < PLACED_REST_M && moved.rotation.angle() < PLACED_REST_RAD {
+                            true
+                        } else {
+                            self.parts[i].rest_ref = Some((now, pose));
+                            false
+                        }
                     }
-                }
-                Some(_) => {}
-                None => self.parts[i].rest_ref = Some((now, pose)),
+                    Some(_) => false,
+                    None => {
+                        self.parts[i].rest_ref = Some((now, pose));
+                        false
+                    }
+                };
+            if at_rest {
+                let b = &mut self.bodies[body];
+                b.set_body_type(RigidBodyType::Fixed, false);
+                b.set_linvel(Vector::ZERO, false);
+                b.set_angvel(Vector::ZERO, false);
+                b.sleep();
+                self.parts[i].rest_ref = None;
             }
         }
     }

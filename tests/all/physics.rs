@@ -234,6 +234,22 @@ fn suction_seals_on_a_flat_top_face_lifts_and_places_within_tolerance() {
         dp * 1e3,
         dyaw.to_degrees()
     );
+    // At rest in its slot the part is fixed there (a body put to sleep by hand could fall
+    // through the floor): the cup coming down on it is a collision, and it does not move.
+    assert!(w.part_sleeping(0));
+    let placed = w.part_pose(0);
+    let top_now = placed.translation.vector + placed.rotation * Vector3::new(0.0, 0.0, 0.010);
+    let err = w
+        .move_tool_line(&tool_down_pose(top_now - Vector3::z() * 0.003, heading), 0.3)
+        .unwrap_err();
+    let binpick::physics::script::ScriptError::Health(report) = err else {
+        panic!("{err:?}");
+    };
+    match report.first() {
+        Some(HealthEvent::ArmCollision { obstacle, .. }) => assert_eq!(obstacle, "placed part 0"),
+        other => panic!("{other:?}"),
+    }
+    assert_eq!(w.part_pose(0), placed);
 }
 
 /// The cup holding `workpiece` lifted 5 cm off the tray, at rest; returns the world, the
