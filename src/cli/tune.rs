@@ -26,7 +26,7 @@ use super::{InputError, Interrupted, ModeArgs, OutArgs, check_picks, stop_on_ctr
 use binpick::report::RunDir;
 use binpick::tune::journal::{Header, Journal};
 use binpick::tune::output::Report;
-use binpick::tune::{Constraints, Objective, Settings};
+use binpick::tune::{Constraints, Objective, Optimizer, Settings};
 
 /// Arguments of `binpick tune`.
 #[derive(Args)]
@@ -60,6 +60,11 @@ pub struct TuneArgs {
     /// each run's first 21 picks).
     #[arg(long, default_value = "sustained", value_parser = ["sustained", "first20"])]
     pub objective: String,
+    /// Who asks for the candidates: `swarm` (argmin's particle swarm) or `grid` (an even grid
+    /// over the keys with as many points as the budget allows: the hand-laid baseline the
+    /// swarm is judged against, through the same runs, constraints and test).
+    #[arg(long, default_value = "swarm", value_parser = ["swarm", "grid"])]
+    pub optimizer: String,
     /// The optimizer's seed (its random numbers come from this seed's `tune-optimizer` stream).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
@@ -115,6 +120,8 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         Objective::First20 => binpick::cycle::FIRST_PICKS,
     });
     check_picks(picks)?;
+    let optimizer = Optimizer::parse(&a.optimizer)
+        .ok_or_else(|| InputError(format!("--optimizer: {:?} is not swarm or grid", a.optimizer)))?;
     if a.budget == 0 || a.budget > 10_000 {
         return Err(InputError(format!("--budget must be within [1, 10000], got {}", a.budget)).into());
     }
@@ -166,6 +173,7 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         seed: a.seed,
         population: a.population,
         objective,
+        optimizer,
     };
     let keys: String = dims
         .iter()
@@ -187,6 +195,10 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         a.seed,
         if a.mode.deterministic { "-det" } else { "" }
     );
+    let name = match optimizer {
+        Optimizer::Swarm => name,
+        Optimizer::Grid => format!("{name}-grid"),
+    };
     let (k, n) = shard;
     let dir_name = if n > 1 {
         format!("{name}-shard{k}of{n}")
@@ -203,6 +215,7 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
     let settings = Settings {
         budget: a.budget,
         population: a.population,
+        optimizer,
         seed: a.seed,
         constraints: Constraints {
             min_success: a.min_success,

@@ -3,7 +3,7 @@
 //!
 //! Job: a JSON-lines file, its first line the tune's identity ([`Header`]: what decides the
 //! candidates and their figures: the cell, the workpiece, the keys and ranges, the training
-//! seeds, picks, mode, seed and population), each further line one candidate's values (as the
+//! seeds, picks, mode, seed, population and optimizer), each further line one candidate's values (as the
 //! files write them) and its training figures. Opening a journal of another tune is refused; a
 //! last line cut short by an interruption is ignored. The optimizer, re-run with the same seed,
 //! asks for the same candidates; the journal answers those it has (figures read back exactly:
@@ -53,6 +53,9 @@ pub struct Header {
     /// sustained).
     #[serde(default)]
     pub objective: super::Objective,
+    /// Who asks for the candidates (journals written before the grid: the swarm).
+    #[serde(default)]
+    pub optimizer: super::Optimizer,
 }
 
 #[derive(Serialize, Deserialize)]
@@ -171,7 +174,7 @@ impl Journal {
             // (nothing, as lines are appended whole) are run again.
             let Some(e) = entries_of(&text, header) else {
                 return Err(StudyError::Input(format!(
-                    "{}: a journal of another tune (another cell, workpiece, keys, ranges, training seeds, picks, mode, seed or population); remove it or write to another --out",
+                    "{}: a journal of another tune (another cell, workpiece, keys, ranges, training seeds, picks, mode, seed, population or optimizer); remove it or write to another --out",
                     path.display()
                 )));
             };

@@ -373,6 +373,85 @@ pub trait Evaluator {
     fn evaluate(&mut self, round: usize, candidates: &[Vec<f64>]) -> Result<Vec<Outcome>, StudyError>;
 }
 
+/// Who asks for the candidates (`--optimizer`).
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "lowercase")]
+pub enum Optimizer {
+    /// argmin's particle swarm (the module's header).
+    #[default]
+    Swarm,
+    /// The baseline a cell engineer would lay out by hand: a full grid over the keys with the
+    /// same number of points on each ([`grid`]), as many as the budget allows, run in rounds of
+    /// the population like the swarm's. What `tune` is judged against.
+    Grid,
+}
+
+impl Optimizer {
+    /// Its name on the command line and in the files.
+    pub fn text(self) -> &'static str {
+        match self {
+            Optimizer::Swarm => "swarm",
+            Optimizer::Grid => "grid",
+        }
+    }
+
+    /// The optimizer named `text`, if it is one.
+    pub fn parse(text: &str) -> Option<Optimizer> {
+        [Optimizer::Swarm, Optimizer::Grid]
+            .into_iter()
+            .find(|o| o.text() == text)
+    }
+}
+
+/// The grid [`Optimizer::Grid`] runs: `n` evenly spaced values on each key, both ends included
+/// (one key's only value is its middle), with `n` the largest whole number whose power of the
+/// key count stays within `budget`; an integer key with fewer than `n` whole values takes each
+/// of them once, and the points it frees are not spent elsewhere. Values are snapped as the
+/// swarm's are; the first key varies slowest.
+pub fn grid(dims: &[Dim], budget: usize) -> Vec<Vec<f64>> {
+    let k = dims.len().max(1) as u32;
+    let mut n = 1usize;
+    while (n + 1).checked_pow(k).is_some_and(|p| p <= budget) {
+        n += 1;
+    }
+    let axes: Vec<Vec<f64>> = dims
+        .iter()
+        .map(|d| {
+            let count = if d.integer {
+                n.min((d.hi - d.lo).round() as usize + 1)
+            } else {
+                n
+            };
+            let mut values: Vec<f64> = (0..count)
+                .map(|i| {
+                    let x = if count == 1 {
+                        0.5 * (d.lo + d.hi)
+                    } else {
+                        d.lo + (d.hi - d.lo) * i as f64 / (count - 1) as f64
+                    };
+                    d.snap(x)
+                })
+                .collect();
+            values.dedup();
+            values
+        })
+        .collect();
+    let mut points: Vec<Vec<f64>> = vec![Vec::new()];
+    for axis in &axes {
+        points = points
+            .into_iter()
+            .flat_map(|p| {
+                axis.iter().map(move |x| {
+                    let mut q = p.clone();
+                    q.push(*x);
+                    q
+                })
+            })
+            .collect();
+    }
+    points
+}
+
 /// How the optimizer runs.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Settings {
@@ -380,6 +459,9 @@ pub struct Settings {
     pub budget: usize,
     /// Particles of the swarm: candidates per round.
     pub population: usize,
+    /// Who asks for the candidates.
+    #[serde(default)]
+    pub optimizer: Optimizer,
     /// The run's seed (the optimizer's random numbers come from its `tune-optimizer` stream).
     pub seed: u64,
     /// What a best must meet.
@@ -484,6 +566,9 @@ pub fn optimize(
     if dims.is_empty() || settings.budget == 0 || settings.population == 0 {
         return Err(input("tune: needs a key, a budget and a population of at least 1"));
     }
+    if settings.optimizer == Optimizer::Grid {
+        return run_grid(dims, settings, evaluator);
+    }
     let seed: u64 = crate::rng::stream(settings.seed, "tune-optimizer").random();
     let (lo, hi): (Vec<f64>, Vec<f64>) = dims.iter().map(Dim::bounds).unzip();
     let mut swarm =
@@ -516,6 +601,31 @@ pub fn optimize(
     let cost = problem
         .take_problem()
         .ok_or_else(|| StudyError::Run("the optimizer lost its objective".into()))?;
+    let st = cost.state.into_inner();
+    match st.failure {
+        Some(e) => Err(e),
+        None => Ok(st.log),
+    }
+}
+
+/// [`Optimizer::Grid`]: the [`grid`]'s points in rounds of the population, through the same
+/// costing and log as the swarm's rounds.
+fn run_grid(dims: &[Dim], settings: &Settings, evaluator: &mut dyn Evaluator) -> Result<Vec<Evaluation>, StudyError> {
+    let cost = Cost {
+        dims,
+        settings,
+        state: RefCell::new(CostState {
+            evaluator,
+            log: Vec::new(),
+            round: 0,
+            failure: None,
+        }),
+    };
+    for chunk in grid(dims, settings.budget).chunks(settings.population) {
+        if cost.round(chunk).is_err() {
+            break;
+        }
+    }
     let st = cost.state.into_inner();
     match st.failure {
         Some(e) => Err(e),
@@ -585,6 +695,7 @@ mod tests {
         Settings {
             budget,
             population: 10,
+            optimizer: Optimizer::Swarm,
             seed: 1,
             constraints: Constraints {
                 min_success: 0.95,
@@ -684,6 +795,40 @@ mod tests {
         assert_eq!(a.last().unwrap().round, 2);
         // A larger budget asks the same first candidates (what resuming relies on).
         assert_eq!(run(40)[..25], a[..]);
+    }
+
+    #[test]
+    fn the_grid_spends_the_budget_on_even_points_with_both_ends_and_finds_the_nearest_point() {
+        // Two keys, budget 20: 4 points each (5 x 5 would be 25), both ends included.
+        let g = grid(&dims(), 20);
+        assert_eq!(g.len(), 16);
+        let xs: Vec<f64> = g.iter().step_by(4).map(|p| p[0]).collect();
+        assert_eq!(xs, vec![0.004, 0.0093333, 0.0146667, 0.02]);
+        let ns: Vec<f64> = g[..4].iter().map(|p| p[1]).collect();
+        assert_eq!(ns, vec![1.0, 3.0, 6.0, 8.0]);
+        // An integer key with fewer whole values than points takes each once.
+        let mut d = dims();
+        d[1].lo = 1.0;
+        d[1].hi = 2.0;
+        assert_eq!(grid(&d, 20).len(), 8);
+        // Through the same rounds and best as the swarm: the grid point nearest the optimum.
+        let mut q = Quadratic {
+            unsafe_below: f64::NEG_INFINITY,
+            rounds: Vec::new(),
+        };
+        let mut s = settings(20, 0);
+        s.optimizer = Optimizer::Grid;
+        let evals = optimize(&dims(), &s, &mut q).unwrap();
+        assert_eq!(evals.len(), 16);
+        assert_eq!(q.rounds, vec![0, 1]);
+        assert_eq!(best(&evals).unwrap().values, vec![0.0093333, 6.0]);
+        // Negative control: the swarm with the same budget is not held to the grid's points.
+        let mut q = Quadratic {
+            unsafe_below: f64::NEG_INFINITY,
+            rounds: Vec::new(),
+        };
+        let swarm = optimize(&dims(), &settings(20, 0), &mut q).unwrap();
+        assert!(swarm.iter().any(|e| !g.contains(&e.values)));
     }
 
     #[test]

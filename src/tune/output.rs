@@ -88,7 +88,10 @@ pub fn json(r: &Report<'_>) -> Value {
     });
     json!({"tune": {
         "spec": r.header, "budget": r.budget, "constraints": r.constraints, "test_seeds": r.test_seeds,
-        "optimizer": "argmin 0.11 particle swarm",
+        "optimizer": match r.header.optimizer {
+            super::Optimizer::Swarm => "argmin 0.11 particle swarm",
+            super::Optimizer::Grid => "grid",
+        },
         "evaluations": evals, "best": best, "test": test,
     }})
 }
@@ -120,7 +123,7 @@ pub fn markdown(r: &Report<'_>) -> String {
     let h = r.header;
     let c = &r.constraints;
     let mut md = format!(
-        "# tune: workpiece {} in {}\n\n{} candidates ({} per round), {} picks per run, objective: the {} takt, training seeds {}, test seeds {}, {}; optimizer: argmin particle swarm, seed {}.\n\nConstraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}.\n\n",
+        "# tune: workpiece {} in {}\n\n{} candidates ({} per round), {} picks per run, objective: the {} takt, training seeds {}, test seeds {}, {}; optimizer: {}.\n\nConstraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}.\n\n",
         h.workpiece,
         h.scene,
         r.evaluations.len(),
@@ -137,7 +140,10 @@ pub fn markdown(r: &Report<'_>) -> String {
         } else {
             "measured compute"
         },
-        h.seed,
+        match h.optimizer {
+            super::Optimizer::Swarm => format!("argmin particle swarm, seed {}", h.seed),
+            super::Optimizer::Grid => "an even grid over the keys (the baseline)".to_string(),
+        },
         100.0 * c.min_success,
         c.max_collisions,
         c.max_stops,

@@ -75,6 +75,7 @@ fn bad_tunes_exit_2_and_write_nothing() {
         (vec!["--vary", KEY, "--min-success", "1.5"], "--min-success"),
         (vec!["--vary", KEY, "--budget", "0"], "--budget"),
         (vec!["--vary", KEY, "--objective", "fastest"], "--objective"),
+        (vec!["--vary", KEY, "--optimizer", "random"], "--optimizer"),
     ] {
         let tmp = crate::support::tempdir().unwrap();
         let out = tmp.path().join("runs");
