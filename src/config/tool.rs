@@ -131,8 +131,13 @@ impl Scene {
 mod tests {
     use crate::config::{LoadedScene, LoadedWorkpiece, parse_toml};
 
+    /// B's file without the cup it brings, with `section` appended.
     fn b_with(section: &str) -> Result<LoadedWorkpiece, crate::config::ConfigError> {
-        let text = format!("{}\n{section}", crate::config::embedded::WORKPIECES[1].1);
+        let b = crate::config::embedded::WORKPIECES[1].1;
+        let own = b
+            .find("[gripper]")
+            .map_or(b.len(), |i| b[..i].rfind("\n\n").map_or(i, |j| j + 1));
+        let text = format!("{}\n{section}", &b[..own]);
         LoadedWorkpiece::from_text("B.toml", crate::config::Source::Embedded, &text)
     }
 
@@ -150,11 +155,11 @@ mod tests {
         assert_eq!(s.sensor, cell.scene.sensor);
         assert_eq!(s.with_tool_of(&b.workpiece), s, "resolving twice changes nothing");
         assert!(s.carries_tool_of(&b.workpiece));
-        // Negative control: the cell itself does not carry B's cup; E brings none.
+        // Negative control: the cell itself does not carry B's cup; A brings none.
         assert!(!cell.scene.carries_tool_of(&b.workpiece));
-        let e = LoadedWorkpiece::resolve("E").unwrap();
-        assert_eq!(cell.scene.with_tool_of(&e.workpiece), cell.scene);
-        assert!(cell.scene.carries_tool_of(&e.workpiece));
+        let a = LoadedWorkpiece::resolve("A").unwrap();
+        assert_eq!(cell.scene.with_tool_of(&a.workpiece), cell.scene);
+        assert!(cell.scene.carries_tool_of(&a.workpiece));
     }
 
     #[test]
@@ -178,11 +183,13 @@ mod tests {
             e.contains("B.toml: cycle.release_lead_s must not exceed gripper.release_s (0.01 s)"),
             "{e}"
         );
-        // The six built-in workpieces bring no cup, and their files round-trip without one.
+        // Of the six built-in workpieces B, E and F bring their cups (the default cell,
+        // docs/studies.md); every file round-trips, with its cup or without one.
         for w in LoadedWorkpiece::all_embedded().unwrap() {
-            assert!(w.workpiece.gripper.is_none());
+            let brings = ["B", "E", "F"].contains(&w.workpiece.name.as_str());
+            assert_eq!(w.workpiece.gripper.is_some(), brings, "{}", w.workpiece.name);
             let text = toml::to_string(&w.workpiece).unwrap();
-            assert!(!text.contains("[gripper]"), "{text}");
+            assert_eq!(text.contains("[gripper]"), brings, "{text}");
             let back: crate::config::Workpiece = parse_toml("w", &text).unwrap();
             assert_eq!(back, w.workpiece);
         }

@@ -27,18 +27,18 @@ fn bad_feeder_keys_exit_2_naming_file_key_and_value_and_write_nothing() {
             "dose_parts = 5000",
             "feeder.dose_parts must be within [0, 1000], got 5000",
         ),
-        ("dose_below = 0", "dose_below = 2.5", "dose_below"),
-        ("dose_below = 0", "dose_below = -3", "dose_below"),
+        ("dose_below = 12", "dose_below = 2.5", "dose_below"),
+        ("dose_below = 12", "dose_below = -3", "dose_below"),
         ("dose_s = 2.0", "dose_s = 2.0\ndose_rate = 3", "dose_rate"),
     ] {
         // The first case needs the hopper on to be wrong.
         let on = ws.edit(
             "scenes/default.toml",
             "scenes/on.toml",
-            "dose_below = 0",
+            "dose_below = 12",
             "dose_below = 4",
         );
-        let base = if from == "dose_below = 0" {
+        let base = if from == "dose_below = 12" {
             "scenes/default.toml"
         } else {
             "scenes/on.toml"

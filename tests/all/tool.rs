@@ -11,9 +11,21 @@ use binpick::robot::RobotModel;
 
 use crate::support::{Workspace, binpick_in, stderr};
 
-/// B (30 x 30 x 20 mm) with `section` appended.
+/// B's file (30 x 30 x 20 mm) without the cup it brings (its `[gripper]` section and the
+/// comment above it).
+fn b_without_cup(text: &str) -> String {
+    let own = text
+        .find("[gripper]")
+        .map_or(text.len(), |i| text[..i].rfind("\n\n").map_or(i, |j| j + 1));
+    text[..own].to_string()
+}
+
+/// B without its own cup, with `section` appended.
 fn b_with(section: &str) -> LoadedWorkpiece {
-    let text = format!("{}\n{section}", binpick::config::embedded::WORKPIECES[1].1);
+    let text = format!(
+        "{}\n{section}",
+        b_without_cup(binpick::config::embedded::WORKPIECES[1].1)
+    );
     LoadedWorkpiece::from_text("B-cup.toml", Source::Embedded, &text).unwrap()
 }
 
@@ -41,7 +53,7 @@ fn the_cup_a_workpiece_brings_decides_what_the_cell_can_place() {
     let own_fits = b_with("[gripper]\ncup_diameter_m = 0.006\n");
     assert!(placed(0.035, &own_fits) > 0, "B's own 6 mm cup must place parts");
     // Negative control: the same cell, B without a cup of its own.
-    let plain = LoadedWorkpiece::resolve("B").unwrap();
+    let plain = b_with("");
     assert_eq!(placed(0.035, &plain), 0, "the cell's 35 mm cup fits no face of B");
     // And the other way: B's own 35 mm cup in a cell whose 6 mm cup fits.
     let own_too_large = b_with("[gripper]\ncup_diameter_m = 0.035\n");
@@ -76,6 +88,7 @@ fn a_workpiece_cup_that_fits_no_face_exits_2_and_a_sweep_reaches_the_key() {
     let ws = Workspace::new();
     let big = ws.path("workpieces/B-big.toml");
     let text = std::fs::read_to_string(ws.path("workpieces/B.toml")).unwrap();
+    let text = b_without_cup(&text);
     std::fs::write(&big, format!("{text}\n[gripper]\ncup_diameter_m = 0.035\n")).unwrap();
     let out = ws.path("runs");
     let o = binpick_in(

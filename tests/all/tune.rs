@@ -202,7 +202,7 @@ fn a_tune_without_a_feasible_candidate_writes_its_table_and_fails() {
         &out,
         &[
             "--vary",
-            "gripper.cup_diameter_m=0.04:0.05",
+            "workpiece.gripper.cup_diameter_m=0.04:0.05",
             "--budget",
             "3",
             "--population",
