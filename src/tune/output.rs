@@ -209,7 +209,14 @@ fn escape_pipe(s: &str) -> String {
 /// `tune.svg`: convergence over the evaluations.
 pub fn svg(r: &Report<'_>) -> String {
     let (width, height) = (760.0, 420.0);
-    let title = format!("tune: workpiece {}, takt on the training seeds", r.header.workpiece);
+    let title = format!(
+        "tune: workpiece {}, takt on the training seeds{}",
+        r.header.workpiece,
+        match r.header.optimizer {
+            super::Optimizer::Swarm => "",
+            super::Optimizer::Grid => " (the grid baseline)",
+        }
+    );
     let mut svg = open(width, height, &title);
     let n = r.evaluations.len().max(1);
     let takts: Vec<f64> = r
