@@ -117,12 +117,22 @@ impl Run<'_, '_> {
                 self.idle_until(hold)?;
             }
             self.maybe_trigger(f64::INFINITY);
-            if self.st.pending.is_none() {
+            // No capture to wait for: none pending, or a spoiled one whose exposure is over and
+            // which the trigger could not replace (the arm is in the view, as after a failed
+            // grasp): get out of the view and trigger. Before, a spoiled job the trigger could
+            // not replace was waited for again and again without a step (a hang: F, seed 11,
+            // one pick per capture).
+            let no_capture = |r: &Self| {
+                r.st.pending
+                    .as_ref()
+                    .is_none_or(|j| j.spoiled.is_some() && r.st.world.time_s() + 1e-9 >= j.exposure_end_s)
+            };
+            if no_capture(self) {
                 if !self.move_out_of_view()? {
                     return Ok(None);
                 }
                 self.maybe_trigger(f64::INFINITY);
-                if self.st.pending.is_none() {
+                if no_capture(self) {
                     return Ok(None);
                 }
                 continue;

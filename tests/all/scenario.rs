@@ -504,3 +504,32 @@ fn the_retreat_runs_into_the_next_pick_when_it_is_ready() {
     let off = go(false);
     assert!(off.records.iter().all(|p| p.overlaps.retreat_s == 0.0));
 }
+
+/// A capture spoiled by the arm, then a failed grasp, leave the arm in the view with a dead
+/// capture pending: the cell gets out of the view and triggers again. This run (F, seed 11,
+/// one pick per capture, no hopper) used to spin forever at pick 42 without a physics step,
+/// waiting for a capture that could never be replaced; it must now finish its picks. The run
+/// goes on a thread so that a hang fails the test instead of holding up the suite.
+#[test]
+fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    scene.scene.cycle.max_picks_per_capture = 1;
+    scene.scene.feeder.dose_below = 0;
+    let (tx, rx) = std::sync::mpsc::channel();
+    std::thread::spawn(move || {
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let wp = LoadedWorkpiece::resolve("F").unwrap();
+        let r = binpick::cycle::run(&scene, &robot, &wp, &deterministic(45, 11), &mut ()).unwrap();
+        let _ = tx.send(r);
+    });
+    let r = rx
+        .recv_timeout(std::time::Duration::from_secs(300))
+        .expect("the run hangs");
+    assert_eq!(r.tally.attempts, 45);
+    // The case it is built on: a failed grasp follows a capture the arm spoiled.
+    assert!(
+        r.records.iter().any(|p| p.index == 42 && p.outcome.grasp_failed()),
+        "{:?}",
+        r.records.iter().map(|p| p.outcome.detail()).collect::<Vec<_>>()
+    );
+}
