@@ -196,6 +196,12 @@ pub struct Constraints {
     pub max_parts_lost: usize,
 }
 
+/// The one of `all` whose name (`name`) is `text`: how a command-line option's text becomes the
+/// choice it names.
+fn named<T: Copy>(all: &[T], name: fn(T) -> &'static str, text: &str) -> Option<T> {
+    all.iter().copied().find(|o| name(*o) == text)
+}
+
 /// Which takt the optimizer minimises (see the module's header).
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "lowercase")]
@@ -218,9 +224,7 @@ impl Objective {
 
     /// The objective named `text`, if it is one.
     pub fn parse(text: &str) -> Option<Objective> {
-        [Objective::Sustained, Objective::First20]
-            .into_iter()
-            .find(|o| o.text() == text)
+        named(&[Objective::Sustained, Objective::First20], Objective::text, text)
     }
 }
 
@@ -397,9 +401,7 @@ impl Optimizer {
 
     /// The optimizer named `text`, if it is one.
     pub fn parse(text: &str) -> Option<Optimizer> {
-        [Optimizer::Swarm, Optimizer::Grid]
-            .into_iter()
-            .find(|o| o.text() == text)
+        named(&[Optimizer::Swarm, Optimizer::Grid], Optimizer::text, text)
     }
 }
 
