@@ -76,7 +76,14 @@ pub fn run(a: &RunArgs) -> Result<()> {
             let files =
                 binpick::recording::RecordingFiles::create(run.staging_dir(), "run", formats, &loaded.scene, &info)
                     .map_err(|(path, e)| anyhow::anyhow!("writing {}: {e}", path.display()))?;
-            Some(Recorder::streaming(&robot, camera, wp.workpiece.size_m, files))
+            let pick_tray = binpick::geometry::TrayVolume::new(&loaded.scene.pick_tray);
+            Some(Recorder::streaming(
+                &robot,
+                &camera,
+                &pick_tray,
+                wp.workpiece.size_m,
+                files,
+            ))
         }
         false => None,
     };

@@ -4,8 +4,9 @@
 //!
 //! Job: watch a cell run ([`crate::cycle::Observer`]) and keep, decimated where a viewer needs
 //! no more: every servo tick (joint states are decimated by the writers), every part's state and
-//! pose every [`SCENE_FRAME_S`] from the first pile pour on, each capture's depth image and a
-//! sixteenth of its point cloud on a [`CLOUD_GRID_M`] grid, each
+//! pose every [`SCENE_FRAME_S`] from the first pile pour on, the pick tray's window of each
+//! capture ([`TRAY_MARGIN_PX`] around the tray): its depth image and a sixteenth of its point
+//! cloud on a [`CLOUD_GRID_M`] grid, each
 //! recognition result with its best grasp candidates and, for evaluation, the true poses at its
 //! trigger and each detection's error, each motion's tool path as planned and as executed, and
 //! the event log, and the takt of every placed pick. Nothing is kept unless a run is watched by a
@@ -26,24 +27,29 @@ use std::sync::mpsc;
 
 use crate::cycle::{CycleEvent, Event, EventLog, Observer, Recognised, Takt};
 use crate::geometry::NamedBox;
+use crate::geometry::TrayVolume;
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
-use crate::sensor::{Camera, Capture, RecognitionReport, TruthAtTrigger};
+use crate::sensor::{Camera, Capture, PixelWindow, RecognitionReport, TruthAtTrigger};
 use crate::servo::Tick;
 use crate::trajectory::Motion;
 
 /// Period of the part-pose snapshots (s).
 pub const SCENE_FRAME_S: f64 = 0.1;
 /// Recorded point clouds keep every this many pixels in each image direction: a sixteenth of the
-/// points (0.6 instead of 9.6 MB per capture at the default 1032 x 772 px, 1.8 mm apart at the
-/// tray), enough to see the pile in 3D; the depth image beside it keeps every pixel, and Rerun's
-/// viewer draws that in 3D too. Every fourth rather than every second pixel takes the recording's
-/// extra CPU from +31 % to about +18 % of the run's.
+/// points (1.8 mm apart at the tray), enough to see the pile in 3D; the depth image beside it
+/// keeps every pixel, and Rerun's viewer draws that in 3D too. Every fourth rather than every
+/// second pixel took the recording's extra CPU from +31 % to about +18 % of the run's.
 pub const CLOUD_EVERY_PX: usize = 4;
 /// Recorded cloud coordinates are rounded to this grid (m): a quarter of the depth image's 1 mm
 /// steps, its rounding error (0.07 mm rms) well below the sensor's noise (0.3 mm at 1 m), and it
 /// lets the files' compressors find repeats (1.4 instead of 4.6 MB of points in a 20-pick MCAP).
 pub const CLOUD_GRID_M: f64 = 2.5e-4;
+/// The recorded window of each capture reaches this far around the pick tray's outer walls (px):
+/// 17 mm at the tray floor with the default sensor, room for a part lying on the rim. Recognition
+/// looks at nothing outside the tray; the default sensor's whole 1032 x 772 px image is five
+/// times the window's pixels, and took two thirds of a recording's bytes and most of its cost.
+pub const TRAY_MARGIN_PX: usize = 20;
 /// Most grasp candidates a [`RecognitionRecord`] keeps.
 pub const RECORDED_CANDIDATES: usize = 20;
 /// A streaming recorder keeps this much simulation time behind the newest step before it hands
@@ -126,15 +132,18 @@ impl CaptureImage {
     }
 }
 
-/// The points of every `every_px`-th pixel of `c` in each direction that has a return, row-major,
-/// each coordinate rounded to the [`CLOUD_GRID_M`] grid [m, world].
-fn cloud_on_grid(c: &Capture, every_px: usize) -> Vec<[f32; 3]> {
+/// The points of every `every_px`-th pixel in each direction of the window `w` of `c`'s organised
+/// cloud that has a return, row-major, each coordinate rounded to the [`CLOUD_GRID_M`] grid
+/// [m, world].
+fn cloud_on_grid(c: &Capture, w: &PixelWindow, every_px: usize) -> Vec<[f32; 3]> {
     let per_m = 1.0 / CLOUD_GRID_M;
     let on_grid = |v: f32| ((f64::from(v) * per_m).round() * CLOUD_GRID_M) as f32;
     c.points_world
         .chunks_exact(c.width_px.max(1))
+        .skip(w.y0_px)
+        .take(w.height_px)
         .step_by(every_px)
-        .flat_map(|row| row.iter().step_by(every_px))
+        .flat_map(|row| row[w.x0_px..w.x0_px + w.width_px].iter().step_by(every_px))
         .filter(|p| p[0].is_finite())
         .map(|p| p.map(on_grid))
         .collect()
@@ -280,16 +289,22 @@ pub struct Recorder<'a> {
     motions: usize,
     /// When the last part-pose snapshot was taken (s).
     last_frame_s: Option<f64>,
+    /// The part of each capture that is recorded: the pick tray's window of the image.
+    window: PixelWindow,
     stream: Option<Stream>,
 }
 
 impl<'a> Recorder<'a> {
-    /// A recorder for a run of `robot` seen by `camera`, of parts with bounding box `part_size_m`,
-    /// that keeps the whole run in memory ([`Recorder::finish`]).
-    pub fn new(robot: &'a RobotModel, camera: Camera, part_size_m: [f64; 3]) -> Self {
+    /// A recorder for a run of `robot` seen by `camera` over `pick_tray`, of parts with bounding
+    /// box `part_size_m`, that keeps the whole run in memory ([`Recorder::finish`]). It records
+    /// the pick tray's window of each capture ([`TRAY_MARGIN_PX`] around the tray), as the
+    /// camera [`Camera::cropped`] to it.
+    pub fn new(robot: &'a RobotModel, camera: &Camera, pick_tray: &TrayVolume, part_size_m: [f64; 3]) -> Self {
+        let window = camera.window_over(pick_tray, TRAY_MARGIN_PX);
         Recorder {
             robot,
-            buffer: Recording::empty(camera, part_size_m),
+            window,
+            buffer: Recording::empty(camera.cropped(&window), part_size_m),
             events: EventLog::default(),
             last_matches: None,
             now_s: 0.0,
@@ -306,7 +321,8 @@ impl<'a> Recorder<'a> {
     /// memory holds at most [`STREAM_LAG_S`] + [`STREAM_EVERY_S`] of simulation time.
     pub fn streaming(
         robot: &'a RobotModel,
-        camera: Camera,
+        camera: &Camera,
+        pick_tray: &TrayVolume,
         part_size_m: [f64; 3],
         files: super::RecordingFiles,
     ) -> Self {
@@ -326,7 +342,7 @@ impl<'a> Recorder<'a> {
             drop(files);
             Err((PathBuf::from("recording"), super::RecordError::Unfinished))
         });
-        let mut recorder = Recorder::new(robot, camera, part_size_m);
+        let mut recorder = Recorder::new(robot, camera, pick_tray, part_size_m);
         recorder.stream = Some(Stream { to_writer, writer });
         recorder
     }
@@ -430,13 +446,19 @@ impl Observer for Recorder<'_> {
 
     fn captured(&mut self, c: &Capture) {
         self.arrived(c.trigger_s);
+        let w = &self.window;
+        debug_assert!(w.x0_px + w.width_px <= c.width_px && w.y0_px + w.height_px <= c.height_px);
         self.buffer.captures.push(CaptureImage {
             t_s: c.trigger_s,
-            size_px: (c.width_px, c.height_px),
+            size_px: (w.width_px, w.height_px),
             // Depths are non-negative: adding a half and truncating rounds as `round` does, without
             // its library call per pixel.
-            depth_mm: c.depth_m.iter().map(|d| (d * 1000.0 + 0.5) as u16).collect(),
-            points_world_m: cloud_on_grid(c, CLOUD_EVERY_PX),
+            depth_mm: w
+                .crop(&c.depth_m, c.width_px)
+                .iter()
+                .map(|d| (d * 1000.0 + 0.5) as u16)
+                .collect(),
+            points_world_m: cloud_on_grid(c, w, CLOUD_EVERY_PX),
         });
     }
 

@@ -10,8 +10,9 @@
 //! with the same content: the cell (table, trays, obstacles, the sensor's frustum), the arm (its
 //! collision primitives once, its link frames over time), all parts as one batched entity (bounding
 //! boxes coloured by state: in the pick tray, held, placed) from the first pile pour on, each
-//! capture (camera intrinsics and pose, depth image, a sixteenth of its point cloud on a 0.25 mm
-//! grid) at its trigger time, each
+//! capture's window over the pick tray (the camera's pose, its intrinsics cropped to the window,
+//! the window's depth image, a sixteenth of its point cloud on a 0.25 mm grid) at its trigger
+//! time, each
 //! recognition result (detections, ranked grasp candidates with the chosen one marked) when it
 //! arrived, every motion's tool path as planned and as executed, the joint positions, velocities
 //! and torques beside each joint's torque limit, the cycle's events as log entries and the takt of

@@ -3,8 +3,9 @@
 //!
 //! Entities (all in `world`, z up; see the module [`super`] for what is recorded and why):
 //! - `world/cell`: table, trays and obstacles as boxes (static);
-//! - `world/camera`: the camera's pose and pinhole intrinsics (static; the viewer draws its
-//!   frustum), `world/camera/depth` each depth image (mm) at its trigger time;
+//! - `world/camera`: the camera's pose and pinhole intrinsics, cropped to the recorded window over
+//!   the pick tray (static; the viewer draws its frustum), `world/camera/depth` each window's
+//!   depth image (mm) at its trigger time;
 //! - `world/cloud`: each capture's point cloud (world frame, every
 //!   [`super::CLOUD_EVERY_PX`]-th pixel each way: under the camera's pinhole the viewer draws the
 //!   depth image itself in 3D at every pixel) at its trigger time;

@@ -7,6 +7,36 @@
 use nalgebra::{Isometry3, Point3, Vector3};
 
 use crate::config::SensorConfig;
+use crate::geometry::TrayVolume;
+
+/// A rectangle of an image's pixels: columns `x0_px..x0_px + width_px`, rows
+/// `y0_px..y0_px + height_px`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub struct PixelWindow {
+    /// First column (px).
+    pub x0_px: usize,
+    /// First row (px).
+    pub y0_px: usize,
+    /// Columns (px).
+    pub width_px: usize,
+    /// Rows (px).
+    pub height_px: usize,
+}
+
+impl PixelWindow {
+    /// The values of the window's pixels, row-major, from a row-major image `width_px` wide.
+    pub fn crop<T: Copy>(&self, image: &[T], width_px: usize) -> Vec<T> {
+        let mut out = Vec::with_capacity(self.width_px * self.height_px);
+        for row in image
+            .chunks_exact(width_px.max(1))
+            .skip(self.y0_px)
+            .take(self.height_px)
+        {
+            out.extend_from_slice(&row[self.x0_px..self.x0_px + self.width_px]);
+        }
+        out
+    }
+}
 
 /// The pinhole camera.
 #[derive(Debug, Clone)]
@@ -78,8 +108,119 @@ impl Camera {
         })
     }
 
+    /// The smallest window of the image that shows the tray `tray` (its outer walls, floor to
+    /// rim) with `margin_px` pixels around it, clipped to the image; the whole image if the tray
+    /// is behind the camera.
+    pub fn window_over(&self, tray: &TrayVolume, margin_px: usize) -> PixelWindow {
+        let whole = PixelWindow {
+            x0_px: 0,
+            y0_px: 0,
+            width_px: self.width_px,
+            height_px: self.height_px,
+        };
+        let [hx, hy] = tray.half_xy_m;
+        let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);
+        for z in [0.0, tray.wall_height_m] {
+            for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
+                let Some((u, v, _)) = self.project(&(tray.world_from_tray * Point3::new(sx * hx, sy * hy, z))) else {
+                    return whole;
+                };
+                lo = [lo[0].min(u), lo[1].min(v)];
+                hi = [hi[0].max(u), hi[1].max(v)];
+            }
+        }
+        let m = margin_px as f64;
+        let clip = |x: f64, n: usize| x.clamp(0.0, n as f64) as usize;
+        let (x0, x1) = (
+            clip((lo[0] - m).floor(), self.width_px),
+            clip((hi[0] + m).ceil(), self.width_px),
+        );
+        let (y0, y1) = (
+            clip((lo[1] - m).floor(), self.height_px),
+            clip((hi[1] + m).ceil(), self.height_px),
+        );
+        if x1 <= x0 || y1 <= y0 {
+            return whole;
+        }
+        PixelWindow {
+            x0_px: x0,
+            y0_px: y0,
+            width_px: x1 - x0,
+            height_px: y1 - y0,
+        }
+    }
+
+    /// The camera whose image is the window `w` of this camera's: the same pose and focal
+    /// lengths, the window's size, the principal point moved with the window's origin.
+    pub fn cropped(&self, w: &PixelWindow) -> Camera {
+        Camera {
+            width_px: w.width_px,
+            height_px: w.height_px,
+            cx_px: self.cx_px - w.x0_px as f64,
+            cy_px: self.cy_px - w.y0_px as f64,
+            ..self.clone()
+        }
+    }
+
     /// Size of a pixel at depth `z` (m).
     pub fn pixel_size_at_m(&self, z: f64) -> f64 {
         z / self.fx_px.min(self.fy_px)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::LoadedScene;
+
+    #[test]
+    fn the_window_over_the_tray_holds_its_rim_and_the_cropped_camera_sees_through_it() {
+        let s = LoadedScene::embedded_default().unwrap().scene;
+        let cam = Camera::from_config(&s.sensor).unwrap();
+        let tray = TrayVolume::new(&s.pick_tray);
+        let w = cam.window_over(&tray, 20);
+        // Smaller than the image, inside it.
+        assert!(w.width_px < cam.width_px && w.height_px < cam.height_px);
+        assert!(w.x0_px + w.width_px <= cam.width_px && w.y0_px + w.height_px <= cam.height_px);
+        let crop = cam.cropped(&w);
+        let [hx, hy] = tray.half_xy_m;
+        for (sx, sy, z) in [
+            (-1.0, -1.0, tray.wall_height_m),
+            (1.0, 1.0, 0.0),
+            (1.0, -1.0, tray.wall_height_m),
+        ] {
+            let p = tray.world_from_tray * Point3::new(sx * hx, sy * hy, z);
+            let (u, v, d) = cam.project(&p).unwrap();
+            let (uc, vc, dc) = crop.project(&p).unwrap();
+            // The same ray: shifted by the window's origin, the same depth.
+            assert!((u - w.x0_px as f64 - uc).abs() < 1e-9 && (v - w.y0_px as f64 - vc).abs() < 1e-9);
+            assert!((d - dc).abs() < 1e-12);
+            // The rim corner lies inside the window, at least the margin from its edges.
+            assert!(
+                uc >= 19.0 && uc <= crop.width_px as f64 - 19.0,
+                "u {uc} of {}",
+                crop.width_px
+            );
+            assert!(
+                vc >= 19.0 && vc <= crop.height_px as f64 - 19.0,
+                "v {vc} of {}",
+                crop.height_px
+            );
+        }
+        // A pixel's ray is the same through either camera.
+        let (pu, pv) = (w.x0_px + 7, w.y0_px + 11);
+        assert!((cam.pixel_dir(pu, pv) - crop.pixel_dir(7, 11)).norm() < 1e-12);
+        // Cropping an image keeps the window's pixels.
+        let image: Vec<usize> = (0..cam.width_px * cam.height_px).collect();
+        let cut = w.crop(&image, cam.width_px);
+        assert_eq!(cut.len(), w.width_px * w.height_px);
+        assert_eq!(cut[0], w.y0_px * cam.width_px + w.x0_px);
+        assert_eq!(cut[w.width_px * 11 + 7], pv * cam.width_px + pu);
+        // Negative control: a tray behind the camera gives the whole image.
+        let mut behind = tray;
+        behind.world_from_tray.translation.vector.z = cam.world_from_camera.translation.vector.z + 1.0;
+        let whole = cam.window_over(&behind, 20);
+        assert_eq!((whole.x0_px, whole.y0_px), (0, 0));
+        assert_eq!((whole.width_px, whole.height_px), (cam.width_px, cam.height_px));
     }
 }

@@ -32,7 +32,7 @@ pub mod recognition;
 use nalgebra::Point3;
 use serde::Serialize;
 
-pub use camera::Camera;
+pub use camera::{Camera, PixelWindow};
 pub use capture::{Background, Capture, capture, capture_over};
 pub use cloud::{CloudDetection, CloudModel, Symmetry};
 pub use heightmap::HeightMap;

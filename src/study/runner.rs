@@ -171,7 +171,14 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
             };
             let files = RecordingFiles::create(r.dir, &stem, r.formats, &scene.scene, &info)
                 .map_err(|(path, e)| format!("{}: {e}", path.display()))?;
-            Some(Recorder::streaming(robot, camera, wp.workpiece.size_m, files))
+            let pick_tray = crate::geometry::TrayVolume::new(&scene.scene.pick_tray);
+            Some(Recorder::streaming(
+                robot,
+                &camera,
+                &pick_tray,
+                wp.workpiece.size_m,
+                files,
+            ))
         }
         _ => None,
     };

@@ -592,7 +592,12 @@ fn a_failed_write_is_reported_and_leaves_nothing() {
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("E").unwrap();
     let camera = binpick::sensor::Camera::from_config(&scene.scene.sensor).unwrap();
-    let mut recorder = binpick::recording::Recorder::new(&robot, camera, wp.workpiece.size_m);
+    let mut recorder = binpick::recording::Recorder::new(
+        &robot,
+        &camera,
+        &binpick::geometry::TrayVolume::new(&scene.scene.pick_tray),
+        wp.workpiece.size_m,
+    );
     let opts = RunOptions {
         picks: 1,
         seed: 1,
@@ -669,13 +674,14 @@ fn a_streamed_recording_is_the_whole_runs() {
     std::fs::create_dir_all(&whole_dir).unwrap();
     std::fs::create_dir_all(&streamed_dir).unwrap();
 
-    let mut whole = Recorder::new(&robot, camera.clone(), wp.workpiece.size_m);
+    let pick_tray = binpick::geometry::TrayVolume::new(&scene.scene.pick_tray);
+    let mut whole = Recorder::new(&robot, &camera, &pick_tray, wp.workpiece.size_m);
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut whole).unwrap();
     let mut whole = whole.finish();
     write_recordings(&whole_dir, "run", formats, &whole, &robot, &scene.scene, &info).unwrap();
 
     let files = RecordingFiles::create(&streamed_dir, "run", formats, &scene.scene, &info).unwrap();
-    let mut streamed = Recorder::streaming(&robot, camera, wp.workpiece.size_m, files);
+    let mut streamed = Recorder::streaming(&robot, &camera, &pick_tray, wp.workpiece.size_m, files);
     let s = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut streamed).unwrap();
     assert_eq!(s.tally.sim_time_s, r.tally.sim_time_s, "deterministic runs");
     assert!(

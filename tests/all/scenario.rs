@@ -98,7 +98,12 @@ fn run(workpiece: &str, picks: usize) -> (RunResult, Recording, RobotModel, Load
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve(workpiece).unwrap();
     let camera = Camera::from_config(&scene.scene.sensor).unwrap();
-    let mut recorder = Recorder::new(&robot, camera, wp.workpiece.size_m);
+    let mut recorder = Recorder::new(
+        &robot,
+        &camera,
+        &binpick::geometry::TrayVolume::new(&scene.scene.pick_tray),
+        wp.workpiece.size_m,
+    );
     let opts = deterministic(picks, 1);
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut recorder).unwrap();
     let rec = recorder.finish();
