@@ -28,8 +28,9 @@ pub const MOTION_RECAPTURES: usize = 2;
 
 /// A recognition result to pick from.
 pub struct SensedResult {
-    /// The capture job (its image and timing).
-    pub job: CaptureJob,
+    /// The capture job (its image and timing), shared by the result's copies ([`Self::keeping`]):
+    /// the image is megabytes.
+    pub job: std::sync::Arc<CaptureJob>,
     /// When the capture was triggered (s).
     pub capture_s: f64,
     /// The recognised parts (`None` if the result was not available).
@@ -46,7 +47,7 @@ impl SensedResult {
     pub fn keeping(&self, keep: &[bool]) -> SensedResult {
         let pick = |i: usize| keep.get(i).copied().unwrap_or(false);
         SensedResult {
-            job: self.job.clone(),
+            job: std::sync::Arc::clone(&self.job),
             capture_s: self.capture_s,
             detections: self.detections.as_ref().map(|d| {
                 d.iter()
@@ -206,7 +207,7 @@ impl Run<'_, '_> {
             job.spoiled = Some(problem.clone());
             self.event_at(job.ready_s, Event::CaptureSpoiled(problem));
             return SensedResult {
-                job,
+                job: job.into(),
                 capture_s,
                 detections: None,
                 evaluation: None,
@@ -235,7 +236,7 @@ impl Run<'_, '_> {
             },
         );
         SensedResult {
-            job,
+            job: job.into(),
             capture_s,
             detections,
             evaluation,
