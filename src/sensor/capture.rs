@@ -24,8 +24,8 @@ use rand::RngExt;
 use rand_chacha::ChaCha8Rng;
 use rayon::prelude::*;
 
-use super::Camera;
 use super::raster::{Facet, NO_FACET, ZBuffer, rasterize};
+use super::{Camera, PixelWindow};
 use crate::physics::{RayTargets, Tag, World};
 
 /// One depth capture.
@@ -48,7 +48,15 @@ pub struct Capture {
     /// What each valid pixel's ray hit: ground truth for the recognition model's visibility
     /// counts and for evaluation only (see [`super::recognition`]).
     pub(super) truth: Vec<Option<Tag>>,
+    /// The pixels that can see the pick tray (its outer walls, floor to rim, and
+    /// [`TRAY_WINDOW_MARGIN_PX`] around them): no other pixel's ray meets the tray, so what looks
+    /// at the tray (the height map, the motion check) reads only these.
+    pub tray_window: PixelWindow,
 }
+
+/// The margin of a capture's [`Capture::tray_window`] around the tray's image (px): a pixel's
+/// centre ray, rounding and the window's whole pixels are within one.
+pub const TRAY_WINDOW_MARGIN_PX: usize = 2;
 
 impl Capture {
     /// Number of pixels with a return.
@@ -181,6 +189,7 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
         depth_m: vec![0.0; w * h],
         points_world: vec![[f32::NAN; 3]; w * h],
         truth: vec![None; w * h],
+        tray_window: camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX),
     };
     c.depth_m
         .par_chunks_mut(w)

@@ -42,12 +42,20 @@ impl HeightMap {
             height_m: vec![f64::NAN; nx * ny],
         };
         let tray_from_world = t.world_from_tray.inverse();
-        for p in &c.points_world {
+        let apex = tray_from_world * Point3::from(c.camera_position_m);
+        // No pixel outside the capture's tray window sees the tray: its points would all fail
+        // the frustum test below.
+        let w = &c.tray_window;
+        let rows = c
+            .points_world
+            .chunks_exact(c.width_px.max(1))
+            .skip(w.y0_px)
+            .take(w.height_px);
+        for p in rows.flat_map(|row| &row[w.x0_px..w.x0_px + w.width_px]) {
             if !p[0].is_finite() {
                 continue;
             }
             let l = tray_from_world * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-            let apex = tray_from_world * Point3::from(c.camera_position_m);
             if apex.z - l.z > 1e-6 {
                 let f = apex.z / (apex.z - l.z);
                 let floor = apex + (l - apex) * f;

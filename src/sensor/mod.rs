@@ -326,8 +326,10 @@ impl Sensor {
         };
         let empty = |u: usize, v: usize| capture.depth_m[v * w + u] <= 0.0;
         let mut holes = vec![false; w * h];
-        for v in 1..h.saturating_sub(1) {
-            for u in 1..w.saturating_sub(1) {
+        // Pixels outside the capture's tray window do not look at the tray floor.
+        let win = &capture.tray_window;
+        for v in win.y0_px.max(1)..(win.y0_px + win.height_px).min(h.saturating_sub(1)) {
+            for u in win.x0_px.max(1)..(win.x0_px + win.width_px).min(w.saturating_sub(1)) {
                 holes[v * w + u] = empty(u, v)
                     && empty(u - 1, v)
                     && empty(u + 1, v)

@@ -44,6 +44,7 @@ pub(super) fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) ->
         depth_m: vec![0.0; w * h],
         points_world: vec![[f32::NAN; 3]; w * h],
         truth: vec![None; w * h],
+        tray_window: cam.window_over(&cell.tray, crate::sensor::capture::TRAY_WINDOW_MARGIN_PX),
     };
     for v in 0..h {
         for u in 0..w {
@@ -409,6 +410,7 @@ pub(super) fn synthetic_meshes(cell: &Cell, parts: &[(&crate::part::mesh::Mesh, 
         depth_m: vec![0.0; w * h],
         points_world: vec![[f32::NAN; 3]; w * h],
         truth: vec![None; w * h],
+        tray_window: cam.window_over(&cell.tray, crate::sensor::capture::TRAY_WINDOW_MARGIN_PX),
     };
     for v in 0..h {
         for u in 0..w {
