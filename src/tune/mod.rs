@@ -256,6 +256,10 @@ pub struct Figures {
     pub parts_lost: usize,
     /// Drops (not a constraint: a drop back into the tray is re-picked).
     pub drops: usize,
+    /// Runs ended by a physics fault (never allowed: such a run's picks stop short, and its
+    /// takt is that of fewer picks).
+    #[serde(default)]
+    pub physics_faults: usize,
     /// Runs merged.
     pub runs: usize,
 }
@@ -285,6 +289,7 @@ impl Figures {
             protective_stops: f.protective_stops,
             parts_lost: f.parts_lost,
             drops: f.drops,
+            physics_faults: tally.physics_faults.len(),
             runs: tally.runs,
         }
     }
@@ -313,6 +318,7 @@ impl Constraints {
         over(f.collisions, self.max_collisions, "collisions");
         over(f.protective_stops, self.max_stops, "protective stops");
         over(f.parts_lost, self.max_parts_lost, "parts lost");
+        over(f.physics_faults, 0, "runs ended by a physics fault");
         v
     }
 
@@ -326,6 +332,7 @@ impl Constraints {
             + over(f.collisions, self.max_collisions)
             + over(f.protective_stops, self.max_stops)
             + over(f.parts_lost, self.max_parts_lost)
+            + over(f.physics_faults, 0)
             + if f.takt_s.is_none() { 1.0 } else { 0.0 }
     }
 }
@@ -675,6 +682,7 @@ mod tests {
                         collisions: usize::from(x < self.unsafe_below),
                         protective_stops: 0,
                         parts_lost: 0,
+                        physics_faults: 0,
                         drops: 0,
                         runs: 1,
                     })
@@ -760,6 +768,7 @@ mod tests {
     fn the_penalty_grows_with_how_far_a_candidate_misses() {
         let c = settings(1, 0).constraints;
         let f = |success: f64, collisions: usize| Figures {
+            physics_faults: 0,
             takt_s: Some(2.0),
             takt_count: 20,
             sustained_takt_s: Some(2.0),
@@ -780,6 +789,16 @@ mod tests {
         assert_eq!(c.violation(&f(1.0, 2)), 2.0);
         // Negative control: each miss is named.
         assert_eq!(c.violations(&f(0.5, 2)).len(), 2);
+        // A run ended by a physics fault is never feasible, whatever the limits.
+        let faulted = Figures {
+            physics_faults: 1,
+            ..f(1.0, 0)
+        };
+        assert_eq!(c.violation(&faulted), 1.0);
+        assert_eq!(
+            c.violations(&faulted),
+            vec!["1 runs ended by a physics fault (at most 0)".to_string()]
+        );
     }
 
     #[test]

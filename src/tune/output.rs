@@ -123,7 +123,7 @@ pub fn markdown(r: &Report<'_>) -> String {
     let h = r.header;
     let c = &r.constraints;
     let mut md = format!(
-        "# tune: workpiece {} in {}\n\n{} candidates ({} per round), {} picks per run, objective: the {} takt, training seeds {}, test seeds {}, {}; optimizer: {}.\n\nConstraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}.\n\n",
+        "# tune: workpiece {} in {}\n\n{} candidates ({} per round), {} picks per run, objective: the {} takt, training seeds {}, test seeds {}, {}; optimizer: {}.\n\nConstraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}, runs ended by a physics fault: none.\n\n",
         h.workpiece,
         h.scene,
         r.evaluations.len(),
