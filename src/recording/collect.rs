@@ -4,8 +4,8 @@
 //!
 //! Job: watch a cell run ([`crate::cycle::Observer`]) and keep, decimated where a viewer needs
 //! no more: every servo tick (joint states are decimated by the writers), every part's state and
-//! pose every [`SCENE_FRAME_S`] from the first pile pour on, the pick tray's window of each
-//! capture ([`TRAY_MARGIN_PX`] around the tray): its depth image and a sixteenth of its point
+//! pose every [`SCENE_FRAME_S`] from the first pile pour on, each capture's region of
+//! interest over the pick tray (all the sensor measures): its depth image and a sixteenth of its point
 //! cloud on a [`CLOUD_GRID_M`] grid, each
 //! recognition result with its best grasp candidates and, for evaluation, the true poses at its
 //! trigger and each detection's error, each motion's tool path as planned and as executed, and
@@ -30,6 +30,7 @@ use crate::geometry::NamedBox;
 use crate::geometry::TrayVolume;
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
+use crate::sensor::capture::TRAY_WINDOW_MARGIN_PX;
 use crate::sensor::{Camera, Capture, PixelWindow, RecognitionReport, TruthAtTrigger};
 use crate::servo::Tick;
 use crate::trajectory::Motion;
@@ -45,11 +46,6 @@ pub const CLOUD_EVERY_PX: usize = 4;
 /// steps, its rounding error (0.07 mm rms) well below the sensor's noise (0.3 mm at 1 m), and it
 /// lets the files' compressors find repeats (1.4 instead of 4.6 MB of points in a 20-pick MCAP).
 pub const CLOUD_GRID_M: f64 = 2.5e-4;
-/// The recorded window of each capture reaches this far around the pick tray's outer walls (px):
-/// 17 mm at the tray floor with the default sensor, room for a part lying on the rim. Recognition
-/// looks at nothing outside the tray; the default sensor's whole 1032 x 772 px image is five
-/// times the window's pixels, and took two thirds of a recording's bytes and most of its cost.
-pub const TRAY_MARGIN_PX: usize = 20;
 /// Most grasp candidates a [`RecognitionRecord`] keeps.
 pub const RECORDED_CANDIDATES: usize = 20;
 /// A streaming recorder keeps this much simulation time behind the newest step before it hands
@@ -289,7 +285,8 @@ pub struct Recorder<'a> {
     motions: usize,
     /// When the last part-pose snapshot was taken (s).
     last_frame_s: Option<f64>,
-    /// The part of each capture that is recorded: the pick tray's window of the image.
+    /// The part of each capture that is recorded: the sensor's region of interest over the pick
+    /// tray ([`Capture::tray_window`]; nothing outside it is measured).
     window: PixelWindow,
     stream: Option<Stream>,
 }
@@ -297,10 +294,10 @@ pub struct Recorder<'a> {
 impl<'a> Recorder<'a> {
     /// A recorder for a run of `robot` seen by `camera` over `pick_tray`, of parts with bounding
     /// box `part_size_m`, that keeps the whole run in memory ([`Recorder::finish`]). It records
-    /// the pick tray's window of each capture ([`TRAY_MARGIN_PX`] around the tray), as the
+    /// the pick tray's window of each capture ([`TRAY_WINDOW_MARGIN_PX`] around the tray), as the
     /// camera [`Camera::cropped`] to it.
     pub fn new(robot: &'a RobotModel, camera: &Camera, pick_tray: &TrayVolume, part_size_m: [f64; 3]) -> Self {
-        let window = camera.window_over(pick_tray, TRAY_MARGIN_PX);
+        let window = camera.window_over(pick_tray, TRAY_WINDOW_MARGIN_PX);
         Recorder {
             robot,
             window,
@@ -447,7 +444,7 @@ impl Observer for Recorder<'_> {
     fn captured(&mut self, c: &Capture) {
         self.arrived(c.trigger_s);
         let w = &self.window;
-        debug_assert!(w.x0_px + w.width_px <= c.width_px && w.y0_px + w.height_px <= c.height_px);
+        debug_assert_eq!(*w, c.tray_window);
         self.buffer.captures.push(CaptureImage {
             t_s: c.trigger_s,
             size_px: (w.width_px, w.height_px),

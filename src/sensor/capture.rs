@@ -48,15 +48,17 @@ pub struct Capture {
     /// What each valid pixel's ray hit: ground truth for the recognition model's visibility
     /// counts and for evaluation only (see [`super::recognition`]).
     pub(super) truth: Vec<Option<Tag>>,
-    /// The pixels that can see the pick tray (its outer walls, floor to rim, and
-    /// [`TRAY_WINDOW_MARGIN_PX`] around them): no other pixel's ray meets the tray, so what looks
-    /// at the tray (the height map, the motion check) reads only these.
+    /// The sensor's region of interest: the pixels that see the pick tray (its outer walls,
+    /// floor to rim) and [`TRAY_WINDOW_MARGIN_PX`] around them. Only these are measured; every
+    /// other pixel has no return. No other pixel's ray meets the tray, so nothing the cell
+    /// decides from looks outside it.
     pub tray_window: PixelWindow,
 }
 
-/// The margin of a capture's [`Capture::tray_window`] around the tray's image (px): a pixel's
-/// centre ray, rounding and the window's whole pixels are within one.
-pub const TRAY_WINDOW_MARGIN_PX: usize = 2;
+/// The margin of a capture's [`Capture::tray_window`] around the tray's image (px): 8.5 mm at
+/// the tray floor with the default sensor, a wall's thickness, so a part resting on the rim is
+/// in the image.
+pub const TRAY_WINDOW_MARGIN_PX: usize = 10;
 
 impl Capture {
     /// Number of pixels with a return.
@@ -147,6 +149,7 @@ impl Background {
         let mut facets = Vec::new();
         rasterize(
             camera,
+            &camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX),
             &world.view_meshes(RayTargets::Fixed, FACET_CHORD_M),
             &mut zbuffer,
             &mut facets,
@@ -170,10 +173,12 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
             &fresh
         }
     };
+    let window = camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX);
     let mut zb = bg.zbuffer.clone();
     let mut facets = bg.facets.clone();
     rasterize(
         camera,
+        &window,
         &world.view_meshes(RayTargets::Moving, FACET_CHORD_M),
         &mut zb,
         &mut facets,
@@ -189,23 +194,34 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
         depth_m: vec![0.0; w * h],
         points_world: vec![[f32::NAN; 3]; w * h],
         truth: vec![None; w * h],
-        tray_window: camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX),
+        tray_window: window,
     };
+    // The pairs of pixels that hold the window's columns.
+    let window_pairs = window.x0_px / 2..(window.x0_px + window.width_px).div_ceil(2).min(pairs);
+    let window_rows = window.y0_px..window.y0_px + window.height_px;
     c.depth_m
         .par_chunks_mut(w)
         .zip(c.points_world.par_chunks_mut(w))
         .zip(c.truth.par_chunks_mut(w))
         .enumerate()
         .for_each(|(v, ((depth, pts), truth))| {
+            if !window_rows.contains(&v) {
+                return;
+            }
             let mut rng = stream.clone();
-            // Each u64 draw takes two 32-bit words.
-            rng.set_word_pos(((id as u128 * h as u128 + v as u128) * pairs as u128) * DRAWS_PER_PAIR * 2);
+            // Each u64 draw takes two 32-bit words; the row's draws start at its first pair, the
+            // window's at its first pair.
+            rng.set_word_pos(
+                ((id as u128 * h as u128 + v as u128) * pairs as u128 + window_pairs.start as u128)
+                    * DRAWS_PER_PAIR
+                    * 2,
+            );
             let row = &zb.facet[v * w..(v + 1) * w];
             let y = (v as f64 + 0.5 - camera.cy_px) / camera.fy_px;
             // The unnormalised ray through (u + 0.5, v + 0.5) in the world: row + u * step.
             let row_dir = rotation * Vector3::new((0.5 - camera.cx_px) / camera.fx_px, y, 1.0);
             let step = rotation.column(0) / camera.fx_px;
-            for p in 0..pairs {
+            for p in window_pairs.clone() {
                 let noise_bits: u64 = rng.random();
                 let drop_bits: u64 = rng.random();
                 let (u_a, u_b) = (2 * p, (2 * p + 1).min(w - 1));

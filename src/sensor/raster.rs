@@ -15,7 +15,7 @@
 use nalgebra::Vector3;
 use rayon::prelude::*;
 
-use super::Camera;
+use super::{Camera, PixelWindow};
 use crate::physics::{Tag, ViewMesh};
 
 /// A triangle's plane and what it belongs to.
@@ -69,10 +69,18 @@ struct ScreenTri {
     rows: (usize, usize),
 }
 
-/// Rasterizes `meshes` into `zb` (over what it holds), appending their facets to `facets`. A
-/// convex mesh's facets facing away from the camera are skipped: a ray from outside enters a
-/// convex solid through a facet facing it.
-pub(crate) fn rasterize(camera: &Camera, meshes: &[ViewMesh], zb: &mut ZBuffer, facets: &mut Vec<Facet>) {
+/// Rasterizes `meshes` into the pixels of `window` of `zb` (over what it holds; the rest of the
+/// buffer is left as it is), appending the facets of the triangles that reach the window to
+/// `facets`. A convex mesh's facets facing away from the camera are skipped: a ray from outside
+/// enters a convex solid through a facet facing it. A pixel inside the window gets the same facet
+/// whatever the window (the window only skips pixels).
+pub(crate) fn rasterize(
+    camera: &Camera,
+    window: &PixelWindow,
+    meshes: &[ViewMesh],
+    zb: &mut ZBuffer,
+    facets: &mut Vec<Facet>,
+) {
     let (w, h) = (camera.width_px, camera.height_px);
     let camera_from_world = camera.world_from_camera.inverse();
     let eye = camera.world_from_camera.translation.vector;
@@ -104,6 +112,7 @@ pub(crate) fn rasterize(camera: &Camera, meshes: &[ViewMesh], zb: &mut ZBuffer, 
             let before = tris.len();
             clip_and_project(
                 camera,
+                window,
                 [cam[t[0] as usize], cam[t[1] as usize], cam[t[2] as usize]],
                 facet,
                 &mut tris,
@@ -138,13 +147,14 @@ pub(crate) fn rasterize(camera: &Camera, meshes: &[ViewMesh], zb: &mut ZBuffer, 
             let v0 = band * BAND_ROWS;
             let v1 = (v0 + BAND_ROWS).min(h) - 1;
             for &k in list {
-                draw(&tris[k as usize], w, v0, v1, depth, facet);
+                draw(&tris[k as usize], w, window, v0, v1, depth, facet);
             }
         });
 }
 
-/// Draws one triangle into the rows `v0..=v1` of a band (`depth`, `facet` start at row `v0`).
-fn draw(t: &ScreenTri, w: usize, v0: usize, v1: usize, inv_depth: &mut [f32], facet: &mut [u32]) {
+/// Draws one triangle into the rows `v0..=v1` of a band (`depth`, `facet` start at row `v0`),
+/// within the columns of `window` (its rows are in the triangle's).
+fn draw(t: &ScreenTri, w: usize, window: &PixelWindow, v0: usize, v1: usize, inv_depth: &mut [f32], facet: &mut [u32]) {
     let [x0, x1, x2] = t.x;
     let [y0, y1, y2] = t.y;
     let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
@@ -160,8 +170,10 @@ fn draw(t: &ScreenTri, w: usize, v0: usize, v1: usize, inv_depth: &mut [f32], fa
     let e2 = edge((x0, y0), (x1, y1));
     let xmin = x0.min(x1).min(x2);
     let xmax = x0.max(x1).max(x2);
-    let u_lo = (xmin - 0.5).ceil().max(0.0);
-    let u_hi = (xmax - 0.5).floor().min(w as f64 - 1.0);
+    let u_lo = (xmin - 0.5).ceil().max(window.x0_px as f64);
+    let u_hi = (xmax - 0.5)
+        .floor()
+        .min((window.x0_px + window.width_px).min(w) as f64 - 1.0);
     if u_lo > u_hi {
         return;
     }
@@ -190,8 +202,8 @@ fn draw(t: &ScreenTri, w: usize, v0: usize, v1: usize, inv_depth: &mut [f32], fa
 }
 
 /// Clips a triangle (camera frame, m) at the near plane and projects what is left into the
-/// image as one or two screen triangles.
-fn clip_and_project(camera: &Camera, v: [Vector3<f64>; 3], facet: u32, out: &mut Vec<ScreenTri>) {
+/// image as one or two screen triangles, kept if they may cover a pixel centre of `window`.
+fn clip_and_project(camera: &Camera, window: &PixelWindow, v: [Vector3<f64>; 3], facet: u32, out: &mut Vec<ScreenTri>) {
     if v.iter().all(|p| p.z < NEAR_M) || v.iter().all(|p| p.z > camera.max_range_m) {
         return;
     }
@@ -206,7 +218,10 @@ fn clip_and_project(camera: &Camera, v: [Vector3<f64>; 3], facet: u32, out: &mut
             poly.push(a + (b - a) * s);
         }
     }
-    let (w, h) = (camera.width_px as f64, camera.height_px as f64);
+    // The window's first and last pixel row and column.
+    let (u_first, v_first) = (window.x0_px as f64, window.y0_px as f64);
+    let u_last = (window.x0_px + window.width_px).min(camera.width_px) as f64 - 1.0;
+    let v_last = (window.y0_px + window.height_px).min(camera.height_px) as f64 - 1.0;
     let project = |p: &Vector3<f64>| {
         (
             camera.fx_px * p.x / p.z + camera.cx_px,
@@ -221,8 +236,9 @@ fn clip_and_project(camera: &Camera, v: [Vector3<f64>; 3], facet: u32, out: &mut
         let ymax = tri.iter().map(|p| p.1).fold(f64::NEG_INFINITY, f64::max);
         let xmin = tri.iter().map(|p| p.0).fold(f64::INFINITY, f64::min);
         let xmax = tri.iter().map(|p| p.0).fold(f64::NEG_INFINITY, f64::max);
-        let (v_lo, v_hi) = ((ymin - 0.5).ceil().max(0.0), (ymax - 0.5).floor().min(h - 1.0));
-        if v_lo > v_hi || xmax < 0.0 || xmin > w {
+        let (v_lo, v_hi) = ((ymin - 0.5).ceil().max(v_first), (ymax - 0.5).floor().min(v_last));
+        // No pixel centre of the window's columns between the triangle's extremes.
+        if v_lo > v_hi || (xmax - 0.5).floor() < u_first || (xmin - 0.5).ceil() > u_last {
             continue;
         }
         out.push(ScreenTri {

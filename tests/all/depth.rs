@@ -121,8 +121,10 @@ fn against_ray_casts(
     let optical = camera.world_from_camera.rotation * Vector3::z();
     let rays = w.ray_caster(RayTargets::All);
     let (mut compared, mut one_sided, mut off) = (0, 0, 0);
-    for v in (0..camera.height_px).step_by(3) {
-        for u in (0..camera.width_px).step_by(3) {
+    // The sensor measures its region of interest over the pick tray only.
+    let roi = &c.tray_window;
+    for v in (roi.y0_px..roi.y0_px + roi.height_px).step_by(3) {
+        for u in (roi.x0_px..roi.x0_px + roi.width_px).step_by(3) {
             let d = camera.pixel_dir(u, v);
             let cast = rays
                 .cast(&origin, &d, camera.max_range_m)
@@ -144,8 +146,10 @@ fn against_ray_casts(
 /// and cup over it: the rasterized depth agrees with a ray cast per pixel into the physics world
 /// (parry's exact shapes) within 0.2 mm (the facets lie within 0.05 mm of the round surfaces;
 /// parry's cylinder casts stop up to 15 micrometres short) except at silhouettes, where a pixel
-/// centre a hair from an edge may fall either way (under 1 % of the pixels). Negative control:
-/// ray casts from 1 mm above the camera disagree nearly everywhere.
+/// centre a hair from an edge may fall either way (under 2 % of the pixels of the region of
+/// interest, which the pile fills: 1.5 % at this seed; under 1 % of the whole image). Negative control:
+/// ray casts from 1 mm above the camera disagree nearly everywhere. Compared over the sensor's
+/// region of interest over the pick tray; outside it nothing is measured (the table would be).
 #[test]
 fn rasterized_depth_agrees_with_ray_casts_into_the_world() {
     let (mut w, camera, _, wp) = empty_cell("D");
@@ -156,9 +160,20 @@ fn rasterized_depth_agrees_with_ray_casts_into_the_world() {
         .unwrap();
     let c = capture(&w, &camera, 2, 0);
     let (n, one_sided, off) = against_ray_casts(&c, &w, &camera, Vector3::zeros(), 2e-4);
-    assert!(n > 50_000, "{n} pixels compared");
+    assert!(n > 15_000, "{n} pixels compared");
+    // Outside the region of interest nothing is measured, though the table is in range there.
+    let roi = c.tray_window;
+    let inside = |u: usize, v: usize| {
+        (roi.x0_px..roi.x0_px + roi.width_px).contains(&u) && (roi.y0_px..roi.y0_px + roi.height_px).contains(&v)
+    };
+    let outside_returns = (0..camera.height_px)
+        .flat_map(|v| (0..camera.width_px).map(move |u| (u, v)))
+        .filter(|&(u, v)| !inside(u, v) && c.depth_m[v * camera.width_px + u] > 0.0)
+        .count();
+    assert_eq!(outside_returns, 0);
+    assert!(roi.width_px * roi.height_px < camera.width_px * camera.height_px / 4);
     assert!(
-        (one_sided as f64) < 0.01 * n as f64 && (off as f64) < 0.01 * n as f64,
+        (one_sided as f64) < 0.02 * n as f64 && (off as f64) < 0.02 * n as f64,
         "{one_sided} one-sided and {off} off by more than 0.2 mm of {n}"
     );
     let (_, one_sided, off) = against_ray_casts(&c, &w, &camera, Vector3::z() * 0.001, 2e-4);
