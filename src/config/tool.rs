@@ -155,11 +155,11 @@ mod tests {
         assert_eq!(s.sensor, cell.scene.sensor);
         assert_eq!(s.with_tool_of(&b.workpiece), s, "resolving twice changes nothing");
         assert!(s.carries_tool_of(&b.workpiece));
-        // Negative control: the cell itself does not carry B's cup; A brings none.
+        // Negative control: the cell itself does not carry B's cup; C brings none.
         assert!(!cell.scene.carries_tool_of(&b.workpiece));
-        let a = LoadedWorkpiece::resolve("A").unwrap();
-        assert_eq!(cell.scene.with_tool_of(&a.workpiece), cell.scene);
-        assert!(cell.scene.carries_tool_of(&a.workpiece));
+        let c = LoadedWorkpiece::resolve("C").unwrap();
+        assert_eq!(cell.scene.with_tool_of(&c.workpiece), cell.scene);
+        assert!(cell.scene.carries_tool_of(&c.workpiece));
     }
 
     #[test]
@@ -183,10 +183,10 @@ mod tests {
             e.contains("B.toml: cycle.release_lead_s must not exceed gripper.release_s (0.01 s)"),
             "{e}"
         );
-        // Of the six built-in workpieces B, E and F bring their cups (the default cell,
+        // Of the six built-in workpieces A, B, E and F bring their cups (the default cell,
         // docs/studies.md); every file round-trips, with its cup or without one.
         for w in LoadedWorkpiece::all_embedded().unwrap() {
-            let brings = ["B", "E", "F"].contains(&w.workpiece.name.as_str());
+            let brings = ["A", "B", "E", "F"].contains(&w.workpiece.name.as_str());
             assert_eq!(w.workpiece.gripper.is_some(), brings, "{}", w.workpiece.name);
             let text = toml::to_string(&w.workpiece).unwrap();
             assert_eq!(text.contains("[gripper]"), brings, "{text}");
