@@ -6,7 +6,7 @@ set -euo pipefail
 bp=${BINPICK:-binpick}
 out=${1:-runs}
 # 1. The cup diameter for A, 4 to 12 mm (a relay 7 mm high: which cups seal on its sides?).
-"$bp" sweep --workpieces A --set gripper.cup_diameter_m=0.004:0.012:0.002 --seeds 1-3 --deterministic --out "$out"
+"$bp" sweep --workpieces A --set workpiece.gripper.cup_diameter_m=0.004:0.012:0.002 --seeds 1-3 --deterministic --out "$out"
 # 2. The sensor's latency (measurement + recognition), 0.3 / 0.7 / 1.1 s, all six workpieces.
 "$bp" sweep --set sensor.latency_s=0.3,0.7,1.1 --deterministic --out "$out"
 # 3. The place tray swung about J1 from 90 to 180 degrees away from the pick tray (pick tray at

@@ -123,6 +123,27 @@ pub fn resolve(
             for (s, v) in sets.iter().zip(vals).filter(|(s, _)| s.target == Target::Workpiece) {
                 set_in(&mut t, &s.path, v.clone()).map_err(|m| ConfigError::one(&wl, &s.key, m))?;
             }
+            // A cell's gripper key that the workpiece's own `[gripper]` sets would vary nothing
+            // for it: refused, so that a study never reports variants that are the same cell.
+            for s in sets.iter().filter(|s| s.target == Target::Cell) {
+                if let [Segment::Key(g), Segment::Key(k)] = s.path.as_slice()
+                    && g == "gripper"
+                    && wtree
+                        .get("gripper")
+                        .and_then(|v| v.as_table())
+                        .is_some_and(|t| t.contains_key(k))
+                {
+                    return Err(ConfigError::one(
+                        &wl,
+                        &s.key,
+                        format!(
+                            "does not reach this workpiece: its file brings its own gripper.{k} (its [gripper] \
+                             section), which the cell's does not override; vary workpiece.gripper.{k} instead"
+                        ),
+                    )
+                    .into());
+                }
+            }
             let wp = LoadedWorkpiece::from_table(&wl, source.clone(), t)?;
             wp.workpiece.check_fits_scene(&wl, &loaded.scene)?;
             let shape = crate::physics::PartShape::build(&wp.workpiece, &wp.source)
@@ -191,7 +212,19 @@ mod tests {
             m.contains("variant 2: sensor.latency_s=fast") && m.contains("invalid type"),
             "{m}"
         );
-        let m = e(&["gripper.cup_diameter_m=0.006,0.04"]);
+        // A and E bring their own cups: the cell's key would not reach them, and is refused.
+        let m = e(&["gripper.cup_diameter_m=0.005,0.007"]);
+        assert!(
+            m.contains("A.toml (sweep variant 1: gripper.cup_diameter_m=0.005)")
+                && m.contains("does not reach this workpiece")
+                && m.contains("vary workpiece.gripper.cup_diameter_m instead"),
+            "{m}"
+        );
+        // Negative control: C runs with the cell's cup, so the same key reaches it.
+        let sets = parse_sets(&["gripper.cup_diameter_m=0.005,0.007".to_string()]).unwrap();
+        assert!(resolve(None, &["C".into()], &sets, &variants(&sets)).is_ok());
+        // The workpiece's key is the one that reaches A and E.
+        let m = e(&["workpiece.gripper.cup_diameter_m=0.006,0.04"]);
         assert!(
             m.contains("cup_diameter_m=0.04") && m.contains("no face the suction cup fits on"),
             "{m}"

@@ -240,7 +240,7 @@ fn batch_sweep_and_tune_pages_are_well_formed_and_link_what_exists() {
         "--workpiece",
         "E",
         "--vary",
-        "gripper.cup_diameter_m=0.004:0.02",
+        "workpiece.gripper.cup_diameter_m=0.004:0.02",
         "--budget",
         "2",
         "--population",

@@ -61,10 +61,10 @@ fn bad_sweeps_are_refused_naming_the_key_and_the_value() {
         &["--set", "gripper.cup_diameter_m=0.004:0.012:0"],
         &["gripper.cup_diameter_m", "range \"0.004:0.012:0\" has a zero step"],
     );
-    // Variants the cell checks refuse: a cup larger than every face of A, a tray out of reach,
-    // a latency out of range.
+    // Variants the cell checks refuse: a cup larger than every face of C (which runs with the
+    // cell's cup), a tray out of reach, a latency out of range.
     refused(
-        &["--workpieces", "A", "--set", "gripper.cup_diameter_m=0.006,0.04"],
+        &["--workpieces", "C", "--set", "gripper.cup_diameter_m=0.006,0.04"],
         &[
             "sweep variant 2: gripper.cup_diameter_m=0.04",
             "no face the suction cup fits on",

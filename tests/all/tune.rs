@@ -11,7 +11,7 @@ use serde_json::Value;
 
 use crate::support::{binpick, stderr, stdout};
 
-const KEY: &str = "gripper.cup_diameter_m=0.004:0.02";
+const KEY: &str = "workpiece.gripper.cup_diameter_m=0.004:0.02";
 
 /// `binpick tune` of workpiece B on seed 1, tested on seed 2, 3 picks, deterministic, with
 /// `extra` arguments, into `out`.
