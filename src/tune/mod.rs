@@ -492,7 +492,30 @@ struct CostState<'a> {
     failure: Option<StudyError>,
 }
 
-impl Cost<'_> {
+impl<'a> Cost<'a> {
+    /// A cost over `dims` under `settings`, with an empty log.
+    fn new(dims: &'a [Dim], settings: &'a Settings, evaluator: &'a mut dyn Evaluator) -> Self {
+        Cost {
+            dims,
+            settings,
+            state: RefCell::new(CostState {
+                evaluator,
+                log: Vec::new(),
+                round: 0,
+                failure: None,
+            }),
+        }
+    }
+
+    /// The evaluations logged, or the evaluator's error if it failed.
+    fn into_log(self) -> Result<Vec<Evaluation>, StudyError> {
+        let st = self.state.into_inner();
+        match st.failure {
+            Some(e) => Err(e),
+            None => Ok(st.log),
+        }
+    }
+
     fn round(&self, positions: &[Vec<f64>]) -> Result<Vec<f64>, ArgminError> {
         let mut st = self.state.borrow_mut();
         let left = self.settings.budget.saturating_sub(st.log.len());
@@ -582,16 +605,7 @@ pub fn optimize(
     let (lo, hi): (Vec<f64>, Vec<f64>) = dims.iter().map(Dim::bounds).unzip();
     let mut swarm =
         ParticleSwarm::new((lo, hi), settings.population).with_rng_generator(Xoshiro256PlusPlus::seed_from_u64(seed));
-    let mut problem = Problem::new(Cost {
-        dims,
-        settings,
-        state: RefCell::new(CostState {
-            evaluator,
-            log: Vec::new(),
-            round: 0,
-            failure: None,
-        }),
-    });
+    let mut problem = Problem::new(Cost::new(dims, settings, evaluator));
     let mut state = match swarm.init(&mut problem, PopulationState::new()) {
         Ok((s, _)) => Some(s),
         Err(_) => None,
@@ -607,39 +621,22 @@ pub fn optimize(
         }
         state = swarm.next_iter(&mut problem, s).ok().map(|(s, _)| s);
     }
-    let cost = problem
+    problem
         .take_problem()
-        .ok_or_else(|| StudyError::Run("the optimizer lost its objective".into()))?;
-    let st = cost.state.into_inner();
-    match st.failure {
-        Some(e) => Err(e),
-        None => Ok(st.log),
-    }
+        .ok_or_else(|| StudyError::Run("the optimizer lost its objective".into()))?
+        .into_log()
 }
 
 /// [`Optimizer::Grid`]: the [`grid`]'s points in rounds of the population, through the same
 /// costing and log as the swarm's rounds.
 fn run_grid(dims: &[Dim], settings: &Settings, evaluator: &mut dyn Evaluator) -> Result<Vec<Evaluation>, StudyError> {
-    let cost = Cost {
-        dims,
-        settings,
-        state: RefCell::new(CostState {
-            evaluator,
-            log: Vec::new(),
-            round: 0,
-            failure: None,
-        }),
-    };
+    let cost = Cost::new(dims, settings, evaluator);
     for chunk in grid(dims, settings.budget).chunks(settings.population) {
         if cost.round(chunk).is_err() {
             break;
         }
     }
-    let st = cost.state.into_inner();
-    match st.failure {
-        Some(e) => Err(e),
-        None => Ok(st.log),
-    }
+    cost.into_log()
 }
 
 /// The best evaluation: the lowest training takt among the feasible ones (the first of equals);
