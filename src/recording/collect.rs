@@ -26,8 +26,7 @@ use std::path::PathBuf;
 use std::sync::mpsc;
 
 use crate::cycle::{CycleEvent, Event, EventLog, Observer, Recognised, Takt};
-use crate::geometry::NamedBox;
-use crate::geometry::TrayVolume;
+use crate::geometry::{NamedBox, TrayVolume};
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::capture::TRAY_WINDOW_MARGIN_PX;
