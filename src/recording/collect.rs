@@ -133,12 +133,9 @@ impl CaptureImage {
 fn cloud_on_grid(c: &Capture, w: &PixelWindow, every_px: usize) -> Vec<[f32; 3]> {
     let per_m = 1.0 / CLOUD_GRID_M;
     let on_grid = |v: f32| ((f64::from(v) * per_m).round() * CLOUD_GRID_M) as f32;
-    c.points_world
-        .chunks_exact(c.width_px.max(1))
-        .skip(w.y0_px)
-        .take(w.height_px)
+    w.rows(&c.points_world, c.width_px)
         .step_by(every_px)
-        .flat_map(|row| row[w.x0_px..w.x0_px + w.width_px].iter().step_by(every_px))
+        .flat_map(|row| row.iter().step_by(every_px))
         .filter(|p| p[0].is_finite())
         .map(|p| p.map(on_grid))
         .collect()

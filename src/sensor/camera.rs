@@ -24,17 +24,20 @@ pub struct PixelWindow {
 }
 
 impl PixelWindow {
-    /// The values of the window's pixels, row-major, from a row-major image `width_px` wide.
-    pub fn crop<T: Copy>(&self, image: &[T], width_px: usize) -> Vec<T> {
-        let mut out = Vec::with_capacity(self.width_px * self.height_px);
-        for row in image
+    /// The window's part of each of its rows, top to bottom, of a row-major image `width_px`
+    /// wide.
+    pub fn rows<'a, T>(&self, image: &'a [T], width_px: usize) -> impl Iterator<Item = &'a [T]> {
+        let cols = self.x0_px..self.x0_px + self.width_px;
+        image
             .chunks_exact(width_px.max(1))
             .skip(self.y0_px)
             .take(self.height_px)
-        {
-            out.extend_from_slice(&row[self.x0_px..self.x0_px + self.width_px]);
-        }
-        out
+            .map(move |row| &row[cols.clone()])
+    }
+
+    /// The values of the window's pixels, row-major, from a row-major image `width_px` wide.
+    pub fn crop<T: Copy>(&self, image: &[T], width_px: usize) -> Vec<T> {
+        self.rows(image, width_px).flatten().copied().collect()
     }
 }
 

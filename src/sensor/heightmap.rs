@@ -45,13 +45,7 @@ impl HeightMap {
         let apex = tray_from_world * Point3::from(c.camera_position_m);
         // No pixel outside the capture's tray window sees the tray: its points would all fail
         // the frustum test below.
-        let w = &c.tray_window;
-        let rows = c
-            .points_world
-            .chunks_exact(c.width_px.max(1))
-            .skip(w.y0_px)
-            .take(w.height_px);
-        for p in rows.flat_map(|row| &row[w.x0_px..w.x0_px + w.width_px]) {
+        for p in c.tray_window.rows(&c.points_world, c.width_px).flatten() {
             if !p[0].is_finite() {
                 continue;
             }
