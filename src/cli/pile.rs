@@ -187,6 +187,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         "recognition": &report, "recognition_mode": loaded.scene.sensor.recognition.name(),
         "detections": &detections,
         "detections_truth": &report.matches,
+        "top_layer_truth": top_layer_truth(&job.truth, &report),
         "grasp": {"chosen": chosen, "ranked": choice.plan.ranked.len(), "rejected": choice.plan.rejected_counts(),
                   "why_none": chosen.is_none().then(|| choice.why_none())},
     });
@@ -277,4 +278,30 @@ fn print_grasp(choice: &GraspChoice, grasp_ms: f64) {
         }
     );
     println!("  sense and grasp  {grasp_ms:.2} ms wall (height map, candidates, IK, ranking, clear approach)");
+}
+
+/// Evaluation only: each top-layer part at the trigger (its pose, its visible pixels, and whether
+/// a correct detection found it), so a reader of `sense.json` can see which parts were missed.
+fn top_layer_truth(
+    truth: &binpick::sensor::recognition::TruthAtTrigger,
+    report: &binpick::sensor::recognition::RecognitionReport,
+) -> serde_json::Value {
+    let found: std::collections::BTreeSet<usize> = report
+        .matches
+        .iter()
+        .flatten()
+        .filter(|m| m.correct)
+        .map(|m| m.part)
+        .collect();
+    truth
+        .top_layer
+        .iter()
+        .map(|&i| {
+            let p = &truth.world_from_part[i];
+            let q = p.rotation.quaternion();
+            json!({"part": i, "visible_px": truth.visible_px[i], "found": found.contains(&i),
+                   "position_m": [p.translation.x, p.translation.y, p.translation.z],
+                   "rotation_xyzw": [q.i, q.j, q.k, q.w]})
+        })
+        .collect()
 }
