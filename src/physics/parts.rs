@@ -55,7 +55,7 @@ impl World {
         );
         let view_collider = self.colliders.insert_with_parent(
             ColliderBuilder::new(s.view_shape.clone())
-                .density(0.0)
+                .mass_properties(MassProperties::default())
                 .sensor(true)
                 .collision_groups(InteractionGroups::new(
                     Group::GROUP_5,

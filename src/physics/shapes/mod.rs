@@ -152,8 +152,11 @@ struct MeshPiece {
 /// come out as pieces of their own: see the tests). Flat shells (no volume) are dropped.
 ///
 /// Simplification: shells are solids of their own; a shell inside another (a cavity) is filled.
-fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> Vec<MeshPiece> {
+/// Also returned: whether a shell was decomposed (its pieces are not its exact surface: a
+/// TO-220's tab hole, a standoff's bore are partly filled).
+fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> (Vec<MeshPiece>, bool) {
     let mut pieces = Vec::new();
+    let mut decomposed_any = false;
     for (sv, st) in shells(verts, tris) {
         let Some(hull) = SharedShape::convex_hull(&sv) else {
             continue;
@@ -177,8 +180,9 @@ fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> Vec<MeshPiece> {
         } else {
             pieces.extend(decomposed.into_iter().map(mesh_piece));
         }
+        decomposed_any = true;
     }
-    pieces
+    (pieces, decomposed_any)
 }
 
 /// A convex piece with its view for rays: an axis-aligned box (8 vertices, each on a corner of
@@ -481,7 +485,7 @@ impl PartShape {
     /// The collider is described in the module header.
     pub fn from_mesh(workpiece: &Workpiece, mesh: &Mesh) -> Result<Self, ShapeError> {
         let sim_verts = centred_sim_vertices(workpiece, mesh)?;
-        let pieces = mesh_collider(&sim_verts, &mesh.triangles);
+        let (pieces, decomposed) = mesh_collider(&sim_verts, &mesh.triangles);
         if pieces.is_empty() {
             return Err(ShapeError::Degenerate(workpiece.name.clone()));
         }
@@ -500,12 +504,27 @@ impl PartShape {
         // anything else a compound, as a compound workpiece's primitives.
         let single_box =
             n == 1 && pieces[0].view.1.as_cuboid().is_some() && pieces[0].view.0.translation.length() < 1e-6;
+        // What rays see: the convex pieces where they are the mesh's exact surface; the mesh
+        // itself where a shell was decomposed (the sensor sees through a tab's hole that the
+        // collider's pieces fill).
+        let exact_view = || {
+            SharedShape::trimesh_with_flags(
+                sim_verts.clone(),
+                mesh.triangles.clone(),
+                rapier3d::parry::shape::TriMeshFlags::ORIENTED,
+            )
+            .ok()
+        };
         let (shape, view_shape) = if single_box {
             (pieces[0].shape.clone(), pieces[0].view.1.clone())
         } else {
+            let view = decomposed
+                .then(exact_view)
+                .flatten()
+                .unwrap_or_else(|| SharedShape::compound(pieces.iter().map(|p| p.view.clone()).collect()));
             (
                 SharedShape::compound(pieces.iter().map(|p| (Pose::IDENTITY, p.shape.clone())).collect()),
-                SharedShape::compound(pieces.iter().map(|p| p.view.clone()).collect()),
+                view,
             )
         };
         let mut built = Self::assemble(workpiece, shape, view_shape, Some(polytopes), n);
