@@ -55,6 +55,24 @@ impl PlanarFace {
         self.centroid_m + self.u * p.x + self.v * p.y
     }
 
+    /// The area of its holes (m^2).
+    pub fn holes_area_m2(&self) -> f64 {
+        self.holes
+            .iter()
+            .map(|h| {
+                let n = h.len();
+                (0..n)
+                    .map(|k| {
+                        let (a, b) = (h[k], h[(k + 1) % n]);
+                        a.x * b.y - b.x * a.y
+                    })
+                    .sum::<f64>()
+                    .abs()
+                    / 2.0
+            })
+            .sum()
+    }
+
     /// The face's extent along `u` and `v` (m).
     pub fn extent_m(&self) -> [f64; 2] {
         let (mut lo, mut hi) = ([f64::INFINITY; 2], [f64::NEG_INFINITY; 2]);

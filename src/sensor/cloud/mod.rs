@@ -39,9 +39,11 @@
 //! - a can (D) lying on its side is found when its axis fits within 4 degrees (standard error)
 //!   and both its base end and its station are decided; about 6 in 400 are off by 5-7 degrees;
 //! - a mesh workpiece (a CAD part) is matched through its part model's planar faces
-//!   ([`CloudModel::of_part_model`]): each face's outline is fitted as its minimum-area bounding
-//!   rectangle (or as a disc when it is round), and hypotheses are verified by rendering the real
-//!   mesh, so a rectangle that is not the face's true outline is caught there. A part whose
+//!   ([`CloudModel::of_part_model`]): a face that is its rectangle (or a disc) is fitted as
+//!   above; any other face by its true outline ([`outline`]: a polygon with the holes the sensor
+//!   sees through, with the features beside it that a patch takes in, such as a DIP's leg
+//!   shoulders), and the patch's plane is then refitted without the pixels off it, which those
+//!   features would tilt. Hypotheses are verified by rendering the real mesh. A part whose
 //!   visible surface is not a large planar face is recognised by point-pair features instead
 //!   ([`ppf`], chosen by the workpiece's `recognition.method`).
 //!
@@ -132,8 +134,19 @@ pub struct CloudModel {
     fine_verify: bool,
     /// Set: recognised by point-pair features ([`ppf`]) instead of planar faces.
     ppf: Option<std::sync::Arc<ppf::PpfModel>>,
+    /// Per face: a mesh face's true outline ([`outline`]), fitted in place of its rectangle;
+    /// `None` for a primitive's faces and round faces (empty for a primitive model).
+    outlines: Vec<Option<std::sync::Arc<outline::Outline>>>,
+    /// Some face has features beside it within the plane band ([`outline::BAND_M`]: a DIP's
+    /// leg shoulders): a patch's plane is refitted without the pixels off it
+    /// ([`PLANE_TRIM_M`]), which would tilt it.
+    trim_plane: bool,
 }
 
+/// A patch's plane is refitted (twice) without its pixels farther than this from it, when the
+/// model's faces have features beside them within the plane band (m): two sigma of the depth
+/// noise.
+pub const PLANE_TRIM_M: f64 = 0.0006;
 /// A planar face of a part model smaller than this share of the largest is not matched.
 pub const MESH_FACE_MIN_SHARE: f64 = 0.03;
 /// A planar face of a part model narrower than this is not matched (m): a 1 mm strip is a pixel
@@ -213,6 +226,8 @@ impl CloudModel {
             round: None,
             fine_verify: w.pieces().iter().any(|(r, _)| *r == PartRole::Lead),
             ppf: None,
+            outlines: Vec::new(),
+            trim_plane: false,
         }
     }
 
@@ -227,6 +242,7 @@ impl CloudModel {
         let largest = pm.faces.first().map_or(0.0, |f| f.face.area_m2);
         let round = pm.round_body();
         let mut faces: Vec<Face> = Vec::new();
+        let mut outlines = Vec::new();
         for (i, mf) in pm.faces.iter().enumerate() {
             if mf.face.area_m2 < MESH_FACE_MIN_SHARE * largest || round.as_ref().is_some_and(|r| r.faces.contains(&i)) {
                 continue;
@@ -236,6 +252,12 @@ impl CloudModel {
                 continue;
             }
             if !faces.iter().any(|g| symmetry.maps_onto(&f, g)) {
+                // A face that is its rectangle, with nothing beside it a patch takes in, keeps
+                // the (exact, faster) rectangle fit.
+                let outline = (!f.disc)
+                    .then(|| outline::Outline::new(&mf.face, &f, &pm.mesh))
+                    .filter(|o| !o.is_rectangle(&f, mf.face.area_m2, mf.face.holes_area_m2()));
+                outlines.push(outline.map(std::sync::Arc::new));
                 faces.push(f);
             }
         }
@@ -252,6 +274,8 @@ impl CloudModel {
             round: round.map(|r| (r.center_m, r.axis, r.radius_m)),
             fine_verify: pm.round.iter().any(|r| 2.0 * r.radius_m < VERIFY_SPACING_M),
             ppf: None,
+            trim_plane: outlines.iter().flatten().any(|o| o.has_band()),
+            outlines,
         }
     }
 
@@ -378,7 +402,9 @@ struct Cloud<'a> {
 
 /// A patch's plane, its in-plane basis (e1, e2), the in-plane points of its pixels' rays (inside)
 /// and of the neighbours seen behind the plane (outside) (m).
-type Silhouette = (Plane, [Vector3<f64>; 2], Vec<[f64; 2]>, Vec<[f64; 2]>);
+/// A patch's plane, its basis (e1, e2), its inside points, its boundary's inside points (those
+/// with a 4-neighbour not in the patch) and its outside points, in that basis (m).
+type Silhouette = (Plane, [Vector3<f64>; 2], Vec<[f64; 2]>, Vec<[f64; 2]>, Vec<[f64; 2]>);
 
 /// A smooth surface patch: its pixels.
 struct Patch {
@@ -602,15 +628,32 @@ impl<'a> Cloud<'a> {
 
     /// A patch's plane, its pixels' rays cut with the plane (inside) and the neighbours whose
     /// measured point lies behind the plane (outside), both in the plane's basis (e1, e2).
-    fn silhouette(&self, patch: &Patch) -> Silhouette {
+    fn silhouette(&self, patch: &Patch, trim: bool) -> Silhouette {
         let origin = self.pts[patch.pixels[0]];
-        let (mut s, mut ss) = (Vector3::zeros(), Matrix3::zeros());
-        for &i in &patch.pixels {
-            let r = self.pts[i] - origin;
-            s += r;
-            ss += r * r.transpose();
+        let fit = |keep: &dyn Fn(&Vector3<f64>) -> bool| {
+            let (mut n, mut s, mut ss) = (0.0, Vector3::zeros(), Matrix3::zeros());
+            for &i in &patch.pixels {
+                if keep(&self.pts[i]) {
+                    let r = self.pts[i] - origin;
+                    n += 1.0;
+                    s += r;
+                    ss += r * r.transpose();
+                }
+            }
+            (n, plane_from_sums(n, &s, &ss, &origin, &self.origin))
+        };
+        let (_, mut plane) = fit(&|_| true);
+        if trim {
+            // Features beside the face within the plane band (a DIP's leg shoulders) join the
+            // patch at its rim and tilt its least-squares plane: refitted without the pixels off it.
+            for _ in 0..2 {
+                let p = Plane { ..plane };
+                let (kept, refit) = fit(&|q| p.normal.dot(&(q - p.point)).abs() <= PLANE_TRIM_M);
+                if kept >= 0.5 * patch.pixels.len() as f64 {
+                    plane = refit;
+                }
+            }
         }
-        let plane = plane_from_sums(patch.pixels.len() as f64, &s, &ss, &origin, &self.origin);
         let n = plane.normal;
         let e1 = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
         let e1 = (e1 - n * n.dot(&e1)).normalize();
@@ -626,6 +669,18 @@ impl<'a> Cloud<'a> {
             .collect();
         let mut member = patch.pixels.clone();
         member.sort_unstable();
+        let edge: Vec<[f64; 2]> = patch
+            .pixels
+            .iter()
+            .filter(|&&i| {
+                let (u, v) = (i % self.w, i / self.w);
+                [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(du, dv)| {
+                    self.neighbour_at(u, v, du, dv)
+                        .is_none_or(|j| member.binary_search(&j).is_err())
+                })
+            })
+            .filter_map(|&i| self.ray_on_plane(i, &plane).map(|(p, _)| to2(p)))
+            .collect();
         // The 8-neighbours of the patch's pixels with a return, not in it, sorted.
         let ring = self.dilate(&patch.pixels, 1, |j| {
             self.depth[j] > 0.0 && member.binary_search(&j).is_err()
@@ -637,12 +692,12 @@ impl<'a> Cloud<'a> {
                 (self.depth[j] > z + BEHIND_TOL_M).then(|| to2(p))
             })
             .collect();
-        (plane, [e1, e2], inside, outside)
+        (plane, [e1, e2], inside, edge, outside)
     }
 
     /// The best verified hypothesis for a patch, if any.
     fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> (Option<CloudDetection>, Vec<lying::AxisFit>) {
-        let (plane, [e1, e2], inside, outside) = self.silhouette(patch);
+        let (plane, [e1, e2], inside, edge, outside) = self.silhouette(patch, model.trim_plane);
         let n = plane.normal;
         // The fits need only the inside points' convex hull (and so does the minimum-area
         // rectangle); a face smaller than the patch's bounding rectangle (at `theta0`) by more
@@ -668,14 +723,34 @@ impl<'a> Cloud<'a> {
             if !model.half_turn_matters && model.faces[..fi].iter().any(twin) {
                 continue;
             }
-            let ext = [
-                face.extent_m[0].max(face.extent_m[1]),
-                face.extent_m[0].min(face.extent_m[1]),
-            ];
+            let outline = model.outlines.get(fi).and_then(|o| o.as_deref());
+            let ext = match outline {
+                Some(o) => o.reach_extent_m,
+                None => [
+                    face.extent_m[0].max(face.extent_m[1]),
+                    face.extent_m[0].min(face.extent_m[1]),
+                ],
+            };
             if dims[0] > ext[0] + pixel_m || dims[1] > ext[1] + pixel_m {
                 continue;
             }
             let mut fits = Vec::new();
+            if let Some(o) = outline {
+                // A patch larger than the outline (its area, a pixel's rim around it) is not it.
+                let rim_m2 = (o.reach_extent_m[0] + o.reach_extent_m[1]) * pixel_m;
+                if inside.len() as f64 * pixel_m * pixel_m > o.reach_area_m2 + rim_m2 {
+                    continue;
+                }
+                // Its true outline, at every yaw: no half turn is added below.
+                for f in outline::fit_outline(o, &inside, &edge, &outside, theta0, model.yaw_span_max_rad) {
+                    let u = e1 * f.yaw_rad.cos() + e2 * f.yaw_rad.sin();
+                    let center = plane.point + e1 * f.center[0] + e2 * f.center[1];
+                    if let Some(d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
+                        verified.push(d);
+                    }
+                }
+                continue;
+            }
             if face.disc {
                 if let Some(c) = fit_disc(&hull, &outside, face.extent_m[0] / 2.0) {
                     // Any yaw looks the same: the face's first axis along the world x in the plane.
@@ -704,8 +779,7 @@ impl<'a> Cloud<'a> {
                     let t = theta + turn;
                     let u = e1 * t.cos() + e2 * t.sin();
                     let center = plane.point + e1 * c[0] + e2 * c[1];
-                    let pose = pose_from_face(face, &center, &n, &u);
-                    if let Some(d) = self.check(model, &pose, Some(fi)) {
+                    if let Some(d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
                         verified.push(d);
                     }
                 }
@@ -917,7 +991,9 @@ fn pose_from_face(face: &Face, center: &Vector3<f64>, n: &Vector3<f64>, u: &Vect
 }
 
 mod fit;
+mod icp;
 mod lying;
+mod outline;
 pub mod ppf;
 mod render;
 mod symmetry;

@@ -52,11 +52,13 @@
 
 use std::collections::HashMap;
 
-use nalgebra::{Isometry3, Matrix6, Point3, Translation3, UnitQuaternion, Vector3, Vector6};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 use rayon::prelude::*;
 use rstar::RTree;
 use rstar::primitives::GeomWithData;
 
+use super::icp::{DenseSurface, icp, surface_samples, thin};
+pub use super::icp::{ICP_FINAL_M, ICP_ITERATIONS, ICP_STRIDE_PX};
 use super::{Cloud, CloudDetection, CloudModel, SAME_POSE_M, SAME_POSE_RAD};
 use crate::part::mesh::Mesh;
 
@@ -80,12 +82,6 @@ pub const CLUSTER_RAD: f64 = 15.0 * std::f64::consts::PI / 180.0;
 pub const MAX_HYPOTHESES: usize = 120;
 /// ... and per place (clusters closer than half the part's smallest size).
 pub const PER_PART: usize = 3;
-/// The ICP's final pairing distance (m).
-pub const ICP_FINAL_M: f64 = 0.0005;
-/// ICP takes every this many pixels along rows and columns.
-pub const ICP_STRIDE_PX: usize = 2;
-/// ICP iterations.
-pub const ICP_ITERATIONS: usize = 10;
 /// A different pose of the same part with at most this much less evidence (grid points) leaves
 /// the part unreported.
 pub const TIE_MARGIN: i64 = 2;
@@ -106,9 +102,8 @@ pub struct PpfModel {
     table: HashMap<u32, (u32, u32)>,
     /// (model reference point, alpha_m (rad)) sorted by key.
     entries: Vec<(u32, f32)>,
-    /// The dense surface samples (part frame) and their normals, for ICP.
-    dense: RTree<Indexed>,
-    dense_normals: Vec<Vector3<f64>>,
+    /// The dense surface samples, for ICP.
+    dense: DenseSurface,
     /// The surface's centroid (the dense samples' mean): turned alternatives turn about it.
     centroid_m: Vector3<f64>,
 }
@@ -173,28 +168,11 @@ impl PpfModel {
         let diameter_m = (hi - lo).norm();
         // Dense samples: a barycentric grid per triangle, spacing at most step / 3.
         let spacing = step_m / 3.0;
-        let (mut dense_pts, mut dense_normals) = (Vec::new(), Vec::new());
-        for k in 0..mesh.triangles.len() {
-            let an = mesh.area_normal(k);
-            if an.norm() < 1e-18 {
-                continue;
-            }
-            let n = an.normalize();
-            let [a, b, c] = mesh.corners(k);
-            let longest = (b - a).norm().max((c - b).norm()).max((a - c).norm());
-            let m = (longest / spacing).ceil().max(1.0) as usize;
-            for i in 0..=m {
-                for j in 0..=m - i {
-                    let p = a.coords + (b - a) * (i as f64 / m as f64) + (c - a) * (j as f64 / m as f64);
-                    dense_pts.push(p);
-                    dense_normals.push(n);
-                }
-            }
-        }
+        let (dense_pts, dense_normals) = surface_samples(mesh, spacing);
         // Feature points: per voxel of `step_m`, the first sample of each normal 30 deg apart;
         // the dense set likewise per voxel of `spacing`.
         let (points, normals) = thin(&dense_pts, &dense_normals, step_m);
-        let (dense_pts, dense_normals) = thin(&dense_pts, &dense_normals, spacing);
+        let dense = DenseSurface::of_samples(&dense_pts, &dense_normals, spacing, diameter_m);
         // The pair table.
         let dist_bins = (diameter_m / step_m).ceil() as usize + 2;
         let mut keyed: Vec<(u32, u32, f32)> = Vec::new();
@@ -227,14 +205,7 @@ impl PpfModel {
             start = end;
         }
         let entries = keyed.into_iter().map(|(_, i, a)| (i, a)).collect();
-        let centroid_m = dense_pts.iter().sum::<Vector3<f64>>() / dense_pts.len().max(1) as f64;
-        let dense = RTree::bulk_load(
-            dense_pts
-                .iter()
-                .enumerate()
-                .map(|(i, p)| Indexed::new([p.x, p.y, p.z], i as u32))
-                .collect(),
-        );
+        let centroid_m = dense.centroid_m;
         PpfModel {
             step_m,
             diameter_m,
@@ -243,7 +214,6 @@ impl PpfModel {
             table,
             entries,
             dense,
-            dense_normals,
             centroid_m,
         }
     }
@@ -286,23 +256,6 @@ pub fn ppf_mesh<'a>(
         RecognitionMethod::Ppf => part.map(|pm| &pm.mesh).or(primitive_mesh),
         RecognitionMethod::Auto => part.filter(|_| model.faces.is_empty()).map(|pm| &pm.mesh),
     }
-}
-
-/// Samples thinned to the first of each normal (30 degrees apart) per voxel of `cell_m`.
-fn thin(pts: &[Vector3<f64>], normals: &[Vector3<f64>], cell_m: f64) -> (Vec<Vector3<f64>>, Vec<Vector3<f64>>) {
-    let cos_distinct = 30f64.to_radians().cos();
-    let mut voxels: HashMap<[i64; 3], Vec<usize>> = HashMap::new();
-    let (mut out_p, mut out_n): (Vec<Vector3<f64>>, Vec<Vector3<f64>>) = (Vec::new(), Vec::new());
-    for (p, n) in pts.iter().zip(normals) {
-        let v = (p / cell_m).map(|x| x.floor() as i64);
-        let kept = voxels.entry([v.x, v.y, v.z]).or_default();
-        if kept.iter().all(|&i| out_n[i].dot(n) < cos_distinct) {
-            kept.push(out_p.len());
-            out_p.push(*p);
-            out_n.push(*n);
-        }
-    }
-    (out_p, out_n)
 }
 
 /// A pose voted for, with its votes.
@@ -387,7 +340,7 @@ fn hypotheses(cloud: &Cloud, model: &CloudModel, ppf: &PpfModel) -> Vec<(i64, Cl
     chosen
         .par_iter()
         .filter_map(|v| {
-            let pose = icp(cloud, ppf, &v.pose);
+            let pose = icp(cloud, &ppf.dense, &v.pose);
             let to_camera = cloud.origin - pose.translation.vector;
             cloud.check(model, &pose, Some(model.face_nearest_up(&pose, &to_camera)))
         })
@@ -425,7 +378,7 @@ fn settle(
             if model.same_pose(&pose, &alt) {
                 continue;
             }
-            let alt = if refine { icp(cloud, ppf, &alt) } else { alt };
+            let alt = if refine { icp(cloud, &ppf.dense, &alt) } else { alt };
             let to_camera = cloud.origin - alt.translation.vector;
             all.extend(cloud.check(model, &alt, Some(model.face_nearest_up(&alt, &to_camera))));
         }
@@ -618,68 +571,6 @@ fn cluster(model: &CloudModel, ppf: &PpfModel, mut votes: Vec<Vote>) -> Vec<Vote
     }
     out.sort_by_key(|v| std::cmp::Reverse(v.votes));
     out
-}
-
-/// Point-to-plane ICP of the pixels around `pose` to the dense model, nearest visible sample
-/// within a shrinking distance.
-fn icp(cloud: &Cloud, ppf: &PpfModel, pose: &Isometry3<f64>) -> Isometry3<f64> {
-    let radius = 0.5 * ppf.diameter_m + 0.001;
-    let centre = pose.translation.vector;
-    let Some((u, v, z)) = cloud.camera.project(&Point3::from(centre)) else {
-        return *pose;
-    };
-    let r_px = (radius / cloud.camera.pixel_size_at_m(z)).ceil() as i64;
-    let (cu, cv) = (u as i64 - cloud.u0 as i64, v as i64 - cloud.v0 as i64);
-    let mut scene = Vec::new();
-    for y in ((cv - r_px).max(0)..=(cv + r_px).min(cloud.h as i64 - 1)).step_by(ICP_STRIDE_PX) {
-        for x in ((cu - r_px).max(0)..=(cu + r_px).min(cloud.w as i64 - 1)).step_by(ICP_STRIDE_PX) {
-            let i = y as usize * cloud.w + x as usize;
-            if cloud.fg[i] && (cloud.pts[i] - centre).norm() <= radius {
-                scene.push(cloud.pts[i]);
-            }
-        }
-    }
-    let mut part_from_world = pose.inverse();
-    for k in 0..ICP_ITERATIONS {
-        let gate = (0.0025 * 0.7f64.powi(k as i32)).max(ICP_FINAL_M);
-        let eye = part_from_world * Point3::from(cloud.origin);
-        let (mut a, mut b, mut n_pairs) = (Matrix6::zeros(), Vector6::zeros(), 0);
-        for s in &scene {
-            let q = part_from_world * Point3::from(*s);
-            let Some(m) = ppf.dense.nearest_neighbor([q.x, q.y, q.z]) else {
-                continue;
-            };
-            let mp = Vector3::from(*m.geom());
-            let n = ppf.dense_normals[m.data as usize];
-            if (q.coords - mp).norm() > gate || n.dot(&(eye - q)) <= 0.0 {
-                continue;
-            }
-            let j = Vector6::new(0.0, 0.0, 0.0, n.x, n.y, n.z);
-            let c = q.coords.cross(&n);
-            let j = Vector6::new(c.x, c.y, c.z, j[3], j[4], j[5]);
-            let r = (q.coords - mp).dot(&n);
-            a += j * j.transpose();
-            b -= j * r;
-            n_pairs += 1;
-        }
-        if n_pairs < 12 {
-            break;
-        }
-        let damp = 1e-9 * a.trace().max(1e-12);
-        a += Matrix6::identity() * damp;
-        let Some(x) = a.cholesky().map(|c| c.solve(&b)) else {
-            break;
-        };
-        let step = Isometry3::from_parts(
-            Translation3::new(x[3], x[4], x[5]),
-            UnitQuaternion::from_scaled_axis(Vector3::new(x[0], x[1], x[2])),
-        );
-        part_from_world = step * part_from_world;
-        if x.norm() < 1e-7 {
-            break;
-        }
-    }
-    part_from_world.inverse()
 }
 
 /// The verified hypotheses reduced to one per part (most evidence first), dropping a part whose
