@@ -40,7 +40,7 @@
 //!   and both its base end and its station are decided; about 6 in 400 are off by 5-7 degrees;
 //! - a mesh workpiece (a CAD part) is matched through its part model's planar faces
 //!   ([`CloudModel::of_part_model`]): a face that is its rectangle (or a disc) is fitted as
-//!   above; any other face by its true outline ([`outline`]: a polygon with the holes the sensor
+//!   above; any other face by its true outline (module `outline`: a polygon with the holes the sensor
 //!   sees through, with the features beside it that a patch takes in, such as a DIP's leg
 //!   shoulders), and the patch's plane is then refitted without the pixels off it, which those
 //!   features would tilt. Hypotheses are verified by rendering the real mesh. A part whose
