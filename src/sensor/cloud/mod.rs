@@ -645,7 +645,30 @@ impl<'a> Cloud<'a> {
         let (_, mut plane) = fit(&|_| true);
         if trim {
             // Features beside the face within the plane band (a DIP's leg shoulders) join the
-            // patch at its rim and tilt its least-squares plane: refitted without the pixels off it.
+            // patch at its rim and tilt its least-squares plane: first the plane of the pixels
+            // whose 8 neighbours are all in the patch (if enough), then refitted without the
+            // pixels off it.
+            let mut sorted = patch.pixels.clone();
+            sorted.sort_unstable();
+            let inner = |q: &usize| {
+                let (u, v) = (q % self.w, q / self.w);
+                (-1..=1).all(|dv| {
+                    (-1..=1).all(|du| {
+                        self.neighbour_at(u, v, du, dv)
+                            .is_some_and(|j| sorted.binary_search(&j).is_ok())
+                    })
+                })
+            };
+            let interior: Vec<usize> = patch.pixels.iter().copied().filter(|q| inner(q)).collect();
+            if interior.len() >= MIN_PATCH_PX.max(patch.pixels.len() / 4) {
+                let (mut s, mut ss) = (Vector3::zeros(), Matrix3::zeros());
+                for &i in &interior {
+                    let r = self.pts[i] - origin;
+                    s += r;
+                    ss += r * r.transpose();
+                }
+                plane = plane_from_sums(interior.len() as f64, &s, &ss, &origin, &self.origin);
+            }
             for _ in 0..2 {
                 let p = Plane { ..plane };
                 let (kept, refit) = fit(&|q| p.normal.dot(&(q - p.point)).abs() <= PLANE_TRIM_M);
