@@ -83,6 +83,8 @@ pub fn sense_bench(
         )
     };
     for wp in workpieces {
+        // The cell as it runs this workpiece (its own cup, if it brings one).
+        let scene = &scene.for_workpiece(wp);
         let shape = PartShape::build(&wp.workpiece, &wp.source)?;
         let (mut cloud, mut oracle) = (RecognitionTotals::default(), RecognitionTotals::default());
         let (mut cloud_ms, mut oracle_ms) = (Vec::new(), Vec::new());
@@ -109,7 +111,8 @@ pub fn sense_bench(
         };
         let cap = time_ms(&mut || c = capture(&w, &sensor.camera, 1, 0));
         let single = one.install(|| time_ms(&mut || c = capture(&w, &sensor.camera, 1, 0)));
-        let selector = crate::grasp::GraspSelector::new(&scene.scene, robot, &wp.workpiece);
+        // The cycle's selector: a mesh part's faces come from its part model.
+        let selector = crate::grasp::GraspSelector::for_workpiece(&scene.scene, robot, wp);
         let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
         let q = w.joints();
         let mut feasible = 0;
