@@ -630,17 +630,19 @@ impl<'a> Cloud<'a> {
     /// measured point lies behind the plane (outside), both in the plane's basis (e1, e2).
     fn silhouette(&self, patch: &Patch, trim: bool) -> Silhouette {
         let origin = self.pts[patch.pixels[0]];
-        let fit = |keep: &dyn Fn(&Vector3<f64>) -> bool| {
-            let (mut n, mut s, mut ss) = (0.0, Vector3::zeros(), Matrix3::zeros());
-            for &i in &patch.pixels {
-                if keep(&self.pts[i]) {
-                    let r = self.pts[i] - origin;
-                    n += 1.0;
-                    s += r;
-                    ss += r * r.transpose();
-                }
+        let mut member = patch.pixels.clone();
+        member.sort_unstable();
+        let is_member = |j: usize| member.binary_search(&j).is_ok();
+        // The least-squares plane of the pixels `keep` takes, and their count.
+        let fit = |keep: &dyn Fn(usize) -> bool| {
+            let (mut n, mut s, mut ss) = (0usize, Vector3::zeros(), Matrix3::zeros());
+            for &i in patch.pixels.iter().filter(|&&i| keep(i)) {
+                let r = self.pts[i] - origin;
+                n += 1;
+                s += r;
+                ss += r * r.transpose();
             }
-            (n, plane_from_sums(n, &s, &ss, &origin, &self.origin))
+            (n, plane_from_sums(n as f64, &s, &ss, &origin, &self.origin))
         };
         let (_, mut plane) = fit(&|_| true);
         if trim {
@@ -648,31 +650,18 @@ impl<'a> Cloud<'a> {
             // patch at its rim and tilt its least-squares plane: first the plane of the pixels
             // whose 8 neighbours are all in the patch (if enough), then refitted without the
             // pixels off it.
-            let mut sorted = patch.pixels.clone();
-            sorted.sort_unstable();
-            let inner = |q: &usize| {
-                let (u, v) = (q % self.w, q / self.w);
-                (-1..=1).all(|dv| {
-                    (-1..=1).all(|du| {
-                        self.neighbour_at(u, v, du, dv)
-                            .is_some_and(|j| sorted.binary_search(&j).is_ok())
-                    })
-                })
+            let inner = |i: usize| {
+                let (u, v) = (i % self.w, i / self.w);
+                (-1..=1).all(|dv| (-1..=1).all(|du| self.neighbour_at(u, v, du, dv).is_some_and(is_member)))
             };
-            let interior: Vec<usize> = patch.pixels.iter().copied().filter(|q| inner(q)).collect();
-            if interior.len() >= MIN_PATCH_PX.max(patch.pixels.len() / 4) {
-                let (mut s, mut ss) = (Vector3::zeros(), Matrix3::zeros());
-                for &i in &interior {
-                    let r = self.pts[i] - origin;
-                    s += r;
-                    ss += r * r.transpose();
-                }
-                plane = plane_from_sums(interior.len() as f64, &s, &ss, &origin, &self.origin);
+            let (count, interior) = fit(&inner);
+            if count >= MIN_PATCH_PX.max(patch.pixels.len() / 4) {
+                plane = interior;
             }
             for _ in 0..2 {
-                let p = Plane { ..plane };
-                let (kept, refit) = fit(&|q| p.normal.dot(&(q - p.point)).abs() <= PLANE_TRIM_M);
-                if kept >= 0.5 * patch.pixels.len() as f64 {
+                let p = plane;
+                let (kept, refit) = fit(&|i| p.normal.dot(&(self.pts[i] - p.point)).abs() <= PLANE_TRIM_M);
+                if 2 * kept >= patch.pixels.len() {
                     plane = refit;
                 }
             }
@@ -690,24 +679,19 @@ impl<'a> Cloud<'a> {
             .iter()
             .filter_map(|&i| self.ray_on_plane(i, &plane).map(|(p, _)| to2(p)))
             .collect();
-        let mut member = patch.pixels.clone();
-        member.sort_unstable();
         let edge: Vec<[f64; 2]> = patch
             .pixels
             .iter()
             .filter(|&&i| {
                 let (u, v) = (i % self.w, i / self.w);
-                [(1, 0), (-1, 0), (0, 1), (0, -1)].iter().any(|&(du, dv)| {
-                    self.neighbour_at(u, v, du, dv)
-                        .is_none_or(|j| member.binary_search(&j).is_err())
-                })
+                [(1, 0), (-1, 0), (0, 1), (0, -1)]
+                    .iter()
+                    .any(|&(du, dv)| self.neighbour_at(u, v, du, dv).is_none_or(|j| !is_member(j)))
             })
             .filter_map(|&i| self.ray_on_plane(i, &plane).map(|(p, _)| to2(p)))
             .collect();
         // The 8-neighbours of the patch's pixels with a return, not in it, sorted.
-        let ring = self.dilate(&patch.pixels, 1, |j| {
-            self.depth[j] > 0.0 && member.binary_search(&j).is_err()
-        });
+        let ring = self.dilate(&patch.pixels, 1, |j| self.depth[j] > 0.0 && !is_member(j));
         let outside: Vec<[f64; 2]> = ring
             .into_iter()
             .filter_map(|j| {
