@@ -86,11 +86,7 @@ impl Outline {
     /// [`super::face_of_planar`] fits it), with the features of `mesh` (part frame) within
     /// [`BAND_M`] of its plane that face the same way.
     pub fn new(face: &PlanarFace, fitted: &Face, mesh: &Mesh) -> Self {
-        let (ex, ey) = (fitted.along, fitted.normal.cross(&fitted.along));
-        let to_face = |p: &Vector3<f64>| {
-            let q = p - fitted.center;
-            [q.dot(&ex), q.dot(&ey)]
-        };
+        let to_face = face_frame(fitted);
         let ring =
             |pts: &[Point2<f64>]| -> Vec<[f64; 2]> { pts.iter().map(|p| to_face(&face.to_part(p).coords)).collect() };
         let holes: Vec<Vec<[f64; 2]>> = face.holes.iter().map(|h| ring(h)).collect();
@@ -100,11 +96,7 @@ impl Outline {
     /// From the face's outer ring and holes in `fitted`'s frame.
     fn of_rings(outer: Vec<[f64; 2]>, holes: Vec<Vec<[f64; 2]>>, fitted: &Face, mesh: &Mesh) -> Self {
         let n = fitted.normal;
-        let (ex, ey) = (fitted.along, n.cross(&fitted.along));
-        let to_face = |p: &Vector3<f64>| {
-            let q = p - fitted.center;
-            [q.dot(&ex), q.dot(&ey)]
-        };
+        let to_face = face_frame(fitted);
         // The band's triangles, projected.
         let plane_d = fitted.center.dot(&n);
         let band: Vec<[[f64; 2]; 3]> = (0..mesh.triangles.len())
@@ -142,14 +134,8 @@ impl Outline {
                 !(in_polygon(h, centre) && covers(centre))
             })
             .collect();
-        let mut lo = [f64::MAX; 2];
-        let mut hi = [f64::MIN; 2];
-        for p in outer.iter().chain(band.iter().flatten()) {
-            for a in 0..2 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
+        let with_band: Vec<[f64; 2]> = outer.iter().chain(band.iter().flatten()).copied().collect();
+        let (lo, hi) = bounds(&with_band);
         let origin = [lo[0] - MARGIN_M, lo[1] - MARGIN_M];
         let cells = [
             ((hi[0] - lo[0] + 2.0 * MARGIN_M) / CELL_M).ceil() as usize + 1,
@@ -177,20 +163,13 @@ impl Outline {
                 *r &= !*b;
             }
         }
-        let mut hull_pts: Vec<[f64; 2]> = outer.clone();
-        if in_band.iter().zip(&in_reach).any(|(b, r)| *b && *r) {
-            hull_pts.extend(band.iter().flatten());
+        // What `reach` spans: the face with the band, unless the band was left out.
+        let reach_pts = if in_band.iter().zip(&in_reach).any(|(b, r)| *b && *r) {
+            &with_band
         } else {
-            lo = [f64::MAX; 2];
-            hi = [f64::MIN; 2];
-            for p in &outer {
-                for a in 0..2 {
-                    lo[a] = lo[a].min(p[a]);
-                    hi[a] = hi[a].max(p[a]);
-                }
-            }
-        }
-        let hull = super::convex_hull(&hull_pts);
+            &outer
+        };
+        let hull = super::convex_hull(reach_pts);
         let theta = super::min_area_theta(&hull);
         let (blo, bhi) = super::fit::bounds_at(&hull, theta);
         let e = [bhi[0] - blo[0], bhi[1] - blo[1]];
@@ -203,8 +182,8 @@ impl Outline {
             core: Field { d: core_d },
             reach: Field { d: reach_d },
             reach_extent_m: [e[0].max(e[1]), e[0].min(e[1])],
-            reach_box: (lo, hi),
-            reach_area_m2: in_reach.iter().filter(|&&m| m).count() as f64 * CELL_M * CELL_M,
+            reach_box: bounds(reach_pts),
+            reach_area_m2: count(&in_reach) as f64 * CELL_M * CELL_M,
             band_area_m2,
             holes: !holes.is_empty(),
         }
@@ -435,14 +414,7 @@ pub fn fit_outline(
         let t = theta0 + q as f64 * std::f64::consts::FRAC_PI_2;
         // The patch's box in the frame turned by t.
         let probe = Placement { c: [0.0, 0.0], t };
-        let (mut lo, mut hi) = ([f64::MAX; 2], [f64::MIN; 2]);
-        for p in edge {
-            let f = probe.face_point(p);
-            for a in 0..2 {
-                lo[a] = lo[a].min(f[a]);
-                hi[a] = hi[a].max(f[a]);
-            }
-        }
+        let (lo, hi) = bounds(&edge.iter().map(|p| probe.face_point(p)).collect::<Vec<_>>());
         let mid = |a: usize| (lo[a] + hi[a] - rlo[a] - rhi[a]) / 2.0;
         let starts = [
             [mid(0), mid(1)],
@@ -530,6 +502,23 @@ pub fn fit_outline(
 fn same(a: &Placement, b: &Placement) -> bool {
     let dt = (a.t - b.t).rem_euclid(std::f64::consts::TAU);
     (a.c[0] - b.c[0]).hypot(a.c[1] - b.c[1]) < SAME_M && dt.min(std::f64::consts::TAU - dt) < SAME_RAD
+}
+
+/// The part-frame point `p` in `fitted`'s face frame (m): from its centre, along `along` and
+/// `normal x along`.
+fn face_frame(fitted: &Face) -> impl Fn(&Vector3<f64>) -> [f64; 2] + '_ {
+    let (ex, ey) = (fitted.along, fitted.normal.cross(&fitted.along));
+    move |p| {
+        let q = p - fitted.center;
+        [q.dot(&ex), q.dot(&ey)]
+    }
+}
+
+/// The lowest and highest coordinates of `pts` (m).
+fn bounds(pts: &[[f64; 2]]) -> ([f64; 2], [f64; 2]) {
+    pts.iter().fold(([f64::MAX; 2], [f64::MIN; 2]), |(lo, hi), p| {
+        ([lo[0].min(p[0]), lo[1].min(p[1])], [hi[0].max(p[0]), hi[1].max(p[1])])
+    })
 }
 
 /// The area `reach` adds to `core` (m^2): cells inside `reach` and more than a cell outside
