@@ -27,9 +27,13 @@
 //! then non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
 //! lying on its curved side (`lying`): per patch no flat face explains, a cylinder of known
 //! radius fitted to the points around it, kept if its axis's standard error is within
-//! `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks which end is the base, the
-//! turn about the axis and the station along it, reported only if the other way round and the
-//! station moved either way have `lying::PIN_MARGIN_PX` less evidence ([`CloudDetection::curved_side_up`]).
+//! `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks the turn about the axis
+//! and the station along it for either way round; which end is the base is decided at every
+//! pixel (each way placed by the evidence of every pixel; one way must have
+//! `lying::END_EVIDENCE_MARGIN_PX` more, or explain at least `lying::END_VOTES_MIN` pixels the
+//! other does not, three times as many as the other); reported only if that decides and
+//! the station moved either way has `lying::PIN_MARGIN_PX` less evidence
+//! ([`CloudDetection::curved_side_up`]).
 //!
 //! Precision first: a pose the image does not pin down is not reported. Limits:
 //! - a flat-lying E or F shows one 7 px face and no side (its sides are past the sensor's
@@ -883,6 +887,43 @@ impl<'a> Cloud<'a> {
     /// visible fraction, evidence = agreeing less 3 x contradicting pixels), `None` if it renders
     /// too few agreeing pixels.
     fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<(f64, f64, i64)> {
+        self.verify_every(model, pose, self.verify_stride(model, pose))
+    }
+
+    /// [`Cloud::verify`] on every `stride`-th pixel.
+    fn verify_every(&self, model: &CloudModel, pose: &Isometry3<f64>, stride: usize) -> Option<(f64, f64, i64)> {
+        let (mut agree, mut contradict, mut rendered) = (0usize, 0usize, 0usize);
+        self.render(model, pose, stride, |i, predicted, graze| {
+            rendered += 1;
+            let measured = self.depth[i];
+            if measured <= 0.0 {
+                return;
+            }
+            if (measured - predicted).abs() <= AGREE_TOL_M {
+                agree += 1;
+            } else if measured > predicted && !graze {
+                contradict += 1;
+            }
+        })?;
+        (agree >= MIN_PATCH_PX).then(|| {
+            (
+                agree as f64 / (agree + contradict) as f64,
+                (agree as f64 / rendered.max(1) as f64).min(1.0),
+                agree as i64 - 3 * contradict as i64,
+            )
+        })
+    }
+
+    /// Renders the model at `pose` on every `stride`-th pixel of the window (rows and columns of
+    /// the image): `at(pixel, predicted depth, grazes a lead)` for each pixel whose ray meets
+    /// the model, in row order. `None` if a corner of its box is behind the camera.
+    fn render(
+        &self,
+        model: &CloudModel,
+        pose: &Isometry3<f64>,
+        stride: usize,
+        mut at: impl FnMut(usize, f64, bool),
+    ) -> Option<()> {
         let (mut u0, mut v0, mut u1, mut v1) = (f64::MAX, f64::MAX, f64::MIN, f64::MIN);
         let hs = model.half_size_m;
         for k in 0..8 {
@@ -894,8 +935,7 @@ impl<'a> Cloud<'a> {
             u1 = u1.max(u);
             v1 = v1.max(v);
         }
-        // Window coordinates, on the verification grid (every `stride`-th pixel of the image).
-        let stride = self.verify_stride(model, pose);
+        // Window coordinates, on the grid (every `stride`-th pixel of the image).
         let clamp = |x: f64, first: usize, n: usize| {
             let i = (x.floor().max(first as f64) as usize).min(first + n - 1);
             i.div_ceil(stride) * stride
@@ -905,7 +945,6 @@ impl<'a> Cloud<'a> {
         // Rays are cast only at the pieces whose image box holds the pixel's centre.
         let boxes = self.piece_boxes(model, pose, PIECE_BOX_MARGIN_PX);
         let mut in_row: Vec<usize> = Vec::with_capacity(boxes.len());
-        let (mut agree, mut contradict, mut rendered) = (0usize, 0usize, 0usize);
         let (vs, ve) = (
             clamp(v0, self.v0, self.h),
             clamp(v1, self.v0, self.h).min(self.v0 + self.h - 1),
@@ -935,26 +974,10 @@ impl<'a> Cloud<'a> {
                 let Some((t, graze)) = render::ray_among_graze(model, &o, &(inv.rotation * d), among) else {
                     continue;
                 };
-                rendered += 1;
-                let measured = self.depth[(v - self.v0) * self.w + (u - self.u0)];
-                if measured <= 0.0 {
-                    continue;
-                }
-                let predicted = t * d.dot(&self.optical);
-                if (measured - predicted).abs() <= AGREE_TOL_M {
-                    agree += 1;
-                } else if measured > predicted && !graze {
-                    contradict += 1;
-                }
+                at((v - self.v0) * self.w + (u - self.u0), t * d.dot(&self.optical), graze);
             }
         }
-        (agree >= MIN_PATCH_PX).then(|| {
-            (
-                agree as f64 / (agree + contradict) as f64,
-                (agree as f64 / rendered.max(1) as f64).min(1.0),
-                agree as i64 - 3 * contradict as i64,
-            )
-        })
+        Some(())
     }
 }
 
