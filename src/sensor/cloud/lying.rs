@@ -440,8 +440,8 @@ impl super::Cloud<'_> {
                 per_sign.extend(self.place_finely(model, |s| pose(sign, roll, s), s));
             }
         }
-        // Which way round: the pixels that only one way explains decide, or the part is not
-        // reported.
+        // Which way round: one way has [`END_EVIDENCE_MARGIN_PX`] more evidence on every pixel,
+        // or the pixels only it explains decide ([`end_votes`]); else the part is not reported.
         let at = match per_sign.as_slice() {
             [] => return None,
             [one] => one.1,
