@@ -341,14 +341,10 @@ impl super::Cloud<'_> {
     pub(super) fn agreeing(&self, model: &CloudModel, pose: &Isometry3<f64>) -> (i64, Vec<usize>) {
         let (mut px, mut contradict) = (Vec::new(), 0i64);
         self.render(model, pose, 1, |i, predicted, graze| {
-            let m = self.depth[i];
-            if m <= 0.0 {
-                return;
-            }
-            if (m - predicted).abs() <= super::AGREE_TOL_M {
-                px.push(i);
-            } else if m > predicted && !graze {
-                contradict += 1;
+            match self.judge(i, predicted, graze) {
+                Some(true) => px.push(i),
+                Some(false) => contradict += 1,
+                None => {}
             }
         });
         (px.len() as i64 - 3 * contradict, px)

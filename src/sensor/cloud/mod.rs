@@ -895,14 +895,10 @@ impl<'a> Cloud<'a> {
         let (mut agree, mut contradict, mut rendered) = (0usize, 0usize, 0usize);
         self.render(model, pose, stride, |i, predicted, graze| {
             rendered += 1;
-            let measured = self.depth[i];
-            if measured <= 0.0 {
-                return;
-            }
-            if (measured - predicted).abs() <= AGREE_TOL_M {
-                agree += 1;
-            } else if measured > predicted && !graze {
-                contradict += 1;
+            match self.judge(i, predicted, graze) {
+                Some(true) => agree += 1,
+                Some(false) => contradict += 1,
+                None => {}
             }
         })?;
         (agree >= MIN_PATCH_PX).then(|| {
@@ -912,6 +908,20 @@ impl<'a> Cloud<'a> {
                 agree as i64 - 3 * contradict as i64,
             )
         })
+    }
+
+    /// What pixel `i`'s measured depth says of a rendered `predicted` depth: agrees within
+    /// [`AGREE_TOL_M`] (`Some(true)`), measured behind it, a contradiction unless the ray only
+    /// grazes a lead (`Some(false)`), or nothing (no return; measured in front: occluded).
+    fn judge(&self, i: usize, predicted: f64, graze: bool) -> Option<bool> {
+        let measured = self.depth[i];
+        if measured <= 0.0 {
+            None
+        } else if (measured - predicted).abs() <= AGREE_TOL_M {
+            Some(true)
+        } else {
+            (measured > predicted && !graze).then_some(false)
+        }
     }
 
     /// Renders the model at `pose` on every `stride`-th pixel of the window (rows and columns of
