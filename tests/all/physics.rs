@@ -59,6 +59,38 @@ fn piles_of_every_workpiece_settle_in_the_tray_within_0_3_mm_and_repeat_bit_for_
 }
 
 #[test]
+fn piles_of_the_cad_parts_settle_even_on_an_smd_cans_small_supports() {
+    // A lying SMD electrolytic rests on its terminal's tip, a corner of its base and its rim:
+    // three supports a few tenths of a millimetre apart in height.
+    for name in ["hex-standoff", "to220", "dip8", "smd-elcap"] {
+        let (mut w, _, wp) = world(&format!("workpieces/{name}.toml"));
+        let r = w
+            .build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, 1))
+            .unwrap_or_else(|e| panic!("{name}: {e}"));
+        assert!(
+            r.settled && r.settle_sim_s < 5.0,
+            "{name}: {:.3} s simulated, settled {}",
+            r.settle_sim_s,
+            r.settled
+        );
+        assert_eq!(r.in_tray, r.spawned, "{name}: parts outside the tray");
+        assert!(
+            r.max_penetration_m <= 0.0003,
+            "{name}: penetration {:.3} mm",
+            r.max_penetration_m * 1e3
+        );
+    }
+    // Negative control: with rapier's contact clustering (at most four points per contact plane
+    // of a pair) the cans lying on those supports rock and walk, and the pile never settles.
+    let (mut w, _, wp) = world("workpieces/smd-elcap.toml");
+    w.set_contact_clustering(true);
+    let r = w
+        .build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, 1))
+        .unwrap();
+    assert!(!r.settled, "clustered contacts settled in {:.3} s", r.settle_sim_s);
+}
+
+#[test]
 fn cans_stacked_cap_on_cap_do_not_sink_into_each_other() {
     // D's pile of seed 13 stacks two cans cap on cap; with the cap touching as a sliver of four
     // of its sixteen corners they sank 2.03 mm into each other at 2.68 s and the health monitor
