@@ -652,3 +652,66 @@ fn a_lying_cans_base_end_is_told_by_every_pixel() {
         assert!(found.iter().all(|d| !d.curved_side_up), "yaw {y}: {found:?}");
     }
 }
+
+#[test]
+fn a_dip_on_its_legs_or_on_its_back_is_told_by_every_pixel() {
+    // The DIP-8's body face looks the same either way up; its 0.5 mm legs (down beside the
+    // body, or up from its rim) fall between the verification grid's points, so the two poses
+    // are a close call on the grid, decided at every pixel.
+    let cell = cell();
+    let lw = LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/dip8.toml")).unwrap();
+    let mesh = &lw.mesh.as_ref().unwrap().0;
+    let pm = lw.workpiece.part_model(mesh, 0.004).unwrap();
+    let m = CloudModel::of_part_model(&pm);
+    let mut close_calls = 0;
+    for y in [15.0, 70.0, -35.0, 125.0] {
+        // On its legs, then on its back (the negative control: the decision follows the image).
+        for (on_back, turn) in [(false, 0.0), (true, 180.0)] {
+            let pose = resting_mesh(&cell, mesh, 0.02, 0.01, yaw(y) * roll(turn));
+            let capture = synthetic_meshes(&cell, &[(mesh, pose)]);
+            let found = recognize(&capture, &cell.camera, &cell.tray, &m);
+            assert_eq!(found.len(), 1, "yaw {y}, on its back {on_back}: {found:?}");
+            let d = &found[0];
+            let up = (d.world_from_part.rotation * Vector3::z()).z;
+            let dp = (d.world_from_part.translation.vector - pose.translation.vector).norm();
+            assert!(
+                (up < 0.0) == on_back && up.abs() > 5f64.to_radians().cos() && dp <= 0.002,
+                "yaw {y}, on its back {on_back}: z axis up {up:.3}, {:.2} mm off",
+                dp * 1e3
+            );
+            if on_back {
+                continue;
+            }
+            // On its legs, the other way up (its back where the found body face is): the grid
+            // barely tells them apart (its legs would stand up from the body's rim, over the
+            // floor); every pixel does. On its back, the legs over the face are occluders for
+            // either pose, and the image decides on the shoulders beside the body.
+            let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+            let face = &m.faces[d.face_up];
+            let opposite = m
+                .faces
+                .iter()
+                .find(|f| f.normal.dot(&face.normal) < -0.999)
+                .expect("the body's other face");
+            let r = d.world_from_part.rotation;
+            let other = pose_from_face(
+                opposite,
+                &(d.world_from_part * Point3::from(face.center)).coords,
+                &(r * face.normal),
+                &(r * face.along),
+            );
+            let grid = |p: &Isometry3<f64>| cloud.verify(&m, p).map_or(i64::MIN / 2, |v| v.2);
+            let every = |p: &Isometry3<f64>| cloud.verify_every(&m, p, 1).map_or(i64::MIN / 2, |v| v.2);
+            if grid(&other) >= grid(&d.world_from_part) - CLOSE_CALL_PX {
+                close_calls += 1;
+            }
+            assert!(
+                every(&d.world_from_part) >= every(&other) + 8,
+                "yaw {y}: every pixel {} against {}",
+                every(&d.world_from_part),
+                every(&other)
+            );
+        }
+    }
+    assert!(close_calls >= 2, "only {close_calls} of 4 were close calls on the grid");
+}
