@@ -423,6 +423,12 @@ pub fn fit_outline(
             [lo[0] - rlo[0], hi[1] - rhi[1]],
             [hi[0] - rhi[0], hi[1] - rhi[1]],
         ];
+        // At this yaw the patch's box must fit the outline's, each side within the loose
+        // tolerance, or no placement at it is consistent: a long patch is not tried across a
+        // long outline's short side.
+        if (0..2).any(|a| hi[a] - lo[a] > rhi[a] - rlo[a] + 2.0 * FIT_VIOLATION_M) {
+            continue;
+        }
         // A patch as large as the outline (within a millimetre) is not occluded: the centred
         // start suffices.
         let whole = (0..2).all(|a| hi[a] - lo[a] >= rhi[a] - rlo[a] - 0.001);
