@@ -92,7 +92,7 @@ pub const UNDER_FLOOR_M: f64 = 0.001;
 /// 93 % for 77 %).
 pub const TIE_MARGIN_PX: i64 = 0;
 /// A different pose within this many points of the best on the verification grid is a close
-/// call, decided at every pixel ([`Cloud::decide`]). Chosen on `sense` seeds 1-8 of the DIP-8
+/// call, decided at every pixel (`Cloud::decide`). Chosen on `sense` seeds 1-8 of the DIP-8
 /// (recall 78.7 -> 81.3 %, precision 93.0 -> 93.9 %, the same from 6 to every hypothesis); no
 /// change for A-F, the hex standoff and the TO-220.
 pub const CLOSE_CALL_PX: i64 = 10;

@@ -25,6 +25,14 @@ pub(super) fn workpiece(name: &str) -> Workpiece {
     LoadedWorkpiece::resolve(name).unwrap().workpiece
 }
 
+/// A shipped CAD part's mesh and its recognition model (the part model for a cup of `cup_m`).
+pub(super) fn cad_model(file: &str, cup_m: f64) -> (crate::part::mesh::Mesh, CloudModel) {
+    let lw = LoadedWorkpiece::resolve(&format!("{}/workpieces/{file}", env!("CARGO_MANIFEST_DIR"))).unwrap();
+    let mesh = lw.mesh.as_ref().unwrap().0.clone();
+    let pm = lw.workpiece.part_model(&mesh, cup_m).unwrap();
+    (mesh, CloudModel::of_part_model(&pm))
+}
+
 /// A capture of `parts` (model, `world_from_part`) lying over the tray floor, noise as the
 /// default sensor's (seeded).
 pub(super) fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) -> Capture {
@@ -613,10 +621,8 @@ fn bit_index_sums_count_every_set_bit() {
 #[test]
 fn a_lying_cans_base_end_is_told_by_every_pixel() {
     let cell = cell();
-    let lw = LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/smd-elcap.toml")).unwrap();
-    let mesh = &lw.mesh.as_ref().unwrap().0;
-    let pm = lw.workpiece.part_model(mesh, 0.006).unwrap();
-    let m = CloudModel::of_part_model(&pm);
+    let (mesh, m) = cad_model("smd-elcap.toml", 0.006);
+    let mesh = &mesh;
     let (lo, hi) = mesh.bounds_m().unwrap();
     let half_length_m = (hi.z - lo.z) / 2.0;
     let bare = crate::part::tessellate::prism_mesh(Vector3::zeros(), 0.004, half_length_m, crate::config::Axis::Z, 32);
@@ -659,10 +665,8 @@ fn a_dip_on_its_legs_or_on_its_back_is_told_by_every_pixel() {
     // body, or up from its rim) fall between the verification grid's points, so the two poses
     // are a close call on the grid, decided at every pixel.
     let cell = cell();
-    let lw = LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/dip8.toml")).unwrap();
-    let mesh = &lw.mesh.as_ref().unwrap().0;
-    let pm = lw.workpiece.part_model(mesh, 0.004).unwrap();
-    let m = CloudModel::of_part_model(&pm);
+    let (mesh, m) = cad_model("dip8.toml", 0.004);
+    let mesh = &mesh;
     let mut close_calls = 0;
     for y in [15.0, 70.0, -35.0, 125.0] {
         // On its legs, then on its back (the negative control: the decision follows the image).
@@ -684,8 +688,8 @@ fn a_dip_on_its_legs_or_on_its_back_is_told_by_every_pixel() {
             }
             // On its legs, the other way up (its back where the found body face is): the grid
             // barely tells them apart (its legs would stand up from the body's rim, over the
-            // floor); every pixel does. On its back, the legs over the face are occluders for
-            // either pose, and the image decides on the shoulders beside the body.
+            // floor); every pixel does. (On its back, the legs standing over the face would be
+            // occluders for either pose: only the found pose is checked.)
             let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
             let face = &m.faces[d.face_up];
             let opposite = m
