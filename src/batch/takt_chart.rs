@@ -49,9 +49,9 @@ const PLOT_TOP: f64 = 84.0;
 /// a panel beside it.
 pub fn takt_svg(title: &str, bars: &[TaktBar]) -> String {
     let n = bars.len().max(1) as f64;
-    let slot = 90.0;
+    let slot = name_slot_px(bars).max(90.0);
     let takt_w = (slot * n).max(360.0);
-    let width = 90.0 + takt_w + 90.0 + (48.0 * n).max(200.0) + 40.0;
+    let width = 90.0 + takt_w + 90.0 + success_width_px(bars) + 40.0;
     let height = PLOT_TOP + 400.0;
     let mut svg = open(width, height, title);
     let finite = |v: &f64| v.is_finite();
@@ -198,6 +198,18 @@ pub fn takt_bars(rows: &[crate::results::Summary]) -> Vec<TaktBar> {
         .collect()
 }
 
+/// Room for a workpiece's name under its slot (px): the longest name at the axis font (about
+/// 7 px a character) and a gap, at least 48.
+fn name_slot_px(bars: &[TaktBar]) -> f64 {
+    let longest = bars.iter().map(|b| b.workpiece.chars().count()).max().unwrap_or(0);
+    (7.0 * longest as f64 + 12.0).max(48.0)
+}
+
+/// The success panel's width (px): a name's slot per workpiece, at least 200.
+fn success_width_px(bars: &[TaktBar]) -> f64 {
+    (name_slot_px(bars) * bars.len().max(1) as f64).max(200.0)
+}
+
 /// Success (%) per workpiece, in a panel to the right of the takt's.
 fn success_panel(svg: &mut String, plot: &Plot, bars: &[TaktBar]) {
     let n = bars.len().max(1) as f64;
@@ -205,7 +217,7 @@ fn success_panel(svg: &mut String, plot: &Plot, bars: &[TaktBar]) {
     let sp = Plot {
         x0: plot.x0 + plot.w + 90.0,
         y0: PLOT_TOP,
-        w: (48.0 * n).max(200.0),
+        w: success_width_px(bars),
         h: 320.0,
         x_range: (0.0, n),
         y_range: (0.0, 100.0),
