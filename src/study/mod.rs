@@ -118,7 +118,8 @@ impl StudySpec {
     }
 
     /// A name for the study's folder: `batch-<workpieces>-seeds<seeds>-picks<n>[-det]`, a
-    /// sweep's with `sweep-<keys>-` in place of `batch-`.
+    /// sweep's with `sweep-<keys>-` in place of `batch-`. One-letter workpieces run together
+    /// (`ABCDEF`); longer names are joined by `+` (`hex-standoff+to220`), as a sweep's keys are.
     pub fn name(&self) -> String {
         let seeds = match (self.seeds.first(), self.seeds.last()) {
             // A run of consecutive seeds reads as a range (no overflow for seeds near u64::MAX).
@@ -131,9 +132,14 @@ impl StudySpec {
             }
             _ => self.seeds.iter().map(u64::to_string).collect::<Vec<_>>().join("_"),
         };
+        let joint = if self.workpieces.iter().all(|w| w.chars().count() == 1) {
+            ""
+        } else {
+            "+"
+        };
         let runs = format!(
             "{}-seeds{seeds}-picks{}{}",
-            self.workpieces.join(""),
+            self.workpieces.join(joint),
             self.picks,
             if self.deterministic { "-det" } else { "" }
         );
@@ -234,4 +240,19 @@ pub fn shard<T: Clone>(jobs: &[T], k: usize, n: usize) -> Vec<T> {
         .filter(|(i, _)| i % n == k - 1)
         .map(|(_, j)| j.clone())
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::StudySpec;
+
+    #[test]
+    fn a_folder_name_keeps_long_workpiece_names_apart() {
+        let spec = |w: &[&str]| StudySpec::batch(w.iter().map(|s| s.to_string()).collect(), vec![1, 2, 3], 21, true);
+        assert_eq!(spec(&["A", "B", "F"]).name(), "batch-ABF-seeds1-3-picks21-det");
+        assert_eq!(
+            spec(&["hex-standoff", "to220", "D"]).name(),
+            "batch-hex-standoff+to220+D-seeds1-3-picks21-det"
+        );
+    }
 }
