@@ -13,7 +13,7 @@
 //! Solver tuning for 5-150 mm parts of a few grams (see docs/model.md, "Physics"): rapier runs in
 //! millimetres; length unit 1 cm (allowed penetration 0.05 mm, prediction distance 0.2 mm);
 //! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; every contact
-//! point solved (no clustering); CCD for parts poured, dropped or shaken until they sleep; the
+//! point solved (no clustering); CCD in steps where a part may travel over 1 mm; the
 //! cell file's timestep. Steps in which nothing can move are not solved ([`quiet`], the cell
 //! file's `sim.stepping`).
 
@@ -182,11 +182,6 @@ pub struct PartBody {
     pub state: PartState,
     /// A placed part's pose at the start of its current rest window: (time (s), pose).
     rest_ref: Option<(f64, Isometry3<f64>)>,
-    /// Poured, dropped, let go or shaken since it last slept: its steps need continuous
-    /// collision detection while it is awake (see [`quiet::CCD_REST_M_S`]).
-    ccd: bool,
-    /// Solved steps in a row the part has been at rest for CCD's purpose.
-    slow_steps: u32,
 }
 
 /// A placed part whose pose changes less than [`PLACED_REST_M`] and [`PLACED_REST_RAD`] over
@@ -234,6 +229,10 @@ pub struct World {
     substeps: u64,
     /// Steps taken without the solver ([`quiet`]).
     quiet_steps: u64,
+    /// Solved steps that ran continuous collision detection.
+    ccd_steps: u64,
+    /// A step runs CCD when a point may travel farther than this (m; [`quiet::CCD_TRAVEL_M`]).
+    ccd_travel_m: f64,
     /// How the world is stepped.
     stepping: Stepping,
     /// What kinematic bodies must keep clear of in a quiet step, gathered while nothing moves.
@@ -315,6 +314,8 @@ impl World {
             steps: 0,
             substeps: 0,
             quiet_steps: 0,
+            ccd_steps: 0,
+            ccd_travel_m: quiet::CCD_TRAVEL_M,
             stepping: scene.sim.stepping,
             quiet_targets: None,
             max_substeps: MAX_SUBSTEPS,
@@ -401,15 +402,6 @@ impl World {
         if moving && body.is_fixed() {
             body.set_body_type(RigidBodyType::KinematicPositionBased, true);
         }
-        if moving {
-            // Shaken parts need CCD until they sleep again.
-            for p in &mut self.parts {
-                if p.state == PartState::Free {
-                    p.ccd = true;
-                    p.slow_steps = 0;
-                }
-            }
-        }
     }
 
     /// Whether the pick tray is away from its rest pose or moving (an agitation under way).
@@ -474,6 +466,7 @@ impl World {
             }
         }
         self.params.max_ccd_substeps = usize::from(self.ccd_needed());
+        self.ccd_steps += self.params.max_ccd_substeps as u64;
         let n = self.substeps_needed();
         let dt = self.params.dt;
         let dt_s = dt as f64;
@@ -513,7 +506,6 @@ impl World {
         self.params.dt = dt;
         self.steps += 1;
         self.substeps += n as u64;
-        self.clear_ccd_flags();
         self.settle_pick_tray();
         self.tool_history = [self.tool_history[1], self.tool_history[2], self.tool_position()];
         self.rest_placed_parts();
@@ -704,6 +696,18 @@ impl World {
     /// Checks every step against `limits` from now on.
     pub fn set_health_limits(&mut self, limits: HealthLimits) {
         self.health.limits = limits;
+    }
+
+    /// Solved steps so far that ran continuous collision detection.
+    pub fn ccd_steps(&self) -> u64 {
+        self.ccd_steps
+    }
+
+    /// Runs continuous collision detection in a step in which a point may travel farther than
+    /// `travel_m` (default [`quiet::CCD_TRAVEL_M`]; infinite: never): the physics tests'
+    /// negative control, showing what CCD stops.
+    pub fn set_ccd_travel_m(&mut self, travel_m: f64) {
+        self.ccd_travel_m = travel_m;
     }
 
     /// Turns rapier's contact clustering on or off ([`Solver::Tuned`] turns it off): the

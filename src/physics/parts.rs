@@ -19,8 +19,6 @@ impl World {
             let p = &mut self.parts[idx];
             p.state = PartState::Free;
             p.rest_ref = None;
-            p.ccd = true;
-            p.slow_steps = 0;
             let b = &mut self.bodies[p.body];
             b.set_enabled(true);
             b.set_body_type(RigidBodyType::Dynamic, false);
@@ -76,8 +74,6 @@ impl World {
             view_collider,
             state: PartState::Free,
             rest_ref: None,
-            ccd: true,
-            slow_steps: 0,
         });
         idx
     }
@@ -160,5 +156,13 @@ impl World {
     pub fn set_part_pose(&mut self, i: usize, world_from_part: &Isometry3<f64>) {
         let b = &mut self.bodies[self.parts[i].body];
         b.set_position(to_pose(world_from_part), true);
+    }
+
+    /// Sets part `i`'s velocity (m/s, world frame), awake, not turning (for set-ups and tests:
+    /// a part flung).
+    pub fn set_part_velocity(&mut self, i: usize, velocity_m_s: &Vector3<f64>) {
+        let b = &mut self.bodies[self.parts[i].body];
+        b.set_linvel(sim_point(velocity_m_s), true);
+        b.set_angvel(Vector::ZERO, true);
     }
 }

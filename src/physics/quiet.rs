@@ -13,9 +13,10 @@
 //! them. The check runs every step, so the solver resumes on the first step in which a contact
 //! becomes possible, wherever the arm's planned motion takes it.
 //!
-//! Continuous collision detection (CCD) runs only while it is needed: while a part that was
-//! poured, dropped, let go or shaken since it last slept is awake, or the pick tray moves.
-//! Parts at rest, and parts the arm nudges while picking, are stepped without it.
+//! Continuous collision detection (CCD) runs only in a step that needs it: one in which some
+//! awake part's point, or the pick tray, can travel farther than [`CCD_TRAVEL_M`] (a pour, a
+//! drop, a part flung). Parts at rest, rocking in a settling pile or shaken with the tray are
+//! stepped without it: their contacts are predicted (soft CCD) well beyond a step's travel.
 //!
 //! What may differ from stepping always: rapier's internal order (its query tree, contact
 //! graph, solver caches) after a quiet spell, so a contact resumed later may come out
@@ -35,13 +36,14 @@ use super::*;
 /// speculative or not, can start in it.
 pub const QUIET_MARGIN_M: f64 = 0.002;
 
-/// A poured, dropped or shaken part whose every point has moved slower than this for
-/// [`CCD_REST_S`] is at rest for CCD's purpose (m/s): 0.1 mm a step, a small fraction of the
-/// thinnest part's half thickness that makes rapier sweep a body. A falling part passes this
-/// speed within 5 ms of letting go.
-pub const CCD_REST_M_S: f64 = 0.05;
-/// See [`CCD_REST_M_S`] (s).
-pub const CCD_REST_S: f64 = 0.1;
+/// Continuous collision detection runs in a step in which some awake part's point, or the
+/// pick tray, can travel farther than this (m). Every part predicts its contacts 10 mm along
+/// its path (soft CCD), and the trays' floors and walls are 6–8 mm thick, so a step that
+/// moves nothing by 1 mm cannot tunnel; rapier's own test, half the thinnest convex piece's
+/// half extent (0.08 mm for a 0.3 mm terminal), would sweep every part still rocking in a
+/// settling or shaken pile. 1 mm a step is 0.5 m/s at the 2 ms step: a part falls that fast
+/// after 13 mm.
+pub const CCD_TRAVEL_M: f64 = 0.001;
 
 /// Most exact distance queries one quiet check makes: beyond, the arm is among parts and the
 /// step is solved.
@@ -89,38 +91,26 @@ impl World {
         p.state == PartState::Removed || self.bodies[p.body].is_sleeping()
     }
 
-    /// Whether the next step needs continuous collision detection: a part poured, dropped or
-    /// shaken since it last slept is awake, or the pick tray moves.
+    /// Whether the next step needs continuous collision detection: some awake part's point,
+    /// or the pick tray, can travel farther than [`CCD_TRAVEL_M`] (as set) in it (at the speeds the step
+    /// starts with; gravity adds 0.02 mm a step).
     pub(super) fn ccd_needed(&self) -> bool {
-        self.stepping == Stepping::Always
-            || self.pick_tray_moving()
-            || self.pick_tray_offset_m.1 != nalgebra::Vector3::zeros()
-            || self
-                .parts
-                .iter()
-                .any(|p| p.ccd && p.state != PartState::Removed && !self.bodies[p.body].is_sleeping())
-    }
-
-    /// After a solved step: parts that sleep again, or have moved slower than
-    /// [`CCD_REST_M_S`] (every point) for [`CCD_REST_S`], no longer need CCD.
-    pub(super) fn clear_ccd_flags(&mut self) {
-        let r = self.part_shape.bounding_radius_m;
-        let rest_steps = (CCD_REST_S / self.step_dt_s).round() as u32;
-        for p in &mut self.parts {
-            if !p.ccd {
-                continue;
-            }
-            let b = &self.bodies[p.body];
-            if p.state == PartState::Removed || b.is_sleeping() {
-                p.ccd = false;
-                continue;
-            }
-            let speed_m_s = b.linvel().length() as f64 / SIM_UNITS_PER_M + b.angvel().length() as f64 * r;
-            p.slow_steps = if speed_m_s < CCD_REST_M_S { p.slow_steps + 1 } else { 0 };
-            if p.slow_steps >= rest_steps {
-                p.ccd = false;
-            }
+        if self.stepping == Stepping::Always {
+            return true;
         }
+        let (tray_from, tray_to) = self.pick_tray_offset_m;
+        if (tray_to - tray_from).norm() > self.ccd_travel_m {
+            return true;
+        }
+        let r = self.part_shape.bounding_radius_m;
+        let fastest_m_s = self.ccd_travel_m / self.step_dt_s;
+        self.parts.iter().any(|p| {
+            let b = &self.bodies[p.body];
+            p.state != PartState::Removed
+                && !b.is_sleeping()
+                && b.is_dynamic()
+                && b.linvel().length() as f64 / SIM_UNITS_PER_M + b.angvel().length() as f64 * r > fastest_m_s
+        })
     }
 
     /// Whether the next step, with the arm's links going to `world_from_links`, is quiet (see

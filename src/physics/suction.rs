@@ -531,9 +531,6 @@ impl World {
         } else {
             PartState::Free
         };
-        // A dropped or released part falls: CCD until it sleeps.
-        p.ccd = true;
-        p.slow_steps = 0;
         self.colliders[collider].set_active_collision_types(ActiveCollisionTypes::default());
         let b = &mut self.bodies[body];
         b.set_body_type(RigidBodyType::Dynamic, true);

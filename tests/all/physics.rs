@@ -157,6 +157,50 @@ fn thin_parts_do_not_tunnel_through_the_tray_floor() {
     }
 }
 
+/// CCD runs only in steps in which a part may travel over 1 mm: a part flung at the floor
+/// gets it and stays on the floor; a pile's pour gets it while parts fall, not while they
+/// rock into rest. Negative control: with a zero travel threshold, CCD runs in nearly every
+/// solved step of the same pour (what rapier's own test for a thin part's pieces did).
+#[test]
+fn ccd_runs_only_in_steps_where_a_part_may_travel_over_a_millimetre() {
+    for name in ["C", "F"] {
+        let (mut w, _, wp) = world(name);
+        let c = w.pick_tray().world_from_tray.translation.vector;
+        let thinnest = wp.workpiece.size_m.iter().cloned().fold(f64::INFINITY, f64::min);
+        // Lying flat 11 mm above the floor, out of its predicted contacts' reach, at 10 m/s.
+        let z0 = c.z + thinnest / 2.0 + 0.011;
+        w.add_part(&Isometry3::new(Vector3::new(c.x, c.y, z0), Vector3::new(0.0, 0.0, 0.3)));
+        w.set_part_velocity(0, &Vector3::new(0.0, 0.0, -10.0));
+        w.run_for(0.5)
+            .unwrap_or_else(|e| panic!("{name} flung at the floor: {e}"));
+        let z = w.part_pose(0).translation.z;
+        assert!(
+            z > c.z + thinnest / 2.0 - 3e-4,
+            "{name} flung at the floor: centre at {z}, floor at {}",
+            c.z
+        );
+        assert!(w.max_penetration_m().0 <= 0.0003);
+        let (ccd, steps) = (w.ccd_steps(), w.steps());
+        assert!(ccd >= 1 && ccd * 4 < steps, "{name} flung: {ccd} CCD steps of {steps}");
+    }
+    let pour = |travel_m: f64| {
+        let (mut w, _, wp) = world("E");
+        w.set_ccd_travel_m(travel_m);
+        let pile = w
+            .build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, 3))
+            .unwrap();
+        assert!(pile.settled && pile.max_penetration_m <= 0.0003);
+        (w.ccd_steps(), w.steps())
+    };
+    let (ccd, steps) = pour(binpick::physics::quiet::CCD_TRAVEL_M);
+    assert!(ccd * 3 < steps, "pour: {ccd} CCD steps of {steps}");
+    let (ccd, steps) = pour(0.0);
+    assert!(
+        ccd * 10 > steps * 9,
+        "pour, CCD whenever anything moves: {ccd} CCD steps of {steps}"
+    );
+}
+
 #[test]
 fn a_part_poured_after_one_was_taken_out_reuses_its_body_and_falls_like_a_new_one() {
     let (mut w, _, _) = world("E");
