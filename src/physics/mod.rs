@@ -465,9 +465,10 @@ impl World {
                 gripper_ran = true;
             }
         }
-        self.params.max_ccd_substeps = usize::from(self.ccd_needed());
+        let travel_m = self.fastest_point_travel_m();
+        self.params.max_ccd_substeps = usize::from(self.ccd_needed(travel_m));
         self.ccd_steps += self.params.max_ccd_substeps as u64;
-        let n = self.substeps_needed();
+        let n = self.substeps_needed(travel_m);
         let dt = self.params.dt;
         let dt_s = dt as f64;
         self.params.dt = dt / n as f32;
@@ -572,22 +573,25 @@ impl World {
         }
     }
 
-    /// How many substeps the next step needs so that no awake part moves more than
-    /// [`MAX_SUBSTEP_MOTION_M`] per substep (its centre's travel plus its rim's turn), 1 to 8.
-    /// A 2.5 g part that lands on a corner spins at 300 rad/s; at the cell's 2 ms step its far
-    /// corner would dig millimetres into the floor before the next collision detection.
-    fn substeps_needed(&self) -> usize {
-        let dt = self.dt_s();
+    /// The farthest any point of an awake free or placed part travels in the next step at its
+    /// present speed (m): its centre's travel plus its rim's turn.
+    fn fastest_point_travel_m(&self) -> f64 {
         let r = self.part_shape.bounding_radius_m;
-        let fastest = self
-            .parts
+        self.parts
             .iter()
             .filter(|p| matches!(p.state, PartState::Free | PartState::Placed))
             .map(|p| &self.bodies[p.body])
             .filter(|b| !b.is_sleeping())
-            .map(|b| (b.linvel().length() as f64 / SIM_UNITS_PER_M + b.angvel().length() as f64 * r) * dt)
-            .fold(0.0, f64::max);
-        ((fastest / MAX_SUBSTEP_MOTION_M).ceil() as usize).clamp(1, self.max_substeps.max(1))
+            .map(|b| (b.linvel().length() as f64 / SIM_UNITS_PER_M + b.angvel().length() as f64 * r) * self.dt_s())
+            .fold(0.0, f64::max)
+    }
+
+    /// How many substeps a step whose fastest point travels `travel_m` needs so that no awake
+    /// part moves more than [`MAX_SUBSTEP_MOTION_M`] per substep, 1 to 8. A 2.5 g part that
+    /// lands on a corner spins at 300 rad/s; at the cell's 2 ms step its far corner would dig
+    /// millimetres into the floor before the next collision detection.
+    fn substeps_needed(&self, travel_m: f64) -> usize {
+        ((travel_m / MAX_SUBSTEP_MOTION_M).ceil() as usize).clamp(1, self.max_substeps.max(1))
     }
 
     /// Steps for `duration_s` of simulation time (rounded up to whole steps).

@@ -91,26 +91,14 @@ impl World {
         p.state == PartState::Removed || self.bodies[p.body].is_sleeping()
     }
 
-    /// Whether the next step needs continuous collision detection: some awake part's point,
-    /// or the pick tray, can travel farther than [`CCD_TRAVEL_M`] (as set) in it (at the speeds the step
-    /// starts with; gravity adds 0.02 mm a step).
-    pub(super) fn ccd_needed(&self) -> bool {
-        if self.stepping == Stepping::Always {
-            return true;
-        }
+    /// Whether the next step needs continuous collision detection: the farthest point of an
+    /// awake part travels `part_travel_m` in it (at the speeds the step starts with; gravity
+    /// adds 0.02 mm a step), and it or the pick tray's travel exceeds [`CCD_TRAVEL_M`] (as set).
+    pub(super) fn ccd_needed(&self, part_travel_m: f64) -> bool {
         let (tray_from, tray_to) = self.pick_tray_offset_m;
-        if (tray_to - tray_from).norm() > self.ccd_travel_m {
-            return true;
-        }
-        let r = self.part_shape.bounding_radius_m;
-        let fastest_m_s = self.ccd_travel_m / self.step_dt_s;
-        self.parts.iter().any(|p| {
-            let b = &self.bodies[p.body];
-            p.state != PartState::Removed
-                && !b.is_sleeping()
-                && b.is_dynamic()
-                && b.linvel().length() as f64 / SIM_UNITS_PER_M + b.angvel().length() as f64 * r > fastest_m_s
-        })
+        self.stepping == Stepping::Always
+            || part_travel_m > self.ccd_travel_m
+            || (tray_to - tray_from).norm() > self.ccd_travel_m
     }
 
     /// Whether the next step, with the arm's links going to `world_from_links`, is quiet (see
