@@ -708,8 +708,8 @@ impl World {
     }
 
     /// Runs continuous collision detection in a step in which a point may travel farther than
-    /// `travel_m` (default [`quiet::CCD_TRAVEL_M`]; infinite: never): the physics tests'
-    /// negative control, showing what CCD stops.
+    /// `travel_m` (default [`quiet::CCD_TRAVEL_M`]; 0: whenever anything moves, as rapier's own
+    /// test nearly did; infinite: never): the physics tests' negative control.
     pub fn set_ccd_travel_m(&mut self, travel_m: f64) {
         self.ccd_travel_m = travel_m;
     }
