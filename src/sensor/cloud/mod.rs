@@ -24,7 +24,9 @@
 //! lead); score = agree / (agree + contradict), evidence = agree - 3 contradict; (7) per patch
 //! the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no different
 //! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much,
-//! then non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
+//! refined (`refine`: settled onto the floor in one of the part's resting poses where the
+//! patch's points allow it; an outline-fitted face turned to its best-verified yaw), then
+//! non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
 //! lying on its curved side (`lying`): per patch no flat face explains, a cylinder of known
 //! radius fitted to the points around it, kept if its axis's standard error is within
 //! `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks the turn about the axis
@@ -150,6 +152,10 @@ pub struct CloudModel {
     /// leg shoulders): a patch's plane is refitted without the pixels off it
     /// ([`PLANE_TRIM_M`]), which would tilt it.
     trim_plane: bool,
+    /// The part's resting poses' support normals (part frame, unit, pointing down at rest): a
+    /// detection near one, on the floor, is tried settled ([`refine`]). Empty (a primitive
+    /// workpiece's model): not tried, and no yaw scan either.
+    resting: Vec<Vector3<f64>>,
 }
 
 /// A patch's plane is refitted (twice) without its pixels farther than this from it, when the
@@ -237,6 +243,7 @@ impl CloudModel {
             ppf: None,
             outlines: Vec::new(),
             trim_plane: false,
+            resting: Vec::new(),
         }
     }
 
@@ -285,6 +292,7 @@ impl CloudModel {
             ppf: None,
             trim_plane: outlines.iter().flatten().any(|o| o.has_band()),
             outlines,
+            resting: pm.poses.iter().map(|p| p.normal).collect(),
         }
     }
 
@@ -345,6 +353,10 @@ pub struct CloudDetection {
     /// The part lies on its body cylinder's curved side (a can on its side): no flat face is
     /// up, and `face_up` is only the flat face turned most toward the camera (not a suction face).
     pub curved_side_up: bool,
+    /// The yaws about the face normal its silhouette fit allows: a span centred on its yaw
+    /// (rad); 0 where no fit leaves the yaw open (a disc, a lying part, point-pair features).
+    #[serde(skip)]
+    pub yaw_span_rad: f64,
 }
 
 /// Recognises parts in a capture from the capture, the camera, the pick tray's geometry and the
@@ -761,7 +773,8 @@ impl<'a> Cloud<'a> {
                 for f in outline::fit_outline(o, &inside, &edge, &outside, theta0, model.yaw_span_max_rad) {
                     let u = e1 * f.yaw_rad.cos() + e2 * f.yaw_rad.sin();
                     let center = plane.point + e1 * f.center[0] + e2 * f.center[1];
-                    if let Some(d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
+                    if let Some(mut d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
+                        d.1.yaw_span_rad = f.yaw_span_rad;
                         verified.push(d);
                     }
                 }
@@ -772,7 +785,7 @@ impl<'a> Cloud<'a> {
                     // Any yaw looks the same: the face's first axis along the world x in the plane.
                     let x = Vector3::x() - n * n.x;
                     let x = if x.norm() > 1e-6 { x.normalize() } else { e1 };
-                    fits.push((c, x.dot(&e2).atan2(x.dot(&e1))));
+                    fits.push((c, x.dot(&e2).atan2(x.dot(&e1)), 0.0));
                 }
             } else {
                 let square = (face.extent_m[0] - face.extent_m[1]).abs() < 1e-9;
@@ -781,11 +794,11 @@ impl<'a> Cloud<'a> {
                     if let Some(f) = fit_rect(&hull, &outside, face.extent_m, t0)
                         && f.yaw_span_rad <= model.yaw_span_max_rad
                     {
-                        fits.push((f.center, f.yaw_rad));
+                        fits.push((f.center, f.yaw_rad, f.yaw_span_rad));
                     }
                 }
             }
-            for (c, theta) in fits {
+            for (c, theta, span) in fits {
                 let turns: &[f64] = if model.half_turn_matters {
                     &[0.0, std::f64::consts::PI]
                 } else {
@@ -795,7 +808,8 @@ impl<'a> Cloud<'a> {
                     let t = theta + turn;
                     let u = e1 * t.cos() + e2 * t.sin();
                     let center = plane.point + e1 * c[0] + e2 * c[1];
-                    if let Some(d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
+                    if let Some(mut d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
+                        d.1.yaw_span_rad = span;
                         verified.push(d);
                     }
                 }
@@ -809,7 +823,10 @@ impl<'a> Cloud<'a> {
         } else {
             Vec::new()
         };
-        (self.decide(model, &verified), fits)
+        let best = self
+            .decide(model, &verified)
+            .map(|d| self.refine(model, patch, &plane, d));
+        (best, fits)
     }
 
     /// The pose the image prefers among a patch's verified hypotheses (evidence, detection). A
@@ -864,6 +881,7 @@ impl<'a> Cloud<'a> {
                     score,
                     visible_fraction: visible,
                     curved_side_up: face_up.is_none(),
+                    yaw_span_rad: 0.0,
                 },
             )
         })
@@ -1059,6 +1077,7 @@ mod icp;
 mod lying;
 mod outline;
 pub mod ppf;
+mod refine;
 mod render;
 mod symmetry;
 
