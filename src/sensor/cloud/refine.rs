@@ -66,9 +66,12 @@ impl super::Cloud<'_> {
             .settled(model, patch, plane, &d)
             .and_then(|pose| self.check(model, &pose, Some(d.face_up)))
             .map_or(d, |(_, s)| s);
-        let turned = self.best_yaw(model, &settled, span);
-        self.check(model, &turned, Some(settled.face_up))
-            .map_or(settled, |(_, t)| t)
+        match self.best_yaw(model, &settled, span) {
+            Some(turned) => self
+                .check(model, &turned, Some(settled.face_up))
+                .map_or(settled, |(_, t)| t),
+            None => settled,
+        }
     }
 
     /// `d`'s pose settled onto the floor, if it is near a resting pose on the floor and the
@@ -131,15 +134,16 @@ impl super::Cloud<'_> {
 
     /// `d`'s pose turned about its face's normal (through the face centre) to the mean of the
     /// yaws, within the silhouette's span `span_rad` centred on it, that verify with the most
-    /// evidence at every pixel; unturned for a face fitted as its rectangle.
-    fn best_yaw(&self, model: &CloudModel, d: &CloudDetection, span_rad: f64) -> Isometry3<f64> {
+    /// evidence at every pixel; `None` (no scan) for a face fitted as its rectangle or a yaw the
+    /// silhouette pins to within a step either way.
+    fn best_yaw(&self, model: &CloudModel, d: &CloudDetection, span_rad: f64) -> Option<Isometry3<f64>> {
         let pose = d.world_from_part;
         let face = &model.faces[d.face_up];
         let pivot = pose.translation.vector + pose.rotation * face.center;
         let axis = Unit::new_normalize(pose.rotation * face.normal);
         let steps = (0.5 * span_rad / YAW_STEP_RAD).floor() as i64;
         if steps == 0 || model.outlines.get(d.face_up).is_none_or(|o| o.is_none()) {
-            return pose;
+            return None;
         }
         let at = |k: i64| {
             turn_about(
@@ -151,12 +155,10 @@ impl super::Cloud<'_> {
         let evidence: Vec<(i64, i64)> = (-steps..=steps)
             .filter_map(|k| self.verify_every(model, &at(k), 1).map(|(_, _, e)| (k, e)))
             .collect();
-        let Some(top) = evidence.iter().map(|(_, e)| *e).max() else {
-            return pose;
-        };
+        let top = evidence.iter().map(|(_, e)| *e).max()?;
         let best: Vec<i64> = evidence.iter().filter(|(_, e)| *e == top).map(|(k, _)| *k).collect();
         let yaw = best.iter().sum::<i64>() as f64 / best.len() as f64 * YAW_STEP_RAD;
-        turn_about(&pose, &pivot, &UnitQuaternion::from_axis_angle(&axis, yaw))
+        Some(turn_about(&pose, &pivot, &UnitQuaternion::from_axis_angle(&axis, yaw)))
     }
 }
 
