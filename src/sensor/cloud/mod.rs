@@ -353,10 +353,11 @@ pub struct CloudDetection {
     /// The part lies on its body cylinder's curved side (a can on its side): no flat face is
     /// up, and `face_up` is only the flat face turned most toward the camera (not a suction face).
     pub curved_side_up: bool,
-    /// The yaws about the face normal its silhouette fit allows: a span centred on its yaw
-    /// (rad); 0 where no fit leaves the yaw open (a disc, a lying part, point-pair features).
+    /// The yaws about the face normal its outline fit (`outline`) allows: a span centred on its
+    /// yaw (rad), which `refine` scans; 0 for every other fit (a rectangle, a disc, a lying part,
+    /// point-pair features).
     #[serde(skip)]
-    pub yaw_span_rad: f64,
+    yaw_span_rad: f64,
 }
 
 /// Recognises parts in a capture from the capture, the camera, the pick tray's geometry and the
@@ -785,7 +786,7 @@ impl<'a> Cloud<'a> {
                     // Any yaw looks the same: the face's first axis along the world x in the plane.
                     let x = Vector3::x() - n * n.x;
                     let x = if x.norm() > 1e-6 { x.normalize() } else { e1 };
-                    fits.push((c, x.dot(&e2).atan2(x.dot(&e1)), 0.0));
+                    fits.push((c, x.dot(&e2).atan2(x.dot(&e1))));
                 }
             } else {
                 let square = (face.extent_m[0] - face.extent_m[1]).abs() < 1e-9;
@@ -794,11 +795,11 @@ impl<'a> Cloud<'a> {
                     if let Some(f) = fit_rect(&hull, &outside, face.extent_m, t0)
                         && f.yaw_span_rad <= model.yaw_span_max_rad
                     {
-                        fits.push((f.center, f.yaw_rad, f.yaw_span_rad));
+                        fits.push((f.center, f.yaw_rad));
                     }
                 }
             }
-            for (c, theta, span) in fits {
+            for (c, theta) in fits {
                 let turns: &[f64] = if model.half_turn_matters {
                     &[0.0, std::f64::consts::PI]
                 } else {
@@ -808,8 +809,7 @@ impl<'a> Cloud<'a> {
                     let t = theta + turn;
                     let u = e1 * t.cos() + e2 * t.sin();
                     let center = plane.point + e1 * c[0] + e2 * c[1];
-                    if let Some(mut d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
-                        d.1.yaw_span_rad = span;
+                    if let Some(d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
                         verified.push(d);
                     }
                 }

@@ -142,7 +142,7 @@ impl super::Cloud<'_> {
         let pivot = pose.translation.vector + pose.rotation * face.center;
         let axis = Unit::new_normalize(pose.rotation * face.normal);
         let steps = (0.5 * span_rad / YAW_STEP_RAD).floor() as i64;
-        if steps == 0 || model.outlines.get(d.face_up).is_none_or(|o| o.is_none()) {
+        if steps == 0 {
             return None;
         }
         let at = |k: i64| {
