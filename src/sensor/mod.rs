@@ -201,13 +201,22 @@ impl Sensor {
             .mesh
             .as_ref()
             .and_then(|mesh| workpiece.part_model(mesh, 0.0).ok());
-        let mut model = pm
-            .as_ref()
-            .map_or_else(|| CloudModel::new(workpiece), CloudModel::of_part_model);
+        // A primitive workpiece is matched by its primitives, and settled onto the floor in the
+        // resting poses of its meshed primitives' part model.
+        let primitive = workpiece.primitive_mesh();
+        let mut model = match &pm {
+            Some(pm) => CloudModel::of_part_model(pm),
+            None => {
+                let model = CloudModel::new(workpiece);
+                match primitive.as_ref().and_then(|mesh| workpiece.part_model(mesh, 0.0).ok()) {
+                    Some(resting) => model.with_resting(&resting),
+                    None => model,
+                }
+            }
+        };
         model.yaw_span_max_rad = cfg.max_yaw_ambiguity_deg.to_radians();
         // Point-pair features where the workpiece's recognition.method asks for them, sampled at
         // a step of `ppf::STEP_PX` pixels at the tray floor.
-        let primitive = workpiece.primitive_mesh();
         if let Some(mesh) = cloud::ppf::ppf_mesh(workpiece.recognition.method, &model, pm.as_ref(), primitive.as_ref())
         {
             let floor =

@@ -511,10 +511,12 @@ fn the_retreat_runs_into_the_next_pick_when_it_is_ready() {
 }
 
 /// A capture spoiled by the arm, then a failed grasp, leave the arm in the view with a dead
-/// capture pending: the cell gets out of the view and triggers again. This run (F, seed 11,
-/// one pick per capture, no hopper) used to spin forever at pick 42 without a physics step,
-/// waiting for a capture that could never be replaced; it must now finish its picks. The run
-/// goes on a thread so that a hang fails the test instead of holding up the suite.
+/// capture pending: the cell gets out of the view and triggers again. Such a run (F, seed 11,
+/// one pick per capture, no hopper, at pick 42) used to spin forever without a physics step,
+/// waiting for a capture that could never be replaced; it must now finish its picks. Since the
+/// primitives' detections are settled onto the floor, the case is this run's first pick (F,
+/// seed 34: searched over seeds 12-40). The run goes on a thread so that a hang fails the test
+/// instead of holding up the suite.
 #[test]
 fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
     let mut scene = LoadedScene::embedded_default().unwrap();
@@ -524,16 +526,16 @@ fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
     std::thread::spawn(move || {
         let robot = RobotModel::from_scene(&scene).unwrap();
         let wp = LoadedWorkpiece::resolve("F").unwrap();
-        let r = binpick::cycle::run(&scene, &robot, &wp, &deterministic(45, 11), &mut ()).unwrap();
+        let r = binpick::cycle::run(&scene, &robot, &wp, &deterministic(10, 34), &mut ()).unwrap();
         let _ = tx.send(r);
     });
     let r = rx
         .recv_timeout(std::time::Duration::from_secs(300))
         .expect("the run hangs");
-    assert_eq!(r.tally.attempts, 45);
+    assert_eq!(r.tally.attempts, 10);
     // The case it is built on: a failed grasp follows a capture the arm spoiled.
     assert!(
-        r.records.iter().any(|p| p.index == 42 && p.outcome.grasp_failed()),
+        r.records.iter().any(|p| p.index == 0 && p.outcome.grasp_failed()),
         "{:?}",
         r.records.iter().map(|p| p.outcome.detail()).collect::<Vec<_>>()
     );

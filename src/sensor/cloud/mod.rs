@@ -153,8 +153,8 @@ pub struct CloudModel {
     /// ([`PLANE_TRIM_M`]), which would tilt it.
     trim_plane: bool,
     /// The part's resting poses' support normals (part frame, unit, pointing down at rest): a
-    /// detection near one, on the floor, is tried settled ([`refine`]). Empty (a primitive
-    /// workpiece's model): not tried, and no yaw scan either.
+    /// detection near one, on the floor, is tried settled ([`refine`]). A primitive workpiece's
+    /// come from its meshed primitives ([`CloudModel::with_resting`]); empty: not tried.
     resting: Vec<Vector3<f64>>,
 }
 
@@ -245,6 +245,13 @@ impl CloudModel {
             trim_plane: false,
             resting: Vec::new(),
         }
+    }
+
+    /// The model with `pm`'s resting poses (a primitive workpiece's, from its meshed primitives):
+    /// its detections lying on the floor in one of them are tried settled (`refine`).
+    pub fn with_resting(mut self, pm: &crate::part::PartModel) -> Self {
+        self.resting = pm.poses.iter().map(|p| p.normal).collect();
+        self
     }
 
     /// The model of a mesh workpiece from its part model: the planar faces large enough to be

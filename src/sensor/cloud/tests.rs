@@ -768,3 +768,45 @@ fn a_dip_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
         "the leaning part was found at only {leaning_seen} of 3 yaws"
     );
 }
+
+#[test]
+fn a_primitive_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
+    // A built-in part takes the resting poses of its meshed primitives: an inductor (F) flat on
+    // the floor is found with no tilt at all. The negative control: leaning 6 degrees (one edge
+    // on the floor) it keeps its measured tilt.
+    let cell = cell();
+    let w = workpiece("F");
+    let pm = w.part_model(&w.primitive_mesh().unwrap(), 0.0).unwrap();
+    let m = CloudModel::new(&w).with_resting(&pm);
+    let tilt_of = |d: &CloudDetection| {
+        (d.world_from_part.rotation * Vector3::z())
+            .z
+            .abs()
+            .min(1.0)
+            .acos()
+            .to_degrees()
+    };
+    let mut leaning_seen = 0;
+    for y in [10.0, 55.0, -30.0] {
+        for (lean, x) in [(0.0, 0.02), (6.0, -0.02)] {
+            let pose = resting(&cell, &w, x, 0.01, 0.0, yaw(y) * roll(lean));
+            let found = recognize(&synthetic(&cell, &[(&m, pose)]), &cell.camera, &cell.tray, &m);
+            if lean > 0.0 && found.is_empty() {
+                continue;
+            }
+            assert_eq!(found.len(), 1, "yaw {y}, lean {lean}: {found:?}");
+            leaning_seen += usize::from(lean > 0.0);
+            let tilt = tilt_of(&found[0]);
+            if lean == 0.0 {
+                assert_found(&w, &found, &pose, 0.0005, 1.0);
+                assert!(tilt < 0.05, "yaw {y}: tilt {tilt:.2} deg");
+            } else {
+                assert!(tilt > 3.0, "yaw {y}, lean {lean}: settled to tilt {tilt:.2}");
+            }
+        }
+    }
+    assert!(
+        leaning_seen >= 2,
+        "the leaning part was found at only {leaning_seen} of 3 yaws"
+    );
+}
