@@ -720,6 +720,16 @@ fn a_dip_on_its_legs_or_on_its_back_is_told_by_every_pixel() {
     assert!(close_calls >= 2, "only {close_calls} of 4 were close calls on the grid");
 }
 
+/// How far a detection's part z axis is from vertical, either way up (degrees).
+fn tilt_deg(d: &CloudDetection) -> f64 {
+    (d.world_from_part.rotation * Vector3::z())
+        .z
+        .abs()
+        .min(1.0)
+        .acos()
+        .to_degrees()
+}
+
 #[test]
 fn a_dip_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
     // On its back on the floor (its most likely resting pose), the found pose is settled: its
@@ -729,14 +739,6 @@ fn a_dip_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
     // where it is found (precision first: not at every yaw).
     let cell = cell();
     let (mesh, m) = cad_model("dip8.toml", 0.004);
-    let tilt_of = |d: &CloudDetection| {
-        (d.world_from_part.rotation * Vector3::z())
-            .z
-            .abs()
-            .min(1.0)
-            .acos()
-            .to_degrees()
-    };
     let mut leaning_seen = 0;
     for y in [10.0, 55.0, -30.0] {
         for (lean, x) in [(0.0, 0.02), (6.0, -0.02)] {
@@ -749,7 +751,7 @@ fn a_dip_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
             assert_eq!(found.len(), 1, "yaw {y}, lean {lean}: {found:?}");
             leaning_seen += usize::from(lean > 0.0);
             let (dp, dr) = m.symmetry().pose_error(&pose, &found[0].world_from_part);
-            let tilt = tilt_of(&found[0]);
+            let tilt = tilt_deg(&found[0]);
             assert!(dp <= 0.0005, "yaw {y}, lean {lean}: {:.2} mm off", dp * 1e3);
             if lean == 0.0 {
                 assert!(
@@ -778,14 +780,6 @@ fn a_primitive_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
     let w = workpiece("F");
     let pm = w.part_model(&w.primitive_mesh().unwrap(), 0.0).unwrap();
     let m = CloudModel::new(&w).with_resting(&pm);
-    let tilt_of = |d: &CloudDetection| {
-        (d.world_from_part.rotation * Vector3::z())
-            .z
-            .abs()
-            .min(1.0)
-            .acos()
-            .to_degrees()
-    };
     let mut leaning_seen = 0;
     for y in [10.0, 55.0, -30.0] {
         for (lean, x) in [(0.0, 0.02), (6.0, -0.02)] {
@@ -796,7 +790,7 @@ fn a_primitive_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
             }
             assert_eq!(found.len(), 1, "yaw {y}, lean {lean}: {found:?}");
             leaning_seen += usize::from(lean > 0.0);
-            let tilt = tilt_of(&found[0]);
+            let tilt = tilt_deg(&found[0]);
             if lean == 0.0 {
                 assert_found(&w, &found, &pose, 0.0005, 1.0);
                 assert!(tilt < 0.05, "yaw {y}: tilt {tilt:.2} deg");
