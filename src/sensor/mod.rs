@@ -206,13 +206,13 @@ impl Sensor {
         let primitive = workpiece.primitive_mesh();
         let mut model = match &pm {
             Some(pm) => CloudModel::of_part_model(pm),
-            None => {
-                let model = CloudModel::new(workpiece);
-                match primitive.as_ref().and_then(|mesh| workpiece.part_model(mesh, 0.0).ok()) {
-                    Some(resting) => model.with_resting(&resting),
-                    None => model,
-                }
-            }
+            None => primitive
+                .as_ref()
+                .and_then(|mesh| workpiece.part_model(mesh, 0.0).ok())
+                .map_or_else(
+                    || CloudModel::new(workpiece),
+                    |r| CloudModel::new(workpiece).with_resting(&r),
+                ),
         };
         model.yaw_span_max_rad = cfg.max_yaw_ambiguity_deg.to_radians();
         // Point-pair features where the workpiece's recognition.method asks for them, sampled at
