@@ -126,7 +126,7 @@ fn held_envelopes(robot: &RobotModel, scene: &LoadedScene) -> anyhow::Result<(Ve
         } else {
             LoadedWorkpiece::resolve(name)?
         };
-        let sel = GraspSelector::new(&scene.scene, robot, &wp.workpiece);
+        let sel = GraspSelector::for_workpiece(&scene.scene, robot, &wp);
         let size = wp.workpiece.size_m;
         for f in sel.faces() {
             if f.extent_m[0].min(f.extent_m[1]) < need(&wp) {

@@ -4,11 +4,12 @@
 //! points on body faces large enough for the cup whose normal is within the cup's tilt of
 //! vertical; drop those the tool would not clear (height map), whose straight approach or retreat
 //! would meet the tray walls (cell geometry), or that the arm cannot reach within its limits along
-//! the whole straight descent (a mesh workpiece's faces are its part model's planar faces that
-//! take the cup, each grasped at the centre of its cup-fit region farthest from its edges whose
-//! approach, cup and tool body, misses the part's own features above the face: pins, tabs); pick the tool yaw that makes the place motion quickest; rank by
-//! exposure, clearance, expected grasp success and expected motion time. Nothing here reads the
-//! world's ground truth.
+//! the whole straight descent. The faces are the part model's planar faces that take the cup
+//! (a CAD part's, or a built-in part's meshed primitives': the selector does not know which),
+//! each grasped at the centre of its cup-fit region farthest from its edges whose approach, cup
+//! and tool body, misses the part's own features above the face (pins, tabs). Pick the tool yaw
+//! that makes the place motion quickest; rank by exposure, clearance, expected grasp success and
+//! expected motion time. Nothing here reads the world's ground truth.
 //!
 //! Units: m, rad, s. Frames: `world_from_part` (detected), `world_from_tool` (z out of the cup,
 //! into the face), the pick tray frame for the height map and the walls.
@@ -18,9 +19,9 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
-use crate::config::{Scene, Workpiece};
+use crate::config::Scene;
 use crate::part::approach::{ColumnPiece, clear_site};
-use crate::part::primitive::{Face, body_faces};
+use crate::part::primitive::Face;
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
 
@@ -76,7 +77,7 @@ impl Rejection {
 pub struct GraspCandidate {
     /// Index of the detection.
     pub detection: usize,
-    /// Which face (index into [`GraspSelector::faces`]: [`body_faces`] for primitives).
+    /// Which face (index into [`GraspSelector::faces`]: the part model's faces that take the cup).
     pub face: usize,
     /// The tool at the grasp: cup lip on the face.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
@@ -142,22 +143,17 @@ impl GraspPlan {
 pub struct GraspSelector {
     robot: RobotModel,
     faces: Vec<Face>,
-    /// Per face: where the cup goes (part frame) and its distance to the face's nearest edge
-    /// (m): a primitive face's centre and half its smaller extent; a mesh face's clearest
-    /// admissible cup centre.
+    /// Per face: where the cup goes (part frame), the face's clearest admissible cup centre,
+    /// and its distance to the face's nearest edge (m).
     sites: Vec<(Vector3<f64>, f64)>,
-    /// The faces are a part model's (their cup-fit regions decide which take the cup).
-    model_faces: bool,
-    /// The centre of mass the peel model reads (part frame, m): a mesh workpiece's part model's;
-    /// the part frame's origin (the bounding box's centre) for primitives, as before the part
-    /// model (their results unchanged).
+    /// The centre of mass the peel model reads (part frame, m): the part model's.
     peel_com_m: Vector3<f64>,
     /// A part model's faces that take the cup but on which every cup site's approach meets the
     /// part's own geometry (pins, tabs, a can above its base): not offered.
     blocked_faces: usize,
-    /// Per face, how a part model's part lies in its slot when grasped there: the stable pose
-    /// whose support is opposite the face (`None`: a primitive's face, placed face up on the
-    /// opposite side of its box).
+    /// Per face, how the part lies in its slot when grasped there: the stable pose whose support
+    /// is opposite the face (`None`: no stable pose has the face up within the cup's tilt; the
+    /// part is placed face up on the opposite side of its bounding box).
     place: Vec<Option<PlacePose>>,
     /// The part's footprint in its place orientations, along the slot's x and y (m).
     place_footprint_m: [f64; 2],
@@ -299,29 +295,30 @@ fn joint_move_s(d: f64, v: f64, a: f64) -> f64 {
 }
 
 impl GraspSelector {
-    /// The selector for `workpiece` in `scene` with `robot`.
-    pub fn new(scene: &Scene, robot: &RobotModel, workpiece: &Workpiece) -> Self {
+    /// The selector for a loaded workpiece in `scene` with `robot`. Its faces are the part
+    /// model's planar faces that take the cell's cup (a CAD part's mesh, or a built-in part's
+    /// primitives meshed: one derivation for both), each fitted as
+    /// [`crate::sensor::cloud::face_of_planar`] fits it and grasped at its cup-fit region's
+    /// clearest centre; the peel model reads the model's centre of mass, and each face places the
+    /// part in the stable pose that has it up. A workpiece whose part model cannot be derived
+    /// (a degenerate mesh, refused by `binpick check`) offers no face.
+    pub fn for_workpiece(scene: &Scene, robot: &RobotModel, workpiece: &crate::config::LoadedWorkpiece) -> Self {
+        let w = &workpiece.workpiece;
         let g = &scene.gripper;
         let t = &scene.pick_tray;
-        let faces = body_faces(&workpiece.pieces());
-        let face_count = faces.len();
-        GraspSelector {
+        let mut sel = GraspSelector {
             robot: robot.clone(),
-            sites: faces
-                .iter()
-                .map(|f| (f.center, 0.5 * f.extent_m[0].min(f.extent_m[1])))
-                .collect(),
-            faces,
-            model_faces: false,
+            sites: Vec::new(),
+            faces: Vec::new(),
             peel_com_m: Vector3::zeros(),
             blocked_faces: 0,
-            place: vec![None; face_count],
-            place_footprint_m: [workpiece.size_m[0], workpiece.size_m[1]],
-            fit_margin_m: workpiece.grasp.face_margin_m,
+            place: Vec::new(),
+            place_footprint_m: [w.size_m[0], w.size_m[1]],
+            fit_margin_m: w.grasp.face_margin_m,
             cup_radius_m: g.cup_diameter_m / 2.0,
             // The recognised pose is off by up to two standard deviations of its noise: the cup
             // must stay on the face that much farther from its edges.
-            face_margin_m: workpiece.grasp.face_margin_m + 2.0 * scene.sensor.pose_noise_m,
+            face_margin_m: w.grasp.face_margin_m + 2.0 * scene.sensor.pose_noise_m,
             max_tilt_rad: g.max_tilt_deg.to_radians(),
             tool_radius_m: g.body_diameter_m / 2.0,
             cup_length_m: crate::geometry::HandGeometry::new(g).cup_length_m,
@@ -329,26 +326,17 @@ impl GraspSelector {
             tray_inner_half_m: [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0],
             rim_height_m: t.wall_height_m,
             approach_above_rim_m: scene.cycle.approach_above_rim_m,
-            size_m: workpiece.size_m,
-            yaw_symmetry_rad: workpiece.grasp.yaw_symmetry_deg.to_radians(),
+            size_m: w.size_m,
+            yaw_symmetry_rad: w.grasp.yaw_symmetry_deg.to_radians(),
             height_tolerance_m: 0.0015,
-        }
-    }
-
-    /// The selector for a loaded workpiece: a mesh workpiece's faces are its part model's planar
-    /// faces that take the cell's cup, each fitted as [`crate::sensor::cloud::face_of_planar`]
-    /// fits it and grasped at its cup-fit region's clearest centre; primitives as [`Self::new`].
-    pub fn for_workpiece(scene: &Scene, robot: &RobotModel, workpiece: &crate::config::LoadedWorkpiece) -> Self {
-        let mut sel = Self::new(scene, robot, &workpiece.workpiece);
-        let Some(mesh) = &workpiece.mesh else {
+        };
+        let primitive = w.primitive_mesh();
+        let Some(mesh) = workpiece.mesh.as_ref().map(|m| &m.0).or(primitive.as_ref()) else {
             return sel;
         };
-        let Ok(pm) = workpiece.workpiece.part_model(&mesh.0, scene.gripper.cup_diameter_m) else {
+        let Ok(pm) = w.part_model(mesh, g.cup_diameter_m) else {
             return sel;
         };
-        sel.faces.clear();
-        sel.sites.clear();
-        sel.place.clear();
         let column = approach_column(scene);
         for f in pm.grasp_faces() {
             // The clearest cup centre whose approach (cup, then tool body) misses the part's own
@@ -362,7 +350,6 @@ impl GraspSelector {
             sel.place
                 .push(PlacePose::of_face(&pm, &f.face.normal, sel.max_tilt_rad));
         }
-        sel.model_faces = true;
         if let Some(fp) = PlacePose::footprint_m(&sel.place, sel.yaw_symmetry_rad) {
             sel.place_footprint_m = fp;
         }
@@ -512,18 +499,13 @@ impl GraspSelector {
                 }
                 let (site, site_clearance) = self.sites[fi];
                 // A face takes the cup where its cup-fit region (cup radius and the workpiece's
-                // face margin) holds the site, a part model's face and a primitive face alike.
+                // face margin) holds the site.
                 // Where the recognised pose is off, the lip may overhang the edge: the plant's
                 // seal probes decide, and the pick counts as a grasp failure.
-                let (too_small, width) = if self.model_faces {
-                    (
-                        site_clearance < self.cup_radius_m + self.fit_margin_m,
-                        2.0 * site_clearance,
-                    )
-                } else {
-                    let w = face.extent_m[0].min(face.extent_m[1]);
-                    (w < 2.0 * (self.cup_radius_m + self.fit_margin_m), w)
-                };
+                let (too_small, width) = (
+                    site_clearance < self.cup_radius_m + self.fit_margin_m,
+                    2.0 * site_clearance,
+                );
                 if too_small {
                     plan.rejected.push((di, fi, Rejection::FaceTooSmall));
                     continue;
@@ -773,6 +755,7 @@ impl GraspSelector {
 mod tests {
     use super::*;
     use crate::config::LoadedWorkpiece;
+    use crate::part::primitive::body_faces;
 
     #[test]
     fn faces_of_a_box_and_of_capacitors() {
@@ -810,11 +793,8 @@ mod tests {
         let scene = crate::config::LoadedScene::embedded_default().unwrap();
         let robot = crate::robot::test_support::default_robot();
         let c = LoadedWorkpiece::resolve("C").unwrap().workpiece;
-        let sel = GraspSelector::new(&scene.scene, &robot, &c);
-        let top = body_faces(&c.pieces())
-            .into_iter()
-            .position(|f| f.normal == Vector3::z())
-            .unwrap();
+        let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &LoadedWorkpiece::resolve("C").unwrap());
+        let top = sel.faces().iter().position(|f| f.normal == Vector3::z()).unwrap();
         let face = sel.faces()[top];
         // The strip lies flat at the tray's centre, turned 30 deg; the map is 1 mm cells.
         let tray_from_part = Isometry3::from_parts(

@@ -154,7 +154,7 @@ pub fn binpicking_queries(
             let c = crate::sensor::capture(&w, &sensor.camera, seed, 0);
             let det = sensor.recognize_oracle(&crate::sensor::TruthAtTrigger::take(&w, &sensor, &c));
             let slots = scene.scene.world_from_slots(&wp.workpiece);
-            let selector = crate::grasp::GraspSelector::new(&scene.scene, robot, &wp.workpiece);
+            let selector = crate::grasp::GraspSelector::for_workpiece(&scene.scene, robot, wp);
             let ctx = GraspContext {
                 scene: &scene.scene,
                 robot,

@@ -16,8 +16,6 @@ use clap::Args;
 use super::InputError;
 use binpick::config::{LoadedWorkpiece, ShapeKind, Workpiece};
 use binpick::part::mesh::Mesh;
-use binpick::part::symmetry::MAX_ORDER;
-use binpick::sensor::Symmetry;
 
 /// Arguments of `binpick export-mesh`.
 #[derive(Args)]
@@ -78,24 +76,8 @@ fn mesh_workpiece(w: &Workpiece, stl_name: &str) -> Workpiece {
     m.shape.parts.clear();
     m.shape.mesh_file = Some(stl_name.to_string());
     m.shape.mesh_scale = Some(1.0 / STL_UNITS_PER_M);
-    m.shape.symmetry_orders = declared_symmetry_orders(w);
+    m.shape.symmetry_orders = w.declared_symmetry_orders();
     m
-}
-
-/// The symmetry a compound workpiece declares (its `grasp.yaw_symmetry_deg` turns about z, or
-/// any turn about z when its body has a cylinder along z: the rule recognition applies to the
-/// primitives, [`Symmetry::of`]) as the mesh workpiece's `shape.symmetry_orders` override, so
-/// the meshed part is recognised with the same symmetry as its primitives. `None` for a box,
-/// whose symmetry the part model detects from the mesh as the box's own (the same turns).
-fn declared_symmetry_orders(w: &Workpiece) -> Option<[u32; 3]> {
-    if w.shape.kind != ShapeKind::Compound {
-        return None;
-    }
-    match Symmetry::of(w) {
-        Symmetry::AboutZ => Some([1, 1, MAX_ORDER]),
-        // The turns about z by the yaw step: their count is the order about z.
-        Symmetry::Finite(turns) => Some([1, 1, (turns.len() as u32).clamp(1, MAX_ORDER)]),
-    }
 }
 
 /// The mesh as binary STL in millimetres, each facet's normal from its winding.

@@ -420,8 +420,7 @@ impl Workpiece {
             face_margin_m: self.grasp.face_margin_m,
         };
         let symmetry = self
-            .shape
-            .symmetry_orders
+            .declared_symmetry_orders()
             .map(|orders| crate::part::symmetry::Symmetry { orders });
         crate::part::PartModel::derive(
             mesh.clone(),

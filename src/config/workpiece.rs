@@ -235,6 +235,31 @@ impl Workpiece {
             .then(|| crate::part::tessellate::pieces_mesh(self.pieces().iter().map(|(_, p)| p)))
     }
 
+    /// The rotational symmetry a workpiece declares, as orders about its x, y, z axes: the
+    /// file's `shape.symmetry_orders`; else, for a compound, the turns about z its
+    /// `grasp.yaw_symmetry_deg` steps through, or any turn about z when its body has a cylinder
+    /// along z (its leads and bases break the symmetry the mesh would show only where the file
+    /// says they matter). `None`: detected from the mesh (a box's own turns, a CAD part's).
+    pub fn declared_symmetry_orders(&self) -> Option<[u32; 3]> {
+        use crate::part::symmetry::MAX_ORDER;
+        if self.shape.symmetry_orders.is_some() || self.shape.kind != ShapeKind::Compound {
+            return self.shape.symmetry_orders;
+        }
+        let round = self
+            .pieces()
+            .iter()
+            .any(|(role, p)| *role == PartRole::Body && matches!(p, Piece::Cylinder { axis: Axis::Z, .. }));
+        let step_deg = self.grasp.yaw_symmetry_deg;
+        let about_z = if round {
+            MAX_ORDER
+        } else if step_deg > 0.0 {
+            ((360.0 / step_deg).round().max(1.0) as u32).min(MAX_ORDER)
+        } else {
+            1
+        };
+        Some([1, 1, about_z])
+    }
+
     /// The shape's primitives with their roles: a box workpiece is one body box, a compound its
     /// parts, a mesh none (its geometry lives in the mesh file). For validated workpieces.
     pub fn pieces(&self) -> Vec<(PartRole, Piece)> {

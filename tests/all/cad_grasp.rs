@@ -116,12 +116,16 @@ fn the_peel_model_reads_the_true_centre_of_mass() {
             .norm()
             < 1e-9
     );
-    // Built-in primitives keep the part frame's origin (their results are unchanged).
+    // A built-in part reads its meshed primitives' centre of mass too. Independent: the relay's
+    // 20 x 30 x 7 mm body centred 1.5 mm up, and five 3 mm pins centred 3.5 mm down (16-sided
+    // prisms of radius 0.5 mm: area 8 r^2 sin 22.5 deg), four at the corners, one at y = -4 mm.
     let a = LoadedWorkpiece::resolve("A").unwrap();
-    assert_eq!(
-        GraspSelector::for_workpiece(&scene.scene, &robot, &a).peel_com_m(),
-        nalgebra::Vector3::zeros()
-    );
+    let (body, pin) = (20.0 * 30.0 * 7.0, 8.0 * 0.25 * 22.5f64.to_radians().sin() * 3.0);
+    let total = body + 5.0 * pin;
+    let want = nalgebra::Vector3::new(0.0, pin * -4.0 / total, (body * 1.5 + 5.0 * pin * -3.5) / total) * 1e-3;
+    let com = GraspSelector::for_workpiece(&scene.scene, &robot, &a).peel_com_m();
+    assert!((com - want).norm() < 1e-8, "{com:?} vs {want:?}");
+    assert!(com.norm() > 1e-3, "the bounding box's centre would be 1.49 mm off");
 }
 
 /// A mesh part's place slots come from its footprint in its place orientation, a stable pose:
@@ -162,9 +166,17 @@ fn place_slots_fit_the_footprint_of_a_stable_pose() {
     // Negative control: the bounding box's footprint is 4 mm short of the lying part's length.
     let bbox = [hex.workpiece.size_m[0], hex.workpiece.size_m[1]];
     assert!(bbox[0].max(bbox[1]) < 0.02 - 0.003, "{bbox:?}");
-    // Built-in primitives keep their box's footprint and the old placement.
+    // A built-in part is placed in its meshed primitives' stable poses too: the relay grasped
+    // on its top stands on its pins, its centre 5 mm up (the pins reach 5 mm below it), where
+    // its box's placement put it 5 mm up on a floor its pins would go through.
     let a = LoadedWorkpiece::resolve("A").unwrap();
     let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &a);
-    assert_eq!(sel.place_footprint_m(), [a.workpiece.size_m[0], a.workpiece.size_m[1]]);
-    assert!(sel.place_pose(0).is_none());
+    let top = sel
+        .faces()
+        .iter()
+        .position(|f| f.normal.z > 1.0 - 1e-9)
+        .expect("the top takes the cup");
+    let p = sel.place_pose(top).expect("standing on its pins is a stable pose");
+    assert!((p.origin_height_m - 0.005).abs() < 1e-9, "{p:?}");
+    assert!((p.slot_from_part * nalgebra::Vector3::z()).z > 1.0 - 1e-9);
 }

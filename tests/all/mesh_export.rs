@@ -250,22 +250,20 @@ fn the_meshed_six_are_seen_and_grasped_like_their_primitives() {
         let [p, m] = recognised_on_the_same_pile(&prim, &meshed, 1);
         eprintln!("{name}: (top layer, found, detected, correct) primitive {p:?}, mesh {m:?}");
         recognised_alike(p, m).unwrap_or_else(|e| panic!("{name}: {e}"));
-        // Cup sites: every face of the primitive wide enough for the cup with the face margin
-        // and twice the pose noise has a face of the mesh's selector along the same normal
-        // whose site is its centre.
-        let g = &scene.scene.gripper;
-        let need =
-            g.cup_diameter_m + 2.0 * (prim.workpiece.grasp.face_margin_m + 2.0 * scene.scene.sensor.pose_noise_m);
-        let ps = binpick::grasp::GraspSelector::new(&scene.scene, &robot, &prim.workpiece);
+        // Cup sites: the primitive's selector and the mesh's read one part model (of the
+        // meshed primitives, and of the exported STL): the same faces along the same normals,
+        // with the same cup sites (within the STL's single-precision millimetres).
+        let ps = binpick::grasp::GraspSelector::for_workpiece(&scene.scene, &robot, &prim);
         let ms = binpick::grasp::GraspSelector::for_workpiece(&scene.scene, &robot, &meshed);
+        assert_eq!(ps.faces().len(), ms.faces().len(), "{name}: faces offered");
+        assert!(!ps.faces().is_empty(), "{name}: no face takes the cup");
         let mesh_sites: Vec<_> = ms.faces().iter().zip(ms.sites_m()).collect();
-        for f in ps.faces().iter().filter(|f| f.extent_m[0].min(f.extent_m[1]) >= need) {
+        for (f, site) in ps.faces().iter().zip(ps.sites_m()) {
             assert!(
                 mesh_sites
                     .iter()
-                    .any(|(mf, s)| (mf.normal - f.normal).norm() < 1e-6 && (s - f.center).norm() < 1e-4),
-                "{name}: no mesh cup site at the face centre {:?} (normal {:?}); mesh sites {:?}",
-                f.center,
+                    .any(|(mf, s)| (mf.normal - f.normal).norm() < 1e-6 && (s - site).norm() < 1e-4),
+                "{name}: no mesh cup site at {site:?} (normal {:?}); mesh sites {:?}",
                 f.normal,
                 ms.sites_m()
             );

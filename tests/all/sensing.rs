@@ -168,7 +168,7 @@ fn cloud_recognition_finds_the_top_layer_and_chosen_grasps_are_reachable_and_cle
             (top, found) = (top + f.top_layer, found + f.top_layer_found);
             (detected, correct) = (detected + f.detected, correct + f.correct);
             let hm = HeightMap::from_capture(&job.capture, w.pick_tray(), 0.002);
-            let selector = GraspSelector::new(&scene.scene, &robot, &wp.workpiece);
+            let selector = GraspSelector::for_workpiece(&scene.scene, &robot, &wp);
             let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
             let plan = selector.select(&detections, &hm, &slot, &w.joints());
             let best = plan
@@ -450,7 +450,7 @@ fn lone_block_grasp(offset_x_m: f64) -> (binpick::pipeline::GraspChoice, bool) {
     let mut job = sensor.trigger(&w).unwrap();
     w.run_for(sensor.latency_s).unwrap();
     let detections = sensor.result(&mut job, w.time_s()).expect("ready");
-    let selector = GraspSelector::new(&scene.scene, &robot, &wp.workpiece);
+    let selector = GraspSelector::for_workpiece(&scene.scene, &robot, &wp);
     let ctx = GraspContext {
         scene: &scene.scene,
         robot: &robot,
