@@ -338,10 +338,13 @@ impl GraspSelector {
             return sel;
         };
         let column = approach_column(scene);
+        // The part's features as the cell may find them: the images under a declared symmetry
+        // that recognition does not tell apart.
+        let features = pm.mesh_under_symmetry();
         for f in pm.grasp_faces() {
             // The clearest cup centre whose approach (cup, then tool body) misses the part's own
             // features above the face.
-            let Some((site, clearance)) = clear_site(&pm.mesh, &f.face, &f.fit.centres, &column) else {
+            let Some((site, clearance)) = clear_site(&features, &f.face, &f.fit.centres, &column) else {
                 sel.blocked_faces += 1;
                 continue;
             };

@@ -135,10 +135,15 @@ pub fn clear_site(
     // only by rounding, and the first of them in grid order sat at the strip's end, far from
     // the centre of mass (C as a mesh: no lift held).
     let key = |c: f64| (c / SITE_TIE_M).round() as i64;
+    // Of centres equally far from the edges and from the centroid (mirror images on a symmetric
+    // face), the one lowest in x, then in y, on the same grid: a part read from a file in single
+    // precision picks the site its primitives pick.
     ranked.sort_by(|a, b| {
         key(b.1)
             .cmp(&key(a.1))
-            .then(a.0.coords.norm_squared().total_cmp(&b.0.coords.norm_squared()))
+            .then(key(a.0.coords.norm()).cmp(&key(b.0.coords.norm())))
+            .then(key(a.0.x).cmp(&key(b.0.x)))
+            .then(key(a.0.y).cmp(&key(b.0.y)))
     });
     let step = ranked.len().div_ceil(MAX_SITES_TRIED).max(1);
     ranked

@@ -82,6 +82,11 @@ pub struct PartModel {
     pub round: Vec<RoundBody>,
 }
 
+/// Turns a declared round symmetry stands for in [`PartModel::mesh_under_symmetry`].
+pub const ROUND_TURNS: u32 = 16;
+/// Most images of the mesh in [`PartModel::mesh_under_symmetry`].
+pub const MAX_SYMMETRY_IMAGES: usize = 64;
+
 impl PartModel {
     /// Derives the model from a closed, outward-wound mesh in the part frame.
     pub fn derive(mesh: Mesh, mass: MassSpec, cup: CupSpec, symmetry: Option<Symmetry>) -> Result<Self, ModelError> {
@@ -155,6 +160,55 @@ impl PartModel {
             })
             .map(|p| p.likelihood)
             .fold(0.0, |a, b| a + b)
+    }
+
+    /// The mesh as the cell may find the part: where the symmetry is the file's (declared, not
+    /// detected), recognition reports a pose only up to turns that do not map the mesh onto
+    /// itself (a relay declared symmetric under a half turn, whose fifth pin is not), so what
+    /// stands above a face is the union of the mesh's images under those turns (about the part
+    /// frame's axes through the centre of mass; a round order as [`ROUND_TURNS`] turns, at most
+    /// [`MAX_SYMMETRY_IMAGES`] images). A detected symmetry maps the mesh onto itself: the mesh.
+    pub fn mesh_under_symmetry(&self) -> std::borrow::Cow<'_, Mesh> {
+        use nalgebra::Rotation3;
+        if self.symmetry_detected || self.symmetry.orders.iter().all(|&n| n <= 1) {
+            return std::borrow::Cow::Borrowed(&self.mesh);
+        }
+        let turns = |axis: Vector3<f64>, order: u32| {
+            let n = if order >= super::symmetry::MAX_ORDER {
+                ROUND_TURNS
+            } else {
+                order.max(1)
+            };
+            (0..n).map(move |k| {
+                Rotation3::from_axis_angle(
+                    &nalgebra::Unit::new_normalize(axis),
+                    k as f64 * std::f64::consts::TAU / n as f64,
+                )
+            })
+        };
+        let [ox, oy, oz] = self.symmetry.orders;
+        let mut images = Vec::new();
+        for rx in turns(Vector3::x(), ox) {
+            for ry in turns(Vector3::y(), oy) {
+                for rz in turns(Vector3::z(), oz) {
+                    images.push(rx * ry * rz);
+                }
+            }
+        }
+        images.truncate(MAX_SYMMETRY_IMAGES);
+        let com = self.mass.com_m;
+        let mut out = Mesh {
+            vertices_m: Vec::with_capacity(self.mesh.vertices_m.len() * images.len()),
+            triangles: Vec::with_capacity(self.mesh.triangles.len() * images.len()),
+        };
+        for r in &images {
+            let off = out.vertices_m.len() as u32;
+            out.vertices_m
+                .extend(self.mesh.vertices_m.iter().map(|p| com + r * (p - com)));
+            out.triangles
+                .extend(self.mesh.triangles.iter().map(|t| t.map(|i| i + off)));
+        }
+        std::borrow::Cow::Owned(out)
     }
 
     /// The centre of mass (m).
@@ -286,6 +340,30 @@ pub struct RoundBody {
 mod tests {
     use super::*;
     use crate::part::mass::tests::box_mesh;
+
+    #[test]
+    fn a_declared_symmetry_adds_the_turned_images_and_a_detected_one_does_not() {
+        let m = box_mesh([0.0, 0.0, 0.0], [0.02, 0.01, 0.004]);
+        let cup = CupSpec {
+            diameter_m: 0.006,
+            face_margin_m: 0.0005,
+        };
+        let detected = PartModel::derive(m.clone(), MassSpec::MassKg(0.002), cup, None).unwrap();
+        assert!(matches!(detected.mesh_under_symmetry(), std::borrow::Cow::Borrowed(_)));
+        // Declared: a quarter turn about z, which the 20 x 10 box does not have. Its images stand
+        // out 5 mm beyond the box along y, as a turned box would (independent: half of 20 mm
+        // across the 10 mm side about the centre of mass).
+        let declared =
+            PartModel::derive(m, MassSpec::MassKg(0.002), cup, Some(Symmetry { orders: [1, 1, 4] })).unwrap();
+        let images = declared.mesh_under_symmetry();
+        assert_eq!(images.triangles.len(), 4 * declared.mesh.triangles.len());
+        let (lo, hi) = images.bounds_m().unwrap();
+        let c = declared.com_m();
+        assert!(
+            (hi.y - c.y - 0.01).abs() < 1e-12 && (c.y - lo.y - 0.01).abs() < 1e-12,
+            "{lo:?} {hi:?}"
+        );
+    }
 
     #[test]
     fn a_plate_model_has_its_faces_poses_and_symmetry() {

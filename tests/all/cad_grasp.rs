@@ -180,3 +180,45 @@ fn place_slots_fit_the_footprint_of_a_stable_pose() {
     assert!((p.origin_height_m - 0.005).abs() < 1e-9, "{p:?}");
     assert!((p.slot_from_part * nalgebra::Vector3::z()).z > 1.0 - 1e-9);
 }
+
+/// A part declared symmetric where its mesh is not (the relay A: a half turn about z, which its
+/// fifth pin at y = -4 mm breaks) is recognised only up to that turn, so a cup site on its pinned
+/// face must clear the pins of both poses: the pins at (0, -4) and, turned, (0, +4) mm.
+/// Independent: the site's distance in the face's plane from both pins' axes, against the cup's
+/// radius plus the pin's. Negative control: sites chosen on the mesh alone (the part as it is,
+/// not as the cell may find it) put the cup on the turned pin (the half turn of A seed 8, pick 8,
+/// which pressed a relay 2.5 mm into the tray floor).
+#[test]
+fn a_cup_site_clears_the_features_of_every_pose_recognition_cannot_tell_apart() {
+    use binpick::part::approach::{ColumnPiece, clear_site};
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let a = LoadedWorkpiece::resolve("A").unwrap();
+    let cup_m = scene.scene.gripper.cup_diameter_m;
+    let (cup_r, pin_r) = (cup_m / 2.0, 0.0005);
+    let pins = [nalgebra::Vector2::new(0.0, -0.004), nalgebra::Vector2::new(0.0, 0.004)];
+    let clear = |site: &nalgebra::Vector3<f64>| pins.iter().all(|p| (site.xy() - p).norm() >= cup_r + pin_r);
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &a);
+    let pinned = sel
+        .faces()
+        .iter()
+        .position(|f| f.normal.z < -1.0 + 1e-9)
+        .expect("the pinned face is offered");
+    let site = sel.sites_m()[pinned];
+    assert!(clear(&site), "the cup on the pinned face at {site:?} meets a pin");
+    // Negative control: the same search on the mesh alone.
+    let w = &a.workpiece;
+    let pm = w.part_model(&w.primitive_mesh().unwrap(), cup_m).unwrap();
+    let face = pm.grasp_faces().find(|f| f.face.normal.z < -1.0 + 1e-9).unwrap();
+    let column = [ColumnPiece {
+        radius_m: cup_r,
+        from_m: 0.0,
+        to_m: 0.008,
+    }];
+    let (alone, _) = clear_site(&pm.mesh, &face.face, &face.fit.centres, &column).unwrap();
+    let alone = face.face.to_part(&alone).coords;
+    assert!(
+        !clear(&alone),
+        "without the turned images the site {alone:?} would clear both pins"
+    );
+}
