@@ -63,10 +63,9 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 let wp = LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
-                    // A mesh part: its model derives, and a warning when no face takes the cup.
-                    if let Some(m) = super::part::model_of(&wp, &s.scene.with_tool_of(&wp.workpiece))?
-                        && let Some(why) = super::part::no_cup_face(&m)
-                    {
+                    // Its part model derives, and a warning when no face takes the cup.
+                    let m = super::part::model_of(&wp, &s.scene.with_tool_of(&wp.workpiece))?;
+                    if let Some(why) = super::part::no_cup_face(&m) {
                         eprintln!("warning: {label}: {why}");
                     }
                 }

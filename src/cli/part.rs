@@ -12,19 +12,17 @@ use clap::Args;
 use serde_json::json;
 
 use binpick::config::{ConfigError, LoadedScene, LoadedWorkpiece, Scene};
-use binpick::part::mass::MassSpec;
+use binpick::part::PartModel;
 use binpick::part::model::ModelFace;
 use binpick::part::poses::RestingPose;
 use binpick::part::repair::RepairReport;
-use binpick::part::symmetry::Symmetry;
-use binpick::part::{CupSpec, PartModel};
 
 use super::{InputError, round};
 
 /// Arguments of `binpick part`.
 #[derive(Args)]
 pub struct PartArgs {
-    /// The workpiece file (.toml with shape.kind = "mesh").
+    /// The workpiece: A ... F (embedded) or a workpiece file (a mesh or primitives).
     pub workpiece: String,
     /// Scene whose gripper the faces are fitted for (default: the embedded default cell).
     #[arg(long)]
@@ -116,26 +114,43 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
     Ok(out)
 }
 
-/// The part model of a loaded mesh workpiece for the scene's cup; `None` for primitives.
-pub fn model_of(wp: &LoadedWorkpiece, scene: &Scene) -> Result<Option<PartModel>, ConfigError> {
-    let Some(mesh) = &wp.mesh else {
-        return Ok(None);
-    };
+/// The part model of a loaded workpiece for the scene's cup: of its mesh file, or of its
+/// primitives meshed ([`binpick::config::Workpiece::part_model`], the derivation every stage
+/// reads).
+pub fn model_of(wp: &LoadedWorkpiece, scene: &Scene) -> Result<PartModel, ConfigError> {
     let w = &wp.workpiece;
-    let cup = CupSpec {
-        diameter_m: scene.gripper.cup_diameter_m,
-        face_margin_m: w.grasp.face_margin_m,
-    };
-    let symmetry = w.shape.symmetry_orders.map(|orders| Symmetry { orders });
-    PartModel::derive(mesh.0.clone(), MassSpec::MassKg(w.mass_kg), cup, symmetry)
-        .map(Some)
-        .map_err(|e| {
-            ConfigError::one(
+    let primitive = w.primitive_mesh();
+    let (mesh, key) = match (&wp.mesh, &primitive) {
+        (Some(m), _) => (&m.0, "shape.mesh_file"),
+        (None, Some(m)) => (m, "shape"),
+        (None, None) => {
+            return Err(ConfigError::one(
                 &wp.label,
-                "shape.mesh_file",
-                format!("{}: {e}", w.shape.mesh_file.clone().unwrap_or_default()),
-            )
-        })
+                "shape",
+                "no mesh to derive a part model from".to_string(),
+            ));
+        }
+    };
+    w.part_model(mesh, scene.gripper.cup_diameter_m).map_err(|e| {
+        ConfigError::one(
+            &wp.label,
+            key,
+            format!(
+                "{}: {e}",
+                w.shape.mesh_file.clone().unwrap_or_else(|| "primitives".into())
+            ),
+        )
+    })
+}
+
+/// Where a workpiece's surface comes from, as the text and the picture name it: its mesh file,
+/// or its primitives.
+fn surface_of(wp: &LoadedWorkpiece) -> String {
+    wp.workpiece
+        .shape
+        .mesh_file
+        .clone()
+        .unwrap_or_else(|| "primitives, meshed".into())
 }
 
 /// Why no face takes the cup, or `None` when one does.
@@ -176,13 +191,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
     wp.workpiece.check_fits_scene(&wp.label, &scene.scene)?;
     // The workpiece's own cup, if it brings one.
     let scene = scene.for_workpiece(&wp);
-    let Some(m) = model_of(&wp, &scene.scene)? else {
-        return Err(InputError(format!(
-            "{}: binpick part reads mesh workpieces (shape.kind = \"mesh\"); this one is built from primitives",
-            wp.label
-        ))
-        .into());
-    };
+    let m = model_of(&wp, &scene.scene)?;
     let report = &wp.mesh.as_ref().map(|m| m.1.clone()).unwrap_or_default();
     let w = &wp.workpiece;
     let tilt = scene.scene.gripper.max_tilt_deg.to_radians();
@@ -190,12 +199,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
         .svg
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}.part.svg", w.name)));
-    let title = format!(
-        "{} ({}): {}",
-        w.name,
-        w.shape.mesh_file.clone().unwrap_or_default(),
-        w.kind
-    );
+    let title = format!("{} ({}): {}", w.name, surface_of(&wp), w.kind);
     write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title))?;
     let piles = pile_share(&scene, &wp, &m, a.piles, tilt)?;
     if a.json {
@@ -306,27 +310,38 @@ fn pose_json(p: &RestingPose) -> serde_json::Value {
 /// The text head: the mesh, what its repair did, size and mass, symmetry.
 fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
     let w = &wp.workpiece;
-    println!(
-        "part {:?} ({}): mesh {}, {} triangles in {} {}",
-        w.name,
-        wp.label,
-        w.shape.mesh_file.clone().unwrap_or_default(),
-        m.mesh.triangles.len(),
-        report.bodies,
-        if report.bodies == 1 { "body" } else { "bodies" }
-    );
-    println!(
-        "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
-        report.welded_vertices,
-        report.zero_area_triangles,
-        report.duplicate_triangles,
-        report.inner_wall_pairs,
-        report.flipped_triangles,
-        report.flipped_bodies,
-        report.holes_closed,
-        report.holes_area_m2 * 1e6,
-        report.non_manifold_edges
-    );
+    if wp.mesh.is_none() {
+        println!(
+            "part {:?} ({}): {} primitives, meshed: {} triangles",
+            w.name,
+            wp.label,
+            w.pieces().len(),
+            m.mesh.triangles.len()
+        );
+        println!("repair: none (primitives are meshed closed)");
+    } else {
+        println!(
+            "part {:?} ({}): mesh {}, {} triangles in {} {}",
+            w.name,
+            wp.label,
+            surface_of(wp),
+            m.mesh.triangles.len(),
+            report.bodies,
+            if report.bodies == 1 { "body" } else { "bodies" }
+        );
+        println!(
+            "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
+            report.welded_vertices,
+            report.zero_area_triangles,
+            report.duplicate_triangles,
+            report.inner_wall_pairs,
+            report.flipped_triangles,
+            report.flipped_bodies,
+            report.holes_closed,
+            report.holes_area_m2 * 1e6,
+            report.non_manifold_edges
+        );
+    }
     let c = m.mass.com_m;
     println!(
         "size {:.2} x {:.2} x {:.2} mm, volume {:.1} mm^3, mass {:.3} g ({:.0} kg/m^3), centre of mass [{:.3} {:.3} {:.3}] mm",

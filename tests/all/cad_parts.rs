@@ -12,7 +12,7 @@ use std::time::{Duration, Instant};
 
 use rand::RngExt;
 
-use crate::support::{Workspace, binpick_in, stderr, stdout, tempdir};
+use crate::support::{Workspace, binpick, binpick_in, stderr, stdout, tempdir};
 
 /// Seed of the truncation points.
 const CUT_SEED: u64 = 29;
@@ -476,4 +476,26 @@ fn a_mesh_near_the_cap_is_modelled_within_the_bound() {
         .filter(|f| f["cup_fit"]["takes_cup"] == true)
         .count();
     assert_eq!(ends, 2);
+}
+
+/// `binpick part` reads a built-in part too: its primitives meshed are the part model every
+/// stage reads. B, a 30 x 30 x 20 mm block with its own 16 mm cup: six faces (two of 900 mm^2,
+/// four of 600), every one wide enough for the 17 mm disc (cup and both margins); 18,000 mm^3;
+/// the box's own turns (half turns about x and y, quarter turns about z), detected. Independent:
+/// the box's arithmetic.
+#[test]
+fn the_part_command_reads_a_built_in_part_through_its_meshed_primitives() {
+    let o = binpick(&["part", "B", "--json", "--piles", "0", "--svg", "/dev/null"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let faces = j["faces"].as_array().unwrap();
+    let mut areas: Vec<f64> = faces.iter().map(|f| f["area_mm2"].as_f64().unwrap()).collect();
+    areas.sort_by(f64::total_cmp);
+    assert_eq!(areas.len(), 6, "{faces:?}");
+    for (a, want) in areas.iter().zip([600.0, 600.0, 600.0, 600.0, 900.0, 900.0]) {
+        assert!((a - want).abs() < 1e-6, "{areas:?}");
+    }
+    assert!(faces.iter().all(|f| f["cup_fit"]["takes_cup"] == true), "{faces:?}");
+    assert!((j["volume_mm3"].as_f64().unwrap() - 18_000.0).abs() < 1e-6);
+    assert_eq!(j["symmetry_orders"], serde_json::json!([2, 2, 4]));
 }
