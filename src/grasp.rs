@@ -284,6 +284,15 @@ fn approach_column(scene: &Scene) -> [ColumnPiece; 2] {
     ]
 }
 
+/// The tool's rotation (world) with its x axis along `x` and its z axis along `z_tool`, both unit
+/// and orthogonal: the basis itself. (nalgebra's `from_matrix` iterates toward the nearest
+/// rotation starting from the identity and never ends on a half turn from it, such as a flat
+/// face's tool pointing straight down with x along -x: a run hung there.)
+fn tool_rotation(x: &Vector3<f64>, z_tool: &Vector3<f64>) -> UnitQuaternion<f64> {
+    let y = z_tool.cross(x);
+    UnitQuaternion::from_rotation_matrix(&nalgebra::Rotation3::from_basis_unchecked(&[*x, y, *z_tool]))
+}
+
 /// Trapezoidal single-joint move time at top speed and acceleration (s).
 fn joint_move_s(d: f64, v: f64, a: f64) -> f64 {
     let d = d.abs();
@@ -677,8 +686,7 @@ impl GraspSelector {
         for k in 0..4 {
             let yaw = k as f64 * std::f64::consts::FRAC_PI_2;
             let x = UnitQuaternion::from_axis_angle(&Unit::new_normalize(z_tool), yaw) * x0;
-            let y = z_tool.cross(&x);
-            let rot = UnitQuaternion::from_matrix(&nalgebra::Matrix3::from_columns(&[x, y, z_tool]));
+            let rot = tool_rotation(&x, &z_tool);
             let grasp = Isometry3::from_parts(Translation3::from(*point), rot);
             let top_z = (self.tray.translation.z + self.rim_height_m + self.approach_above_rim_m).max(clear_z);
             // Straight down onto the face and straight up with the part, whatever the face's tilt:
@@ -789,6 +797,24 @@ mod tests {
         );
         assert!(!d.iter().any(|f| f.disc && f.normal == -Vector3::z()));
         assert!(!d.iter().any(|f| !f.disc && f.normal == Vector3::z()));
+    }
+
+    #[test]
+    fn the_tool_rotation_of_a_half_turn_is_exact() {
+        // Straight down with x along -x: a half turn about y from the identity.
+        let (x, z) = (-Vector3::x(), -Vector3::z());
+        let r = tool_rotation(&x, &z);
+        let want = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::PI);
+        assert!(r.angle_to(&want) < 1e-12, "{r:?}");
+        assert!((r * Vector3::x() - x).norm() < 1e-12 && (r * Vector3::z() - z).norm() < 1e-12);
+        // Negative control: the iteration from the identity, bounded to 1000 steps, does not
+        // reach it (unbounded, as `from_matrix` runs it, it never returned).
+        let m = nalgebra::Matrix3::from_columns(&[x, z.cross(&x), z]);
+        let it = nalgebra::Rotation3::from_matrix_eps(&m, f64::EPSILON, 1000, nalgebra::Rotation3::identity());
+        assert!(
+            UnitQuaternion::from_rotation_matrix(&it).angle_to(&want) > 1.0,
+            "{it:?}"
+        );
     }
 
     #[test]
