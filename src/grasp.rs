@@ -20,7 +20,7 @@ use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
 use crate::config::Scene;
-use crate::part::approach::{ColumnPiece, clear_site};
+use crate::part::approach::ColumnPiece;
 use crate::part::primitive::Face;
 use crate::robot::{JointVector, RobotModel};
 use crate::sensor::{Detection, HeightMap};
@@ -267,7 +267,7 @@ impl PlacePose {
 /// The hand's solid above a cup site, as the approach sweeps it down the face normal: the cup
 /// from the lip up its length, then the tool body, each widened by two standard deviations of
 /// the recognised pose's noise (the site lands that far off).
-fn approach_column(scene: &Scene) -> [ColumnPiece; 2] {
+pub fn approach_column(scene: &Scene) -> [ColumnPiece; 2] {
     let hand = crate::geometry::HandGeometry::new(&scene.gripper);
     let slack = 2.0 * scene.sensor.pose_noise_m;
     [
@@ -346,19 +346,17 @@ impl GraspSelector {
         let Ok(pm) = w.part_model(mesh, g.cup_diameter_m) else {
             return sel;
         };
-        let column = approach_column(scene);
-        // The part's features as the cell may find them: the images under a declared symmetry
-        // that recognition does not tell apart.
-        let features = pm.mesh_under_symmetry();
-        for f in pm.grasp_faces() {
-            // The clearest cup centre whose approach (cup, then tool body) misses the part's own
-            // features above the face.
-            let Some((site, clearance)) = clear_site(&features, &f.face, &f.fit.centres, &column) else {
+        let sites = pm.cup_sites(&approach_column(scene));
+        for (f, site) in pm.faces.iter().zip(sites) {
+            if !f.fit.takes_cup() {
+                continue;
+            }
+            let Some((site, clearance)) = site else {
                 sel.blocked_faces += 1;
                 continue;
             };
             sel.faces.push(crate::sensor::cloud::face_of_planar(&f.face));
-            sel.sites.push((f.face.to_part(&site).coords, clearance));
+            sel.sites.push((site.coords, clearance));
             sel.place
                 .push(PlacePose::of_face(&pm, &f.face.normal, sel.max_tilt_rad));
         }

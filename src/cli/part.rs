@@ -200,13 +200,15 @@ pub fn part(a: &PartArgs) -> Result<()> {
         .clone()
         .unwrap_or_else(|| PathBuf::from(format!("{}.part.svg", w.name)));
     let title = format!("{} ({}): {}", w.name, surface_of(&wp), w.kind);
-    write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title))?;
+    // Where the grasp selector puts the cup on each face (the one derivation it reads).
+    let sites = m.cup_sites(&binpick::grasp::approach_column(&scene.scene));
+    write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title, &sites))?;
     let piles = pile_share(&scene, &wp, &m, a.piles, tilt)?;
     if a.json {
-        print_json(&wp, &m, report, tilt, &svg_path, &piles)
+        print_json(&wp, &m, &sites, report, tilt, &svg_path, &piles)
     } else {
         print_summary(&wp, &m, report);
-        print_faces(&m);
+        print_faces(&m, &sites);
         print_poses(&m, tilt);
         if piles.piles > 0 {
             println!(
@@ -236,6 +238,7 @@ fn mm(v: f64) -> f64 {
 fn print_json(
     wp: &LoadedWorkpiece,
     m: &PartModel,
+    sites: &binpick::part::svg::CupSites,
     report: &RepairReport,
     tilt: f64,
     svg_path: &Path,
@@ -257,7 +260,7 @@ fn print_json(
         "symmetry_detected": m.symmetry_detected,
         "cup_diameter_mm": mm(m.cup.diameter_m),
         "face_margin_mm": mm(m.cup.face_margin_m),
-        "faces": m.faces.iter().map(face_json).collect::<Vec<_>>(),
+        "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(f, site)).collect::<Vec<_>>(),
         "poses": m.poses.iter().map(pose_json).collect::<Vec<_>>(),
         "graspable_share": round(m.graspable_share(tilt), 6),
         "pile": {
@@ -274,7 +277,7 @@ fn print_json(
 }
 
 /// One planar face with its cup fit, in the JSON output.
-fn face_json(f: &ModelFace) -> serde_json::Value {
+fn face_json(f: &ModelFace, site: &Option<(nalgebra::Point3<f64>, f64)>) -> serde_json::Value {
     json!({
         "normal": f.face.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
         "centroid_mm": f.face.centroid_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
@@ -292,6 +295,9 @@ fn face_json(f: &ModelFace) -> serde_json::Value {
                 [mm(p.x), mm(p.y), mm(p.z)]
             }),
             "best_clearance_mm": mm(f.fit.best_clearance_m),
+            // Where the grasp selector puts the cup: the clearest centre whose approach misses
+            // the part's features in every pose recognition cannot tell apart.
+            "cup_site_mm": site.map(|(p, _)| [mm(p.x), mm(p.y), mm(p.z)]),
         },
     })
 }
@@ -376,22 +382,23 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
 }
 
 /// The text table of the planar faces that matter to a cup (`--json` lists every face).
-fn print_faces(m: &PartModel) {
+fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
     println!(
         "\nplanar faces, for the {:.1} mm cup with a {:.1} mm margin (largest first):",
         m.cup.diameter_m * 1e3,
         m.cup.face_margin_m * 1e3
     );
-    println!("   #  normal                  area mm^2   extent mm      holes  cup fits  fit area mm^2  best centre mm");
+    println!("   #  normal                  area mm^2   extent mm      holes  cup fits  fit area mm^2  cup site mm");
     let largest = m.faces.first().map_or(0.0, |f| f.face.area_m2);
     let shown = |f: &ModelFace| f.fit.takes_cup() || f.face.area_m2 >= 0.05 * largest;
-    for (i, f) in m.faces.iter().enumerate().filter(|(_, f)| shown(f)) {
+    for (i, (f, site)) in m.faces.iter().zip(sites).enumerate().filter(|(_, (f, _))| shown(f)) {
         let n = f.face.normal;
         let e = f.face.extent_m();
-        let best = f.fit.best.map_or("-".to_string(), |b| {
-            let p = f.face.to_part(&b);
-            format!("[{:.2} {:.2} {:.2}]", p.x * 1e3, p.y * 1e3, p.z * 1e3)
-        });
+        let best = match site {
+            Some((p, _)) => format!("[{:.2} {:.2} {:.2}]", p.x * 1e3, p.y * 1e3, p.z * 1e3),
+            None if f.fit.takes_cup() => "blocked (the part's own features)".to_string(),
+            None => "-".to_string(),
+        };
         println!(
             "  {:>2}  [{:6.3} {:6.3} {:6.3}]  {:10.2}  {:5.2} x {:5.2}  {:5}  {:8}  {:13.2}  {best}",
             i + 1,

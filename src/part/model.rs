@@ -211,6 +211,26 @@ impl PartModel {
         std::borrow::Cow::Owned(out)
     }
 
+    /// Per face (in [`PartModel::faces`] order), where the cup goes: the clearest centre of its
+    /// cup-fit region whose approach (`column`: cup, then tool body) misses the part's features
+    /// above the face in every pose recognition cannot tell apart
+    /// ([`PartModel::mesh_under_symmetry`]), as a part-frame point with its distance to the
+    /// face's nearest edge (m); `None` where the face does not take the cup or every site's
+    /// approach meets the part. The grasp selector and `binpick part` read this one answer.
+    pub fn cup_sites(&self, column: &[super::approach::ColumnPiece]) -> Vec<Option<(Point3<f64>, f64)>> {
+        let features = self.mesh_under_symmetry();
+        self.faces
+            .iter()
+            .map(|f| {
+                if !f.fit.takes_cup() {
+                    return None;
+                }
+                super::approach::clear_site(&features, &f.face, &f.fit.centres, column)
+                    .map(|(site, clearance)| (f.face.to_part(&site), clearance))
+            })
+            .collect()
+    }
+
     /// The centre of mass (m).
     pub fn com_m(&self) -> Point3<f64> {
         self.mass.com_m

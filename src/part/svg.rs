@@ -1,6 +1,6 @@
 //! A picture of a part model as SVG: three orthographic views (top, front, side) of its mesh,
 //! shaded, with the faces the cell's cup seals on in green, their cup-fit regions dotted and the
-//! cup drawn at each face's best centre.
+//! cup drawn at each face's site ([`PartModel::cup_sites`]: the grasp selector's).
 //!
 //! Units: m in, pixels out (one scale for the three views). Frames: top looks down the part's
 //! -z (x right, y up), front looks along +y (x right, z up), side looks along -x (y right, z up).
@@ -50,8 +50,12 @@ fn views() -> [View; 3] {
     ]
 }
 
-/// The SVG text of the picture, titled `title`.
-pub fn picture(model: &PartModel, title: &str) -> String {
+/// The cup's site on each face of a part model, in [`PartModel::faces`] order, as
+/// [`PartModel::cup_sites`] gives them (part frame, with the distance to the nearest edge).
+pub type CupSites = [Option<(Point3<f64>, f64)>];
+
+/// The SVG text of the picture, titled `title`, with the cup drawn at each face's `sites` entry.
+pub fn picture(model: &PartModel, title: &str, sites: &CupSites) -> String {
     let largest = model.size_m.iter().cloned().fold(1e-9, f64::max);
     let scale = (VIEW_PX - 2.0 * PAD_PX) / largest;
     let width = 3.0 * VIEW_PX + 2.0 * PAD_PX;
@@ -69,7 +73,7 @@ pub fn picture(model: &PartModel, title: &str) -> String {
         escape(title)
     );
     for (vi, view) in views().iter().enumerate() {
-        draw_view(&mut s, model, view, vi, scale, &grasp_of);
+        draw_view(&mut s, model, view, vi, scale, &grasp_of, sites);
     }
     draw_legend(&mut s, model, scale);
     s.push_str("</svg>\n");
@@ -91,7 +95,15 @@ fn grasp_face_of_triangles(model: &PartModel) -> Vec<Option<usize>> {
 
 /// View number `vi`: its frame and caption, the shaded mesh, the cup fits facing the viewer and
 /// the centre of mass.
-fn draw_view(s: &mut String, model: &PartModel, view: &View, vi: usize, scale: f64, grasp_of: &[Option<usize>]) {
+fn draw_view(
+    s: &mut String,
+    model: &PartModel,
+    view: &View,
+    vi: usize,
+    scale: f64,
+    grasp_of: &[Option<usize>],
+    sites: &CupSites,
+) {
     let ox = PAD_PX + vi as f64 * VIEW_PX + VIEW_PX / 2.0;
     let oy = 40.0 + VIEW_PX / 2.0;
     let px = |p: &Point3<f64>| (ox + scale * p.coords.dot(&view.h), oy - scale * p.coords.dot(&view.v));
@@ -109,7 +121,7 @@ fn draw_view(s: &mut String, model: &PartModel, view: &View, vi: usize, scale: f
         view.name
     );
     draw_triangles(s, model, view, &px, grasp_of);
-    draw_cup_fits(s, model, view, &px, scale);
+    draw_cup_fits(s, model, view, &px, scale, sites);
     // The centre of mass.
     let (x, y) = px(&model.mass.com_m);
     let _ = writeln!(
@@ -159,9 +171,16 @@ fn draw_triangles(
     }
 }
 
-/// Cup-fit regions (dotted) and the cup at the best centre, on the cup faces looking at the viewer.
-fn draw_cup_fits(s: &mut String, model: &PartModel, view: &View, px: &impl Fn(&Point3<f64>) -> (f64, f64), scale: f64) {
-    for f in model.faces.iter().filter(|f| f.fit.takes_cup()) {
+/// Cup-fit regions (dotted) and the cup at its site, on the cup faces looking at the viewer.
+fn draw_cup_fits(
+    s: &mut String,
+    model: &PartModel,
+    view: &View,
+    px: &impl Fn(&Point3<f64>) -> (f64, f64),
+    scale: f64,
+    sites: &CupSites,
+) {
+    for (f, site) in model.faces.iter().zip(sites).filter(|(f, _)| f.fit.takes_cup()) {
         if f.face.normal.dot(&view.toward) < 0.99 {
             continue;
         }
@@ -170,8 +189,8 @@ fn draw_cup_fits(s: &mut String, model: &PartModel, view: &View, px: &impl Fn(&P
             let (x, y) = px(&f.face.to_part(c));
             let _ = writeln!(s, "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"0.9\" fill=\"#0a5\"/>");
         }
-        if let Some(b) = f.fit.best {
-            let (x, y) = px(&f.face.to_part(&b));
+        if let Some((site, _)) = site {
+            let (x, y) = px(site);
             let _ = writeln!(
                 s,
                 "<circle cx=\"{x:.2}\" cy=\"{y:.2}\" r=\"{:.2}\" fill=\"none\" stroke=\"#c30\" stroke-width=\"1.5\" stroke-dasharray=\"4 2\"/>",
@@ -186,7 +205,7 @@ fn draw_legend(s: &mut String, model: &PartModel, scale: f64) {
     let legend_y = 40.0 + VIEW_PX + 40.0;
     let _ = writeln!(
         s,
-        "<text x=\"{PAD_PX}\" y=\"{legend_y:.0}\">green: faces the {:.1} mm cup seals on (margin {:.1} mm); dots: admissible cup centres; dashed: the cup at the best centre; red cross: centre of mass. Scale: {:.0} px per mm.</text>",
+        "<text x=\"{PAD_PX}\" y=\"{legend_y:.0}\">green: faces the {:.1} mm cup seals on (margin {:.1} mm); dots: admissible cup centres; dashed: the cup at its site; red cross: centre of mass. Scale: {:.0} px per mm.</text>",
         model.cup.diameter_m * 1e3,
         model.cup.face_margin_m * 1e3,
         scale / 1e3

@@ -481,8 +481,8 @@ fn a_mesh_near_the_cap_is_modelled_within_the_bound() {
 /// `binpick part` reads a built-in part too: its primitives meshed are the part model every
 /// stage reads. B, a 30 x 30 x 20 mm block with its own 16 mm cup: six faces (two of 900 mm^2,
 /// four of 600), every one wide enough for the 17 mm disc (cup and both margins); 18,000 mm^3;
-/// the box's own turns (half turns about x and y, quarter turns about z), detected. Independent:
-/// the box's arithmetic.
+/// the box's own turns (half turns about x and y, quarter turns about z), detected; the cup's
+/// site at each face's centre. Independent: the box's arithmetic.
 #[test]
 fn the_part_command_reads_a_built_in_part_through_its_meshed_primitives() {
     let o = binpick(&["part", "B", "--json", "--piles", "0", "--svg", "/dev/null"]);
@@ -496,6 +496,16 @@ fn the_part_command_reads_a_built_in_part_through_its_meshed_primitives() {
         assert!((a - want).abs() < 1e-6, "{areas:?}");
     }
     assert!(faces.iter().all(|f| f["cup_fit"]["takes_cup"] == true), "{faces:?}");
+    // The cup's site, the grasp selector's: a box face's centre (nothing of the part above it),
+    // to the fit grid's spacing (the grid need not hold the exact centre).
+    for f in faces {
+        let (site, centre) = (&f["cup_fit"]["cup_site_mm"], &f["centroid_mm"]);
+        let grid = f["cup_fit"]["grid_spacing_mm"].as_f64().unwrap();
+        for k in 0..3 {
+            let (a, b) = (site[k].as_f64().unwrap(), centre[k].as_f64().unwrap());
+            assert!((a - b).abs() <= grid, "site {site} vs centre {centre} (grid {grid} mm)");
+        }
+    }
     assert!((j["volume_mm3"].as_f64().unwrap() - 18_000.0).abs() < 1e-6);
     assert_eq!(j["symmetry_orders"], serde_json::json!([2, 2, 4]));
 }
