@@ -3,7 +3,7 @@
 
 use nalgebra::{Isometry3, Matrix3, Rotation3, UnitQuaternion, Vector3};
 
-use crate::config::{Axis, PartRole, Piece, ShapeKind, Workpiece};
+use crate::config::{ShapeKind, Workpiece};
 
 /// How a workpiece looks the same, for evaluation: a finite set of rotations of the part frame,
 /// or any turn about the part's z axis.
@@ -17,29 +17,15 @@ pub enum Symmetry {
 
 impl Symmetry {
     /// A box workpiece: the box's own proper rotations (a half turn about every axis, a quarter
-    /// turn about an axis whose two other edges are equal). A compound: turns about z by
-    /// `grasp.yaw_symmetry_deg`; any turn if its body has a cylinder along z (its yaw cannot be
+    /// turn about an axis whose two other edges are equal). A compound: the turns it declares
+    /// ([`Workpiece::declared_symmetry_orders`], the rule its part model reads too): about z by
+    /// `grasp.yaw_symmetry_deg`, any turn if its body has a cylinder along z (its yaw cannot be
     /// seen from above).
     pub fn of(w: &Workpiece) -> Self {
-        let pieces = w.pieces();
-        if w.shape.kind == ShapeKind::Compound {
-            if pieces
-                .iter()
-                .any(|(role, p)| *role == PartRole::Body && matches!(p, Piece::Cylinder { axis: Axis::Z, .. }))
-            {
-                return Symmetry::AboutZ;
-            }
-            let step = w.grasp.yaw_symmetry_deg;
-            let k = if step > 0.0 {
-                (360.0 / step).round().max(1.0) as usize
-            } else {
-                1
-            };
-            return Symmetry::Finite(
-                (0..k)
-                    .map(|i| UnitQuaternion::from_axis_angle(&Vector3::z_axis(), (i as f64 * step).to_radians()))
-                    .collect(),
-            );
+        if w.shape.kind == ShapeKind::Compound
+            && let Some(orders) = w.declared_symmetry_orders()
+        {
+            return Symmetry::of_orders(orders);
         }
         let size = Vector3::from(w.size_m);
         let mut out = Vec::new();
