@@ -219,13 +219,13 @@ impl Run<'_, '_> {
         if at_most + f.dose_parts as usize > self.cell.pile_count {
             return Ok(false);
         }
-        self.dose(f.dose_parts as usize, f.dose_s)?;
+        self.dose(f.dose_parts as usize, f.dose_time_s(f.dose_parts as usize))?;
         Ok(true)
     }
 
     /// Pours `parts` parts from the hopper onto the pile (through the physics, above the pile as
     /// it lies), the arm waiting out of the view until they have settled and at least `dose_s`
-    /// has passed.
+    /// (the dose's time, [`crate::config::FeederConfig::dose_time_s`]) has passed.
     fn dose(&mut self, parts: usize, dose_s: f64) -> Result<(), CycleError> {
         self.forget_pile();
         let t0 = self.st.world.time_s();

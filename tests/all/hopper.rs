@@ -30,6 +30,11 @@ fn bad_feeder_keys_exit_2_naming_file_key_and_value_and_write_nothing() {
         ("dose_below = 12", "dose_below = 2.5", "dose_below"),
         ("dose_below = 12", "dose_below = -3", "dose_below"),
         ("dose_s = 2.0", "dose_s = 2.0\ndose_rate = 3", "dose_rate"),
+        (
+            "dose_rate_parts_per_s = 10.0",
+            "dose_rate_parts_per_s = 0.0",
+            "feeder.dose_rate_parts_per_s must be within [0.1, 1000], got 0",
+        ),
     ] {
         // The first case needs the hopper on to be wrong.
         let on = ws.edit(
@@ -98,6 +103,8 @@ struct Doses {
     last_detected: Option<usize>,
     detected: Vec<usize>,
     before_dose: Vec<Option<usize>>,
+    /// Each dose's span: how long the arm waited for it (s).
+    dose_spans_s: Vec<f64>,
 }
 
 impl Observer for Doses {
@@ -107,9 +114,10 @@ impl Observer for Doses {
             self.detected.push(*detected);
         }
     }
-    fn span(&mut self, stage: Stage, _start_s: f64, _end_s: f64, label: &str) {
+    fn span(&mut self, stage: Stage, start_s: f64, end_s: f64, label: &str) {
         if stage == Stage::Stall && label == "hopper dose" {
             self.before_dose.push(self.last_detected);
+            self.dose_spans_s.push(end_s - start_s);
         }
     }
 }
@@ -138,6 +146,7 @@ fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry
         dose_below,
         dose_parts: 6,
         dose_s: 1.5,
+        dose_rate_parts_per_s: 10.0,
     };
     // B's 16-part pile over 60 picks: without a hopper it runs dry and is exchanged.
     let (without, _) = run("B", 60, FeederConfig::default());
@@ -170,4 +179,36 @@ fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry
     let (full, seen_full) = run("E", 20, hopper(1));
     assert!(seen_full.detected.iter().all(|&n| n >= 1), "{:?}", seen_full.detected);
     assert_eq!((full.doses, seen_full.before_dose.len()), (0, 0));
+}
+
+#[test]
+fn a_large_dose_waits_for_the_hoppers_chute() {
+    // B's 16-part pile topped up 12 parts at a time by a chute of 2 parts/s: 6 s a dose, where
+    // its shortest time is 0.5 s.
+    let slow = FeederConfig {
+        dose_below: 6,
+        dose_parts: 12,
+        dose_s: 0.5,
+        dose_rate_parts_per_s: 2.0,
+    };
+    let (tally, seen) = run("B", 40, slow);
+    assert!(tally.doses >= 1, "doses {}", tally.doses);
+    assert!(
+        seen.dose_spans_s.iter().all(|&s| s >= 6.0 - 1e-6),
+        "{:?}",
+        seen.dose_spans_s
+    );
+    // Negative control: a chute fast enough not to bind; the dose then lasts as long as its
+    // pour takes to settle, less than the slow chute's 6 s.
+    let fast = FeederConfig {
+        dose_rate_parts_per_s: 1000.0,
+        ..slow
+    };
+    let (tally, seen) = run("B", 40, fast);
+    assert!(tally.doses >= 1, "doses {}", tally.doses);
+    assert!(
+        seen.dose_spans_s.iter().all(|&s| s < 6.0 - 1e-3),
+        "{:?}",
+        seen.dose_spans_s
+    );
 }
