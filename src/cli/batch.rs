@@ -78,7 +78,7 @@ pub fn batch(a: &BatchArgs) -> Result<()> {
     dir.write_inputs(&variant.scene, None)?;
     for wp in &variant.workpieces {
         // A workpiece's own cup, written in full.
-        let wp = wp.with_tool_completed(&variant.scene.scene.gripper);
+        let wp = wp.with_set_up_completed(&variant.scene.scene);
         dir.write_workpiece(&wp, &format!("workpiece-{}.toml", wp.workpiece.name))?;
     }
     let how = Finish {

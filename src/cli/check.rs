@@ -64,7 +64,7 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
                     // Its part model derives, and a warning when no face takes the cup.
-                    let m = super::part::model_of(&wp, &s.scene.with_tool_of(&wp.workpiece))?;
+                    let m = super::part::model_of(&wp, &s.scene.set_up_for(&wp.workpiece))?;
                     if let Some(why) = super::part::no_cup_face(&m) {
                         eprintln!("warning: {label}: {why}");
                     }

@@ -99,7 +99,7 @@ pub fn write_variant(dir: &binpick::report::RunDir, sub: &str, v: &binpick::stud
     for wp in &v.workpieces {
         // A mesh goes beside the variant's workpiece file, which names it by its bare name; a
         // cup the workpiece brings is written in full.
-        let mut wp = wp.with_tool_completed(&v.scene.scene.gripper);
+        let mut wp = wp.with_set_up_completed(&v.scene.scene);
         if let (ShapeKind::Mesh, Source::File(p), Some(mesh)) = (
             wp.workpiece.shape.kind,
             &wp.source,

@@ -19,6 +19,11 @@
 //! settled, `dose_s` has passed and the chute has had time to convey the dose at its rate,
 //! whichever is latest.
 //!
+//! A workpiece file may bring its own recipe for the hopper (`[feeder]` in it, [`FeederRecipe`]):
+//! how many parts a dose holds and below what count the cell doses depend on the part (its pile
+//! size, how many of a pile the sensor finds), as a real feeder's recipe is set per product; the
+//! hopper itself (its chute's flow, a dose's shortest time) stays the cell's.
+//!
 //! Units: s, counts.
 
 use serde::{Deserialize, Serialize};
@@ -91,17 +96,58 @@ impl FeederConfig {
             f64::from(MAX_PARTS),
         );
         c.within("feeder.dose_s", self.dose_s, 0.0, 60.0);
-        c.within(
-            "feeder.dose_rate_parts_per_s",
-            self.dose_rate_parts_per_s,
-            0.1,
-            1000.0,
-        );
+        c.within("feeder.dose_rate_parts_per_s", self.dose_rate_parts_per_s, 0.1, 1000.0);
         if self.on() && self.dose_parts == 0 {
             c.fail(
                 "feeder.dose_parts",
                 format!("must be at least 1 while dose_below > 0, got {}", self.dose_parts),
             );
+        }
+    }
+}
+
+/// The hopper's recipe a workpiece brings (`[feeder]` in a workpiece file): each key given
+/// replaces the cell's `feeder.` key of the same name for this workpiece; a key left out keeps
+/// the cell's.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct FeederRecipe {
+    /// Dose when a result shows fewer detections than this (0: no hopper for this part).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dose_below: Option<u32>,
+    /// Parts per dose.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub dose_parts: Option<u32>,
+}
+
+impl FeederRecipe {
+    /// Checks each key given, as the cell file's `feeder.` key of the same name is checked.
+    pub fn check(&self, c: &mut Checker) {
+        if let Some(v) = self.dose_below {
+            c.within("feeder.dose_below", f64::from(v), 0.0, f64::from(MAX_PARTS));
+        }
+        if let Some(v) = self.dose_parts {
+            c.within("feeder.dose_parts", f64::from(v), 0.0, f64::from(MAX_PARTS));
+        }
+    }
+
+    /// This recipe with every key the workpiece left out filled in from the cell's `feeder`.
+    pub fn completed(&self, f: &FeederConfig) -> FeederRecipe {
+        let r = f.with_recipe(self);
+        FeederRecipe {
+            dose_below: Some(r.dose_below),
+            dose_parts: Some(r.dose_parts),
+        }
+    }
+}
+
+impl FeederConfig {
+    /// The hopper with `recipe`'s keys in place of its own.
+    pub fn with_recipe(&self, recipe: &FeederRecipe) -> FeederConfig {
+        FeederConfig {
+            dose_below: recipe.dose_below.unwrap_or(self.dose_below),
+            dose_parts: recipe.dose_parts.unwrap_or(self.dose_parts),
+            ..*self
         }
     }
 }
@@ -126,5 +172,30 @@ mod tests {
             ..f
         };
         assert_eq!(fast.dose_time_s(40), 2.0);
+    }
+
+    #[test]
+    fn a_recipe_replaces_only_the_keys_it_gives() {
+        let cell = FeederConfig {
+            dose_below: 12,
+            dose_parts: 10,
+            dose_s: 2.0,
+            dose_rate_parts_per_s: 10.0,
+        };
+        let r = FeederRecipe {
+            dose_below: None,
+            dose_parts: Some(40),
+        };
+        let f = cell.with_recipe(&r);
+        assert_eq!((f.dose_below, f.dose_parts, f.dose_s), (12, 40, 2.0));
+        assert_eq!(
+            r.completed(&cell),
+            FeederRecipe {
+                dose_below: Some(12),
+                dose_parts: Some(40)
+            }
+        );
+        // Negative control: no recipe, the cell's hopper.
+        assert_eq!(cell.with_recipe(&FeederRecipe::default()), cell);
     }
 }

@@ -29,7 +29,7 @@ pub mod tool;
 pub mod workpiece;
 
 pub use agitation::AgitationConfig;
-pub use feeder::FeederConfig;
+pub use feeder::{FeederConfig, FeederRecipe};
 pub use model_error::ModelErrorConfig;
 pub use scene::*;
 pub use tool::CupConfig;
@@ -379,11 +379,11 @@ impl LoadedScene {
         }
     }
 
-    /// The cell as it runs `wp`: with the cup `wp` brings in place of the cell's
-    /// ([`Scene::with_tool_of`]); the same cell when it brings none.
+    /// The cell as it runs `wp`: with the cup and the hopper recipe `wp` brings in place of the
+    /// cell's ([`Scene::set_up_for`]); the same cell when it brings neither.
     pub fn for_workpiece(&self, wp: &LoadedWorkpiece) -> LoadedScene {
         LoadedScene {
-            scene: self.scene.with_tool_of(&wp.workpiece),
+            scene: self.scene.set_up_for(&wp.workpiece),
             ..self.clone()
         }
     }

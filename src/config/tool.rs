@@ -1,9 +1,10 @@
-//! The tool per workpiece: the suction cup a workpiece file may bring, overriding the cell's for
-//! that workpiece only.
+//! The set-up per workpiece: the suction cup a workpiece file may bring, overriding the cell's for
+//! that workpiece only (and the hopper recipe it may bring, [`crate::config::FeederRecipe`]).
 //!
 //! Job: the workpiece file's optional `[gripper]` section ([`CupConfig`]), its checks, and the one
-//! resolution every stage reads: [`Scene::with_tool_of`] gives the cell with the workpiece's cup
-//! in place of its own, [`crate::config::LoadedScene::for_workpiece`] the same for a loaded cell.
+//! resolution every stage reads: [`Scene::set_up_for`] gives the cell with the workpiece's cup
+//! and hopper recipe in place of its own, [`crate::config::LoadedScene::for_workpiece`] the same
+//! for a loaded cell.
 //! A run resolves its cell once ([`crate::cycle::run`]); the grasp selector's cup fit, the
 //! suction force model, the hand's collision model, the physics gripper, the recordings and the
 //! resolved inputs written beside the run all read that resolved cell.
@@ -81,12 +82,16 @@ impl CupConfig {
 }
 
 impl super::LoadedWorkpiece {
-    /// The workpiece as written beside a run in cell `g`'s gripper: a cup it brings with every key
-    /// filled in ([`CupConfig::completed`]); unchanged when it brings none.
-    pub fn with_tool_completed(&self, g: &GripperConfig) -> super::LoadedWorkpiece {
+    /// The workpiece as written beside a run in `cell`: a cup and a hopper recipe it brings with
+    /// every key filled in from the cell's ([`CupConfig::completed`],
+    /// [`super::FeederRecipe::completed`]); unchanged where it brings none.
+    pub fn with_set_up_completed(&self, cell: &Scene) -> super::LoadedWorkpiece {
         let mut w = self.clone();
         if let Some(cup) = &mut w.workpiece.gripper {
-            *cup = cup.completed(g);
+            *cup = cup.completed(&cell.gripper);
+        }
+        if let Some(recipe) = &mut w.workpiece.feeder {
+            *recipe = recipe.completed(&cell.feeder);
         }
         w
     }
@@ -107,23 +112,29 @@ impl GripperConfig {
 }
 
 impl Scene {
-    /// The cell as it runs workpiece `w`: with `w`'s cup, if it brings one, in place of the
-    /// cell's (the same cell otherwise). Applying it twice gives the same cell.
-    pub fn with_tool_of(&self, w: &Workpiece) -> Scene {
-        match &w.gripper {
-            Some(cup) => Scene {
-                gripper: self.gripper.with_cup(cup),
-                ..self.clone()
-            },
-            None => self.clone(),
+    /// The cell as it runs workpiece `w`: with `w`'s cup and hopper recipe, where it brings
+    /// them, in place of the cell's (the same cell otherwise). Applying it twice gives the same
+    /// cell.
+    pub fn set_up_for(&self, w: &Workpiece) -> Scene {
+        let mut s = self.clone();
+        if let Some(cup) = &w.gripper {
+            s.gripper = self.gripper.with_cup(cup);
         }
+        if let Some(recipe) = &w.feeder {
+            s.feeder = self.feeder.with_recipe(recipe);
+        }
+        s
     }
 
-    /// Whether this cell already carries `w`'s cup (it was resolved for `w`, or `w` brings none).
-    pub fn carries_tool_of(&self, w: &Workpiece) -> bool {
+    /// Whether this cell is already set up for `w` (it was resolved for `w`, or `w` brings
+    /// neither a cup nor a hopper recipe).
+    pub fn is_set_up_for(&self, w: &Workpiece) -> bool {
         w.gripper
             .as_ref()
             .is_none_or(|cup| self.gripper.with_cup(cup) == self.gripper)
+            && w.feeder
+                .as_ref()
+                .is_none_or(|r| self.feeder.with_recipe(r) == self.feeder)
     }
 }
 
@@ -145,7 +156,7 @@ mod tests {
     fn a_workpiece_cup_overrides_the_cells_for_that_workpiece_only() {
         let cell = LoadedScene::embedded_default().unwrap();
         let b = b_with("[gripper]\ncup_diameter_m = 0.016\nmax_tilt_deg = 15.0\n").unwrap();
-        let s = cell.scene.with_tool_of(&b.workpiece);
+        let s = cell.scene.set_up_for(&b.workpiece);
         assert_eq!(s.gripper.cup_diameter_m, 0.016);
         assert_eq!(s.gripper.max_tilt_deg, 15.0);
         // The rest of the tool is the cell's, and so is the rest of the cell.
@@ -153,13 +164,13 @@ mod tests {
         assert_eq!(s.gripper.vacuum_kpa, cell.scene.gripper.vacuum_kpa);
         assert_eq!(s.gripper.release_s, cell.scene.gripper.release_s);
         assert_eq!(s.sensor, cell.scene.sensor);
-        assert_eq!(s.with_tool_of(&b.workpiece), s, "resolving twice changes nothing");
-        assert!(s.carries_tool_of(&b.workpiece));
+        assert_eq!(s.set_up_for(&b.workpiece), s, "resolving twice changes nothing");
+        assert!(s.is_set_up_for(&b.workpiece));
         // Negative control: the cell itself does not carry B's cup; C brings none.
-        assert!(!cell.scene.carries_tool_of(&b.workpiece));
+        assert!(!cell.scene.is_set_up_for(&b.workpiece));
         let c = LoadedWorkpiece::resolve("C").unwrap();
-        assert_eq!(cell.scene.with_tool_of(&c.workpiece), cell.scene);
-        assert!(cell.scene.carries_tool_of(&c.workpiece));
+        assert_eq!(cell.scene.set_up_for(&c.workpiece), cell.scene);
+        assert!(cell.scene.is_set_up_for(&c.workpiece));
     }
 
     #[test]

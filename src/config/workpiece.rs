@@ -47,6 +47,10 @@ pub struct Workpiece {
     /// for this workpiece only (absent: the cell's cup; [`super::tool`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub gripper: Option<super::CupConfig>,
+    /// The hopper recipe this workpiece runs with, overriding the cell's `feeder` keys of the
+    /// same name for this workpiece only (absent: the cell's; [`super::feeder`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub feeder: Option<super::FeederRecipe>,
     /// Collision shape.
     pub shape: ShapeConfig,
     /// Grasp hints.
@@ -347,6 +351,9 @@ impl Workpiece {
         if let Some(cup) = &self.gripper {
             cup.check(&mut c);
         }
+        if let Some(recipe) = &self.feeder {
+            recipe.check(&mut c);
+        }
         c.finish()
     }
 
@@ -385,11 +392,19 @@ impl Workpiece {
     pub fn check_fits_scene(&self, file: &str, scene: &Scene) -> Result<(), ConfigError> {
         let mut c = Checker::new(file);
         let resolved;
-        let scene = if self.gripper.is_some() {
-            resolved = scene.with_tool_of(self);
+        let scene = if self.gripper.is_some() || self.feeder.is_some() {
+            resolved = scene.set_up_for(self);
             if let Err(e) = resolved.validate(file) {
                 for p in e.problems {
-                    c.fail(&p.key, format!("{} (with this workpiece's gripper)", p.message));
+                    // The cell's check of a key this workpiece's own section set names that
+                    // section; a check across sections (a release lead against the cup) the one
+                    // the workpiece brings.
+                    let what = if p.key.starts_with("feeder.") || self.gripper.is_none() {
+                        "feeder"
+                    } else {
+                        "gripper"
+                    };
+                    c.fail(&p.key, format!("{} (with this workpiece's {what})", p.message));
                 }
             }
             &resolved

@@ -317,7 +317,7 @@ impl<'a> Cell<'a> {
     ) -> Result<Self, CycleError> {
         let wp = &workpiece.workpiece;
         let s = &scene.scene;
-        if !s.carries_tool_of(wp) {
+        if !s.is_set_up_for(wp) {
             return Err(SetupError::ToolNotResolved.into());
         }
         let selector = GraspSelector::for_workpiece(s, robot, workpiece);

@@ -126,7 +126,7 @@ impl RunDir {
         self.write(&urdf_name, &scene.urdf_text)?;
         if let Some(wp) = workpiece {
             // The cup it runs with, in full (the scene written is resolved for it).
-            let wp = wp.with_tool_completed(&scene.scene.with_tool_of(&wp.workpiece).gripper);
+            let wp = wp.with_set_up_completed(&scene.scene);
             self.write_workpiece(&wp, "workpiece.toml")?;
         }
         Ok(())

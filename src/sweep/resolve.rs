@@ -123,13 +123,14 @@ pub fn resolve(
             for (s, v) in sets.iter().zip(vals).filter(|(s, _)| s.target == Target::Workpiece) {
                 set_in(&mut t, &s.path, v.clone()).map_err(|m| ConfigError::one(&wl, &s.key, m))?;
             }
-            // A cell's gripper key that the workpiece's own `[gripper]` sets would vary nothing
-            // for it: refused, so that a study never reports variants that are the same cell.
+            // A cell's gripper or feeder key that the workpiece's own `[gripper]` or `[feeder]`
+            // sets would vary nothing for it: refused, so that a study never reports variants
+            // that are the same cell.
             for s in sets.iter().filter(|s| s.target == Target::Cell) {
                 if let [Segment::Key(g), Segment::Key(k)] = s.path.as_slice()
-                    && g == "gripper"
+                    && (g == "gripper" || g == "feeder")
                     && wtree
-                        .get("gripper")
+                        .get(g.as_str())
                         .and_then(|v| v.as_table())
                         .is_some_and(|t| t.contains_key(k))
                 {
@@ -137,8 +138,8 @@ pub fn resolve(
                         &wl,
                         &s.key,
                         format!(
-                            "does not reach this workpiece: its file brings its own gripper.{k} (its [gripper] \
-                             section), which the cell's does not override; vary workpiece.gripper.{k} instead"
+                            "does not reach this workpiece: its file brings its own {g}.{k} (its [{g}] \
+                             section), which the cell's does not override; vary workpiece.{g}.{k} instead"
                         ),
                     )
                     .into());

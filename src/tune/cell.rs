@@ -9,8 +9,9 @@
 //! [`crate::study::run_study`] (in parallel), answer repeated candidates and those in the
 //! [`Journal`] without running them, and append each candidate to the journal as soon as all its
 //! runs finished. A run ended by Ctrl-C is not journalled. The varied keys the files may leave
-//! out are checked against the values the untuned cell runs with: a workpiece's cup keys
-//! (`workpiece.gripper.*`, the cell's cup where it brings none) and the grid's slot spacing
+//! out are checked against the values the untuned cell runs with: a workpiece's cup and hopper
+//! recipe keys (`workpiece.gripper.*`, `workpiece.feeder.*`: the cell's where it brings none)
+//! and the grid's slot spacing
 //! (`place_tray.pitch_x_m`, `pitch_y_m`: the footprint plus the gap where the cell gives none).
 //!
 //! Shards ([`Cell::shard`], `tune --shard K/N`): of each round's new candidates, shard K runs
@@ -65,10 +66,12 @@ pub fn check_keys(base: &Resolved, dims: &mut [Dim]) -> Result<(), StudyError> {
         cell.place_tray.pitch_y_m.get_or_insert(py);
     }
     let scene = as_tree("cell", toml::Value::try_from(&cell))?;
-    // The workpiece's cup keys hold the cell's values where it brings none of its own, so a
-    // `workpiece.gripper.` key can be varied on any workpiece.
+    // The workpiece's cup and hopper recipe keys hold the cell's values where it brings none of
+    // its own, so a `workpiece.gripper.` or `workpiece.feeder.` key can be varied on any
+    // workpiece.
     let mut w = v.workpieces[0].workpiece.clone();
     w.gripper = Some(w.gripper.unwrap_or_default().completed(&v.scene.scene.gripper));
+    w.feeder = Some(w.feeder.unwrap_or_default().completed(&v.scene.scene.feeder));
     let wp = as_tree("workpiece", toml::Value::try_from(&w))?;
     for d in dims.iter_mut() {
         let (target, path) = d.target();

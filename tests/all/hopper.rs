@@ -124,10 +124,14 @@ impl Observer for Doses {
 
 /// A deterministic run of `picks` picks of `workpiece`, seed 1, with the hopper `feeder`.
 fn run(workpiece: &str, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
+    run_wp(&LoadedWorkpiece::resolve(workpiece).unwrap(), picks, feeder)
+}
+
+/// [`run`] of a loaded workpiece.
+fn run_wp(wp: &LoadedWorkpiece, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
     let mut scene = LoadedScene::embedded_default().unwrap();
     scene.scene.feeder = feeder;
     let robot = RobotModel::from_scene(&scene).unwrap();
-    let wp = LoadedWorkpiece::resolve(workpiece).unwrap();
     let opts = RunOptions {
         picks,
         seed: 1,
@@ -136,7 +140,7 @@ fn run(workpiece: &str, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
         keep_records: false,
     };
     let mut doses = Doses::default();
-    let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut doses).unwrap();
+    let r = binpick::cycle::run(&scene, &robot, wp, &opts, &mut doses).unwrap();
     (r.tally, doses)
 }
 
@@ -211,4 +215,80 @@ fn a_large_dose_waits_for_the_hoppers_chute() {
         "{:?}",
         seen.dose_spans_s
     );
+}
+
+/// B's built-in file with `section` appended.
+fn b_with(section: &str) -> Result<LoadedWorkpiece, binpick::config::ConfigError> {
+    let text = std::fs::read_to_string(crate::support::repo().join("workpieces/B.toml")).unwrap();
+    LoadedWorkpiece::from_text(
+        "B.toml",
+        binpick::config::Source::Embedded,
+        &format!("{text}\n{section}"),
+    )
+}
+
+#[test]
+fn a_workpiece_brings_its_own_hopper_recipe() {
+    let cell = FeederConfig {
+        dose_below: 6,
+        dose_parts: 6,
+        dose_s: 1.5,
+        dose_rate_parts_per_s: 10.0,
+    };
+    // The cell's hopper doses B's 16-part pile over 60 picks ...
+    let (plain, _) = run("B", 60, cell);
+    assert!(plain.doses >= 2 && plain.refills == 0, "{plain:?}");
+    // ... B's recipe switches it off for B: the pile runs dry and is exchanged.
+    let off = b_with("[feeder]\ndose_below = 0\n").unwrap();
+    let (tally, seen) = run_wp(&off, 60, cell);
+    assert_eq!((tally.doses, seen.before_dose.len()), (0, 0), "{tally:?}");
+    assert!(tally.refills >= 1, "{tally:?}");
+    // A recipe's dose size reaches the run: doses of 2 parts, so more of them.
+    let small = b_with("[feeder]\ndose_parts = 2\n").unwrap();
+    let (tally, _) = run_wp(&small, 60, cell);
+    assert!(tally.doses > plain.doses, "{} vs {}", tally.doses, plain.doses);
+}
+
+#[test]
+fn a_bad_hopper_recipe_exits_2_naming_file_key_and_value() {
+    let ws = Workspace::new();
+    for (to, why) in [
+        (
+            "[feeder]\ndose_parts = 0\n",
+            "feeder.dose_parts must be at least 1 while dose_below > 0, got 0 (with this workpiece's feeder)",
+        ),
+        (
+            "[feeder]\ndose_below = 5000\n",
+            "feeder.dose_below must be within [0, 1000], got 5000",
+        ),
+        ("[feeder]\ndose_s = 1.0\n", "dose_s"),
+    ] {
+        let bad = ws.edit(
+            "workpieces/B.toml",
+            "workpieces/bad.toml",
+            "[gripper]",
+            &format!("{to}\n[gripper]"),
+        );
+        let out = ws.path("runs");
+        let o = binpick_in(
+            ws.dir.path(),
+            &[
+                "batch",
+                "--workpieces",
+                bad.to_str().unwrap(),
+                "--picks",
+                "2",
+                "--deterministic",
+                "--out",
+                out.to_str().unwrap(),
+            ],
+        );
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{to}: {err}");
+        assert!(
+            err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
+            "{to}: {err}"
+        );
+        assert!(!out.exists(), "{to} wrote {}", out.display());
+    }
 }
