@@ -26,7 +26,8 @@
 //! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much
 //! (a CAD part's hypotheses joined by their twin faces' at the same placements),
 //! refined (`refine`: settled onto the floor in one of the part's resting poses where the
-//! patch's points allow it; an outline-fitted face turned to its best-verified yaw), then
+//! patch's points allow it; else a CAD part's tilt the patch leaves open scanned by rendering;
+//! an outline-fitted face turned to its best-verified yaw), then
 //! non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
 //! lying on its curved side (`lying`): per patch no flat face explains, a cylinder of known
 //! radius fitted to the points around it, kept if its axis's standard error is within
