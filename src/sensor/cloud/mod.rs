@@ -23,9 +23,11 @@
 //! (occluded, allowed) or measured behind (a contradiction, unless the ray only grazes a
 //! lead); score = agree / (agree + contradict), evidence = agree - 3 contradict; (7) per patch
 //! the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no different
-//! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much,
+//! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much
+//! (a CAD part's hypotheses joined by their twin faces' at the same placements),
 //! refined (`refine`: settled onto the floor in one of the part's resting poses where the
-//! patch's points allow it; an outline-fitted face turned to its best-verified yaw), then
+//! patch's points allow it; else a CAD part's tilt the patch leaves open scanned by rendering;
+//! an outline-fitted face turned to its best-verified yaw), then
 //! non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
 //! lying on its curved side (`lying`): per patch no flat face explains, a cylinder of known
 //! radius fitted to the points around it, kept if its axis's standard error is within
@@ -822,6 +824,7 @@ impl<'a> Cloud<'a> {
                 }
             }
         }
+        verified.extend(self.twin_hypotheses(model, &verified));
         // A patch a flat face explains is no lying part's top.
         let flat = verified.iter().any(|v| v.1.score >= LYING_SKIP_SCORE);
         let fits = if model.round_side && !flat {
@@ -834,6 +837,55 @@ impl<'a> Cloud<'a> {
             .decide(model, &verified)
             .map(|d| self.refine(model, patch, &plane, d));
         (best, fits)
+    }
+
+    /// Each verified hypothesis's face swapped for its twins (the other model faces of the same
+    /// extents), placed with the same centre, normal and first axis, and turned half about the
+    /// normal; verified. Only for a model with outline-fitted faces, whose fit of one face can
+    /// fail where its twin's would hold (a DIP-8 on its legs shows its top face with the leg
+    /// shoulders beside it: when that outline fit finds no placement, its back's plain rectangle
+    /// holds the patch and wins unrivalled, legs rendered up where the part's are down). Poses
+    /// already verified are not tried again.
+    fn twin_hypotheses(&self, model: &CloudModel, verified: &[(i64, CloudDetection)]) -> Vec<(i64, CloudDetection)> {
+        if model.outlines.iter().all(Option::is_none) {
+            return Vec::new();
+        }
+        let same_extents = |a: &Face, b: &Face| {
+            let (a, b) = (a.extent_m, b.extent_m);
+            (a[0] - b[0]).abs() + (a[1] - b[1]).abs() < 1e-6 || (a[0] - b[1]).abs() + (a[1] - b[0]).abs() < 1e-6
+        };
+        let mut out: Vec<(i64, CloudDetection)> = Vec::new();
+        for (_, d) in verified {
+            let (fi, pose) = (d.face_up, d.world_from_part);
+            let face = &model.faces[fi];
+            let center = pose * Point3::from(face.center);
+            let n = pose.rotation * face.normal;
+            for (gi, g) in model.faces.iter().enumerate() {
+                if gi == fi || g.disc || face.disc || !same_extents(face, g) {
+                    continue;
+                }
+                // The twin's first axis along the face's longer side, as the face's.
+                let along = if (g.extent_m[0] >= g.extent_m[1]) == (face.extent_m[0] >= face.extent_m[1]) {
+                    pose.rotation * face.along
+                } else {
+                    n.cross(&(pose.rotation * face.along))
+                };
+                for turn in [1.0, -1.0] {
+                    let candidate = pose_from_face(g, &center.coords, &n, &(along * turn));
+                    let known = verified
+                        .iter()
+                        .chain(out.iter())
+                        .any(|(_, v)| model.same_pose(&v.world_from_part, &candidate));
+                    if known {
+                        continue;
+                    }
+                    if let Some(t) = self.check(model, &candidate, Some(gi)) {
+                        out.push(t);
+                    }
+                }
+            }
+        }
+        out
     }
 
     /// The pose the image prefers among a patch's verified hypotheses (evidence, detection). A

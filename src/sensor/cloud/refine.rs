@@ -1,7 +1,8 @@
 //! A flat-face detection refined after it wins its patch: (1) settled onto the tray floor when
 //! it lies there in one of the part's resting poses, as far as the patch's points can tell;
-//! (2) turned about its face's normal, within the yaws its silhouette allows, to the yaw whose
-//! rendering the image supports best.
+//! (1b) otherwise, where the patch leaves its tilt open, tilted to the rendering the image
+//! supports best; (2) turned about its face's normal, within the yaws its silhouette allows, to
+//! the yaw whose rendering the image supports best.
 //!
 //! (1) Settling. A face of 60-90 pixels under 0.3 mm of depth noise fixes its plane to about a
 //! degree (a DIP-8's top face: tilt error median 1.4 degrees), while four in five of a settled
@@ -15,6 +16,12 @@
 //! `((ssr_settled - ssr_fit) / 3) / (ssr_fit / (n - 3))` is at most [`F_MAX`]. A DIP-8 resting
 //! 3 degrees tilted against a neighbour passes across its 6.35 mm width, 5 degrees do not; a
 //! part on another part's lead (a 1 mm step) does not.
+//!
+//! (1b) Tilt, for a CAD part's detection that is not settled: a patch a few pixels wide (a
+//! DIP-8's 3.3 mm side) leaves its plane's tilt about its long axis open by several degrees
+//! ([`tilt_standard_error`]); where that standard error is at least [`TILT_OPEN_RAD`], the
+//! hypothesis is rendered at tilts about that axis (through the face centre) and verified at
+//! every pixel, and takes the mean of the tilts of greatest evidence unless its own is one.
 //!
 //! (2) Yaw, for a face fitted by its true outline (`outline`: one with features beside it, such
 //! as a DIP's legs). The silhouette fit takes the middle of the yaws its pixel centres allow,
@@ -50,6 +57,21 @@ pub const BAND_M: f64 = 0.001;
 /// is at most this many times the fit's residual variance: the 99th percentile of F(3, infinity)
 /// (3.78), rounded up.
 pub const F_MAX: f64 = 3.8;
+/// A detection not settled whose patch leaves its plane's tilt open by at least this standard
+/// error (rad) is tilted to the rendering the image supports best: on `sense` seeds 1-12 of the
+/// DIP-8, its patches on a 3.3 mm side (about 4 pixels wide, 2.5-5.5 degrees) were 5-10 degrees
+/// off in 5 of 6 cases, its top faces (6.35 mm, 1-2 degrees) are pinned by their own points and
+/// the scan only made them worse (7 new errors at every detection). CAD parts (mesh models)
+/// only: on the built-in parts over `batch` seeds 1-3 it changed only E, 2 more wrong
+/// detections of 2798.
+pub const TILT_OPEN_RAD: f64 = 2.0 * std::f64::consts::PI / 180.0;
+/// The depth noise along a plane's normal the tilt's standard error assumes (m): [`super::AGREE_TOL_M`]
+/// is 3 sigma of it.
+pub const DEPTH_NOISE_M: f64 = super::AGREE_TOL_M / 3.0;
+/// The tilt scan's reach either way (rad).
+pub const TILT_SCAN_RAD: f64 = 8.0 * std::f64::consts::PI / 180.0;
+/// The tilt scan's step (rad).
+pub const TILT_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
 /// The yaw scan's step (rad).
 pub const YAW_STEP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
 
@@ -62,10 +84,20 @@ impl super::Cloud<'_> {
             return d;
         }
         let span = d.yaw_span_rad;
-        let settled = self
+        let settled = match self
             .settled(model, patch, plane, &d)
             .and_then(|pose| self.check(model, &pose, Some(d.face_up)))
-            .map_or(d, |(_, s)| s);
+        {
+            Some((_, s)) => s,
+            None if model.mesh.is_none() => d,
+            None => match self.tilt_open(patch, plane) {
+                Some(long) => self
+                    .best_tilt(model, &d, &long)
+                    .and_then(|pose| self.check(model, &pose, Some(d.face_up)))
+                    .map_or(d, |(_, t)| t),
+                None => d,
+            },
+        };
         match self.best_yaw(model, &settled, span) {
             Some(turned) => self
                 .check(model, &turned, Some(settled.face_up))
@@ -162,10 +194,142 @@ impl super::Cloud<'_> {
     }
 }
 
+impl super::Cloud<'_> {
+    /// The patch's long in-plane axis (world, unit), if the patch leaves its plane's tilt about
+    /// that axis open: a standard error ([`tilt_standard_error`]) of at least [`TILT_OPEN_RAD`].
+    fn tilt_open(&self, patch: &Patch, plane: &Plane) -> Option<Vector3<f64>> {
+        let n = plane.normal;
+        let e1 = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        let e1 = (e1 - n * n.dot(&e1)).normalize();
+        let e2 = n.cross(&e1);
+        let in_plane: Vec<[f64; 2]> = patch
+            .pixels
+            .iter()
+            .map(|&i| {
+                let r = self.pts[i] - plane.point;
+                [r.dot(&e1), r.dot(&e2)]
+            })
+            .collect();
+        let (sigma_rad, long) = tilt_standard_error(&in_plane, DEPTH_NOISE_M)?;
+        (sigma_rad >= TILT_OPEN_RAD).then(|| (e1 * long[0] + e2 * long[1]).normalize())
+    }
+
+    /// `d`'s pose tilted about `long` (world, unit; through its face's centre) to the mean of
+    /// the tilts, [`TILT_STEP_RAD`] apart within [`TILT_SCAN_RAD`] either way, that verify with
+    /// the most evidence at every pixel; `None` (the measured tilt kept) when the measured tilt
+    /// is among them.
+    fn best_tilt(&self, model: &CloudModel, d: &CloudDetection, long: &Vector3<f64>) -> Option<Isometry3<f64>> {
+        let pose = d.world_from_part;
+        let face = &model.faces[d.face_up];
+        let pivot = pose.translation.vector + pose.rotation * face.center;
+        let axis = Unit::new_normalize(*long);
+        let steps = (TILT_SCAN_RAD / TILT_STEP_RAD).round() as i64;
+        let at = |k: i64| {
+            turn_about(
+                &pose,
+                &pivot,
+                &UnitQuaternion::from_axis_angle(&axis, k as f64 * TILT_STEP_RAD),
+            )
+        };
+        let evidence: Vec<(i64, i64)> = (-steps..=steps)
+            .filter_map(|k| self.verify_every(model, &at(k), 1).map(|(_, _, e)| (k, e)))
+            .collect();
+        let top = evidence.iter().map(|(_, e)| *e).max()?;
+        if evidence.iter().any(|&(k, e)| k == 0 && e == top) {
+            return None;
+        }
+        let best: Vec<i64> = evidence.iter().filter(|(_, e)| *e == top).map(|(k, _)| *k).collect();
+        let tilt_rad = best.iter().sum::<i64>() as f64 / best.len() as f64 * TILT_STEP_RAD;
+        Some(turn_about(
+            &pose,
+            &pivot,
+            &UnitQuaternion::from_axis_angle(&axis, tilt_rad),
+        ))
+    }
+}
+
+/// The standard error (rad) of the tilt of a least-squares plane through points with
+/// `noise_m` of independent noise along its normal, about the axis the points pin down least
+/// (their scatter's longest axis, about which the plane turns most freely), and that axis (unit,
+/// in the points' plane basis): `noise_m / sqrt(smallest eigenvalue of the scatter matrix)`.
+/// `None` for fewer than 3 points.
+pub(super) fn tilt_standard_error(points: &[[f64; 2]], noise_m: f64) -> Option<(f64, [f64; 2])> {
+    if points.len() < 3 {
+        return None;
+    }
+    let m = points.len() as f64;
+    let mean = [
+        points.iter().map(|p| p[0]).sum::<f64>() / m,
+        points.iter().map(|p| p[1]).sum::<f64>() / m,
+    ];
+    let (mut sxx, mut syy, mut sxy) = (0.0, 0.0, 0.0);
+    for p in points {
+        let (x, y) = (p[0] - mean[0], p[1] - mean[1]);
+        sxx += x * x;
+        syy += y * y;
+        sxy += x * y;
+    }
+    let half = 0.5 * (sxx + syy);
+    let r = (0.25 * (sxx - syy).powi(2) + sxy * sxy).sqrt();
+    let (smallest, largest) = (half - r, half + r);
+    let long = if sxy.abs() > 1e-18 {
+        [largest - syy, sxy]
+    } else if sxx >= syy {
+        [1.0, 0.0]
+    } else {
+        [0.0, 1.0]
+    };
+    let norm = long[0].hypot(long[1]);
+    Some((noise_m / smallest.max(1e-24).sqrt(), [long[0] / norm, long[1] / norm]))
+}
+
 /// `pose` turned by `turn` (world) about the world point `pivot`.
 fn turn_about(pose: &Isometry3<f64>, pivot: &Vector3<f64>, turn: &UnitQuaternion<f64>) -> Isometry3<f64> {
     Isometry3::from_parts(
         Translation3::from(pivot + turn * (pose.translation.vector - pivot)),
         turn * pose.rotation,
     )
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// Pixel centres 0.85 mm apart over a `w` x `h` (m) rectangle turned by `turn_rad`.
+    fn grid(w: f64, h: f64, turn_rad: f64) -> Vec<[f64; 2]> {
+        let step = 0.00085;
+        let (c, s) = (turn_rad.cos(), turn_rad.sin());
+        let mut out = Vec::new();
+        let (nx, ny) = ((w / step) as i64, (h / step) as i64);
+        for i in 0..=nx {
+            for j in 0..=ny {
+                let (x, y) = (i as f64 * step - w / 2.0, j as f64 * step - h / 2.0);
+                out.push([c * x - s * y, s * x + c * y]);
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_narrow_strip_leaves_its_tilt_open_about_its_long_axis() {
+        // A DIP-8's 9.3 x 3.3 mm side, about 12 x 4 pixels: its plane's tilt about its long
+        // axis has a standard error over the threshold; the axis is the strip's, whatever it is
+        // turned by. Negative control: its 9.3 x 6.35 mm top face pins its tilt (under 2 deg).
+        for turn_deg in [0.0f64, 30.0, 90.0, 135.0] {
+            let t = turn_deg.to_radians();
+            let (sigma, long) = tilt_standard_error(&grid(0.0093, 0.0033, t), DEPTH_NOISE_M).unwrap();
+            assert!(sigma >= TILT_OPEN_RAD, "turn {turn_deg}: {:.2} deg", sigma.to_degrees());
+            assert!(
+                (long[0] * t.cos() + long[1] * t.sin()).abs() > 0.999,
+                "turn {turn_deg}: axis {long:?}"
+            );
+            let (sigma, _) = tilt_standard_error(&grid(0.0093, 0.00635, t), DEPTH_NOISE_M).unwrap();
+            assert!(
+                sigma < TILT_OPEN_RAD,
+                "turn {turn_deg}: top face {:.2} deg",
+                sigma.to_degrees()
+            );
+        }
+        assert!(tilt_standard_error(&[[0.0, 0.0], [0.001, 0.0]], DEPTH_NOISE_M).is_none());
+    }
 }

@@ -804,3 +804,71 @@ fn a_primitive_flat_on_the_floor_is_settled_and_a_tilted_one_is_not() {
         "the leaning part was found at only {leaning_seen} of 3 yaws"
     );
 }
+
+#[test]
+fn a_dip_on_its_legs_taken_for_its_back_is_turned_over_by_its_twin_face() {
+    // A DIP-8 on its legs whose top face's outline fit finds nothing (in piles, the leg
+    // shoulders beside it can spoil it) leaves its back's plain rectangle alone on the patch:
+    // the part placed on its back, legs rendered up, verifies on the grid. The twin hypotheses
+    // (the back's twin face, the top, at the same placement) bring back the pose on its legs,
+    // which the image prefers. Negative controls: without the twins the back pose wins (the
+    // failure); a model without outline faces (a primitive's) tries no twins.
+    let cell = cell();
+    let (mesh, m) = cad_model("dip8.toml", 0.004);
+    let mut turned = 0;
+    for y in [15.0, 70.0, -35.0, 125.0] {
+        let pose = resting_mesh(&cell, &mesh, 0.02, 0.01, yaw(y));
+        let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
+        let found = recognize(&capture, &cell.camera, &cell.tray, &m);
+        assert_eq!(found.len(), 1, "yaw {y}: {found:?}");
+        let d = &found[0];
+        let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+        let face = &m.faces[d.face_up];
+        let (back_index, back) = m
+            .faces
+            .iter()
+            .enumerate()
+            .find(|(_, f)| f.normal.dot(&face.normal) < -0.999)
+            .expect("the body's other face");
+        let r = d.world_from_part.rotation;
+        let on_back = pose_from_face(
+            back,
+            &(d.world_from_part * Point3::from(face.center)).coords,
+            &(r * face.normal),
+            &(r * face.along),
+        );
+        let Some(alone) = cloud.check(&m, &on_back, Some(back_index)) else {
+            continue;
+        };
+        let wrong = cloud
+            .decide(&m, std::slice::from_ref(&alone))
+            .expect("the back pose alone wins");
+        assert!(
+            !m.same_pose(&wrong.world_from_part, &pose),
+            "yaw {y}: the back pose is the part's"
+        );
+        let twins = cloud.twin_hypotheses(&m, std::slice::from_ref(&alone));
+        assert!(
+            twins.iter().any(|(_, t)| m.same_pose(&t.world_from_part, &pose)),
+            "yaw {y}: no twin on its legs: {twins:?}"
+        );
+        let mut all = vec![alone];
+        all.extend(twins);
+        let right = cloud.decide(&m, &all).expect("a pose");
+        assert!(m.same_pose(&right.world_from_part, &pose), "yaw {y}: {right:?}");
+        turned += 1;
+    }
+    assert!(turned >= 2, "the back pose verified at only {turned} of 4 yaws");
+    // A primitive model has no outline faces: no twins.
+    let w = workpiece("A");
+    let ma = CloudModel::new(&w);
+    let pose = resting(&cell, &w, 0.02, 0.01, 0.0, yaw(20.0));
+    let capture = synthetic(&cell, &[(&ma, pose)]);
+    let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+    let found: Vec<(i64, CloudDetection)> = recognize(&capture, &cell.camera, &cell.tray, &ma)
+        .into_iter()
+        .map(|d| (0, d))
+        .collect();
+    assert!(!found.is_empty());
+    assert!(cloud.twin_hypotheses(&ma, &found).is_empty());
+}
