@@ -122,9 +122,12 @@ impl Observer for Doses {
     }
 }
 
-/// A deterministic run of `picks` picks of `workpiece`, seed 1, with the hopper `feeder`.
+/// A deterministic run of `picks` picks of `workpiece`, seed 1, with the hopper `feeder` (the
+/// workpiece's own recipe, if it brings one, left out).
 fn run(workpiece: &str, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
-    run_wp(&LoadedWorkpiece::resolve(workpiece).unwrap(), picks, feeder)
+    let mut wp = LoadedWorkpiece::resolve(workpiece).unwrap();
+    wp.workpiece.feeder = None;
+    run_wp(&wp, picks, feeder)
 }
 
 /// [`run`] of a loaded workpiece.
@@ -217,15 +220,19 @@ fn a_large_dose_waits_for_the_hoppers_chute() {
     );
 }
 
-/// B's built-in file with `section` appended.
+/// B's built-in file with its own hopper recipe replaced by `section`.
 fn b_with(section: &str) -> Result<LoadedWorkpiece, binpick::config::ConfigError> {
     let text = std::fs::read_to_string(crate::support::repo().join("workpieces/B.toml")).unwrap();
+    assert!(text.contains(B_RECIPE), "B.toml's recipe is not {B_RECIPE:?}");
     LoadedWorkpiece::from_text(
         "B.toml",
         binpick::config::Source::Embedded,
-        &format!("{text}\n{section}"),
+        &text.replace(B_RECIPE, section),
     )
 }
+
+/// B's own hopper recipe, as its file writes it.
+const B_RECIPE: &str = "[feeder]\ndose_below = 4\ndose_parts = 10\n";
 
 #[test]
 fn a_workpiece_brings_its_own_hopper_recipe() {
@@ -263,12 +270,7 @@ fn a_bad_hopper_recipe_exits_2_naming_file_key_and_value() {
         ),
         ("[feeder]\ndose_s = 1.0\n", "dose_s"),
     ] {
-        let bad = ws.edit(
-            "workpieces/B.toml",
-            "workpieces/bad.toml",
-            "[gripper]",
-            &format!("{to}\n[gripper]"),
-        );
+        let bad = ws.edit("workpieces/B.toml", "workpieces/bad.toml", B_RECIPE, to);
         let out = ws.path("runs");
         let o = binpick_in(
             ws.dir.path(),

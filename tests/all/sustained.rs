@@ -10,12 +10,13 @@ use binpick::results::Summary;
 use binpick::robot::RobotModel;
 
 /// A deterministic run of workpiece B (a 16-part pile: a few refills in 60 picks, with the
-/// default cell's hopper off), seed 1.
+/// default cell's hopper off, and B's own recipe for it left out), seed 1.
 fn run_b(picks: usize) -> RunResult {
     let mut scene = LoadedScene::embedded_default().unwrap();
     scene.scene.feeder.dose_below = 0;
     let robot = RobotModel::from_scene(&scene).unwrap();
-    let wp = LoadedWorkpiece::resolve("B").unwrap();
+    let mut wp = LoadedWorkpiece::resolve("B").unwrap();
+    wp.workpiece.feeder = None;
     let opts = RunOptions {
         picks,
         seed: 1,
