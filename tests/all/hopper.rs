@@ -50,29 +50,7 @@ fn bad_feeder_keys_exit_2_naming_file_key_and_value_and_write_nothing() {
         };
         assert!(on.exists());
         let bad = ws.edit(base, "scenes/bad.toml", from, to);
-        let out = ws.path("runs");
-        let o = binpick_in(
-            ws.dir.path(),
-            &[
-                "batch",
-                "--scene",
-                bad.to_str().unwrap(),
-                "--workpieces",
-                "E",
-                "--picks",
-                "2",
-                "--deterministic",
-                "--out",
-                out.to_str().unwrap(),
-            ],
-        );
-        let err = stderr(&o);
-        assert_eq!(o.status.code(), Some(2), "{to}: {err}");
-        assert!(
-            err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
-            "{to}: {err}"
-        );
-        assert!(!out.exists(), "{to} wrote {}", out.display());
+        batch_is_refused(&ws, &["--scene", bad.to_str().unwrap(), "--workpieces", "E"], why);
     }
     // Negative control: the hopper on with valid keys runs, and writes its batch.
     let on = ws.path("scenes/on.toml");
@@ -271,26 +249,29 @@ fn a_bad_hopper_recipe_exits_2_naming_file_key_and_value() {
         ("[feeder]\ndose_s = 1.0\n", "dose_s"),
     ] {
         let bad = ws.edit("workpieces/B.toml", "workpieces/bad.toml", B_RECIPE, to);
-        let out = ws.path("runs");
-        let o = binpick_in(
-            ws.dir.path(),
-            &[
-                "batch",
-                "--workpieces",
-                bad.to_str().unwrap(),
-                "--picks",
-                "2",
-                "--deterministic",
-                "--out",
-                out.to_str().unwrap(),
-            ],
-        );
-        let err = stderr(&o);
-        assert_eq!(o.status.code(), Some(2), "{to}: {err}");
-        assert!(
-            err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
-            "{to}: {err}"
-        );
-        assert!(!out.exists(), "{to} wrote {}", out.display());
+        batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
     }
+}
+
+/// A two-pick batch with `args` exits 2 naming `bad.toml` and `why`, without a panic, and
+/// writes nothing.
+fn batch_is_refused(ws: &Workspace, args: &[&str], why: &str) {
+    let out = ws.path("runs");
+    let mut all = vec![
+        "batch",
+        "--picks",
+        "2",
+        "--deterministic",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    all.extend_from_slice(args);
+    let o = binpick_in(ws.dir.path(), &all);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert!(
+        err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
+        "{args:?}: {err}"
+    );
+    assert!(!out.exists(), "{args:?} wrote {}", out.display());
 }
