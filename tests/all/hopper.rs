@@ -100,6 +100,16 @@ impl Observer for Doses {
     }
 }
 
+/// A hopper: its threshold, dose, shortest dose time (s) and chute flow (parts/s).
+fn feeder(dose_below: u32, dose_parts: u32, dose_s: f64, dose_rate_parts_per_s: f64) -> FeederConfig {
+    FeederConfig {
+        dose_below,
+        dose_parts,
+        dose_s,
+        dose_rate_parts_per_s,
+    }
+}
+
 /// A deterministic run of `picks` picks of `workpiece`, seed 1, with the hopper `feeder` (the
 /// workpiece's own recipe, if it brings one, left out).
 fn run(workpiece: &str, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
@@ -127,12 +137,7 @@ fn run_wp(wp: &LoadedWorkpiece, picks: usize, feeder: FeederConfig) -> (Tally, D
 
 #[test]
 fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry() {
-    let hopper = |dose_below| FeederConfig {
-        dose_below,
-        dose_parts: 6,
-        dose_s: 1.5,
-        dose_rate_parts_per_s: 10.0,
-    };
+    let hopper = |dose_below| feeder(dose_below, 6, 1.5, 10.0);
     // B's 16-part pile over 60 picks: without a hopper it runs dry and is exchanged.
     let (without, _) = run("B", 60, FeederConfig::default());
     assert!(without.refills >= 2 && without.doses == 0, "{without:?}");
@@ -170,12 +175,7 @@ fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry
 fn a_large_dose_waits_for_the_hoppers_chute() {
     // B's 16-part pile topped up 12 parts at a time by a chute of 2 parts/s: 6 s a dose, where
     // its shortest time is 0.5 s.
-    let slow = FeederConfig {
-        dose_below: 6,
-        dose_parts: 12,
-        dose_s: 0.5,
-        dose_rate_parts_per_s: 2.0,
-    };
+    let slow = feeder(6, 12, 0.5, 2.0);
     let (tally, seen) = run("B", 40, slow);
     assert!(tally.doses >= 1, "doses {}", tally.doses);
     assert!(
@@ -214,12 +214,7 @@ const B_RECIPE: &str = "[feeder]\ndose_below = 4\ndose_parts = 10\n";
 
 #[test]
 fn a_workpiece_brings_its_own_hopper_recipe() {
-    let cell = FeederConfig {
-        dose_below: 6,
-        dose_parts: 6,
-        dose_s: 1.5,
-        dose_rate_parts_per_s: 10.0,
-    };
+    let cell = feeder(6, 6, 1.5, 10.0);
     // The cell's hopper doses B's 16-part pile over 60 picks ...
     let (plain, _) = run("B", 60, cell);
     assert!(plain.doses >= 2 && plain.refills == 0, "{plain:?}");

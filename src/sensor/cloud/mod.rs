@@ -452,6 +452,17 @@ struct Plane {
     normal: Vector3<f64>,
 }
 
+impl Plane {
+    /// Two unit axes in the plane (world), with the normal a right-handed frame: the first is
+    /// world x (or y, for a normal near x) projected into the plane.
+    fn basis(&self) -> (Vector3<f64>, Vector3<f64>) {
+        let n = self.normal;
+        let e1 = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
+        let e1 = (e1 - n * n.dot(&e1)).normalize();
+        (e1, n.cross(&e1))
+    }
+}
+
 /// Least-squares plane of points given as sums relative to `origin`: count, sum, sum of outer
 /// products. The normal is oriented toward `eye`.
 fn plane_from_sums(n: f64, s: &Vector3<f64>, ss: &Matrix3<f64>, origin: &Vector3<f64>, eye: &Vector3<f64>) -> Plane {
@@ -697,10 +708,7 @@ impl<'a> Cloud<'a> {
                 }
             }
         }
-        let n = plane.normal;
-        let e1 = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-        let e1 = (e1 - n * n.dot(&e1)).normalize();
-        let e2 = n.cross(&e1);
+        let (e1, e2) = plane.basis();
         let to2 = |p: Vector3<f64>| {
             let q = p - plane.point;
             [q.dot(&e1), q.dot(&e2)]

@@ -198,10 +198,7 @@ impl super::Cloud<'_> {
     /// The patch's long in-plane axis (world, unit), if the patch leaves its plane's tilt about
     /// that axis open: a standard error ([`tilt_standard_error`]) of at least [`TILT_OPEN_RAD`].
     fn tilt_open(&self, patch: &Patch, plane: &Plane) -> Option<Vector3<f64>> {
-        let n = plane.normal;
-        let e1 = if n.x.abs() < 0.9 { Vector3::x() } else { Vector3::y() };
-        let e1 = (e1 - n * n.dot(&e1)).normalize();
-        let e2 = n.cross(&e1);
+        let (e1, e2) = plane.basis();
         let in_plane: Vec<[f64; 2]> = patch
             .pixels
             .iter()
