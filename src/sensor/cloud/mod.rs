@@ -791,7 +791,15 @@ impl<'a> Cloud<'a> {
                 for f in outline::fit_outline(o, &inside, &edge, &outside, theta0, model.yaw_span_max_rad) {
                     let u = e1 * f.yaw_rad.cos() + e2 * f.yaw_rad.sin();
                     let center = plane.point + e1 * f.center[0] + e2 * f.center[1];
-                    if let Some(mut d) = self.check(model, &pose_from_face(face, &center, &n, &u), Some(fi)) {
+                    let pose = pose_from_face(face, &center, &n, &u);
+                    // The silhouette's middle yaw, or, where that does not verify, the yaw in
+                    // its span the image supports best: a 7 degree span leaves a TO-220's tab
+                    // hole and leads far enough off to fail verification at the middle.
+                    let checked = self.check(model, &pose, Some(fi)).or_else(|| {
+                        self.best_yaw(model, &pose, fi, f.yaw_span_rad)
+                            .and_then(|turned| self.check(model, &turned, Some(fi)))
+                    });
+                    if let Some(mut d) = checked {
                         d.1.yaw_span_rad = f.yaw_span_rad;
                         verified.push(d);
                     }

@@ -98,7 +98,7 @@ impl super::Cloud<'_> {
                 None => d,
             },
         };
-        match self.best_yaw(model, &settled, span) {
+        match self.best_yaw(model, &settled.world_from_part, settled.face_up, span) {
             Some(turned) => self
                 .check(model, &turned, Some(settled.face_up))
                 .map_or(settled, |(_, t)| t),
@@ -164,13 +164,19 @@ impl super::Cloud<'_> {
         variance > 0.0 && (ssr_candidate - ssr_fit) / 3.0 <= F_MAX * variance
     }
 
-    /// `d`'s pose turned about its face's normal (through the face centre) to the mean of the
-    /// yaws, within the silhouette's span `span_rad` centred on it, that verify with the most
-    /// evidence at every pixel; `None` (no scan) for a face fitted as its rectangle or a yaw the
-    /// silhouette pins to within a step either way.
-    fn best_yaw(&self, model: &CloudModel, d: &CloudDetection, span_rad: f64) -> Option<Isometry3<f64>> {
-        let pose = d.world_from_part;
-        let face = &model.faces[d.face_up];
+    /// `pose` (face `face_up` up) turned about its face's normal (through the face centre) to
+    /// the mean of the yaws, within the silhouette's span `span_rad` centred on it, that verify
+    /// with the most evidence at every pixel; `None` (no scan) for a face fitted as its
+    /// rectangle or a yaw the silhouette pins to within a step either way.
+    pub(super) fn best_yaw(
+        &self,
+        model: &CloudModel,
+        pose: &Isometry3<f64>,
+        face_up: usize,
+        span_rad: f64,
+    ) -> Option<Isometry3<f64>> {
+        let pose = *pose;
+        let face = &model.faces[face_up];
         let pivot = pose.translation.vector + pose.rotation * face.center;
         let axis = Unit::new_normalize(pose.rotation * face.normal);
         let steps = (0.5 * span_rad / YAW_STEP_RAD).floor() as i64;
