@@ -91,6 +91,18 @@ pub enum Trip {
     },
 }
 
+impl std::fmt::Display for Trip {
+    /// Joints are numbered J1 to J6 and angles given in degrees, as on the controller's pendant.
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        match *self {
+            Trip::TrackingError { joint, error_rad } => {
+                write!(f, "J{} tracking error {:.2} deg", joint + 1, error_rad.to_degrees())
+            }
+            Trip::Saturation { joint, for_s } => write!(f, "J{} at its torque limit for {:.3} s", joint + 1, for_s),
+        }
+    }
+}
+
 /// One servo tick.
 #[derive(Debug, Clone, Copy)]
 pub struct Tick {

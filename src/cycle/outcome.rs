@@ -213,7 +213,7 @@ pub struct Stop {
 
 impl fmt::Display for Stop {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        write!(f, "{:?} at {:.3} s into the motion", self.trip, self.after_s)
+        write!(f, "{} at {:.3} s into the motion", self.trip, self.after_s)
     }
 }
 
@@ -325,6 +325,23 @@ mod tests {
             MotionFailure::PlaceRetreat.to_string(),
             "place retreat: no joint path along the line"
         );
+        // A stop reads in the pendant's terms (J1 to J6, degrees), not as a Rust value.
+        let stop = Stop {
+            trip: crate::servo::Trip::Saturation {
+                joint: 1,
+                for_s: 0.020000000000000018,
+            },
+            after_s: 0.04,
+        };
+        assert_eq!(
+            stop.to_string(),
+            "J2 at its torque limit for 0.020 s at 0.040 s into the motion"
+        );
+        let tracking = crate::servo::Trip::TrackingError {
+            joint: 0,
+            error_rad: 0.02,
+        };
+        assert_eq!(tracking.to_string(), "J1 tracking error 1.15 deg");
     }
 }
 
