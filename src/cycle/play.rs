@@ -222,19 +222,7 @@ impl Run<'_, '_> {
 
     /// Takes every part that is out of the tray it belongs in out of the cell, counting it lost.
     fn remove_lost_parts(&mut self) {
-        let world = &mut self.st.world;
-        for i in 0..world.part_count() {
-            let c = world.part_pose(i).translation.vector;
-            let lost = match world.part_state(i) {
-                PartState::Free => !world.pick_tray().contains(&c),
-                PartState::Placed => !world.place_tray().contains(&c),
-                PartState::Held | PartState::Removed => false,
-            };
-            if lost {
-                world.remove_part(i);
-                self.st.parts_lost += 1;
-            }
-        }
+        self.st.parts_lost += self.st.world.remove_parts_out_of_their_trays();
     }
 
     /// Steps the world to `t` with the arm still. Contacts of a resting arm are not new faults.

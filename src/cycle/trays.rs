@@ -15,11 +15,11 @@
 //!
 //! Units: s. Frames: none.
 
-use super::events::{EndReason, Event, Stage};
+use super::events::{EndReason, Event, PartLoss, Stage};
 use super::{CycleError, Run};
 use crate::config::OnEmpty;
-use crate::physics::PartState;
 use crate::physics::pile::PileOptions;
+use crate::physics::{HealthEvent, PartState};
 
 /// The trays' state.
 #[derive(Debug, Clone)]
@@ -193,11 +193,7 @@ impl Run<'_, '_> {
             .opts
             .seed
             .wrapping_add(fill.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        let obs = &mut *self.obs;
-        self.st
-            .world
-            .build_pile_observed(&PileOptions::new(self.cell.pile_count, seed), &mut |w| obs.stepped(w))
-            .map_err(CycleError::Pour)?;
+        self.pour(PileOptions::new(self.cell.pile_count, seed))?;
         self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
         self.st.arm.free_s = self.st.world.time_s();
         self.st.compute_from_s = self.st.world.time_s();
@@ -238,11 +234,7 @@ impl Run<'_, '_> {
             .seed
             .wrapping_add(n.wrapping_mul(0xD1B5_4A32_D192_ED03))
             .rotate_left(17);
-        let obs = &mut *self.obs;
-        self.st
-            .world
-            .build_pile_observed(&PileOptions::new(parts, seed), &mut |w| obs.stepped(w))
-            .map_err(CycleError::Pour)?;
+        self.pour(PileOptions::new(parts, seed))?;
         self.idle_until(t0 + dose_s)?;
         self.span(Stage::Stall, t0, self.st.world.time_s(), "hopper dose");
         let trays = &mut self.st.trays;
@@ -251,6 +243,25 @@ impl Run<'_, '_> {
         self.st.failed_spots.clear();
         self.st.arm.free_s = self.st.world.time_s();
         self.st.compute_from_s = self.st.world.time_s();
+        Ok(())
+    }
+
+    /// Pours a refill or a dose through the physics. A part that bounces out of the tray is
+    /// lost, as one dragged out by a pick: taken out of the cell and counted, and the cell goes
+    /// on (a feeder spills now and then; it does not end the shift).
+    fn pour(&mut self, opts: PileOptions) -> Result<(), CycleError> {
+        let obs = &mut *self.obs;
+        let report = self
+            .st
+            .world
+            .build_pile_observed(&opts.losing_spilled(), &mut |w| obs.stepped(w))
+            .map_err(CycleError::Pour)?;
+        for spilled in report.spilled {
+            if let HealthEvent::LeftVolume { body, volume, .. } = spilled {
+                self.st.parts_lost += 1;
+                self.event(Event::PartLost(PartLoss::LeftTray { body, tray: volume }));
+            }
+        }
         Ok(())
     }
 

@@ -95,6 +95,26 @@ impl World {
         b.set_enabled(false);
     }
 
+    /// Takes every part that is out of the tray it belongs in (a free part out of the pick tray,
+    /// a placed one out of the place tray) out of the world: the parts the health monitor reports
+    /// as having left their tray. Returns how many.
+    pub fn remove_parts_out_of_their_trays(&mut self) -> usize {
+        let mut removed = 0;
+        for i in 0..self.part_count() {
+            let c = self.part_pose(i).translation.vector;
+            let out = match self.part_state(i) {
+                PartState::Free => !self.pick_tray().contains(&c),
+                PartState::Placed => !self.place_tray().contains(&c),
+                PartState::Held | PartState::Removed => false,
+            };
+            if out {
+                self.remove_part(i);
+                removed += 1;
+            }
+        }
+        removed
+    }
+
     /// Indices of the parts in a given state.
     pub fn parts_in_state(&self, state: PartState) -> Vec<usize> {
         (0..self.parts.len())

@@ -17,7 +17,7 @@ use nalgebra::{Isometry3, Quaternion, Translation3, UnitQuaternion, Vector3};
 use rand::RngExt;
 use serde::Serialize;
 
-use super::{HealthError, PartState, World};
+use super::{HealthError, HealthEvent, PartState, World};
 
 /// How to build a pile.
 #[derive(Debug, Clone, Copy)]
@@ -28,6 +28,10 @@ pub struct PileOptions {
     pub seed: u64,
     /// Give up settling after this much simulated time (s).
     pub max_settle_s: f64,
+    /// A part that bounces out of the pick tray is taken out of the world and reported in
+    /// [`PileReport::spilled`] (a hopper dose or a refill in a running cell: a real feeder loses
+    /// the part, not the shift); without it, the pour ends with the health error.
+    pub lose_spilled: bool,
 }
 
 impl PileOptions {
@@ -37,7 +41,14 @@ impl PileOptions {
             count,
             seed,
             max_settle_s: 10.0,
+            lose_spilled: false,
         }
+    }
+
+    /// As these options, with parts that bounce out of the tray lost instead of a fault.
+    pub fn losing_spilled(mut self) -> Self {
+        self.lose_spilled = true;
+        self
     }
 }
 
@@ -73,6 +84,10 @@ pub struct PileReport {
     pub waves: usize,
     /// Settled poses, in part order.
     pub poses: Vec<PartPose>,
+    /// With [`PileOptions::lose_spilled`]: the parts that left the tray during the pour (one
+    /// health event each), taken out of the world.
+    #[serde(skip)]
+    pub spilled: Vec<HealthEvent>,
     /// Wall-clock time to build and settle (s) (not part of any result file).
     #[serde(skip)]
     pub wall_s: f64,
@@ -136,6 +151,7 @@ impl World {
         let start_time = self.time_s;
         let mut spawned = 0usize;
         let mut waves = 0usize;
+        let mut spilled = Vec::new();
         while spawned < opts.count {
             waves += 1;
             let mut layer_z = self.pile_top_z() - floor_z + 0.003;
@@ -187,7 +203,7 @@ impl World {
             // Let the wave fall and slow down before the next one.
             let wave_start = self.time_s;
             loop {
-                self.step()?;
+                self.pour_step(opts.lose_spilled, &mut spilled)?;
                 on_step(self);
                 let t = self.time_s - wave_start;
                 if t >= 0.6 || (t >= 0.1 && self.parts_at_rest(0.05, 1.0)) {
@@ -195,7 +211,7 @@ impl World {
                 }
             }
         }
-        let settled = self.settle_pile(start_time, opts.max_settle_s, on_step)?;
+        let settled = self.settle_pile(start_time, opts.max_settle_s, opts.lose_spilled, &mut spilled, on_step)?;
         let in_tray = self.parts_in_pick_tray();
         let pile_height_m = in_tray
             .iter()
@@ -227,16 +243,33 @@ impl World {
             }),
             waves,
             poses,
+            spilled,
             wall_s: wall.elapsed().as_secs_f64(),
         })
     }
 
+    /// One step of a pour. With `lose_spilled`, a step whose only problems are parts out of
+    /// their tray takes those parts out of the world and adds the events to `spilled`; any other
+    /// problem ends the pour.
+    fn pour_step(&mut self, lose_spilled: bool, spilled: &mut Vec<HealthEvent>) -> Result<(), HealthError> {
+        match self.step() {
+            Err(e) if lose_spilled && e.events.iter().all(|ev| matches!(ev, HealthEvent::LeftVolume { .. })) => {
+                self.remove_parts_out_of_their_trays();
+                spilled.extend(e.events);
+                Ok(())
+            }
+            other => other,
+        }
+    }
+
     /// Steps until the pile has settled (`true`) or `max_settle_s` have passed since
-    /// `start_time` (s).
+    /// `start_time` (s); parts that leave the tray as in [`World::pour_step`].
     pub(super) fn settle_pile(
         &mut self,
         start_time: f64,
         max_settle_s: f64,
+        lose_spilled: bool,
+        spilled: &mut Vec<HealthEvent>,
         on_step: &mut dyn FnMut(&World),
     ) -> Result<bool, HealthError> {
         // Settle: every 0.1 s of simulated time, compare poses with the last look. Settled when
@@ -246,7 +279,7 @@ impl World {
         let mut last = poses_now(self);
         let mut last_look = self.time_s;
         while self.time_s - start_time < max_settle_s {
-            self.step()?;
+            self.pour_step(lose_spilled, spilled)?;
             on_step(self);
             if self
                 .parts

@@ -736,3 +736,32 @@ fn the_arms_link_boxes_are_full_size_in_the_world() {
     }
     assert!(boxes >= 3, "the arm model has {boxes} boxes");
 }
+
+#[test]
+fn a_pour_that_spills_loses_the_part_and_goes_on_only_when_asked() {
+    // A part outside the pick tray when a pour steps (as a strip that bounced over the wall of
+    // a hopper dose): with `losing_spilled` it is taken out of the world and reported, and the
+    // pour completes; without (the negative control), the pour ends on the health error.
+    let spill = |lose: bool| {
+        let (mut w, _, _) = world("E");
+        let tray = *w.pick_tray();
+        let outside = tray.world_from_tray * Isometry3::translation(0.0, tray.half_xy_m[1] + 0.04, 0.05);
+        let stray = w.add_part(&outside);
+        let opts = PileOptions::new(6, 3);
+        let opts = if lose { opts.losing_spilled() } else { opts };
+        let built = w.build_pile(&opts);
+        (w, stray, built)
+    };
+    let (w, stray, built) = spill(true);
+    let report = built.expect("the pour goes on");
+    assert_eq!(report.spilled.len(), 1, "{:?}", report.spilled);
+    assert!(matches!(report.spilled[0], HealthEvent::LeftVolume { .. }));
+    assert_eq!(w.part_state(stray), binpick::physics::PartState::Removed);
+    assert_eq!(report.in_tray, 6);
+    let (_, _, built) = spill(false);
+    let err = built.expect_err("the pour ends on the spill");
+    assert!(
+        err.events.iter().any(|e| matches!(e, HealthEvent::LeftVolume { .. })),
+        "{err}"
+    );
+}
