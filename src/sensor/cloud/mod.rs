@@ -113,6 +113,10 @@ pub const VERIFY_SPACING_M: f64 = 0.0014;
 const PIECE_BOX_MARGIN_PX: f64 = 1.0;
 /// Lowest verification score kept.
 pub const MIN_SCORE: f64 = 0.8;
+/// An outline fit whose middle yaw fails verification with at least this score is scanned over
+/// its yaw span (a near miss; lower scores are other poses, and the scan renders at every pixel
+/// of up to 25 yaws).
+pub const YAW_SCAN_MIN_SCORE: f64 = 0.7;
 /// A patch with a flat-face hypothesis verified this well is not tried as a lying part's top.
 pub const LYING_SKIP_SCORE: f64 = 0.95;
 
@@ -792,13 +796,16 @@ impl<'a> Cloud<'a> {
                     let u = e1 * f.yaw_rad.cos() + e2 * f.yaw_rad.sin();
                     let center = plane.point + e1 * f.center[0] + e2 * f.center[1];
                     let pose = pose_from_face(face, &center, &n, &u);
-                    // The silhouette's middle yaw, or, where that does not verify, the yaw in
-                    // its span the image supports best: a 7 degree span leaves a TO-220's tab
-                    // hole and leads far enough off to fail verification at the middle.
-                    let checked = self.check(model, &pose, Some(fi)).or_else(|| {
-                        self.best_yaw(model, &pose, fi, f.yaw_span_rad)
-                            .and_then(|turned| self.check(model, &turned, Some(fi)))
-                    });
+                    // The silhouette's middle yaw, or, where that only just fails verification,
+                    // the yaw in its span the image supports best: a 7 degree span leaves a
+                    // TO-220's tab hole and leads far enough off to fail at the middle (0.75).
+                    let checked = match self.check_scored(model, &pose, Some(fi)) {
+                        Ok(d) => Some(d),
+                        Err(score) if score >= YAW_SCAN_MIN_SCORE => self
+                            .best_yaw(model, &pose, fi, f.yaw_span_rad)
+                            .and_then(|turned| self.check(model, &turned, Some(fi))),
+                        Err(_) => None,
+                    };
                     if let Some(mut d) = checked {
                         d.1.yaw_span_rad = f.yaw_span_rad;
                         verified.push(d);
@@ -942,24 +949,36 @@ impl<'a> Cloud<'a> {
         pose: &Isometry3<f64>,
         face_up: Option<usize>,
     ) -> Option<(i64, CloudDetection)> {
+        self.check_scored(model, pose, face_up).ok()
+    }
+
+    /// As [`Cloud::check`], a failed hypothesis giving its verification score (0 when it lies
+    /// under the floor or shows nothing to verify).
+    fn check_scored(
+        &self,
+        model: &CloudModel,
+        pose: &Isometry3<f64>,
+        face_up: Option<usize>,
+    ) -> Result<(i64, CloudDetection), f64> {
         if model.lowest_along(pose, &self.floor.normal) < self.floor.point.dot(&self.floor.normal) - UNDER_FLOOR_M {
-            return None;
+            return Err(0.0);
         }
-        let (score, visible, evidence) = self.verify(model, pose)?;
-        (score >= MIN_SCORE).then(|| {
-            (
-                evidence,
-                CloudDetection {
-                    world_from_part: *pose,
-                    face_up: face_up
-                        .unwrap_or_else(|| model.face_nearest_up(pose, &(self.origin - pose.translation.vector))),
-                    score,
-                    visible_fraction: visible,
-                    curved_side_up: face_up.is_none(),
-                    yaw_span_rad: 0.0,
-                },
-            )
-        })
+        let (score, visible, evidence) = self.verify(model, pose).ok_or(0.0)?;
+        if score < MIN_SCORE {
+            return Err(score);
+        }
+        Ok((
+            evidence,
+            CloudDetection {
+                world_from_part: *pose,
+                face_up: face_up
+                    .unwrap_or_else(|| model.face_nearest_up(pose, &(self.origin - pose.translation.vector))),
+                score,
+                visible_fraction: visible,
+                curved_side_up: face_up.is_none(),
+                yaw_span_rad: 0.0,
+            },
+        ))
     }
 
     /// Every how many pixels (along rows and columns) a hypothesis at `pose` is verified: a
