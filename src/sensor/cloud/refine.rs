@@ -175,7 +175,6 @@ impl super::Cloud<'_> {
         face_up: usize,
         span_rad: f64,
     ) -> Option<Isometry3<f64>> {
-        let pose = *pose;
         let face = &model.faces[face_up];
         let pivot = pose.translation.vector + pose.rotation * face.center;
         let axis = Unit::new_normalize(pose.rotation * face.normal);
@@ -183,20 +182,12 @@ impl super::Cloud<'_> {
         if steps == 0 {
             return None;
         }
-        let at = |k: i64| {
-            turn_about(
-                &pose,
-                &pivot,
-                &UnitQuaternion::from_axis_angle(&axis, k as f64 * YAW_STEP_RAD),
-            )
-        };
-        let evidence: Vec<(i64, i64)> = (-steps..=steps)
-            .filter_map(|k| self.verify_every(model, &at(k), 1).map(|(_, _, e)| (k, e)))
-            .collect();
-        let top = evidence.iter().map(|(_, e)| *e).max()?;
-        let best: Vec<i64> = evidence.iter().filter(|(_, e)| *e == top).map(|(k, _)| *k).collect();
+        let best = self.best_turns(model, pose, &pivot, &axis, YAW_STEP_RAD, steps);
+        if best.is_empty() {
+            return None;
+        }
         let yaw = best.iter().sum::<i64>() as f64 / best.len() as f64 * YAW_STEP_RAD;
-        Some(turn_about(&pose, &pivot, &UnitQuaternion::from_axis_angle(&axis, yaw)))
+        Some(turn_about(pose, &pivot, &UnitQuaternion::from_axis_angle(&axis, yaw)))
     }
 }
 
@@ -227,27 +218,40 @@ impl super::Cloud<'_> {
         let pivot = pose.translation.vector + pose.rotation * face.center;
         let axis = Unit::new_normalize(*long);
         let steps = (TILT_SCAN_RAD / TILT_STEP_RAD).round() as i64;
-        let at = |k: i64| {
-            turn_about(
-                &pose,
-                &pivot,
-                &UnitQuaternion::from_axis_angle(&axis, k as f64 * TILT_STEP_RAD),
-            )
-        };
-        let evidence: Vec<(i64, i64)> = (-steps..=steps)
-            .filter_map(|k| self.verify_every(model, &at(k), 1).map(|(_, _, e)| (k, e)))
-            .collect();
-        let top = evidence.iter().map(|(_, e)| *e).max()?;
-        if evidence.iter().any(|&(k, e)| k == 0 && e == top) {
+        let best = self.best_turns(model, &pose, &pivot, &axis, TILT_STEP_RAD, steps);
+        if best.is_empty() || best.contains(&0) {
             return None;
         }
-        let best: Vec<i64> = evidence.iter().filter(|(_, e)| *e == top).map(|(k, _)| *k).collect();
         let tilt_rad = best.iter().sum::<i64>() as f64 / best.len() as f64 * TILT_STEP_RAD;
         Some(turn_about(
             &pose,
             &pivot,
             &UnitQuaternion::from_axis_angle(&axis, tilt_rad),
         ))
+    }
+
+    /// The steps k (`-steps..=steps`) whose turn of `pose` by `k * step_rad` about `axis`
+    /// through `pivot` verifies with the most evidence at every pixel; empty when none
+    /// verifies. The yaw and the tilt scans both read it.
+    fn best_turns(
+        &self,
+        model: &CloudModel,
+        pose: &Isometry3<f64>,
+        pivot: &Vector3<f64>,
+        axis: &Unit<Vector3<f64>>,
+        step_rad: f64,
+        steps: i64,
+    ) -> Vec<i64> {
+        let evidence: Vec<(i64, i64)> = (-steps..=steps)
+            .filter_map(|k| {
+                let turned = turn_about(pose, pivot, &UnitQuaternion::from_axis_angle(axis, k as f64 * step_rad));
+                self.verify_every(model, &turned, 1).map(|(_, _, e)| (k, e))
+            })
+            .collect();
+        let Some(top) = evidence.iter().map(|(_, e)| *e).max() else {
+            return Vec::new();
+        };
+        evidence.iter().filter(|(_, e)| *e == top).map(|(k, _)| *k).collect()
     }
 }
 
