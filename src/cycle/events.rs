@@ -227,8 +227,27 @@ pub enum Event {
     PlaceTrayExchange,
     /// A pick ended.
     Outcome(Outcome),
-    /// A motion did not start where the arm was (jump (rad)).
-    MotionStartMismatch(f64),
+    /// A motion did not start where the arm was, or as fast as it moved.
+    MotionStartMismatch(StartMismatch),
+}
+
+/// How far a motion's start was from where the arm was and from the velocity the motion before
+/// it commanded at its end.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct StartMismatch {
+    /// Largest joint position step from the arm's measured position (rad): its tracking error
+    /// at least.
+    pub q_rad: f64,
+    /// Largest step in the commanded joint velocity (rad/s).
+    pub qd_rad_s: f64,
+}
+
+impl StartMismatch {
+    /// A step the servo's feedback answers with a torque spike (0.01 rad, 0.1 rad/s): an
+    /// incident, where the tracking errors of well-joined motions (about 1 mrad) are not.
+    pub fn is_large(&self) -> bool {
+        self.q_rad > 0.01 || self.qd_rad_s > 0.1
+    }
 }
 
 impl Event {
@@ -263,9 +282,13 @@ impl Event {
     }
 
     /// Whether it is an incident a tally lists ([`super::Incident`]): a fault, a lost part, a
-    /// physics fault.
+    /// physics fault, a large step at a motion's start.
     pub fn is_incident(&self) -> bool {
-        matches!(self, Event::Fault(_) | Event::PartLost(_) | Event::PhysicsFault(_))
+        match self {
+            Event::Fault(_) | Event::PartLost(_) | Event::PhysicsFault(_) => true,
+            Event::MotionStartMismatch(m) => m.is_large(),
+            _ => false,
+        }
     }
 
     /// Whether a log shows it as a warning: faults, lost parts, picks that were not placed.
@@ -330,7 +353,7 @@ impl fmt::Display for Event {
             ),
             Event::Fault(Fault::Collision(what)) => write!(f, "collision: {what}"),
             Event::Fault(Fault::ProtectiveStop(what)) => write!(f, "protective stop: {what}"),
-            Event::Fault(Fault::NoPathOutOfView) => f.write_str("no path out of the sensor's view"),
+            Event::Fault(Fault::NoPathOutOfView(why)) => write!(f, "no path out of the sensor's view: {why}"),
             Event::PartLost(PartLoss::LeftTray { body, tray }) => write!(f, "{body} left the {tray}"),
             Event::PartLost(PartLoss::PressedDeep { part, depth_m }) => {
                 write!(f, "part {part} pressed {:.2} mm deep", depth_m * 1e3)
@@ -345,7 +368,11 @@ impl fmt::Display for Event {
                 "{taken} pick(s) from this result before, {since_capture} into the pile since its capture"
             ),
             Event::Outcome(o) => write!(f, "{}: {}", o.name(), o.cause()),
-            Event::MotionStartMismatch(jump_rad) => write!(f, "{jump_rad:.4} rad"),
+            Event::MotionStartMismatch(m) => write!(
+                f,
+                "a motion started {:.4} rad from the arm, its commanded velocity stepped {:.3} rad/s",
+                m.q_rad, m.qd_rad_s
+            ),
             Event::PickStart | Event::PlaceStart | Event::Released | Event::PlaceTrayExchange => Ok(()),
         }
     }
@@ -515,5 +542,27 @@ mod tests {
         assert_eq!(Event::Outcome(Outcome::Placed).to_string(), "placed: ");
         assert_eq!(EndReason::Interrupted.to_string(), "interrupted");
         assert_eq!(serde_json::to_string(&EndReason::PicksDone).unwrap(), "\"picks done\"");
+    }
+
+    /// A step at a motion's start is an incident when the servo's feedback would answer it with
+    /// a torque spike; the control: the tracking error a well-joined motion starts with is not.
+    #[test]
+    fn a_large_step_at_a_motions_start_is_an_incident_and_a_tracking_error_is_not() {
+        let step = |q_rad, qd_rad_s| Event::MotionStartMismatch(StartMismatch { q_rad, qd_rad_s });
+        assert!(!step(0.0013, 0.0).is_incident());
+        assert!(!step(0.0, 0.05).is_incident());
+        assert!(step(0.02, 0.0).is_incident());
+        assert!(step(0.0, 0.5).is_incident());
+        assert_eq!(
+            step(0.02, 0.5).to_string(),
+            "a motion started 0.0200 rad from the arm, its commanded velocity stepped 0.500 rad/s"
+        );
+        let no_path = Event::Fault(Fault::NoPathOutOfView(crate::planning::PlanError::StartInCollision(
+            "clearance 1.0 mm between link_6 and the pick tray".into(),
+        )));
+        assert_eq!(
+            no_path.to_string(),
+            "no path out of the sensor's view: start in collision: clearance 1.0 mm between link_6 and the pick tray"
+        );
     }
 }

@@ -60,7 +60,8 @@ pub mod trays;
 use nalgebra::{Isometry3, Vector3};
 
 pub use events::{
-    CycleEvent, EndReason, Event, EventLog, Observer, Observers, PartLoss, Planned, Recognised, Stage, StallCause, Takt,
+    CycleEvent, EndReason, Event, EventLog, Observer, Observers, PartLoss, Planned, Recognised, Stage, StallCause,
+    StartMismatch, Takt,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
@@ -201,6 +202,8 @@ pub struct Cell<'a> {
 pub struct ArmState {
     /// The arm's actual joint state and the servo's integral after the last motion.
     pub servo: crate::servo::ServoState,
+    /// The joint velocity the last motion commanded at its end (rad/s); zero at rest.
+    pub commanded_qd: crate::robot::JointVector,
     /// When the arm has nothing to do from (s).
     pub free_s: f64,
     /// Largest tracking error since the pick's motions began (rad).
@@ -371,6 +374,7 @@ impl<'a> Cell<'a> {
         Ok(CellState {
             arm: ArmState {
                 servo: crate::servo::ServoState::at_rest(world.joints()),
+                commanded_qd: crate::robot::JointVector::zeros(),
                 free_s: world.time_s(),
                 max_error_rad: 0.0,
                 peak_demand_ratio: [0.0; crate::robot::DOF],

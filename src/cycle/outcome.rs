@@ -259,8 +259,8 @@ pub enum Fault {
     Collision(HealthEvent),
     /// The servo tripped a protective stop.
     ProtectiveStop(Stop),
-    /// The arm could not leave the sensor's view.
-    NoPathOutOfView,
+    /// The arm could not leave the sensor's view: why the planner found no path.
+    NoPathOutOfView(PlanError),
 }
 
 #[cfg(test)]

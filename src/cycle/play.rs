@@ -15,7 +15,7 @@ use std::borrow::Cow;
 
 use nalgebra::{Isometry3, Translation3};
 
-use super::events::{Event, PartLoss, Stage};
+use super::events::{Event, PartLoss, Stage, StartMismatch};
 use super::outcome::{Fault, Outcome, Slip, Stop};
 use super::{CycleError, Run};
 use crate::physics::suction::GripperEvent;
@@ -265,9 +265,13 @@ impl Run<'_, '_> {
             ..
         } = segment;
         let robot = self.cell.robot;
-        let jump = (motion.at(0.0).q - self.st.world.joints()).amax();
-        if jump > 1e-3 {
-            self.event(Event::MotionStartMismatch(jump));
+        let start = motion.at(0.0);
+        let mismatch = StartMismatch {
+            q_rad: (start.q - self.st.world.joints()).amax(),
+            qd_rad_s: (start.qd - self.st.arm.commanded_qd).amax(),
+        };
+        if mismatch.q_rad > 1e-3 || mismatch.qd_rad_s > 1e-2 {
+            self.event(Event::MotionStartMismatch(mismatch));
         }
         // The controller's model with the payload it believes; the plant with its own model
         // error and the part as it actually sits on the cup.
@@ -283,6 +287,7 @@ impl Run<'_, '_> {
             *settle,
         );
         self.st.arm.servo = run.end_state;
+        self.st.arm.commanded_qd = motion.at(motion.duration_s()).qd;
         let t0 = self.st.world.time_s();
         let arm = &mut self.st.arm;
         for i in 0..DOF {
@@ -338,7 +343,9 @@ impl Run<'_, '_> {
         self.obs.executed(t0, motion, &run.ticks, played);
         if let Some((after_s, trip)) = run.trip {
             let stop = Stop { trip, after_s };
-            self.recover(&[], Fault::ProtectiveStop(stop.clone()))?;
+            // Back along what the arm executed before the drive stopped.
+            let path: Vec<JointVector> = run.ticks.iter().map(|tk| tk.q).collect();
+            self.recover(&path, Fault::ProtectiveStop(stop.clone()))?;
             return Ok(Played::Failed(Outcome::ProtectiveStop(stop)));
         }
         if let Some(why) = dropped {
@@ -370,6 +377,7 @@ impl Run<'_, '_> {
         self.st.world.vacuum_off();
         self.idle_until(t + self.cell.scene.sim.protective_stop_reset_s)?;
         self.st.arm.servo = ServoState::at_rest(self.st.world.joints());
+        self.st.arm.commanded_qd = JointVector::zeros();
         self.clear_deep_penetrations();
         let tool = self.st.world.world_from_tool();
         let tray = self.st.world.pick_tray();
@@ -405,6 +413,7 @@ impl Run<'_, '_> {
             self.retrace(&back, 3)?;
         }
         self.st.arm.servo = ServoState::at_rest(self.st.world.joints());
+        self.st.arm.commanded_qd = JointVector::zeros();
         self.st.world.take_gripper_events();
         self.st.gripper_events.clear();
         self.span(Stage::Stall, t, self.st.world.time_s(), "fault reset and retreat");

@@ -317,9 +317,12 @@ impl Run<'_, '_> {
             }
             plan = free.plan(&self.st.world.joints(), &home, &PlanOptions::default(), &mut rng);
         }
-        let Ok(p) = plan else {
-            self.event(Event::Fault(Fault::NoPathOutOfView));
-            return Ok(false);
+        let p = match plan {
+            Ok(p) => p,
+            Err(why) => {
+                self.event(Event::Fault(Fault::NoPathOutOfView(why)));
+                return Ok(false);
+            }
         };
         let hand = self.cell.hand;
         let acc = self.cell.accelerate_free(&p.waypoints, &free);

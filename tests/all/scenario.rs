@@ -132,6 +132,9 @@ fn scenario(workpiece: &str) {
     );
     assert_eq!(s.faults.collisions, 0, "{workpiece}: {outcomes:?}");
     assert_eq!(s.faults.protective_stops, 0, "{workpiece}: {outcomes:?}");
+    // No incident either: no part lost, no motion that started off the arm's state or with a
+    // step in its commanded velocity.
+    assert!(s.incidents.is_empty(), "{workpiece}: {:?}", s.incidents);
     let servo = binpick::servo::Servo::from_config(&scene.scene.sim);
     let check = demand_check(&robot, &servo, &rec.trace);
     assert!(check.is_ok(), "{workpiece}: {check:?}");
