@@ -107,6 +107,8 @@ pub enum PartLoss {
         body: String,
         /// Which tray.
         tray: &'static str,
+        /// What the cell was doing then.
+        during: LeftDuring,
     },
     /// A fault pressed it deeper into the tray or a neighbour than the health monitor allows.
     PressedDeep {
@@ -115,6 +117,17 @@ pub enum PartLoss {
         /// Overlap (m).
         depth_m: f64,
     },
+}
+
+/// What the cell was doing when a part left its tray: what explains the loss.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub enum LeftDuring {
+    /// A hopper dose or a refill was pouring parts in: it bounced out.
+    Pour,
+    /// This part was on the cup: dragged out with it, or knocked over the wall.
+    Holding(usize),
+    /// Nothing was on the cup: an agitation, a pile settling, a descent.
+    CupEmpty,
 }
 
 /// A generated motion of one pick, as the event log reports it.
@@ -354,7 +367,14 @@ impl fmt::Display for Event {
             Event::Fault(Fault::Collision(what)) => write!(f, "collision: {what}"),
             Event::Fault(Fault::ProtectiveStop(what)) => write!(f, "protective stop: {what}"),
             Event::Fault(Fault::NoPathOutOfView(why)) => write!(f, "no path out of the sensor's view: {why}"),
-            Event::PartLost(PartLoss::LeftTray { body, tray }) => write!(f, "{body} left the {tray}"),
+            Event::PartLost(PartLoss::LeftTray { body, tray, during }) => {
+                write!(f, "{body} left the {tray}")?;
+                match during {
+                    LeftDuring::Pour => f.write_str(" in a pour"),
+                    LeftDuring::Holding(part) => write!(f, " while part {part} was on the cup"),
+                    LeftDuring::CupEmpty => f.write_str(" with the cup empty"),
+                }
+            }
             Event::PartLost(PartLoss::PressedDeep { part, depth_m }) => {
                 write!(f, "part {part} pressed {:.2} mm deep", depth_m * 1e3)
             }
@@ -546,8 +566,9 @@ mod tests {
 
     /// A step at a motion's start is an incident when the servo's feedback would answer it with
     /// a torque spike; the control: the tracking error a well-joined motion starts with is not.
+    /// A lost part says what the cell was doing; no path out of the view says why.
     #[test]
-    fn a_large_step_at_a_motions_start_is_an_incident_and_a_tracking_error_is_not() {
+    fn incidents_say_what_happened_and_a_tracking_error_is_not_one() {
         let step = |q_rad, qd_rad_s| Event::MotionStartMismatch(StartMismatch { q_rad, qd_rad_s });
         assert!(!step(0.0013, 0.0).is_incident());
         assert!(!step(0.0, 0.05).is_incident());
@@ -556,6 +577,23 @@ mod tests {
         assert_eq!(
             step(0.02, 0.5).to_string(),
             "a motion started 0.0200 rad from the arm, its commanded velocity stepped 0.500 rad/s"
+        );
+        let left = |during| {
+            Event::PartLost(PartLoss::LeftTray {
+                body: "part 5".into(),
+                tray: "pick tray",
+                during,
+            })
+            .to_string()
+        };
+        assert_eq!(left(LeftDuring::Pour), "part 5 left the pick tray in a pour");
+        assert_eq!(
+            left(LeftDuring::Holding(7)),
+            "part 5 left the pick tray while part 7 was on the cup"
+        );
+        assert_eq!(
+            left(LeftDuring::CupEmpty),
+            "part 5 left the pick tray with the cup empty"
         );
         let no_path = Event::Fault(Fault::NoPathOutOfView(crate::planning::PlanError::StartInCollision(
             "clearance 1.0 mm between link_6 and the pick tray".into(),

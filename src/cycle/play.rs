@@ -15,7 +15,7 @@ use std::borrow::Cow;
 
 use nalgebra::{Isometry3, Translation3};
 
-use super::events::{Event, PartLoss, Stage, StartMismatch};
+use super::events::{Event, LeftDuring, PartLoss, Stage, StartMismatch};
 use super::outcome::{Fault, Outcome, Slip, Stop};
 use super::{CycleError, Run};
 use crate::physics::suction::GripperEvent;
@@ -202,6 +202,11 @@ impl Run<'_, '_> {
         // once), a collision or a part pressed into the tray stops the motion.
         let mut fault = None;
         let mut lost_removed = false;
+        let during = self
+            .st
+            .world
+            .held_part()
+            .map_or(LeftDuring::CupEmpty, LeftDuring::Holding);
         for event in report.events {
             match event {
                 HealthEvent::LeftVolume { body, volume, .. } => {
@@ -209,7 +214,11 @@ impl Run<'_, '_> {
                         self.remove_lost_parts();
                         lost_removed = true;
                     }
-                    self.event(Event::PartLost(PartLoss::LeftTray { body, tray: volume }));
+                    self.event(Event::PartLost(PartLoss::LeftTray {
+                        body,
+                        tray: volume,
+                        during,
+                    }));
                 }
                 e @ (HealthEvent::ArmCollision { .. } | HealthEvent::DeepPenetration { .. }) => {
                     fault.get_or_insert(e);

@@ -15,7 +15,7 @@
 //!
 //! Units: s. Frames: none.
 
-use super::events::{EndReason, Event, PartLoss, Stage};
+use super::events::{EndReason, Event, LeftDuring, PartLoss, Stage};
 use super::{CycleError, Run};
 use crate::config::OnEmpty;
 use crate::physics::pile::PileOptions;
@@ -259,7 +259,11 @@ impl Run<'_, '_> {
         for spilled in report.spilled {
             if let HealthEvent::LeftVolume { body, volume, .. } = spilled {
                 self.st.parts_lost += 1;
-                self.event(Event::PartLost(PartLoss::LeftTray { body, tray: volume }));
+                self.event(Event::PartLost(PartLoss::LeftTray {
+                    body,
+                    tray: volume,
+                    during: LeftDuring::Pour,
+                }));
             }
         }
         Ok(())
