@@ -382,9 +382,9 @@ pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &
     }
     let patches = cloud.segment();
     // Patches in parallel, collected in their order: deterministic.
-    let per_patch: Vec<(Vec<CloudDetection>, Vec<lying::AxisFit>)> = patches
+    let per_patch: Vec<(Option<CloudDetection>, Vec<lying::AxisFit>)> = patches
         .par_iter()
-        .map(|patch| cloud.patch_hypotheses(patch, model))
+        .map(|patch| cloud.best_hypothesis(patch, model))
         .collect();
     let mut found: Vec<CloudDetection> = Vec::new();
     let mut fits = Vec::new();
@@ -745,13 +745,8 @@ impl<'a> Cloud<'a> {
         (plane, [e1, e2], inside, edge, outside)
     }
 
-    /// The best verified hypothesis for a patch, if any; the lying parts' axis fits; and whether
-    /// the patch is larger than every face (two parts lying level side by side look like that).
-    fn best_hypothesis(
-        &self,
-        patch: &Patch,
-        model: &CloudModel,
-    ) -> (Option<CloudDetection>, Vec<lying::AxisFit>, bool) {
+    /// The best verified hypothesis for a patch, if any.
+    fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> (Option<CloudDetection>, Vec<lying::AxisFit>) {
         let (plane, [e1, e2], inside, edge, outside) = self.silhouette(patch, model.trim_plane);
         let n = plane.normal;
         // The fits need only the inside points' convex hull (and so does the minimum-area
@@ -769,7 +764,6 @@ impl<'a> Cloud<'a> {
             .pixel_size_at_m((plane.point - self.origin).dot(&self.optical));
         // (evidence, detection) of every hypothesis the image supports.
         let mut verified: Vec<(i64, CloudDetection)> = Vec::new();
-        let mut larger_than_every_face = true;
         for (fi, face) in model.faces.iter().enumerate() {
             // A box's faces of equal extents look alike: the first stands for them.
             let twin = |g: &Face| {
@@ -790,9 +784,6 @@ impl<'a> Cloud<'a> {
             if dims[0] > ext[0] + pixel_m || dims[1] > ext[1] + pixel_m {
                 continue;
             }
-            if outline.is_none() {
-                larger_than_every_face = false;
-            }
             let mut fits = Vec::new();
             if let Some(o) = outline {
                 // A patch larger than the outline (its area, a pixel's rim around it) is not it.
@@ -800,7 +791,6 @@ impl<'a> Cloud<'a> {
                 if inside.len() as f64 * pixel_m * pixel_m > o.reach_area_m2 + rim_m2 {
                     continue;
                 }
-                larger_than_every_face = false;
                 // Its true outline, at every yaw: no half turn is added below.
                 for f in outline::fit_outline(o, &inside, &edge, &outside, theta0, model.yaw_span_max_rad) {
                     let u = e1 * f.yaw_rad.cos() + e2 * f.yaw_rad.sin();
@@ -869,83 +859,7 @@ impl<'a> Cloud<'a> {
         let best = self
             .decide(model, &verified)
             .map(|d| self.refine(model, patch, &plane, d));
-        (best, fits, larger_than_every_face)
-    }
-
-    /// A patch's hypotheses: its best, or, where it is larger than every face and nothing
-    /// explains it whole, the best of each of its two halves ([`Cloud::halves`]): two parts
-    /// lying level side by side make one patch. The halves' lying fits are left out (the whole
-    /// patch's stand).
-    fn patch_hypotheses(&self, patch: &Patch, model: &CloudModel) -> (Vec<CloudDetection>, Vec<lying::AxisFit>) {
-        let (best, fits, larger) = self.best_hypothesis(patch, model);
-        if best.is_some() || !larger {
-            return (best.into_iter().collect(), fits);
-        }
-        let found = self
-            .halves(patch)
-            .iter()
-            .filter_map(|half| self.best_hypothesis(half, model).0)
-            .collect();
-        (found, fits)
-    }
-
-    /// A patch cut in two by 2-means on its pixels' image positions, started at its two ends
-    /// along its principal axis; empty if a half has fewer than [`MIN_PATCH_PX`] pixels.
-    fn halves(&self, patch: &Patch) -> Vec<Patch> {
-        let uv: Vec<[f64; 2]> = patch
-            .pixels
-            .iter()
-            .map(|&i| [(i % self.w) as f64, (i / self.w) as f64])
-            .collect();
-        let n = uv.len() as f64;
-        let mean = uv.iter().fold([0.0, 0.0], |m, p| [m[0] + p[0] / n, m[1] + p[1] / n]);
-        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
-        for p in &uv {
-            let (x, y) = (p[0] - mean[0], p[1] - mean[1]);
-            (sxx, sxy, syy) = (sxx + x * x, sxy + x * y, syy + y * y);
-        }
-        let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
-        let axis = [angle.cos(), angle.sin()];
-        let along = |p: &[f64; 2]| (p[0] - mean[0]) * axis[0] + (p[1] - mean[1]) * axis[1];
-        let (lo, hi) = uv.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
-            let a = along(p);
-            (lo.min(a), hi.max(a))
-        });
-        let mut centres = [
-            [mean[0] + axis[0] * lo, mean[1] + axis[1] * lo],
-            [mean[0] + axis[0] * hi, mean[1] + axis[1] * hi],
-        ];
-        let d2 = |p: &[f64; 2], c: &[f64; 2]| (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2);
-        let mut second = vec![false; uv.len()];
-        for _ in 0..8 {
-            for (k, p) in uv.iter().enumerate() {
-                second[k] = d2(p, &centres[1]) < d2(p, &centres[0]);
-            }
-            for (c, side) in centres.iter_mut().zip([false, true]) {
-                let (mut sum, mut count) = ([0.0, 0.0], 0.0);
-                for (p, _) in uv.iter().zip(&second).filter(|(_, s)| **s == side) {
-                    sum = [sum[0] + p[0], sum[1] + p[1]];
-                    count += 1.0;
-                }
-                if count > 0.0 {
-                    *c = [sum[0] / count, sum[1] / count];
-                }
-            }
-        }
-        let part = |side: bool| Patch {
-            pixels: patch
-                .pixels
-                .iter()
-                .zip(&second)
-                .filter(|(_, s)| **s == side)
-                .map(|(i, _)| *i)
-                .collect(),
-        };
-        let halves = vec![part(false), part(true)];
-        if halves.iter().any(|h| h.pixels.len() < MIN_PATCH_PX) {
-            return Vec::new();
-        }
-        halves
+        (best, fits)
     }
 
     /// Each verified hypothesis's face swapped for its twins (the other model faces of the same
