@@ -256,6 +256,11 @@ pub struct StartMismatch {
 }
 
 impl StartMismatch {
+    /// Worth a line in the event log (1 mrad, 0.01 rad/s): a hand-over's tracking error shows.
+    pub fn is_logged(&self) -> bool {
+        self.q_rad > 1e-3 || self.qd_rad_s > 1e-2
+    }
+
     /// A step the servo's feedback answers with a torque spike (0.01 rad, 0.1 rad/s): an
     /// incident, where the tracking errors of well-joined motions (about 1 mrad) are not.
     pub fn is_large(&self) -> bool {

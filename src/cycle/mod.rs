@@ -214,6 +214,14 @@ pub struct ArmState {
     pub saturated_s: f64,
 }
 
+impl ArmState {
+    /// The arm stopped at `q`: the servo at rest there, no velocity commanded.
+    pub fn rest_at(&mut self, q: crate::robot::JointVector) {
+        self.servo = crate::servo::ServoState::at_rest(q);
+        self.commanded_qd = crate::robot::JointVector::zeros();
+    }
+}
+
 /// The mutable state of the cell.
 pub struct CellState {
     /// The physics world: trays, parts, the arm's bodies, the gripper.

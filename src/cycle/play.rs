@@ -22,7 +22,7 @@ use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthEvent, PartState};
 use crate::robot::{DOF, JointVector, Payload};
 pub(super) use crate::servo::Settle;
-use crate::servo::{ServoState, execute_from};
+use crate::servo::execute_from;
 use crate::trajectory::{LineLimits, LineMotion, Motion, Overlapped, Trajectory, straight_line};
 
 /// How a motion ended.
@@ -279,7 +279,7 @@ impl Run<'_, '_> {
             q_rad: (start.q - self.st.world.joints()).amax(),
             qd_rad_s: (start.qd - self.st.arm.commanded_qd).amax(),
         };
-        if mismatch.q_rad > 1e-3 || mismatch.qd_rad_s > 1e-2 {
+        if mismatch.is_logged() {
             self.event(Event::MotionStartMismatch(mismatch));
         }
         // The controller's model with the payload it believes; the plant with its own model
@@ -385,8 +385,7 @@ impl Run<'_, '_> {
         self.obs.marker(t, "fault");
         self.st.world.vacuum_off();
         self.idle_until(t + self.cell.scene.sim.protective_stop_reset_s)?;
-        self.st.arm.servo = ServoState::at_rest(self.st.world.joints());
-        self.st.arm.commanded_qd = JointVector::zeros();
+        self.st.arm.rest_at(self.st.world.joints());
         self.clear_deep_penetrations();
         let tool = self.st.world.world_from_tool();
         let tray = self.st.world.pick_tray();
@@ -421,8 +420,7 @@ impl Run<'_, '_> {
             let back: Vec<JointVector> = path.iter().rev().copied().collect();
             self.retrace(&back, 3)?;
         }
-        self.st.arm.servo = ServoState::at_rest(self.st.world.joints());
-        self.st.arm.commanded_qd = JointVector::zeros();
+        self.st.arm.rest_at(self.st.world.joints());
         self.st.world.take_gripper_events();
         self.st.gripper_events.clear();
         self.span(Stage::Stall, t, self.st.world.time_s(), "fault reset and retreat");
