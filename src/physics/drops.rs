@@ -103,7 +103,7 @@ impl World {
                 dropped.push(self.add_part(&(tray * Isometry3::from_parts(Translation3::from(c), rot))));
             }
             let start = self.time_s;
-            let settled = self.settle_pile(start, opts.max_settle_s, false, &mut Vec::new(), &mut |_| {})?;
+            let settled = self.settle_pile(start, opts.max_settle_s, None, &mut |_| {})?;
             report.settled.push(settled);
             let at: Vec<Isometry3<f64>> = dropped.iter().map(|&i| self.part_pose(i)).collect();
             report.crowded += at

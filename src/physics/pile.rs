@@ -152,6 +152,7 @@ impl World {
         let mut spawned = 0usize;
         let mut waves = 0usize;
         let mut spilled = Vec::new();
+        let mut lost = opts.lose_spilled.then_some(&mut spilled);
         while spawned < opts.count {
             waves += 1;
             let mut layer_z = self.pile_top_z() - floor_z + 0.003;
@@ -203,7 +204,7 @@ impl World {
             // Let the wave fall and slow down before the next one.
             let wave_start = self.time_s;
             loop {
-                self.pour_step(opts.lose_spilled, &mut spilled)?;
+                self.pour_step(lost.as_deref_mut())?;
                 on_step(self);
                 let t = self.time_s - wave_start;
                 if t >= 0.6 || (t >= 0.1 && self.parts_at_rest(0.05, 1.0)) {
@@ -211,7 +212,7 @@ impl World {
                 }
             }
         }
-        let settled = self.settle_pile(start_time, opts.max_settle_s, opts.lose_spilled, &mut spilled, on_step)?;
+        let settled = self.settle_pile(start_time, opts.max_settle_s, lost, on_step)?;
         let in_tray = self.parts_in_pick_tray();
         let pile_height_m = in_tray
             .iter()
@@ -248,17 +249,17 @@ impl World {
         })
     }
 
-    /// One step of a pour. With `lose_spilled`, a step whose only problems are parts out of
-    /// their tray takes those parts out of the world and adds the events to `spilled`; any other
+    /// One step of a pour. With `spilled`, a step whose only problems are parts out of their
+    /// tray takes those parts out of the world and adds the events to it; any other
     /// problem ends the pour.
-    fn pour_step(&mut self, lose_spilled: bool, spilled: &mut Vec<HealthEvent>) -> Result<(), HealthError> {
-        match self.step() {
-            Err(e) if lose_spilled && e.events.iter().all(|ev| matches!(ev, HealthEvent::LeftVolume { .. })) => {
+    fn pour_step(&mut self, spilled: Option<&mut Vec<HealthEvent>>) -> Result<(), HealthError> {
+        match (self.step(), spilled) {
+            (Err(e), Some(spilled)) if e.events.iter().all(|ev| matches!(ev, HealthEvent::LeftVolume { .. })) => {
                 self.remove_parts_out_of_their_trays();
                 spilled.extend(e.events);
                 Ok(())
             }
-            other => other,
+            (result, _) => result,
         }
     }
 
@@ -268,8 +269,7 @@ impl World {
         &mut self,
         start_time: f64,
         max_settle_s: f64,
-        lose_spilled: bool,
-        spilled: &mut Vec<HealthEvent>,
+        mut spilled: Option<&mut Vec<HealthEvent>>,
         on_step: &mut dyn FnMut(&World),
     ) -> Result<bool, HealthError> {
         // Settle: every 0.1 s of simulated time, compare poses with the last look. Settled when
@@ -279,7 +279,7 @@ impl World {
         let mut last = poses_now(self);
         let mut last_look = self.time_s;
         while self.time_s - start_time < max_settle_s {
-            self.pour_step(lose_spilled, spilled)?;
+            self.pour_step(spilled.as_deref_mut())?;
             on_step(self);
             if self
                 .parts
