@@ -108,6 +108,9 @@ pub const CLOSE_CALL_PX: i64 = 10;
 /// A part with leads is verified at every pixel: on the grid, A's recall in the cycle fell from
 /// 80 to 63 % (its 1 mm pins decide between on its back and on its face).
 pub const VERIFY_SPACING_M: f64 = 0.0014;
+/// Fewest rendered pixels on the [`VERIFY_SPACING_M`] grid for the grid to decide: twice
+/// the agreeing pixels a verification needs ([`MIN_PATCH_PX`]).
+pub const MIN_GRID_SAMPLES: usize = 2 * MIN_PATCH_PX;
 /// Verification casts a pixel's ray only at the pieces whose image box, this much wider each
 /// side (px), holds the pixel's centre: a margin for the box's and the ray's rounding.
 const PIECE_BOX_MARGIN_PX: f64 = 1.0;
@@ -1022,12 +1025,30 @@ impl<'a> Cloud<'a> {
     /// Renders the model at `pose` into the image and compares with the measured depth: (score,
     /// visible fraction, evidence = agreeing less 3 x contradicting pixels), `None` if it renders
     /// too few agreeing pixels.
+    /// A hypothesis whose grid holds fewer than [`MIN_GRID_SAMPLES`] rendered pixels is verified
+    /// at every pixel instead: a small footprint (a DIP standing on its end shows 30 pixels, 8
+    /// of them on the grid) would otherwise turn on a pixel or two.
     fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<(f64, f64, i64)> {
-        self.verify_every(model, pose, self.verify_stride(model, pose))
+        let stride = self.verify_stride(model, pose);
+        let (counts, rendered) = self.verify_counts(model, pose, stride)?;
+        if stride > 1 && rendered < MIN_GRID_SAMPLES {
+            return self.verify_every(model, pose, 1);
+        }
+        counts
     }
 
     /// [`Cloud::verify`] on every `stride`-th pixel.
     fn verify_every(&self, model: &CloudModel, pose: &Isometry3<f64>, stride: usize) -> Option<(f64, f64, i64)> {
+        self.verify_counts(model, pose, stride)?.0
+    }
+
+    /// [`Cloud::verify_every`]'s result, and how many pixels it rendered; `None` as `render`.
+    fn verify_counts(
+        &self,
+        model: &CloudModel,
+        pose: &Isometry3<f64>,
+        stride: usize,
+    ) -> Option<(Option<(f64, f64, i64)>, usize)> {
         let (mut agree, mut contradict, mut rendered) = (0usize, 0usize, 0usize);
         self.render(model, pose, stride, |i, predicted, graze| {
             rendered += 1;
@@ -1037,13 +1058,14 @@ impl<'a> Cloud<'a> {
                 None => {}
             }
         })?;
-        (agree >= MIN_PATCH_PX).then(|| {
+        let counts = (agree >= MIN_PATCH_PX).then(|| {
             (
                 agree as f64 / (agree + contradict) as f64,
                 (agree as f64 / rendered.max(1) as f64).min(1.0),
                 agree as i64 - 3 * contradict as i64,
             )
-        })
+        });
+        Some((counts, rendered))
     }
 
     /// What pixel `i`'s measured depth says of a rendered `predicted` depth: agrees within

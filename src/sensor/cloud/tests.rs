@@ -924,3 +924,44 @@ fn a_yaw_off_within_the_silhouettes_span_is_turned_to_the_image() {
     assert!(cloud.check(&m, &found, Some(fi)).is_some(), "the scanned yaw verifies");
     assert!(m.same_pose(&found, &pose), "turned {off_deg} deg, scanned to {found:?}");
 }
+
+/// A DIP-8 standing on its end shows about 30 pixels, 8 or 9 of them on the verification grid, so
+/// it is verified at every pixel, and the part is found at 5 or more of 6 yaws (on the grid, 3).
+/// The control: a pose 5 degrees off its true yaw (as a 30-pixel outline fit leaves it) verifies
+/// at every pixel at all six yaws, and on the grid alone renders too few agreeing pixels at some.
+#[test]
+fn a_dip_standing_on_its_end_is_verified_at_every_pixel() {
+    let cell = cell();
+    let (mesh, m) = cad_model("dip8.toml", 0.004);
+    let on_end = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 90f64.to_radians());
+    let (mut found_at, mut grid_undecided, mut every_pixel_verified) = (0, 0, 0);
+    for y in [0.0, 15.0, 33.0, 70.0, 110.0, 160.0] {
+        let pose = resting_mesh(&cell, &mesh, 0.02, 0.01, yaw(y) * on_end);
+        let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
+        let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+        let stride = cloud.verify_stride(&m, &pose);
+        let (_, on_grid) = cloud.verify_counts(&m, &pose, stride).expect("in view");
+        assert!(
+            stride > 1 && on_grid < MIN_GRID_SAMPLES,
+            "yaw {y}: {on_grid} pixels on a grid of {stride}"
+        );
+        let (score, _, _) = cloud.verify(&m, &pose).expect("the true pose verifies");
+        assert!(score >= MIN_SCORE, "yaw {y}: score {score}");
+        // A pose 5 degrees off about the vertical, as an outline fit of 30 pixels leaves it.
+        let off = Isometry3::from_parts(pose.translation, yaw(5.0) * pose.rotation);
+        grid_undecided += cloud.verify_every(&m, &off, stride).is_none() as usize;
+        every_pixel_verified += cloud.verify(&m, &off).is_some_and(|v| v.0 >= MIN_SCORE) as usize;
+        let found = recognize(&capture, &cell.camera, &cell.tray, &m);
+        found_at += found
+            .iter()
+            .any(|d| (d.world_from_part.translation.vector - pose.translation.vector).norm() < 0.002)
+            as usize;
+    }
+    assert!(found_at >= 5, "found at {found_at} of 6 yaws");
+    assert_eq!(every_pixel_verified, 6, "a pose 5 degrees off fails at every pixel");
+    assert!(
+        grid_undecided >= 2,
+        "the grid alone decided {} of 6: no control",
+        6 - grid_undecided
+    );
+}
