@@ -413,6 +413,9 @@ pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &
     kept
 }
 
+/// A verification's (score, visible fraction, evidence = agreeing less 3 x contradicting pixels).
+type Verdict = (f64, f64, i64);
+
 /// The capture prepared for recognition: the window of the image over the tray's inside.
 struct Cloud<'a> {
     camera: &'a Camera,
@@ -1028,7 +1031,7 @@ impl<'a> Cloud<'a> {
     /// A hypothesis whose grid holds fewer than [`MIN_GRID_SAMPLES`] rendered pixels is verified
     /// at every pixel instead: a small footprint (a DIP standing on its end shows 30 pixels, 8
     /// of them on the grid) would otherwise turn on a pixel or two.
-    fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<(f64, f64, i64)> {
+    fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<Verdict> {
         let stride = self.verify_stride(model, pose);
         let (counts, rendered) = self.verify_counts(model, pose, stride)?;
         if stride > 1 && rendered < MIN_GRID_SAMPLES {
@@ -1038,7 +1041,7 @@ impl<'a> Cloud<'a> {
     }
 
     /// [`Cloud::verify`] on every `stride`-th pixel.
-    fn verify_every(&self, model: &CloudModel, pose: &Isometry3<f64>, stride: usize) -> Option<(f64, f64, i64)> {
+    fn verify_every(&self, model: &CloudModel, pose: &Isometry3<f64>, stride: usize) -> Option<Verdict> {
         self.verify_counts(model, pose, stride)?.0
     }
 
@@ -1048,7 +1051,7 @@ impl<'a> Cloud<'a> {
         model: &CloudModel,
         pose: &Isometry3<f64>,
         stride: usize,
-    ) -> Option<(Option<(f64, f64, i64)>, usize)> {
+    ) -> Option<(Option<Verdict>, usize)> {
         let (mut agree, mut contradict, mut rendered) = (0usize, 0usize, 0usize);
         self.render(model, pose, stride, |i, predicted, graze| {
             rendered += 1;
