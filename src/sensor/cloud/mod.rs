@@ -1028,6 +1028,7 @@ impl<'a> Cloud<'a> {
     /// Renders the model at `pose` into the image and compares with the measured depth: (score,
     /// visible fraction, evidence = agreeing less 3 x contradicting pixels), `None` if it renders
     /// too few agreeing pixels.
+    ///
     /// A hypothesis whose grid holds fewer than [`MIN_GRID_SAMPLES`] rendered pixels is verified
     /// at every pixel instead: a small footprint (a DIP standing on its end shows 30 pixels, 8
     /// of them on the grid) would otherwise turn on a pixel or two.
