@@ -212,6 +212,29 @@ impl Outline {
             && hi[1] <= b / 2.0 + tol
     }
 
+    /// The field's distance at `p` (face frame), as [`Outline::at`] gives it, without the
+    /// gradient: what a consistency check needs.
+    #[inline]
+    fn value(&self, f: &Field, p: [f64; 2]) -> f64 {
+        let gx = (p[0] - self.origin[0]) / CELL_M;
+        let gy = (p[1] - self.origin[1]) / CELL_M;
+        let (mx, my) = ((self.n[0] - 1) as f64, (self.n[1] - 1) as f64);
+        let (cx, cy) = (gx.clamp(0.0, mx - 1e-9), gy.clamp(0.0, my - 1e-9));
+        // Non-negative: truncation is the floor.
+        let (i, j) = (cx as usize, cy as usize);
+        let (fx, fy) = (cx - i as f64, cy - j as f64);
+        let k = j * self.n[0] + i;
+        let (d00, d10) = (f.d[k] as f64, f.d[k + 1] as f64);
+        let (d01, d11) = (f.d[k + self.n[0]] as f64, f.d[k + self.n[0] + 1] as f64);
+        let d = d00 * (1.0 - fx) * (1.0 - fy) + d10 * fx * (1.0 - fy) + d01 * (1.0 - fx) * fy + d11 * fx * fy;
+        let (ox, oy) = ((gx - cx) * CELL_M, (gy - cy) * CELL_M);
+        if ox == 0.0 && oy == 0.0 {
+            return d;
+        }
+        let out = (ox * ox + oy * oy).sqrt();
+        if out > 1e-12 { d + out } else { d }
+    }
+
     /// The field's distance at `p` (face frame) and its gradient, bilinear between cell centres;
     /// beyond the grid, the edge's distance plus the way out to it.
     fn at(&self, f: &Field, p: [f64; 2]) -> (f64, [f64; 2]) {
@@ -250,9 +273,17 @@ struct Placement {
 impl Placement {
     /// Plane point `p` in the face frame.
     fn face_point(&self, p: &[f64; 2]) -> [f64; 2] {
+        self.to_face()(p)
+    }
+
+    /// The map of plane points to the face frame, its sine and cosine taken once.
+    fn to_face(self) -> impl Fn(&[f64; 2]) -> [f64; 2] {
         let (s, c) = self.t.sin_cos();
-        let q = [p[0] - self.c[0], p[1] - self.c[1]];
-        [c * q[0] + s * q[1], -s * q[0] + c * q[1]]
+        let o = self.c;
+        move |p| {
+            let q = [p[0] - o[0], p[1] - o[1]];
+            [c * q[0] + s * q[1], -s * q[0] + c * q[1]]
+        }
     }
 }
 
@@ -279,13 +310,14 @@ struct Problem<'a> {
 impl Problem<'_> {
     /// Whether `x` is consistent: no violation beyond the tolerance.
     fn consistent(&self, x: &Placement) -> bool {
+        let to_face = x.to_face();
         self.inside
             .iter()
-            .all(|p| self.o.at(&self.o.reach, x.face_point(p)).0 <= self.tol)
+            .all(|p| self.o.value(&self.o.reach, to_face(p)) <= self.tol)
             && self
                 .outside
                 .iter()
-                .all(|q| self.o.at(&self.o.core, x.face_point(q)).0 >= -self.tol)
+                .all(|q| self.o.value(&self.o.core, to_face(q)) >= -self.tol)
     }
 
     /// Gauss-Newton on the violations from `x`: the placement it reaches, and whether it is
@@ -306,17 +338,19 @@ impl Problem<'_> {
                 jtr += jrow * r;
                 cost += r * r;
             };
+            let to_face = x.to_face();
+            // The gradient only where a point violates (most do not, near the end).
             for p in self.inside {
-                let pf = x.face_point(p);
-                let (d, g) = self.o.at(&self.o.reach, pf);
-                if d > 0.0 {
+                let pf = to_face(p);
+                if self.o.value(&self.o.reach, pf) > 0.0 {
+                    let (d, g) = self.o.at(&self.o.reach, pf);
                     add(d, g, pf);
                 }
             }
             for q in self.outside {
-                let pf = x.face_point(q);
-                let (d, g) = self.o.at(&self.o.core, pf);
-                if d < 0.0 {
+                let pf = to_face(q);
+                if self.o.value(&self.o.core, pf) < 0.0 {
+                    let (d, g) = self.o.at(&self.o.core, pf);
                     add(-d, [-g[0], -g[1]], pf);
                 }
             }
@@ -724,6 +758,23 @@ mod tests {
         let [inside, edge, outside] = patch(rect, c, t);
         let theta0 = super::super::min_area_theta(&super::super::convex_hull(&inside));
         assert!(fit_outline(&o, &inside, &edge, &outside, theta0, 12f64.to_radians()).is_empty());
+    }
+
+    #[test]
+    fn the_value_alone_is_bit_for_bit_the_distance_with_its_gradient() {
+        let o = hexagon_ring();
+        // A 0.37 mm lattice across the grid and 5 mm beyond it (the extrapolated distance).
+        let mut beyond = 0;
+        for a in -40..=40 {
+            for b in -40..=40 {
+                let p = [a as f64 * 0.00037, b as f64 * 0.00037];
+                for f in [&o.core, &o.reach] {
+                    assert_eq!(o.value(f, p).to_bits(), o.at(f, p).0.to_bits(), "at {p:?}");
+                }
+                beyond += usize::from(o.at(&o.core, p).1[0].abs() == 1.0 || o.at(&o.core, p).0 > MARGIN_M);
+            }
+        }
+        assert!(beyond > 0, "no point beyond the grid was tried");
     }
 
     #[test]
