@@ -212,54 +212,77 @@ impl Outline {
             && hi[1] <= b / 2.0 + tol
     }
 
-    /// The field's distance at `p` (face frame), as [`Outline::at`] gives it, without the
-    /// gradient: what a consistency check needs.
+    /// The cell of the field under `p` (face frame): its four corner distances, where `p` lies
+    /// in it, and how far `p` lies beyond the grid (m, zero inside).
     #[inline]
-    fn value(&self, f: &Field, p: [f64; 2]) -> f64 {
+    fn cell(&self, f: &Field, p: [f64; 2]) -> Cell {
         let gx = (p[0] - self.origin[0]) / CELL_M;
         let gy = (p[1] - self.origin[1]) / CELL_M;
         let (mx, my) = ((self.n[0] - 1) as f64, (self.n[1] - 1) as f64);
         let (cx, cy) = (gx.clamp(0.0, mx - 1e-9), gy.clamp(0.0, my - 1e-9));
         // Non-negative: truncation is the floor.
         let (i, j) = (cx as usize, cy as usize);
-        let (fx, fy) = (cx - i as f64, cy - j as f64);
         let k = j * self.n[0] + i;
-        let (d00, d10) = (f.d[k] as f64, f.d[k + 1] as f64);
-        let (d01, d11) = (f.d[k + self.n[0]] as f64, f.d[k + self.n[0] + 1] as f64);
-        let d = d00 * (1.0 - fx) * (1.0 - fy) + d10 * fx * (1.0 - fy) + d01 * (1.0 - fx) * fy + d11 * fx * fy;
-        let (ox, oy) = ((gx - cx) * CELL_M, (gy - cy) * CELL_M);
-        if ox == 0.0 && oy == 0.0 {
-            return d;
+        let row = self.n[0];
+        Cell {
+            d: [f.d[k], f.d[k + 1], f.d[k + row], f.d[k + row + 1]].map(f64::from),
+            frac: [cx - i as f64, cy - j as f64],
+            out: [(gx - cx) * CELL_M, (gy - cy) * CELL_M],
         }
-        let out = (ox * ox + oy * oy).sqrt();
-        if out > 1e-12 { d + out } else { d }
     }
 
-    /// The field's distance at `p` (face frame) and its gradient, bilinear between cell centres;
-    /// beyond the grid, the edge's distance plus the way out to it.
+    /// The field's distance at `p` (face frame), bilinear between cell centres; beyond the
+    /// grid, the edge's distance plus the way out to it.
+    #[inline]
+    fn value(&self, f: &Field, p: [f64; 2]) -> f64 {
+        let c = self.cell(f, p);
+        match c.beyond() {
+            Some((out, _)) => c.distance() + out,
+            None => c.distance(),
+        }
+    }
+
+    /// [`Outline::value`] and its gradient.
     fn at(&self, f: &Field, p: [f64; 2]) -> (f64, [f64; 2]) {
-        let gx = (p[0] - self.origin[0]) / CELL_M;
-        let gy = (p[1] - self.origin[1]) / CELL_M;
-        let (mx, my) = ((self.n[0] - 1) as f64, (self.n[1] - 1) as f64);
-        let (cx, cy) = (gx.clamp(0.0, mx - 1e-9), gy.clamp(0.0, my - 1e-9));
-        // Non-negative: truncation is the floor.
-        let (i, j) = (cx as usize, cy as usize);
-        let (fx, fy) = (cx - i as f64, cy - j as f64);
-        let at = |a: usize, b: usize| f.d[b * self.n[0] + a] as f64;
-        let (d00, d10, d01, d11) = (at(i, j), at(i + 1, j), at(i, j + 1), at(i + 1, j + 1));
-        let d = d00 * (1.0 - fx) * (1.0 - fy) + d10 * fx * (1.0 - fy) + d01 * (1.0 - fx) * fy + d11 * fx * fy;
-        let ddx = ((d10 - d00) * (1.0 - fy) + (d11 - d01) * fy) / CELL_M;
-        let ddy = ((d01 - d00) * (1.0 - fx) + (d11 - d10) * fx) / CELL_M;
-        let (ox, oy) = ((gx - cx) * CELL_M, (gy - cy) * CELL_M);
+        let c = self.cell(f, p);
+        let d = c.distance();
+        match c.beyond() {
+            Some((out, g)) => (d + out, g),
+            None => {
+                let ([d00, d10, d01, d11], [fx, fy]) = (c.d, c.frac);
+                let ddx = ((d10 - d00) * (1.0 - fy) + (d11 - d01) * fy) / CELL_M;
+                let ddy = ((d01 - d00) * (1.0 - fx) + (d11 - d10) * fx) / CELL_M;
+                (d, [ddx, ddy])
+            }
+        }
+    }
+}
+
+/// A field's cell under a point: see [`Outline::cell`].
+struct Cell {
+    /// Distances at the corners (m): (0, 0), (1, 0), (0, 1), (1, 1).
+    d: [f64; 4],
+    /// Where the point lies in the cell, 0 to 1 along x and y.
+    frac: [f64; 2],
+    /// How far the point lies beyond the grid along x and y (m).
+    out: [f64; 2],
+}
+
+impl Cell {
+    /// The bilinear distance in the cell (m).
+    fn distance(&self) -> f64 {
+        let ([d00, d10, d01, d11], [fx, fy]) = (self.d, self.frac);
+        d00 * (1.0 - fx) * (1.0 - fy) + d10 * fx * (1.0 - fy) + d01 * (1.0 - fx) * fy + d11 * fx * fy
+    }
+
+    /// Beyond the grid: how far (m), and the way out (unit).
+    fn beyond(&self) -> Option<(f64, [f64; 2])> {
+        let [ox, oy] = self.out;
         if ox == 0.0 && oy == 0.0 {
-            return (d, [ddx, ddy]);
+            return None;
         }
         let out = (ox * ox + oy * oy).sqrt();
-        if out > 1e-12 {
-            (d + out, [ox / out, oy / out])
-        } else {
-            (d, [ddx, ddy])
-        }
+        (out > 1e-12).then(|| (out, [ox / out, oy / out]))
     }
 }
 
