@@ -235,26 +235,7 @@ impl Outline {
     /// grid, the edge's distance plus the way out to it.
     #[inline]
     fn value(&self, f: &Field, p: [f64; 2]) -> f64 {
-        let c = self.cell(f, p);
-        match c.beyond() {
-            Some((out, _)) => c.distance() + out,
-            None => c.distance(),
-        }
-    }
-
-    /// [`Outline::value`] and its gradient.
-    fn at(&self, f: &Field, p: [f64; 2]) -> (f64, [f64; 2]) {
-        let c = self.cell(f, p);
-        let d = c.distance();
-        match c.beyond() {
-            Some((out, g)) => (d + out, g),
-            None => {
-                let ([d00, d10, d01, d11], [fx, fy]) = (c.d, c.frac);
-                let ddx = ((d10 - d00) * (1.0 - fy) + (d11 - d01) * fy) / CELL_M;
-                let ddy = ((d01 - d00) * (1.0 - fx) + (d11 - d10) * fx) / CELL_M;
-                (d, [ddx, ddy])
-            }
-        }
+        self.cell(f, p).value()
     }
 }
 
@@ -273,6 +254,28 @@ impl Cell {
     fn distance(&self) -> f64 {
         let ([d00, d10, d01, d11], [fx, fy]) = (self.d, self.frac);
         d00 * (1.0 - fx) * (1.0 - fy) + d10 * fx * (1.0 - fy) + d01 * (1.0 - fx) * fy + d11 * fx * fy
+    }
+
+    /// The field's distance at the point: bilinear in the grid; beyond it, the edge's distance
+    /// plus the way out to it (m).
+    fn value(&self) -> f64 {
+        match self.beyond() {
+            Some((out, _)) => self.distance() + out,
+            None => self.distance(),
+        }
+    }
+
+    /// The gradient of [`Cell::value`]: the bilinear one in the grid, the way out beyond it.
+    fn gradient(&self) -> [f64; 2] {
+        match self.beyond() {
+            Some((_, g)) => g,
+            None => {
+                let ([d00, d10, d01, d11], [fx, fy]) = (self.d, self.frac);
+                let ddx = ((d10 - d00) * (1.0 - fy) + (d11 - d01) * fy) / CELL_M;
+                let ddy = ((d01 - d00) * (1.0 - fx) + (d11 - d10) * fx) / CELL_M;
+                [ddx, ddy]
+            }
+        }
     }
 
     /// Beyond the grid: how far (m), and the way out (unit).
@@ -362,18 +365,22 @@ impl Problem<'_> {
                 cost += r * r;
             };
             let to_face = x.to_face();
-            // The gradient only where a point violates (most do not, near the end).
+            // The gradient only where a point violates (most do not, near the end), from the
+            // cell its value was read from.
             for p in self.inside {
                 let pf = to_face(p);
-                if self.o.value(&self.o.reach, pf) > 0.0 {
-                    let (d, g) = self.o.at(&self.o.reach, pf);
-                    add(d, g, pf);
+                let cell = self.o.cell(&self.o.reach, pf);
+                let d = cell.value();
+                if d > 0.0 {
+                    add(d, cell.gradient(), pf);
                 }
             }
             for q in self.outside {
                 let pf = to_face(q);
-                if self.o.value(&self.o.core, pf) < 0.0 {
-                    let (d, g) = self.o.at(&self.o.core, pf);
+                let cell = self.o.cell(&self.o.core, pf);
+                let d = cell.value();
+                if d < 0.0 {
+                    let g = cell.gradient();
                     add(-d, [-g[0], -g[1]], pf);
                 }
             }
@@ -765,7 +772,7 @@ mod tests {
     fn a_hexagon_ring_is_placed_by_its_true_outline_and_a_rectangle_patch_is_not() {
         let o = hexagon_ring();
         let (c, t) = ([0.0004, -0.0003], 17f64.to_radians());
-        let hex = |p: [f64; 2]| o.at(&o.core, p).0 < 0.0;
+        let hex = |p: [f64; 2]| o.value(&o.core, p) < 0.0;
         let [inside, edge, outside] = patch(hex, c, t);
         let theta0 = super::super::min_area_theta(&super::super::convex_hull(&inside));
         let fits = fit_outline(&o, &inside, &edge, &outside, theta0, 12f64.to_radians());
@@ -783,21 +790,52 @@ mod tests {
         assert!(fit_outline(&o, &inside, &edge, &outside, theta0, 12f64.to_radians()).is_empty());
     }
 
+    /// The gradient the descent reads is the slope of the value it reads: inside a cell (where
+    /// the bilinear distance is smooth) central differences agree with it; beyond the grid, a
+    /// step along it adds the step's length. Negative control: the gradient with its components
+    /// swapped disagrees with the differences.
     #[test]
-    fn the_value_alone_is_bit_for_bit_the_distance_with_its_gradient() {
+    fn the_gradient_is_the_slope_of_the_value() {
         let o = hexagon_ring();
+        let h = 1e-7;
+        let (mut inside, mut beyond, mut swapped_off) = (0, 0, 0);
         // A 0.37 mm lattice across the grid and 5 mm beyond it (the extrapolated distance).
-        let mut beyond = 0;
         for a in -40..=40 {
             for b in -40..=40 {
                 let p = [a as f64 * 0.00037, b as f64 * 0.00037];
                 for f in [&o.core, &o.reach] {
-                    assert_eq!(o.value(f, p).to_bits(), o.at(f, p).0.to_bits(), "at {p:?}");
+                    let cell = o.cell(f, p);
+                    let g = cell.gradient();
+                    if cell.beyond().is_some() {
+                        let step = o.value(f, [p[0] + h * g[0], p[1] + h * g[1]]) - cell.value();
+                        assert!(
+                            (step - h).abs() < 1e-4 * h,
+                            "beyond, at {p:?}: {step} for a step of {h}"
+                        );
+                        beyond += 1;
+                        continue;
+                    }
+                    if cell.frac.iter().any(|&t| !(1e-3..=1.0 - 1e-3).contains(&t)) {
+                        continue;
+                    }
+                    let slope = [
+                        (o.value(f, [p[0] + h, p[1]]) - o.value(f, [p[0] - h, p[1]])) / (2.0 * h),
+                        (o.value(f, [p[0], p[1] + h]) - o.value(f, [p[0], p[1] - h])) / (2.0 * h),
+                    ];
+                    assert!(
+                        (slope[0] - g[0]).abs() < 1e-6 && (slope[1] - g[1]).abs() < 1e-6,
+                        "at {p:?}: slope {slope:?}, gradient {g:?}"
+                    );
+                    inside += 1;
+                    swapped_off += usize::from((slope[0] - g[1]).abs() > 0.1 || (slope[1] - g[0]).abs() > 0.1);
                 }
-                beyond += usize::from(o.at(&o.core, p).1[0].abs() == 1.0 || o.at(&o.core, p).0 > MARGIN_M);
             }
         }
-        assert!(beyond > 0, "no point beyond the grid was tried");
+        assert!(inside > 1000 && beyond > 0, "{inside} points inside, {beyond} beyond");
+        assert!(
+            swapped_off > 100,
+            "the swapped gradient agreed at all but {swapped_off} points"
+        );
     }
 
     #[test]
