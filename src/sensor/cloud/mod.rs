@@ -385,9 +385,9 @@ pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &
     }
     let patches = cloud.segment();
     // Patches in parallel, collected in their order: deterministic.
-    let per_patch: Vec<(Option<CloudDetection>, Vec<lying::AxisFit>)> = patches
+    let per_patch: Vec<(Vec<CloudDetection>, Vec<lying::AxisFit>)> = patches
         .par_iter()
-        .map(|patch| cloud.best_hypothesis(patch, model))
+        .map(|patch| cloud.patch_hypotheses(patch, model))
         .collect();
     let mut found: Vec<CloudDetection> = Vec::new();
     let mut fits = Vec::new();
@@ -751,8 +751,13 @@ impl<'a> Cloud<'a> {
         (plane, [e1, e2], inside, edge, outside)
     }
 
-    /// The best verified hypothesis for a patch, if any.
-    fn best_hypothesis(&self, patch: &Patch, model: &CloudModel) -> (Option<CloudDetection>, Vec<lying::AxisFit>) {
+    /// The best verified hypothesis for a patch, if any; the lying parts' axis fits; and whether
+    /// the patch is larger than every face (two parts lying level side by side look like that).
+    fn best_hypothesis(
+        &self,
+        patch: &Patch,
+        model: &CloudModel,
+    ) -> (Option<CloudDetection>, Vec<lying::AxisFit>, bool) {
         let (plane, [e1, e2], inside, edge, outside) = self.silhouette(patch, model.trim_plane);
         let n = plane.normal;
         // The fits need only the inside points' convex hull (and so does the minimum-area
@@ -770,6 +775,7 @@ impl<'a> Cloud<'a> {
             .pixel_size_at_m((plane.point - self.origin).dot(&self.optical));
         // (evidence, detection) of every hypothesis the image supports.
         let mut verified: Vec<(i64, CloudDetection)> = Vec::new();
+        let mut larger_than_every_face = true;
         for (fi, face) in model.faces.iter().enumerate() {
             // A box's faces of equal extents look alike: the first stands for them.
             let twin = |g: &Face| {
@@ -790,6 +796,9 @@ impl<'a> Cloud<'a> {
             if dims[0] > ext[0] + pixel_m || dims[1] > ext[1] + pixel_m {
                 continue;
             }
+            if outline.is_none() {
+                larger_than_every_face = false;
+            }
             let mut fits = Vec::new();
             if let Some(o) = outline {
                 // A patch larger than the outline (its area, a pixel's rim around it) is not it.
@@ -797,6 +806,7 @@ impl<'a> Cloud<'a> {
                 if inside.len() as f64 * pixel_m * pixel_m > o.reach_area_m2 + rim_m2 {
                     continue;
                 }
+                larger_than_every_face = false;
                 // Its true outline, at every yaw: no half turn is added below.
                 for f in outline::fit_outline(o, &inside, &edge, &outside, theta0, model.yaw_span_max_rad) {
                     let u = e1 * f.yaw_rad.cos() + e2 * f.yaw_rad.sin();
@@ -865,7 +875,166 @@ impl<'a> Cloud<'a> {
         let best = self
             .decide(model, &verified)
             .map(|d| self.refine(model, patch, &plane, d));
-        (best, fits)
+        (best, fits, larger_than_every_face)
+    }
+
+    /// A patch's hypotheses: its best, or, where it is larger than every face and nothing
+    /// explains it whole, the best of each of its two halves ([`Cloud::halves`]): two parts
+    /// lying level side by side make one patch. The halves' lying fits are left out (the whole
+    /// patch's stand).
+    ///
+    /// The cut is rarely exactly at the junction, and a face fitted to a half can slide across
+    /// the cut into its level neighbour, where rendering cannot tell (the neighbour agrees). So
+    /// the halves' detections are kept only as the patch's explanation: together their faces
+    /// cover the whole patch but for a row of pixels ([`Cloud::uncovered`]), and no pixel lies
+    /// inside both (a pixel in from their edges). One half's detection alone is kept only where
+    /// it covers the whole patch so (one part and a few pixels of rim or noise beside it).
+    fn patch_hypotheses(&self, patch: &Patch, model: &CloudModel) -> (Vec<CloudDetection>, Vec<lying::AxisFit>) {
+        let (best, fits, larger) = self.best_hypothesis(patch, model);
+        if best.is_some() || !larger {
+            return (best.into_iter().collect(), fits);
+        }
+        let halves = self.halves(patch);
+        let found: Vec<CloudDetection> = halves
+            .iter()
+            .filter_map(|half| self.best_hypothesis(half, model).0)
+            .collect();
+        // Both, if no pixel lies inside both faces; else either alone: the first that covers the
+        // whole patch.
+        let apart = |a: &CloudDetection, b: &CloudDetection| {
+            !patch.pixels.iter().any(|&i| {
+                [a, b]
+                    .iter()
+                    .all(|d| self.face_distance_m(model, d, &self.pts[i], false) < -self.pixel_m_at(d))
+            })
+        };
+        let mut options: Vec<&[CloudDetection]> = Vec::new();
+        if let [a, b] = found.as_slice()
+            && apart(a, b)
+        {
+            options.push(&found);
+        }
+        options.extend(found.chunks(1));
+        let kept = options
+            .into_iter()
+            .find(|ds| self.uncovered(model, ds, patch) <= self.row_px(model, ds))
+            .map(<[CloudDetection]>::to_vec)
+            .unwrap_or_default();
+        (kept, fits)
+    }
+
+    /// The pixel size at a detection's position (m).
+    fn pixel_m_at(&self, d: &CloudDetection) -> f64 {
+        self.camera
+            .pixel_size_at_m((d.world_from_part.translation.vector - self.origin).dot(&self.optical))
+    }
+
+    /// How far the point `p` (world) lies from the face up of `d` in its plane (m, negative
+    /// inside): its rectangle or disc; for a face fitted by its outline, the outline with the
+    /// features beside it within the plane band (`reach`, what its patch may hold) or the face
+    /// alone (`reach` false).
+    fn face_distance_m(&self, model: &CloudModel, d: &CloudDetection, p: &Vector3<f64>, reach: bool) -> f64 {
+        let face = &model.faces[d.face_up];
+        let q = d.world_from_part.inverse() * Point3::from(*p);
+        let r = q.coords - face.center;
+        let (u, v) = (r.dot(&face.along), r.dot(&face.normal.cross(&face.along)));
+        if let Some(o) = model.outlines.get(d.face_up).and_then(|o| o.as_deref()) {
+            return o.distance_m([u, v], reach);
+        }
+        if face.disc {
+            return u.hypot(v) - face.extent_m[0] / 2.0;
+        }
+        let (du, dv) = (u.abs() - face.extent_m[0] / 2.0, v.abs() - face.extent_m[1] / 2.0);
+        if du > 0.0 || dv > 0.0 {
+            du.max(0.0).hypot(dv.max(0.0))
+        } else {
+            du.max(dv)
+        }
+    }
+
+    /// The pixels of `patch` that no face of `found` covers (grown by a pixel).
+    fn uncovered(&self, model: &CloudModel, found: &[CloudDetection], patch: &Patch) -> usize {
+        patch
+            .pixels
+            .iter()
+            .filter(|&&i| {
+                found
+                    .iter()
+                    .all(|d| self.face_distance_m(model, d, &self.pts[i], true) > self.pixel_m_at(d))
+            })
+            .count()
+    }
+
+    /// A row of pixels across the narrowest of the faces up in `found`: the slack of
+    /// [`Cloud::uncovered`] (a cut a pixel off, depth noise at the rim).
+    fn row_px(&self, model: &CloudModel, found: &[CloudDetection]) -> usize {
+        found
+            .iter()
+            .map(|d| {
+                let e = model.faces[d.face_up].extent_m;
+                (e[0].min(e[1]) / self.pixel_m_at(d)).ceil() as usize
+            })
+            .min()
+            .unwrap_or(0)
+    }
+
+    /// A patch cut in two by 2-means on its pixels' image positions, started at its two ends
+    /// along its principal axis; empty if a half has fewer than [`MIN_PATCH_PX`] pixels.
+    fn halves(&self, patch: &Patch) -> Vec<Patch> {
+        let uv: Vec<[f64; 2]> = patch
+            .pixels
+            .iter()
+            .map(|&i| [(i % self.w) as f64, (i / self.w) as f64])
+            .collect();
+        let n = uv.len() as f64;
+        let mean = uv.iter().fold([0.0, 0.0], |m, p| [m[0] + p[0] / n, m[1] + p[1] / n]);
+        let (mut sxx, mut sxy, mut syy) = (0.0, 0.0, 0.0);
+        for p in &uv {
+            let (x, y) = (p[0] - mean[0], p[1] - mean[1]);
+            (sxx, sxy, syy) = (sxx + x * x, sxy + x * y, syy + y * y);
+        }
+        let angle = 0.5 * (2.0 * sxy).atan2(sxx - syy);
+        let axis = [angle.cos(), angle.sin()];
+        let along = |p: &[f64; 2]| (p[0] - mean[0]) * axis[0] + (p[1] - mean[1]) * axis[1];
+        let (lo, hi) = uv.iter().fold((f64::MAX, f64::MIN), |(lo, hi), p| {
+            let a = along(p);
+            (lo.min(a), hi.max(a))
+        });
+        let mut centres = [
+            [mean[0] + axis[0] * lo, mean[1] + axis[1] * lo],
+            [mean[0] + axis[0] * hi, mean[1] + axis[1] * hi],
+        ];
+        let d2 = |p: &[f64; 2], c: &[f64; 2]| (p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2);
+        let mut second = vec![false; uv.len()];
+        for _ in 0..8 {
+            for (k, p) in uv.iter().enumerate() {
+                second[k] = d2(p, &centres[1]) < d2(p, &centres[0]);
+            }
+            for (c, side) in centres.iter_mut().zip([false, true]) {
+                let (mut sum, mut count) = ([0.0, 0.0], 0.0);
+                for (p, _) in uv.iter().zip(&second).filter(|(_, s)| **s == side) {
+                    sum = [sum[0] + p[0], sum[1] + p[1]];
+                    count += 1.0;
+                }
+                if count > 0.0 {
+                    *c = [sum[0] / count, sum[1] / count];
+                }
+            }
+        }
+        let part = |side: bool| Patch {
+            pixels: patch
+                .pixels
+                .iter()
+                .zip(&second)
+                .filter(|(_, s)| **s == side)
+                .map(|(i, _)| *i)
+                .collect(),
+        };
+        let halves = vec![part(false), part(true)];
+        if halves.iter().any(|h| h.pixels.len() < MIN_PATCH_PX) {
+            return Vec::new();
+        }
+        halves
     }
 
     /// Each verified hypothesis's face swapped for its twins (the other model faces of the same

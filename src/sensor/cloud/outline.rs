@@ -231,6 +231,12 @@ impl Outline {
         }
     }
 
+    /// How far the face-frame point `p` lies outside the face (m, negative inside): with the
+    /// features beside it within the band (`reach`), or the face alone.
+    pub fn distance_m(&self, p: [f64; 2], reach: bool) -> f64 {
+        self.value(if reach { &self.reach } else { &self.core }, p)
+    }
+
     /// The field's distance at `p` (face frame), bilinear between cell centres; beyond the
     /// grid, the edge's distance plus the way out to it.
     #[inline]

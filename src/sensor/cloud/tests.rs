@@ -170,6 +170,58 @@ fn two_touching_parts_at_different_heights_are_both_found() {
     assert_found(&w, &found, &b, 0.0008, 5.0);
 }
 
+/// Two parts lying level side by side make one patch, larger than any face: it is cut in two,
+/// and each half is found. The control: the whole patch alone explains nothing.
+#[test]
+fn two_parts_lying_level_side_by_side_are_both_found() {
+    let cell = cell();
+    let w = workpiece("E");
+    let m = CloudModel::new(&w);
+    // End to end along the first's long side, 0.2 mm apart: their top faces, 10 x 5 mm each,
+    // make one 20 x 5 mm patch.
+    let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(26.0));
+    let (c, s) = (26f64.to_radians().cos(), 26f64.to_radians().sin());
+    let b = resting(
+        &cell,
+        &w,
+        0.0102 * c - 0.0003 * s,
+        0.0102 * s + 0.0003 * c,
+        0.0,
+        yaw(24.0),
+    );
+    let capture = synthetic(&cell, &[(&m, a), (&m, b)]);
+    let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+    let patches = cloud.segment();
+    let merged = patches.iter().max_by_key(|p| p.pixels.len()).expect("a patch");
+    let (whole, _, larger) = cloud.best_hypothesis(merged, &m);
+    assert!(
+        whole.is_none() && larger,
+        "the two parts did not merge into one patch: {whole:?}"
+    );
+    let found = recognize(&capture, &cell.camera, &cell.tray, &m);
+    assert_eq!(found.len(), 2, "{found:?}");
+    assert_found(&w, &found, &a, 0.0008, 5.0);
+    assert_found(&w, &found, &b, 0.0008, 5.0);
+    // The pair explains the merged patch: it covers it but for a row of pixels.
+    let slack = cloud.row_px(&m, &found);
+    assert!(cloud.uncovered(&m, &found, merged) <= slack);
+    // Negative controls: either part alone leaves half the patch unexplained, and so does the
+    // pair with one face slid 2 mm along its length (the failure the check is for).
+    for one in found.chunks(1) {
+        assert!(
+            cloud.uncovered(&m, one, merged) > slack,
+            "one part explains the pair's patch"
+        );
+    }
+    let mut slid = found.clone();
+    let along = slid[0].world_from_part.rotation * m.faces[slid[0].face_up].along;
+    slid[0].world_from_part.translation.vector += along * 0.002;
+    assert!(
+        cloud.uncovered(&m, &slid, merged) > slack,
+        "a face slid 2 mm still explains the patch"
+    );
+}
+
 #[test]
 fn a_half_covered_part_is_found() {
     let cell = cell();
