@@ -548,6 +548,17 @@ impl<'a> Cloud<'a> {
         cloud
     }
 
+    /// Whether pixel `i` and its 8 neighbours all lie in `member` (a patch's pixels, sorted).
+    fn is_interior(&self, member: &[usize], i: usize) -> bool {
+        let (u, v) = (i % self.w, i / self.w);
+        (-1..=1).all(|dv| {
+            (-1..=1).all(|du| {
+                self.neighbour_at(u, v, du, dv)
+                    .is_some_and(|j| member.binary_search(&j).is_ok())
+            })
+        })
+    }
+
     /// The pixel `du` columns and `dv` rows from the pixel in column `u` and row `v` of the
     /// window, if within it.
     #[inline]
@@ -702,10 +713,7 @@ impl<'a> Cloud<'a> {
             // patch at its rim and tilt its least-squares plane: first the plane of the pixels
             // whose 8 neighbours are all in the patch (if enough), then refitted without the
             // pixels off it.
-            let inner = |i: usize| {
-                let (u, v) = (i % self.w, i / self.w);
-                (-1..=1).all(|dv| (-1..=1).all(|du| self.neighbour_at(u, v, du, dv).is_some_and(is_member)))
-            };
+            let inner = |i: usize| self.is_interior(&member, i);
             let (count, interior) = fit(&inner);
             if count >= MIN_PATCH_PX.max(patch.pixels.len() / 4) {
                 plane = interior;

@@ -150,11 +150,7 @@ impl super::Cloud<'_> {
         // The patch's interior: the pixels whose 8 neighbours are all in it.
         let mut member = patch.pixels.clone();
         member.sort_unstable();
-        let is_member = |j: usize| member.binary_search(&j).is_ok();
-        let interior = |i: usize| {
-            let (u, v) = (i % self.w, i / self.w);
-            (-1..=1).all(|dv| (-1..=1).all(|du| self.neighbour_at(u, v, du, dv).is_some_and(is_member)))
-        };
+        let interior = |i: usize| self.is_interior(&member, i);
         let in_band = |keep: &dyn Fn(usize) -> bool| -> Vec<Vector3<f64>> {
             patch
                 .pixels
