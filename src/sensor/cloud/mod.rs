@@ -452,6 +452,13 @@ struct Patch {
     pixels: Vec<usize>,
 }
 
+/// Whether `count` interior pixels of `patch` (all 8 neighbours in it) are enough to stand for
+/// it: at least [`MIN_PATCH_PX`] and a quarter of its pixels. A narrower patch (a DIP-8 on its
+/// end, 7 x 4 pixels) is read whole.
+fn interior_suffices(count: usize, patch: &Patch) -> bool {
+    count >= MIN_PATCH_PX.max(patch.pixels.len() / 4)
+}
+
 /// The 8-ring around a pixel, in circular order.
 const RING: [(i64, i64); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
 
@@ -715,7 +722,7 @@ impl<'a> Cloud<'a> {
             // pixels off it.
             let inner = |i: usize| self.is_interior(&member, i);
             let (count, interior) = fit(&inner);
-            if count >= MIN_PATCH_PX.max(patch.pixels.len() / 4) {
+            if interior_suffices(count, patch) {
                 plane = interior;
             }
             for _ in 0..2 {

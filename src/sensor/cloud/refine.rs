@@ -21,8 +21,8 @@
 //! millimetre below the face and all on one side, which tilts the points' own plane. Taking
 //! them for noise, the test refused 57 of 522 DIP-8s lying flat on the floor (`sense` seeds
 //! 1-12; the median F was 1.31, where F(3, n) gives 0.8); on the interior the median is 0.83
-//! and 7 are refused. A patch whose interior holds fewer than [`super::MIN_PATCH_PX`] points or
-//! a quarter of its pixels (a DIP-8 on its end, 7 x 4 pixels) is tested on all its points.
+//! and 7 are refused. A patch whose interior is too small to stand for it
+//! ([`super::interior_suffices`]) is tested on all its points.
 //!
 //! (1b) Tilt, for a CAD part's detection that is not settled: a patch a few pixels wide (a
 //! DIP-8's 3.3 mm side) leaves its plane's tilt about its long axis open by several degrees
@@ -161,7 +161,7 @@ impl super::Cloud<'_> {
                 .collect()
         };
         let mut pts = in_band(&interior);
-        if pts.len() < super::MIN_PATCH_PX.max(patch.pixels.len() / 4) {
+        if !super::interior_suffices(pts.len(), patch) {
             pts = in_band(&|_| true);
         }
         if pts.len() < super::MIN_PATCH_PX {
