@@ -12,7 +12,7 @@
 //! kept as `world_from_box`; the hand's cylinders lie along the flange z axis, from the flange face (z = 0) to
 //! the tool frame at the cup lip (z = `tool_length_m`).
 
-use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+use nalgebra::{Isometry3, Point3, Translation3, UnitQuaternion, Vector3};
 
 use crate::config::{GripperConfig, Scene, TrayConfig};
 
@@ -193,6 +193,25 @@ impl TrayVolume {
             && l.y.abs() <= self.half_xy_m[1] - self.wall_thickness_m
             && l.z >= -0.001
             && l.z <= self.wall_height_m
+    }
+
+    /// The outer rim's corners at floor level (world): with a camera's optical centre, the
+    /// corners of the view frustum over the tray, which the arm must be out of while the sensor
+    /// exposes and outside which recognition sees nothing of the pile.
+    pub fn rim_corners_at_floor(&self) -> [Point3<f64>; 4] {
+        let [hx, hy] = self.half_xy_m;
+        [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)]
+            .map(|(sx, sy)| self.world_from_tray * Point3::new(sx * hx, sy * hy, 0.0))
+    }
+
+    /// Whether the point `p_tray` (tray frame) lies inside the view frustum from `eye_tray` (the
+    /// camera's optical centre, tray frame, above the floor): below the eye, with its ray from the
+    /// eye meeting the floor plane inside the outer rim ([`Self::rim_corners_at_floor`]).
+    pub fn frustum_holds(&self, eye_tray: &Point3<f64>, p_tray: &Point3<f64>) -> bool {
+        let s = eye_tray.z / (eye_tray.z - p_tray.z);
+        p_tray.z < eye_tray.z
+            && (eye_tray.x + (p_tray.x - eye_tray.x) * s).abs() < self.half_xy_m[0]
+            && (eye_tray.y + (p_tray.y - eye_tray.y) * s).abs() < self.half_xy_m[1]
     }
 }
 

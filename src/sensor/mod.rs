@@ -29,7 +29,6 @@ pub mod heightmap;
 mod raster;
 pub mod recognition;
 
-use nalgebra::Point3;
 use serde::Serialize;
 
 pub use camera::{Camera, PixelWindow};
@@ -56,11 +55,8 @@ impl ViewFrustum {
     /// The frustum of `camera` over the pick tray `tray`; `None` if it spans no volume (the
     /// cell file's validation refuses such a camera).
     pub fn over_tray(tray: &TrayVolume, camera: &Camera) -> Option<Self> {
-        let [hx, hy] = tray.half_xy_m;
         let mut pts = vec![camera.world_from_camera.translation.vector];
-        for (sx, sy) in [(-1.0, -1.0), (1.0, -1.0), (1.0, 1.0), (-1.0, 1.0)] {
-            pts.push((tray.world_from_tray * Point3::new(sx * hx, sy * hy, 0.0)).coords);
-        }
+        pts.extend(tray.rim_corners_at_floor().iter().map(|p| p.coords));
         ViewVolume::hull(&pts).map(|volume| ViewFrustum { volume })
     }
 

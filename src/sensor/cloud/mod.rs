@@ -2,12 +2,13 @@
 //! workpiece model and the fixed cell. It never sees the physics world: its inputs are
 //! [`Capture`] (depth and organised points), [`Camera`], [`TrayVolume`] and [`CloudModel`].
 //!
-//! Pipeline: (1) background removal: points within [`FLOOR_TOL_M`] of the tray floor or outside
-//! its inner walls; pixels without a return (dropouts, and parts blurred by motion, which the
-//! cycle invalidates: depth 0) are neither part nor background, they say nothing; (2) normals
-//! per pixel from the ring of its 8 neighbours; (3) region growing from smooth seed pixels,
-//! highest first: a 4-neighbour joins when it lies within [`PLANE_TOL_M`] of the region's plane
-//! (refitted as it doubles) and its normal within [`NORMAL_TOL_RAD`] of the plane's; (4) per
+//! Pipeline: (1) background removal: points within [`FLOOR_TOL_M`] of the tray floor, outside
+//! its inner walls or outside the view frustum over the tray (where the arm may be); pixels
+//! without a return (dropouts, and parts blurred by motion, which the cycle invalidates: depth
+//! 0) are neither part nor background, they say nothing; (2) normals per pixel from the ring of
+//! its 8 neighbours; (3) region growing from smooth seed pixels, highest first: a 4-neighbour
+//! joins when it lies within [`PLANE_TOL_M`] of the region's plane (refitted as it doubles) and
+//! its normal within [`NORMAL_TOL_RAD`] of the plane's; (4) per
 //! patch the least-squares plane, and each pixel's ray cut with that plane (noise-free in-plane
 //! positions); the neighbours whose measured point lies behind the plane are "outside" (the ray
 //! passed the face), those in front or missing say nothing; (5) per model face (not smaller than
@@ -502,6 +503,10 @@ impl<'a> Cloud<'a> {
             tray.half_xy_m[0] - tray.wall_thickness_m,
             tray.half_xy_m[1] - tray.wall_thickness_m,
         ];
+        // A point is the pile's only inside the view frustum over the tray, which the cell keeps
+        // the arm and the part it holds out of while it exposes: above the inner floor but
+        // outside the frustum is where the arm carries a part over the tray's rim.
+        let eye = tray_from_world * Point3::from(camera.world_from_camera.translation.vector);
         let (u0, v0, w, h) = tray_window(camera, tray, c.width_px, c.height_px);
         let mut pts = vec![Vector3::zeros(); w * h];
         let mut depth = vec![0.0; w * h];
@@ -526,7 +531,8 @@ impl<'a> Cloud<'a> {
                         && l.z > FLOOR_TOL_M
                         && l.z < tray.wall_height_m + 0.05
                         && l.x.abs() < inner[0] - 0.0005
-                        && l.y.abs() < inner[1] - 0.0005;
+                        && l.y.abs() < inner[1] - 0.0005
+                        && tray.frustum_holds(&eye, &l);
                     pts[k] = v;
                     depth[k] = if ok { *d as f64 } else { 0.0 };
                     fg[k] = inside;
