@@ -702,8 +702,9 @@ impl<'a> Cloud<'a> {
         (t > 0.0).then(|| (self.origin + d * t, t * d.dot(&self.optical)))
     }
 
-    /// A patch's plane, its pixels' rays cut with the plane (inside) and the neighbours whose
-    /// measured point lies behind the plane (outside), both in the plane's basis (e1, e2).
+    /// A patch's plane, its pixels' rays cut with the plane (inside; but those measured more
+    /// than [`PLANE_TRIM_M`] behind it) and the neighbours whose measured point lies behind the
+    /// plane (outside), both in the plane's basis (e1, e2).
     fn silhouette(&self, patch: &Patch, trim: bool) -> Silhouette {
         let origin = self.pts[patch.pixels[0]];
         let mut member = patch.pixels.clone();
@@ -744,14 +745,21 @@ impl<'a> Cloud<'a> {
             let q = p - plane.point;
             [q.dot(&e1), q.dot(&e2)]
         };
+        // A pixel measured more than PLANE_TRIM_M behind the plane is not the face's: toward the
+        // tray's corners the patch takes in the upper rim of the side walls that face the
+        // optical axis, whose rays cut the plane beyond the face's edge (and would hold the
+        // face's outline off its true place and yaw); else a noise tail, one pixel in 40.
+        let on_face = |i: usize| plane.normal.dot(&(self.pts[i] - plane.point)) >= -PLANE_TRIM_M;
         let inside: Vec<[f64; 2]> = patch
             .pixels
             .iter()
+            .filter(|&&i| on_face(i))
             .filter_map(|&i| self.ray_on_plane(i, &plane).map(|(p, _)| to2(p)))
             .collect();
         let edge: Vec<[f64; 2]> = patch
             .pixels
             .iter()
+            .filter(|&&i| on_face(i))
             .filter(|&&i| {
                 let (u, v) = (i % self.w, i / self.w);
                 [(1, 0), (-1, 0), (0, 1), (0, -1)]
