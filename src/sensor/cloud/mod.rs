@@ -2,43 +2,41 @@
 //! workpiece model and the fixed cell. It never sees the physics world: its inputs are
 //! [`Capture`] (depth and organised points), [`Camera`], [`TrayVolume`] and [`CloudModel`].
 //!
-//! Pipeline: (1) background removal: points within [`FLOOR_TOL_M`] of the tray floor, outside
-//! its inner walls or outside the view frustum over the tray (where the arm may be); pixels
-//! without a return (dropouts, and parts blurred by motion, which the cycle invalidates: depth
-//! 0) are neither part nor background, they say nothing; (2) normals per pixel from the ring of
-//! its 8 neighbours; (3) region growing from smooth seed pixels, highest first: a 4-neighbour
-//! joins when it lies within [`PLANE_TOL_M`] of the region's plane (refitted as it doubles) and
-//! its normal within [`NORMAL_TOL_RAD`] of the plane's; (4) per
-//! patch the least-squares plane, and each pixel's ray cut with that plane (noise-free in-plane
-//! positions); the neighbours whose measured point lies behind the plane are "outside" (the ray
-//! passed the face), those in front or missing say nothing; (5) per model face (not smaller than
-//! the patch) an exact silhouette fit (`fit`): every placement of the face's rectangle (or disc)
-//! holding every inside point and no outside point, yaws scanned around the patch's minimum-area
-//! rectangle; the estimate is the middle of the consistent yaws and the mean of the consistent
-//! centres; a face whose centre is not pinned down (both edges of an axis hidden) or whose yaw is
-//! open by more than the model's `yaw_span_max_rad` (the cell file's
-//! `sensor.max_yaw_ambiguity_deg`, [`YAW_SPAN_MAX_RAD`] by default) is no hypothesis; (6) a
-//! hypothesis reaching under the tray floor is impossible; the others are rendered by ray casting
-//! the model into the depth image (each ray at the pieces whose image box holds its pixel) and
-//! compared: agreeing within [`AGREE_TOL_M`] (3 sigma of the depth noise), measured in front
-//! (occluded, allowed) or measured behind (a contradiction, unless the ray only grazes a
-//! lead); score = agree / (agree + contradict), evidence = agree - 3 contradict; (7) per patch
-//! the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no different
-//! pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as much
-//! (a CAD part's hypotheses joined by their twin faces' at the same placements),
-//! refined (`refine`: settled onto the floor in one of the part's resting poses where the
-//! patch's points allow it; else a CAD part's tilt the patch leaves open scanned by rendering;
-//! an outline-fitted face turned to its best-verified yaw), then
-//! non-maximum suppression by centre distance; (8) a part with a body cylinder (D's can)
-//! lying on its curved side (`lying`): per patch no flat face explains, a cylinder of known
-//! radius fitted to the points around it, kept if its axis's standard error is within
-//! `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks the turn about the axis
-//! and the station along it for either way round; which end is the base is decided at every
-//! pixel (each way placed by the evidence of every pixel; one way must have
+//! Pipeline: (1) background removal: points within [`FLOOR_TOL_M`] of the tray floor, outside its
+//! inner walls or outside the view frustum over the tray (where the arm may be); pixels without a
+//! return (dropouts, and parts blurred by motion, which the cycle invalidates: depth 0) are neither
+//! part nor background, they say nothing; (2) normals per pixel from the ring of its 8 neighbours;
+//! (3) region growing from smooth seed pixels, highest first: a 4-neighbour joins when it lies
+//! within [`PLANE_TOL_M`] of the region's plane (refitted as it doubles) and its normal within
+//! [`NORMAL_TOL_RAD`] of the plane's; (4) per patch the least-squares plane, and each pixel's ray
+//! cut with that plane (noise-free in-plane positions; not those measured more than
+//! [`PLANE_TRIM_M`] behind it, the side walls' rim near the tray's corners); the neighbours whose
+//! measured point lies behind the plane are "outside" (the ray passed the face), those in front or
+//! missing say nothing; (5) per model face (not smaller than the patch) an exact silhouette fit
+//! (`fit`): every placement of the face's rectangle (or disc) holding every inside point and no
+//! outside point, yaws scanned around the patch's minimum-area rectangle; the estimate is the
+//! middle of the consistent yaws and the mean of the consistent centres; a face whose centre is not
+//! pinned down (both edges of an axis hidden) or whose yaw is open by more than the model's
+//! `yaw_span_max_rad` (the cell file's `sensor.max_yaw_ambiguity_deg`, [`YAW_SPAN_MAX_RAD`] by
+//! default) is no hypothesis; (6) a hypothesis reaching under the tray floor is impossible; the
+//! others are rendered by ray casting the model into the depth image (each ray at the pieces whose
+//! image box holds its pixel) and compared: agreeing within [`AGREE_TOL_M`] (3 sigma of the depth
+//! noise), measured in front (occluded, allowed) or measured behind (a contradiction, unless the
+//! ray only grazes a lead); score = agree / (agree + contradict), evidence = agree - 3 contradict;
+//! (7) per patch the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no
+//! different pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as
+//! much (a CAD part's hypotheses joined by their twin faces' at the same placements), refined
+//! (`refine`: settled onto the floor in one of the part's resting poses where the patch's points
+//! allow it; else a CAD part's tilt the patch leaves open scanned by rendering; an outline-fitted
+//! face turned to its best-verified yaw), then non-maximum suppression by centre distance; (8) a
+//! part with a body cylinder (D's can) lying on its curved side (`lying`): per patch no flat face
+//! explains, a cylinder of known radius fitted to the points around it, kept if its axis's standard
+//! error is within `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks the turn
+//! about the axis and the station along it for either way round; which end is the base is decided
+//! at every pixel (each way placed by the evidence of every pixel; one way must have
 //! `lying::END_EVIDENCE_MARGIN_PX` more, or explain at least `lying::END_VOTES_MIN` pixels the
-//! other does not, three times as many as the other); reported only if that decides and
-//! the station moved either way has `lying::PIN_MARGIN_PX` less evidence
-//! ([`CloudDetection::curved_side_up`]).
+//! other does not, three times as many as the other); reported only if that decides and the station
+//! moved either way has `lying::PIN_MARGIN_PX` less evidence ([`CloudDetection::curved_side_up`]).
 //!
 //! Precision first: a pose the image does not pin down is not reported. Limits:
 //! - a flat-lying E or F shows one 7 px face and no side (its sides are past the sensor's
