@@ -14,7 +14,7 @@
 //! millimetres; length unit 1 cm (allowed penetration 0.05 mm, prediction distance 0.2 mm);
 //! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; every contact
 //! point solved (no clustering); CCD in steps where a part may travel over 1 mm; the
-//! cell file's timestep. Steps in which nothing can move are not solved ([`quiet`], the cell
+//! cell file's timestep; the contacts of parts that wake recomputed at once ([`quiet`]). Steps in which nothing can move are not solved ([`quiet`], the cell
 //! file's `sim.stepping`).
 
 mod arm;
@@ -272,6 +272,11 @@ pub struct World {
     step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
     tray_pieces: Vec<(Isometry3<f64>, overlap::Polytope)>,
+    /// Whether the contacts of parts that woke in a step are recomputed in the next
+    /// ([`World::set_refresh_woken_contacts`]).
+    refresh_woken_contacts: bool,
+    /// Which parts slept before the step under way (scratch of [`World::pipeline_step`]).
+    asleep_before: Vec<bool>,
     /// The cell's fixed boxes as built (table, trays, obstacles), named as in the geometry.
     cell_boxes: Vec<crate::geometry::NamedBox>,
 }
@@ -343,6 +348,8 @@ impl World {
                 .into_iter()
                 .chain(overlap::tray_pieces(&scene.place_tray.tray))
                 .collect(),
+            refresh_woken_contacts: true,
+            asleep_before: Vec::new(),
             cell_boxes: Vec::new(),
         };
         // The cell's fixed boxes: table, trays, obstacles (one geometry for physics and planning).
@@ -422,6 +429,19 @@ impl World {
 
     fn pipeline_step(&mut self) {
         self.quiet_targets = None;
+        if self.refresh_woken_contacts {
+            self.asleep_before.clear();
+            self.asleep_before
+                .extend(self.parts.iter().map(|p| self.bodies[p.body].is_sleeping()));
+        }
+        self.pipeline_step_only();
+        if self.refresh_woken_contacts {
+            self.refresh_contacts_of_woken_parts();
+        }
+    }
+
+    /// One rapier step, nothing around it.
+    fn pipeline_step_only(&mut self) {
         self.pipeline.step(
             self.gravity,
             &self.params,
@@ -712,6 +732,12 @@ impl World {
     /// test nearly did; infinite: never): the physics tests' negative control.
     pub fn set_ccd_travel_m(&mut self, travel_m: f64) {
         self.ccd_travel_m = travel_m;
+    }
+
+    /// Recomputes the contacts of parts that woke in a step in the step after (default on;
+    /// see [`quiet`]): the physics tests' negative control turns it off.
+    pub fn set_refresh_woken_contacts(&mut self, on: bool) {
+        self.refresh_woken_contacts = on;
     }
 
     /// Turns rapier's contact clustering on or off ([`Solver::Tuned`] turns it off): the
