@@ -14,8 +14,8 @@
 //! millimetres; length unit 1 cm (allowed penetration 0.05 mm, prediction distance 0.2 mm);
 //! contact stiffness 200 Hz (400 Hz against fixed bodies); 8 solver iterations; every contact
 //! point solved (no clustering); CCD in steps where a part may travel over 1 mm; the
-//! cell file's timestep; the contacts of parts that wake recomputed at once ([`quiet`]). Steps in which nothing can move are not solved ([`quiet`], the cell
-//! file's `sim.stepping`).
+//! cell file's timestep; the contacts of parts that wake recomputed at once. Steps in which
+//! nothing can move are not solved ([`quiet`], the cell file's `sim.stepping`).
 
 mod arm;
 pub mod drops;

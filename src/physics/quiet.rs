@@ -15,9 +15,8 @@
 //!
 //! A part that wakes (the pile woken by a seal, an agitation, a pour, the arm) has its contacts
 //! recomputed in the step after it woke ([`World::set_refresh_woken_contacts`]): rapier would
-//! otherwise keep the contacts it recycled while the pile slept. Over 2,001 deterministic
-//! picks of C at each of seeds 1-7 that took the collisions from 4 (strips pressed into the
-//! floor, into each other, into a wall) to none (CHANGELOG, 2026-12-04).
+//! otherwise keep the contacts it recycled while the pile slept, and a woken pile of strips
+//! could be pressed into the floor, into each other or into a wall.
 //!
 //! Continuous collision detection (CCD) runs only in a step that needs it: one in which some
 //! awake part's point, or the pick tray, can travel farther than [`CCD_TRAVEL_M`] (a pour, a
@@ -101,9 +100,7 @@ impl World {
     /// recomputed in the next step, from the parts' poses. rapier 0.36.1 recycles a contact
     /// whose two bodies moved less than its recycle distance (0.5 mm here) since the contact
     /// was last computed, so a pile that wakes keeps the contacts it had when it went to
-    /// sleep, stale by up to 0.15 mm (the unit test below); a pile woken by a seal or an
-    /// agitation then pressed strips into the floor, each other or a wall (see the module
-    /// header). A collision-group change is the public way to make rapier recompute a
+    /// sleep, stale by up to 0.15 mm (the unit test below). A collision-group change is the public way to make rapier recompute a
     /// collider's pairs: the solver groups are switched away and back, which leaves them as
     /// they were and marks the collider changed.
     pub(super) fn refresh_contacts_of_woken_parts(&mut self) {
