@@ -370,16 +370,17 @@ impl<'a> Cell<'a> {
     }
 
     /// The cell's state at the start: the world with its first pile poured and the sensor over it.
+    /// A part the pour spills out of the tray is lost, as in a refill or a dose.
     pub fn start(&self, obs: &mut dyn Observer) -> Result<CellState, CycleError> {
         let mut world = World::new(self.scene, self.robot, self.shape.clone());
-        world
-            .build_pile_observed(&PileOptions::new(self.pile_count, self.opts.seed), &mut |w| {
-                obs.stepped(w)
-            })
-            .map_err(CycleError::Pour)?;
+        let pile = PileOptions::new(self.pile_count, self.opts.seed).losing_spilled();
+        let spilled = world
+            .build_pile_observed(&pile, &mut |w| obs.stepped(w))
+            .map_err(CycleError::Pour)?
+            .spilled;
         let sensor = Sensor::new(&self.scene.sensor, &world, self.opts.seed, &self.workpiece)
             .ok_or(SetupError::DegenerateSensorPose)?;
-        Ok(CellState {
+        let st = CellState {
             arm: ArmState {
                 servo: crate::servo::ServoState::at_rest(world.joints()),
                 commanded_qd: crate::robot::JointVector::zeros(),
@@ -407,7 +408,10 @@ impl<'a> Cell<'a> {
             results_collected: 0,
             capture_hold_until_s: f64::NEG_INFINITY,
             moving_in_a_row: 0,
-        })
+        };
+        let mut run = Run { cell: self, st, obs };
+        run.lose_spilled(spilled);
+        Ok(run.st)
     }
 }
 

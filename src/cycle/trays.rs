@@ -256,7 +256,14 @@ impl Run<'_, '_> {
             .world
             .build_pile_observed(&opts.losing_spilled(), &mut |w| obs.stepped(w))
             .map_err(CycleError::Pour)?;
-        for spilled in report.spilled {
+        self.lose_spilled(report.spilled);
+        Ok(())
+    }
+
+    /// Counts and reports the parts a pour spilled out of the pick tray (the first pile's
+    /// included) as lost.
+    pub(super) fn lose_spilled(&mut self, spilled: Vec<HealthEvent>) {
+        for spilled in spilled {
             if let HealthEvent::LeftVolume { body, volume, .. } = spilled {
                 self.st.parts_lost += 1;
                 self.event(Event::PartLost(PartLoss::LeftTray {
@@ -266,7 +273,6 @@ impl Run<'_, '_> {
                 }));
             }
         }
-        Ok(())
     }
 
     /// When the place tray's slots are used up: exchange it for an empty one.
