@@ -581,7 +581,10 @@ impl World {
         }
         if let Some((seal, tool_from_part)) = self.gripper.held() {
             let body = self.parts[seal.part].body;
-            self.bodies[body].set_next_kinematic_position(to_pose(&(world_from_tool_next * tool_from_part)));
+            super::set_next_kinematic(
+                &mut self.bodies[body],
+                to_pose(&(world_from_tool_next * tool_from_part)),
+            );
         }
     }
 }
