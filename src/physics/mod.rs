@@ -65,8 +65,8 @@ pub(crate) fn to_pose(iso: &Isometry3<f64>) -> Pose {
 /// Sets a kinematic body's pose at the end of the next step, its quaternion on the same side as
 /// the body's present one. rapier derives a kinematic body's velocity from the two quaternions
 /// without taking the shorter way round, so `q` then `-q` (the same rotation, as a pose computed
-/// afresh may come out) reads as most of a full turn within the step: a strip sealed on by the
-/// cup spun at 392 rad/s for that step and threw the two strips under it out of the tray.
+/// afresh may come out) reads as most of a full turn within the step: a strip the cup had just
+/// sealed on spun through that step and threw the strips under it out of the tray.
 pub(crate) fn set_next_kinematic(body: &mut rapier3d::dynamics::RigidBody, mut pose: Pose) {
     if body.position().rotation.dot(pose.rotation) < 0.0 {
         pose.rotation = -pose.rotation;
