@@ -525,13 +525,7 @@ impl World {
             if gripper_ran {
                 gripper_ran = false;
                 // The held part's pose at the step's end, as the gripper would have set it.
-                if let Some((seal, tool_from_part)) = self.gripper.held() {
-                    let body = self.parts[seal.part].body;
-                    set_next_kinematic(
-                        &mut self.bodies[body],
-                        to_pose(&(world_from_tool_next * tool_from_part)),
-                    );
-                }
+                self.move_held_part(&world_from_tool_next);
             } else {
                 self.update_gripper(&world_from_tool_next);
             }

@@ -579,6 +579,12 @@ impl World {
                 self.gripper.released(now, seal.part);
             }
         }
+        self.move_held_part(world_from_tool_next);
+    }
+
+    /// Sets the held part's pose at the step's end: where the tool, at `world_from_tool_next`,
+    /// carries it.
+    pub(super) fn move_held_part(&mut self, world_from_tool_next: &Isometry3<f64>) {
         if let Some((seal, tool_from_part)) = self.gripper.held() {
             let body = self.parts[seal.part].body;
             super::set_next_kinematic(
