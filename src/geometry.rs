@@ -257,7 +257,8 @@ impl HandGeometry {
 /// The cup's holding-force model (simplified, stated in docs/model.md, "Physics"): a full seal holds
 /// vacuum x cup area; the force the cup must exert on a part, m |a_tool - g|, is amplified for
 /// peeling by (1 + 4 e / d), e the part's centre-of-mass offset from the cup axis and d the cup
-/// diameter.
+/// diameter; a load other bodies put on the part adds its force and 4 / d times its moment about
+/// the cup centre.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SuctionModel {
     /// Cup lip radius (m).
@@ -285,6 +286,14 @@ impl SuctionModel {
     /// magnitude `specific_force_m_s2` (|a - g|), with the centre of mass `offset_m` off the axis.
     pub fn required_n(&self, mass_kg: f64, specific_force_m_s2: f64, offset_m: f64) -> f64 {
         mass_kg * specific_force_m_s2 * self.peel_factor(offset_m)
+    }
+
+    /// The force the cup must exert (N) against loads other bodies put on the held part: their
+    /// force `force_n` [N] and its moment about the cup centre across the cup axis
+    /// `moment_across_nm` [N m], peeling as the offset weight does: |F| + 4 |M| / d. Added to
+    /// [`SuctionModel::required_n`], a bound on the combined load's.
+    pub fn contact_required_n(&self, force_n: f64, moment_across_nm: f64) -> f64 {
+        force_n + 4.0 * moment_across_nm / (2.0 * self.cup_radius_m)
     }
 
     /// The largest tool specific force [m/s^2] that needs at most `share` of the holding force

@@ -169,6 +169,12 @@ pub struct GripperConfig {
     pub com_m: [f64; 3],
     /// Hand principal moments of inertia about its centre of mass, axes along the flange frame [kg m^2].
     pub inertia_kg_m2: [f64; 3],
+    /// Whether parts pressing on the held part load the seal (their pull off the cup and its peel
+    /// moment, [`crate::physics::ContactLoad`]), not only its own weight and the tool's
+    /// acceleration. Off by default for now: the grasp selector does not yet avoid parts another
+    /// lies on, and a C strip with a strip across its end tears off a 6 mm cup (docs/model.md).
+    #[serde(default)]
+    pub seal_loaded_by_parts: bool,
 }
 
 /// A silhouette fit whose consistent yaws span more than this does not pin the yaw down (rad)

@@ -76,13 +76,15 @@ impl Run<'_, '_> {
             self.st.capture_hold_until_s = self.st.world.time_s() + super::LET_GO_SETTLE_S;
             self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
         }
-        // No motion for it is a failure at that spot too: the same pile gives the same plan.
-        if (outcome.grasp_failed()
+        // No motion for it is a failure at that spot too: the same pile gives the same plan. A
+        // part torn off the cup falls back where it lay, under what tore it off.
+        if ((outcome.grasp_failed()
             || matches!(
                 outcome,
                 Outcome::Collision(_) | Outcome::ProtectiveStop(_) | Outcome::NoMotion(_)
             ))
-            && rec.place_s == 0.0
+            && rec.place_s == 0.0)
+            || matches!(outcome, Outcome::Dropped(_))
         {
             self.st.failed_spots.push(prep.grasp.world_from_tool.translation.vector);
         }
@@ -360,9 +362,14 @@ impl Run<'_, '_> {
         };
         let lifted = self.play(&lift.flowing_on().capturing(Capture::ANY))?;
         self.pick_done(rec, t_pick);
-        if let Played::Failed(o) = lifted {
-            return Ok((o, None));
-        }
+        // A part that tore off the cup in a lift blended into the transfer leaves the arm at the
+        // transfer's speed: it goes on along the planned Place, its cup empty (those motions are
+        // checked; none starts from mid-swing), releases nothing, and the pick is the drop.
+        let dropped = match lifted {
+            Played::Failed(o @ Outcome::Dropped(_)) if lift_blend.is_some() => Some(o),
+            Played::Failed(o) => return Ok((o, None)),
+            Played::Done => None,
+        };
         // Place: the motions were generated while the Pick ran; wait if they are not ready yet.
         if place_ready > self.st.world.time_s() {
             let t = self.st.world.time_s();
@@ -394,8 +401,18 @@ impl Run<'_, '_> {
             self.place_done(rec, t_place, 0.0);
             return Ok((o, None));
         }
-        let release = self.release()?;
-        self.obs.marker(release, &format!("release {}", rec.index));
+        let release = match dropped {
+            Some(_) => {
+                self.st.world.vacuum_off();
+                None
+            }
+            None => {
+                let release = self.release()?;
+                self.obs.marker(release, &format!("release {}", rec.index));
+                Some(release)
+            }
+        };
+        let outcome = dropped.unwrap_or(Outcome::Placed);
         if let Some((mut next, head_s)) = self.prefetch_next(up) {
             // The retreat runs into the next Pick, prepared now: its head alone ends this Place.
             self.place_done(rec, t_place, head_s);
@@ -404,8 +421,8 @@ impl Run<'_, '_> {
                 part,
                 slot: prep.slot,
             });
-            rec.release_s = Some(release);
-            return Ok((Outcome::Placed, Some(next)));
+            rec.release_s = release;
+            return Ok((outcome, Some(next)));
         }
         if let Played::Failed(o) = self.play(&Segment::new(up, hand).capturing(capture))? {
             self.place_done(rec, t_place, 0.0);
@@ -417,8 +434,8 @@ impl Run<'_, '_> {
             rec.placement_error_mm = Some(d * 1e3);
             rec.yaw_error_deg = Some(yaw.to_degrees());
         }
-        rec.release_s = Some(release);
-        Ok((Outcome::Placed, None))
+        rec.release_s = release;
+        Ok((outcome, None))
     }
 
     /// The Place from `t_place` ends `after_s` from now: 0, or the head of a retreat that runs

@@ -40,7 +40,7 @@ use crate::robot::{DOF, JointVector, RobotModel};
 pub use health::{HealthError, HealthEvent, HealthLimits, HealthMonitor};
 pub use query::{RayCaster, RayHit, RayTargets, ViewVolume};
 pub use shapes::{PartShape, ShapeError};
-pub use suction::{GraspFailure, GripperEvent, SuctionGripper};
+pub use suction::{ContactLoad, GraspFailure, GripperEvent, SuctionGripper};
 pub use view::ViewMesh;
 
 /// rapier units per metre: the physics runs in millimetres. parry reuses a pair's contact points
@@ -280,6 +280,8 @@ pub struct World {
     health: HealthMonitor,
     /// Tool positions after the last steps, newest last, for the tool's acceleration.
     tool_history: [Vector3<f64>; 3],
+    /// What other parts push on the held part with, low-passed ([`suction::ContactLoad`]).
+    held_load: suction::ContactLoad,
     /// The physics step (s) (`params.dt` holds the substep's while a step runs).
     step_dt_s: f64,
     /// Both trays' floors and walls for the independent overlap check.
@@ -355,6 +357,7 @@ impl World {
                 },
             },
             tool_history: [Vector3::zeros(); 3],
+            held_load: suction::ContactLoad::default(),
             step_dt_s: f64::from(scene.sim.physics_dt_s as f32),
             tray_pieces: overlap::tray_pieces(&scene.pick_tray)
                 .into_iter()
@@ -530,6 +533,7 @@ impl World {
                 self.update_gripper(&world_from_tool_next);
             }
             self.pipeline_step();
+            self.update_held_load(&world_from_tool_next, dt_s / n as f64);
             self.time_s += dt_s / n as f64;
             self.q = q_k;
         }

@@ -23,7 +23,7 @@
 use nalgebra::{Isometry3, Matrix3, Translation3, Vector3};
 use rapier3d::prelude::{ActiveCollisionTypes, RigidBodyType};
 
-use super::{PartState, SIM_UNITS_PER_M, Tag, World, sim_point, to_pose};
+use super::{PartState, SIM_UNITS_PER_M, Tag, World, dir_from_sim, point_from_sim, sim_point, to_pose};
 use crate::config::GripperConfig;
 use crate::robot::Payload;
 
@@ -37,6 +37,23 @@ const SAME_FACE_RAD: f64 = 0.087;
 const TOUCH_GAP_M: f64 = 0.0008;
 /// The bellows take up at most this much overlap of the part with the tray at the seal (m).
 const BELLOWS_TAKE_UP_M: f64 = 0.001;
+/// Time constant of the low pass on the contact load on the held part (s). A rigid solver
+/// delivers a touch as one substep's impulse; a seal is broken by a load that lasts long enough to
+/// lift the lip and let air in. Chosen (a few substeps, a fraction of the vacuum's build-up), not
+/// measured.
+pub const CONTACT_LOAD_LAG_S: f64 = 0.01;
+
+/// What other parts push on the held part with, low-passed over [`CONTACT_LOAD_LAG_S`]: of the
+/// solver's normal contact impulses over the substep, the pull along the cup axis away from the
+/// cup, and its moment. A push toward the cup (a part under the held one) is carried by the lip
+/// and neither loads nor relieves the seal; shear and friction are left out.
+#[derive(Debug, Clone, Copy, Default, PartialEq)]
+pub struct ContactLoad {
+    /// Their force on the held part [N, world].
+    pub force_n: Vector3<f64>,
+    /// Its moment about the cup centre [N m, world].
+    pub moment_nm: Vector3<f64>,
+}
 
 /// Why a grasp failed.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -173,6 +190,8 @@ pub struct SuctionGripper {
     pub build_up_s: f64,
     /// Release time (s).
     pub release_s: f64,
+    /// Parts pressing on the held part load the seal (`gripper.seal_loaded_by_parts`).
+    pub loaded_by_parts: bool,
     /// When the valve was last commanded closed, while it stays closed (s) (the controller's
     /// command, whatever the part did).
     closed_since_s: Option<f64>,
@@ -210,6 +229,7 @@ impl SuctionGripper {
             model,
             build_up_s: g.vacuum_build_up_s,
             release_s: g.release_s,
+            loaded_by_parts: g.seal_loaded_by_parts,
             closed_since_s: None,
             state: GripperState::Idle,
             events: Vec::new(),
@@ -481,6 +501,7 @@ impl World {
             let lifted = Isometry3::from_parts(Translation3::from(pose.translation.vector + out_m), pose.rotation);
             self.bodies[body].set_position(to_pose(&lifted), true);
         }
+        self.held_load = ContactLoad::default();
         let p = &mut self.parts[seal.part];
         p.state = PartState::Held;
         self.bodies[body].set_body_type(RigidBodyType::KinematicPositionBased, true);
@@ -503,7 +524,7 @@ impl World {
             if !matches!(self.tag_of(other), Some(Tag::Env(_))) {
                 continue;
             }
-            for m in pair.manifolds() {
+            for m in pair.solver_manifolds() {
                 let depth_m = m
                     .points
                     .iter()
@@ -539,13 +560,77 @@ impl World {
     }
 
     /// The force the cup must exert on the sealed part against gravity and the tool's
-    /// acceleration now, amplified for peeling (N).
+    /// acceleration now, amplified for peeling, and against what other parts push on it (N).
     fn required_holding_n(&self, seal: &Seal) -> f64 {
         let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
         let specific_force = (self.tool_acceleration() - g).norm();
-        self.gripper
-            .model
-            .required_n(self.part_shape.mass_kg, specific_force, seal.com_offset_m)
+        let model = &self.gripper.model;
+        let inertial = model.required_n(self.part_shape.mass_kg, specific_force, seal.com_offset_m);
+        if !self.gripper.loaded_by_parts {
+            return inertial;
+        }
+        let axis = self.world_from_tool().rotation * Vector3::z();
+        let m = self.held_load.moment_nm;
+        let across = (m - axis * m.dot(&axis)).norm();
+        inertial + model.contact_required_n(self.held_load.force_n.norm(), across)
+    }
+
+    /// The low-passed contact load on the held part ([`ContactLoad`]), if a part is held.
+    pub fn held_contact_load(&self) -> Option<ContactLoad> {
+        self.gripper.held().map(|_| self.held_load)
+    }
+
+    /// After a solved substep of `dt_s` with the tool at `world_from_tool`: the normal impulses
+    /// the solver applied between the held part and the parts touching it, as the pull on the
+    /// held part away from the cup and its moment about the cup centre, into the low pass. Only dynamic bodies push: a
+    /// kinematic held part gets no impulse from the tray or the arm.
+    pub(super) fn update_held_load(&mut self, world_from_tool: &Isometry3<f64>, dt_s: f64) {
+        let Some((seal, _)) = self.gripper.held().filter(|_| self.gripper.loaded_by_parts) else {
+            return;
+        };
+        let held = self.parts[seal.part].collider;
+        let cup = world_from_tool.translation.vector;
+        let axis = world_from_tool.rotation * Vector3::z();
+        let mut raw = ContactLoad::default();
+        for pair in self.narrow_phase.contact_pairs_with(held) {
+            let (held_first, other) = if pair.collider1 == held {
+                (true, pair.collider2)
+            } else {
+                (false, pair.collider1)
+            };
+            if !matches!(self.tag_of(other), Some(Tag::Part(_))) {
+                continue;
+            }
+            let held_pose = self.colliders[held].position();
+            // The manifolds the solver saw (its contact clusters where it made them).
+            for m in pair.solver_manifolds() {
+                // The manifold's normal points from collider 1 to collider 2; the solver's
+                // normal impulse pushes them apart.
+                let n = dir_from_sim(m.data.normal);
+                let toward_held = if held_first { -n } else { n };
+                for pt in &m.points {
+                    let impulse = pt.data.impulse as f64;
+                    if impulse <= 0.0 {
+                        continue;
+                    }
+                    let local = if held_first { pt.local_p1 } else { pt.local_p2 };
+                    let at_m = point_from_sim(held_pose.transform_point(local));
+                    // rapier units: kg mm / s; a force in N is that over dt, over 1000. Only
+                    // its pull, away from the cup along its axis.
+                    let f = toward_held * (impulse / SIM_UNITS_PER_M / dt_s);
+                    let pull_n = f.dot(&axis);
+                    if pull_n <= 0.0 {
+                        continue;
+                    }
+                    let f = axis * pull_n;
+                    raw.force_n += f;
+                    raw.moment_nm += (at_m - cup).cross(&f);
+                }
+            }
+        }
+        let k = (dt_s / CONTACT_LOAD_LAG_S).min(1.0);
+        self.held_load.force_n += (raw.force_n - self.held_load.force_n) * k;
+        self.held_load.moment_nm += (raw.moment_nm - self.held_load.moment_nm) * k;
     }
 
     /// Runs the gripper's timers and moves the held part with the tool; called by `step` before

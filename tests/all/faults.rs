@@ -196,3 +196,48 @@ fn a_part_the_first_pour_spills_is_lost_and_the_run_goes_on() {
         "{err:?}"
     );
 }
+
+#[test]
+fn a_part_torn_off_the_cup_in_a_blended_lift_leaves_the_arm_on_its_planned_place() {
+    // With `gripper.seal_loaded_by_parts`, a C strip another strip presses on tears off the
+    // 6 mm cup early in the lift (seed 4, pick 3, 0.034 s into it). The lift is played blended
+    // into the Place transfer and ends at the transfer's speed; the arm goes on along the planned
+    // Place with its cup empty, and the pick is a drop. Seen failing against the handling before,
+    // where the pick ended at the lift's end, mid-swing: no drop went on along the Place, and on
+    // seed 2 (with an earlier form of the load) the next motion's commanded velocity stepped by
+    // 2.9 rad/s and a protective stop ended the run.
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    scene.scene.gripper.seal_loaded_by_parts = true;
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("C").unwrap();
+    let r = cycle::run(
+        &scene,
+        &robot,
+        &wp,
+        &RunOptions {
+            keep_records: true,
+            ..opts(5, 4)
+        },
+        &mut (),
+    )
+    .unwrap();
+    let t = &r.tally;
+    // The drop went on along the Place (its Place time counted) and released nothing.
+    let in_lift = r
+        .records
+        .iter()
+        .filter(|p| {
+            matches!(p.outcome, binpick::cycle::Outcome::Dropped(_)) && p.overlaps.lift_s > 0.0 && p.place_s > 0.0
+        })
+        .inspect(|p| assert_eq!(p.release_s, None))
+        .count();
+    assert!(in_lift >= 1, "the case needs a drop in a blended lift: {:?}", t.faults);
+    assert_eq!(t.faults.protective_stops, 0, "{:?}", t.incidents);
+    assert_eq!(t.ended, Some(EndReason::PicksDone));
+    // A drop releases nothing: every takt interval ends at a placed part's release.
+    assert_eq!(t.takts_s.len() + 1, t.placed.max(1), "{t:?}");
+    // Negative control: the cell's default, no load on the seal, no drop on these picks.
+    let scene = LoadedScene::embedded_default().unwrap();
+    let r = cycle::run(&scene, &robot, &wp, &opts(5, 4), &mut ()).unwrap();
+    assert_eq!(r.tally.faults.drops, 0, "{:?}", r.tally.faults);
+}

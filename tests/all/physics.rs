@@ -765,3 +765,76 @@ fn a_pour_that_spills_loses_the_part_and_goes_on_only_when_asked() {
         "{err}"
     );
 }
+
+/// What a part lying across the held part weighs on the cup: two C strips, one held by the cup at
+/// its middle 5 cm above the tray, the other laid across it a lever away from the cup. The
+/// solver's contact impulses, read as a force and its moment about the cup centre, carry the
+/// upper strip's weight (checked against m g and the lever measured from the two bodies' poses,
+/// not from the contacts). The cup holds it 2 cm out, and the same strip 6 cm out peels the held
+/// one off: each case's need, |F| + 4 |M| / d over the held strip's own, is worked out here
+/// against the holding force, one below and one above it (`gripper.seal_loaded_by_parts` on).
+/// Negative controls: nothing on the held strip, no load; the key off, the strip 6 cm out stays.
+#[test]
+fn a_part_lying_across_the_held_part_loads_the_cup_with_its_weight_and_peels_it_far_out() {
+    let held_and_loaded = |lever_m: Option<f64>, loaded: bool| {
+        let mut scene = LoadedScene::embedded_default().unwrap();
+        scene.scene.gripper.seal_loaded_by_parts = loaded;
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let wp = LoadedWorkpiece::resolve("C").unwrap();
+        let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+        let mut w = World::new(&scene.scene, &robot, shape);
+        let top = lone_part(&mut w, 0.005, (0.0, 0.0), UnitQuaternion::identity());
+        let ev = grasp_at(&mut w, tool_down_pose(top, 0.0));
+        assert!(matches!(ev, GripperEvent::Grasped { .. }), "{ev:?}");
+        let lifted = tool_down_pose(top + Vector3::z() * 0.05, 0.0);
+        w.move_tool_line(&lifted, 0.5).unwrap();
+        let upper = lever_m.map(|dx| {
+            let held = w.part_pose(0);
+            let at = held.translation.vector + held.rotation * Vector3::new(dx, 0.0, 0.0055);
+            let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2);
+            w.add_part(&Isometry3::from_parts(Translation3::from(at), held.rotation * turn))
+        });
+        w.run_for(0.3).unwrap();
+        (w, wp.workpiece.mass_kg, upper)
+    };
+    let weight_n = |mass_kg: f64| mass_kg * binpick::robot::GRAVITY_M_S2;
+    // Negative control: nothing on it.
+    let (w, _, _) = held_and_loaded(None, true);
+    let load = w.held_contact_load().expect("held");
+    assert!(load.force_n.norm() < 1e-6, "{load:?}");
+    // 2 cm out: the weight, straight down, its moment the weight times the lever across the cup
+    // axis; the cup holds.
+    let (w, mass_kg, upper) = held_and_loaded(Some(0.02), true);
+    let upper = upper.unwrap();
+    let (wn, cup) = (weight_n(mass_kg), w.world_from_tool().translation.vector);
+    let load = w.held_contact_load().expect("held");
+    assert!(
+        (load.force_n - Vector3::new(0.0, 0.0, -wn)).norm() < 0.05 * wn,
+        "{load:?} against {wn} N"
+    );
+    let lever = w.part_pose(upper).translation.vector - cup;
+    assert!((lever.x - 0.02).abs() < 0.002 && w.part_pose(upper).translation.z > w.part_pose(0).translation.z);
+    let moment = Vector3::new(lever.x, lever.y, 0.0).cross(&Vector3::new(0.0, 0.0, -wn));
+    assert!(
+        (load.moment_nm - moment).norm() < 0.1 * moment.norm(),
+        "{load:?} against {moment}"
+    );
+    let (d_m, holding_n) = (2.0 * w.gripper().cup_radius_m, w.gripper().holding_n);
+    let need = |lever_m: f64| 2.0 * wn + 4.0 * wn * lever_m / d_m;
+    assert!(need(0.02) < holding_n, "{} N, {holding_n} N", need(0.02));
+    assert_eq!(w.held_part(), Some(0));
+    // 6 cm out: more than the cup holds, and the held strip tears off.
+    assert!(need(0.06) > holding_n, "{} N, {holding_n} N", need(0.06));
+    let (mut w, _, _) = held_and_loaded(Some(0.06), true);
+    assert!(w.held_part().is_none());
+    assert!(
+        w.take_gripper_events()
+            .iter()
+            .any(|e| matches!(e, GripperEvent::Slipped { part: 0, .. })),
+        "no slip"
+    );
+    // With the cell's key off, the seal sees no load and the strip stays on the cup.
+    let (w, _, _) = held_and_loaded(Some(0.06), false);
+    assert_eq!(w.held_part(), Some(0));
+    assert_eq!(w.held_contact_load().map(|l| l.force_n.norm()), Some(0.0));
+}
