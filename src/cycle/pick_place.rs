@@ -412,8 +412,14 @@ impl Run<'_, '_> {
                 Some(release)
             }
         };
+        // A next pick prepared during the retreat goes to the slot after this part's: none after
+        // a drop, which leaves its slot empty.
+        let prefetched = match dropped {
+            Some(_) => None,
+            None => self.prefetch_next(up),
+        };
         let outcome = dropped.unwrap_or(Outcome::Placed);
-        if let Some((mut next, head_s)) = self.prefetch_next(up) {
+        if let Some((mut next, head_s)) = prefetched {
             // The retreat runs into the next Pick, prepared now: its head alone ends this Place.
             self.place_done(rec, t_place, head_s);
             next.late = part.map(|part| LatePlacement {
