@@ -171,10 +171,15 @@ pub struct GripperConfig {
     pub inertia_kg_m2: [f64; 3],
     /// Whether parts pressing on the held part load the seal (their pull off the cup and its peel
     /// moment, [`crate::physics::ContactLoad`]), not only its own weight and the tool's
-    /// acceleration. Off by default for now: the grasp selector does not yet avoid parts another
-    /// lies on, and a C strip with a strip across its end tears off a 6 mm cup (docs/model.md).
-    #[serde(default)]
+    /// acceleration. On by default: off, a strip lying on the end of the held one is lifted
+    /// rigidly, kinder than a real cup (docs/model.md).
+    #[serde(default = "seal_loaded_by_parts")]
     pub seal_loaded_by_parts: bool,
+}
+
+/// The default of `gripper.seal_loaded_by_parts`.
+fn seal_loaded_by_parts() -> bool {
+    true
 }
 
 /// A silhouette fit whose consistent yaws span more than this does not pin the yaw down (rad)
