@@ -9,7 +9,9 @@
 //! Model (simplified, stated in docs/model.md, "Physics"): the seal is probed with rays along the tool axis at
 //! the cup centre and 16 points of the lip circle. Holding force = vacuum x cup area. A part slips
 //! when the force the cup must exert, m |a_tool - g|, amplified for peeling by (1 + 4 e / d)
-//! (e: centre-of-mass offset from the cup axis, d: cup diameter), exceeds the holding force.
+//! (e: centre-of-mass offset from the cup axis, d: cup diameter), plus what other parts pull on
+//! it off the cup, |F| + 4 |M| / d (M its moment about the cup centre; [`ContactLoad`], with
+//! `gripper.seal_loaded_by_parts`), exceeds the holding force.
 //! Once the valve closes, the holding force falls linearly to zero over `release_s`: the part
 //! comes off when the force it needs exceeds what is left (earlier for a heavy part or a cup
 //! still decelerating), and at the latest after `release_s`.
@@ -582,8 +584,8 @@ impl World {
 
     /// After a solved substep of `dt_s` with the tool at `world_from_tool`: the normal impulses
     /// the solver applied between the held part and the parts touching it, as the pull on the
-    /// held part away from the cup and its moment about the cup centre, into the low pass. Only dynamic bodies push: a
-    /// kinematic held part gets no impulse from the tray or the arm.
+    /// held part away from the cup and its moment about the cup centre, into the low pass. Only
+    /// dynamic bodies push: a kinematic held part gets no impulse from the tray or the arm.
     pub(super) fn update_held_load(&mut self, world_from_tool: &Isometry3<f64>, dt_s: f64) {
         let Some((seal, _)) = self.gripper.held().filter(|_| self.gripper.loaded_by_parts) else {
             return;
