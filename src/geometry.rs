@@ -289,8 +289,8 @@ impl SuctionModel {
     }
 
     /// The force the cup must exert (N) against loads other bodies put on the held part: their
-    /// force `force_n` [N] and its moment about the cup centre across the cup axis
-    /// `moment_across_nm` [N m], peeling as the offset weight does: |F| + 4 |M| / d. Added to
+    /// force `force_n` (N) and its moment about the cup centre across the cup axis
+    /// `moment_across_nm` (N m), peeling as the offset weight does: |F| + 4 |M| / d. Added to
     /// [`SuctionModel::required_n`], a bound on the combined load's.
     pub fn contact_required_n(&self, force_n: f64, moment_across_nm: f64) -> f64 {
         force_n + 4.0 * moment_across_nm / (2.0 * self.cup_radius_m)
