@@ -402,7 +402,7 @@ impl GraspSelector {
     }
 
     /// Whether the cloud stands above the face anywhere over it: a cell whose centre lies on the
-    /// face (shrunk by the pose's uncertainty and a cell) higher than the face's plane there by
+    /// face (shrunk by half a cell) higher than the face's plane there by
     /// more than [`COVER_TOLERANCE_M`]. `face_point_tray` is the face point under the cup (tray
     /// frame, its height measured). Unseen cells say nothing here (the planner treats them as
     /// occupied).
@@ -414,7 +414,9 @@ impl GraspSelector {
         }
         let u_dir = tray_from_part.rotation * face.along;
         let v_dir = n.cross(&u_dir);
-        let shrink = self.face_margin_m + height_map.cell_m;
+        // Only the cells whose centres lie on the face: a part resting on its rim or a corner
+        // loads the seal as much as one on its middle, and more the farther from the cup.
+        let shrink = 0.5 * height_map.cell_m;
         let half = [face.extent_m[0] / 2.0 - shrink, face.extent_m[1] / 2.0 - shrink];
         if half[0] <= 0.0 || half[1] <= 0.0 {
             return false;
@@ -815,15 +817,15 @@ mod tests {
         );
     }
 
-    #[test]
-    fn a_strip_with_a_part_across_it_is_covered() {
+    /// A C strip lying flat at the tray's centre, turned 30 deg, seen on a map of 1 mm cells:
+    /// the selector, its top face, the detection, the map, and the strip's pose and size.
+    fn bare_strip() -> (GraspSelector, Face, Detection, HeightMap, Isometry3<f64>, [f64; 3]) {
         let scene = crate::config::LoadedScene::embedded_default().unwrap();
         let robot = crate::robot::test_support::default_robot();
         let c = LoadedWorkpiece::resolve("C").unwrap().workpiece;
         let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &LoadedWorkpiece::resolve("C").unwrap());
         let top = sel.faces().iter().position(|f| f.normal == Vector3::z()).unwrap();
         let face = sel.faces()[top];
-        // The strip lies flat at the tray's centre, turned 30 deg; the map is 1 mm cells.
         let tray_from_part = Isometry3::from_parts(
             Translation3::new(0.0, 0.0, c.size_m[2] / 2.0),
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5),
@@ -834,41 +836,76 @@ mod tests {
             score: 1.0,
             face_up: None,
         };
-        let cell_m = 0.001;
-        let (nx, ny) = (200, 200);
         let mut map = HeightMap {
             world_from_tray: sel.tray,
-            cell_m,
-            nx,
-            ny,
+            cell_m: 0.001,
+            nx: 200,
+            ny: 200,
             origin_xy_m: [-0.1, -0.1],
-            height_m: vec![0.0; nx * ny],
+            height_m: vec![0.0; 200 * 200],
         };
+        raise(&mut map, &tray_from_part, c.size_m[2], |x, y| {
+            x.abs() <= c.size_m[0] / 2.0 && y.abs() <= c.size_m[1] / 2.0
+        });
+        (sel, face, det, map, tray_from_part, c.size_m)
+    }
+
+    /// Sets the map to `height_m` wherever `inside` holds for the cell centre in the part frame.
+    fn raise(map: &mut HeightMap, tray_from_part: &Isometry3<f64>, height_m: f64, inside: impl Fn(f64, f64) -> bool) {
         let inverse = tray_from_part.inverse();
-        let centre =
-            |i: usize, j: usize| Point3::new(-0.1 + (i as f64 + 0.5) * cell_m, -0.1 + (j as f64 + 0.5) * cell_m, 0.0);
-        for j in 0..ny {
-            for i in 0..nx {
-                let p = inverse * centre(i, j);
-                if p.x.abs() <= c.size_m[0] / 2.0 && p.y.abs() <= c.size_m[1] / 2.0 {
-                    map.height_m[j * nx + i] = c.size_m[2];
+        for j in 0..map.ny {
+            for i in 0..map.nx {
+                let c = Point3::new(
+                    map.origin_xy_m[0] + (i as f64 + 0.5) * map.cell_m,
+                    map.origin_xy_m[1] + (j as f64 + 0.5) * map.cell_m,
+                    0.0,
+                );
+                let p = inverse * c;
+                if inside(p.x, p.y) {
+                    map.height_m[j * map.nx + i] = height_m;
                 }
             }
         }
+    }
+
+    #[test]
+    fn a_strip_with_a_part_across_it_is_covered() {
+        let (sel, face, det, mut map, tray_from_part, size) = bare_strip();
         let face_point = (tray_from_part * Point3::from(face.center)).coords;
         assert!(!sel.covered(&map, &det, &face, &face_point), "a bare strip is covered");
         // Negative control: a 10 mm part lying across the strip 55 mm from its centre.
-        for j in 0..ny {
-            for i in 0..nx {
-                let p = inverse * centre(i, j);
-                if (p.x - 0.055).abs() <= 0.005 && p.y.abs() <= 0.02 {
-                    map.height_m[j * nx + i] = c.size_m[2] + 0.01;
-                }
-            }
-        }
+        raise(&mut map, &tray_from_part, size[2] + 0.01, |x, y| {
+            (x - 0.055).abs() <= 0.005 && y.abs() <= 0.02
+        });
         assert!(
             sel.covered(&map, &det, &face, &face_point),
             "a part across the strip is not seen"
+        );
+    }
+
+    /// A part resting on the strip's corner (2 x 2 mm of it, inside the face's grasp margin) covers
+    /// it: lifted, the strip would carry that part's weight 75 mm from the cup. A part as high
+    /// right beside the strip's end, off the face, does not (negative control).
+    #[test]
+    fn a_part_on_a_strips_corner_covers_it_and_one_beside_its_end_does_not() {
+        let (sel, face, det, map, tray_from_part, size) = bare_strip();
+        let face_point = (tray_from_part * Point3::from(face.center)).coords;
+        let (hx, hy) = (size[0] / 2.0, size[1] / 2.0);
+        let mut beside = map.clone();
+        raise(&mut beside, &tray_from_part, size[2] + 0.005, |x, y| {
+            x > hx + 0.0015 && x < hx + 0.02 && y.abs() <= 0.02
+        });
+        assert!(
+            !sel.covered(&beside, &det, &face, &face_point),
+            "a part beside the end covers it"
+        );
+        let mut corner = map;
+        raise(&mut corner, &tray_from_part, size[2] + 0.005, |x, y| {
+            x > hx - 0.002 && x < hx + 0.02 && y > hy - 0.002 && y < hy + 0.02
+        });
+        assert!(
+            sel.covered(&corner, &det, &face, &face_point),
+            "a part on the corner is not seen"
         );
     }
 
