@@ -401,22 +401,18 @@ impl Run<'_, '_> {
             self.place_done(rec, t_place, 0.0);
             return Ok((o, None));
         }
-        let release = match dropped {
+        // A next pick prepared during the retreat goes to the slot after this part's: none after
+        // a drop, which releases nothing and leaves its slot empty.
+        let (release, prefetched) = match dropped {
             Some(_) => {
                 self.st.world.vacuum_off();
-                None
+                (None, None)
             }
             None => {
                 let release = self.release()?;
                 self.obs.marker(release, &format!("release {}", rec.index));
-                Some(release)
+                (Some(release), self.prefetch_next(up))
             }
-        };
-        // A next pick prepared during the retreat goes to the slot after this part's: none after
-        // a drop, which leaves its slot empty.
-        let prefetched = match dropped {
-            Some(_) => None,
-            None => self.prefetch_next(up),
         };
         let outcome = dropped.unwrap_or(Outcome::Placed);
         if let Some((mut next, head_s)) = prefetched {
