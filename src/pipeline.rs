@@ -65,11 +65,42 @@ pub struct ChosenGrasp {
     pub model: CollisionModel,
 }
 
+/// What one capture shows of the pick tray, derived once for every grasp choice made on it (the
+/// cycle chooses on one capture for several picks, and ahead of the pick it is for).
+#[derive(Debug, Clone)]
+pub struct SensedPile {
+    /// The capture's number within its run.
+    pub capture_id: u64,
+    /// The pick tray's pose the maps were binned in.
+    pub world_from_tray: nalgebra::Isometry3<f64>,
+    /// The capture's height map over the pick tray (walls included).
+    pub height_map: HeightMap,
+    /// The pile as the planner sees it ([`pile_map`]).
+    pub pile: HeightMap,
+}
+
+impl SensedPile {
+    /// The height map of `capture` over `ctx`'s pick tray, and the planner's pile from it.
+    pub fn new(ctx: &GraspContext<'_>, capture: &Capture) -> Self {
+        let height_map = HeightMap::from_capture(capture, ctx.pick_tray, HEIGHT_MAP_CELL_M);
+        let pile = pile_map(ctx.scene, &height_map);
+        SensedPile {
+            capture_id: capture.id,
+            world_from_tray: ctx.pick_tray.world_from_tray,
+            height_map,
+            pile,
+        }
+    }
+
+    /// Whether these are the maps of `capture` with the pick tray at `tray`.
+    pub fn is_of(&self, capture: &Capture, tray: &TrayVolume) -> bool {
+        self.capture_id == capture.id && self.world_from_tray == tray.world_from_tray
+    }
+}
+
 /// The result of sense-and-grasp.
 #[derive(Debug, Clone)]
 pub struct GraspChoice {
-    /// The capture's height map over the pick tray (walls included).
-    pub height_map: HeightMap,
     /// The selector's ranking and rejections.
     pub plan: GraspPlan,
     /// The grasp to try, if any.
@@ -152,22 +183,22 @@ pub fn pile_map(scene: &Scene, height_map: &HeightMap) -> HeightMap {
     height_map.unseen_filled(inner, t.wall_height_m).inner_only(inner)
 }
 
-/// Sense and grasp on one capture: the height map, the ranked grasps for the part to go to
+/// Sense and grasp on one capture (its maps in `sensed`): the ranked grasps for the part to go to
 /// `world_from_slot` with the arm at `q_now`, and the best one not within
 /// [`FAILED_SPOT_RADIUS_M`] of a `failed_spots` entry whose approach pose is clear with the hand
 /// alone and with the part held (a part near a wall can hang into it when lifted: the Place
 /// would have nowhere to start from).
 pub fn sense_and_grasp(
     ctx: &GraspContext<'_>,
-    capture: &Capture,
+    sensed: &SensedPile,
     detections: &[Detection],
     world_from_slot: &nalgebra::Isometry3<f64>,
     q_now: &JointVector,
     failed_spots: &[Vector3<f64>],
 ) -> GraspChoice {
-    let height_map = HeightMap::from_capture(capture, ctx.pick_tray, HEIGHT_MAP_CELL_M);
-    let plan = ctx.selector.select(detections, &height_map, world_from_slot, q_now);
-    let pile = pile_map(ctx.scene, &height_map);
+    let plan = ctx
+        .selector
+        .select(detections, &sensed.height_map, world_from_slot, q_now);
     // Not where a grasp has just failed: the same spot would fail the same way.
     let tried = |g: &GraspCandidate| {
         failed_spots
@@ -182,7 +213,7 @@ pub fn sense_and_grasp(
         .filter(|(_, g)| !tried(g))
         .take(APPROACH_CANDIDATES)
     {
-        let env = planning_environment(ctx.scene, &pile, g);
+        let env = planning_environment(ctx.scene, &sensed.pile, g);
         let model = CollisionModel::new(ctx.robot, RobotSpheres::new(ctx.robot, ctx.scene, None), env.clone());
         let q_approach = JointVector::from(g.q_approach);
         if !model.free(&q_approach, &mut PlanStats::default()) {
@@ -200,9 +231,5 @@ pub fn sense_and_grasp(
             break;
         }
     }
-    GraspChoice {
-        height_map,
-        plan,
-        chosen,
-    }
+    GraspChoice { plan, chosen }
 }

@@ -139,7 +139,7 @@ pub fn binpicking_queries(
     n: usize,
 ) -> Result<Vec<PlannerCase>, Box<dyn std::error::Error + Send + Sync>> {
     use crate::physics::{PartShape, World, pile::PileOptions};
-    use crate::pipeline::{GraspContext, pile_map, planning_environment, sense_and_grasp};
+    use crate::pipeline::{GraspContext, SensedPile, planning_environment, sense_and_grasp};
     use crate::planning::{CollisionModel, RobotSpheres};
     use crate::sensor::Sensor;
     let mut out = Vec::new();
@@ -163,13 +163,14 @@ pub fn binpicking_queries(
                 part_half_extents_m: shape.half_extents_m,
             };
             // The cycle's own grasp ranking and planning scenes; the poses of its motions.
-            let choice = sense_and_grasp(&ctx, &c, &det, &slots[0], &w.joints(), &[]);
-            let pile = pile_map(&scene.scene, &choice.height_map);
+            let sensed = SensedPile::new(&ctx, &c);
+            let choice = sense_and_grasp(&ctx, &sensed, &det, &slots[0], &w.joints(), &[]);
+            let pile = &sensed.pile;
             let empty = RobotSpheres::new(robot, &scene.scene, None);
             for g in choice.plan.ranked.iter().take(per_pile / 2) {
                 let tool_from_part = g.world_from_tool.inverse() * det[g.detection].world_from_part;
                 let held = RobotSpheres::new(robot, &scene.scene, Some((tool_from_part, shape.half_extents_m)));
-                let env = planning_environment(&scene.scene, &pile, g);
+                let env = planning_environment(&scene.scene, pile, g);
                 let q_place = JointVector::from(g.q_place);
                 let Ok(pre_place) = robot.ik_tool_nearest(&crate::cycle::above_place(g), &q_place) else {
                     continue;

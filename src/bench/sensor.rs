@@ -125,7 +125,8 @@ pub fn sense_bench(
         };
         // The cycle's own sense-and-grasp: height map, candidates, IK, ranking, clear approach.
         let grasp = time_ms(&mut || {
-            feasible = crate::pipeline::sense_and_grasp(&ctx, &c, &detections, &slot, &q, &[])
+            let sensed = crate::pipeline::SensedPile::new(&ctx, &c);
+            feasible = crate::pipeline::sense_and_grasp(&ctx, &sensed, &detections, &slot, &q, &[])
                 .plan
                 .ranked
                 .len();

@@ -139,7 +139,7 @@ pub fn pile(a: &PileArgs) -> Result<()> {
 pub fn sense(args: &SenseArgs) -> Result<()> {
     let a = &args.pile;
     use binpick::cycle::{Cell, RunOptions};
-    use binpick::pipeline::{GraspContext, sense_and_grasp};
+    use binpick::pipeline::{GraspContext, SensedPile, sense_and_grasp};
     let (mut loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
     super::override_recognition(&mut loaded, args.recognition);
     let count = pile_count(a, &wp)?;
@@ -167,7 +167,8 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         pick_tray: world.pick_tray(),
         part_half_extents_m: cell.shape.half_extents_m,
     };
-    let choice = sense_and_grasp(&ctx, &job.capture, &detections, &cell.slots[0], &world.joints(), &[]);
+    let pile = SensedPile::new(&ctx, &job.capture);
+    let choice = sense_and_grasp(&ctx, &pile, &detections, &cell.slots[0], &world.joints(), &[]);
     let grasp_ms = t1.elapsed().as_secs_f64() * 1e3;
     let chosen = choice.chosen.as_ref().map(|c| &c.grasp);
     let name = format!("sense-{}-seed{seed}", wp.workpiece.name);

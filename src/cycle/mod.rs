@@ -234,6 +234,8 @@ pub struct CellState {
     pub arm: ArmState,
     /// Grasp points where a pick failed at the part, in this pile [m, world].
     pub failed_spots: Vec<Vector3<f64>>,
+    /// The maps of the capture the last grasp was chosen on.
+    pub sensed: Option<crate::pipeline::SensedPile>,
     /// Gripper events seen while a motion played (a seal decided before the descent settled).
     pub gripper_events: Vec<GripperEvent>,
     /// The trays' state.
@@ -393,6 +395,7 @@ impl<'a> Cell<'a> {
             sensor,
             pending: None,
             failed_spots: Vec::new(),
+            sensed: None,
             gripper_events: Vec::new(),
             trays: trays::TrayState::default(),
             pick: None,

@@ -25,7 +25,7 @@ use super::play::{Capture, Segment, SegmentMotion, Settle, Valve};
 use super::records::StageCompute;
 use crate::geometry::NamedBox;
 use crate::grasp::GraspCandidate;
-use crate::pipeline::{GraspContext, NoGrasp, sense_and_grasp};
+use crate::pipeline::{GraspContext, NoGrasp, SensedPile, sense_and_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
 use crate::robot::{JointVector, Payload};
 use crate::sensor::{CaptureJob, Detection};
@@ -456,7 +456,13 @@ impl Run<'_, '_> {
             pick_tray: self.st.world.pick_tray(),
             part_half_extents_m: cell.shape.half_extents_m,
         };
-        let choice = sense_and_grasp(&ctx, &job.capture, detections, &slot, &q_now, &self.st.failed_spots);
+        // The capture's maps, binned once for every pick chosen on it.
+        let sensed = match self.st.sensed.take() {
+            Some(s) if s.is_of(&job.capture, ctx.pick_tray) => s,
+            _ => SensedPile::new(&ctx, &job.capture),
+        };
+        let choice = sense_and_grasp(&ctx, &sensed, detections, &slot, &q_now, &self.st.failed_spots);
+        self.st.sensed = Some(sensed);
         self.obs.recognised(&Recognised {
             t_s,
             detections,
