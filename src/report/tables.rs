@@ -168,10 +168,16 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
     )
 }
 
-/// The per-pick table printed by `binpick run` (a takt in brackets spans a pick-tray refill).
+/// The widest line [`picks_table`] prints (columns).
+pub const PICKS_TABLE_WIDTH: usize = 110;
+
+/// The per-pick table printed by `binpick run` (a takt in brackets spans a pick-tray refill), at
+/// most [`PICKS_TABLE_WIDTH`] columns: a pick's detail follows its row where it fits, else on
+/// lines of its own under the row, whole.
 pub fn picks_table(records: &[PickRecord]) -> String {
     let mut out = String::from(
-        "pick  outcome            takt_s  pick_s  place_s  wait_sensor_s  wait_compute_s  place_err_mm  torque_demand  detail\n",
+        "pick  outcome              takt_s  pick_s  place_s  waits_s s/c  err_mm    torque  detail\n\
+         (waits: for the sensor / for compute; err: placement error; torque: peak demand / limit, joint)\n",
     );
     for r in records {
         let takt = r.takt_s.map_or("-".to_string(), |t| {
@@ -182,31 +188,126 @@ pub fn picks_table(records: &[PickRecord]) -> String {
             }
         });
         let err = r.placement_error_mm.map_or("-".to_string(), |e| format!("{e:.2}"));
-        out += &format!(
-            "{:>4}  {:<17} {:>7}  {:>6.3}  {:>7.3}  {:>13.3}  {:>14.3}  {:>12}  {:>13}  {:.60}\n",
+        let torque = if r.outcome.set_out() {
+            format!("{:.0} % J{}", 100.0 * r.peak_demand_ratio, r.peak_demand_joint)
+        } else {
+            "-".into()
+        };
+        let waits = format!("{:.3}/{:.3}", r.stall_sensor_s, r.stall_compute_s);
+        let row = format!(
+            "{:>4}  {:<17}  {:>8}  {:>6.3}  {:>7.3}  {:>11}  {:>6}  {:>8}",
             r.index,
             r.outcome.name(),
             takt,
             r.pick_s,
             r.place_s,
-            r.stall_sensor_s,
-            r.stall_compute_s,
+            waits,
             err,
-            if r.outcome.set_out() {
-                format!("{:.0} % J{}", 100.0 * r.peak_demand_ratio, r.peak_demand_joint)
-            } else {
-                "-".into()
-            },
-            r.outcome.detail()
+            torque,
         );
+        let detail = r.outcome.detail();
+        if detail.is_empty() {
+            out += row.trim_end();
+            out.push('\n');
+        } else if row.chars().count() + 2 + detail.chars().count() <= PICKS_TABLE_WIDTH {
+            out += &format!("{row}  {detail}\n");
+        } else {
+            out += &row;
+            out.push('\n');
+            for line in wrap(&detail, 6, PICKS_TABLE_WIDTH) {
+                out += &line;
+                out.push('\n');
+            }
+        }
     }
     out
+}
+
+/// `text` in lines of at most `width` columns, each indented by `indent` spaces, broken at spaces
+/// (a word longer than a line is cut).
+fn wrap(text: &str, indent: usize, width: usize) -> Vec<String> {
+    let room = width.saturating_sub(indent).max(1);
+    let pad = " ".repeat(indent);
+    let mut lines = Vec::new();
+    let mut line = String::new();
+    for word in text.split_whitespace() {
+        let mut word: Vec<char> = word.chars().collect();
+        while word.len() > room {
+            if !line.is_empty() {
+                lines.push(format!("{pad}{line}"));
+                line.clear();
+            }
+            lines.push(format!("{pad}{}", word.drain(..room).collect::<String>()));
+        }
+        let word: String = word.into_iter().collect();
+        if word.is_empty() {
+            continue;
+        }
+        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > room {
+            lines.push(format!("{pad}{line}"));
+            line.clear();
+        }
+        if !line.is_empty() {
+            line.push(' ');
+        }
+        line += &word;
+    }
+    if !line.is_empty() {
+        lines.push(format!("{pad}{line}"));
+    }
+    lines
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
     use crate::cycle::Outcome;
+
+    /// Every line of the printed table fits its width, and a long detail is printed whole under
+    /// its row (negative control: the same detail in one line would not fit).
+    #[test]
+    fn picks_table_fits_its_width_and_keeps_long_details_whole() {
+        const LONG: &str = "part 47 left the pick tray while part 12 was on the cup; xxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxxx";
+        let mut a = PickRecord::new(1, 1.0, 2.1);
+        a.outcome = Outcome::NothingGraspable(crate::pipeline::NoGrasp::NoneFeasible(
+            [("crowded", 2), ("face tilted", 1), ("tray wall", 3)]
+                .into_iter()
+                .collect(),
+        ));
+        let mut b = PickRecord::new(2, 3.0, 4.1);
+        b.outcome = Outcome::NothingGraspable(crate::pipeline::NoGrasp::NoneFeasible(
+            [(LONG, 1)].into_iter().collect(),
+        ));
+        let c = PickRecord::new(3, 5.0, 6.1);
+        let text = picks_table(&[a, b, c]);
+        for line in text.lines() {
+            assert!(
+                line.chars().count() <= PICKS_TABLE_WIDTH,
+                "{} columns: {line}",
+                line.chars().count()
+            );
+        }
+        let words: Vec<&str> = text.split_whitespace().collect();
+        let joined = words.join(" ");
+        assert!(
+            joined.contains("part 47 left the pick tray while part 12 was on the cup;"),
+            "{text}"
+        );
+        let xs: usize = text.matches('x').count();
+        assert!(xs >= 130, "the long word lost letters: {xs}\n{text}");
+        assert!(
+            joined.contains("no feasible grasp (crowded 2, face tilted 1, tray wall 3)"),
+            "{text}"
+        );
+        let row = text
+            .lines()
+            .find(|l| l.trim_start().starts_with("2 "))
+            .unwrap_or_default();
+        assert!(
+            row.chars().count() + 2 + LONG.len() > PICKS_TABLE_WIDTH,
+            "the control fits in one line"
+        );
+    }
 
     #[test]
     fn picks_csv_quotes_reasons_and_keeps_them_whole() {
