@@ -435,7 +435,7 @@ fn the_capture_fires_at_the_earliest_moment() {
 /// sense-and-grasp makes of it (cloud recognition) and whether its best-ranked grasp's approach
 /// pose is clear with the hand alone.
 fn lone_block_grasp(offset_x_m: f64) -> (binpick::pipeline::GraspChoice, bool) {
-    use binpick::pipeline::{GraspContext, pile_map, planning_environment, sense_and_grasp};
+    use binpick::pipeline::{GraspContext, SensedPile, planning_environment, sense_and_grasp};
     use binpick::planning::{CollisionModel, PlanStats, RobotSpheres};
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
@@ -459,9 +459,10 @@ fn lone_block_grasp(offset_x_m: f64) -> (binpick::pipeline::GraspChoice, bool) {
         part_half_extents_m: half,
     };
     let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
-    let choice = sense_and_grasp(&ctx, &job.capture, &detections, &slot, &w.joints(), &[]);
+    let sensed = SensedPile::new(&ctx, &job.capture);
+    let choice = sense_and_grasp(&ctx, &sensed, &detections, &slot, &w.joints(), &[]);
     let best = choice.plan.best().expect("the selector ranks a grasp on the block");
-    let env = planning_environment(&scene.scene, &pile_map(&scene.scene, &choice.height_map), best);
+    let env = planning_environment(&scene.scene, &sensed.pile, best);
     let hand_alone = CollisionModel::new(&robot, RobotSpheres::new(&robot, &scene.scene, None), env)
         .free(&JointVector::from(best.q_approach), &mut PlanStats::default());
     (choice, hand_alone)
