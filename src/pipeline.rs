@@ -71,9 +71,7 @@ pub struct ChosenGrasp {
 pub struct SensedPile {
     /// The capture's number within its run.
     pub capture_id: u64,
-    /// The pick tray's pose the maps were binned in.
-    pub world_from_tray: nalgebra::Isometry3<f64>,
-    /// The capture's height map over the pick tray (walls included).
+    /// The capture's height map over the pick tray (walls included), in the tray's pose then.
     pub height_map: HeightMap,
     /// The pile as the planner sees it ([`pile_map`]).
     pub pile: HeightMap,
@@ -86,7 +84,6 @@ impl SensedPile {
         let pile = pile_map(ctx.scene, &height_map);
         SensedPile {
             capture_id: capture.id,
-            world_from_tray: ctx.pick_tray.world_from_tray,
             height_map,
             pile,
         }
@@ -94,7 +91,7 @@ impl SensedPile {
 
     /// Whether these are the maps of `capture` with the pick tray at `tray`.
     pub fn is_of(&self, capture: &Capture, tray: &TrayVolume) -> bool {
-        self.capture_id == capture.id && self.world_from_tray == tray.world_from_tray
+        self.capture_id == capture.id && self.height_map.world_from_tray == tray.world_from_tray
     }
 }
 

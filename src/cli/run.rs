@@ -162,7 +162,8 @@ fn takt_text(s: &binpick::results::Summary) -> String {
 
 /// Prints a run's summary: takt, success, waits, faults, the servo's figures, recognition.
 fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) {
-    use binpick::results::table::{TERMINAL_WIDTH, wrap};
+    use binpick::report::wrap;
+    use binpick::results::table::TERMINAL_WIDTH;
     let t = &s.tally;
     let summary = format!(
         "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \

@@ -181,7 +181,7 @@ pub struct LimitsMissed {
     pub file: String,
 }
 
-pub use binpick::results::table::wrap;
+pub use binpick::report::wrap;
 
 /// Writes the study's files (a batch's `takt.*`, a sweep's `sweep.*`; with limits, a batch's
 /// `takt.junit.xml`), moves the folder into place and prints the table; an interrupted run makes

@@ -214,48 +214,39 @@ pub fn picks_table(records: &[PickRecord]) -> String {
         } else {
             out += &row;
             out.push('\n');
-            for line in wrap(&detail, 6, PICKS_TABLE_WIDTH) {
-                out += &line;
-                out.push('\n');
+            for line in wrap(&detail, PICKS_TABLE_WIDTH - 6).lines() {
+                out += &format!("      {line}\n");
             }
         }
     }
     out
 }
 
-/// `text` in lines of at most `width` columns, each indented by `indent` spaces, broken at spaces
-/// (a word longer than a line is cut).
-fn wrap(text: &str, indent: usize, width: usize) -> Vec<String> {
-    let room = width.saturating_sub(indent).max(1);
-    let pad = " ".repeat(indent);
-    let mut lines = Vec::new();
+/// `text` in lines of at most `width` characters, broken at spaces; a word longer than the width
+/// is cut across lines.
+pub fn wrap(text: &str, width: usize) -> String {
+    let width = width.max(1);
+    let mut lines: Vec<String> = Vec::new();
     let mut line = String::new();
-    for word in text.split_whitespace() {
+    for word in text.split(' ') {
         let mut word: Vec<char> = word.chars().collect();
-        while word.len() > room {
+        // A word longer than a line: lines of its own, cut at the width.
+        while word.len() > width {
             if !line.is_empty() {
-                lines.push(format!("{pad}{line}"));
-                line.clear();
+                lines.push(std::mem::take(&mut line));
             }
-            lines.push(format!("{pad}{}", word.drain(..room).collect::<String>()));
+            lines.push(word.drain(..width).collect());
         }
-        let word: String = word.into_iter().collect();
-        if word.is_empty() {
-            continue;
-        }
-        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > room {
-            lines.push(format!("{pad}{line}"));
-            line.clear();
+        if !line.is_empty() && line.chars().count() + 1 + word.len() > width {
+            lines.push(std::mem::take(&mut line));
         }
         if !line.is_empty() {
             line.push(' ');
         }
-        line += &word;
+        line.extend(word);
     }
-    if !line.is_empty() {
-        lines.push(format!("{pad}{line}"));
-    }
-    lines
+    lines.push(line);
+    lines.join("\n")
 }
 
 #[cfg(test)]

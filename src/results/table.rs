@@ -14,6 +14,7 @@ use serde::{Serialize, Serializer};
 use serde_json::{Value, json};
 
 use super::Summary;
+use crate::report::wrap;
 
 /// A JSON key of a row and its value (`None`: the key is left out).
 type JsonCell = (&'static str, fn(&Summary) -> Option<Value>);
@@ -251,25 +252,6 @@ pub fn incident_note(label: &str, s: &Summary) -> String {
         out += &format!("- and {} more in the JSON results\n", list.len() - INCIDENTS_LISTED);
     }
     out
-}
-
-/// `text` in lines of at most `width` characters, broken at spaces (a word longer than the
-/// width keeps a line of its own).
-pub fn wrap(text: &str, width: usize) -> String {
-    let mut out = String::new();
-    let mut line = String::new();
-    for word in text.split(' ') {
-        if !line.is_empty() && line.chars().count() + 1 + word.chars().count() > width {
-            out += &line;
-            out.push('\n');
-            line.clear();
-        }
-        if !line.is_empty() {
-            line.push(' ');
-        }
-        line += word;
-    }
-    out + &line
 }
 
 fn val(v: impl Serialize) -> Option<Value> {
