@@ -18,8 +18,10 @@ use binpick::study::{Resolved, StudySpec};
 pub struct BatchArgs {
     #[command(flatten)]
     pub study: StudyArgs,
-    /// Record every run: `run-<workpiece>-seed<seed>.rrd` and `.mcap`, and its time charts
-    /// (`.timechart.svg`, `.timechart-steady.svg`), in the batch folder (linked from report.html).
+    /// Record every run: `run-<workpiece>-seed<seed>.rrd` and `.mcap`, its time charts
+    /// (`.timechart.svg`, `.timechart-steady.svg`), its per-pick table and event log (`.picks.csv`,
+    /// `.events.json`), in the batch folder (linked from report.html). With `--no-rrd --no-mcap`,
+    /// all but the recordings: a long run's incidents traced at little cost.
     #[arg(long)]
     pub record: bool,
     /// Print the full table (every column of takt.md) instead of the terminal's short one.

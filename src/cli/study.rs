@@ -121,8 +121,9 @@ pub struct WallTimes {
     pub threads: usize,
 }
 
-/// Runs this shard of the study with a progress bar; records each run into `dir` in `record`'s
-/// formats, if any. Returns the study's file and its wall times.
+/// Runs this shard of the study with a progress bar; with `record`, each run's time charts, picks
+/// and events go into `dir`, with its recordings in `record`'s formats. Returns the study's file
+/// and its wall times.
 pub fn run(
     resolved: &Resolved,
     spec: StudySpec,
@@ -140,7 +141,8 @@ pub fn run(
     );
     let settings = RunSettings {
         threads: study.threads,
-        record: record.filter(|f| f.any()).map(|formats| RecordTo {
+        // With both recordings left out, a recorded run still keeps its charts and logs.
+        record: record.map(|formats| RecordTo {
             dir: dir.staging_dir(),
             formats,
         }),

@@ -46,7 +46,9 @@ pub struct RunFiles {
 }
 
 /// What a run may leave beside the study's results: the suffix after its stem and what it shows.
-pub const RUN_FILES: [(&str, &str); 4] = [
+pub const RUN_FILES: [(&str, &str); 6] = [
+    (".picks.csv", "picks"),
+    (".events.json", "events"),
     (".timechart.svg", "time chart"),
     (".timechart-steady.svg", "steady state"),
     (".rrd", "Rerun"),

@@ -19,7 +19,7 @@ use rayon::prelude::*;
 use super::{Job, StudyError, StudyRun, StudySpec};
 use crate::chart::TimeChart;
 use crate::config::{LoadedScene, LoadedWorkpiece};
-use crate::cycle::{Observer, Observers, RunOptions, Tally};
+use crate::cycle::{EventLog, Observer, Observers, RunOptions, Tally};
 use crate::recording::{Formats, Recorder, RecordingFiles, RunInfo};
 use crate::robot::RobotModel;
 use crate::sensor::Camera;
@@ -64,8 +64,9 @@ impl Resolved {
     }
 }
 
-/// Where and how to record each run: `<dir>/run-<workpiece>-seed<seed>.rrd` and `.mcap`, and
-/// its time charts `.timechart.svg` and `.timechart-steady.svg` ([`run_stem`]).
+/// Where and how to record each run: `<dir>/run-<workpiece>-seed<seed>.rrd` and `.mcap`, its
+/// time charts `.timechart.svg` and `.timechart-steady.svg`, and its per-pick table and event
+/// log `.picks.csv` and `.events.json`, as `binpick run` writes them ([`run_stem`]).
 #[derive(Clone, Copy)]
 pub struct RecordTo<'a> {
     /// The folder.
@@ -182,8 +183,9 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
         }
         _ => None,
     };
-    // A recorded run also keeps its time chart.
+    // A recorded run also keeps its time chart and its event log.
     let mut chart = record.map(|_| TimeChart::default());
+    let mut log = record.map(|_| EventLog::default());
     let t = std::time::Instant::now();
     let mut watchers: Vec<&mut dyn Observer> = Vec::new();
     if let Some(r) = recorder.as_mut() {
@@ -192,12 +194,25 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
     if let Some(c) = chart.as_mut() {
         watchers.push(c);
     }
+    if let Some(l) = log.as_mut() {
+        watchers.push(l);
+    }
     let result =
         crate::cycle::run(&scene, robot, wp, &opts, &mut Observers(watchers)).map_err(|e| format!("{what}: {e}"))?;
     let tally = Tally {
         wall_s: Some(t.elapsed().as_secs_f64()),
         ..result.tally.clone()
     };
+    if let (Some(log), Some(to)) = (log, record) {
+        let events = serde_json::to_string_pretty(&log.into_sorted()).map_err(|e| format!("{what}: events: {e}"))?;
+        for (suffix, text) in [
+            ("picks.csv", crate::report::picks_csv(&result.records)),
+            ("events.json", events + "\n"),
+        ] {
+            let path = to.dir.join(format!("{stem}.{suffix}"));
+            std::fs::write(&path, text).map_err(|e| format!("{}: {e}", path.display()))?;
+        }
+    }
     if let (Some(chart), Some(to)) = (chart, record) {
         let title = format!("binpick {what}");
         let releases: Vec<f64> = result.records.iter().filter_map(|r| r.release_s).collect();

@@ -741,3 +741,60 @@ fn a_streamed_recording_is_the_whole_runs() {
     write_recordings(&cut_dir, "run", formats, &whole, &robot, &scene.scene, &info).unwrap();
     assert!(std::fs::read(cut_dir.join("run.mcap")).unwrap() != whole_mcap);
 }
+
+/// `batch --record --no-rrd --no-mcap` keeps each run's per-pick table and event log (and its time
+/// charts), no recording: byte for byte what `binpick run` writes for the same deterministic run.
+/// Negative control: another seed's run writes other events, so the equality is not vacuous.
+#[test]
+fn a_batch_keeps_each_runs_events_without_recordings() {
+    let tmp = crate::support::tempdir().unwrap();
+    let out = |s: &str| tmp.path().join(s).to_str().unwrap().to_string();
+    let run_ok = |args: &[&str]| {
+        let o = crate::support::binpick(args);
+        assert_eq!(o.status.code(), Some(0), "{args:?}: {}", crate::support::stderr(&o));
+    };
+    let common = ["--picks", "5", "--deterministic", "--no-rrd", "--no-mcap"];
+    run_ok(
+        &[
+            &[
+                "batch",
+                "--workpieces",
+                "E",
+                "--seeds",
+                "1",
+                "--record",
+                "--out",
+                &out("b"),
+            ],
+            &common[..],
+        ]
+        .concat(),
+    );
+    for seed in ["1", "2"] {
+        run_ok(
+            &[
+                &["run", "--workpiece", "E", "--seed", seed, "--out", &out("r")],
+                &common[..],
+            ]
+            .concat(),
+        );
+    }
+    let batch = tmp.path().join("b").join("batch-E-seeds1-picks5-det");
+    let read = |p: std::path::PathBuf| std::fs::read(&p).unwrap_or_else(|e| panic!("{}: {e}", p.display()));
+    let run = |seed: &str| tmp.path().join("r").join(format!("run-E-seed{seed}-det"));
+    assert_eq!(
+        read(batch.join("run-E-seed1.events.json")),
+        read(run("1").join("events.json"))
+    );
+    assert_eq!(
+        read(batch.join("run-E-seed1.picks.csv")),
+        read(run("1").join("picks.csv"))
+    );
+    assert!(batch.join("run-E-seed1.timechart.svg").is_file());
+    for f in ["run-E-seed1.rrd", "run-E-seed1.mcap"] {
+        assert!(!batch.join(f).exists(), "{f} written with --no-rrd --no-mcap");
+    }
+    let events: serde_json::Value = serde_json::from_slice(&read(batch.join("run-E-seed1.events.json"))).unwrap();
+    assert!(events.as_array().is_some_and(|e| e.len() > 20), "{events}");
+    assert_ne!(read(run("2").join("events.json")), read(run("1").join("events.json")));
+}

@@ -185,7 +185,14 @@ fn batch_sweep_and_tune_pages_are_well_formed_and_link_what_exists() {
         );
     }
     for w in ["E", "F"] {
-        for suffix in [".timechart.svg", ".timechart-steady.svg", ".rrd", ".mcap"] {
+        for suffix in [
+            ".picks.csv",
+            ".events.json",
+            ".timechart.svg",
+            ".timechart-steady.svg",
+            ".rrd",
+            ".mcap",
+        ] {
             let f = format!("run-{w}-seed1{suffix}");
             assert!(facts.links.contains(&f), "{f} not linked: {:?}", facts.links);
         }
