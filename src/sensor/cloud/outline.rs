@@ -344,9 +344,30 @@ struct Problem<'a> {
     inside: &'a [[f64; 2]],
     outside: &'a [[f64; 2]],
     tol: f64,
+    /// The centroid of all the points (plane basis, m) and the farthest point's distance from it
+    /// (m): the lever of a yaw step in the descent's skip bound.
+    spread: ([f64; 2], f64),
 }
 
-impl Problem<'_> {
+impl<'a> Problem<'a> {
+    /// The points `inside` and `outside` of `o`, each violation allowed `tol` (m).
+    fn new(o: &'a Outline, inside: &'a [[f64; 2]], outside: &'a [[f64; 2]], tol: f64) -> Self {
+        let all = || inside.iter().chain(outside);
+        let n = (inside.len() + outside.len()).max(1) as f64;
+        let sum = all().fold([0.0, 0.0], |s, p| [s[0] + p[0], s[1] + p[1]]);
+        let centroid = [sum[0] / n, sum[1] / n];
+        let r2 = all()
+            .map(|p| (p[0] - centroid[0]).powi(2) + (p[1] - centroid[1]).powi(2))
+            .fold(0.0, f64::max);
+        Problem {
+            o,
+            inside,
+            outside,
+            tol,
+            spread: (centroid, r2.sqrt()),
+        }
+    }
+
     /// Whether `x` is consistent: no violation beyond the tolerance.
     fn consistent(&self, x: &Placement) -> bool {
         let to_face = x.to_face();
@@ -377,7 +398,7 @@ impl Problem<'_> {
         // points had moved when it was read (m); `moved_m` is that bound now.
         let mut margin: Vec<f64> = vec![f64::NEG_INFINITY; self.inside.len() + self.outside.len()];
         let mut moved_m = 0.0;
-        let (centroid, radius_m) = self.spread();
+        let (centroid, radius_m) = self.spread;
         for it in 0..ITERATIONS {
             // Normal equations in (cx, cy, t).
             let mut jtj = nalgebra::Matrix3::<f64>::zeros();
@@ -453,19 +474,6 @@ impl Problem<'_> {
         self.consistent(&x).then_some(x)
     }
 
-    /// The centroid of all the points (plane basis, m) and the farthest point's distance from it
-    /// (m).
-    fn spread(&self) -> ([f64; 2], f64) {
-        let all = || self.inside.iter().chain(self.outside);
-        let n = (self.inside.len() + self.outside.len()).max(1) as f64;
-        let sum = all().fold([0.0, 0.0], |s, p| [s[0] + p[0], s[1] + p[1]]);
-        let centroid = [sum[0] / n, sum[1] / n];
-        let r2 = all()
-            .map(|p| (p[0] - centroid[0]).powi(2) + (p[1] - centroid[1]).powi(2))
-            .fold(0.0, f64::max);
-        (centroid, r2.sqrt())
-    }
-
     /// How many steps `dir` (a consistent) `x` can be moved and stay consistent, at most
     /// `max_steps` each way: (steps back, steps forward). By bisection: the consistent
     /// placements along a line are taken as one interval.
@@ -512,18 +520,8 @@ pub fn fit_outline(
     // else the plane's error).
     let problems = |tol: f64| {
         (
-            Problem {
-                o,
-                inside: edge,
-                outside,
-                tol,
-            },
-            Problem {
-                o,
-                inside,
-                outside,
-                tol,
-            },
+            Problem::new(o, edge, outside, tol),
+            Problem::new(o, inside, outside, tol),
         )
     };
     let (loose_edge, loose_full) = problems(FIT_VIOLATION_M);
@@ -857,12 +855,7 @@ mod tests {
         let (c, t) = ([0.0004, -0.0003], 17f64.to_radians());
         let hex = |p: [f64; 2]| o.value(&o.core, p) < 0.0;
         let [_, edge, outside] = patch(hex, c, t);
-        let problem = Problem {
-            o: &o,
-            inside: &edge,
-            outside: &outside,
-            tol: FIT_VIOLATION_M,
-        };
+        let problem = Problem::new(&o, &edge, &outside, FIT_VIOLATION_M);
         let bits = |x: Option<Placement>| x.map(|x| [x.c[0].to_bits(), x.c[1].to_bits(), x.t.to_bits()]);
         let (mut reached, mut flat_differs) = (0, 0);
         for k in 0..40 {
