@@ -593,6 +593,7 @@ impl World {
         let held = self.parts[seal.part].collider;
         let cup = world_from_tool.translation.vector;
         let axis = world_from_tool.rotation * Vector3::z();
+        let held_pose = self.colliders[held].position();
         let mut raw = ContactLoad::default();
         for pair in self.narrow_phase.contact_pairs_with(held) {
             let (held_first, other) = if pair.collider1 == held {
@@ -603,7 +604,6 @@ impl World {
             if !matches!(self.tag_of(other), Some(Tag::Part(_))) {
                 continue;
             }
-            let held_pose = self.colliders[held].position();
             // The manifolds the solver saw (its contact clusters where it made them).
             for m in pair.solver_manifolds() {
                 // The manifold's normal points from collider 1 to collider 2; the solver's

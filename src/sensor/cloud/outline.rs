@@ -819,6 +819,14 @@ mod tests {
         [inside, edge, outside]
     }
 
+    /// The patch of `o` (the hexagon ring) placed at a centre and yaw off the origin: the
+    /// centre, the yaw, and [`patch`]'s point sets.
+    fn hexagon_patch(o: &Outline) -> ([f64; 2], f64, [Vec<[f64; 2]>; 3]) {
+        let (c, t) = ([0.0004, -0.0003], 17f64.to_radians());
+        let hex = |p: [f64; 2]| o.value(&o.core, p) < 0.0;
+        (c, t, patch(hex, c, t))
+    }
+
     /// The hexagon ring's outline is placed within 0.15 mm and 1 degree of where its patch lies
     /// (up to its sixfold turns), from the patch alone. Negative control: a patch filling the
     /// hexagon's bounding rectangle (what the rectangle fit assumed) is consistent with no
@@ -826,9 +834,7 @@ mod tests {
     #[test]
     fn a_hexagon_ring_is_placed_by_its_true_outline_and_a_rectangle_patch_is_not() {
         let o = hexagon_ring();
-        let (c, t) = ([0.0004, -0.0003], 17f64.to_radians());
-        let hex = |p: [f64; 2]| o.value(&o.core, p) < 0.0;
-        let [inside, edge, outside] = patch(hex, c, t);
+        let (c, t, [inside, edge, outside]) = hexagon_patch(&o);
         let theta0 = super::super::min_area_theta(&super::super::convex_hull(&inside));
         let fits = fit_outline(&o, &inside, &edge, &outside, theta0, 12f64.to_radians());
         assert!(!fits.is_empty(), "no fit");
@@ -852,9 +858,7 @@ mod tests {
     #[test]
     fn skipping_clear_points_leaves_the_descent_unchanged() {
         let o = hexagon_ring();
-        let (c, t) = ([0.0004, -0.0003], 17f64.to_radians());
-        let hex = |p: [f64; 2]| o.value(&o.core, p) < 0.0;
-        let [_, edge, outside] = patch(hex, c, t);
+        let (c, t, [_, edge, outside]) = hexagon_patch(&o);
         let problem = Problem::new(&o, &edge, &outside, FIT_VIOLATION_M);
         let bits = |x: Option<Placement>| x.map(|x| [x.c[0].to_bits(), x.c[1].to_bits(), x.t.to_bits()]);
         let (mut reached, mut flat_differs) = (0, 0);
