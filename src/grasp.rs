@@ -88,6 +88,11 @@ pub struct GraspCandidate {
     /// The tool when the part touches down in its slot.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
     pub world_from_tool_place: Isometry3<f64>,
+    /// Where the part should then lie: the slot turned into the part's place pose (and by the
+    /// multiple of its yaw symmetry the place motion takes). Its placement error is measured
+    /// from this, not from the slot's own frame.
+    #[serde(serialize_with = "crate::sensor::ser_pose")]
+    pub world_from_part_place: Isometry3<f64>,
     /// Joint positions at the approach pose (rad).
     pub q_approach: [f64; 6],
     /// Joint positions at the grasp (rad).
@@ -716,7 +721,7 @@ impl GraspSelector {
             let part_in_slot = Isometry3::from_parts(Translation3::from(part_center_in_slot), slot_rot);
             // The part keeps its pose relative to the tool; its yaw in the slot may differ by
             // any multiple of its symmetry: pick the tool pose among those nearest in J6.
-            let mut place_best: Option<(f64, Isometry3<f64>, JointVector)> = None;
+            let mut place_best: Option<(f64, Isometry3<f64>, Isometry3<f64>, JointVector)> = None;
             let sym = if self.yaw_symmetry_rad > 0.0 {
                 self.yaw_symmetry_rad
             } else {
@@ -729,12 +734,12 @@ impl GraspSelector {
                 let tool = placed * part_from_tool;
                 if let Ok(sol) = self.robot.ik_tool_nearest(&tool, &qg) {
                     let time = self.motion_time_s(&qg, &sol.q);
-                    if place_best.as_ref().is_none_or(|(bt, _, _)| time < *bt) {
-                        place_best = Some((time, tool, sol.q));
+                    if place_best.as_ref().is_none_or(|(bt, ..)| time < *bt) {
+                        place_best = Some((time, tool, placed, sol.q));
                     }
                 }
             }
-            let (time, tool_place, qp) = place_best?;
+            let (time, tool_place, part_place, qp) = place_best?;
             if best.as_ref().is_none_or(|(bt, _)| time < *bt) {
                 best = Some((
                     time,
@@ -744,6 +749,7 @@ impl GraspSelector {
                         world_from_tool: grasp,
                         world_from_tool_approach: approach,
                         world_from_tool_place: tool_place,
+                        world_from_part_place: part_place,
                         q_approach: qa.into(),
                         q_grasp: qg.into(),
                         q_place: qp.into(),

@@ -183,8 +183,6 @@ pub struct Cell<'a> {
     pub suction: SuctionModel,
     /// The place slots in the world, in filling order.
     pub slots: Vec<Isometry3<f64>>,
-    /// The part's yaw symmetry (rad) (0: none), for the placement error.
-    pub yaw_symmetry_rad: f64,
     /// Compute budgets charged in deterministic mode: grasp selection, Pick and Place motion.
     pub budgets: StageCompute,
     /// Parts per pile.
@@ -358,7 +356,6 @@ impl<'a> Cell<'a> {
             shape,
             suction: SuctionModel::new(&s.gripper),
             slots,
-            yaw_symmetry_rad: wp.grasp.yaw_symmetry_deg.to_radians(),
             budgets: StageCompute {
                 grasp_s: s.compute.grasp_estimation_s,
                 pick_s: s.compute.motion_generation_s,
@@ -715,6 +712,6 @@ fn apply_placement_fix(records: &mut [PickRecord], fix: Option<PlacementFix>) {
         && let Some(r) = records.get_mut(fix.record)
     {
         r.placement_error_mm = Some(fix.error_m * 1e3);
-        r.yaw_error_deg = Some(fix.yaw_rad.to_degrees());
+        r.rotation_error_deg = Some(fix.rotation_rad.to_degrees());
     }
 }

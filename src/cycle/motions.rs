@@ -162,10 +162,8 @@ pub(super) struct Holding<'a> {
 
 /// The motions of one pick, generated from one recognition result.
 pub(super) struct Prepared {
-    /// The grasp.
+    /// The grasp (with where the part goes: `world_from_part_place`).
     pub grasp: GraspCandidate,
-    /// Where the part goes.
-    pub slot: Isometry3<f64>,
     /// Transfer to the approach pose (or why not).
     pub pick_transfer: Result<Trajectory, MotionFailure>,
     /// Straight descent to the grasp.
@@ -531,7 +529,6 @@ impl Run<'_, '_> {
         Ok((
             Prepared {
                 grasp,
-                slot,
                 pick_transfer,
                 descent,
                 pick_blend,

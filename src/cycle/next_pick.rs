@@ -42,8 +42,8 @@ pub(super) struct LatePlacement {
     pub record: usize,
     /// The part.
     pub part: usize,
-    /// Its slot.
-    pub slot: Isometry3<f64>,
+    /// Where it should lie in its slot (the grasp's `world_from_part_place`).
+    pub world_from_part_place: Isometry3<f64>,
 }
 
 /// A placement error measured late, for the record it belongs to.
@@ -52,8 +52,8 @@ pub(super) struct PlacementFix {
     pub record: usize,
     /// Horizontal error (m).
     pub error_m: f64,
-    /// Yaw error (rad).
-    pub yaw_rad: f64,
+    /// Rotation error (rad).
+    pub rotation_rad: f64,
 }
 
 /// A later pick from the same result takes only a part whose centre is this much farther from
@@ -207,14 +207,25 @@ impl Run<'_, '_> {
     /// The placement error of a part whose retreat ran into the next Pick, once the cup has
     /// left it.
     pub(super) fn measure_placement(&mut self, late: LatePlacement) -> PlacementFix {
-        let (error_m, yaw_rad) = self
-            .st
-            .world
-            .placement_error(late.part, &late.slot, self.cell.yaw_symmetry_rad);
+        let (error_m, rotation_rad) = self.placement_error(late.part, &late.world_from_part_place);
         PlacementFix {
             record: late.record,
             error_m,
-            yaw_rad,
+            rotation_rad,
         }
+    }
+
+    /// How far part `part` lies from where it should, `world_from_part_place` (the slot turned
+    /// into the part's place pose): the horizontal distance of the part frame's origin (m), and
+    /// the rotation between the two, the least over the turns that leave the part looking the
+    /// same (rad; the recognition's scoring measure). A part that lies in its place pose but
+    /// turned in its slot is off by that turn; one tipped onto another face, by the tip.
+    pub(super) fn placement_error(&self, part: usize, world_from_part_place: &Isometry3<f64>) -> (f64, f64) {
+        let pose = self.st.world.part_pose(part);
+        let (_, rotation_rad) = self.st.sensor.symmetry.pose_error(world_from_part_place, &pose);
+        let horizontal_m = (pose.translation.vector - world_from_part_place.translation.vector)
+            .xy()
+            .norm();
+        (horizontal_m, rotation_rad)
     }
 }

@@ -421,7 +421,7 @@ impl Run<'_, '_> {
             next.late = part.map(|part| LatePlacement {
                 record: rec.index,
                 part,
-                slot: prep.slot,
+                world_from_part_place: prep.grasp.world_from_part_place,
             });
             rec.release_s = release;
             return Ok((outcome, Some(next)));
@@ -432,9 +432,9 @@ impl Run<'_, '_> {
         }
         self.place_done(rec, t_place, 0.0);
         if let Some(i) = part {
-            let (d, yaw) = self.st.world.placement_error(i, &prep.slot, self.cell.yaw_symmetry_rad);
+            let (d, rotation) = self.placement_error(i, &prep.grasp.world_from_part_place);
             rec.placement_error_mm = Some(d * 1e3);
-            rec.yaw_error_deg = Some(yaw.to_degrees());
+            rec.rotation_error_deg = Some(rotation.to_degrees());
         }
         rec.release_s = release;
         Ok((outcome, None))

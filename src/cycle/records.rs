@@ -63,10 +63,12 @@ pub struct PickRecord {
     /// Compute charged per stage: grasp selection, Pick motion generation (planning,
     /// acceleration, the straight lines), Place motion generation.
     pub compute: StageCompute,
-    /// Horizontal placement error (mm) (placed picks).
+    /// Horizontal placement error (mm) (placed picks): from where the part should lie in its
+    /// slot.
     pub placement_error_mm: Option<f64>,
-    /// Yaw placement error (deg), modulo the part's symmetry (placed picks).
-    pub yaw_error_deg: Option<f64>,
+    /// Rotation placement error (deg) (placed picks): from how the part should lie in its slot
+    /// (its place pose), the least over the turns that leave it looking the same.
+    pub rotation_error_deg: Option<f64>,
     /// Largest servo tracking error over the pick's motions (deg).
     pub max_tracking_error_deg: f64,
     /// Largest |demanded torque| / torque limit over the pick's motions and joints (before the
@@ -115,7 +117,7 @@ impl PickRecord {
             stall_compute_s: 0.0,
             compute: StageCompute::default(),
             placement_error_mm: None,
-            yaw_error_deg: None,
+            rotation_error_deg: None,
             max_tracking_error_deg: 0.0,
             peak_demand_ratio: 0.0,
             peak_demand_joint: 0,

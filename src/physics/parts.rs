@@ -138,23 +138,6 @@ impl World {
         })
     }
 
-    /// How far part `i` landed from where it should be: horizontal distance of the centres (m)
-    /// and yaw difference (rad), the latter modulo the part's yaw symmetry (0: any yaw).
-    pub fn placement_error(&self, i: usize, world_from_slot: &Isometry3<f64>, yaw_symmetry_rad: f64) -> (f64, f64) {
-        let p = self.part_pose(i);
-        let d = p.translation.vector - world_from_slot.translation.vector;
-        let horizontal = d.xy().norm();
-        if yaw_symmetry_rad <= 0.0 {
-            return (horizontal, 0.0);
-        }
-        let heading = |iso: &Isometry3<f64>| {
-            let x = iso.rotation * Vector3::x();
-            x.y.atan2(x.x)
-        };
-        let diff = (heading(&p) - heading(world_from_slot)).rem_euclid(yaw_symmetry_rad);
-        (horizontal, diff.min(yaw_symmetry_rad - diff))
-    }
-
     /// Indices of the free parts whose centre lies inside the pick tray's inner walls.
     pub fn parts_in_pick_tray(&self) -> Vec<usize> {
         (0..self.parts.len())
