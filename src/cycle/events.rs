@@ -213,6 +213,8 @@ pub enum Event {
     PlaceStart,
     /// The part came off the cup over its slot.
     Released,
+    /// A placed part lies beyond [`MISPLACED_M`] or [`MISPLACED_RAD`] from its place pose.
+    Misplaced(PlacementError),
     /// A fault stopped the arm.
     Fault(Fault),
     /// A part was taken out of the cell.
@@ -271,7 +273,7 @@ impl StartMismatch {
 impl Event {
     /// The event's kind, as the event log names it: `capture`, `capture_spoiled`,
     /// `recognition_ready`, `grasp_chosen`, `planned`, `stall`, `pick_start`, `grasped`,
-    /// `place_start`, `released`, `fault`, `part_lost`, `part_let_go`, `slot_skipped`, `refill`,
+    /// `place_start`, `released`, `misplaced`, `fault`, `part_lost`, `part_let_go`, `slot_skipped`, `refill`,
     /// `place_tray_exchange`, `outcome`, `motion_start_mismatch`.
     pub fn kind(&self) -> &'static str {
         match self {
@@ -285,6 +287,7 @@ impl Event {
             Event::Grasped { .. } => "grasped",
             Event::PlaceStart => "place_start",
             Event::Released => "released",
+            Event::Misplaced(_) => "misplaced",
             Event::Fault(_) => "fault",
             Event::PartLost(_) => "part_lost",
             Event::PartLetGo => "part_let_go",
@@ -300,19 +303,20 @@ impl Event {
     }
 
     /// Whether it is an incident a tally lists ([`super::Incident`]): a fault, a lost part, a
-    /// physics fault, a large step at a motion's start.
+    /// misplaced part, a physics fault, a large step at a motion's start.
     pub fn is_incident(&self) -> bool {
         match self {
-            Event::Fault(_) | Event::PartLost(_) | Event::PhysicsFault(_) => true,
+            Event::Fault(_) | Event::PartLost(_) | Event::Misplaced(_) | Event::PhysicsFault(_) => true,
             Event::MotionStartMismatch(m) => m.is_large(),
             _ => false,
         }
     }
 
-    /// Whether a log shows it as a warning: faults, lost parts, picks that were not placed.
+    /// Whether a log shows it as a warning: faults, lost and misplaced parts, picks that were
+    /// not placed.
     pub fn is_warning(&self) -> bool {
         match self {
-            Event::Fault(_) | Event::PartLost(_) | Event::PhysicsFault(_) => true,
+            Event::Fault(_) | Event::PartLost(_) | Event::Misplaced(_) | Event::PhysicsFault(_) => true,
             Event::Outcome(o) => *o != Outcome::Placed,
             _ => false,
         }
@@ -383,6 +387,13 @@ impl fmt::Display for Event {
             Event::PartLost(PartLoss::PressedDeep { part, depth_m }) => {
                 write!(f, "part {part} pressed {:.2} mm deep", depth_m * 1e3)
             }
+            Event::Misplaced(m) => write!(
+                f,
+                "part {} lies {:.2} mm and {:.1} deg from its place pose",
+                m.part,
+                m.error_m * 1e3,
+                m.rotation_rad.to_degrees()
+            ),
             Event::PartLetGo => f.write_str("the part stays in the pick tray"),
             Event::SlotSkipped(slot) => write!(f, "slot {slot}"),
             Event::Refill(pile) => write!(f, "pile {pile}"),
@@ -443,6 +454,33 @@ pub struct Takt {
     pub takt_s: f64,
     /// Whether a refill of the pick tray fell into the interval.
     pub spans_refill: bool,
+}
+
+/// A placed part lying farther than this from its place pose is misplaced (m): the bound a
+/// recognised pose is judged right by ([`crate::sensor::CORRECT_WITHIN_M`]); a tray's pockets
+/// or the next machine's feeder may allow more or less.
+pub const MISPLACED_M: f64 = crate::sensor::CORRECT_WITHIN_M;
+/// ... or turned farther than this from it (rad), over the turns that leave it looking the same.
+pub const MISPLACED_RAD: f64 = crate::sensor::CORRECT_WITHIN_RAD;
+
+/// How far a placed part lies from its place pose, measured once the cup has left it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlacementError {
+    /// The pick that placed it (its record's index).
+    pub pick: usize,
+    /// The part.
+    pub part: usize,
+    /// Horizontal distance from its place pose (m).
+    pub error_m: f64,
+    /// Rotation from its place pose (rad).
+    pub rotation_rad: f64,
+}
+
+impl PlacementError {
+    /// Whether the part lies beyond [`MISPLACED_M`] or [`MISPLACED_RAD`].
+    pub fn misplaced(&self) -> bool {
+        self.error_m > MISPLACED_M || self.rotation_rad > MISPLACED_RAD
+    }
 }
 
 /// Watches a cell run. Every method does nothing by default: a run keeps nothing for a watcher
@@ -567,6 +605,27 @@ mod tests {
         assert_eq!(Event::Outcome(Outcome::Placed).to_string(), "placed: ");
         assert_eq!(EndReason::Interrupted.to_string(), "interrupted");
         assert_eq!(serde_json::to_string(&EndReason::PicksDone).unwrap(), "\"picks done\"");
+    }
+
+    /// A placed part beyond 2 mm or 5 deg of its place pose is misplaced, and that is an
+    /// incident; the control: one within both bounds is not.
+    #[test]
+    fn a_part_placed_off_its_place_pose_is_an_incident() {
+        let at = |error_m: f64, deg: f64| PlacementError {
+            pick: 165,
+            part: 15,
+            error_m,
+            rotation_rad: deg.to_radians(),
+        };
+        assert!(!at(0.0019, 4.9).misplaced());
+        assert!(at(0.0021, 0.0).misplaced() && at(0.0, 5.1).misplaced());
+        let flipped = Event::Misplaced(at(0.00303, 179.0));
+        assert!(flipped.is_incident() && flipped.is_warning());
+        assert_eq!(flipped.kind(), "misplaced");
+        assert_eq!(
+            flipped.to_string(),
+            "part 15 lies 3.03 mm and 179.0 deg from its place pose"
+        );
     }
 
     /// A step at a motion's start is an incident when the servo's feedback would answer it with

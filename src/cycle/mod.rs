@@ -60,8 +60,8 @@ pub mod trays;
 use nalgebra::{Isometry3, Vector3};
 
 pub use events::{
-    CycleEvent, EndReason, Event, EventLog, LeftDuring, Observer, Observers, PartLoss, Planned, Recognised, Stage,
-    StallCause, StartMismatch, Takt,
+    CycleEvent, EndReason, Event, EventLog, LeftDuring, MISPLACED_M, MISPLACED_RAD, Observer, Observers, PartLoss,
+    PlacementError, Planned, Recognised, Stage, StallCause, StartMismatch, Takt,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
@@ -77,7 +77,7 @@ use crate::physics::{HealthError, PartShape, World};
 use crate::robot::{Payload, RobotModel};
 use crate::sensor::{CaptureJob, RecognitionReport, Sensor};
 use crate::servo::Servo;
-use next_pick::{PlacementFix, Prefetched};
+use next_pick::Prefetched;
 
 pub use crate::reference::reference_takt;
 
@@ -295,18 +295,23 @@ impl Run<'_, '_> {
         self.event_at(self.st.world.time_s(), event);
     }
 
-    /// Reports an event at time `t_s`; an incident is also listed for the tally.
+    /// Reports an event at time `t_s`, of the pick under way (a misplaced part's: the pick that
+    /// placed it, measured late); an incident is also listed for the tally.
     fn event_at(&mut self, t_s: f64, event: Event) {
+        let pick = match &event {
+            Event::Misplaced(m) => Some(m.pick),
+            _ => self.st.pick,
+        };
         if event.is_incident() {
             self.st.incidents.push(Incident {
                 seed: self.cell.opts.seed,
-                pick: self.st.pick,
+                pick,
                 t_s,
                 kind: event.kind().to_string(),
                 detail: event.to_string(),
             });
         }
-        self.obs.event(t_s, self.st.pick, &event);
+        self.obs.event(t_s, pick, &event);
     }
 
     /// Reports a busy interval of a stage (if it has a positive length).
@@ -707,9 +712,9 @@ impl Run<'_, '_> {
 }
 
 /// Writes a placement error measured late into the kept record it belongs to.
-fn apply_placement_fix(records: &mut [PickRecord], fix: Option<PlacementFix>) {
+fn apply_placement_fix(records: &mut [PickRecord], fix: Option<PlacementError>) {
     if let Some(fix) = fix
-        && let Some(r) = records.get_mut(fix.record)
+        && let Some(r) = records.get_mut(fix.pick)
     {
         r.placement_error_mm = Some(fix.error_m * 1e3);
         r.rotation_error_deg = Some(fix.rotation_rad.to_degrees());

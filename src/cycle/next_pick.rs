@@ -9,7 +9,7 @@
 
 use nalgebra::{Isometry3, Vector3};
 
-use super::events::Event;
+use super::events::{Event, PlacementError};
 use super::motions::Prepared;
 use super::play::{Capture, Played, Segment};
 use super::records::StageCompute;
@@ -44,16 +44,6 @@ pub(super) struct LatePlacement {
     pub part: usize,
     /// Where it should lie in its slot (the grasp's `world_from_part_place`).
     pub world_from_part_place: Isometry3<f64>,
-}
-
-/// A placement error measured late, for the record it belongs to.
-pub(super) struct PlacementFix {
-    /// The pick's record index.
-    pub record: usize,
-    /// Horizontal error (m).
-    pub error_m: f64,
-    /// Rotation error (rad).
-    pub rotation_rad: f64,
 }
 
 /// A later pick from the same result takes only a part whose centre is this much farther from
@@ -193,7 +183,7 @@ impl Run<'_, '_> {
 
     /// A retreat left for a next Pick that will not come (the run ends): played alone now, and
     /// the placement error of the part it left measured.
-    pub(super) fn play_held_retreat(&mut self, next: Option<Prefetched>) -> Result<Option<PlacementFix>, CycleError> {
+    pub(super) fn play_held_retreat(&mut self, next: Option<Prefetched>) -> Result<Option<PlacementError>, CycleError> {
         let Some(p) = next else {
             return Ok(None);
         };
@@ -206,26 +196,35 @@ impl Run<'_, '_> {
 
     /// The placement error of a part whose retreat ran into the next Pick, once the cup has
     /// left it.
-    pub(super) fn measure_placement(&mut self, late: LatePlacement) -> PlacementFix {
-        let (error_m, rotation_rad) = self.placement_error(late.part, &late.world_from_part_place);
-        PlacementFix {
-            record: late.record,
-            error_m,
-            rotation_rad,
-        }
+    pub(super) fn measure_placement(&mut self, late: LatePlacement) -> PlacementError {
+        self.placement_error(late.record, late.part, &late.world_from_part_place)
     }
 
-    /// How far part `part` lies from where it should, `world_from_part_place` (the slot turned
-    /// into the part's place pose): the horizontal distance of the part frame's origin (m), and
-    /// the rotation between the two, the least over the turns that leave the part looking the
-    /// same (rad; the recognition's scoring measure). A part that lies in its place pose but
-    /// turned in its slot is off by that turn; one tipped onto another face, by the tip.
-    pub(super) fn placement_error(&self, part: usize, world_from_part_place: &Isometry3<f64>) -> (f64, f64) {
+    /// How far part `part`, placed by pick `pick`, lies from where it should,
+    /// `world_from_part_place` (the slot turned into the part's place pose): the horizontal
+    /// distance of the part frame's origin, and the rotation between the two, the least over the
+    /// turns that leave the part looking the same (the recognition's scoring measure). A part
+    /// that lies in its place pose but turned in its slot is off by that turn; one tipped onto
+    /// another face, by the tip. A misplaced part is reported as an incident.
+    pub(super) fn placement_error(
+        &mut self,
+        pick: usize,
+        part: usize,
+        world_from_part_place: &Isometry3<f64>,
+    ) -> PlacementError {
         let pose = self.st.world.part_pose(part);
         let (_, rotation_rad) = self.st.sensor.symmetry.pose_error(world_from_part_place, &pose);
-        let horizontal_m = (pose.translation.vector - world_from_part_place.translation.vector)
-            .xy()
-            .norm();
-        (horizontal_m, rotation_rad)
+        let error = PlacementError {
+            pick,
+            part,
+            error_m: (pose.translation.vector - world_from_part_place.translation.vector)
+                .xy()
+                .norm(),
+            rotation_rad,
+        };
+        if error.misplaced() {
+            self.event(Event::Misplaced(error));
+        }
+        error
     }
 }

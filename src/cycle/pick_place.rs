@@ -16,9 +16,9 @@
 
 use nalgebra::Vector3;
 
-use super::events::{Event, Planned, Stage, StallCause};
+use super::events::{Event, PlacementError, Planned, Stage, StallCause};
 use super::motions::{PlaceMotion, Prepared};
-use super::next_pick::{LatePlacement, PlacementFix, Prefetched};
+use super::next_pick::{LatePlacement, Prefetched};
 use super::outcome::{NoSeal, Outcome, Slip, WrongPose};
 use super::play::{Capture, Played, Segment, Valve};
 use super::records::PickRecord;
@@ -34,7 +34,7 @@ pub(super) struct PickEnd {
     /// retreat (not played yet).
     pub next: Option<Prefetched>,
     /// The placement error of the pick before, measured once this Pick's start left its part.
-    pub fix: Option<PlacementFix>,
+    pub fix: Option<PlacementError>,
 }
 
 impl Run<'_, '_> {
@@ -432,9 +432,9 @@ impl Run<'_, '_> {
         }
         self.place_done(rec, t_place, 0.0);
         if let Some(i) = part {
-            let (d, rotation) = self.placement_error(i, &prep.grasp.world_from_part_place);
-            rec.placement_error_mm = Some(d * 1e3);
-            rec.rotation_error_deg = Some(rotation.to_degrees());
+            let error = self.placement_error(rec.index, i, &prep.grasp.world_from_part_place);
+            rec.placement_error_mm = Some(error.error_m * 1e3);
+            rec.rotation_error_deg = Some(error.rotation_rad.to_degrees());
         }
         rec.release_s = release;
         Ok((outcome, None))
