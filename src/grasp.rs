@@ -19,7 +19,7 @@ use std::collections::BTreeMap;
 use nalgebra::{Isometry3, Point3, Translation3, Unit, UnitQuaternion, Vector3};
 use serde::Serialize;
 
-use crate::config::Scene;
+use crate::config::{PlaceOrientation, Scene};
 use crate::part::approach::ColumnPiece;
 use crate::part::primitive::Face;
 use crate::robot::{JointVector, RobotModel};
@@ -156,6 +156,9 @@ pub struct GraspSelector {
     /// A part model's faces that take the cup but on which every cup site's approach meets the
     /// part's own geometry (pins, tabs, a can above its base): not offered.
     blocked_faces: usize,
+    /// Faces that take the cup but would place the part another way up than its workpiece file
+    /// allows (`grasp.place_orientation`): not offered.
+    not_upright_faces: usize,
     /// Per face, how the part lies in its slot when grasped there: the stable pose whose support
     /// is opposite the face (`None`: no stable pose has the face up within the cup's tilt; the
     /// part is placed face up on the opposite side of its bounding box).
@@ -243,6 +246,22 @@ impl PlacePose {
         })
     }
 
+    /// Whether the part rests in this pose on the stable pose most nearly on its frame's -z
+    /// side, or one its symmetry makes look the same (`grasp.place_orientation = "upright"`):
+    /// recognition reports a symmetric part's pose only up to its symmetry, so a block seen
+    /// with its bottom up is placed upright all the same.
+    pub fn is_upright(&self, pm: &crate::part::PartModel) -> bool {
+        let Some(upright) = pm.poses.iter().max_by(|a, b| (-a.normal.z).total_cmp(&(-b.normal.z))) else {
+            return false;
+        };
+        let down = |turn: &UnitQuaternion<f64>| (self.slot_from_part * (turn * upright.normal)).z < -0.9999;
+        match crate::sensor::Symmetry::of_orders(pm.symmetry.orders) {
+            crate::sensor::Symmetry::Finite(turns) => turns.iter().any(down),
+            // Any turn about the part's z leaves its -z side down.
+            crate::sensor::Symmetry::AboutZ => down(&UnitQuaternion::identity()),
+        }
+    }
+
     /// The footprint the slots must hold for every place pose in `place` (m): the largest
     /// extents along x and y; when the part may be turned in its slot by its yaw symmetry
     /// (`yaw_symmetry_rad`, 0: a quarter turn), both the larger of the two for quarter turns and
@@ -326,6 +345,7 @@ impl GraspSelector {
             faces: Vec::new(),
             peel_com_m: Vector3::zeros(),
             blocked_faces: 0,
+            not_upright_faces: 0,
             place: Vec::new(),
             place_footprint_m: [w.size_m[0], w.size_m[1]],
             fit_margin_m: w.grasp.face_margin_m,
@@ -360,10 +380,16 @@ impl GraspSelector {
                 sel.blocked_faces += 1;
                 continue;
             };
+            let place = PlacePose::of_face(&pm, &f.face.normal, sel.max_tilt_rad);
+            if w.grasp.place_orientation == PlaceOrientation::Upright
+                && !place.as_ref().is_some_and(|p| p.is_upright(&pm))
+            {
+                sel.not_upright_faces += 1;
+                continue;
+            }
             sel.faces.push(crate::sensor::cloud::face_of_planar(&f.face));
             sel.sites.push((site.coords, clearance));
-            sel.place
-                .push(PlacePose::of_face(&pm, &f.face.normal, sel.max_tilt_rad));
+            sel.place.push(place);
         }
         if let Some(fp) = PlacePose::footprint_m(&sel.place, sel.yaw_symmetry_rad) {
             sel.place_footprint_m = fp;
@@ -386,6 +412,12 @@ impl GraspSelector {
     /// meets the part's own geometry.
     pub fn blocked_faces(&self) -> usize {
         self.blocked_faces
+    }
+
+    /// The part model's faces that take the cup but were not offered because they would place
+    /// the part another way up than `grasp.place_orientation` allows.
+    pub fn not_upright_faces(&self) -> usize {
+        self.not_upright_faces
     }
 
     /// The part's footprint in its place orientations, along the slot's x and y (m): a part
@@ -821,6 +853,39 @@ mod tests {
             UnitQuaternion::from_rotation_matrix(&it).angle_to(&want) > 1.0,
             "{it:?}"
         );
+    }
+
+    /// `grasp.place_orientation = "upright"` offers only the faces that are up when the part
+    /// rests on its -z side, up to its symmetry: A's top (its half turn keeps its pins down),
+    /// B's top and bottom (the block looks the same flipped), none of their sides. The control:
+    /// with `any`, every face that takes the cup is offered, sides included.
+    #[test]
+    fn upright_placing_offers_only_the_faces_up_in_the_upright_pose() {
+        let robot = crate::robot::test_support::default_robot();
+        let offered = |name: &str, orientation: PlaceOrientation| {
+            let mut wp = LoadedWorkpiece::resolve(name).unwrap();
+            wp.workpiece.grasp.place_orientation = orientation;
+            let scene = crate::config::LoadedScene::embedded_default()
+                .unwrap()
+                .for_workpiece(&wp);
+            let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &wp);
+            let mut normals: Vec<[i32; 3]> = sel
+                .faces()
+                .iter()
+                .map(|f| f.normal.map(|v| v.round() as i32).into())
+                .collect();
+            normals.sort_unstable();
+            (normals, sel.not_upright_faces())
+        };
+        assert_eq!(offered("A", PlaceOrientation::Upright), (vec![[0, 0, 1]], 5));
+        assert_eq!(
+            offered("B", PlaceOrientation::Upright),
+            (vec![[0, 0, -1], [0, 0, 1]], 4)
+        );
+        for name in ["A", "B"] {
+            let (any, dropped) = offered(name, PlaceOrientation::Any);
+            assert_eq!((any.len(), dropped), (6, 0), "{name}: {any:?}");
+        }
     }
 
     /// A C strip lying flat at the tray's centre, turned 30 deg, seen on a map of 1 mm cells:

@@ -68,6 +68,10 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                     if let Some(why) = super::part::no_cup_face(&m) {
                         eprintln!("warning: {label}: {why}");
                     }
+                    let tilt = s.scene.gripper.max_tilt_deg.to_radians();
+                    if let Some(why) = super::part::no_upright_face(&m, &wp.workpiece, tilt) {
+                        eprintln!("warning: {label}: {why}");
+                    }
                 }
                 let mesh = match &wp.mesh {
                     Some(m) => {

@@ -153,6 +153,23 @@ fn surface_of(wp: &LoadedWorkpiece) -> String {
         .unwrap_or_else(|| "primitives, meshed".into())
 }
 
+/// Why a workpiece that must be placed upright (`grasp.place_orientation = "upright"`) cannot
+/// be, or `None` when a face that takes the cup is up in its upright pose (or any pose will do).
+pub fn no_upright_face(m: &PartModel, w: &binpick::config::Workpiece, max_tilt_rad: f64) -> Option<String> {
+    if w.grasp.place_orientation != binpick::config::PlaceOrientation::Upright
+        || m.grasp_faces().any(|f| {
+            binpick::grasp::PlacePose::of_face(m, &f.face.normal, max_tilt_rad).is_some_and(|p| p.is_upright(m))
+        })
+    {
+        return None;
+    }
+    Some(
+        "grasp.place_orientation = \"upright\": no face that takes the cup is up when the part rests on its \
+         -z side, so nothing will be picked (`binpick part` lists the faces and poses)"
+            .to_string(),
+    )
+}
+
 /// Why no face takes the cup, or `None` when one does.
 pub fn no_cup_face(m: &PartModel) -> Option<String> {
     if m.grasp_faces().next().is_some() {

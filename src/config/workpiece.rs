@@ -312,6 +312,23 @@ pub struct GraspHints {
     pub place_yaw_deg: f64,
     /// Smallest margin between cup edge and face edge that still seals (m).
     pub face_margin_m: f64,
+    /// Which way up the part may lie in its slot (`any` when left out).
+    #[serde(default)]
+    pub place_orientation: PlaceOrientation,
+}
+
+/// Which way up a placed part may lie in its slot.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq, Eq)]
+#[serde(rename_all = "snake_case")]
+pub enum PlaceOrientation {
+    /// Any of its stable poses: each grasped face is placed up, in the stable pose that has it
+    /// up (a relay may land on its back, its top or a side).
+    #[default]
+    Any,
+    /// Only resting on the part frame's -z side, as the file's frame stands it (a relay or a DIP
+    /// on its pins, a can on its base), as a tray's pockets, a tape or the next machine need it:
+    /// the faces that would place the part another way up are not grasped.
+    Upright,
 }
 
 impl Workpiece {

@@ -509,3 +509,42 @@ fn the_part_command_reads_a_built_in_part_through_its_meshed_primitives() {
     assert!((j["volume_mm3"].as_f64().unwrap() - 18_000.0).abs() < 1e-6);
     assert_eq!(j["symmetry_orders"], serde_json::json!([2, 2, 4]));
 }
+
+/// `grasp.place_orientation`: `binpick check` warns when an upright part cannot be picked at
+/// all (the hex standoff's bored ends do not take the 6 mm cup, and only they are up when it
+/// stands on its end), not when one face can (the DIP-8's top, its legs down; the control), and
+/// refuses an unknown orientation with exit 2 naming the file and the key.
+#[test]
+fn check_warns_when_no_face_can_be_placed_upright_and_refuses_an_unknown_orientation() {
+    let ws = Workspace::new();
+    let with = |file: &str, line: &str| {
+        let src = ws.path(&format!("workpieces/{file}.toml"));
+        let text = std::fs::read_to_string(&src).unwrap().replace(
+            "face_margin_m = 0.0005",
+            &format!("face_margin_m = 0.0005\nplace_orientation = {line}"),
+        );
+        let out = ws.path(&format!("workpieces/{file}-{}.toml", line.trim_matches('"')));
+        std::fs::write(&out, text).unwrap();
+        binpick_in(ws.dir.path(), &["check", out.to_str().unwrap()])
+    };
+    let hex = with("hex-standoff", "\"upright\"");
+    assert!(hex.status.success(), "{}", stderr(&hex));
+    assert!(
+        stderr(&hex).contains("warning") && stderr(&hex).contains("grasp.place_orientation = \"upright\""),
+        "{}",
+        stderr(&hex)
+    );
+    let dip = with("dip8", "\"upright\"");
+    assert!(
+        dip.status.success() && !stderr(&dip).contains("warning"),
+        "{}",
+        stderr(&dip)
+    );
+    let bad = with("dip8", "\"sideways\"");
+    assert_eq!(bad.status.code(), Some(2));
+    assert!(
+        stderr(&bad).contains("dip8-sideways.toml") && stderr(&bad).contains("grasp.place_orientation"),
+        "{}",
+        stderr(&bad)
+    );
+}
