@@ -153,13 +153,24 @@ fn surface_of(wp: &LoadedWorkpiece) -> String {
         .unwrap_or_else(|| "primitives, meshed".into())
 }
 
+/// The faces (1-based, as listed) that take the cup and are up when the part rests upright, on
+/// its -z side (up to its symmetry): those `grasp.place_orientation = "upright"` grasps.
+fn upright_faces(m: &PartModel, max_tilt_rad: f64) -> Vec<usize> {
+    (0..m.faces.len())
+        .filter(|&i| {
+            let f = &m.faces[i];
+            f.fit.takes_cup()
+                && binpick::grasp::PlacePose::of_face(m, &f.face.normal, max_tilt_rad).is_some_and(|p| p.is_upright(m))
+        })
+        .map(|i| i + 1)
+        .collect()
+}
+
 /// Why a workpiece that must be placed upright (`grasp.place_orientation = "upright"`) cannot
 /// be, or `None` when a face that takes the cup is up in its upright pose (or any pose will do).
 pub fn no_upright_face(m: &PartModel, w: &binpick::config::Workpiece, max_tilt_rad: f64) -> Option<String> {
     if w.grasp.place_orientation != binpick::config::PlaceOrientation::Upright
-        || m.grasp_faces().any(|f| {
-            binpick::grasp::PlacePose::of_face(m, &f.face.normal, max_tilt_rad).is_some_and(|p| p.is_upright(m))
-        })
+        || !upright_faces(m, max_tilt_rad).is_empty()
     {
         return None;
     }
@@ -226,6 +237,19 @@ pub fn part(a: &PartArgs) -> Result<()> {
     } else {
         print_summary(&wp, &m, report);
         print_faces(&m, &sites);
+        let upright = upright_faces(&m, tilt);
+        println!(
+            "placed upright (resting on its -z side; grasp.place_orientation = \"upright\" grasps only these): {}",
+            if upright.is_empty() {
+                "no face that takes the cup".to_string()
+            } else {
+                upright
+                    .iter()
+                    .map(|i| format!("face {i}"))
+                    .collect::<Vec<_>>()
+                    .join(", ")
+            }
+        );
         print_poses(&m, tilt);
         if piles.piles > 0 {
             println!(
@@ -238,7 +262,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
                 piles.piles
             );
         }
-        if let Some(why) = no_cup_face(&m) {
+        for why in [no_cup_face(&m), no_upright_face(&m, w, tilt)].into_iter().flatten() {
             println!("warning: {why}");
         }
         println!("picture: {}", svg_path.display());
@@ -279,6 +303,7 @@ fn print_json(
         "face_margin_mm": mm(m.cup.face_margin_m),
         "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(f, site)).collect::<Vec<_>>(),
         "poses": m.poses.iter().map(pose_json).collect::<Vec<_>>(),
+        "upright_faces": upright_faces(m, tilt),
         "graspable_share": round(m.graspable_share(tilt), 6),
         "pile": {
             "piles": piles.piles,

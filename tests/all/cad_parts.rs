@@ -540,6 +540,21 @@ fn check_warns_when_no_face_can_be_placed_upright_and_refuses_an_unknown_orienta
         "{}",
         stderr(&dip)
     );
+    // `binpick part` lists the faces placed upright: the DIP-8's top (face 2), none of the
+    // standoff's.
+    let upright = |file: &str| {
+        let svg = ws.path(&format!("{file}.svg"));
+        let toml = ws.path(&format!("workpieces/{file}.toml"));
+        let o = binpick_in(
+            ws.dir.path(),
+            &["part", toml.to_str().unwrap(), "--svg", svg.to_str().unwrap(), "--json"],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        v["upright_faces"].clone()
+    };
+    assert_eq!(upright("dip8"), serde_json::json!([2]));
+    assert_eq!(upright("hex-standoff"), serde_json::json!([]));
     let bad = with("dip8", "\"sideways\"");
     assert_eq!(bad.status.code(), Some(2));
     assert!(
