@@ -273,8 +273,8 @@ impl StartMismatch {
 impl Event {
     /// The event's kind, as the event log names it: `capture`, `capture_spoiled`,
     /// `recognition_ready`, `grasp_chosen`, `planned`, `stall`, `pick_start`, `grasped`,
-    /// `place_start`, `released`, `misplaced`, `fault`, `part_lost`, `part_let_go`, `slot_skipped`, `refill`,
-    /// `place_tray_exchange`, `outcome`, `motion_start_mismatch`.
+    /// `place_start`, `released`, `misplaced`, `fault`, `part_lost`, `part_let_go`,
+    /// `slot_skipped`, `refill`, `place_tray_exchange`, `outcome`, `motion_start_mismatch`.
     pub fn kind(&self) -> &'static str {
         match self {
             Event::Capture(_) => "capture",
