@@ -605,3 +605,28 @@ fn a_placed_part_is_measured_from_its_place_pose_not_from_the_slots_frame() {
     assert_eq!(placed.len(), run.tally.placed, "every placed pick is measured");
     assert!(placed.iter().all(|d| *d < 5.0), "rotation errors {placed:?} deg");
 }
+
+/// `grasp.place_orientation = "upright"` places every relay pins down: each relay lying placed
+/// after a short deterministic run of A has its z axis up (read from the world, not from the
+/// cell's records). The control: the same run with `any` places some another way up.
+#[test]
+fn an_upright_line_places_every_relay_pins_down() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let placed_z = |orientation: binpick::config::PlaceOrientation| {
+        let mut wp = LoadedWorkpiece::resolve("A").unwrap();
+        wp.workpiece.grasp.place_orientation = orientation;
+        let mut watch = PlacedPoses::default();
+        binpick::cycle::run(&scene, &robot, &wp, &deterministic(10, 1), &mut watch).unwrap();
+        watch
+            .0
+            .iter()
+            .map(|p| (p.rotation * nalgebra::Vector3::z()).z)
+            .collect::<Vec<f64>>()
+    };
+    let upright = placed_z(binpick::config::PlaceOrientation::Upright);
+    assert!(upright.len() >= 5, "only {} relays placed", upright.len());
+    assert!(upright.iter().all(|z| *z > 0.99), "z axes' heights {upright:?}");
+    let any = placed_z(binpick::config::PlaceOrientation::Any);
+    assert!(any.iter().any(|z| *z < 0.99), "z axes' heights {any:?}");
+}
