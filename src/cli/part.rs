@@ -239,15 +239,11 @@ pub fn part(a: &PartArgs) -> Result<()> {
         print_faces(&m, &sites);
         let upright = upright_faces(&m, tilt);
         println!(
-            "placed upright (resting on its -z side; grasp.place_orientation = \"upright\" grasps only these): {}",
+            "faces up when it rests upright, on its -z side (grasp.place_orientation = \"upright\"): {}",
             if upright.is_empty() {
-                "no face that takes the cup".to_string()
+                "none that takes the cup".to_string()
             } else {
-                upright
-                    .iter()
-                    .map(|i| format!("face {i}"))
-                    .collect::<Vec<_>>()
-                    .join(", ")
+                upright.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
             }
         );
         print_poses(&m, tilt);
