@@ -327,6 +327,25 @@ pub struct PlaceTrayConfig {
     /// List: placement poses in the tray frame, each `[x_m, y_m, yaw_deg]`.
     #[serde(default)]
     pub poses: Option<Vec<[f64; 3]>>,
+    /// A placed part lying farther than this from its place pose, horizontally, is misplaced
+    /// (m): what the tray's pockets or the next machine allow (default 2 mm, the bound a
+    /// recognised pose is judged right by).
+    #[serde(default = "default_place_tolerance_m")]
+    pub tolerance_m: f64,
+    /// ... or turned farther than this from it (deg), over the turns that leave the part
+    /// looking the same (default 5).
+    #[serde(default = "default_place_tolerance_deg")]
+    pub tolerance_deg: f64,
+}
+
+/// `place_tray.tolerance_m` when the cell file leaves it out.
+fn default_place_tolerance_m() -> f64 {
+    crate::sensor::CORRECT_WITHIN_M
+}
+
+/// `place_tray.tolerance_deg` when the cell file leaves it out.
+fn default_place_tolerance_deg() -> f64 {
+    crate::sensor::CORRECT_WITHIN_RAD.to_degrees()
 }
 
 /// The table top: a box whose upper face is at `top_z_m`.

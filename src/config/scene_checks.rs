@@ -168,6 +168,8 @@ impl Scene {
         check_tray(c, "pick_tray", &self.pick_tray);
         let p = &self.place_tray;
         check_tray(c, "place_tray.tray", &p.tray);
+        c.positive("place_tray.tolerance_m", p.tolerance_m);
+        c.within("place_tray.tolerance_deg", p.tolerance_deg, 1e-9, 180.0);
         match p.pattern {
             SlotPattern::Grid => {
                 match p.gap_m {

@@ -213,7 +213,7 @@ pub enum Event {
     PlaceStart,
     /// The part came off the cup over its slot.
     Released,
-    /// A placed part lies beyond [`MISPLACED_M`] or [`MISPLACED_RAD`] from its place pose.
+    /// A placed part lies beyond the place tray's tolerances from its place pose.
     Misplaced(PlacementError),
     /// A fault stopped the arm.
     Fault(Fault),
@@ -456,13 +456,6 @@ pub struct Takt {
     pub spans_refill: bool,
 }
 
-/// A placed part lying farther than this from its place pose is misplaced (m): the bound a
-/// recognised pose is judged right by ([`crate::sensor::CORRECT_WITHIN_M`]); a tray's pockets
-/// or the next machine's feeder may allow more or less.
-pub const MISPLACED_M: f64 = crate::sensor::CORRECT_WITHIN_M;
-/// ... or turned farther than this from it (rad), over the turns that leave it looking the same.
-pub const MISPLACED_RAD: f64 = crate::sensor::CORRECT_WITHIN_RAD;
-
 /// How far a placed part lies from its place pose, measured once the cup has left it.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct PlacementError {
@@ -477,9 +470,10 @@ pub struct PlacementError {
 }
 
 impl PlacementError {
-    /// Whether the part lies beyond [`MISPLACED_M`] or [`MISPLACED_RAD`].
-    pub fn misplaced(&self) -> bool {
-        self.error_m > MISPLACED_M || self.rotation_rad > MISPLACED_RAD
+    /// Whether the part lies beyond `tolerance_m` (m) or `tolerance_rad` (rad): the place
+    /// tray's `tolerance_m` and `tolerance_deg`.
+    pub fn misplaced(&self, tolerance_m: f64, tolerance_rad: f64) -> bool {
+        self.error_m > tolerance_m || self.rotation_rad > tolerance_rad
     }
 }
 
@@ -607,8 +601,8 @@ mod tests {
         assert_eq!(serde_json::to_string(&EndReason::PicksDone).unwrap(), "\"picks done\"");
     }
 
-    /// A placed part beyond 2 mm or 5 deg of its place pose is misplaced, and that is an
-    /// incident; the control: one within both bounds is not.
+    /// A placed part beyond the tolerances (2 mm and 5 deg here) of its place pose is
+    /// misplaced, and that is an incident; the control: one within both is not.
     #[test]
     fn a_part_placed_off_its_place_pose_is_an_incident() {
         let at = |error_m: f64, deg: f64| PlacementError {
@@ -617,8 +611,9 @@ mod tests {
             error_m,
             rotation_rad: deg.to_radians(),
         };
-        assert!(!at(0.0019, 4.9).misplaced());
-        assert!(at(0.0021, 0.0).misplaced() && at(0.0, 5.1).misplaced());
+        let misplaced = |e: PlacementError| e.misplaced(0.002, 5f64.to_radians());
+        assert!(!misplaced(at(0.0019, 4.9)));
+        assert!(misplaced(at(0.0021, 0.0)) && misplaced(at(0.0, 5.1)));
         let flipped = Event::Misplaced(at(0.00303, 179.0));
         assert!(flipped.is_incident() && flipped.is_warning());
         assert_eq!(flipped.kind(), "misplaced");

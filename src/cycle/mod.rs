@@ -60,8 +60,8 @@ pub mod trays;
 use nalgebra::{Isometry3, Vector3};
 
 pub use events::{
-    CycleEvent, EndReason, Event, EventLog, LeftDuring, MISPLACED_M, MISPLACED_RAD, Observer, Observers, PartLoss,
-    PlacementError, Planned, Recognised, Stage, StallCause, StartMismatch, Takt,
+    CycleEvent, EndReason, Event, EventLog, LeftDuring, Observer, Observers, PartLoss, PlacementError, Planned,
+    Recognised, Stage, StallCause, StartMismatch, Takt,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};

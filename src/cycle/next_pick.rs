@@ -205,7 +205,8 @@ impl Run<'_, '_> {
     /// distance of the part frame's origin, and the rotation between the two, the least over the
     /// turns that leave the part looking the same (the recognition's scoring measure). A part
     /// that lies in its place pose but turned in its slot is off by that turn; one tipped onto
-    /// another face, by the tip. A misplaced part is reported as an incident.
+    /// another face, by the tip. A part beyond the place tray's tolerances is reported as a
+    /// misplaced incident.
     pub(super) fn placement_error(
         &mut self,
         pick: usize,
@@ -222,7 +223,8 @@ impl Run<'_, '_> {
                 .norm(),
             rotation_rad,
         };
-        if error.misplaced() {
+        let tray = &self.cell.scene.place_tray;
+        if error.misplaced(tray.tolerance_m, tray.tolerance_deg.to_radians()) {
             self.event(Event::Misplaced(error));
         }
         error

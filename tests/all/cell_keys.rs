@@ -181,3 +181,39 @@ fn sweep_set_reaches_the_waiting_pose_and_the_slot_spacing() {
     assert!(err.contains("cycle.waiting_tool_m = [0.1, 0.45, 0.2]"), "{err}");
     assert!(!out.exists());
 }
+
+/// `place_tray.tolerance_m`: a placed part farther than it from its place pose is a `misplaced`
+/// incident. With 0.01 mm every part E places is one (its event log); with the default 2 mm,
+/// none in the same run (the control). A tolerance of zero exits 2 naming the key.
+#[test]
+fn the_place_tolerance_decides_which_placed_parts_are_misplaced() {
+    let ws = Workspace::new();
+    let key = "tolerance_m = 0.002";
+    let misplaced = |scene: &std::path::Path| {
+        let (code, err) = run(&ws, scene, "E");
+        assert_eq!(code, Some(0), "{err}");
+        let read = |file: &str| -> serde_json::Value {
+            let path = ws.path(&format!("runs/run-E-seed1-det/{file}"));
+            serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
+        };
+        let (summary, events) = (read("summary.json"), read("events.json"));
+        std::fs::remove_dir_all(ws.path("runs")).unwrap();
+        let events = events.as_array().cloned().unwrap_or_default();
+        (
+            events.iter().filter(|e| e["kind"] == "misplaced").count(),
+            summary["placed"].as_u64().unwrap(),
+        )
+    };
+    let tight = ws.edit("scenes/default.toml", "scenes/tight.toml", key, "tolerance_m = 0.00001");
+    let (n, placed) = misplaced(&tight);
+    assert!(placed >= 1 && n as u64 == placed, "{n} misplaced of {placed}");
+    let (n, _) = misplaced(&ws.path("scenes/default.toml"));
+    assert_eq!(n, 0);
+    let zero = ws.edit("scenes/default.toml", "scenes/zero.toml", key, "tolerance_m = 0.0");
+    let (code, err) = run(&ws, &zero, "E");
+    assert_eq!(code, Some(2), "{err}");
+    assert!(
+        err.contains("zero.toml") && err.contains("place_tray.tolerance_m"),
+        "{err}"
+    );
+}
