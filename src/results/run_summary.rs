@@ -59,6 +59,10 @@ impl Serialize for RunSummary<'_> {
         m.serialize_entry("recognition_per_capture", self.per_capture)?;
         m.serialize_entry("ended", &t.ended)?;
         m.serialize_entry("sim_time_s", &t.sim_time_s)?;
+        // Every collision, stop, lost or misplaced part, physics fault and large step at a
+        // motion's start, as takt.json lists a batch's (added last: the fields before keep their
+        // order).
+        m.serialize_entry("incidents", &t.incidents)?;
         m.end()
     }
 }

@@ -183,8 +183,9 @@ fn sweep_set_reaches_the_waiting_pose_and_the_slot_spacing() {
 }
 
 /// `place_tray.tolerance_m`: a placed part farther than it from its place pose is a `misplaced`
-/// incident. With 0.01 mm every part E places is one (its event log); with the default 2 mm,
-/// none in the same run (the control). A tolerance of zero exits 2 naming the key.
+/// incident. With 0.01 mm every part E places is one (its event log, and the summary's
+/// incidents); with the default 2 mm, none in the same run (the control). A tolerance of zero
+/// exits 2 naming the key.
 #[test]
 fn the_place_tolerance_decides_which_placed_parts_are_misplaced() {
     let ws = Workspace::new();
@@ -199,10 +200,11 @@ fn the_place_tolerance_decides_which_placed_parts_are_misplaced() {
         let (summary, events) = (read("summary.json"), read("events.json"));
         std::fs::remove_dir_all(ws.path("runs")).unwrap();
         let events = events.as_array().cloned().unwrap_or_default();
-        (
-            events.iter().filter(|e| e["kind"] == "misplaced").count(),
-            summary["placed"].as_u64().unwrap(),
-        )
+        let misplaced = events.iter().filter(|e| e["kind"] == "misplaced").count();
+        // The summary lists the same incidents.
+        let listed = summary["incidents"].as_array().unwrap();
+        assert_eq!(listed.iter().filter(|i| i["kind"] == "misplaced").count(), misplaced);
+        (misplaced, summary["placed"].as_u64().unwrap())
     };
     let tight = ws.edit("scenes/default.toml", "scenes/tight.toml", key, "tolerance_m = 0.00001");
     let (n, placed) = misplaced(&tight);
