@@ -302,13 +302,20 @@ impl Event {
         }
     }
 
+    /// A fault, a lost or misplaced part, a physics fault: always an incident and a warning.
+    fn is_mishap(&self) -> bool {
+        matches!(
+            self,
+            Event::Fault(_) | Event::PartLost(_) | Event::Misplaced(_) | Event::PhysicsFault(_)
+        )
+    }
+
     /// Whether it is an incident a tally lists ([`super::Incident`]): a fault, a lost part, a
     /// misplaced part, a physics fault, a large step at a motion's start.
     pub fn is_incident(&self) -> bool {
         match self {
-            Event::Fault(_) | Event::PartLost(_) | Event::Misplaced(_) | Event::PhysicsFault(_) => true,
             Event::MotionStartMismatch(m) => m.is_large(),
-            _ => false,
+            _ => self.is_mishap(),
         }
     }
 
@@ -316,9 +323,8 @@ impl Event {
     /// not placed.
     pub fn is_warning(&self) -> bool {
         match self {
-            Event::Fault(_) | Event::PartLost(_) | Event::Misplaced(_) | Event::PhysicsFault(_) => true,
             Event::Outcome(o) => *o != Outcome::Placed,
-            _ => false,
+            _ => self.is_mishap(),
         }
     }
 }
