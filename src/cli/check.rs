@@ -65,12 +65,17 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
                     // Its part model derives, and a warning when no face takes the cup.
                     let m = super::part::model_of(&wp, &s.scene.set_up_for(&wp.workpiece))?;
-                    if let Some(why) = super::part::no_cup_face(&m) {
-                        eprintln!("warning: {label}: {why}");
-                    }
                     let tilt = s.scene.gripper.max_tilt_deg.to_radians();
-                    if let Some(why) = super::part::no_upright_face(&m, &wp.workpiece, tilt) {
-                        eprintln!("warning: {label}: {why}");
+                    let warnings = [
+                        super::part::no_cup_face(&m),
+                        super::part::no_upright_face(&m, &wp.workpiece, tilt),
+                    ];
+                    for why in warnings.into_iter().flatten() {
+                        let text = format!("warning: {label}: {why}");
+                        eprintln!(
+                            "{}",
+                            binpick::report::wrap(&text, binpick::results::table::TERMINAL_WIDTH)
+                        );
                     }
                 }
                 let mesh = match &wp.mesh {

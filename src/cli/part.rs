@@ -153,6 +153,14 @@ fn surface_of(wp: &LoadedWorkpiece) -> String {
         .unwrap_or_else(|| "primitives, meshed".into())
 }
 
+/// Prints `text` wrapped to the terminal's width.
+fn say(text: &str) {
+    println!(
+        "{}",
+        binpick::report::wrap(text, binpick::results::table::TERMINAL_WIDTH)
+    );
+}
+
 /// The faces (1-based, as listed) that take the cup and are up when the part rests upright, on
 /// its -z side (up to its symmetry): those `grasp.place_orientation = "upright"` grasps.
 fn upright_faces(m: &PartModel, max_tilt_rad: f64) -> Vec<usize> {
@@ -238,17 +246,17 @@ pub fn part(a: &PartArgs) -> Result<()> {
         print_summary(&wp, &m, report);
         print_faces(&m, &sites);
         let upright = upright_faces(&m, tilt);
-        println!(
+        say(&format!(
             "faces up when it rests upright, on its -z side (grasp.place_orientation = \"upright\"): {}",
             if upright.is_empty() {
                 "none that takes the cup".to_string()
             } else {
                 upright.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
             }
-        );
+        ));
         print_poses(&m, tilt);
         if piles.piles > 0 {
-            println!(
+            say(&format!(
                 "simulated piles: {} of {} settled parts ({:.1} %) offer a cup face up with nothing on the cup's disc ({} piles of {}, seeds 1-{})",
                 piles.offered,
                 piles.in_tray,
@@ -256,10 +264,10 @@ pub fn part(a: &PartArgs) -> Result<()> {
                 piles.piles,
                 w.pile_count,
                 piles.piles
-            );
+            ));
         }
         for why in [no_cup_face(&m), no_upright_face(&m, w, tilt)].into_iter().flatten() {
-            println!("warning: {why}");
+            say(&format!("warning: {why}"));
         }
         println!("picture: {}", svg_path.display());
         Ok(())
@@ -373,7 +381,7 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
             report.bodies,
             if report.bodies == 1 { "body" } else { "bodies" }
         );
-        println!(
+        say(&format!(
             "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
             report.welded_vertices,
             report.zero_area_triangles,
@@ -384,10 +392,10 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
             report.holes_closed,
             report.holes_area_m2 * 1e6,
             report.non_manifold_edges
-        );
+        ));
     }
     let c = m.mass.com_m;
-    println!(
+    say(&format!(
         "size {:.2} x {:.2} x {:.2} mm, volume {:.1} mm^3, mass {:.3} g ({:.0} kg/m^3), centre of mass [{:.3} {:.3} {:.3}] mm",
         m.size_m[0] * 1e3,
         m.size_m[1] * 1e3,
@@ -398,7 +406,7 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
         c.x * 1e3,
         c.y * 1e3,
         c.z * 1e3
-    );
+    ));
     let order = |n: u32| {
         if n >= binpick::part::symmetry::MAX_ORDER {
             "round".to_string()
