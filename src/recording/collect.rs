@@ -127,13 +127,14 @@ impl CaptureImage {
     }
 }
 
-/// The points of every `every_px`-th pixel in each direction of the window `w` of `c`'s organised
-/// cloud that has a return, row-major, each coordinate rounded to the [`CLOUD_GRID_M`] grid
+/// The points of every `every_px`-th pixel in each direction of `c`'s organised cloud (its tray
+/// window `w`) that have a return, row-major, each coordinate rounded to the [`CLOUD_GRID_M`] grid
 /// [m, world].
 fn cloud_on_grid(c: &Capture, w: &PixelWindow, every_px: usize) -> Vec<[f32; 3]> {
     let per_m = 1.0 / CLOUD_GRID_M;
     let on_grid = |v: f32| ((f64::from(v) * per_m).round() * CLOUD_GRID_M) as f32;
-    w.rows(&c.points_world, c.width_px)
+    c.points_world
+        .chunks_exact(w.width_px.max(1))
         .step_by(every_px)
         .flat_map(|row| row.iter().step_by(every_px))
         .filter(|p| p[0].is_finite())
@@ -446,11 +447,7 @@ impl Observer for Recorder<'_> {
             size_px: (w.width_px, w.height_px),
             // Depths are non-negative: adding a half and truncating rounds as `round` does, without
             // its library call per pixel.
-            depth_mm: w
-                .crop(&c.depth_m, c.width_px)
-                .iter()
-                .map(|d| (d * 1000.0 + 0.5) as u16)
-                .collect(),
+            depth_mm: c.depth_m.iter().map(|d| (d * 1000.0 + 0.5) as u16).collect(),
             points_world_m: cloud_on_grid(c, w, CLOUD_EVERY_PX),
         });
     }

@@ -23,24 +23,6 @@ pub struct PixelWindow {
     pub height_px: usize,
 }
 
-impl PixelWindow {
-    /// The window's part of each of its rows, top to bottom, of a row-major image `width_px`
-    /// wide.
-    pub fn rows<'a, T>(&self, image: &'a [T], width_px: usize) -> impl Iterator<Item = &'a [T]> {
-        let cols = self.x0_px..self.x0_px + self.width_px;
-        image
-            .chunks_exact(width_px.max(1))
-            .skip(self.y0_px)
-            .take(self.height_px)
-            .map(move |row| &row[cols.clone()])
-    }
-
-    /// The values of the window's pixels, row-major, from a row-major image `width_px` wide.
-    pub fn crop<T: Copy>(&self, image: &[T], width_px: usize) -> Vec<T> {
-        self.rows(image, width_px).flatten().copied().collect()
-    }
-}
-
 /// The pinhole camera.
 #[derive(Debug, Clone)]
 pub struct Camera {
@@ -213,12 +195,6 @@ mod tests {
         // A pixel's ray is the same through either camera.
         let (pu, pv) = (w.x0_px + 7, w.y0_px + 11);
         assert!((cam.pixel_dir(pu, pv) - crop.pixel_dir(7, 11)).norm() < 1e-12);
-        // Cropping an image keeps the window's pixels.
-        let image: Vec<usize> = (0..cam.width_px * cam.height_px).collect();
-        let cut = w.crop(&image, cam.width_px);
-        assert_eq!(cut.len(), w.width_px * w.height_px);
-        assert_eq!(cut[0], w.y0_px * cam.width_px + w.x0_px);
-        assert_eq!(cut[w.width_px * 11 + 7], pv * cam.width_px + pu);
         // Negative control: a tray behind the camera gives the whole image.
         let mut behind = tray;
         behind.world_from_tray.translation.vector.z = cam.world_from_camera.translation.vector.z + 1.0;

@@ -28,7 +28,8 @@ use super::raster::{Facet, NO_FACET, ZBuffer, rasterize};
 use super::{Camera, PixelWindow};
 use crate::physics::{RayTargets, Tag, World};
 
-/// One depth capture.
+/// One depth capture. Only the pixels of its [`Capture::tray_window`] are measured and stored;
+/// every other pixel of the image has no return ([`Capture::depth_at_m`] reads any pixel).
 #[derive(Debug, Clone)]
 pub struct Capture {
     /// Capture number within the run.
@@ -41,12 +42,15 @@ pub struct Capture {
     pub width_px: usize,
     /// Image height (px).
     pub height_px: usize,
-    /// Depth along the optical axis per pixel, row-major; 0 where there is no return (m).
+    /// Depth along the optical axis per pixel of the tray window, row-major; 0 where there is no
+    /// return (m).
     pub depth_m: Vec<f32>,
-    /// World point per pixel (NaN where there is no return) (m): the organised point cloud.
+    /// World point per pixel of the tray window, row-major (NaN where there is no return) (m):
+    /// the organised point cloud.
     pub points_world: Vec<[f32; 3]>,
-    /// What each valid pixel's ray hit: ground truth for the recognition model's visibility
-    /// counts and for evaluation only (see [`super::recognition`]).
+    /// What each valid pixel's ray hit, per pixel of the tray window: ground truth for the
+    /// recognition model's visibility counts and for evaluation only (see
+    /// [`super::recognition`]).
     pub(super) truth: Vec<Option<Tag>>,
     /// The sensor's region of interest: the pixels that see the pick tray (its outer walls,
     /// floor to rim) and [`TRAY_WINDOW_MARGIN_PX`] around them. Only these are measured; every
@@ -61,6 +65,68 @@ pub struct Capture {
 pub const TRAY_WINDOW_MARGIN_PX: usize = 10;
 
 impl Capture {
+    /// A capture of an image `width_px` x `height_px` with no return in any pixel, measuring the
+    /// pixels of `tray_window`.
+    pub fn blank(
+        id: u64,
+        trigger_s: f64,
+        camera_position_m: Vector3<f64>,
+        (width_px, height_px): (usize, usize),
+        tray_window: PixelWindow,
+    ) -> Self {
+        let n = tray_window.width_px * tray_window.height_px;
+        Capture {
+            id,
+            trigger_s,
+            camera_position_m,
+            width_px,
+            height_px,
+            depth_m: vec![0.0; n],
+            points_world: vec![[f32::NAN; 3]; n],
+            truth: vec![None; n],
+            tray_window,
+        }
+    }
+
+    /// The index of image pixel (`u_px`, `v_px`) in the capture's buffers; `None` outside its
+    /// tray window.
+    pub fn index_of(&self, u_px: usize, v_px: usize) -> Option<usize> {
+        let w = &self.tray_window;
+        let (u, v) = (u_px.checked_sub(w.x0_px)?, v_px.checked_sub(w.y0_px)?);
+        (u < w.width_px && v < w.height_px).then_some(v * w.width_px + u)
+    }
+
+    /// Depth of image pixel (`u_px`, `v_px`) (m); 0 where there is no return, as everywhere
+    /// outside the tray window.
+    pub fn depth_at_m(&self, u_px: usize, v_px: usize) -> f32 {
+        self.index_of(u_px, v_px).map_or(0.0, |i| self.depth_m[i])
+    }
+
+    /// World point of image pixel (`u_px`, `v_px`) (m); NaN where there is no return, as
+    /// everywhere outside the tray window.
+    pub fn point_at_world(&self, u_px: usize, v_px: usize) -> [f32; 3] {
+        self.index_of(u_px, v_px)
+            .map_or([f32::NAN; 3], |i| self.points_world[i])
+    }
+
+    /// Sets image pixel (`u_px`, `v_px`)'s return: its depth (m) and world point (m). A pixel
+    /// outside the tray window is not measured, and is left without a return.
+    pub fn set_return(&mut self, u_px: usize, v_px: usize, depth_m: f32, point_world: [f32; 3]) {
+        if let Some(i) = self.index_of(u_px, v_px) {
+            self.depth_m[i] = depth_m;
+            self.points_world[i] = point_world;
+        }
+    }
+
+    /// Clears image pixel (`u_px`, `v_px`)'s return (no return), if it had one.
+    pub fn clear_return(&mut self, u_px: usize, v_px: usize) {
+        if let Some(i) = self.index_of(u_px, v_px) {
+            self.depth_m[i] = 0.0;
+            self.points_world[i] = [f32::NAN; 3];
+            self.truth[i] = None;
+        }
+    }
+
     /// Number of pixels with a return.
     pub fn valid_count(&self) -> usize {
         self.depth_m.iter().filter(|d| **d > 0.0).count()
@@ -77,11 +143,14 @@ impl Capture {
         enc.set_color(png::ColorType::Grayscale);
         enc.set_depth(png::BitDepth::Sixteen);
         let mut w = enc.write_header().map_err(std::io::Error::other)?;
-        let bytes: Vec<u8> = self
-            .depth_m
-            .iter()
-            .flat_map(|d| ((*d as f64 * 1000.0).round().clamp(0.0, 65535.0) as u16).to_be_bytes())
-            .collect();
+        let mut bytes = vec![0u8; 2 * self.width_px * self.height_px];
+        let win = &self.tray_window;
+        for (v, row) in self.depth_m.chunks_exact(win.width_px.max(1)).enumerate() {
+            let first = 2 * ((win.y0_px + v) * self.width_px + win.x0_px);
+            for (out, d) in bytes[first..first + 2 * row.len()].chunks_exact_mut(2).zip(row) {
+                out.copy_from_slice(&((*d as f64 * 1000.0).round().clamp(0.0, 65535.0) as u16).to_be_bytes());
+            }
+        }
         w.write_image_data(&bytes).map_err(std::io::Error::other)?;
         w.finish().map_err(std::io::Error::other)
     }
@@ -143,13 +212,13 @@ pub struct Background {
 }
 
 impl Background {
-    /// Rasterizes the fixed colliders of `world` into `camera`'s image.
+    /// Rasterizes the fixed colliders of `world` into the pixels of `camera`'s image over the
+    /// pick tray (its tray window).
     pub fn new(world: &World, camera: &Camera) -> Self {
-        let mut zbuffer = ZBuffer::empty(camera);
+        let mut zbuffer = ZBuffer::empty(camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX));
         let mut facets = Vec::new();
         rasterize(
             camera,
-            &camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX),
             &world.view_meshes(RayTargets::Fixed, FACET_CHORD_M),
             &mut zbuffer,
             &mut facets,
@@ -165,49 +234,38 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
     let origin = camera.world_from_camera.translation.vector;
     let rotation = camera.world_from_camera.rotation.to_rotation_matrix().into_inner();
     let stream = crate::rng::stream(seed, "sensor");
+    let window = camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX);
+    // A background rasterized over another window (another tray) does not hold these pixels.
     let fresh;
     let bg = match background {
-        Some(b) => b,
-        None => {
+        Some(b) if b.zbuffer.window == window => b,
+        _ => {
             fresh = Background::new(world, camera);
             &fresh
         }
     };
-    let window = camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX);
     let mut zb = bg.zbuffer.clone();
     let mut facets = bg.facets.clone();
     rasterize(
         camera,
-        &window,
         &world.view_meshes(RayTargets::Moving, FACET_CHORD_M),
         &mut zb,
         &mut facets,
     );
     let cos_grazing = camera.dropout_grazing_rad.cos();
     let pairs = w.div_ceil(2);
-    let mut c = Capture {
-        id,
-        trigger_s: world.time_s(),
-        camera_position_m: origin,
-        width_px: w,
-        height_px: h,
-        depth_m: vec![0.0; w * h],
-        points_world: vec![[f32::NAN; 3]; w * h],
-        truth: vec![None; w * h],
-        tray_window: window,
-    };
+    let mut c = Capture::blank(id, world.time_s(), origin, (w, h), window);
     // The pairs of pixels that hold the window's columns.
     let window_pairs = window.x0_px / 2..(window.x0_px + window.width_px).div_ceil(2).min(pairs);
-    let window_rows = window.y0_px..window.y0_px + window.height_px;
+    let ww = window.width_px.max(1);
     c.depth_m
-        .par_chunks_mut(w)
-        .zip(c.points_world.par_chunks_mut(w))
-        .zip(c.truth.par_chunks_mut(w))
+        .par_chunks_mut(ww)
+        .zip(c.points_world.par_chunks_mut(ww))
+        .zip(c.truth.par_chunks_mut(ww))
+        .zip(zb.facet.par_chunks(ww))
         .enumerate()
-        .for_each(|(v, ((depth, pts), truth))| {
-            if !window_rows.contains(&v) {
-                return;
-            }
+        .for_each(|(row, (((depth, pts), truth), row_facets))| {
+            let v = window.y0_px + row;
             let mut rng = stream.clone();
             // Each u64 draw takes two 32-bit words; the row's draws start at its first pair, the
             // window's at its first pair.
@@ -216,7 +274,8 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                     * DRAWS_PER_PAIR
                     * 2,
             );
-            let row = &zb.facet[v * w..(v + 1) * w];
+            // The window's pixel of image column u, if it is in the window.
+            let at = |u: usize| u.checked_sub(window.x0_px).filter(|k| *k < window.width_px);
             let y = (v as f64 + 0.5 - camera.cy_px) / camera.fy_px;
             // The unnormalised ray through (u + 0.5, v + 0.5) in the world: row + u * step.
             let row_dir = rotation * Vector3::new((0.5 - camera.cx_px) / camera.fx_px, y, 1.0);
@@ -225,7 +284,8 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                 let noise_bits: u64 = rng.random();
                 let drop_bits: u64 = rng.random();
                 let (u_a, u_b) = (2 * p, (2 * p + 1).min(w - 1));
-                if row[u_a] == NO_FACET && row[u_b] == NO_FACET {
+                let facet_at = |u: usize| at(u).map_or(NO_FACET, |k| row_facets[k]);
+                if facet_at(u_a) == NO_FACET && facet_at(u_b) == NO_FACET {
                     continue;
                 }
                 // Box-Muller's two normals, one per pixel of the pair (in single precision: the
@@ -236,10 +296,12 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                     if k == 1 && u_b == u_a {
                         break;
                     }
-                    let f = row[u];
+                    let f = facet_at(u);
                     if f == NO_FACET {
                         continue;
                     }
+                    // A pixel with a facet is in the window.
+                    let k_px = u - window.x0_px;
                     let drop = unit_from_bits((drop_bits >> (32 * k)) as u32);
                     let facet = &facets[f as usize];
                     let ray = row_dir + step * u as f64;
@@ -264,11 +326,67 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
                     let noise = (r * if k == 0 { cos } else { sin }) as f64;
                     let zn = z + noise * camera.depth_noise_at_1m_m * z * z;
                     let pt = origin + dir * (zn / z_per_range);
-                    depth[u] = zn as f32;
-                    pts[u] = [pt.x as f32, pt.y as f32, pt.z as f32];
-                    truth[u] = Some(facet.tag);
+                    depth[k_px] = zn as f32;
+                    pts[k_px] = [pt.x as f32, pt.y as f32, pt.z as f32];
+                    truth[k_px] = Some(facet.tag);
                 }
             }
         });
     c
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A capture stores its tray window's pixels only and reads every pixel of the image: its
+    /// window's through the buffers, every other one as no return. Its depth PNG is the whole
+    /// image, the window's depths at their own pixels. Negative control: the transposed pixel
+    /// holds nothing, and a return set outside the window is not measured.
+    #[test]
+    fn a_capture_holds_its_window_and_reads_no_return_outside_it() {
+        let window = PixelWindow {
+            x0_px: 3,
+            y0_px: 2,
+            width_px: 4,
+            height_px: 3,
+        };
+        let mut c = Capture::blank(0, 0.0, Vector3::zeros(), (10, 8), window);
+        assert_eq!(c.depth_m.len(), 12);
+        c.set_return(4, 3, 0.5, [1.0, 2.0, 3.0]);
+        c.set_return(0, 0, 0.7, [1.0, 1.0, 1.0]);
+        assert_eq!(c.index_of(4, 3), Some(5));
+        assert_eq!(c.index_of(7, 3), None, "the window's columns end at 6");
+        assert_eq!(c.index_of(0, 0), None);
+        assert_eq!(c.depth_at_m(4, 3), 0.5);
+        assert_eq!(c.point_at_world(4, 3), [1.0, 2.0, 3.0]);
+        assert_eq!(c.depth_at_m(3, 4), 0.0);
+        assert_eq!(c.depth_at_m(0, 0), 0.0);
+        assert!(c.point_at_world(0, 0)[0].is_nan());
+        assert_eq!(c.valid_count(), 1);
+        let dir = std::env::temp_dir().join(format!("binpick-capture-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let path = dir.join("depth.png");
+        c.write_depth_png(&path).unwrap();
+        let mut reader = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&path).unwrap()))
+            .read_info()
+            .unwrap();
+        let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+        let info = reader.next_frame(&mut buf).unwrap();
+        assert_eq!((info.width, info.height), (10, 8));
+        let mm = |u: usize, v: usize| u16::from_be_bytes([buf[2 * (v * 10 + u)], buf[2 * (v * 10 + u) + 1]]);
+        assert_eq!(mm(4, 3), 500);
+        assert_eq!(mm(3, 4), 0);
+        assert_eq!(mm(0, 0), 0);
+        assert_eq!(
+            (0..8)
+                .flat_map(|v| (0..10).map(move |u| (u, v)))
+                .filter(|&(u, v)| mm(u, v) > 0)
+                .count(),
+            1
+        );
+        c.clear_return(4, 3);
+        assert_eq!((c.depth_at_m(4, 3), c.valid_count()), (0.0, 0));
+        std::fs::remove_dir_all(&dir).ok();
+    }
 }

@@ -43,9 +43,8 @@ impl HeightMap {
         };
         let tray_from_world = t.world_from_tray.inverse();
         let apex = tray_from_world * Point3::from(c.camera_position_m);
-        // No pixel outside the capture's tray window sees the tray: its points would all fail
-        // the frustum test below.
-        for p in c.tray_window.rows(&c.points_world, c.width_px).flatten() {
+        // The capture holds its tray window's points only: no other pixel sees the tray.
+        for p in &c.points_world {
             if !p[0].is_finite() {
                 continue;
             }

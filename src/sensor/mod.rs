@@ -329,7 +329,7 @@ impl Sensor {
             let p = tray_from_world * nalgebra::Point3::from(origin + d * ((floor_z - origin.z) / d.z));
             p.x.abs() < inner[0] && p.y.abs() < inner[1]
         };
-        let empty = |u: usize, v: usize| capture.depth_m[v * w + u] <= 0.0;
+        let empty = |u: usize, v: usize| capture.depth_at_m(u, v) <= 0.0;
         let mut holes = vec![false; w * h];
         // Pixels outside the capture's tray window do not look at the tray floor.
         let win = &capture.tray_window;

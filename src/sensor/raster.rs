@@ -29,13 +29,15 @@ pub(crate) struct Facet {
     pub tag: Tag,
 }
 
-/// Nearest facet per pixel.
+/// Nearest facet per pixel of a window of the image (the rest of the image is never drawn).
 #[derive(Debug, Clone)]
 pub(crate) struct ZBuffer {
-    /// Inverse depth along the optical axis per pixel, row-major; 0 where nothing covers it
-    /// (1/m): the nearest surface has the largest.
+    /// The pixels the buffer holds.
+    pub window: PixelWindow,
+    /// Inverse depth along the optical axis per pixel of the window, row-major; 0 where nothing
+    /// covers it (1/m): the nearest surface has the largest.
     pub inv_depth: Vec<f32>,
-    /// Facet index per pixel; [`NO_FACET`] where nothing covers it.
+    /// Facet index per pixel of the window; [`NO_FACET`] where nothing covers it.
     pub facet: Vec<u32>,
 }
 
@@ -49,10 +51,11 @@ const NEAR_M: f64 = 1e-3;
 const BAND_ROWS: usize = 16;
 
 impl ZBuffer {
-    /// An empty buffer for `camera`'s image.
-    pub fn empty(camera: &Camera) -> Self {
-        let n = camera.width_px * camera.height_px;
+    /// An empty buffer for the pixels of `window` (within its camera's image).
+    pub fn empty(window: PixelWindow) -> Self {
+        let n = window.width_px * window.height_px;
         ZBuffer {
+            window,
             inv_depth: vec![0.0; n],
             facet: vec![NO_FACET; n],
         }
@@ -69,19 +72,12 @@ struct ScreenTri {
     rows: (usize, usize),
 }
 
-/// Rasterizes `meshes` into the pixels of `window` of `zb` (over what it holds; the rest of the
-/// buffer is left as it is), appending the facets of the triangles that reach the window to
-/// `facets`. A convex mesh's facets facing away from the camera are skipped: a ray from outside
-/// enters a convex solid through a facet facing it. A pixel inside the window gets the same facet
-/// whatever the window (the window only skips pixels).
-pub(crate) fn rasterize(
-    camera: &Camera,
-    window: &PixelWindow,
-    meshes: &[ViewMesh],
-    zb: &mut ZBuffer,
-    facets: &mut Vec<Facet>,
-) {
-    let (w, h) = (camera.width_px, camera.height_px);
+/// Rasterizes `meshes` into the pixels of `zb`'s window (over what it holds), appending the
+/// facets of the triangles that reach the window to `facets`. A convex mesh's facets facing away
+/// from the camera are skipped: a ray from outside enters a convex solid through a facet facing
+/// it. A pixel gets the same facet whatever the window (the window only skips pixels).
+pub(crate) fn rasterize(camera: &Camera, meshes: &[ViewMesh], zb: &mut ZBuffer, facets: &mut Vec<Facet>) {
+    let window = &zb.window.clone();
     let camera_from_world = camera.world_from_camera.inverse();
     let eye = camera.world_from_camera.translation.vector;
     let mut tris: Vec<ScreenTri> = Vec::new();
@@ -126,14 +122,19 @@ pub(crate) fn rasterize(
             }
         }
     }
-    // Bin the triangles by bands of rows, in their order.
-    let bands = h.div_ceil(BAND_ROWS);
+    // Bin the triangles by bands of the window's rows, in their order (their rows are the
+    // window's).
+    let (w, y0) = (window.width_px, window.y0_px);
+    if w == 0 || window.height_px == 0 {
+        return;
+    }
+    let bands = window.height_px.div_ceil(BAND_ROWS);
     let mut binned: Vec<Vec<u32>> = vec![Vec::new(); bands];
     for (k, t) in tris.iter().enumerate() {
         for band in binned
             .iter_mut()
-            .take(t.rows.1 / BAND_ROWS + 1)
-            .skip(t.rows.0 / BAND_ROWS)
+            .take((t.rows.1 - y0) / BAND_ROWS + 1)
+            .skip((t.rows.0 - y0) / BAND_ROWS)
         {
             band.push(k as u32);
         }
@@ -144,17 +145,18 @@ pub(crate) fn rasterize(
         .zip(binned.par_iter())
         .enumerate()
         .for_each(|(band, ((depth, facet), list))| {
-            let v0 = band * BAND_ROWS;
-            let v1 = (v0 + BAND_ROWS).min(h) - 1;
+            let v0 = y0 + band * BAND_ROWS;
+            let v1 = (v0 + BAND_ROWS).min(y0 + window.height_px) - 1;
             for &k in list {
-                draw(&tris[k as usize], w, window, v0, v1, depth, facet);
+                draw(&tris[k as usize], window, v0, v1, depth, facet);
             }
         });
 }
 
-/// Draws one triangle into the rows `v0..=v1` of a band (`depth`, `facet` start at row `v0`),
-/// within the columns of `window` (its rows are in the triangle's).
-fn draw(t: &ScreenTri, w: usize, window: &PixelWindow, v0: usize, v1: usize, inv_depth: &mut [f32], facet: &mut [u32]) {
+/// Draws one triangle into the image rows `v0..=v1` of a band of `window`'s rows (`depth`,
+/// `facet` start at the window's pixel of row `v0`), within the window's columns (its rows are in
+/// the triangle's).
+fn draw(t: &ScreenTri, window: &PixelWindow, v0: usize, v1: usize, inv_depth: &mut [f32], facet: &mut [u32]) {
     let [x0, x1, x2] = t.x;
     let [y0, y1, y2] = t.y;
     let area = (x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0);
@@ -171,9 +173,7 @@ fn draw(t: &ScreenTri, w: usize, window: &PixelWindow, v0: usize, v1: usize, inv
     let xmin = x0.min(x1).min(x2);
     let xmax = x0.max(x1).max(x2);
     let u_lo = (xmin - 0.5).ceil().max(window.x0_px as f64);
-    let u_hi = (xmax - 0.5)
-        .floor()
-        .min((window.x0_px + window.width_px).min(w) as f64 - 1.0);
+    let u_hi = (xmax - 0.5).floor().min((window.x0_px + window.width_px) as f64 - 1.0);
     if u_lo > u_hi {
         return;
     }
@@ -182,7 +182,7 @@ fn draw(t: &ScreenTri, w: usize, window: &PixelWindow, v0: usize, v1: usize, inv
     const EPS: f64 = -1e-12;
     for v in t.rows.0.max(v0)..=t.rows.1.min(v1) {
         let py = v as f64 + 0.5;
-        let row = (v - v0) * w;
+        let row = (v - v0) * window.width_px;
         for u in u_lo..=u_hi {
             let px = u as f64 + 0.5;
             let b0 = e0.0 * px + e0.1 * py + e0.2;
@@ -192,7 +192,7 @@ fn draw(t: &ScreenTri, w: usize, window: &PixelWindow, v0: usize, v1: usize, inv
                 continue;
             }
             let inv_z = (b0 * t.inv_z[0] + b1 * t.inv_z[1] + b2 * t.inv_z[2]) as f32;
-            let i = row + u;
+            let i = row + u - window.x0_px;
             if inv_z > inv_depth[i] {
                 inv_depth[i] = inv_z;
                 facet[i] = t.facet;

@@ -517,13 +517,11 @@ impl<'a> Cloud<'a> {
             .zip(height.par_chunks_mut(w))
             .enumerate()
             .for_each(|(row, (((pts, depth), fg), height))| {
-                let first = (v0 + row) * c.width_px + u0;
-                let image = c.points_world[first..first + w]
-                    .iter()
-                    .zip(&c.depth_m[first..first + w]);
+                // The capture measures its own tray window; any pixel outside it has no return.
+                let image = (u0..u0 + w).map(|u| (c.point_at_world(u, v0 + row), c.depth_at_m(u, v0 + row)));
                 for (k, (p, d)) in image.enumerate() {
                     let v = Vector3::new(p[0] as f64, p[1] as f64, p[2] as f64);
-                    let ok = *d > 0.0 && v.x.is_finite();
+                    let ok = d > 0.0 && v.x.is_finite();
                     let l = tray_from_world * Point3::from(v);
                     let inside = ok
                         && l.z > FLOOR_TOL_M
@@ -532,7 +530,7 @@ impl<'a> Cloud<'a> {
                         && l.y.abs() < inner[1] - 0.0005
                         && tray.frustum_holds(&eye, &l);
                     pts[k] = v;
-                    depth[k] = if ok { *d as f64 } else { 0.0 };
+                    depth[k] = if ok { d as f64 } else { 0.0 };
                     fg[k] = inside;
                     height[k] = if ok { l.z } else { f64::NAN };
                 }

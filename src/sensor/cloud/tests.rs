@@ -43,17 +43,13 @@ pub(super) fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) ->
     let floor_p = cell.tray.world_from_tray.translation.vector;
     let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(7);
     let (w, h) = (cam.width_px, cam.height_px);
-    let mut c = Capture {
-        id: 0,
-        trigger_s: 0.0,
-        camera_position_m: origin,
-        width_px: w,
-        height_px: h,
-        depth_m: vec![0.0; w * h],
-        points_world: vec![[f32::NAN; 3]; w * h],
-        truth: vec![None; w * h],
-        tray_window: cam.window_over(&cell.tray, crate::sensor::capture::TRAY_WINDOW_MARGIN_PX),
-    };
+    let mut c = Capture::blank(
+        0,
+        0.0,
+        origin,
+        (w, h),
+        cam.window_over(&cell.tray, crate::sensor::capture::TRAY_WINDOW_MARGIN_PX),
+    );
     for v in 0..h {
         for u in 0..w {
             let d = cam.pixel_dir(u, v);
@@ -67,8 +63,7 @@ pub(super) fn synthetic(cell: &Cell, parts: &[(&CloudModel, Isometry3<f64>)]) ->
             let z = t * d.dot(&optical);
             let zn = z + gaussian(&mut rng) * cam.depth_noise_at_1m_m * z * z;
             let p = origin + d * (zn / d.dot(&optical));
-            c.depth_m[v * w + u] = zn as f32;
-            c.points_world[v * w + u] = [p.x as f32, p.y as f32, p.z as f32];
+            c.set_return(u, v, zn as f32, [p.x as f32, p.y as f32, p.z as f32]);
         }
     }
     c
@@ -334,9 +329,7 @@ fn holes_say_nothing() {
     let (u, v) = (u as usize, v as usize);
     for dv in 0..4 {
         for du in 0..4 {
-            let i = (v + dv - 2) * cap.width_px + u + du - 2;
-            cap.depth_m[i] = 0.0;
-            cap.points_world[i] = [f32::NAN; 3];
+            cap.clear_return(u + du - 2, v + dv - 2);
         }
     }
     let found = recognize(&cap, &cell.camera, &cell.tray, &m);
@@ -461,17 +454,13 @@ pub(super) fn synthetic_meshes(cell: &Cell, parts: &[(&crate::part::mesh::Mesh, 
         })
         .collect();
     let (w, h) = (cam.width_px, cam.height_px);
-    let mut c = Capture {
-        id: 0,
-        trigger_s: 0.0,
-        camera_position_m: origin,
-        width_px: w,
-        height_px: h,
-        depth_m: vec![0.0; w * h],
-        points_world: vec![[f32::NAN; 3]; w * h],
-        truth: vec![None; w * h],
-        tray_window: cam.window_over(&cell.tray, crate::sensor::capture::TRAY_WINDOW_MARGIN_PX),
-    };
+    let mut c = Capture::blank(
+        0,
+        0.0,
+        origin,
+        (w, h),
+        cam.window_over(&cell.tray, crate::sensor::capture::TRAY_WINDOW_MARGIN_PX),
+    );
     for v in 0..h {
         for u in 0..w {
             let d = cam.pixel_dir(u, v);
@@ -501,8 +490,7 @@ pub(super) fn synthetic_meshes(cell: &Cell, parts: &[(&crate::part::mesh::Mesh, 
             let z = t * d.dot(&optical);
             let zn = z + gaussian(&mut rng) * cam.depth_noise_at_1m_m * z * z;
             let p = origin + d * (zn / d.dot(&optical));
-            c.depth_m[v * w + u] = zn as f32;
-            c.points_world[v * w + u] = [p.x as f32, p.y as f32, p.z as f32];
+            c.set_return(u, v, zn as f32, [p.x as f32, p.y as f32, p.z as f32]);
         }
     }
     c
