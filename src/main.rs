@@ -7,6 +7,12 @@
 
 mod cli;
 
+/// mimalloc keeps the memory it frees for the next allocation of its size, where glibc's malloc
+/// gave a capture's and a recognition's megabyte buffers back to the system and page-faulted them
+/// in again at every capture.
+#[global_allocator]
+static GLOBAL: mimalloc::MiMalloc = mimalloc::MiMalloc;
+
 use std::path::PathBuf;
 use std::process::ExitCode;
 
