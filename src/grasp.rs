@@ -56,6 +56,10 @@ pub enum Rejection {
     TrayWall,
     /// No joint solution within limits along the straight descent, or at the place pose.
     Unreachable,
+    /// None of the faces offered to the cup points up within 60 deg (nor within the cup's tilt):
+    /// a can lying on its side, a part on its edge, or, on an upright line, a part lying another
+    /// way up. Counted once per recognised part, with the face index 0.
+    NoFaceUp,
 }
 
 impl Rejection {
@@ -68,6 +72,7 @@ impl Rejection {
             Rejection::Covered => "covered",
             Rejection::TrayWall => "tray wall",
             Rejection::Unreachable => "unreachable",
+            Rejection::NoFaceUp => "no face up",
         }
     }
 }
@@ -535,6 +540,7 @@ impl GraspSelector {
         // map is not free space. The face height is measured on what was seen only.
         let occupied = height_map.unseen_filled(self.tray_inner_half_m, self.rim_height_m);
         for (di, det) in detections.iter().enumerate() {
+            let counted = plan.rejected.len() + plan.ranked.len();
             for (fi, face) in self.faces.iter().enumerate() {
                 let n = det.world_from_part.rotation * face.normal;
                 let tilt = n.z.clamp(-1.0, 1.0).acos();
@@ -636,6 +642,9 @@ impl GraspSelector {
                     }
                     None => plan.rejected.push((di, fi, Rejection::Unreachable)),
                 }
+            }
+            if plan.rejected.len() + plan.ranked.len() == counted {
+                plan.rejected.push((di, 0, Rejection::NoFaceUp));
             }
         }
         plan.ranked.sort_by(|a, b| {
@@ -977,6 +986,39 @@ mod tests {
         assert!(
             sel.covered(&corner, &det, &face, &face_point),
             "a part on the corner is not seen"
+        );
+    }
+
+    /// A strip lying on its 5 mm side shows the cup no face within 60 deg of up: the plan
+    /// says so ("no face up", once for the part) instead of naming no reason. The control: the
+    /// same strip lying flat is a candidate, and no "no face up" is counted.
+    #[test]
+    fn a_part_with_no_face_up_is_named_as_such() {
+        let (sel, _, det, map, _, _) = bare_strip();
+        let scene = crate::config::LoadedScene::embedded_default().unwrap();
+        let c = LoadedWorkpiece::resolve("C").unwrap().workpiece;
+        let slot = scene.scene.world_from_slots(&c)[0];
+        let q_now = JointVector::from(scene.scene.robot.home_rad());
+        let flat = sel.select(std::slice::from_ref(&det), &map, &slot, &q_now);
+        assert!(
+            !flat.rejected_counts().contains_key("no face up"),
+            "{:?}",
+            flat.rejected
+        );
+        assert!(
+            !flat.ranked.is_empty(),
+            "the flat strip is not a candidate: {:?}",
+            flat.rejected
+        );
+        let mut on_side = det;
+        on_side.world_from_part.rotation *=
+            UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::FRAC_PI_2);
+        let plan = sel.select(&[on_side], &map, &slot, &q_now);
+        assert!(plan.ranked.is_empty());
+        assert_eq!(plan.rejected_counts(), [("no face up", 1)].into_iter().collect());
+        assert_eq!(
+            crate::pipeline::why_none(&plan).to_string(),
+            "no feasible grasp (no face up 1)"
         );
     }
 
