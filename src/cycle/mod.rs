@@ -597,7 +597,7 @@ impl Run<'_, '_> {
         while self.st.tally.attempts < opts.picks {
             if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
                 let fix = self.play_held_retreat(next.take())?;
-                apply_placement_fix(records, fix);
+                apply_placement_fix(records, &mut self.st.tally, fix);
                 return Ok(EndReason::Interrupted);
             }
             let index = self.st.tally.attempts;
@@ -697,7 +697,7 @@ impl Run<'_, '_> {
                 .map(|d| d[prep.grasp.detection].world_from_part.translation.vector);
             let end = self.pick_and_place(&prep, charged, compute_from_s, chosen, late, &mut rec)?;
             next = end.next;
-            apply_placement_fix(records, end.fix);
+            apply_placement_fix(records, &mut self.st.tally, end.fix);
             if !(rec.outcome == Outcome::Placed || rec.outcome.grasp_failed()) {
                 // The pile may have been disturbed anywhere: no result from before counts.
                 self.st.in_hand = None;
@@ -706,17 +706,22 @@ impl Run<'_, '_> {
             self.keep(records, rec);
         }
         let fix = self.play_held_retreat(next)?;
-        apply_placement_fix(records, fix);
+        apply_placement_fix(records, &mut self.st.tally, fix);
         Ok(EndReason::PicksDone)
     }
 }
 
-/// Writes a placement error measured late into the kept record it belongs to.
-fn apply_placement_fix(records: &mut [PickRecord], fix: Option<PlacementError>) {
-    if let Some(fix) = fix
-        && let Some(r) = records.get_mut(fix.pick)
-    {
-        r.placement_error_mm = Some(fix.error_m * 1e3);
-        r.rotation_error_deg = Some(fix.rotation_rad.to_degrees());
+/// Writes a placement error measured late (after its pick's record was tallied) into the tally
+/// and into the kept record it belongs to.
+fn apply_placement_fix(records: &mut [PickRecord], tally: &mut Tally, fix: Option<PlacementError>) {
+    let Some(fix) = fix else {
+        return;
+    };
+    let (error_mm, rotation_deg) = (fix.error_m * 1e3, fix.rotation_rad.to_degrees());
+    tally.placement_error_mm.push(error_mm);
+    tally.placement_rotation_deg.push(rotation_deg);
+    if let Some(r) = records.get_mut(fix.pick) {
+        r.placement_error_mm = Some(error_mm);
+        r.rotation_error_deg = Some(rotation_deg);
     }
 }

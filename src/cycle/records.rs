@@ -484,6 +484,12 @@ pub struct Tally {
     pub pick_s: Vec<f64> => sum,
     /// Place times of the placed picks (s).
     pub place_s: Vec<f64> => sum,
+    /// Placement position error of the placed picks that measured one (mm).
+    #[serde(default)]
+    pub placement_error_mm: Vec<f64> => sum,
+    /// Placement rotation error of the placed picks that measured one (deg).
+    #[serde(default)]
+    pub placement_rotation_deg: Vec<f64> => sum,
     /// Compute charged over the picks set out, summed per stage (s).
     #[serde(rename = "compute_sum_s")]
     pub compute_sum: StageCompute => sum,
@@ -590,6 +596,8 @@ impl Tally {
             self.placed += 1;
             self.pick_s.push(r.pick_s);
             self.place_s.push(r.place_s);
+            self.placement_error_mm.extend(r.placement_error_mm);
+            self.placement_rotation_deg.extend(r.rotation_error_deg);
         }
         if r.outcome.set_out() {
             self.set_out += 1;

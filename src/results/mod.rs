@@ -79,6 +79,38 @@ pub struct Summary {
     pub picks_per_capture: f64,
     /// Recognition over the results used, against the truth at each trigger.
     pub recognition: RecognitionSummary,
+    /// How the placed parts lie against their place poses.
+    pub placement: PlacementSummary,
+}
+
+/// How the placed parts lie in their slots, against the pose the place motion aimed each at.
+#[derive(Debug, Clone, Copy, PartialEq, serde::Serialize)]
+pub struct PlacementSummary {
+    /// Placed parts measured.
+    pub measured: usize,
+    /// Position error, median and p95 (nearest rank) (mm; NaN when none was measured).
+    pub position_error_mm: [f64; 2],
+    /// Rotation error, median and p95 (nearest rank) (deg; NaN when none was measured).
+    pub rotation_error_deg: [f64; 2],
+    /// Placed parts beyond the place tray's tolerance (`misplaced` incidents): they count as
+    /// placed.
+    pub misplaced: usize,
+}
+
+impl PlacementSummary {
+    /// The placements of `t`.
+    pub fn of(t: &Tally) -> Self {
+        let median_p95 = |v: &[f64]| {
+            let v = sorted(v);
+            [crate::stats::median_sorted(&v), percentile_sorted(&v, 0.95)]
+        };
+        PlacementSummary {
+            measured: t.placement_error_mm.len(),
+            position_error_mm: median_p95(&t.placement_error_mm),
+            rotation_error_deg: median_p95(&t.placement_rotation_deg),
+            misplaced: t.incidents.iter().filter(|i| i.kind == "misplaced").count(),
+        }
+    }
 }
 
 /// `a / b`, NaN when `b` is 0.
@@ -114,6 +146,7 @@ impl Summary {
             grasp_success_rate: ratio(t.grasps.1, t.grasps.0),
             picks_per_capture: ratio(t.set_out, t.results_used),
             recognition: t.recognition.summary(),
+            placement: PlacementSummary::of(t),
             tally: tally.clone(),
         }
     }

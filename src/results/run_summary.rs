@@ -63,6 +63,8 @@ impl Serialize for RunSummary<'_> {
         // motion's start, as takt.json lists a batch's (added last: the fields before keep their
         // order).
         m.serialize_entry("incidents", &t.incidents)?;
+        // How the placed parts lie against their place poses (added last, as incidents).
+        m.serialize_entry("placement", &s.placement)?;
         m.end()
     }
 }

@@ -511,6 +511,29 @@ pub const COLUMNS: &[Column] = &[
         ],
     },
     Column {
+        json: &[("placement", |s| val(s.placement))],
+        csv: &[
+            ("placement_error_median_mm", |s| f6(s.placement.position_error_mm[0])),
+            ("placement_error_p95_mm", |s| f6(s.placement.position_error_mm[1])),
+            ("placement_rotation_median_deg", |s| {
+                f6(s.placement.rotation_error_deg[0])
+            }),
+            ("placement_rotation_p95_deg", |s| f6(s.placement.rotation_error_deg[1])),
+            ("misplaced", |s| s.placement.misplaced.to_string()),
+        ],
+        md: &[
+            ("placement error med mm / deg", true, |s| {
+                let p = &s.placement;
+                format!(
+                    "{} / {}",
+                    num(p.position_error_mm[0], 2),
+                    num(p.rotation_error_deg[0], 2)
+                )
+            }),
+            ("misplaced", true, |s| s.placement.misplaced.to_string()),
+        ],
+    },
+    Column {
         json: &[("peak_demand_ratio", |s| val(s.peak_demand_ratio()))],
         csv: &[("peak_demand_ratio", |s| f6(s.peak_demand_ratio()))],
         md: &[("peak torque demand", true, |s| {

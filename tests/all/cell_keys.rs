@@ -198,12 +198,30 @@ fn the_place_tolerance_decides_which_placed_parts_are_misplaced() {
             serde_json::from_str(&std::fs::read_to_string(path).unwrap()).unwrap()
         };
         let (summary, events) = (read("summary.json"), read("events.json"));
+        // The placement errors picks.csv lists, read here on their own.
+        let picks = std::fs::read_to_string(ws.path("runs/run-E-seed1-det/picks.csv")).unwrap();
+        let mut rows = picks.lines();
+        let header: Vec<&str> = rows.next().unwrap().split(',').collect();
+        let col = header.iter().position(|h| *h == "placement_error_mm").unwrap();
+        let mut errors_mm: Vec<f64> = rows
+            .filter_map(|r| r.split(',').nth(col).and_then(|v| v.parse().ok()))
+            .collect();
+        errors_mm.sort_by(f64::total_cmp);
         std::fs::remove_dir_all(ws.path("runs")).unwrap();
         let events = events.as_array().cloned().unwrap_or_default();
         let misplaced = events.iter().filter(|e| e["kind"] == "misplaced").count();
-        // The summary lists the same incidents.
+        // The summary lists the same incidents, counts them, and gives the median placement
+        // error of the placed parts (the upper middle one).
         let listed = summary["incidents"].as_array().unwrap();
         assert_eq!(listed.iter().filter(|i| i["kind"] == "misplaced").count(), misplaced);
+        let placement = &summary["placement"];
+        assert_eq!(placement["misplaced"].as_u64().unwrap() as usize, misplaced);
+        assert_eq!(placement["measured"].as_u64().unwrap() as usize, errors_mm.len());
+        let median = placement["position_error_mm"][0].as_f64().unwrap();
+        assert!(
+            (median - errors_mm[errors_mm.len() / 2]).abs() < 1e-5,
+            "{median} {errors_mm:?}"
+        );
         (misplaced, summary["placed"].as_u64().unwrap())
     };
     let tight = ws.edit("scenes/default.toml", "scenes/tight.toml", key, "tolerance_m = 0.00001");
