@@ -20,7 +20,13 @@ pub fn check(files: &[PathBuf], scene_path: Option<&Path>) -> Result<()> {
     };
     for f in files {
         match check_one(f, reference_scene.as_ref()) {
-            Ok(what) => println!("ok: {} ({what})", f.display()),
+            Ok(what) => println!(
+                "{}",
+                binpick::report::wrap(
+                    &format!("ok: {} ({what})", f.display()),
+                    binpick::results::table::TERMINAL_WIDTH
+                )
+            ),
             Err(e) => problems.extend(e.problems),
         }
     }
