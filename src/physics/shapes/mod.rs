@@ -137,6 +137,10 @@ pub const MAX_PIECES: usize = 64;
 /// 0.5 mm pin is two voxels wide; at parry's default of 64 the test relay's 0.5 mm pins merge).
 const VHACD_RESOLUTION: u32 = 128;
 
+/// Where decompositions are kept between processes (read once per process).
+static CACHE_DIR: std::sync::LazyLock<Option<std::path::PathBuf>> =
+    std::sync::LazyLock::new(decomposition_cache::folder);
+
 /// One convex piece of a mesh collider: its polyhedron (rapier units, part frame) and what rays
 /// see of it (an axis-aligned box as a cuboid at its centre, else the same polyhedron).
 struct MeshPiece {
@@ -149,7 +153,8 @@ struct MeshPiece {
 /// lies within [`HULL_TOLERANCE_M`] of its surface is that hull (one convex piece: the common case
 /// of a box, a prism, a meshed primitive), any other shell is decomposed by parry's VHACD into at
 /// most [`MAX_PIECES_PER_SHELL`] exact convex hulls of the shell's own triangles (pins and leads
-/// come out as pieces of their own: see the tests). Flat shells (no volume) are dropped.
+/// come out as pieces of their own: see the tests), kept on disk between processes
+/// ([`decomposition_cache`]). Flat shells (no volume) are dropped.
 ///
 /// Simplification: shells are solids of their own; a shell inside another (a cavity) is filled.
 /// Also returned: whether a shell was decomposed (its pieces are not its exact surface: a
@@ -170,10 +175,16 @@ fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> (Vec<MeshPiece>, bool) 
             max_convex_hulls: MAX_PIECES_PER_SHELL,
             ..VHACDParameters::default()
         };
-        let decomposed: Vec<SharedShape> = VHACD::decompose(&params, &sv, &st, true)
-            .compute_exact_convex_hulls(&sv, &st)
+        let decomposed: Vec<SharedShape> =
+            decomposition_cache::decomposition(CACHE_DIR.as_deref(), &sv, &st, &format!("{params:?}"), || {
+                VHACD::decompose(&params, &sv, &st, true)
+                    .compute_exact_convex_hulls(&sv, &st)
+                    .into_iter()
+                    .map(|(v, _)| v)
+                    .collect()
+            })
             .into_iter()
-            .filter_map(|(v, _)| SharedShape::convex_hull(&v))
+            .filter_map(|v| SharedShape::convex_hull(&v))
             .collect();
         if decomposed.is_empty() {
             pieces.push(mesh_piece(hull));
@@ -598,6 +609,7 @@ impl PartShape {
     }
 }
 
+mod decomposition_cache;
 pub mod supports;
 #[cfg(test)]
 mod tests;
