@@ -222,6 +222,20 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
         t.misrecognised
     );
     println!("{}", wrap(&recognised, TERMINAL_WIDTH));
+    let p = &s.placement;
+    if p.measured > 0 {
+        let placed = format!(
+            "placement, against each part's place pose: {} measured, error median {:.2} mm / {:.2} deg, \
+             p95 {:.2} mm / {:.2} deg; misplaced (beyond the place tray's tolerance, counted as placed) {}",
+            p.measured,
+            p.position_error_mm[0],
+            p.rotation_error_deg[0],
+            p.position_error_mm[1],
+            p.rotation_error_deg[1],
+            p.misplaced
+        );
+        println!("{}", wrap(&placed, TERMINAL_WIDTH));
+    }
     print!("{}", binpick::results::table::incident_note(&t.workpiece, s));
 }
 
