@@ -3,9 +3,10 @@
 //! `batch` or `run` process) would pay it again.
 //!
 //! Job: key a shell's decomposition by everything it is computed from (the shell's vertices and
-//! triangles bit for bit, the VHACD parameters, this cache's format and the parry release), keep
-//! each piece's vertices (f32 bit patterns, so a cached decomposition is the computed one, bit
-//! for bit: no result changes) in one small file per shell, and read it back only when it is whole.
+//! triangles bit for bit, the VHACD parameters, this cache's format and the exact parry3d
+//! release), keep each piece's vertices (f32 bit patterns, so a cached decomposition is the
+//! computed one, bit for bit: no result changes) in one small file per shell, and read it back
+//! only when it is whole.
 //! A missing, short or malformed file is recomputed; a write goes to a temporary file renamed into
 //! place, so a reader never sees half a file. Where no folder is known, nothing is cached.
 //!
@@ -19,9 +20,10 @@ use std::path::{Path, PathBuf};
 
 use rapier3d::math::Vector;
 
-/// What a cached decomposition also depends on besides its inputs: bump it with parry (its VHACD
-/// may decompose differently) or with this file's layout.
-const FORMAT: &str = "binpick-vhacd-1 parry3d-0.31";
+/// What a cached decomposition also depends on besides its inputs: this file's layout (bump the
+/// number with it) and the parry3d release that decomposed it (from `Cargo.lock`, by the build
+/// script: another release's VHACD may decompose differently).
+const FORMAT: &str = concat!("binpick-vhacd-1 parry3d-", env!("BINPICK_PARRY3D_VERSION"));
 
 /// The cache folder from the environment, if any (see the module header).
 pub fn folder() -> Option<PathBuf> {
