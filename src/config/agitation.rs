@@ -45,12 +45,79 @@ impl Default for AgitationConfig {
     }
 }
 
+/// A workpiece's own shake (its file's `[agitation]`): each key given replaces the cell's key of
+/// the same name for this workpiece only, as a vibrating feeder runs a program per product.
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct AgitationRecipe {
+    /// Agitations in a row before the `on_empty` policy; 0: none for this part.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_tries: Option<u32>,
+    /// Vibration amplitude along the tray's x, y and z (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub amplitude_m: Option<[f64; 3]>,
+    /// Vibration frequency (Hz).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub frequency_hz: Option<f64>,
+    /// How long the tray vibrates (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub duration_s: Option<f64>,
+    /// How long the pile settles afterwards (s).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub settle_s: Option<f64>,
+}
+
+impl AgitationRecipe {
+    /// Checks each key given against the cell file's ranges for the key of the same name (what
+    /// holds only for the whole shake, a stroke while agitation is on, is checked on the cell
+    /// resolved for the workpiece).
+    pub fn check(&self, c: &mut Checker) {
+        if let Some(a) = self.amplitude_m {
+            for (i, a) in a.iter().enumerate() {
+                c.within(&format!("agitation.amplitude_m[{i}]"), *a, 0.0, MAX_AMPLITUDE_M);
+            }
+        }
+        if let Some(f) = self.frequency_hz {
+            c.within("agitation.frequency_hz", f, 0.1, MAX_FREQUENCY_HZ);
+        }
+        if let Some(d) = self.duration_s {
+            c.within("agitation.duration_s", d, 0.0, 10.0);
+        }
+        if let Some(d) = self.settle_s {
+            c.within("agitation.settle_s", d, 0.0, 10.0);
+        }
+    }
+
+    /// This recipe with every key the workpiece left out filled in from the cell's `agitation`.
+    pub fn completed(&self, cell: &AgitationConfig) -> AgitationRecipe {
+        let a = cell.with_recipe(self);
+        AgitationRecipe {
+            max_tries: Some(a.max_tries),
+            amplitude_m: Some(a.amplitude_m),
+            frequency_hz: Some(a.frequency_hz),
+            duration_s: Some(a.duration_s),
+            settle_s: Some(a.settle_s),
+        }
+    }
+}
+
 /// Largest amplitude accepted (m): strokes bigger than this are not a vibrating base's
 const MAX_AMPLITUDE_M: f64 = 0.02;
 /// Highest frequency accepted (Hz): the physics step (2 ms) samples a period in 10 steps.
 const MAX_FREQUENCY_HZ: f64 = 50.0;
 
 impl AgitationConfig {
+    /// The shake with `recipe`'s keys in place of its own.
+    pub fn with_recipe(&self, recipe: &AgitationRecipe) -> AgitationConfig {
+        AgitationConfig {
+            max_tries: recipe.max_tries.unwrap_or(self.max_tries),
+            amplitude_m: recipe.amplitude_m.unwrap_or(self.amplitude_m),
+            frequency_hz: recipe.frequency_hz.unwrap_or(self.frequency_hz),
+            duration_s: recipe.duration_s.unwrap_or(self.duration_s),
+            settle_s: recipe.settle_s.unwrap_or(self.settle_s),
+        }
+    }
+
     /// Checks the ranges; an agitation that is on needs a stroke, a frequency and a duration.
     pub(super) fn check(&self, c: &mut Checker) {
         for (i, a) in self.amplitude_m.iter().enumerate() {
@@ -87,5 +154,35 @@ impl AgitationConfig {
         let w = std::f64::consts::TAU * self.frequency_hz * t_s;
         let [ax, ay, az] = self.amplitude_m;
         [ramp * ax * w.sin(), ramp * ay * w.cos(), ramp * az * w.sin()]
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A recipe replaces the keys it gives and keeps the cell's others; completed, it holds every
+    /// key. The control: an empty recipe is the cell's shake.
+    #[test]
+    fn a_recipe_replaces_only_the_keys_it_gives() {
+        let cell = AgitationConfig {
+            max_tries: 3,
+            amplitude_m: [0.002, 0.002, 0.001],
+            frequency_hz: 15.0,
+            duration_s: 0.6,
+            settle_s: 0.3,
+        };
+        let r = AgitationRecipe {
+            frequency_hz: Some(22.0),
+            amplitude_m: Some([0.0, 0.0, 0.004]),
+            ..AgitationRecipe::default()
+        };
+        let a = cell.with_recipe(&r);
+        assert_eq!((a.frequency_hz, a.amplitude_m), (22.0, [0.0, 0.0, 0.004]));
+        assert_eq!((a.max_tries, a.duration_s, a.settle_s), (3, 0.6, 0.3));
+        let full = r.completed(&cell);
+        assert_eq!(cell.with_recipe(&full), a);
+        assert!(full.max_tries.is_some() && full.settle_s.is_some());
+        assert_eq!(cell.with_recipe(&AgitationRecipe::default()), cell);
     }
 }

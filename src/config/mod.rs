@@ -28,7 +28,7 @@ mod scene_checks;
 pub mod tool;
 pub mod workpiece;
 
-pub use agitation::AgitationConfig;
+pub use agitation::{AgitationConfig, AgitationRecipe};
 pub use feeder::{FeederConfig, FeederRecipe};
 pub use model_error::ModelErrorConfig;
 pub use scene::*;

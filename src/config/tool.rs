@@ -123,6 +123,9 @@ impl Scene {
         if let Some(recipe) = &w.feeder {
             s.feeder = self.feeder.with_recipe(recipe);
         }
+        if let Some(shake) = &w.agitation {
+            s.agitation = self.agitation.with_recipe(shake);
+        }
         s
     }
 
@@ -135,6 +138,9 @@ impl Scene {
             && w.feeder
                 .as_ref()
                 .is_none_or(|r| self.feeder.with_recipe(r) == self.feeder)
+            && w.agitation
+                .as_ref()
+                .is_none_or(|r| self.agitation.with_recipe(r) == self.agitation)
     }
 }
 

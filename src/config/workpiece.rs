@@ -51,6 +51,10 @@ pub struct Workpiece {
     /// same name for this workpiece only (absent: the cell's; [`super::feeder`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub feeder: Option<super::FeederRecipe>,
+    /// The shake this workpiece runs with, overriding the cell's `agitation` keys of the same
+    /// name for this workpiece only (absent: the cell's; [`super::agitation`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub agitation: Option<super::AgitationRecipe>,
     /// Collision shape.
     pub shape: ShapeConfig,
     /// Grasp hints.
@@ -371,6 +375,9 @@ impl Workpiece {
         if let Some(recipe) = &self.feeder {
             recipe.check(&mut c);
         }
+        if let Some(shake) = &self.agitation {
+            shake.check(&mut c);
+        }
         c.finish()
     }
 
@@ -409,14 +416,16 @@ impl Workpiece {
     pub fn check_fits_scene(&self, file: &str, scene: &Scene) -> Result<(), ConfigError> {
         let mut c = Checker::new(file);
         let resolved;
-        let scene = if self.gripper.is_some() || self.feeder.is_some() {
+        let scene = if self.gripper.is_some() || self.feeder.is_some() || self.agitation.is_some() {
             resolved = scene.set_up_for(self);
             if let Err(e) = resolved.validate(file) {
                 for p in e.problems {
                     // The cell's check of a key this workpiece's own section set names that
                     // section; a check across sections (a release lead against the cup) the one
                     // the workpiece brings.
-                    let what = if p.key.starts_with("feeder.") || self.gripper.is_none() {
+                    let what = if p.key.starts_with("agitation.") {
+                        "agitation"
+                    } else if p.key.starts_with("feeder.") || self.gripper.is_none() {
                         "feeder"
                     } else {
                         "gripper"

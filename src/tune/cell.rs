@@ -66,12 +66,13 @@ pub fn check_keys(base: &Resolved, dims: &mut [Dim]) -> Result<(), StudyError> {
         cell.place_tray.pitch_y_m.get_or_insert(py);
     }
     let scene = as_tree("cell", toml::Value::try_from(&cell))?;
-    // The workpiece's cup and hopper recipe keys hold the cell's values where it brings none of
-    // its own, so a `workpiece.gripper.` or `workpiece.feeder.` key can be varied on any
-    // workpiece.
+    // The workpiece's cup, hopper recipe and shake keys hold the cell's values where it brings
+    // none of its own, so a `workpiece.gripper.`, `workpiece.feeder.` or `workpiece.agitation.`
+    // key can be varied on any workpiece.
     let mut w = v.workpieces[0].workpiece.clone();
     w.gripper = Some(w.gripper.unwrap_or_default().completed(&v.scene.scene.gripper));
     w.feeder = Some(w.feeder.unwrap_or_default().completed(&v.scene.scene.feeder));
+    w.agitation = Some(w.agitation.unwrap_or_default().completed(&v.scene.scene.agitation));
     let wp = as_tree("workpiece", toml::Value::try_from(&w))?;
     for d in dims.iter_mut() {
         let (target, path) = d.target();

@@ -1,5 +1,6 @@
 //! Integration tests, one binary: the command line end to end on good and bad input.
 
+mod agitation_recipe;
 mod cad_drops;
 mod cad_grasp;
 mod cad_parts;

@@ -1,0 +1,123 @@
+//! A workpiece's own shake (`[agitation]` in its file): it reaches the cell a run of that
+//! workpiece uses, and only that workpiece; its keys are checked naming file, key and value; a
+//! sweep of the cell's key it sets is refused.
+
+use crate::support::{Workspace, binpick_in, stderr};
+
+/// D's file with its own shake (`shake`, a section's keys) before its `[grasp]`.
+fn shaken(ws: &Workspace, name: &str, shake: &str) -> std::path::PathBuf {
+    ws.edit(
+        "workpieces/D.toml",
+        &format!("workpieces/{name}.toml"),
+        "[grasp]",
+        &format!("[agitation]\n{shake}\n[grasp]"),
+    )
+}
+
+/// The cell a run of `picks` picks of `workpiece` (seed 1) wrote beside its results, as TOML,
+/// and its summary.
+fn resolved_cell(ws: &Workspace, workpiece: &str, picks: &str) -> (toml::Table, serde_json::Value) {
+    let out = ws.path("runs");
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "run",
+            "--workpiece",
+            workpiece,
+            "--picks",
+            picks,
+            "--deterministic",
+            "--no-rrd",
+            "--no-mcap",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let dir = std::fs::read_dir(&out).unwrap().next().unwrap().unwrap().path();
+    let cell = std::fs::read_to_string(dir.join("scene.toml")).unwrap();
+    let summary = std::fs::read_to_string(dir.join("summary.json")).unwrap();
+    std::fs::remove_dir_all(&out).unwrap();
+    (toml::from_str(&cell).unwrap(), serde_json::from_str(&summary).unwrap())
+}
+
+/// The run of a workpiece with its own frequency and duration uses them, with the cell's
+/// amplitude and tries; the control: D without a shake of its own runs the cell's. A shake
+/// switched off in the workpiece's file (`max_tries = 0`) reaches the cycle: D's 21 picks of seed
+/// 1 agitate with the cell's shake and never without it.
+#[test]
+fn a_workpiece_brings_its_own_shake() {
+    let ws = Workspace::new();
+    let own = shaken(&ws, "shaken", "frequency_hz = 22.0\nduration_s = 0.4\n");
+    let (cell, _) = resolved_cell(&ws, own.to_str().unwrap(), "2");
+    let a = cell["agitation"].as_table().unwrap();
+    assert_eq!(a["frequency_hz"].as_float(), Some(22.0), "{a:?}");
+    assert_eq!(a["duration_s"].as_float(), Some(0.4), "{a:?}");
+    let (plain, shaken_21) = resolved_cell(&ws, "D", "21");
+    let p = plain["agitation"].as_table().unwrap();
+    assert_eq!(p["frequency_hz"].as_float(), Some(15.0), "{p:?}");
+    assert_eq!(p["duration_s"].as_float(), Some(0.6), "{p:?}");
+    assert_eq!(a["amplitude_m"], p["amplitude_m"]);
+    assert_eq!(a["max_tries"], p["max_tries"]);
+    assert!(shaken_21["agitations"].as_u64().unwrap() >= 1, "{shaken_21}");
+    let still = shaken(&ws, "still", "max_tries = 0\n");
+    let (_, still_21) = resolved_cell(&ws, still.to_str().unwrap(), "21");
+    assert_eq!(still_21["agitations"].as_u64(), Some(0), "{still_21}");
+}
+
+/// A bad shake exits 2 naming the file, the key and the value, writing nothing: a value out of
+/// range, a key the section does not have, and a shake that is on without a duration (checked on
+/// the cell resolved for the workpiece). A sweep of the cell's frequency over a workpiece that
+/// sets its own is refused: it would vary nothing for it.
+#[test]
+fn a_bad_shake_exits_2_naming_file_key_and_value() {
+    let ws = Workspace::new();
+    let out = ws.path("runs");
+    let refused = |args: &[&str], why: &str| {
+        let o = binpick_in(ws.dir.path(), args);
+        let err = stderr(&o);
+        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+        assert!(
+            err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
+            "{args:?}: {err}"
+        );
+        assert!(!out.exists(), "{args:?} wrote {}", out.display());
+    };
+    for (shake, why) in [
+        (
+            "frequency_hz = 80.0\n",
+            "agitation.frequency_hz must be within [0.1, 50], got 80",
+        ),
+        ("stroke_m = 0.001\n", "stroke_m"),
+        (
+            "duration_s = 0.0\n",
+            "agitation.duration_s must be positive while max_tries > 0, got 0 (with this workpiece's agitation)",
+        ),
+    ] {
+        let bad = shaken(&ws, "bad", shake);
+        let args = [
+            "batch",
+            "--picks",
+            "2",
+            "--deterministic",
+            "--out",
+            out.to_str().unwrap(),
+        ];
+        refused(&[&args[..], &["--workpieces", bad.to_str().unwrap()]].concat(), why);
+    }
+    let bad = shaken(&ws, "bad", "frequency_hz = 22.0\n");
+    refused(
+        &[
+            "sweep",
+            "--set",
+            "agitation.frequency_hz=10,20",
+            "--workpieces",
+            bad.to_str().unwrap(),
+            "--picks",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+        "does not reach this workpiece",
+    );
+}
