@@ -72,20 +72,7 @@ impl AgitationRecipe {
     /// holds only for the whole shake, a stroke while agitation is on, is checked on the cell
     /// resolved for the workpiece).
     pub fn check(&self, c: &mut Checker) {
-        if let Some(a) = self.amplitude_m {
-            for (i, a) in a.iter().enumerate() {
-                c.within(&format!("agitation.amplitude_m[{i}]"), *a, 0.0, MAX_AMPLITUDE_M);
-            }
-        }
-        if let Some(f) = self.frequency_hz {
-            c.within("agitation.frequency_hz", f, 0.1, MAX_FREQUENCY_HZ);
-        }
-        if let Some(d) = self.duration_s {
-            c.within("agitation.duration_s", d, 0.0, 10.0);
-        }
-        if let Some(d) = self.settle_s {
-            c.within("agitation.settle_s", d, 0.0, 10.0);
-        }
+        check_ranges(c, self.amplitude_m, self.frequency_hz, self.duration_s, self.settle_s);
     }
 
     /// This recipe with every key the workpiece left out filled in from the cell's `agitation`.
@@ -98,6 +85,28 @@ impl AgitationRecipe {
             duration_s: Some(a.duration_s),
             settle_s: Some(a.settle_s),
         }
+    }
+}
+
+/// Checks each of the shake's keys given against its range (the cell's and a workpiece's alike).
+fn check_ranges(
+    c: &mut Checker,
+    amplitude_m: Option<[f64; 3]>,
+    frequency_hz: Option<f64>,
+    duration_s: Option<f64>,
+    settle_s: Option<f64>,
+) {
+    for (i, a) in amplitude_m.iter().flatten().enumerate() {
+        c.within(&format!("agitation.amplitude_m[{i}]"), *a, 0.0, MAX_AMPLITUDE_M);
+    }
+    if let Some(f) = frequency_hz {
+        c.within("agitation.frequency_hz", f, 0.1, MAX_FREQUENCY_HZ);
+    }
+    if let Some(d) = duration_s {
+        c.within("agitation.duration_s", d, 0.0, 10.0);
+    }
+    if let Some(d) = settle_s {
+        c.within("agitation.settle_s", d, 0.0, 10.0);
     }
 }
 
@@ -120,12 +129,13 @@ impl AgitationConfig {
 
     /// Checks the ranges; an agitation that is on needs a stroke, a frequency and a duration.
     pub(super) fn check(&self, c: &mut Checker) {
-        for (i, a) in self.amplitude_m.iter().enumerate() {
-            c.within(&format!("agitation.amplitude_m[{i}]"), *a, 0.0, MAX_AMPLITUDE_M);
-        }
-        c.within("agitation.frequency_hz", self.frequency_hz, 0.1, MAX_FREQUENCY_HZ);
-        c.within("agitation.duration_s", self.duration_s, 0.0, 10.0);
-        c.within("agitation.settle_s", self.settle_s, 0.0, 10.0);
+        check_ranges(
+            c,
+            Some(self.amplitude_m),
+            Some(self.frequency_hz),
+            Some(self.duration_s),
+            Some(self.settle_s),
+        );
         if self.max_tries > 0 {
             if self.amplitude_m.iter().all(|a| *a == 0.0) {
                 c.fail(
