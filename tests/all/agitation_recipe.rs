@@ -2,7 +2,7 @@
 //! workpiece uses, and only that workpiece; its keys are checked naming file, key and value; a
 //! sweep of the cell's key it sets is refused.
 
-use crate::support::{Workspace, binpick_in, stderr};
+use crate::support::{Workspace, batch_is_refused, binpick_in, stderr};
 
 /// D's file with its own shake (`shake`, a section's keys) before its `[grasp]`.
 fn shaken(ws: &Workspace, name: &str, shake: &str) -> std::path::PathBuf {
@@ -72,17 +72,6 @@ fn a_workpiece_brings_its_own_shake() {
 #[test]
 fn a_bad_shake_exits_2_naming_file_key_and_value() {
     let ws = Workspace::new();
-    let out = ws.path("runs");
-    let refused = |args: &[&str], why: &str| {
-        let o = binpick_in(ws.dir.path(), args);
-        let err = stderr(&o);
-        assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-        assert!(
-            err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
-            "{args:?}: {err}"
-        );
-        assert!(!out.exists(), "{args:?} wrote {}", out.display());
-    };
     for (shake, why) in [
         (
             "frequency_hz = 80.0\n",
@@ -95,18 +84,12 @@ fn a_bad_shake_exits_2_naming_file_key_and_value() {
         ),
     ] {
         let bad = shaken(&ws, "bad", shake);
-        let args = [
-            "batch",
-            "--picks",
-            "2",
-            "--deterministic",
-            "--out",
-            out.to_str().unwrap(),
-        ];
-        refused(&[&args[..], &["--workpieces", bad.to_str().unwrap()]].concat(), why);
+        batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
     }
     let bad = shaken(&ws, "bad", "frequency_hz = 22.0\n");
-    refused(
+    let out = ws.path("runs");
+    let o = binpick_in(
+        ws.dir.path(),
         &[
             "sweep",
             "--set",
@@ -118,6 +101,12 @@ fn a_bad_shake_exits_2_naming_file_key_and_value() {
             "--out",
             out.to_str().unwrap(),
         ],
-        "does not reach this workpiece",
     );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("bad.toml") && err.contains("does not reach this workpiece"),
+        "{err}"
+    );
+    assert!(!out.exists(), "the refused sweep wrote {}", out.display());
 }

@@ -50,7 +50,7 @@ fn bad_feeder_keys_exit_2_naming_file_key_and_value_and_write_nothing() {
         };
         assert!(on.exists());
         let bad = ws.edit(base, "scenes/bad.toml", from, to);
-        batch_is_refused(&ws, &["--scene", bad.to_str().unwrap(), "--workpieces", "E"], why);
+        crate::support::batch_is_refused(&ws, &["--scene", bad.to_str().unwrap(), "--workpieces", "E"], why);
     }
     // Negative control: the hopper on with valid keys runs, and writes its batch.
     let on = ws.path("scenes/on.toml");
@@ -244,29 +244,6 @@ fn a_bad_hopper_recipe_exits_2_naming_file_key_and_value() {
         ("[feeder]\ndose_s = 1.0\n", "dose_s"),
     ] {
         let bad = ws.edit("workpieces/B.toml", "workpieces/bad.toml", B_RECIPE, to);
-        batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
+        crate::support::batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
     }
-}
-
-/// A two-pick batch with `args` exits 2 naming `bad.toml` and `why`, without a panic, and
-/// writes nothing.
-fn batch_is_refused(ws: &Workspace, args: &[&str], why: &str) {
-    let out = ws.path("runs");
-    let mut all = vec![
-        "batch",
-        "--picks",
-        "2",
-        "--deterministic",
-        "--out",
-        out.to_str().unwrap(),
-    ];
-    all.extend_from_slice(args);
-    let o = binpick_in(ws.dir.path(), &all);
-    let err = stderr(&o);
-    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
-    assert!(
-        err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
-        "{args:?}: {err}"
-    );
-    assert!(!out.exists(), "{args:?} wrote {}", out.display());
 }

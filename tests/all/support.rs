@@ -195,3 +195,26 @@ pub const BOX_TRIANGLES: [[usize; 3]; 12] = [
     [1, 3, 7],
     [1, 7, 5],
 ];
+
+/// A two-pick batch with `args` exits 2 naming `bad.toml` and `why`, without a panic, and
+/// writes nothing.
+pub fn batch_is_refused(ws: &Workspace, args: &[&str], why: &str) {
+    let out = ws.path("runs");
+    let mut all = vec![
+        "batch",
+        "--picks",
+        "2",
+        "--deterministic",
+        "--out",
+        out.to_str().unwrap(),
+    ];
+    all.extend_from_slice(args);
+    let o = binpick_in(ws.dir.path(), &all);
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{args:?}: {err}");
+    assert!(
+        err.contains("bad.toml") && err.contains(why) && !err.contains("panicked"),
+        "{args:?}: {err}"
+    );
+    assert!(!out.exists(), "{args:?} wrote {}", out.display());
+}
