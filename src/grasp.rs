@@ -7,7 +7,9 @@
 //! the whole straight descent. The faces are the part model's planar faces that take the cup
 //! (a CAD part's, or a built-in part's meshed primitives': the selector does not know which),
 //! each grasped at the centre of its cup-fit region farthest from its edges whose approach, cup
-//! and tool body, misses the part's own features above the face (pins, tabs). Pick the tool yaw
+//! and tool body, misses the part's own features above the face (pins, tabs); with a cup that
+//! seals on round surfaces (`gripper.round_min_radius_m`), also a round body's side, as tangent
+//! strips all round ([`crate::part::round_side`]). Pick the tool yaw
 //! that makes the place motion quickest; rank by exposure, clearance, expected grasp success and
 //! expected motion time. Nothing here reads the world's ground truth.
 //!
@@ -395,6 +397,22 @@ impl GraspSelector {
             sel.faces.push(crate::sensor::cloud::face_of_planar(&f.face));
             sel.sites.push((site.coords, clearance));
             sel.place.push(place);
+        }
+        // A cup that seals on round surfaces also takes the round body's side (a can lying on
+        // it), as tangent strips all round; a strip no stable pose has up is not offered (the
+        // part could not be set down as held).
+        if let Some(round_min_radius_m) = g.round_min_radius_m {
+            for strip in pm.round_side_strips(round_min_radius_m, &approach_column(scene)) {
+                let place = PlacePose::of_face(&pm, &strip.face.normal, sel.max_tilt_rad);
+                let Some(p) = place else { continue };
+                if w.grasp.place_orientation == PlaceOrientation::Upright && !p.is_upright(&pm) {
+                    sel.not_upright_faces += 1;
+                    continue;
+                }
+                sel.faces.push(crate::sensor::cloud::face_of_planar(&strip.face));
+                sel.sites.push((strip.site_m.coords, strip.clearance_m));
+                sel.place.push(place);
+            }
         }
         if let Some(fp) = PlacePose::footprint_m(&sel.place, sel.yaw_symmetry_rad) {
             sel.place_footprint_m = fp;

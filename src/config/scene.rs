@@ -157,6 +157,13 @@ pub struct GripperConfig {
     pub cup_flatness_tolerance_m: f64,
     /// Largest tilt of the approach from the face normal at which the cup still seals (deg).
     pub max_tilt_deg: f64,
+    /// The smallest radius of a convex round surface (a can's side) the cup's lip seals on, as a
+    /// bellows cup's datasheet gives it (m); left out, the cup seals on flat faces only. Must
+    /// exceed the cup's radius. The grasp selector then also offers a part's round body's side,
+    /// where its radius is at least this, and the physical cup's seal follows a surface that
+    /// curves away from its centre by up to what a sphere of this radius does under the lip.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round_min_radius_m: Option<f64>,
     /// Vacuum level once sealed (below ambient) (kPa).
     pub vacuum_kpa: f64,
     /// Time from valve open to full vacuum (s).

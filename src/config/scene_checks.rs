@@ -74,6 +74,19 @@ impl Scene {
         c.positive("gripper.cup_diameter_m", g.cup_diameter_m);
         c.non_negative("gripper.cup_flatness_tolerance_m", g.cup_flatness_tolerance_m);
         c.within("gripper.max_tilt_deg", g.max_tilt_deg, 0.0, 90.0);
+        if let Some(r) = g.round_min_radius_m {
+            c.positive("gripper.round_min_radius_m", r);
+            if r.is_finite() && r <= g.cup_diameter_m / 2.0 {
+                c.fail(
+                    "gripper.round_min_radius_m",
+                    format!(
+                        "must exceed the cup's radius (gripper.cup_diameter_m / 2 = {} m): no lip seals on a \
+                         surface rounder than itself, got {r}",
+                        g.cup_diameter_m / 2.0
+                    ),
+                );
+            }
+        }
         c.within("gripper.vacuum_kpa", g.vacuum_kpa, 0.0, 101.325);
         c.non_negative("gripper.vacuum_build_up_s", g.vacuum_build_up_s);
         c.non_negative("gripper.release_s", g.release_s);

@@ -14,10 +14,10 @@
 //! changes the cup with the product; a changer would add change time to the cycle and a second
 //! decision (which cup) to the grasp selector, for a gain only mixed piles would see. What a cup
 //! change changes is the cup's: its diameter, the flatness its lip tolerates, the tilt at which
-//! it still seals, and the time the vacuum takes to build up in it and to vent. The tool body
-//! (its length, diameter, mass and inertia) and the vacuum generator's level stay the cell's: a
-//! cup is screwed onto the same tool, so the arm's model (flange to tool frame) is the same for
-//! every workpiece.
+//! it still seals, the roundest surface it seals on (a bellows cup's), and the time the vacuum
+//! takes to build up in it and to vent. The tool body (its length, diameter, mass and inertia)
+//! and the vacuum generator's level stay the cell's: a cup is screwed onto the same tool, so the
+//! arm's model (flange to tool frame) is the same for every workpiece.
 //!
 //! Units: metres, seconds, degrees (as read; the cell's accessors convert). Frames: none.
 
@@ -39,6 +39,10 @@ pub struct CupConfig {
     /// Largest tilt of the approach from the face normal at which the cup still seals (deg).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_tilt_deg: Option<f64>,
+    /// The smallest radius of a round surface this cup seals on (m) (a bellows cup's datasheet
+    /// figure); left out, the cell's (which may be none: a cup for flat faces only).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub round_min_radius_m: Option<f64>,
     /// Time from valve open to full vacuum in this cup (s).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub vacuum_build_up_s: Option<f64>,
@@ -59,6 +63,9 @@ impl CupConfig {
         if let Some(v) = self.max_tilt_deg {
             c.within("gripper.max_tilt_deg", v, 0.0, 90.0);
         }
+        if let Some(v) = self.round_min_radius_m {
+            c.positive("gripper.round_min_radius_m", v);
+        }
         if let Some(v) = self.vacuum_build_up_s {
             c.non_negative("gripper.vacuum_build_up_s", v);
         }
@@ -75,6 +82,7 @@ impl CupConfig {
             cup_diameter_m: Some(r.cup_diameter_m),
             cup_flatness_tolerance_m: Some(r.cup_flatness_tolerance_m),
             max_tilt_deg: Some(r.max_tilt_deg),
+            round_min_radius_m: r.round_min_radius_m,
             vacuum_build_up_s: Some(r.vacuum_build_up_s),
             release_s: Some(r.release_s),
         }
@@ -104,6 +112,7 @@ impl GripperConfig {
             cup_diameter_m: cup.cup_diameter_m.unwrap_or(self.cup_diameter_m),
             cup_flatness_tolerance_m: cup.cup_flatness_tolerance_m.unwrap_or(self.cup_flatness_tolerance_m),
             max_tilt_deg: cup.max_tilt_deg.unwrap_or(self.max_tilt_deg),
+            round_min_radius_m: cup.round_min_radius_m.or(self.round_min_radius_m),
             vacuum_build_up_s: cup.vacuum_build_up_s.unwrap_or(self.vacuum_build_up_s),
             release_s: cup.release_s.unwrap_or(self.release_s),
             ..self.clone()

@@ -4,10 +4,12 @@
 //! Job: hold the part's surface as a triangle mesh ([`mesh::Mesh`]) in the part frame, whether it
 //! came from a CAD file or from the workpiece file's primitives, and what follows from it
 //! ([`model::PartModel`]: mass properties, planar faces with their cup-fit regions, stable poses,
-//! symmetry). The data flow: [`import`] (and [`vrml`]) read a CAD file into a raw triangle
-//! soup ([`raw`]), [`repair`] makes it a closed solid in metres (or refuses it), [`model`] derives the
-//! rest; [`svg`] draws it. [`primitive`] holds the workpiece file's primitives and the
-//! flat body faces that follow from them (what grasp and recognition fit and match). [`load_mesh`] is the one entry from a file to a repaired mesh.
+//! symmetry; [`round_side`]: where a bellows cup takes a round body by its side). The data flow:
+//! [`import`] (and [`vrml`]) read a CAD file into a raw triangle soup ([`raw`]), [`repair`] makes
+//! it a closed solid in metres (or refuses it), [`model`] derives the rest; [`svg`] draws it.
+//! [`primitive`] holds the workpiece file's primitives and the flat body faces that follow from
+//! them (what grasp and recognition fit and match). [`load_mesh`] is the one entry from a file to
+//! a repaired mesh.
 //!
 //! This module depends on nothing else in the crate (the workpiece file's keys are read by
 //! `config`, which calls [`load_mesh`]).
@@ -25,6 +27,7 @@ pub mod poses;
 pub mod primitive;
 pub mod raw;
 pub mod repair;
+pub mod round_side;
 pub mod svg;
 pub mod symmetry;
 pub mod tessellate;

@@ -2,7 +2,10 @@
 //!
 //! Job: when the vacuum is switched on, decide from the world's geometry whether the cup seals on
 //! a part: the cup lip must sit on one flat face of one part that is large enough for the cup,
-//! touching it, with the tool axis within the allowed tilt of the face normal. The decision is
+//! touching it, with the tool axis within the allowed tilt of the face normal. A cup that seals
+//! on round surfaces (`gripper.round_min_radius_m`, a bellows cup) also seals where the surface
+//! under its lip falls away by no more than a sphere of that radius does, on surface turned from
+//! the cup's axis by at most the tilt limit and that sphere's turn across the lip (a can's side). The decision is
 //! made when the vacuum has built up (`vacuum_build_up_s` later). A sealed part then moves rigidly
 //! with the tool until it slips, or until the vacuum is switched off and has vented.
 //!
@@ -184,6 +187,13 @@ pub struct SuctionGripper {
     pub max_tilt_rad: f64,
     /// Flatness the lip tolerates (m).
     pub flatness_m: f64,
+    /// How far below the plane at the cup's centre a round surface may fall away under the lip
+    /// and still seal (m): the sag of a sphere of `gripper.round_min_radius_m` across the cup's
+    /// radius; 0 for a cup that seals on flat faces only.
+    pub lip_sag_m: f64,
+    /// How much farther than the tilt limit the surface under the lip may turn from the cup's
+    /// axis (rad): the turn across the cup's radius on that sphere; 0 for a flat-face cup.
+    pub lip_turn_rad: f64,
     /// Holding force of a full seal (N).
     pub holding_n: f64,
     /// The cup's force model.
@@ -223,10 +233,17 @@ impl SuctionGripper {
     /// A gripper from the cell file.
     pub fn new(g: &GripperConfig) -> Self {
         let model = crate::geometry::SuctionModel::new(g);
+        let r = model.cup_radius_m;
+        let (lip_sag_m, lip_turn_rad) = match g.round_min_radius_m {
+            Some(big_r) if big_r > r => (big_r - (big_r * big_r - r * r).sqrt(), (r / big_r).asin()),
+            _ => (0.0, 0.0),
+        };
         SuctionGripper {
             cup_radius_m: model.cup_radius_m,
             max_tilt_rad: g.max_tilt_deg.to_radians(),
             flatness_m: g.cup_flatness_tolerance_m,
+            lip_sag_m,
+            lip_turn_rad,
             holding_n: model.holding_n,
             model,
             build_up_s: g.vacuum_build_up_s,
@@ -392,9 +409,21 @@ impl World {
                     normal: n,
                 }) => {
                     let q = p - dir * PROBE_BACK_M + dir * d;
-                    let same = t == Tag::Part(part as u32)
-                        && n.dot(&normal).clamp(-1.0, 1.0).acos() < SAME_FACE_RAD
-                        && (q - face_point).dot(&normal).abs() <= g.flatness_m.max(1e-5);
+                    // Above the centre's plane by at most the flatness; below it by that and,
+                    // for a cup that seals on round surfaces, the sag it follows. A flat cup's
+                    // lip needs the centre's face under it; a round-sealing cup's lip tilts with
+                    // the surface, up to the seal's tilt and the turn it follows, against the
+                    // cup's axis (on a faceted can the centre's facet is itself turned from the
+                    // true radial direction by up to half a facet).
+                    let flat = g.flatness_m.max(1e-5);
+                    let height = (q - face_point).dot(&normal);
+                    let turned_ok = if g.lip_turn_rad > 0.0 {
+                        n.dot(&-axis).clamp(-1.0, 1.0).acos() < g.max_tilt_rad + g.lip_turn_rad
+                    } else {
+                        n.dot(&normal).clamp(-1.0, 1.0).acos() < SAME_FACE_RAD
+                    };
+                    let same =
+                        t == Tag::Part(part as u32) && turned_ok && height <= flat && height >= -(flat + g.lip_sag_m);
                     if same { Ok(()) } else { Err(Some(t)) }
                 }
                 None => Err(None),

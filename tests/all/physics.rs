@@ -844,3 +844,43 @@ fn a_part_lying_across_the_held_part_loads_the_cup_with_its_weight_and_peels_it_
     assert_eq!(w.held_part(), Some(0));
     assert_eq!(w.held_contact_load().map(|l| l.force_n.norm()), Some(0.0));
 }
+
+/// D lying on its side on the floor, with the cell's tool given a 4 mm cup that seals on round
+/// surfaces of `round_min_radius_m` and up (`None`: a cup for flat faces); the grasp on the top
+/// line of its can, over the part's centre of mass along the can's axis.
+fn grasp_on_a_lying_can(round_min_radius_m: Option<f64>) -> GripperEvent {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let mut cell = scene.scene.clone();
+    cell.gripper.cup_diameter_m = 0.004;
+    cell.gripper.round_min_radius_m = round_min_radius_m;
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("D").unwrap();
+    let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+    let mut w = World::new(&cell, &robot, shape);
+    let tray = w.pick_tray().world_from_tray;
+    let lying = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), std::f64::consts::FRAC_PI_2);
+    let i = w.add_part(&(tray * Isometry3::from_parts(Translation3::new(0.0, 0.0, 0.0056), lying)));
+    w.run_for(0.5).unwrap();
+    let p = w.part_pose(i);
+    let axis = p.rotation * Vector3::z();
+    assert!(axis.z.abs() < 0.05, "D lies on its side: axis {axis:?}");
+    let up = (Vector3::z() - axis * axis.z).normalize();
+    // The can (radius 5 mm, centred 0.75 mm up its axis) at the centre of mass's station.
+    let top = p.translation.vector + up * 0.005;
+    grasp_at(&mut w, tool_down_pose(top, 0.0))
+}
+
+#[test]
+fn a_cup_that_seals_on_round_surfaces_takes_a_lying_can_and_a_flat_cup_does_not() {
+    let ev = grasp_on_a_lying_can(Some(0.004));
+    assert!(matches!(ev, GripperEvent::Grasped { .. }), "{ev:?}");
+    // Negative control: the same 4 mm cup for flat faces only; its lip needs one flat face, and
+    // the can's top facet (a 16-sided prism's, under 2 mm) is narrower than the cup.
+    match grasp_on_a_lying_can(None) {
+        GripperEvent::GraspFailed {
+            reason: GraspFailure::FaceTooSmall { width_mm, .. },
+            ..
+        } => assert!(width_mm < 2.0, "{width_mm}"),
+        other => panic!("{other:?}"),
+    }
+}

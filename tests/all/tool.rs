@@ -158,3 +158,97 @@ fn a_workpiece_cup_that_fits_no_face_exits_2_and_a_sweep_reaches_the_key() {
     assert!(w.contains("[gripper]") && w.contains("cup_diameter_m = 0.012"), "{w}");
     assert!(w.contains("release_s = 0.06"), "the cup is written in full: {w}");
 }
+
+/// Counts, from the world itself, the parts the cup lifted and those of them it held by the side
+/// of their can (the can's axis, the part's z, within 30 deg of level when first held).
+#[derive(Default)]
+struct SideGrasps {
+    held: usize,
+    by_the_side: usize,
+    last: Option<usize>,
+}
+
+impl binpick::cycle::Observer for SideGrasps {
+    fn stepped(&mut self, world: &binpick::physics::World) {
+        let now = world.held_part();
+        if let Some(i) = now
+            && self.last != now
+        {
+            self.held += 1;
+            let axis = world.part_pose(i).rotation * nalgebra::Vector3::z();
+            if axis.z.abs() < 30f64.to_radians().sin() {
+                self.by_the_side += 1;
+            }
+        }
+        self.last = now;
+    }
+}
+
+/// What 24 deterministic picks of D (seed 1) with a 4 mm cup of its own did: the placed count and
+/// the grasps seen from the world. `round_min_radius_m`: the roundest surface the cup seals on.
+fn d_with_cup(round_min_radius_m: Option<f64>) -> (usize, SideGrasps) {
+    let mut section = String::from("[gripper]\ncup_diameter_m = 0.004\n");
+    if let Some(r) = round_min_radius_m {
+        section.push_str(&format!("round_min_radius_m = {r}\n"));
+    }
+    let text = format!("{}\n{section}", binpick::config::embedded::WORKPIECES[3].1);
+    let wp = LoadedWorkpiece::from_text("D-cup.toml", Source::Embedded, &text).unwrap();
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let opts = RunOptions {
+        picks: 24,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: false,
+    };
+    let mut seen = SideGrasps::default();
+    let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
+    (r.tally.placed, seen)
+}
+
+#[test]
+fn a_cup_that_seals_on_round_surfaces_picks_lying_cans_by_their_side() {
+    let (placed, seen) = d_with_cup(Some(0.004));
+    // Seed 1's pile offers cans standing on end first: the first 16 are taken by their ends.
+    assert!(
+        seen.by_the_side >= 4,
+        "lying cans taken by the side: {} of {}",
+        seen.by_the_side,
+        seen.held
+    );
+    assert!(placed >= 23, "placed {placed} of 24");
+    // Negative control: the same cup for flat faces only never holds a can by its side.
+    let (_, seen) = d_with_cup(None);
+    assert!(seen.held > 0);
+    assert_eq!(
+        seen.by_the_side, 0,
+        "a flat-face cup held {} cans by the side",
+        seen.by_the_side
+    );
+}
+
+#[test]
+fn a_round_surface_radius_within_the_cup_exits_2_naming_file_key_and_value() {
+    let ws = Workspace::new();
+    let text = std::fs::read_to_string(ws.path("workpieces/D.toml")).unwrap();
+    let check = |name: &str, section: &str| {
+        let path = ws.path(&format!("workpieces/{name}"));
+        std::fs::write(&path, format!("{text}\n[gripper]\n{section}")).unwrap();
+        binpick_in(ws.dir.path(), &["check", path.to_str().unwrap()])
+    };
+    // A 6 mm cup cannot seal on anything rounder than its own 3 mm radius.
+    let o = check("D-bad.toml", "cup_diameter_m = 0.006\nround_min_radius_m = 0.002\n");
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("D-bad.toml") && err.contains("gripper.round_min_radius_m") && err.contains("got 0.002"),
+        "{err}"
+    );
+    let o = check("D-neg.toml", "round_min_radius_m = -0.004\n");
+    assert_eq!(o.status.code(), Some(2), "{}", stderr(&o));
+    assert!(stderr(&o).contains("gripper.round_min_radius_m"), "{}", stderr(&o));
+    // Negative control: a radius beyond the cup's is accepted.
+    let o = check("D-ok.toml", "cup_diameter_m = 0.004\nround_min_radius_m = 0.004\n");
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+}
