@@ -32,6 +32,14 @@ use crate::sensor::{Detection, HeightMap};
 /// across a cell, well below the thinnest part (C: 5 mm).
 pub const COVER_TOLERANCE_M: f64 = 0.003;
 
+/// A round body's side strip is offered only where a stable pose has it up within this (rad):
+/// the part is set down lying as held, with the strip straight up
+/// ([`PlacePose::with_face_up`]), and settles by at most this into its pose; the place tray's
+/// tolerance is 5 degrees. (At the cup's 20 degrees, with the tool tilted as the pose has it, the
+/// SMD electrolytic's sustained seed 1 left 2 parts touching the place tray's wall and 15
+/// misplaced.)
+pub const SIDE_PLACE_OFF_MAX_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
+
 /// Where on a detected part's face the cup would go, in the world.
 struct FacePoint {
     /// The grasp point on the face (m).
@@ -56,6 +64,9 @@ pub enum Rejection {
     Covered,
     /// The straight approach or retreat would meet a tray wall.
     TrayWall,
+    /// The tool at the place pose would meet the place tray's wall, at every tool yaw that
+    /// reaches it.
+    PlaceTrayWall,
     /// No joint solution within limits along the straight descent, or at the place pose.
     Unreachable,
     /// None of the faces offered to the cup points up within 60 deg (nor within the cup's tilt):
@@ -73,6 +84,7 @@ impl Rejection {
             Rejection::Crowded => "crowded",
             Rejection::Covered => "covered",
             Rejection::TrayWall => "tray wall",
+            Rejection::PlaceTrayWall => "place tray wall",
             Rejection::Unreachable => "unreachable",
             Rejection::NoFaceUp => "no face up",
         }
@@ -182,6 +194,8 @@ pub struct GraspSelector {
     tray: Isometry3<f64>,
     tray_inner_half_m: [f64; 2],
     rim_height_m: f64,
+    /// The place tray's inner walls, which the tool at the place pose must clear.
+    place_walls: Walls,
     /// Height of the approach pose above the tray rim (m).
     pub approach_above_rim_m: f64,
     size_m: [f64; 3],
@@ -218,6 +232,25 @@ impl PlacePose {
         let down = -Vector3::z();
         let tip = UnitQuaternion::rotation_between(&pose.normal, &down)
             .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+        Some(Self::tipped(pm, tip))
+    }
+
+    /// The part set down with the face of outward normal `face_normal` exactly up (the tool
+    /// straight down on it), where a stable pose has that face up within `max_off_rad`: the part
+    /// then settles by at most that into the pose. A round body's side strip is placed so: a tool
+    /// tilted by a lying pose's skew over a slot where the wrist hangs straight (J5 near 0) finds
+    /// no straight descent (D, sustained, seed 1: 125 of 180 picks, at a 1.1 degree tilt), where
+    /// a tool straight down does.
+    pub fn with_face_up(pm: &crate::part::PartModel, face_normal: &Vector3<f64>, max_off_rad: f64) -> Option<Self> {
+        Self::of_face(pm, face_normal, max_off_rad)?;
+        let tip = UnitQuaternion::rotation_between(face_normal, &Vector3::z())
+            .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
+        Some(Self::tipped(pm, tip))
+    }
+
+    /// The part turned by `tip` (its support down), then about the vertical so that its
+    /// footprint's box is smallest, resting on its hull's lowest point.
+    fn tipped(pm: &crate::part::PartModel, tip: UnitQuaternion<f64>) -> Self {
         let bounds = |rot: &UnitQuaternion<f64>| {
             let placed = pm.hull.vertices_m.iter().map(|v| rot * v.coords);
             placed.fold(
@@ -246,11 +279,11 @@ impl PlacePose {
             .unwrap_or(0);
         let rot = turned(deg);
         let (lo, hi) = bounds(&rot);
-        Some(PlacePose {
+        PlacePose {
             slot_from_part: rot,
             origin_height_m: -lo.z,
             footprint_m: [hi.x - lo.x, hi.y - lo.y],
-        })
+        }
     }
 
     /// Whether the part rests in this pose on the stable pose most nearly on its frame's -z
@@ -334,6 +367,24 @@ fn joint_move_s(d: f64, v: f64, a: f64) -> f64 {
     }
 }
 
+/// A tray's inner walls, as the tool's axis must clear them.
+#[derive(Debug, Clone, Copy)]
+struct Walls {
+    world_from_tray: Isometry3<f64>,
+    inner_half_m: [f64; 2],
+    rim_height_m: f64,
+}
+
+impl Walls {
+    fn of(t: &crate::config::TrayConfig) -> Self {
+        Walls {
+            world_from_tray: t.world_from_tray(),
+            inner_half_m: [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0],
+            rim_height_m: t.wall_height_m,
+        }
+    }
+}
+
 impl GraspSelector {
     /// The selector for a loaded workpiece in `scene` with `robot`. Its faces are the part
     /// model's planar faces that take the cell's cup (a CAD part's mesh, or a built-in part's
@@ -366,6 +417,7 @@ impl GraspSelector {
             tray: t.world_from_tray(),
             tray_inner_half_m: [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0],
             rim_height_m: t.wall_height_m,
+            place_walls: Walls::of(&scene.place_tray.tray),
             approach_above_rim_m: scene.cycle.approach_above_rim_m,
             size_m: w.size_m,
             yaw_symmetry_rad: w.grasp.yaw_symmetry_deg.to_radians(),
@@ -399,11 +451,11 @@ impl GraspSelector {
             sel.place.push(place);
         }
         // A cup that seals on round surfaces also takes the round body's side (a can lying on
-        // it), as tangent strips all round; a strip no stable pose has up is not offered (the
-        // part could not be set down as held).
+        // it), as tangent strips all round; a strip no stable pose has nearly up is not offered
+        // (the part could not be set down as held).
         if let Some(round_min_radius_m) = g.round_min_radius_m {
             for strip in pm.round_side_strips(round_min_radius_m, &approach_column(scene)) {
-                let place = PlacePose::of_face(&pm, &strip.face.normal, sel.max_tilt_rad);
+                let place = PlacePose::with_face_up(&pm, &strip.face.normal, SIDE_PLACE_OFF_MAX_RAD);
                 let Some(p) = place else { continue };
                 if w.grasp.place_orientation == PlaceOrientation::Upright && !p.is_upright(&pm) {
                     sel.not_upright_faces += 1;
@@ -611,7 +663,12 @@ impl GraspSelector {
                 let clearance = self.clearance_radius(&occupied, local.x, local.y, face_h);
                 // Tray walls: the tool's axis from the face up past the rim, at each height its
                 // radius (cup near the lip, body above) inside the inner walls.
-                if !self.clear_of_walls(&point.coords, &(-n)) {
+                let pick_walls = Walls {
+                    world_from_tray: self.tray,
+                    inner_half_m: self.tray_inner_half_m,
+                    rim_height_m: self.rim_height_m,
+                };
+                if !self.clear_of_walls(&pick_walls, &point.coords, &(-n)) {
                     plan.rejected.push((di, fi, Rejection::TrayWall));
                     continue;
                 }
@@ -632,7 +689,7 @@ impl GraspSelector {
                     clear_z,
                 };
                 match self.best_yaw(det, fi, &at, world_from_slot, q_now) {
-                    Some(mut c) => {
+                    Ok(mut c) => {
                         c.detection = di;
                         c.face = fi;
                         let com = (det.world_from_part * Point3::from(self.peel_com_m)).coords;
@@ -658,7 +715,7 @@ impl GraspSelector {
                         };
                         plan.ranked.push(c);
                     }
-                    None => plan.rejected.push((di, fi, Rejection::Unreachable)),
+                    Err(why) => plan.rejected.push((di, fi, why)),
                 }
             }
             if plan.rejected.len() + plan.ranked.len() == counted {
@@ -688,15 +745,18 @@ impl GraspSelector {
         0.02
     }
 
-    fn clear_of_walls(&self, point: &Vector3<f64>, axis: &Vector3<f64>) -> bool {
-        let tray_from_world = self.tray.inverse();
+    /// Whether the tool's axis from the lip at `point` (world), pointing along `axis` (the tool's
+    /// z, into the part), with the cup's radius near the lip and the body's above, stays inside
+    /// the walls up to 1 cm above their rim.
+    fn clear_of_walls(&self, walls: &Walls, point: &Vector3<f64>, axis: &Vector3<f64>) -> bool {
+        let tray_from_world = walls.world_from_tray.inverse();
         let p = tray_from_world * Point3::from(*point);
         let a = tray_from_world.rotation * axis;
         // Walk up the tool axis (against `a`) from the lip to 1 cm above the rim.
         let mut s = 0.0;
         while s < 0.25 {
             let q = p.coords - a * s;
-            if q.z > self.rim_height_m + 0.01 {
+            if q.z > walls.rim_height_m + 0.01 {
                 return true;
             }
             let radius = if s < self.cup_length_m {
@@ -704,7 +764,7 @@ impl GraspSelector {
             } else {
                 self.tool_radius_m
             };
-            if q.x.abs() + radius > self.tray_inner_half_m[0] || q.y.abs() + radius > self.tray_inner_half_m[1] {
+            if q.x.abs() + radius > walls.inner_half_m[0] || q.y.abs() + radius > walls.inner_half_m[1] {
                 return false;
             }
             s += 0.002;
@@ -713,7 +773,11 @@ impl GraspSelector {
     }
 
     /// For the four tool yaws about the face normal, the reachable one with the quickest place
-    /// motion (ties: the first). The descent is checked for a continuous joint path.
+    /// motion (ties: the first). The descent is checked for a continuous joint path, and the tool
+    /// at the place pose for the place tray's walls (a tool tilted over a slot by the wall, as a
+    /// can set down lying in a tilted stable pose holds it, would touch it). Why none is, when
+    /// none is: [`Rejection::PlaceTrayWall`] when the place tray's walls ruled out every turn of
+    /// the part in its slot, else [`Rejection::Unreachable`].
     fn best_yaw(
         &self,
         det: &Detection,
@@ -721,12 +785,15 @@ impl GraspSelector {
         at: &FacePoint,
         world_from_slot: &Isometry3<f64>,
         q_now: &JointVector,
-    ) -> Option<GraspCandidate> {
+    ) -> Result<GraspCandidate, Rejection> {
+        let mut walled = false;
         let face = &self.faces[fi];
         let (point, clear_z) = (&at.point, at.clear_z);
         let z_tool = -at.normal;
         let along_world = det.world_from_part.rotation * face.along;
-        let x0 = (along_world - z_tool * along_world.dot(&z_tool)).try_normalize(1e-9)?;
+        let x0 = (along_world - z_tool * along_world.dot(&z_tool))
+            .try_normalize(1e-9)
+            .ok_or(Rejection::Unreachable)?;
         // The part in its slot: the grasped face up, turned to the slot's yaw.
         let face_up = UnitQuaternion::rotation_between(&face.normal, &Vector3::z())
             .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
@@ -757,7 +824,9 @@ impl GraspSelector {
             // a part lying against a wall slides up along it, not into it.
             let rise = (top_z - point.z).max(0.02);
             let approach = Isometry3::from_parts(Translation3::from(point + Vector3::z() * rise), rot);
-            let qa = self.robot.ik_tool_nearest(&approach, q_now).ok()?.q;
+            let Ok(qa) = self.robot.ik_tool_nearest(&approach, q_now).map(|sol| sol.q) else {
+                return Err(Rejection::Unreachable);
+            };
             // The straight descent: a continuous joint path in 6 steps.
             let mut q = qa;
             let mut ok = true;
@@ -791,6 +860,11 @@ impl GraspSelector {
                 let spin = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), t as f64 * sym);
                 let placed = Isometry3::from_parts(part_in_slot.translation, spin * part_in_slot.rotation);
                 let tool = placed * part_from_tool;
+                let tool_z = tool.rotation * Vector3::z();
+                if !self.clear_of_walls(&self.place_walls, &tool.translation.vector, &tool_z) {
+                    walled = true;
+                    continue;
+                }
                 if let Ok(sol) = self.robot.ik_tool_nearest(&tool, &qg) {
                     let time = self.motion_time_s(&qg, &sol.q);
                     if place_best.as_ref().is_none_or(|(bt, ..)| time < *bt) {
@@ -798,7 +872,15 @@ impl GraspSelector {
                     }
                 }
             }
-            let (time, tool_place, part_place, qp) = place_best?;
+            // (No place for this yaw ends the search: the tool's axis at the place, the walls'
+            // concern, is the same for every yaw about it.)
+            let Some((time, tool_place, part_place, qp)) = place_best else {
+                return Err(if walled {
+                    Rejection::PlaceTrayWall
+                } else {
+                    Rejection::Unreachable
+                });
+            };
             if best.as_ref().is_none_or(|(bt, _)| time < *bt) {
                 best = Some((
                     time,
@@ -823,7 +905,7 @@ impl GraspSelector {
                 ));
             }
         }
-        best.map(|(_, c)| c)
+        best.map(|(_, c)| c).ok_or(Rejection::Unreachable)
     }
 }
 
@@ -913,6 +995,34 @@ mod tests {
             let (any, dropped) = offered(name, PlaceOrientation::Any);
             assert_eq!((any.len(), dropped), (6, 0), "{name}: {any:?}");
         }
+    }
+
+    /// The tool at a place pose must clear the place tray's walls: straight down 20 mm from the
+    /// +x wall it does (its body, 15 mm, stays inside); tilted 20 deg toward the wall at the
+    /// same point, its body leans into it above the part. Control: the same tilt away from the
+    /// wall is clear.
+    #[test]
+    fn a_tool_tilted_over_a_slot_by_the_wall_meets_the_place_tray() {
+        let scene = crate::config::LoadedScene::embedded_default().unwrap();
+        let robot = crate::robot::test_support::default_robot();
+        let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &LoadedWorkpiece::resolve("E").unwrap());
+        let walls = sel.place_walls;
+        let near_wall = walls.world_from_tray * Point3::new(walls.inner_half_m[0] - 0.02, 0.0, 0.005);
+        let down = walls.world_from_tray.rotation * -Vector3::z();
+        assert!(sel.clear_of_walls(&walls, &near_wall.coords, &down));
+        // Tilted: the tool's z (into the part) leans away from the wall at the lip, so its body
+        // above leans toward the wall.
+        let toward = walls.world_from_tray.rotation * Vector3::x();
+        let tilt = |sign: f64| {
+            UnitQuaternion::from_axis_angle(
+                &Unit::new_normalize(walls.world_from_tray.rotation * Vector3::y()),
+                sign * 20f64.to_radians(),
+            ) * down
+        };
+        let (a, b) = (tilt(1.0), tilt(-1.0));
+        let (into, away) = if a.dot(&toward) < 0.0 { (a, b) } else { (b, a) };
+        assert!(!sel.clear_of_walls(&walls, &near_wall.coords, &into));
+        assert!(sel.clear_of_walls(&walls, &near_wall.coords, &away));
     }
 
     /// A C strip lying flat at the tray's centre, turned 30 deg, seen on a map of 1 mm cells:
