@@ -209,13 +209,17 @@ mod tests {
             e.contains("B.toml: cycle.release_lead_s must not exceed gripper.release_s (0.01 s)"),
             "{e}"
         );
-        // Of the six built-in workpieces A, B, E and F bring their cups (the default cell,
-        // docs/studies.md); every file round-trips, with its cup or without one.
+        // Of the six built-in workpieces A, B, D, E and F bring their cups (the default cell,
+        // docs/studies.md); every file round-trips, with its cup or without one, and D's keeps
+        // the roundest surface its bellows cup seals on.
         for w in LoadedWorkpiece::all_embedded().unwrap() {
-            let brings = ["A", "B", "E", "F"].contains(&w.workpiece.name.as_str());
+            let brings = ["A", "B", "D", "E", "F"].contains(&w.workpiece.name.as_str());
+            let round = w.workpiece.gripper.as_ref().and_then(|g| g.round_min_radius_m);
+            assert_eq!(round.is_some(), w.workpiece.name == "D", "{}", w.workpiece.name);
             assert_eq!(w.workpiece.gripper.is_some(), brings, "{}", w.workpiece.name);
             let text = toml::to_string(&w.workpiece).unwrap();
             assert_eq!(text.contains("[gripper]"), brings, "{text}");
+            assert_eq!(text.contains("round_min_radius_m"), round.is_some(), "{text}");
             let back: crate::config::Workpiece = parse_toml("w", &text).unwrap();
             assert_eq!(back, w.workpiece);
         }

@@ -2,12 +2,23 @@
 //! workpiece uses, and only that workpiece; its keys are checked naming file, key and value; a
 //! sweep of the cell's key it sets is refused.
 
-use crate::support::{Workspace, batch_is_refused, binpick_in, stderr};
+use crate::support::{Workspace, batch_is_refused, binpick_in, stderr, without_cup_section};
 
-/// D's file with its own shake (`shake`, a section's keys) before its `[grasp]`.
+/// D's file with the cell's cup (its own bellows cup, which takes lying cans by their side, is
+/// cut: with it, D's first 21 picks of seed 1 need no shake), as `workpieces/D-flat.toml`.
+fn d_flat_cup(ws: &Workspace) -> std::path::PathBuf {
+    let text = std::fs::read_to_string(ws.path("workpieces/D.toml")).unwrap();
+    assert!(text.contains("[gripper]"), "D brings a cup");
+    let p = ws.path("workpieces/D-flat.toml");
+    std::fs::write(&p, without_cup_section(&text)).unwrap();
+    p
+}
+
+/// D (with the cell's cup) with its own shake (`shake`, a section's keys) before its `[grasp]`.
 fn shaken(ws: &Workspace, name: &str, shake: &str) -> std::path::PathBuf {
+    d_flat_cup(ws);
     ws.edit(
-        "workpieces/D.toml",
+        "workpieces/D-flat.toml",
         &format!("workpieces/{name}.toml"),
         "[grasp]",
         &format!("[agitation]\n{shake}\n[grasp]"),
@@ -44,7 +55,7 @@ fn resolved_cell(ws: &Workspace, workpiece: &str, picks: &str) -> (toml::Table, 
 /// The run of a workpiece with its own frequency and duration uses them, with the cell's
 /// amplitude and tries; the control: D without a shake of its own runs the cell's. A shake
 /// switched off in the workpiece's file (`max_tries = 0`) reaches the cycle: D's 21 picks of seed
-/// 1 agitate with the cell's shake and never without it.
+/// 1 with the cell's flat-face cup agitate with the cell's shake and never without it.
 #[test]
 fn a_workpiece_brings_its_own_shake() {
     let ws = Workspace::new();
@@ -53,7 +64,8 @@ fn a_workpiece_brings_its_own_shake() {
     let a = cell["agitation"].as_table().unwrap();
     assert_eq!(a["frequency_hz"].as_float(), Some(22.0), "{a:?}");
     assert_eq!(a["duration_s"].as_float(), Some(0.4), "{a:?}");
-    let (plain, shaken_21) = resolved_cell(&ws, "D", "21");
+    let flat = d_flat_cup(&ws);
+    let (plain, shaken_21) = resolved_cell(&ws, flat.to_str().unwrap(), "21");
     let p = plain["agitation"].as_table().unwrap();
     assert_eq!(p["frequency_hz"].as_float(), Some(15.0), "{p:?}");
     assert_eq!(p["duration_s"].as_float(), Some(0.6), "{p:?}");

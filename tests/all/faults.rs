@@ -27,6 +27,7 @@ fn run_into_refill(limit_m: Option<f64>) -> binpick::cycle::RunResult {
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("D").unwrap();
+    let scene = scene.for_workpiece(&wp);
     let cell = Cell::new(&scene, &robot, &wp, opts(6, 5)).unwrap();
     let mut st = cell.start(&mut ()).unwrap();
     for i in st.world.parts_in_state(PartState::Free) {

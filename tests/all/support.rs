@@ -218,3 +218,14 @@ pub fn batch_is_refused(ws: &Workspace, args: &[&str], why: &str) {
     );
     assert!(!out.exists(), "{args:?} wrote {}", out.display());
 }
+
+/// A workpiece file's text without its `[gripper]` section (up to the next blank line).
+pub fn without_cup_section(text: &str) -> String {
+    match text.find("[gripper]") {
+        Some(start) => {
+            let end = text[start..].find("\n\n").map_or(text.len(), |i| start + i + 1);
+            format!("{}{}", &text[..start], &text[end..])
+        }
+        None => text.to_string(),
+    }
+}

@@ -9,7 +9,7 @@ use binpick::config::{LoadedScene, LoadedWorkpiece, OnEmpty, Source};
 use binpick::cycle::RunOptions;
 use binpick::robot::RobotModel;
 
-use crate::support::{Workspace, binpick_in, stderr};
+use crate::support::{Workspace, binpick_in, stderr, without_cup_section};
 
 /// B's file (30 x 30 x 20 mm) without the cup it brings (its `[gripper]` section and the
 /// comment above it).
@@ -191,7 +191,10 @@ fn d_with_cup(round_min_radius_m: Option<f64>) -> (usize, SideGrasps) {
     if let Some(r) = round_min_radius_m {
         section.push_str(&format!("round_min_radius_m = {r}\n"));
     }
-    let text = format!("{}\n{section}", binpick::config::embedded::WORKPIECES[3].1);
+    let text = format!(
+        "{}\n{section}",
+        without_cup_section(binpick::config::embedded::WORKPIECES[3].1)
+    );
     let wp = LoadedWorkpiece::from_text("D-cup.toml", Source::Embedded, &text).unwrap();
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
@@ -231,7 +234,7 @@ fn a_cup_that_seals_on_round_surfaces_picks_lying_cans_by_their_side() {
 #[test]
 fn a_round_surface_radius_within_the_cup_exits_2_naming_file_key_and_value() {
     let ws = Workspace::new();
-    let text = std::fs::read_to_string(ws.path("workpieces/D.toml")).unwrap();
+    let text = without_cup_section(&std::fs::read_to_string(ws.path("workpieces/D.toml")).unwrap());
     let check = |name: &str, section: &str| {
         let path = ws.path(&format!("workpieces/{name}"));
         std::fs::write(&path, format!("{text}\n[gripper]\n{section}")).unwrap();
