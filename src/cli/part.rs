@@ -241,7 +241,16 @@ pub fn part(a: &PartArgs) -> Result<()> {
     write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title, &sites))?;
     let piles = pile_share(&scene, &wp, &m, a.piles, tilt)?;
     if a.json {
-        print_json(&wp, &m, &sites, report, tilt, &svg_path, &piles)
+        print_json(
+            &wp,
+            &m,
+            &sites,
+            report,
+            tilt,
+            &svg_path,
+            &piles,
+            round_side(&m, &scene.scene),
+        )
     } else {
         print_summary(&wp, &m, report);
         print_faces(&m, &sites);
@@ -254,6 +263,18 @@ pub fn part(a: &PartArgs) -> Result<()> {
                 upright.iter().map(usize::to_string).collect::<Vec<_>>().join(", ")
             }
         ));
+        if let Some(side) = round_side(&m, &scene.scene) {
+            say(&format!(
+                "round side: the cup seals on radii of {:.2} mm and up; the round body (radius {:.2} mm) \
+                 offers {} of its {} tangent strips (a clear cup site, and a stable pose with the strip up \
+                 within {:.0} deg to set the part down in); the shares below count flat faces only",
+                mm(side.min_radius_m),
+                mm(side.radius_m),
+                side.offered,
+                binpick::part::round_side::SIDE_STRIPS,
+                binpick::grasp::SIDE_PLACE_OFF_MAX_RAD.to_degrees()
+            ));
+        }
         print_poses(&m, tilt);
         if piles.piles > 0 {
             say(&format!(
@@ -274,6 +295,35 @@ pub fn part(a: &PartArgs) -> Result<()> {
     }
 }
 
+/// What a cup that seals on round surfaces (`gripper.round_min_radius_m`) takes of the part's
+/// round body's side, as the grasp selector offers it.
+struct RoundSide {
+    min_radius_m: f64,
+    radius_m: f64,
+    /// Strips with a clear cup site.
+    clear: usize,
+    /// Of them, those a stable pose has up within the set-down limit: the ones offered.
+    offered: usize,
+}
+
+fn round_side(m: &PartModel, scene: &binpick::config::Scene) -> Option<RoundSide> {
+    let min_radius_m = scene.gripper.round_min_radius_m?;
+    let body = m.round_body()?;
+    let strips = m.round_side_strips(min_radius_m, &binpick::grasp::approach_column(scene));
+    let offered = strips
+        .iter()
+        .filter(|s| {
+            binpick::grasp::PlacePose::with_face_up(m, &s.face.normal, binpick::grasp::SIDE_PLACE_OFF_MAX_RAD).is_some()
+        })
+        .count();
+    Some(RoundSide {
+        min_radius_m,
+        radius_m: body.radius_m,
+        clear: strips.len(),
+        offered,
+    })
+}
+
 /// Millimetres from metres, rounded for the JSON output.
 fn mm(v: f64) -> f64 {
     round(v * 1e3, 4)
@@ -288,6 +338,7 @@ fn print_json(
     tilt: f64,
     svg_path: &Path,
     piles: &PileShare,
+    side: Option<RoundSide>,
 ) -> Result<()> {
     let w = &wp.workpiece;
     let out = json!({
@@ -309,6 +360,13 @@ fn print_json(
         "poses": m.poses.iter().map(pose_json).collect::<Vec<_>>(),
         "upright_faces": upright_faces(m, tilt),
         "graspable_share": round(m.graspable_share(tilt), 6),
+        "round_side": side.map(|r| json!({
+            "cup_round_min_radius_mm": mm(r.min_radius_m),
+            "body_radius_mm": mm(r.radius_m),
+            "strips": binpick::part::round_side::SIDE_STRIPS,
+            "strips_with_a_clear_site": r.clear,
+            "strips_offered": r.offered,
+        })),
         "pile": {
             "piles": piles.piles,
             "parts_in_tray": piles.in_tray,

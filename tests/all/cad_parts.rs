@@ -511,6 +511,25 @@ fn the_part_command_reads_a_built_in_part_through_its_meshed_primitives() {
     }
     assert!((j["volume_mm3"].as_f64().unwrap() - 18_000.0).abs() < 1e-6);
     assert_eq!(j["symmetry_orders"], serde_json::json!([2, 2, 4]));
+    // B has no round body, and its cup seals on flat faces only: no round side.
+    assert!(j["round_side"].is_null(), "{}", j["round_side"]);
+}
+
+/// D's bellows cup seals on radii of 4 mm and up; `binpick part` says what it takes of D's 5 mm
+/// can's side: of the 24 tangent strips every one has a clear site (the base plate stands proud
+/// 1.9 mm, below the 6 mm cup's length), and the four a lying pose has up (within 3 deg: D rests
+/// on its can and its base's flat side, four ways round) are offered. Independent: D's drawing.
+#[test]
+fn the_part_command_says_what_a_bellows_cup_takes_of_a_cans_side() {
+    let o = binpick(&["part", "D", "--json", "--piles", "0", "--svg", "/dev/null"]);
+    assert!(o.status.success(), "{}", stderr(&o));
+    let j: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let side = &j["round_side"];
+    assert_eq!(side["cup_round_min_radius_mm"].as_f64(), Some(4.0), "{side}");
+    assert_eq!(side["body_radius_mm"].as_f64(), Some(5.0), "{side}");
+    assert_eq!(side["strips"].as_u64(), Some(24), "{side}");
+    assert_eq!(side["strips_with_a_clear_site"].as_u64(), Some(24), "{side}");
+    assert_eq!(side["strips_offered"].as_u64(), Some(4), "{side}");
 }
 
 /// `grasp.place_orientation`: `binpick check` warns when an upright part cannot be picked at
