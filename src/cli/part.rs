@@ -241,16 +241,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
     write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title, &sites))?;
     let piles = pile_share(&scene, &wp, &m, a.piles, tilt)?;
     if a.json {
-        print_json(
-            &wp,
-            &m,
-            &sites,
-            report,
-            tilt,
-            &svg_path,
-            &piles,
-            round_side(&m, &scene.scene),
-        )
+        print_json(&wp, &m, &sites, report, &scene.scene, &svg_path, &piles)
     } else {
         print_summary(&wp, &m, report);
         print_faces(&m, &sites);
@@ -335,12 +326,13 @@ fn print_json(
     m: &PartModel,
     sites: &binpick::part::svg::CupSites,
     report: &RepairReport,
-    tilt: f64,
+    scene: &binpick::config::Scene,
     svg_path: &Path,
     piles: &PileShare,
-    side: Option<RoundSide>,
 ) -> Result<()> {
     let w = &wp.workpiece;
+    let tilt = scene.gripper.max_tilt_deg.to_radians();
+    let side = round_side(m, scene);
     let out = json!({
         "workpiece": wp.label,
         "mesh_file": w.shape.mesh_file,
