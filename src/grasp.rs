@@ -40,6 +40,27 @@ pub const COVER_TOLERANCE_M: f64 = 0.003;
 /// misplaced.)
 pub const SIDE_PLACE_OFF_MAX_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
 
+/// The round body's side strips `scene`'s cup takes, when it seals on round surfaces
+/// (`gripper.round_min_radius_m`), each with the pose the part is set down in
+/// ([`PlacePose::with_face_up`]): those with a clear cup site that a stable pose has up within
+/// [`SIDE_PLACE_OFF_MAX_RAD`]. The grasp selector offers them (on an upright line, those whose
+/// pose is upright); `binpick part` counts them.
+pub fn offered_side_strips(
+    pm: &crate::part::PartModel,
+    scene: &Scene,
+) -> Vec<(crate::part::round_side::SideStrip, PlacePose)> {
+    let Some(round_min_radius_m) = scene.gripper.round_min_radius_m else {
+        return Vec::new();
+    };
+    pm.round_side_strips(round_min_radius_m, &approach_column(scene))
+        .into_iter()
+        .filter_map(|strip| {
+            let place = PlacePose::with_face_up(pm, &strip.face.normal, SIDE_PLACE_OFF_MAX_RAD)?;
+            Some((strip, place))
+        })
+        .collect()
+}
+
 /// Where on a detected part's face the cup would go, in the world.
 struct FacePoint {
     /// The grasp point on the face (m).
@@ -191,9 +212,9 @@ pub struct GraspSelector {
     max_tilt_rad: f64,
     tool_radius_m: f64,
     cup_length_m: f64,
-    tray: Isometry3<f64>,
-    tray_inner_half_m: [f64; 2],
-    rim_height_m: f64,
+    /// The pick tray's inner walls (and its frame, the height map's), which the approach and
+    /// retreat must clear.
+    pick_walls: Walls,
     /// The place tray's inner walls, which the tool at the place pose must clear.
     place_walls: Walls,
     /// Height of the approach pose above the tray rim (m).
@@ -222,13 +243,7 @@ impl PlacePose {
     /// (part frame) up: the pose whose support normal is most nearly opposite it, if the face
     /// then tilts within `max_tilt_rad` (the cup must press straight down on it).
     pub fn of_face(pm: &crate::part::PartModel, face_normal: &Vector3<f64>, max_tilt_rad: f64) -> Option<Self> {
-        let pose = pm
-            .poses
-            .iter()
-            .max_by(|a, b| (-a.normal.dot(face_normal)).total_cmp(&(-b.normal.dot(face_normal))))?;
-        if -pose.normal.dot(face_normal) < max_tilt_rad.cos() {
-            return None;
-        }
+        let pose = Self::supporting(pm, face_normal, max_tilt_rad)?;
         let down = -Vector3::z();
         let tip = UnitQuaternion::rotation_between(&pose.normal, &down)
             .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
@@ -242,10 +257,24 @@ impl PlacePose {
     /// no straight descent (D, sustained, seed 1: 125 of 180 picks, at a 1.1 degree tilt), where
     /// a tool straight down does.
     pub fn with_face_up(pm: &crate::part::PartModel, face_normal: &Vector3<f64>, max_off_rad: f64) -> Option<Self> {
-        Self::of_face(pm, face_normal, max_off_rad)?;
+        Self::supporting(pm, face_normal, max_off_rad)?;
         let tip = UnitQuaternion::rotation_between(face_normal, &Vector3::z())
             .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
         Some(Self::tipped(pm, tip))
+    }
+
+    /// The stable pose whose support normal is most nearly opposite `face_normal`, if that has
+    /// the face up within `max_tilt_rad`.
+    fn supporting<'m>(
+        pm: &'m crate::part::PartModel,
+        face_normal: &Vector3<f64>,
+        max_tilt_rad: f64,
+    ) -> Option<&'m crate::part::poses::RestingPose> {
+        let pose = pm
+            .poses
+            .iter()
+            .max_by(|a, b| (-a.normal.dot(face_normal)).total_cmp(&(-b.normal.dot(face_normal))))?;
+        (-pose.normal.dot(face_normal) >= max_tilt_rad.cos()).then_some(pose)
     }
 
     /// The part turned by `tip` (its support down), then about the vertical so that its
@@ -414,9 +443,7 @@ impl GraspSelector {
             max_tilt_rad: g.max_tilt_deg.to_radians(),
             tool_radius_m: g.body_diameter_m / 2.0,
             cup_length_m: crate::geometry::HandGeometry::new(g).cup_length_m,
-            tray: t.world_from_tray(),
-            tray_inner_half_m: [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0],
-            rim_height_m: t.wall_height_m,
+            pick_walls: Walls::of(t),
             place_walls: Walls::of(&scene.place_tray.tray),
             approach_above_rim_m: scene.cycle.approach_above_rim_m,
             size_m: w.size_m,
@@ -453,18 +480,14 @@ impl GraspSelector {
         // A cup that seals on round surfaces also takes the round body's side (a can lying on
         // it), as tangent strips all round; a strip no stable pose has nearly up is not offered
         // (the part could not be set down as held).
-        if let Some(round_min_radius_m) = g.round_min_radius_m {
-            for strip in pm.round_side_strips(round_min_radius_m, &approach_column(scene)) {
-                let place = PlacePose::with_face_up(&pm, &strip.face.normal, SIDE_PLACE_OFF_MAX_RAD);
-                let Some(p) = place else { continue };
-                if w.grasp.place_orientation == PlaceOrientation::Upright && !p.is_upright(&pm) {
-                    sel.not_upright_faces += 1;
-                    continue;
-                }
-                sel.faces.push(crate::sensor::cloud::face_of_planar(&strip.face));
-                sel.sites.push((strip.site_m.coords, strip.clearance_m));
-                sel.place.push(place);
+        for (strip, place) in offered_side_strips(&pm, scene) {
+            if w.grasp.place_orientation == PlaceOrientation::Upright && !place.is_upright(&pm) {
+                sel.not_upright_faces += 1;
+                continue;
             }
+            sel.faces.push(crate::sensor::cloud::face_of_planar(&strip.face));
+            sel.sites.push((strip.site_m.coords, strip.clearance_m));
+            sel.place.push(Some(place));
         }
         if let Some(fp) = PlacePose::footprint_m(&sel.place, sel.yaw_symmetry_rad) {
             sel.place_footprint_m = fp;
@@ -519,7 +542,7 @@ impl GraspSelector {
     /// frame, its height measured). Unseen cells say nothing here (the planner treats them as
     /// occupied).
     fn covered(&self, height_map: &HeightMap, det: &Detection, face: &Face, face_point_tray: &Vector3<f64>) -> bool {
-        let tray_from_part = self.tray.inverse() * det.world_from_part;
+        let tray_from_part = self.pick_walls.world_from_tray.inverse() * det.world_from_part;
         let n = tray_from_part.rotation * face.normal;
         if n.z < 0.5 {
             return false;
@@ -595,8 +618,8 @@ impl GraspSelector {
             ranked: Vec::new(),
             rejected: Vec::new(),
         };
-        let tray_from_world = self.tray.inverse();
-        let floor_z = self.tray.translation.vector.z;
+        let tray_from_world = self.pick_walls.world_from_tray.inverse();
+        let floor_z = self.pick_walls.world_from_tray.translation.vector.z;
         let pile_top = height_map
             .height_m
             .iter()
@@ -608,7 +631,7 @@ impl GraspSelector {
         // The collision decisions (crowding under the cup and the body, the clear height of the
         // approach, the free radius) read the map with its unseen cells occupied: a hole in the
         // map is not free space. The face height is measured on what was seen only.
-        let occupied = height_map.unseen_filled(self.tray_inner_half_m, self.rim_height_m);
+        let occupied = height_map.unseen_filled(self.pick_walls.inner_half_m, self.pick_walls.rim_height_m);
         for (di, det) in detections.iter().enumerate() {
             let counted = plan.rejected.len() + plan.ranked.len();
             for (fi, face) in self.faces.iter().enumerate() {
@@ -663,12 +686,7 @@ impl GraspSelector {
                 let clearance = self.clearance_radius(&occupied, local.x, local.y, face_h);
                 // Tray walls: the tool's axis from the face up past the rim, at each height its
                 // radius (cup near the lip, body above) inside the inner walls.
-                let pick_walls = Walls {
-                    world_from_tray: self.tray,
-                    inner_half_m: self.tray_inner_half_m,
-                    rim_height_m: self.rim_height_m,
-                };
-                if !self.clear_of_walls(&pick_walls, &point.coords, &(-n)) {
+                if !self.clear_of_walls(&self.pick_walls, &point.coords, &(-n)) {
                     plan.rejected.push((di, fi, Rejection::TrayWall));
                     continue;
                 }
@@ -679,7 +697,7 @@ impl GraspSelector {
                 let hang = self.size_m[face.normal.iamax()];
                 let around = occupied.max_within(local.x, local.y, half_length + 0.01);
                 let clear_z = if around.is_finite() {
-                    self.tray.translation.vector.z + around + hang + 0.015
+                    self.pick_walls.world_from_tray.translation.vector.z + around + hang + 0.015
                 } else {
                     f64::NEG_INFINITY
                 };
@@ -819,7 +837,10 @@ impl GraspSelector {
             let x = UnitQuaternion::from_axis_angle(&Unit::new_normalize(z_tool), yaw) * x0;
             let rot = tool_rotation(&x, &z_tool);
             let grasp = Isometry3::from_parts(Translation3::from(*point), rot);
-            let top_z = (self.tray.translation.z + self.rim_height_m + self.approach_above_rim_m).max(clear_z);
+            let top_z = (self.pick_walls.world_from_tray.translation.z
+                + self.pick_walls.rim_height_m
+                + self.approach_above_rim_m)
+                .max(clear_z);
             // Straight down onto the face and straight up with the part, whatever the face's tilt:
             // a part lying against a wall slides up along it, not into it.
             let rise = (top_z - point.z).max(0.02);
@@ -1039,13 +1060,13 @@ mod tests {
             UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5),
         );
         let det = Detection {
-            world_from_part: sel.tray * tray_from_part,
+            world_from_part: sel.pick_walls.world_from_tray * tray_from_part,
             visible_fraction: 1.0,
             score: 1.0,
             face_up: None,
         };
         let mut map = HeightMap {
-            world_from_tray: sel.tray,
+            world_from_tray: sel.pick_walls.world_from_tray,
             cell_m: 0.001,
             nx: 200,
             ny: 200,

@@ -300,18 +300,13 @@ struct RoundSide {
 fn round_side(m: &PartModel, scene: &binpick::config::Scene) -> Option<RoundSide> {
     let min_radius_m = scene.gripper.round_min_radius_m?;
     let body = m.round_body()?;
-    let strips = m.round_side_strips(min_radius_m, &binpick::grasp::approach_column(scene));
-    let offered = strips
-        .iter()
-        .filter(|s| {
-            binpick::grasp::PlacePose::with_face_up(m, &s.face.normal, binpick::grasp::SIDE_PLACE_OFF_MAX_RAD).is_some()
-        })
-        .count();
     Some(RoundSide {
         min_radius_m,
         radius_m: body.radius_m,
-        clear: strips.len(),
-        offered,
+        clear: m
+            .round_side_strips(min_radius_m, &binpick::grasp::approach_column(scene))
+            .len(),
+        offered: binpick::grasp::offered_side_strips(m, scene).len(),
     })
 }
 
