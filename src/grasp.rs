@@ -34,10 +34,9 @@ pub const COVER_TOLERANCE_M: f64 = 0.003;
 
 /// A round body's side strip is offered only where a stable pose has it up within this (rad):
 /// the part is set down lying as held, with the strip straight up
-/// ([`PlacePose::with_face_up`]), and settles by at most this into its pose; the place tray's
-/// tolerance is 5 degrees. (At the cup's 20 degrees, with the tool tilted as the pose has it, the
-/// SMD electrolytic's sustained seed 1 left 2 parts touching the place tray's wall and 15
-/// misplaced.)
+/// ([`PlacePose::with_face_up`]), and settles by at most this into its pose, well within the
+/// place tray's 5 degree tolerance. Allowing the cup's whole tilt instead would set parts down
+/// far from a pose they stay in, with the tool leaning over the slot toward the tray's wall.
 pub const SIDE_PLACE_OFF_MAX_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
 
 /// The round body's side strips `scene`'s cup takes, when it seals on round surfaces
@@ -253,9 +252,9 @@ impl PlacePose {
     /// The part set down with the face of outward normal `face_normal` exactly up (the tool
     /// straight down on it), where a stable pose has that face up within `max_off_rad`: the part
     /// then settles by at most that into the pose. A round body's side strip is placed so: a tool
-    /// tilted by a lying pose's skew over a slot where the wrist hangs straight (J5 near 0) finds
-    /// no straight descent (D, sustained, seed 1: 125 of 180 picks, at a 1.1 degree tilt), where
-    /// a tool straight down does.
+    /// tilted by a lying pose's small skew over a slot where the wrist hangs straight (J5 near
+    /// 0) finds no straight descent, where a tool straight down does (the wrist's singular
+    /// case, which the straight line handles).
     pub fn with_face_up(pm: &crate::part::PartModel, face_normal: &Vector3<f64>, max_off_rad: f64) -> Option<Self> {
         Self::supporting(pm, face_normal, max_off_rad)?;
         let tip = UnitQuaternion::rotation_between(face_normal, &Vector3::z())
