@@ -160,6 +160,31 @@ fn takt_text(s: &binpick::results::Summary) -> String {
     format!("none ({why}; each pick's reason is in picks.csv)")
 }
 
+/// Where the takt goes: each cause's share of the mean takt (they add up to it) and its
+/// intervals.
+fn takt_by_cause_text(s: &binpick::results::Summary) -> String {
+    use binpick::cycle::IntervalCause;
+    let c = &s.tally.takt_causes;
+    let what = |cause: IntervalCause| match cause {
+        IntervalCause::Clean => "clean cycles",
+        IntervalCause::Failed => "after failed attempts",
+        IntervalCause::Dose => "hopper doses",
+        IntervalCause::Refill => "tray refills",
+    };
+    let parts: Vec<String> = IntervalCause::ALL
+        .iter()
+        .map(|&cause| {
+            format!(
+                "{} {:.3} s ({} intervals)",
+                what(cause),
+                c.share_s(cause),
+                c.count(cause)
+            )
+        })
+        .collect();
+    format!("takt by cause (shares of the mean): {}", parts.join(", "))
+}
+
 /// Prints a run's summary: takt, success, waits, faults, the servo's figures, recognition.
 fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) {
     use binpick::report::wrap;
@@ -201,6 +226,9 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
         t.sim_time_s / wall_s
     );
     println!("{}", wrap(&summary, TERMINAL_WIDTH));
+    if s.takt.count > 0 {
+        println!("{}", wrap(&takt_by_cause_text(s), TERMINAL_WIDTH));
+    }
     let r = &s.recognition;
     let recognised = format!(
         "recognition ({}), against the truth at each trigger: top layer {} / {} found (recall {:.1} %), \

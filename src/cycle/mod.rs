@@ -65,7 +65,10 @@ pub use events::{
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
-pub use records::{FIRST_PICKS, Faults, Incident, Overlaps, PickRecord, RunResult, StageCompute, Tally, Waits, takts};
+pub use records::{
+    FIRST_PICKS, Faults, Incident, IntervalCause, Overlaps, PickRecord, RunResult, StageCompute, TaktCauses, Tally,
+    Waits, takts,
+};
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
@@ -573,6 +576,9 @@ impl Run<'_, '_> {
     /// Tallies a finished pick, and keeps its record if the run keeps them.
     fn keep(&mut self, records: &mut Vec<PickRecord>, rec: PickRecord) {
         self.st.tally.add(&rec);
+        if rec.outcome != Outcome::Placed {
+            self.st.trays.failed_since_release = true;
+        }
         if let (Some(release_s), Some(takt_s)) = (rec.release_s, rec.takt_s) {
             self.obs.takt(&Takt {
                 pick: rec.index,

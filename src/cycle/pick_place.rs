@@ -21,8 +21,8 @@ use super::motions::{PlaceMotion, Prepared};
 use super::next_pick::{LatePlacement, Prefetched};
 use super::outcome::{NoSeal, Outcome, Slip, WrongPose};
 use super::play::{Capture, Played, Segment, Valve};
-use super::records::PickRecord;
 use super::records::StageCompute;
+use super::records::{IntervalCause, PickRecord};
 use super::{CycleError, Run};
 use crate::physics::suction::GripperEvent;
 use crate::robot::JointVector;
@@ -98,10 +98,20 @@ impl Run<'_, '_> {
         if rec.outcome == Outcome::Placed {
             let release = rec.release_s.unwrap_or(self.st.world.time_s());
             rec.takt_s = self.st.trays.last_release_s.map(|r| release - r);
-            rec.spans_refill = rec.takt_s.is_some() && self.st.trays.refilled_since_release;
-            self.st.trays.refilled_since_release = false;
-            self.st.trays.last_release_s = Some(release);
-            self.st.trays.next_slot += 1;
+            let trays = &mut self.st.trays;
+            rec.spans_refill = rec.takt_s.is_some() && trays.refilled_since_release;
+            rec.interval_cause = rec.takt_s.map(|_| {
+                IntervalCause::of(
+                    trays.refilled_since_release,
+                    trays.failed_since_release,
+                    trays.doses > trays.doses_at_release,
+                )
+            });
+            trays.refilled_since_release = false;
+            trays.failed_since_release = false;
+            trays.doses_at_release = trays.doses;
+            trays.last_release_s = Some(release);
+            trays.next_slot += 1;
         }
         self.exchange_full_place_tray()?;
         let arm = &self.st.arm;

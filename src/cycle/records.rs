@@ -52,6 +52,8 @@ pub struct PickRecord {
     pub takt_s: Option<f64>,
     /// A pick-tray refill happened since the previous release.
     pub spans_refill: bool,
+    /// What happened in the interval since the previous release (none without a takt).
+    pub interval_cause: Option<IntervalCause>,
     /// Pick: transfer, descent, vacuum build-up and lift (s).
     pub pick_s: f64,
     /// Place: transfer, descent, release and retreat (s).
@@ -111,6 +113,7 @@ impl PickRecord {
             release_s: None,
             takt_s: None,
             spans_refill: false,
+            interval_cause: None,
             pick_s: 0.0,
             place_s: 0.0,
             stall_sensor_s: 0.0,
@@ -201,6 +204,104 @@ pub struct Overlaps {
     pub place_descent_s: f64,
     /// The last Place's retreat and this Pick's transfer.
     pub retreat_s: f64,
+}
+
+/// What happened in a release-to-release interval (a takt), the first that applies: a pick-tray
+/// refill; else a failed attempt (nothing detected or graspable and the agitation after it, a
+/// grasp failure, a drop, no motion, a collision or a stop); else a hopper dose; else nothing of
+/// these: a clean cycle, as fast as the motions, the sensor and compute allow.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize)]
+#[serde(rename_all = "snake_case")]
+pub enum IntervalCause {
+    /// No refill, failed attempt or dose since the previous release.
+    Clean,
+    /// At least one failed attempt since the previous release, and no refill.
+    Failed,
+    /// A hopper dose since the previous release, and no refill or failed attempt.
+    Dose,
+    /// A pick-tray refill since the previous release.
+    Refill,
+}
+
+impl IntervalCause {
+    /// Every cause, in the order tables list them.
+    pub const ALL: [IntervalCause; 4] = [
+        IntervalCause::Clean,
+        IntervalCause::Failed,
+        IntervalCause::Dose,
+        IntervalCause::Refill,
+    ];
+
+    /// The cause of an interval in which these happened (see the type).
+    pub fn of(refilled: bool, failed: bool, dosed: bool) -> Self {
+        if refilled {
+            IntervalCause::Refill
+        } else if failed {
+            IntervalCause::Failed
+        } else if dosed {
+            IntervalCause::Dose
+        } else {
+            IntervalCause::Clean
+        }
+    }
+
+    /// Its name in files (`clean`, `failed`, `dose`, `refill`).
+    pub fn name(self) -> &'static str {
+        match self {
+            IntervalCause::Clean => "clean",
+            IntervalCause::Failed => "failed",
+            IntervalCause::Dose => "dose",
+            IntervalCause::Refill => "refill",
+        }
+    }
+
+    fn index(self) -> usize {
+        self as usize
+    }
+}
+
+/// The takt's intervals split by [`IntervalCause`]: per cause, how many and their total (s).
+/// Written as `[[count, total_s], ...]` in [`IntervalCause::ALL`]'s order.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Serialize, Deserialize)]
+pub struct TaktCauses([(usize, f64); 4]);
+
+impl TaktCauses {
+    /// Adds one interval of `takt_s` seconds with its cause.
+    pub fn add(&mut self, cause: IntervalCause, takt_s: f64) {
+        let c = &mut self.0[cause.index()];
+        c.0 += 1;
+        c.1 += takt_s;
+    }
+
+    /// Intervals with this cause.
+    pub fn count(&self, cause: IntervalCause) -> usize {
+        self.0[cause.index()].0
+    }
+
+    /// Their total (s).
+    pub fn total_s(&self, cause: IntervalCause) -> f64 {
+        self.0[cause.index()].1
+    }
+
+    /// What the cause adds to the mean takt (s): its intervals' total over every interval's
+    /// count, so the shares of all causes add up to the mean takt (NaN without an interval).
+    pub fn share_s(&self, cause: IntervalCause) -> f64 {
+        let n: usize = self.0.iter().map(|c| c.0).sum();
+        if n == 0 {
+            f64::NAN
+        } else {
+            self.total_s(cause) / n as f64
+        }
+    }
+}
+
+impl Merge for TaktCauses {
+    fn merge(&mut self, o: &Self) {
+        for (a, b) in self.0.iter_mut().zip(o.0) {
+            a.0 += b.0;
+            a.1 += b.1;
+        }
+    }
 }
 
 /// Waits of the arm: how many and their total (s). Written as `[count, total]` in tallies.
@@ -476,6 +577,9 @@ pub struct Tally {
     /// reference's 20-pick takt (all of `takts_s` in a run of at most 21 picks).
     #[serde(default)]
     pub takts_first_s: Vec<f64> => sum,
+    /// The intervals of `takts_s` by what happened in them.
+    #[serde(default)]
+    pub takt_causes: TaktCauses => sum,
     /// Parts the pick tray's pile holds when poured (the workpiece's `pile_count`; 0 in shard
     /// files written before it was kept).
     #[serde(default)]
@@ -586,6 +690,9 @@ impl Tally {
             }
             if !r.spans_refill {
                 self.takts_excl_refills_s.push(t);
+            }
+            if let Some(cause) = r.interval_cause {
+                self.takt_causes.add(cause, t);
             }
             if placed {
                 self.sensor_waits.add(r.stall_sensor_s);
@@ -706,5 +813,57 @@ mod tests {
         bad["ended"] = "bored".into();
         let e = serde_json::from_value::<Tally>(bad).unwrap_err().to_string();
         assert!(e.contains("\"bored\" is not a reason a run ends"), "{e}");
+    }
+
+    /// A placed pick ending an interval of `takt_s` with `cause`.
+    fn placed(index: usize, takt_s: f64, cause: IntervalCause) -> PickRecord {
+        PickRecord {
+            takt_s: Some(takt_s),
+            interval_cause: Some(cause),
+            ..PickRecord::new(index, 0.0, 0.0)
+        }
+    }
+
+    #[test]
+    fn the_takt_splits_by_cause_into_shares_that_add_up_to_its_mean() {
+        use IntervalCause::*;
+        // The first that applies: refill, failure, dose.
+        assert_eq!(IntervalCause::of(true, true, true), Refill);
+        assert_eq!(IntervalCause::of(false, true, true), Failed);
+        assert_eq!(IntervalCause::of(false, false, true), Dose);
+        assert_eq!(IntervalCause::of(false, false, false), Clean);
+        let mut t = Tally::default();
+        let failed = PickRecord {
+            outcome: Outcome::NothingDetected,
+            ..PickRecord::new(2, 0.0, 0.0)
+        };
+        for r in [
+            placed(0, 1.0, Clean),
+            placed(1, 2.0, Clean),
+            failed,
+            placed(3, 7.0, Failed),
+            placed(4, 5.0, Dose),
+        ] {
+            t.add(&r);
+        }
+        let c = t.takt_causes;
+        assert_eq!(IntervalCause::ALL.map(|k| c.count(k)), [2, 1, 1, 0]);
+        // Mean takt 15 s / 4 = 3.75 s: clean 3/4, failed 7/4, dose 5/4, refill 0.
+        assert_eq!(IntervalCause::ALL.map(|k| c.share_s(k)), [0.75, 1.75, 1.25, 0.0]);
+        let mean = t.takts_s.iter().sum::<f64>() / t.takts_s.len() as f64;
+        let sum: f64 = IntervalCause::ALL.iter().map(|&k| c.share_s(k)).sum();
+        assert_eq!(sum, mean);
+        // Runs merge by adding; the file holds [count, total] per cause.
+        let mut two = t.clone();
+        two.merge(&t);
+        assert_eq!(two.takt_causes.count(Clean), 4);
+        assert_eq!(two.takt_causes.total_s(Failed), 14.0);
+        let v = serde_json::to_value(&t).unwrap();
+        assert_eq!(
+            v["takt_causes"],
+            serde_json::json!([[2, 3.0], [1, 7.0], [1, 5.0], [0, 0.0]])
+        );
+        // Negative control: no interval, no share (not a zero that reads as "no time lost").
+        assert!(Tally::default().takt_causes.share_s(Clean).is_nan());
     }
 }

@@ -45,6 +45,10 @@ pub struct TrayState {
     pub exchanges: usize,
     /// A pick-tray refill happened since the last release.
     pub refilled_since_release: bool,
+    /// A pick failed (any outcome but placed) since the last release.
+    pub failed_since_release: bool,
+    /// Hopper doses (`doses`) at the last release.
+    pub doses_at_release: usize,
     /// The last release (s).
     pub last_release_s: Option<f64>,
     /// Hopper doses, in all.
@@ -68,6 +72,8 @@ impl Default for TrayState {
             agitations_in_row: 0,
             exchanges: 0,
             refilled_since_release: false,
+            failed_since_release: false,
+            doses_at_release: 0,
             last_release_s: None,
             doses: 0,
             dosed_since_fill: 0,

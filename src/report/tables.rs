@@ -6,7 +6,7 @@
 
 use serde::{Serialize, Serializer};
 
-use crate::cycle::PickRecord;
+use crate::cycle::{IntervalCause, PickRecord};
 
 /// A number written with `D` decimals in a CSV file, empty when absent or not finite.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -42,7 +42,7 @@ pub fn to_csv<T: Serialize>(header: &[&str], rows: impl IntoIterator<Item = T>) 
 }
 
 /// The columns of `picks.csv`.
-pub const PICKS_CSV_HEADER: [&str; 36] = [
+pub const PICKS_CSV_HEADER: [&str; 37] = [
     "pick",
     "outcome",
     "detail",
@@ -51,6 +51,7 @@ pub const PICKS_CSV_HEADER: [&str; 36] = [
     "release_s",
     "takt_s",
     "spans_refill",
+    "interval_cause",
     "pick_s",
     "place_s",
     "stall_sensor_s",
@@ -92,6 +93,7 @@ struct PickRow<'a> {
     release_s: Fixed<6>,
     takt_s: Fixed<6>,
     spans_refill: bool,
+    interval_cause: &'static str,
     pick_s: Fixed<6>,
     place_s: Fixed<6>,
     stall_sensor_s: Fixed<6>,
@@ -136,6 +138,7 @@ pub fn picks_csv(records: &[PickRecord]) -> String {
             release_s: Fixed(r.release_s),
             takt_s: Fixed(r.takt_s),
             spans_refill: r.spans_refill,
+            interval_cause: r.interval_cause.map_or("", IntervalCause::name),
             pick_s: Fixed::of(r.pick_s),
             place_s: Fixed::of(r.place_s),
             stall_sensor_s: Fixed::of(r.stall_sensor_s),
@@ -316,6 +319,9 @@ mod tests {
         assert_eq!(&rows[0][2], "no feasible grasp (crowded 3, face \"tilted\" 2)");
         assert_eq!(&rows[0][3], "1.000000");
         assert_eq!(&rows[0][5], "");
-        assert_eq!(&rows[0][21], "1.0000");
+        let col = |name: &str| PICKS_CSV_HEADER.iter().position(|h| *h == name).unwrap();
+        assert_eq!(&rows[0][col("suction_speed_factor")], "1.0000");
+        // No takt, so no interval to put down to a cause.
+        assert_eq!(&rows[0][col("interval_cause")], "");
     }
 }

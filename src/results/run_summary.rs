@@ -65,6 +65,8 @@ impl Serialize for RunSummary<'_> {
         m.serialize_entry("incidents", &t.incidents)?;
         // How the placed parts lie against their place poses (added last, as incidents).
         m.serialize_entry("placement", &s.placement)?;
+        // The takt by what happened in its intervals (added last, as placement).
+        m.serialize_entry("takt_by_cause", &super::table::takt_by_cause_json(s))?;
         m.end()
     }
 }

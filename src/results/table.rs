@@ -14,6 +14,7 @@ use serde::{Serialize, Serializer};
 use serde_json::{Value, json};
 
 use super::Summary;
+use crate::cycle::IntervalCause;
 use crate::report::wrap;
 
 /// A JSON key of a row and its value (`None`: the key is left out).
@@ -258,6 +259,20 @@ fn val(v: impl Serialize) -> Option<Value> {
     Some(json!(v))
 }
 
+/// The takt by what happened in its intervals: per cause ([`IntervalCause`]), how many
+/// intervals and what they add to the mean takt (s; the shares add up to it).
+pub fn takt_by_cause_json(s: &Summary) -> Value {
+    let c = &s.tally.takt_causes;
+    let mut m = serde_json::Map::new();
+    for cause in IntervalCause::ALL {
+        m.insert(
+            cause.name().into(),
+            json!({"intervals": c.count(cause), "share_s": c.share_s(cause)}),
+        );
+    }
+    Value::Object(m)
+}
+
 /// The table's metrics, in CSV order.
 pub const COLUMNS: &[Column] = &[
     Column {
@@ -345,6 +360,28 @@ pub const COLUMNS: &[Column] = &[
         csv: &[("takt_excl_refills_mean_s", |s| f6(s.takt_excl_refills.mean_s))],
         md: &[("takt excl. tray refills [s]", true, |s| {
             num(s.takt_excl_refills.mean_s, 3)
+        })],
+    },
+    Column {
+        json: &[("takt_by_cause", |s| Some(takt_by_cause_json(s)))],
+        csv: &[
+            ("takt_clean_share_s", |s| {
+                f6(s.tally.takt_causes.share_s(IntervalCause::Clean))
+            }),
+            ("takt_failed_share_s", |s| {
+                f6(s.tally.takt_causes.share_s(IntervalCause::Failed))
+            }),
+            ("takt_dose_share_s", |s| {
+                f6(s.tally.takt_causes.share_s(IntervalCause::Dose))
+            }),
+            ("takt_refill_share_s", |s| {
+                f6(s.tally.takt_causes.share_s(IntervalCause::Refill))
+            }),
+        ],
+        md: &[("takt by cause: clean/failed/dose/refill [s]", true, |s| {
+            IntervalCause::ALL
+                .map(|c| num(s.tally.takt_causes.share_s(c), 3))
+                .join("/")
         })],
     },
     Column {

@@ -247,3 +247,104 @@ fn a_bad_hopper_recipe_exits_2_naming_file_key_and_value() {
         crate::support::batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
     }
 }
+
+/// Classifies each release-to-release interval from the run's own event stream, apart from the
+/// cycle's bookkeeping: a refill, else a pick that ended in anything but `placed`, else a hopper
+/// dose since the previous placed pick; each takt the run reports pairs with the last placed
+/// pick's interval.
+#[derive(Default)]
+struct Intervals {
+    refilled: bool,
+    failed: bool,
+    dosed: bool,
+    last: Option<&'static str>,
+    /// (cause, takt) per interval.
+    seen: Vec<(&'static str, f64)>,
+}
+
+impl Observer for Intervals {
+    fn event(&mut self, _t_s: f64, _pick: Option<usize>, event: &Event) {
+        match event {
+            Event::Refill(_) => self.refilled = true,
+            Event::Outcome(o) if o.name() == "placed" => {
+                self.last = Some(if self.refilled {
+                    "refill"
+                } else if self.failed {
+                    "failed"
+                } else if self.dosed {
+                    "dose"
+                } else {
+                    "clean"
+                });
+                (self.refilled, self.failed, self.dosed) = (false, false, false);
+            }
+            Event::Outcome(_) => self.failed = true,
+            _ => {}
+        }
+    }
+    fn span(&mut self, stage: Stage, _start_s: f64, _end_s: f64, label: &str) {
+        if stage == Stage::Stall && label == "hopper dose" {
+            self.dosed = true;
+        }
+    }
+    fn takt(&mut self, takt: &binpick::cycle::Takt) {
+        self.seen
+            .push((self.last.expect("a takt ends a placed pick's interval"), takt.takt_s));
+    }
+}
+
+/// The tally's takt by cause against [`Intervals`]' count and total per cause.
+fn causes_match(tally: &Tally, seen: &Intervals) {
+    use binpick::cycle::IntervalCause;
+    let c = &tally.takt_causes;
+    for cause in IntervalCause::ALL {
+        let mine: Vec<f64> = seen.seen.iter().filter(|s| s.0 == cause.name()).map(|s| s.1).collect();
+        assert_eq!(c.count(cause), mine.len(), "{}", cause.name());
+        assert!(
+            (c.total_s(cause) - mine.iter().sum::<f64>()).abs() < 1e-9,
+            "{}",
+            cause.name()
+        );
+    }
+    let mean = tally.takts_s.iter().sum::<f64>() / tally.takts_s.len() as f64;
+    let shares: f64 = IntervalCause::ALL.iter().map(|&k| c.share_s(k)).sum();
+    assert!((shares - mean).abs() < 1e-9, "{shares} against {mean}");
+}
+
+#[test]
+fn the_takt_by_cause_counts_each_interval_as_the_event_log_tells_it() {
+    use binpick::cycle::IntervalCause;
+    let robot_run = |feeder: FeederConfig| {
+        let mut wp = LoadedWorkpiece::resolve("B").unwrap();
+        wp.workpiece.feeder = None;
+        let mut scene = LoadedScene::embedded_default().unwrap();
+        scene.scene.feeder = feeder;
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let opts = RunOptions {
+            picks: 60,
+            seed: 1,
+            deterministic: true,
+            stop: None,
+            keep_records: false,
+        };
+        let mut seen = Intervals::default();
+        let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
+        (r.tally, seen)
+    };
+    // B's 16-part pile over 60 picks, topped up by a hopper: doses, and clean cycles between.
+    let (with, seen) = robot_run(feeder(6, 6, 1.5, 10.0));
+    causes_match(&with, &seen);
+    let c = &with.takt_causes;
+    assert!(
+        c.count(IntervalCause::Dose) >= 1 && c.count(IntervalCause::Clean) >= 1,
+        "{c:?}"
+    );
+    // Negative control: without the hopper the pile runs dry and is exchanged: refills, no dose.
+    let (without, seen) = robot_run(FeederConfig::default());
+    causes_match(&without, &seen);
+    let c = &without.takt_causes;
+    assert!(
+        c.count(IntervalCause::Refill) >= 1 && c.count(IntervalCause::Dose) == 0,
+        "{c:?}"
+    );
+}
