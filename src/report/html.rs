@@ -102,7 +102,7 @@ pub fn folder_files(dir: &Path, skip: &[RunFiles]) -> Vec<String> {
 }
 
 /// The reading guide: each term and what it means.
-pub const READING_GUIDE: [(&str, &str); 5] = [
+pub const READING_GUIDE: [(&str, &str); 6] = [
     (
         "takt",
         "as the reference defines it: the mean of every release-to-release interval after a run's first release, failed picks, re-captures, waits and tray refills included (\"excl. tray refills\" leaves out the intervals that span a refill); lower is better",
@@ -122,6 +122,10 @@ pub const READING_GUIDE: [(&str, &str); 5] = [
     (
         "p5, p95, min, max",
         "the 5th and 95th percentiles and the extremes of all intervals; a maximum far above the mean is usually an interval that spans a tray refill",
+    ),
+    (
+        "takt by cause",
+        "the takt split by what happened in each interval since the release before: a tray refill, else a failed attempt (and the agitation after it), else a hopper dose, else nothing (a clean cycle); the four shares add up to the takt",
     ),
 ];
 
