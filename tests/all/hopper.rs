@@ -111,15 +111,15 @@ fn feeder(dose_below: u32, dose_parts: u32, dose_s: f64, dose_rate_parts_per_s: 
 }
 
 /// A deterministic run of `picks` picks of `workpiece`, seed 1, with the hopper `feeder` (the
-/// workpiece's own recipe, if it brings one, left out).
-fn run(workpiece: &str, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
+/// workpiece's own recipe, if it brings one, left out), watched by `O`.
+fn run<O: Observer + Default>(workpiece: &str, picks: usize, feeder: FeederConfig) -> (Tally, O) {
     let mut wp = LoadedWorkpiece::resolve(workpiece).unwrap();
     wp.workpiece.feeder = None;
     run_wp(&wp, picks, feeder)
 }
 
 /// [`run`] of a loaded workpiece.
-fn run_wp(wp: &LoadedWorkpiece, picks: usize, feeder: FeederConfig) -> (Tally, Doses) {
+fn run_wp<O: Observer + Default>(wp: &LoadedWorkpiece, picks: usize, feeder: FeederConfig) -> (Tally, O) {
     let mut scene = LoadedScene::embedded_default().unwrap();
     scene.scene.feeder = feeder;
     let robot = RobotModel::from_scene(&scene).unwrap();
@@ -130,19 +130,19 @@ fn run_wp(wp: &LoadedWorkpiece, picks: usize, feeder: FeederConfig) -> (Tally, D
         stop: None,
         keep_records: false,
     };
-    let mut doses = Doses::default();
-    let r = binpick::cycle::run(&scene, &robot, wp, &opts, &mut doses).unwrap();
-    (r.tally, doses)
+    let mut seen = O::default();
+    let r = binpick::cycle::run(&scene, &robot, wp, &opts, &mut seen).unwrap();
+    (r.tally, seen)
 }
 
 #[test]
 fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry() {
     let hopper = |dose_below| feeder(dose_below, 6, 1.5, 10.0);
     // B's 16-part pile over 60 picks: without a hopper it runs dry and is exchanged.
-    let (without, _) = run("B", 60, FeederConfig::default());
+    let (without, _) = run::<Doses>("B", 60, FeederConfig::default());
     assert!(without.refills >= 2 && without.doses == 0, "{without:?}");
     let threshold = 6;
-    let (with, seen) = run("B", 60, hopper(threshold));
+    let (with, seen) = run::<Doses>("B", 60, hopper(threshold));
     assert!(with.doses >= 2, "doses {}", with.doses);
     assert_eq!(seen.before_dose.len(), with.doses);
     // Every dose followed a result that showed fewer parts than the threshold.
@@ -166,7 +166,7 @@ fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry
     );
     // Negative control: with the threshold 1 the hopper doses only on an empty view; E's 60-part
     // pile over 20 picks always shows parts, so no dose, though the feeder's count leaves room.
-    let (full, seen_full) = run("E", 20, hopper(1));
+    let (full, seen_full) = run::<Doses>("E", 20, hopper(1));
     assert!(seen_full.detected.iter().all(|&n| n >= 1), "{:?}", seen_full.detected);
     assert_eq!((full.doses, seen_full.before_dose.len()), (0, 0));
 }
@@ -176,7 +176,7 @@ fn a_large_dose_waits_for_the_hoppers_chute() {
     // B's 16-part pile topped up 12 parts at a time by a chute of 2 parts/s: 6 s a dose, where
     // its shortest time is 0.5 s.
     let slow = feeder(6, 12, 0.5, 2.0);
-    let (tally, seen) = run("B", 40, slow);
+    let (tally, seen) = run::<Doses>("B", 40, slow);
     assert!(tally.doses >= 1, "doses {}", tally.doses);
     assert!(
         seen.dose_spans_s.iter().all(|&s| s >= 6.0 - 1e-6),
@@ -189,7 +189,7 @@ fn a_large_dose_waits_for_the_hoppers_chute() {
         dose_rate_parts_per_s: 1000.0,
         ..slow
     };
-    let (tally, seen) = run("B", 40, fast);
+    let (tally, seen) = run::<Doses>("B", 40, fast);
     assert!(tally.doses >= 1, "doses {}", tally.doses);
     assert!(
         seen.dose_spans_s.iter().all(|&s| s < 6.0 - 1e-3),
@@ -216,16 +216,16 @@ const B_RECIPE: &str = "[feeder]\ndose_below = 4\ndose_parts = 10\n";
 fn a_workpiece_brings_its_own_hopper_recipe() {
     let cell = feeder(6, 6, 1.5, 10.0);
     // The cell's hopper doses B's 16-part pile over 60 picks ...
-    let (plain, _) = run("B", 60, cell);
+    let (plain, _) = run::<Doses>("B", 60, cell);
     assert!(plain.doses >= 2 && plain.refills == 0, "{plain:?}");
     // ... B's recipe switches it off for B: the pile runs dry and is exchanged.
     let off = b_with("[feeder]\ndose_below = 0\n").unwrap();
-    let (tally, seen) = run_wp(&off, 60, cell);
+    let (tally, seen) = run_wp::<Doses>(&off, 60, cell);
     assert_eq!((tally.doses, seen.before_dose.len()), (0, 0), "{tally:?}");
     assert!(tally.refills >= 1, "{tally:?}");
     // A recipe's dose size reaches the run: doses of 2 parts, so more of them.
     let small = b_with("[feeder]\ndose_parts = 2\n").unwrap();
-    let (tally, _) = run_wp(&small, 60, cell);
+    let (tally, _) = run_wp::<Doses>(&small, 60, cell);
     assert!(tally.doses > plain.doses, "{} vs {}", tally.doses, plain.doses);
 }
 
@@ -314,25 +314,8 @@ fn causes_match(tally: &Tally, seen: &Intervals) {
 #[test]
 fn the_takt_by_cause_counts_each_interval_as_the_event_log_tells_it() {
     use binpick::cycle::IntervalCause;
-    let robot_run = |feeder: FeederConfig| {
-        let mut wp = LoadedWorkpiece::resolve("B").unwrap();
-        wp.workpiece.feeder = None;
-        let mut scene = LoadedScene::embedded_default().unwrap();
-        scene.scene.feeder = feeder;
-        let robot = RobotModel::from_scene(&scene).unwrap();
-        let opts = RunOptions {
-            picks: 60,
-            seed: 1,
-            deterministic: true,
-            stop: None,
-            keep_records: false,
-        };
-        let mut seen = Intervals::default();
-        let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
-        (r.tally, seen)
-    };
     // B's 16-part pile over 60 picks, topped up by a hopper: doses, and clean cycles between.
-    let (with, seen) = robot_run(feeder(6, 6, 1.5, 10.0));
+    let (with, seen) = run::<Intervals>("B", 60, feeder(6, 6, 1.5, 10.0));
     causes_match(&with, &seen);
     let c = &with.takt_causes;
     assert!(
@@ -340,7 +323,7 @@ fn the_takt_by_cause_counts_each_interval_as_the_event_log_tells_it() {
         "{c:?}"
     );
     // Negative control: without the hopper the pile runs dry and is exchanged: refills, no dose.
-    let (without, seen) = robot_run(FeederConfig::default());
+    let (without, seen) = run::<Intervals>("B", 60, FeederConfig::default());
     causes_match(&without, &seen);
     let c = &without.takt_causes;
     assert!(
