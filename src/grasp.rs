@@ -222,6 +222,39 @@ pub struct GraspSelector {
     yaw_symmetry_rad: f64,
     /// Cloud points within this of the face plane belong to it (noise) (m).
     pub height_tolerance_m: f64,
+    /// Points on the part model's surface (part frame, m): its vertices and points at most
+    /// [`OWN_SURFACE_SPACING_M`] apart on each triangle. What of the height map around a grasp
+    /// the recognised part itself explains.
+    own_surface_m: Vec<Point3<f64>>,
+}
+
+/// Spacing of [`GraspSelector`]'s samples of the part's own surface (m): half a height-map cell,
+/// so every cell the surface crosses holds one.
+const OWN_SURFACE_SPACING_M: f64 = 0.001;
+/// A height-map cell whose highest point lies at most this above the recognised part's own
+/// surface in it is the part itself, not something crowding the tool (m): a cell holds its
+/// highest point (depth noise, +0.15 to 0.5 mm) and the pose is off by a few tenths.
+const OWN_EXPLAINS_M: f64 = 0.001;
+/// The part's own surface explains the map only where it stands more than this out of the
+/// grasped face's plane (m): its features, not the face (nor what lies below it).
+const OWN_OFF_FACE_M: f64 = 0.0002;
+
+/// Points on `mesh`'s surface: its vertices, and on each triangle a grid of barycentric points at
+/// most `spacing_m` apart along its longest edge (part frame, m).
+fn surface_samples(mesh: &crate::part::mesh::Mesh, spacing_m: f64) -> Vec<Point3<f64>> {
+    let mut out = mesh.vertices_m.clone();
+    for k in 0..mesh.triangles.len() {
+        let [a, b, c] = mesh.corners(k);
+        let longest = (b - a).norm().max((c - b).norm()).max((a - c).norm());
+        let n = (longest / spacing_m).ceil() as usize;
+        for i in 0..=n {
+            for j in 0..=(n - i) {
+                let (u, v) = (i as f64 / n.max(1) as f64, j as f64 / n.max(1) as f64);
+                out.push(a + (b - a) * u + (c - a) * v);
+            }
+        }
+    }
+    out
 }
 
 /// How a part model's part lies in its place slot: resting on the floor in one of its stable
@@ -448,6 +481,7 @@ impl GraspSelector {
             size_m: w.size_m,
             yaw_symmetry_rad: w.grasp.yaw_symmetry_deg.to_radians(),
             height_tolerance_m: 0.0015,
+            own_surface_m: Vec::new(),
         };
         let primitive = w.primitive_mesh();
         let Some(mesh) = workpiece.mesh.as_ref().map(|m| &m.0).or(primitive.as_ref()) else {
@@ -456,6 +490,7 @@ impl GraspSelector {
         let Ok(pm) = w.part_model(mesh, g.cup_diameter_m) else {
             return sel;
         };
+        sel.own_surface_m = surface_samples(&pm.mesh, OWN_SURFACE_SPACING_M);
         let sites = pm.cup_sites(&approach_column(scene));
         for (f, site) in pm.faces.iter().zip(sites) {
             if !f.fit.takes_cup() {
@@ -670,11 +705,7 @@ impl GraspSelector {
                 let face_h = local.z;
                 // Clearance from the cloud: nothing higher than the face (plus noise) under the
                 // cup, nothing higher than the cup's top under the tool body.
-                let cup_clear = occupied.max_within(local.x, local.y, self.cup_radius_m + 0.001);
-                let body_clear = occupied.max_within(local.x, local.y, self.tool_radius_m + 0.002);
-                if cup_clear > face_h + self.height_tolerance_m
-                    || body_clear > face_h + self.cup_length_m - self.height_tolerance_m
-                {
+                if self.crowded(&occupied, &(tray_from_world * det.world_from_part), face, &local) {
                     plan.rejected.push((di, fi, Rejection::Crowded));
                     continue;
                 }
@@ -746,6 +777,56 @@ impl GraspSelector {
                 .then(a.detection.cmp(&b.detection))
         });
         plan
+    }
+
+    /// Whether the map `hm` (tray frame, unseen cells filled) shows something in the tool's way
+    /// at the cup site `site` (tray frame; its height is the face's): higher than the face plus
+    /// the height tolerance within the cup's radius plus 1 mm, or than the cup's top within the
+    /// tool body's radius plus 2 mm. What the recognised part's own surface (at
+    /// `tray_from_part`) explains is not in the way: the cup site keeps the tool clear of the
+    /// part's own features (pins, legs, a tab), which a fine enough map shows beside the face.
+    fn crowded(&self, hm: &HeightMap, tray_from_part: &Isometry3<f64>, face: &Face, site: &Point3<f64>) -> bool {
+        let face_h = site.z;
+        let in_way = |explained: &dyn Fn(usize, f64) -> bool| {
+            let cup_clear = hm.max_within_unexplained(site.x, site.y, self.cup_radius_m + 0.001, explained);
+            let body_clear = hm.max_within_unexplained(site.x, site.y, self.tool_radius_m + 0.002, explained);
+            cup_clear > face_h + self.height_tolerance_m
+                || body_clear > face_h + self.cup_length_m - self.height_tolerance_m
+        };
+        // The part's own surface is rendered only where the map alone says crowded.
+        in_way(&|_, _| false) && {
+            let own = self.own_heights(hm, tray_from_part, face, site);
+            in_way(&|k, h| own.get(&k).is_some_and(|o| h <= o + OWN_EXPLAINS_M))
+        }
+    }
+
+    /// The highest point of the part's own features standing out of the grasped face's plane
+    /// (more than [`OWN_OFF_FACE_M`] above it: pins, legs, a tab; not the face itself, whose tilt
+    /// the tilt limit judges), at the recognised pose `tray_from_part`, in each cell of `hm`
+    /// within the tool's reach of the site `site` (tray frame) (m, by cell index).
+    fn own_heights(
+        &self,
+        hm: &HeightMap,
+        tray_from_part: &Isometry3<f64>,
+        face: &Face,
+        site: &Point3<f64>,
+    ) -> std::collections::HashMap<usize, f64> {
+        let reach_m = self.tool_radius_m + 0.002 + 2.0 * hm.cell_m;
+        let mut own = std::collections::HashMap::new();
+        for p in &self.own_surface_m {
+            if (p.coords - face.center).dot(&face.normal) <= OWN_OFF_FACE_M {
+                continue;
+            }
+            let q = tray_from_part * p;
+            if (q.x - site.x).hypot(q.y - site.y) > reach_m {
+                continue;
+            }
+            if let Some(k) = hm.index(q.x, q.y) {
+                let h = own.entry(k).or_insert(f64::NEG_INFINITY);
+                *h = h.max(q.z);
+            }
+        }
+        own
     }
 
     /// Free radius around (x, y) in the tray frame: distance to the nearest cell higher than the
@@ -1043,6 +1124,104 @@ mod tests {
         let (into, away) = if a.dot(&toward) < 0.0 { (a, b) } else { (b, a) };
         assert!(!sel.clear_of_walls(&walls, &near_wall.coords, &into));
         assert!(sel.clear_of_walls(&walls, &near_wall.coords, &away));
+    }
+
+    /// A DIP-8 lying on its top, legs up, at the tray's centre, on a map of the cell's 2 mm
+    /// cells rendered from its mesh apart from the selector's code (8 x 8 points per cell, each
+    /// the highest triangle over it): its legs stand 3.4 mm above its back, 3.8 mm either side of
+    /// the cup site, within the cup's reach on that map. They are the part's own: not crowding.
+    /// Controls: read as the map alone, the legs crowd the cup; something resting on the legs,
+    /// 3 mm above them, still does.
+    #[test]
+    fn a_parts_own_legs_beside_the_cup_do_not_crowd_it_and_what_rests_on_them_does() {
+        let scene = crate::config::LoadedScene::embedded_default().unwrap();
+        let robot = crate::robot::test_support::default_robot();
+        let path = concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/dip8.toml");
+        let wp = LoadedWorkpiece::resolve(path).unwrap();
+        let scene = scene.for_workpiece(&wp);
+        let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &wp);
+        let mesh = &wp.mesh.as_ref().unwrap().0;
+        // On its top (the part's +z side down), legs up: a half turn about x, lifted so the
+        // lowest point rests on the floor.
+        let turn = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        let low = mesh
+            .vertices_m
+            .iter()
+            .map(|v| (turn * v).z)
+            .fold(f64::INFINITY, f64::min);
+        let tray_from_part = Isometry3::from_parts(Translation3::new(0.0, 0.0, -low), turn);
+        let corners: Vec<[Point3<f64>; 3]> = (0..mesh.triangles.len())
+            .map(|k| mesh.corners(k).map(|c| tray_from_part * c))
+            .collect();
+        let top_at = |x: f64, y: f64| {
+            corners
+                .iter()
+                .filter_map(|[a, b, c]| {
+                    let d = (b.x - a.x) * (c.y - a.y) - (c.x - a.x) * (b.y - a.y);
+                    if d.abs() < 1e-18 {
+                        return None;
+                    }
+                    let u = ((x - a.x) * (c.y - a.y) - (c.x - a.x) * (y - a.y)) / d;
+                    let v = ((b.x - a.x) * (y - a.y) - (x - a.x) * (b.y - a.y)) / d;
+                    (u >= 0.0 && v >= 0.0 && u + v <= 1.0).then(|| a.z + u * (b.z - a.z) + v * (c.z - a.z))
+                })
+                .fold(0.0, f64::max)
+        };
+        let cell = crate::pipeline::HEIGHT_MAP_CELL_M;
+        let n = 30;
+        let mut map = HeightMap {
+            world_from_tray: sel.pick_walls.world_from_tray,
+            cell_m: cell,
+            nx: n,
+            ny: n,
+            origin_xy_m: [-0.5 * n as f64 * cell; 2],
+            height_m: vec![0.0; n * n],
+        };
+        for j in 0..n {
+            for i in 0..n {
+                let (x0, y0) = (
+                    map.origin_xy_m[0] + i as f64 * cell,
+                    map.origin_xy_m[1] + j as f64 * cell,
+                );
+                let mut h: f64 = 0.0;
+                for a in 0..8 {
+                    for b in 0..8 {
+                        h = h.max(top_at(
+                            x0 + (a as f64 + 0.5) * cell / 8.0,
+                            y0 + (b as f64 + 0.5) * cell / 8.0,
+                        ));
+                    }
+                }
+                map.height_m[j * n + i] = h;
+            }
+        }
+        // The back face (the part's -z side) up, and its cup site.
+        let fi = sel.faces().iter().position(|f| f.normal == -Vector3::z()).unwrap();
+        let site = tray_from_part * Point3::from(sel.sites[fi].0);
+        let legs_m = map.height_m.iter().cloned().fold(0.0, f64::max) - site.z;
+        assert!(legs_m > 0.003, "the legs stand {legs_m} m above the back");
+        // Control: the map alone reads the legs as something in the cup's way.
+        let away = Isometry3::translation(1.0, 0.0, 0.0) * tray_from_part;
+        let face = sel.faces()[fi];
+        assert!(
+            sel.crowded(&map, &away, &face, &site),
+            "the legs do not reach the cup's ring"
+        );
+        assert!(
+            !sel.crowded(&map, &tray_from_part, &face, &site),
+            "the part's own legs crowd it"
+        );
+        // Negative control: something resting on the legs, 3 mm above them.
+        let mut on_legs = map.clone();
+        for h in on_legs.height_m.iter_mut() {
+            if *h > site.z + 0.002 {
+                *h += 0.003;
+            }
+        }
+        assert!(
+            sel.crowded(&on_legs, &tray_from_part, &face, &site),
+            "what rests on the legs is not seen"
+        );
     }
 
     /// A C strip lying flat at the tray's centre, turned 30 deg, seen on a map of 1 mm cells:

@@ -146,7 +146,8 @@ impl HeightMap {
         m
     }
 
-    fn index(&self, x: f64, y: f64) -> Option<usize> {
+    /// The index into `height_m` of the cell under tray point (x, y), if it lies on the map.
+    pub fn index(&self, x: f64, y: f64) -> Option<usize> {
         let i = ((x - self.origin_xy_m[0]) / self.cell_m).floor();
         let j = ((y - self.origin_xy_m[1]) / self.cell_m).floor();
         (i >= 0.0 && j >= 0.0 && (i as usize) < self.nx && (j as usize) < self.ny)
@@ -156,6 +157,11 @@ impl HeightMap {
     /// Stored heights (m) (NaN where unseen) of the cells whose centres lie within `radius_m` of
     /// tray point (x, y), in row-major order.
     fn heights_within(&self, x: f64, y: f64, radius_m: f64) -> impl Iterator<Item = f64> + '_ {
+        self.cells_within(x, y, radius_m).map(|(_, h)| h)
+    }
+
+    /// [`HeightMap::heights_within`] with each cell's index ([`HeightMap::index`]).
+    fn cells_within(&self, x: f64, y: f64, radius_m: f64) -> impl Iterator<Item = (usize, f64)> + '_ {
         let r = (radius_m / self.cell_m).ceil() as isize + 1;
         let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
         let j0 = ((y - self.origin_xy_m[1]) / self.cell_m).floor() as isize;
@@ -167,7 +173,10 @@ impl HeightMap {
                 let cy = self.origin_xy_m[1] + (j as f64 + 0.5) * self.cell_m;
                 (cx - x).hypot(cy - y) <= radius_m
             })
-            .map(move |(i, j)| self.height_m[j as usize * self.nx + i as usize])
+            .map(move |(i, j)| {
+                let k = j as usize * self.nx + i as usize;
+                (k, self.height_m[k])
+            })
     }
 
     /// Median of the cell heights within `radius_m` of tray point (x, y) and within `band_m` of
@@ -188,9 +197,18 @@ impl HeightMap {
     /// (NaN if nothing was seen there). Cells count when any part of them may lie in the disc
     /// (centre within `radius_m` plus half a cell diagonal).
     pub fn max_within(&self, x: f64, y: f64, radius_m: f64) -> f64 {
-        self.heights_within(x, y, radius_m + self.cell_m * 0.71)
-            .filter(|h| !h.is_nan())
-            .fold(f64::NAN, |best, h| if best.is_nan() || h > best { h } else { best })
+        self.max_within_unexplained(x, y, radius_m, |_, _| false)
+    }
+
+    /// [`HeightMap::max_within`] over the cells whose height `explained` (cell index, height)
+    /// does not put down to something known (a recognised part's own surface); NaN if none.
+    pub fn max_within_unexplained(&self, x: f64, y: f64, radius_m: f64, explained: impl Fn(usize, f64) -> bool) -> f64 {
+        self.cells_within(x, y, radius_m + self.cell_m * 0.71)
+            .filter(|&(k, h)| !h.is_nan() && !explained(k, h))
+            .fold(
+                f64::NAN,
+                |best, (_, h)| if best.is_nan() || h > best { h } else { best },
+            )
     }
 }
 
