@@ -222,10 +222,12 @@ pub struct GraspSelector {
     yaw_symmetry_rad: f64,
     /// Cloud points within this of the face plane belong to it (noise) (m).
     pub height_tolerance_m: f64,
-    /// Points on the part model's surface (part frame, m): its vertices and points at most
-    /// [`OWN_SURFACE_SPACING_M`] apart on each triangle. What of the height map around a grasp
-    /// the recognised part itself explains.
-    own_surface_m: Vec<Point3<f64>>,
+    /// Per face (as `faces`), the points of the part model's surface standing more than
+    /// [`OWN_OFF_FACE_M`] out of the face's plane (part frame, m): its vertices and points at
+    /// most [`OWN_SURFACE_SPACING_M`] apart on each triangle, where they are the part's features
+    /// beside the face (pins, legs, a tab). What of the height map around a grasp the recognised
+    /// part itself explains.
+    own_features_m: Vec<Vec<Point3<f64>>>,
 }
 
 /// Spacing of [`GraspSelector`]'s samples of the part's own surface (m): half a height-map cell,
@@ -481,7 +483,7 @@ impl GraspSelector {
             size_m: w.size_m,
             yaw_symmetry_rad: w.grasp.yaw_symmetry_deg.to_radians(),
             height_tolerance_m: 0.0015,
-            own_surface_m: Vec::new(),
+            own_features_m: Vec::new(),
         };
         let primitive = w.primitive_mesh();
         let Some(mesh) = workpiece.mesh.as_ref().map(|m| &m.0).or(primitive.as_ref()) else {
@@ -490,7 +492,6 @@ impl GraspSelector {
         let Ok(pm) = w.part_model(mesh, g.cup_diameter_m) else {
             return sel;
         };
-        sel.own_surface_m = surface_samples(&pm.mesh, OWN_SURFACE_SPACING_M);
         let sites = pm.cup_sites(&approach_column(scene));
         for (f, site) in pm.faces.iter().zip(sites) {
             if !f.fit.takes_cup() {
@@ -526,6 +527,15 @@ impl GraspSelector {
         if let Some(fp) = PlacePose::footprint_m(&sel.place, sel.yaw_symmetry_rad) {
             sel.place_footprint_m = fp;
         }
+        let surface = surface_samples(&pm.mesh, OWN_SURFACE_SPACING_M);
+        sel.own_features_m = sel
+            .faces
+            .iter()
+            .map(|f| {
+                let off = |p: &&Point3<f64>| (p.coords - f.center).dot(&f.normal) > OWN_OFF_FACE_M;
+                surface.iter().filter(off).copied().collect()
+            })
+            .collect();
         sel.peel_com_m = pm.com_m().coords;
         sel
     }
@@ -705,7 +715,7 @@ impl GraspSelector {
                 let face_h = local.z;
                 // Clearance from the cloud: nothing higher than the face (plus noise) under the
                 // cup, nothing higher than the cup's top under the tool body.
-                if self.crowded(&occupied, &(tray_from_world * det.world_from_part), face, &local) {
+                if self.crowded(&occupied, &(tray_from_world * det.world_from_part), fi, &local) {
                     plan.rejected.push((di, fi, Rejection::Crowded));
                     continue;
                 }
@@ -782,10 +792,10 @@ impl GraspSelector {
     /// Whether the map `hm` (tray frame, unseen cells filled) shows something in the tool's way
     /// at the cup site `site` (tray frame; its height is the face's): higher than the face plus
     /// the height tolerance within the cup's radius plus 1 mm, or than the cup's top within the
-    /// tool body's radius plus 2 mm. What the recognised part's own surface (at
-    /// `tray_from_part`) explains is not in the way: the cup site keeps the tool clear of the
-    /// part's own features (pins, legs, a tab), which a fine enough map shows beside the face.
-    fn crowded(&self, hm: &HeightMap, tray_from_part: &Isometry3<f64>, face: &Face, site: &Point3<f64>) -> bool {
+    /// tool body's radius plus 2 mm. What the recognised part's own features beside face `fi`
+    /// (at `tray_from_part`) explain is not in the way: the cup site keeps the tool clear of them
+    /// (pins, legs, a tab), and a fine enough map shows them beside the face.
+    fn crowded(&self, hm: &HeightMap, tray_from_part: &Isometry3<f64>, fi: usize, site: &Point3<f64>) -> bool {
         let face_h = site.z;
         let in_way = |explained: &dyn Fn(usize, f64) -> bool| {
             let cup_clear = hm.max_within_unexplained(site.x, site.y, self.cup_radius_m + 0.001, explained);
@@ -795,28 +805,25 @@ impl GraspSelector {
         };
         // The part's own surface is rendered only where the map alone says crowded.
         in_way(&|_, _| false) && {
-            let own = self.own_heights(hm, tray_from_part, face, site);
+            let own = self.own_heights(hm, tray_from_part, fi, site);
             in_way(&|k, h| own.get(&k).is_some_and(|o| h <= o + OWN_EXPLAINS_M))
         }
     }
 
-    /// The highest point of the part's own features standing out of the grasped face's plane
-    /// (more than [`OWN_OFF_FACE_M`] above it: pins, legs, a tab; not the face itself, whose tilt
-    /// the tilt limit judges), at the recognised pose `tray_from_part`, in each cell of `hm`
-    /// within the tool's reach of the site `site` (tray frame) (m, by cell index).
+    /// The highest point of the part's own features beside face `fi` (standing out of its
+    /// plane: pins, legs, a tab; not the face itself, whose tilt the tilt limit judges), at the
+    /// recognised pose `tray_from_part`, in each cell of `hm` within the tool's reach of the site
+    /// `site` (tray frame) (m, by cell index).
     fn own_heights(
         &self,
         hm: &HeightMap,
         tray_from_part: &Isometry3<f64>,
-        face: &Face,
+        fi: usize,
         site: &Point3<f64>,
     ) -> std::collections::HashMap<usize, f64> {
         let reach_m = self.tool_radius_m + 0.002 + 2.0 * hm.cell_m;
         let mut own = std::collections::HashMap::new();
-        for p in &self.own_surface_m {
-            if (p.coords - face.center).dot(&face.normal) <= OWN_OFF_FACE_M {
-                continue;
-            }
+        for p in &self.own_features_m[fi] {
             let q = tray_from_part * p;
             if (q.x - site.x).hypot(q.y - site.y) > reach_m {
                 continue;
@@ -1202,13 +1209,12 @@ mod tests {
         assert!(legs_m > 0.003, "the legs stand {legs_m} m above the back");
         // Control: the map alone reads the legs as something in the cup's way.
         let away = Isometry3::translation(1.0, 0.0, 0.0) * tray_from_part;
-        let face = sel.faces()[fi];
         assert!(
-            sel.crowded(&map, &away, &face, &site),
+            sel.crowded(&map, &away, fi, &site),
             "the legs do not reach the cup's ring"
         );
         assert!(
-            !sel.crowded(&map, &tray_from_part, &face, &site),
+            !sel.crowded(&map, &tray_from_part, fi, &site),
             "the part's own legs crowd it"
         );
         // Negative control: something resting on the legs, 3 mm above them.
@@ -1219,7 +1225,7 @@ mod tests {
             }
         }
         assert!(
-            sel.crowded(&on_legs, &tray_from_part, &face, &site),
+            sel.crowded(&on_legs, &tray_from_part, fi, &site),
             "what rests on the legs is not seen"
         );
     }
