@@ -144,13 +144,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
     super::override_recognition(&mut loaded, args.recognition);
     let count = pile_count(a, &wp)?;
     let (seed, out, json) = (a.seed, &a.out, a.json);
-    let opts = RunOptions {
-        picks: 1,
-        seed,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    };
+    let opts = RunOptions::deterministic(1, seed);
     let mut cell = Cell::new(&loaded, &robot, &wp, opts).context("setting up the cell")?;
     cell.pile_count = count;
     let (state, sensed) = binpick::cycle::sense_once(&cell, &mut ()).context("sensing")?;

@@ -162,6 +162,20 @@ pub struct RunOptions {
     pub keep_records: bool,
 }
 
+impl RunOptions {
+    /// `picks` picks with seed `seed`, deterministic, to the end (no stop flag), keeping only
+    /// the tally.
+    pub fn deterministic(picks: usize, seed: u64) -> Self {
+        RunOptions {
+            picks,
+            seed,
+            deterministic: true,
+            stop: None,
+            keep_records: false,
+        }
+    }
+}
+
 /// The constant parts of the cell: what does not change while it runs.
 pub struct Cell<'a> {
     /// The arm as the controller models it (nominal inertials, friction, armature).

@@ -12,13 +12,7 @@ use binpick::physics::{HealthEvent, HealthLimits, PartState};
 use binpick::robot::RobotModel;
 
 fn opts(picks: usize, seed: u64) -> RunOptions {
-    RunOptions {
-        picks,
-        seed,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    }
+    RunOptions::deterministic(picks, seed)
 }
 
 /// A run of D whose pick tray is emptied before its first capture, so the cell shakes the empty

@@ -123,13 +123,7 @@ fn run_wp<O: Observer + Default>(wp: &LoadedWorkpiece, picks: usize, feeder: Fee
     let mut scene = LoadedScene::embedded_default().unwrap();
     scene.scene.feeder = feeder;
     let robot = RobotModel::from_scene(&scene).unwrap();
-    let opts = RunOptions {
-        picks,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    };
+    let opts = RunOptions::deterministic(picks, 1);
     let mut seen = O::default();
     let r = binpick::cycle::run(&scene, &robot, wp, &opts, &mut seen).unwrap();
     (r.tally, seen)

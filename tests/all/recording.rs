@@ -653,13 +653,7 @@ fn a_streamed_recording_is_the_whole_runs() {
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp = LoadedWorkpiece::resolve("E").unwrap();
     let camera = binpick::sensor::Camera::from_config(&scene.scene.sensor).unwrap();
-    let opts = RunOptions {
-        picks: 30,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    };
+    let opts = RunOptions::deterministic(30, 1);
     let info = RunInfo {
         scene: scene.label.clone(),
         workpiece: "E".into(),

@@ -89,13 +89,7 @@ fn a_run_ends_after_three_fruitless_full_trays_in_a_row_not_one() {
     let robot = RobotModel::from_scene(&scene).unwrap();
     let wp =
         LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/capacitor-radial.toml")).unwrap();
-    let opts = RunOptions {
-        picks: 200,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    };
+    let opts = RunOptions::deterministic(200, 1);
     let t = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut ()).unwrap().tally;
     assert_eq!(
         t.ended,

@@ -36,13 +36,7 @@ fn placed(cell_cup_m: f64, wp: &LoadedWorkpiece) -> usize {
     scene.scene.gripper.cup_diameter_m = cell_cup_m;
     scene.scene.cycle.on_empty = OnEmpty::End;
     let robot = RobotModel::from_scene(&scene).unwrap();
-    let opts = RunOptions {
-        picks: 3,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    };
+    let opts = RunOptions::deterministic(3, 1);
     let r = binpick::cycle::run(&scene, &robot, wp, &opts, &mut ()).unwrap();
     r.tally.placed
 }
@@ -65,13 +59,7 @@ fn a_cell_not_resolved_for_the_workpieces_cup_is_refused_by_the_cycle() {
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let b = b_with("[gripper]\ncup_diameter_m = 0.012\n");
-    let opts = RunOptions {
-        picks: 1,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    };
+    let opts = RunOptions::deterministic(1, 1);
     let e = binpick::cycle::Cell::new(&scene, &robot, &b, opts)
         .err()
         .expect("refused");
@@ -198,13 +186,7 @@ fn d_with_cup(round_min_radius_m: Option<f64>) -> (usize, SideGrasps) {
     let wp = LoadedWorkpiece::from_text("D-cup.toml", Source::Embedded, &text).unwrap();
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
-    let opts = RunOptions {
-        picks: 24,
-        seed: 1,
-        deterministic: true,
-        stop: None,
-        keep_records: false,
-    };
+    let opts = RunOptions::deterministic(24, 1);
     let mut seen = SideGrasps::default();
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
     (r.tally.placed, seen)
