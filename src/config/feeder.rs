@@ -15,9 +15,10 @@
 //! `[agitation]` and `cycle.on_empty` policies, as before.
 //!
 //! Simplified model: the dose's parts are dropped in waves at its start, as a pile is poured
-//! (see [`crate::physics::pile`]), above the pile as it lies; the cell waits until the pour has
-//! settled, `dose_s` has passed and the chute has had time to convey the dose at its rate,
-//! whichever is latest.
+//! (see [`crate::physics::pile`]), above the pile as it lies; the cell waits `dose_s` or the
+//! chute's time, whichever is longer, from the dose's start, then looks: whether the pour has
+//! come to rest is its sensor's to tell (a capture showing the pile moving is taken again), never
+//! the physics'.
 //!
 //! A workpiece file may bring its own recipe for the hopper (`[feeder]` in it, [`FeederRecipe`]):
 //! how many parts a dose holds and below what count the cell doses depend on the part (its pile

@@ -202,11 +202,11 @@ impl Run<'_, '_> {
         // once), a collision or a part pressed into the tray stops the motion.
         let mut fault = None;
         let mut lost_removed = false;
-        let during = self
-            .st
-            .world
-            .held_part()
-            .map_or(LeftDuring::CupEmpty, LeftDuring::Holding);
+        let during = match self.st.world.held_part() {
+            Some(held) => LeftDuring::Holding(held),
+            None if self.st.trays.pouring => LeftDuring::Pour,
+            None => LeftDuring::CupEmpty,
+        };
         for event in report.events {
             match event {
                 HealthEvent::LeftVolume { body, volume, .. } => {

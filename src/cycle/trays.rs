@@ -57,6 +57,9 @@ pub struct TrayState {
     pub dosed_since_fill: usize,
     /// Parts placed (the run's count) at the last pour of a whole pile.
     pub placed_at_fill: usize,
+    /// A dose or a refill is under way: its parts are still falling in (a part that leaves the
+    /// tray now was spilled by the pour).
+    pub pouring: bool,
 }
 
 impl Default for TrayState {
@@ -78,6 +81,7 @@ impl Default for TrayState {
             doses: 0,
             dosed_since_fill: 0,
             placed_at_fill: 0,
+            pouring: false,
         }
     }
 }
@@ -192,14 +196,19 @@ impl Run<'_, '_> {
         }
         let t = self.st.world.time_s();
         self.event(Event::Refill(fill));
-        self.idle_until(t + self.cell.scene.cycle.refill_s)?;
         self.st.failed_spots.clear();
         let seed = self
             .cell
             .opts
             .seed
             .wrapping_add(fill.wrapping_mul(0x9E37_79B9_7F4A_7C15));
-        self.pour(PileOptions::new(self.cell.pile_count, seed))?;
+        // The new pile falls in at the exchange's start and rests for the rest of it: the
+        // exchange takes `refill_s`, however long the physics takes to settle it.
+        self.pour(PileOptions::into_running_cell(self.cell.pile_count, seed))?;
+        self.st.trays.pouring = true;
+        let rested = self.idle_until(t + self.cell.scene.cycle.refill_s);
+        self.st.trays.pouring = false;
+        rested?;
         self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
         self.st.arm.free_s = self.st.world.time_s();
         self.st.compute_from_s = self.st.world.time_s();
@@ -226,8 +235,9 @@ impl Run<'_, '_> {
     }
 
     /// Pours `parts` parts from the hopper onto the pile (through the physics, above the pile as
-    /// it lies), the arm waiting out of the view until they have settled and at least `dose_s`
-    /// (the dose's time, [`crate::config::FeederConfig::dose_time_s`]) has passed.
+    /// it lies), the arm waiting out of the view for `dose_s` (the dose's time,
+    /// [`crate::config::FeederConfig::dose_time_s`]) from the dose's start. Whether the pile has
+    /// settled by then is the sensor's to tell: a capture that shows it moving is taken again.
     fn dose(&mut self, parts: usize, dose_s: f64) -> Result<(), CycleError> {
         self.forget_pile();
         let t0 = self.st.world.time_s();
@@ -240,8 +250,11 @@ impl Run<'_, '_> {
             .seed
             .wrapping_add(n.wrapping_mul(0xD1B5_4A32_D192_ED03))
             .rotate_left(17);
-        self.pour(PileOptions::new(parts, seed))?;
-        self.idle_until(t0 + dose_s)?;
+        self.pour(PileOptions::into_running_cell(parts, seed))?;
+        self.st.trays.pouring = true;
+        let waited = self.idle_until(t0 + dose_s);
+        self.st.trays.pouring = false;
+        waited?;
         self.span(Stage::Stall, t0, self.st.world.time_s(), "hopper dose");
         let trays = &mut self.st.trays;
         trays.doses += 1;
@@ -260,7 +273,7 @@ impl Run<'_, '_> {
         let report = self
             .st
             .world
-            .build_pile_observed(&opts.losing_spilled(), &mut |w| obs.stepped(w))
+            .build_pile_observed(&opts, &mut |w| obs.stepped(w))
             .map_err(CycleError::Pour)?;
         self.lose_spilled(report.spilled);
         Ok(())

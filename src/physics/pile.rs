@@ -7,7 +7,9 @@
 //! long axis within 30 deg of level, as strips slide out of a box), positions uniformly
 //! random where the part's rotated box fits inside the walls and clears the wave's other parts
 //! (else a layer higher). Between waves the world runs until the wave has slowed down; at the end
-//! until every part is asleep or none moved more than 0.05 mm or 0.005 rad in the last 0.1 s.
+//! until every part is asleep or none moved more than 0.05 mm or 0.005 rad in the last 0.1 s
+//! (a pile built before a run; a pour into a running cell ends with its last wave, and the cell
+//! finds out by looking whether the pile still moves: [`PileOptions::into_running_cell`]).
 //!
 //! Randomness: the `pile` stream of the run seed. Units: m, s. Frames: world.
 
@@ -32,6 +34,10 @@ pub struct PileOptions {
     /// [`PileReport::spilled`] (a hopper dose or a refill in a running cell: a real feeder loses
     /// the part, not the shift); without it, the pour ends with the health error.
     pub lose_spilled: bool,
+    /// Step on after the last wave until the pile has settled (or `max_settle_s` have passed).
+    /// A pile built before a run does; a pour into a running cell does not: the cell waits the
+    /// time it is set to wait, and its sensor tells whether the pile still moves.
+    pub settle: bool,
 }
 
 impl PileOptions {
@@ -42,6 +48,17 @@ impl PileOptions {
             seed,
             max_settle_s: 10.0,
             lose_spilled: false,
+            settle: true,
+        }
+    }
+
+    /// A pour into a running cell (a hopper dose, a refill): parts that bounce out of the tray
+    /// are lost, and the pour ends when its last wave has been dropped, not when the physics says
+    /// the pile has settled (that is the cell's to find out, by looking).
+    pub fn into_running_cell(count: usize, seed: u64) -> Self {
+        PileOptions {
+            settle: false,
+            ..PileOptions::new(count, seed).losing_spilled()
         }
     }
 
@@ -74,7 +91,8 @@ pub struct PileReport {
     pub pile_height_m: f64,
     /// Simulated time from the first drop to settled (s).
     pub settle_sim_s: f64,
-    /// Whether every part came to rest within `max_settle_s`.
+    /// Whether every part came to rest within `max_settle_s` (false when the pour did not wait
+    /// for it: [`PileOptions::settle`]).
     pub settled: bool,
     /// Deepest part-part or part-tray overlap after settling, exact (independent check) (m).
     pub max_penetration_m: f64,
@@ -201,7 +219,11 @@ impl World {
                 self.add_part(&pose);
                 spawned += 1;
             }
-            // Let the wave fall and slow down before the next one.
+            // Let the wave fall and slow down before the next one (a pour into a running cell
+            // ends with its last wave dropped: the cell's own wait runs from there).
+            if !opts.settle && spawned == opts.count {
+                break;
+            }
             let wave_start = self.time_s;
             loop {
                 self.pour_step(lost.as_deref_mut())?;
@@ -212,7 +234,7 @@ impl World {
                 }
             }
         }
-        let settled = self.settle_pile(start_time, opts.max_settle_s, lost, on_step)?;
+        let settled = opts.settle && self.settle_pile(start_time, opts.max_settle_s, lost, on_step)?;
         let in_tray = self.parts_in_pick_tray();
         let pile_height_m = in_tray
             .iter()

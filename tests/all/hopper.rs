@@ -6,6 +6,7 @@
 use crate::support::{Workspace, binpick_in, stderr};
 use binpick::config::{FeederConfig, LoadedScene, LoadedWorkpiece};
 use binpick::cycle::{Event, Observer, RunOptions, Stage, Tally};
+use binpick::physics::pile::PileOptions;
 use binpick::robot::RobotModel;
 
 #[test]
@@ -83,6 +84,8 @@ struct Doses {
     before_dose: Vec<Option<usize>>,
     /// Each dose's span: how long the arm waited for it (s).
     dose_spans_s: Vec<f64>,
+    /// Each pick-tray refill's span (s).
+    refill_spans_s: Vec<f64>,
 }
 
 impl Observer for Doses {
@@ -96,6 +99,9 @@ impl Observer for Doses {
         if stage == Stage::Stall && label == "hopper dose" {
             self.before_dose.push(self.last_detected);
             self.dose_spans_s.push(end_s - start_s);
+        }
+        if stage == Stage::Stall && label == "pick tray refill" {
+            self.refill_spans_s.push(end_s - start_s);
         }
     }
 }
@@ -133,8 +139,20 @@ fn run_wp<O: Observer + Default>(wp: &LoadedWorkpiece, picks: usize, feeder: Fee
 fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry() {
     let hopper = |dose_below| feeder(dose_below, 6, 1.5, 10.0);
     // B's 16-part pile over 60 picks: without a hopper it runs dry and is exchanged.
-    let (without, _) = run::<Doses>("B", 60, FeederConfig::default());
+    let (without, seen_without) = run::<Doses>("B", 60, FeederConfig::default());
     assert!(without.refills >= 2 && without.doses == 0, "{without:?}");
+    // Each exchange takes the cell's `refill_s`, the fresh pile poured in it, however long the
+    // physics takes to settle it (a 16-block pile settles in well under a second of it).
+    let scene = LoadedScene::embedded_default().unwrap().scene;
+    assert_eq!(seen_without.refill_spans_s.len(), without.refills);
+    assert!(
+        seen_without
+            .refill_spans_s
+            .iter()
+            .all(|&s| (s - scene.cycle.refill_s).abs() < scene.sim.physics_dt_s + 1e-6),
+        "{:?}",
+        seen_without.refill_spans_s
+    );
     let threshold = 6;
     let (with, seen) = run::<Doses>("B", 60, hopper(threshold));
     assert!(with.doses >= 2, "doses {}", with.doses);
@@ -166,19 +184,22 @@ fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry
 }
 
 #[test]
-fn a_large_dose_waits_for_the_hoppers_chute() {
+fn a_dose_takes_its_set_time_and_the_chutes_not_the_piles_settling() {
     // B's 16-part pile topped up 12 parts at a time by a chute of 2 parts/s: 6 s a dose, where
     // its shortest time is 0.5 s.
     let slow = feeder(6, 12, 0.5, 2.0);
+    let step_s = LoadedScene::embedded_default().unwrap().scene.sim.physics_dt_s;
     let (tally, seen) = run::<Doses>("B", 40, slow);
     assert!(tally.doses >= 1, "doses {}", tally.doses);
     assert!(
-        seen.dose_spans_s.iter().all(|&s| s >= 6.0 - 1e-6),
+        seen.dose_spans_s
+            .iter()
+            .all(|&s| (6.0 - 1e-6..6.0 + step_s + 1e-6).contains(&s)),
         "{:?}",
         seen.dose_spans_s
     );
-    // Negative control: a chute fast enough not to bind; the dose then lasts as long as its
-    // pour takes to settle, less than the slow chute's 6 s.
+    // A chute fast enough not to bind: the cell waits its 0.5 s and looks; when the pile still
+    // moves, its sensor has to tell (the truth of the physics does not end the wait).
     let fast = FeederConfig {
         dose_rate_parts_per_s: 1000.0,
         ..slow
@@ -186,9 +207,33 @@ fn a_large_dose_waits_for_the_hoppers_chute() {
     let (tally, seen) = run::<Doses>("B", 40, fast);
     assert!(tally.doses >= 1, "doses {}", tally.doses);
     assert!(
-        seen.dose_spans_s.iter().all(|&s| s < 6.0 - 1e-3),
+        seen.dose_spans_s
+            .iter()
+            .all(|&s| (0.5 - 1e-6..0.5 + step_s + 1e-6).contains(&s)),
         "{:?}",
         seen.dose_spans_s
+    );
+    // Negative control: the same 12 blocks poured onto B's pile and stepped until the physics
+    // says they have settled take longer than 0.5 s: a wait that ended at the settling would
+    // not have been 0.5 s.
+    let wp = LoadedWorkpiece::resolve("B").unwrap();
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source).unwrap();
+    let mut world = binpick::physics::World::new(&scene.scene, &robot, shape);
+    world.build_pile(&PileOptions::new(16, 1)).unwrap();
+    let dose = world.build_pile(&PileOptions::new(12, 2)).unwrap();
+    assert!(dose.settled && dose.settle_sim_s > 0.5 + 0.1, "{:?}", dose.settle_sim_s);
+    // And poured as the running cell pours, the pour itself ends at once (one wave of 12).
+    let mut world = binpick::physics::World::new(&scene.scene, &robot, {
+        binpick::physics::PartShape::build(&wp.workpiece, &wp.source).unwrap()
+    });
+    world.build_pile(&PileOptions::new(16, 1)).unwrap();
+    let dose = world.build_pile(&PileOptions::into_running_cell(12, 2)).unwrap();
+    assert!(
+        !dose.settled && dose.settle_sim_s < step_s / 2.0,
+        "{:?}",
+        dose.settle_sim_s
     );
 }
 
