@@ -303,6 +303,56 @@ impl SuctionModel {
     }
 }
 
+/// The least distance between two boxes, each given by `world_from_box` (its centre and axes)
+/// and its half extents (m); 0 where they overlap. Computed by parry in millimetres and single
+/// precision (a few micrometres).
+pub fn box_box_distance_m(
+    world_from_a: &Isometry3<f64>,
+    half_a_m: &Vector3<f64>,
+    world_from_b: &Isometry3<f64>,
+    half_b_m: &Vector3<f64>,
+) -> f64 {
+    use rapier3d::parry::shape::Cuboid;
+    let a = Cuboid::new(mm_vector(half_a_m));
+    let b = Cuboid::new(mm_vector(half_b_m));
+    rapier3d::parry::query::distance(&mm_pose(world_from_a), &a, &mm_pose(world_from_b), &b)
+        .map_or(0.0, |d| d.distance as f64 / 1e3)
+}
+
+/// The least distance between a box (`world_from_box`, half extents, m) and a round column: the
+/// points within `radius_m` of the segment from `from_m` to `to_m` (world, m); 0 where they
+/// overlap.
+pub fn box_column_distance_m(
+    world_from_box: &Isometry3<f64>,
+    half_m: &Vector3<f64>,
+    from_m: &Vector3<f64>,
+    to_m: &Vector3<f64>,
+    radius_m: f64,
+) -> f64 {
+    use rapier3d::parry::shape::{Capsule, Cuboid};
+    let cuboid = Cuboid::new(mm_vector(half_m));
+    let column = Capsule::new(mm_vector(from_m), mm_vector(to_m), (radius_m * 1e3) as f32);
+    rapier3d::parry::query::distance(
+        &mm_pose(world_from_box),
+        &cuboid,
+        &rapier3d::math::Pose::IDENTITY,
+        &column,
+    )
+    .map_or(0.0, |d| d.distance as f64 / 1e3)
+}
+
+/// A vector (m) in millimetres, single precision, for parry.
+fn mm_vector(v_m: &Vector3<f64>) -> rapier3d::math::Vector {
+    rapier3d::math::Vector::new((v_m.x * 1e3) as f32, (v_m.y * 1e3) as f32, (v_m.z * 1e3) as f32)
+}
+
+/// An isometry (m) in millimetres, single precision, for parry.
+fn mm_pose(iso: &Isometry3<f64>) -> rapier3d::math::Pose {
+    let mut p: rapier3d::math::Pose = iso.cast::<f32>().into();
+    p.translation = mm_vector(&iso.translation.vector);
+    p
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -338,5 +388,27 @@ mod tests {
         // At the limit the required force equals the share of the holding force.
         let a = m.max_specific_force_m_s2(0.75, 0.01, 0.002);
         assert!((m.required_n(0.01, a, 0.002) - 0.75 * m.holding_n).abs() < 1e-9);
+    }
+
+    #[test]
+    fn box_distances_are_the_gaps_between_the_shapes() {
+        // Two unit-free boxes 10 mm wide side by side, 20 mm between their centres: a 10 mm gap;
+        // turned a quarter turn, the second is 30 mm wide along x: a 0 mm gap (touching).
+        let half = Vector3::new(0.005, 0.005, 0.005);
+        let a = Isometry3::identity();
+        let b = Isometry3::translation(0.020, 0.0, 0.0);
+        assert!((box_box_distance_m(&a, &half, &b, &half) - 0.010).abs() < 1e-5);
+        let long = Vector3::new(0.005, 0.015, 0.005);
+        let turned = b * Isometry3::rotation(Vector3::z() * std::f64::consts::FRAC_PI_2);
+        assert!(box_box_distance_m(&a, &half, &turned, &long) < 1e-5);
+        // Control: overlapping boxes are 0 apart, not negative.
+        assert_eq!(box_box_distance_m(&a, &half, &a, &half), 0.0);
+        // A column of radius 5 mm standing 30 mm off the box's centre along y: a 20 mm gap; one
+        // lying over the box, 10 mm above its top: 10 mm.
+        let up = |x: f64, y: f64, z: f64| Vector3::new(x, y, z);
+        let d = box_column_distance_m(&a, &half, &up(0.0, 0.030, 0.0), &up(0.0, 0.030, 0.3), 0.005);
+        assert!((d - 0.020).abs() < 1e-5, "{d}");
+        let d = box_column_distance_m(&a, &half, &up(-0.1, 0.0, 0.020), &up(0.1, 0.0, 0.020), 0.005);
+        assert!((d - 0.010).abs() < 1e-5, "{d}");
     }
 }

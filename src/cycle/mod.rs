@@ -237,6 +237,19 @@ impl ArmState {
     }
 }
 
+/// A pick that went into the pile, as the cell knows it: the part as recognised and the tool's
+/// way in. A later pick from an image taken before it keeps clear of what it may have moved
+/// ([`next_pick`]).
+#[derive(Debug, Clone)]
+pub struct PickSpot {
+    /// When the descent began (s).
+    pub t_s: f64,
+    /// The picked part as recognised: `world_from_part` (m).
+    pub world_from_part: Isometry3<f64>,
+    /// The tool's origin at its approach pose and at its grasp pose [m, world].
+    pub tool_path_m: [Vector3<f64>; 2],
+}
+
 /// The mutable state of the cell.
 pub struct CellState {
     /// The physics world: trays, parts, the arm's bodies, the gripper.
@@ -272,9 +285,9 @@ pub struct CellState {
     /// The newest recognition result and how many picks came from it (several picks per
     /// capture).
     pub in_hand: Option<InHand>,
-    /// When and where each pick went into the pile since the last pour or agitation [s, m
-    /// world]: a result is only picked from clear of the picks made after its trigger.
-    pub pick_spots: Vec<(f64, Vector3<f64>)>,
+    /// Each pick that went into the pile since the last pour or agitation: a result is only
+    /// picked from clear of the picks made after its trigger.
+    pub pick_spots: Vec<PickSpot>,
     /// When compute for the next pick may start (s): the start of the last Place that went as
     /// planned (the arm's remaining motion and where it ends are known then), else when the
     /// last pick ended.
@@ -714,7 +727,7 @@ impl Run<'_, '_> {
             let chosen = result
                 .detections
                 .as_deref()
-                .map(|d| d[prep.grasp.detection].world_from_part.translation.vector);
+                .map(|d| d[prep.grasp.detection].world_from_part);
             let end = self.pick_and_place(&prep, charged, compute_from_s, chosen, late, &mut rec)?;
             next = end.next;
             apply_placement_fix(records, &mut self.st.tally, end.fix);

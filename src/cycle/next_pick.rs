@@ -14,7 +14,8 @@ use super::motions::Prepared;
 use super::play::{Capture, Played, Segment};
 use super::records::StageCompute;
 use super::sensing::SensedResult;
-use super::{CycleError, InHand, Run};
+use super::{CycleError, InHand, PickSpot, Run};
+use crate::sensor::Detection;
 use crate::trajectory::{LineMotion, Motion};
 
 /// The next pick, prepared at a release from the result in hand (see `Run::prefetch_next`),
@@ -46,50 +47,87 @@ pub(super) struct LatePlacement {
     pub world_from_part_place: Isometry3<f64>,
 }
 
-/// A later pick from the same result takes only a part whose centre is this much farther from
-/// every earlier pick's than both parts' bounding radii (or the tool's, whichever is larger) (m).
+/// A later pick from the same result takes only a part whose recognised box keeps this much
+/// clear of what each earlier pick may have moved (m).
 pub const BLIND_PICK_MARGIN_M: f64 = 0.005;
+
+/// How far above its grasp the tool's column is followed beyond its approach pose (m): the
+/// hand's body stands over the cup all the way up.
+const TOOL_COLUMN_UP_M: f64 = 0.3;
+
+/// Which of `detections` (boxes of half extents `half_m` at their recognised poses) keep
+/// [`BLIND_PICK_MARGIN_M`] clear of what the picks `since` may have moved: each picked part's
+/// box, the boxes of the detections touching it, and the tool's column (radius `tool_r_m` about
+/// the line from its grasp up through its approach pose and [`TOOL_COLUMN_UP_M`] beyond).
+fn clear_of_picks(detections: &[Detection], since: &[&PickSpot], half_m: &Vector3<f64>, tool_r_m: f64) -> Vec<bool> {
+    let apart = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
+        crate::geometry::box_box_distance_m(a, half_m, b, half_m) >= BLIND_PICK_MARGIN_M
+    };
+    // The boxes a pick may have moved: the picked part's and its recognised neighbours'.
+    let mut moved: Vec<Isometry3<f64>> = Vec::new();
+    for spot in since {
+        moved.push(spot.world_from_part);
+        moved.extend(
+            detections
+                .iter()
+                .map(|d| d.world_from_part)
+                .filter(|d| !apart(d, &spot.world_from_part)),
+        );
+    }
+    let columns: Vec<[Vector3<f64>; 2]> = since
+        .iter()
+        .map(|spot| {
+            let [approach, grasp] = spot.tool_path_m;
+            let up = (approach - grasp).try_normalize(1e-9).unwrap_or_else(Vector3::z);
+            [grasp, approach + up * TOOL_COLUMN_UP_M]
+        })
+        .collect();
+    detections
+        .iter()
+        .map(|d| {
+            let p = &d.world_from_part;
+            moved.iter().all(|m| apart(p, m))
+                && columns.iter().all(|[from, to]| {
+                    crate::geometry::box_column_distance_m(p, half_m, from, to, tool_r_m) >= BLIND_PICK_MARGIN_M
+                })
+        })
+        .collect()
+}
 
 impl Run<'_, '_> {
     /// The result in hand with only the detections the next pick may take, and the number of
     /// picks made since its trigger (0: the image shows the pile as it is). `None` if the cell
     /// file allows no more picks from it, or (when picks were made since its trigger) none of its
-    /// detections is clear of them: each taken must be recognised clear of every pick made after
-    /// the trigger (centres at least two bounding radii, or the tool's radius plus the part's,
-    /// plus [`BLIND_PICK_MARGIN_M`] apart horizontally), so neither the parts lifted nor the
-    /// tool's column over them touched it. A real cell can decide this from its recognition and
-    /// its own picks alone; whether the part is still there the seal check tells.
+    /// detections is clear of them.
+    ///
+    /// What a pick may have moved, as the cell knows it from its recognition and its own motion:
+    /// the picked part's box at its recognised pose, the boxes of the parts this result
+    /// recognised touching it (within [`BLIND_PICK_MARGIN_M`]: lifted off, they shift), and the
+    /// tool's column (its body's radius about the line from its grasp up through its approach
+    /// pose). A detection is taken only if its box keeps [`BLIND_PICK_MARGIN_M`] clear of all of
+    /// them, for every pick made after the trigger. Whether the part is still there the seal
+    /// check tells.
     pub(super) fn usable(&self) -> Option<(SensedResult, usize)> {
         let h = self.st.in_hand.as_ref()?;
         if h.taken >= self.cell.scene.cycle.max_picks_per_capture as usize {
             return None;
         }
-        let since: Vec<Vector3<f64>> = self
+        let since: Vec<&PickSpot> = self
             .st
             .pick_spots
             .iter()
-            .filter(|(t, _)| *t >= h.result.capture_s)
-            .map(|(_, c)| *c)
+            .filter(|p| p.t_s >= h.result.capture_s)
             .collect();
+        let detections = h.result.detections.as_deref();
         if since.is_empty() {
-            return Some((
-                h.result
-                    .keeping(&vec![true; h.result.detections.as_ref().map_or(0, Vec::len)]),
-                0,
-            ));
+            return Some((h.result.keeping(&vec![true; detections.map_or(0, <[_]>::len)]), 0));
         }
-        let r_part = self.cell.shape.bounding_radius_m;
-        let reach_m = r_part + r_part.max(self.cell.scene.gripper.body_diameter_m / 2.0) + BLIND_PICK_MARGIN_M;
-        let keep: Vec<bool> = h
-            .result
-            .detections
-            .as_deref()?
-            .iter()
-            .map(|d| {
-                let c = d.world_from_part.translation.vector;
-                since.iter().all(|u| (c - u).xy().norm() >= reach_m)
-            })
-            .collect();
+        let keep = clear_of_picks(
+            detections?,
+            &since,
+            &self.cell.shape.half_extents_m,
+            self.cell.scene.gripper.body_diameter_m / 2.0,
+        );
         keep.iter().any(|k| *k).then(|| (h.result.keeping(&keep), since.len()))
     }
 
@@ -228,5 +266,62 @@ impl Run<'_, '_> {
             self.event(Event::Misplaced(error));
         }
         error
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A detection of a part at `(x, y)` on the tray floor (m), turned `yaw` about z.
+    fn at(x: f64, y: f64, yaw: f64) -> Detection {
+        Detection {
+            world_from_part: Isometry3::new(Vector3::new(x, y, 0.0025), Vector3::z() * yaw),
+            visible_fraction: 1.0,
+            score: 1.0,
+            face_up: Some(0),
+        }
+    }
+
+    #[test]
+    fn a_later_pick_keeps_clear_of_the_picked_strip_its_neighbours_and_the_tools_column() {
+        // C's strip, 150 x 10 x 5 mm, and a cup whose body is 30 mm across.
+        let half = Vector3::new(0.075, 0.005, 0.0025);
+        let picked = at(0.0, 0.0, 0.0);
+        let spot = PickSpot {
+            t_s: 1.0,
+            world_from_part: picked.world_from_part,
+            tool_path_m: [Vector3::new(0.0, 0.0, 0.1), Vector3::new(0.0, 0.0, 0.005)],
+        };
+        let detections = [
+            picked.clone(),
+            // Parallel, 27 mm off centre: 17 mm of floor between the two, 7 mm beyond the
+            // hand's body over the cup.
+            at(0.0, 0.027, 0.0),
+            // Lying across the picked strip's end, reaching 70 mm to one side.
+            at(0.070, -0.070, std::f64::consts::FRAC_PI_2),
+            // Touching that one's far end, 130 mm from the picked strip: it may be knocked.
+            at(0.070 + 0.005 + 0.075, -0.140, 0.0),
+            // Parallel on the other side, 13 mm off centre: 3 mm of floor, less than the margin.
+            at(-0.080, -0.013, 0.0),
+            // End to end beyond the tool's column, 20 mm gap.
+            at(0.170, 0.0, 0.0),
+        ];
+        let keep = clear_of_picks(&detections, &[&spot], &half, 0.015);
+        assert_eq!(keep, [false, true, false, false, false, true]);
+        // The column: a short part 10 mm beside the cup, clear of the picked strip's box by
+        // 5 mm, is not clear of the 15 mm body over the cup.
+        let small = Vector3::new(0.0025, 0.0025, 0.0025);
+        let cube = at(0.0, 0.0125, 0.0);
+        let spot_small = PickSpot {
+            world_from_part: Isometry3::translation(0.0, 0.0, 0.0025),
+            ..spot.clone()
+        };
+        assert_eq!(
+            clear_of_picks(std::slice::from_ref(&cube), &[&spot_small], &small, 0.015),
+            [false]
+        );
+        // Control: with a thin hand (2 mm body) it is clear.
+        assert_eq!(clear_of_picks(&[cube], &[&spot_small], &small, 0.001), [true]);
     }
 }

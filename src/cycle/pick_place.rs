@@ -14,7 +14,7 @@
 //!
 //! Units: s, m, rad. Frames: world.
 
-use nalgebra::Vector3;
+use nalgebra::Isometry3;
 
 use super::events::{Event, PlacementError, Planned, Stage, StallCause};
 use super::motions::{PlaceMotion, Prepared};
@@ -23,7 +23,7 @@ use super::outcome::{NoSeal, Outcome, Slip, WrongPose};
 use super::play::{Capture, Played, Segment, Valve};
 use super::records::StageCompute;
 use super::records::{IntervalCause, PickRecord};
-use super::{CycleError, Run};
+use super::{CycleError, PickSpot, Run};
 use crate::physics::suction::GripperEvent;
 use crate::robot::JointVector;
 use crate::trajectory::Motion;
@@ -39,14 +39,14 @@ pub(super) struct PickEnd {
 
 impl Run<'_, '_> {
     /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute, aimed
-    /// at the part recognised at `aimed_m` [m, world], after the last Place's part `late` (when
+    /// at the part recognised at `aimed` (`world_from_part`, m), after the last Place's part `late` (when
     /// its retreat runs into this Pick): stalls, motions, outcome.
     pub(super) fn pick_and_place(
         &mut self,
         prep: &Prepared,
         charged: StageCompute,
         ready_s: f64,
-        aimed_m: Option<Vector3<f64>>,
+        aimed: Option<Isometry3<f64>>,
         late: Option<LatePlacement>,
         rec: &mut PickRecord,
     ) -> Result<PickEnd, CycleError> {
@@ -55,7 +55,7 @@ impl Run<'_, '_> {
         if prep.retreat_blend.is_none() {
             self.idle_until(pick_ready.max(self.st.world.time_s()))?;
         }
-        let (outcome, end) = self.motions(prep, rec, place_ready, aimed_m, late)?;
+        let (outcome, end) = self.motions(prep, rec, place_ready, aimed, late)?;
         // Compute for the next pick may start with this Place if it went as planned.
         self.st.compute_from_s = match (&outcome, self.st.planned_end_q) {
             (Outcome::Placed, Some(_)) => self.st.compute_from_s,
@@ -214,7 +214,7 @@ impl Run<'_, '_> {
         prep: &Prepared,
         rec: &mut PickRecord,
         place_ready: f64,
-        aimed_m: Option<Vector3<f64>>,
+        aimed: Option<Isometry3<f64>>,
         late: Option<LatePlacement>,
     ) -> Result<(Outcome, PickEnd), CycleError> {
         self.st.arm.max_error_rad = 0.0;
@@ -238,7 +238,7 @@ impl Run<'_, '_> {
             }
         }
         let t_pick = self.st.world.time_s();
-        if let Some(o) = self.pick(prep, rec, t_pick, aimed_m)? {
+        if let Some(o) = self.pick(prep, rec, t_pick, aimed)? {
             return Ok((o, end));
         }
         let (outcome, next) = self.lift_and_place(prep, rec, t_pick, place_ready)?;
@@ -262,7 +262,7 @@ impl Run<'_, '_> {
         prep: &Prepared,
         rec: &mut PickRecord,
         t_pick: f64,
-        aimed_m: Option<Vector3<f64>>,
+        aimed: Option<Isometry3<f64>>,
     ) -> Result<Option<Outcome>, CycleError> {
         let hand = self.cell.hand;
         self.st.planned_end_q = None;
@@ -283,8 +283,16 @@ impl Run<'_, '_> {
         }
         // From here on the pile is touched: results captured before do not show it.
         let t_descent = self.st.world.time_s();
-        if let Some(c) = aimed_m {
-            self.st.pick_spots.push((t_descent, c));
+        if let Some(world_from_part) = aimed {
+            let g = &prep.grasp;
+            self.st.pick_spots.push(PickSpot {
+                t_s: t_descent,
+                world_from_part,
+                tool_path_m: [
+                    g.world_from_tool_approach.translation.vector,
+                    g.world_from_tool.translation.vector,
+                ],
+            });
         }
         if let Played::Failed(o) = self.play(&down)? {
             self.pick_done(rec, t_pick);
