@@ -229,6 +229,8 @@ pub enum Event {
     PhysicsFault(PhysicsFault),
     /// The pick tray was agitated (the how-manieth in a row).
     Agitation(u32),
+    /// The hopper began to pour this many parts onto the pile (the arm waits out of the view).
+    Dose(usize),
     /// A pick looks for a part in a recognition result: how many picks the result has served
     /// before, and how many picks went into the pile after its capture (the parts near them
     /// are left out).
@@ -295,6 +297,7 @@ impl Event {
             Event::Refill(_) => "refill",
             Event::PhysicsFault(_) => "physics_fault",
             Event::Agitation(_) => "agitation",
+            Event::Dose(_) => "dose",
             Event::ResultUsed { .. } => "result_used",
             Event::PlaceTrayExchange => "place_tray_exchange",
             Event::Outcome(_) => "outcome",
@@ -405,6 +408,7 @@ impl fmt::Display for Event {
             Event::Refill(pile) => write!(f, "pile {pile}"),
             Event::PhysicsFault(fault) => write!(f, "{fault}"),
             Event::Agitation(k) => write!(f, "the pick tray shaken (number {k} in a row)"),
+            Event::Dose(parts) => write!(f, "{parts} parts poured from the hopper"),
             Event::ResultUsed { taken, since_capture } => write!(
                 f,
                 "{taken} pick(s) from this result before, {since_capture} into the pile since its capture"

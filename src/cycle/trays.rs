@@ -241,6 +241,7 @@ impl Run<'_, '_> {
     fn dose(&mut self, parts: usize, dose_s: f64) -> Result<(), CycleError> {
         self.forget_pile();
         let t0 = self.st.world.time_s();
+        self.event(Event::Dose(parts));
         let n = self.st.trays.doses as u64 + 1;
         // Its own seed per dose, apart from the refills' (which add multiples of another odd
         // constant to the run seed).

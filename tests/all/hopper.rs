@@ -86,10 +86,17 @@ struct Doses {
     dose_spans_s: Vec<f64>,
     /// Each pick-tray refill's span (s).
     refill_spans_s: Vec<f64>,
+    /// The parts of each dose the event log reported, and when.
+    dose_events: Vec<(f64, usize)>,
+    /// When each dose's wait began (s).
+    dose_starts_s: Vec<f64>,
 }
 
 impl Observer for Doses {
-    fn event(&mut self, _t_s: f64, _pick: Option<usize>, event: &Event) {
+    fn event(&mut self, t_s: f64, _pick: Option<usize>, event: &Event) {
+        if let Event::Dose(parts) = event {
+            self.dose_events.push((t_s, *parts));
+        }
         if let Event::RecognitionReady { detected, .. } = event {
             self.last_detected = Some(*detected);
             self.detected.push(*detected);
@@ -99,6 +106,7 @@ impl Observer for Doses {
         if stage == Stage::Stall && label == "hopper dose" {
             self.before_dose.push(self.last_detected);
             self.dose_spans_s.push(end_s - start_s);
+            self.dose_starts_s.push(start_s);
         }
         if stage == Stage::Stall && label == "pick tray refill" {
             self.refill_spans_s.push(end_s - start_s);
@@ -157,6 +165,20 @@ fn the_hopper_doses_only_below_its_threshold_and_keeps_the_pile_from_running_dry
     let (with, seen) = run::<Doses>("B", 60, hopper(threshold));
     assert!(with.doses >= 2, "doses {}", with.doses);
     assert_eq!(seen.before_dose.len(), with.doses);
+    // The event log names each dose, with its parts, where its wait begins.
+    assert_eq!(seen.dose_events.len(), with.doses);
+    assert!(
+        seen.dose_events.iter().all(|&(_, parts)| parts == 6),
+        "{:?}",
+        seen.dose_events
+    );
+    assert!(
+        seen.dose_events.iter().zip(&seen.dose_starts_s).all(|(e, s)| e.0 == *s),
+        "{:?} {:?}",
+        seen.dose_events,
+        seen.dose_starts_s
+    );
+    assert!(seen_without.dose_events.is_empty());
     // Every dose followed a result that showed fewer parts than the threshold.
     for d in &seen.before_dose {
         assert!(
