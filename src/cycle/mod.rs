@@ -239,7 +239,7 @@ impl ArmState {
 
 /// A pick that went into the pile, as the cell knows it: the part as recognised and the tool's
 /// way in. A later pick from an image taken before it keeps clear of what it may have moved
-/// ([`next_pick`]).
+/// (see `Run::usable` in the cycle's `next_pick` module).
 #[derive(Debug, Clone)]
 pub struct PickSpot {
     /// When the descent began (s).
