@@ -39,8 +39,8 @@ pub(super) struct PickEnd {
 
 impl Run<'_, '_> {
     /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute, aimed
-    /// at the part recognised at `aimed` (`world_from_part`, m), after the last Place's part `late` (when
-    /// its retreat runs into this Pick): stalls, motions, outcome.
+    /// at the part recognised at `aimed` (`world_from_part`, m), after the last Place's part
+    /// `late` (when its retreat runs into this Pick): stalls, motions, outcome.
     pub(super) fn pick_and_place(
         &mut self,
         prep: &Prepared,
