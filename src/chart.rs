@@ -172,6 +172,8 @@ const TOP: f64 = 48.0;
 const LANE_H: f64 = 36.0;
 const AXIS_H: f64 = 44.0;
 const CHAR_W: f64 = 6.0;
+/// Width of a character of a marker's 10 px label, an estimate (px).
+const MARKER_CHAR_W: f64 = 5.5;
 
 /// Renders the spans (and markers) whose time overlaps [t0_s, t1_s] as a standalone SVG document.
 ///
@@ -257,8 +259,10 @@ pub fn time_chart_svg(title: &str, spans: &[Span], markers: &[Marker], t0_s: f64
             out!("<text x=\"{tx:.1}\" y=\"{ty:.1}\" text-anchor=\"middle\" font-size=\"11\">{text}</text>");
         }
     }
-    // Event markers.
+    // Event markers. A label that would run into the one before is left out (its line keeps it
+    // as a tooltip): releases a second apart at a 40 s scale would print over each other.
     let (line_top, marker_label_y) = (TOP - 4.0, TOP - 7.0);
+    let mut labels_end_x = f64::NEG_INFINITY;
     for m in markers
         .iter()
         .filter(|m| m.t_s.is_finite() && m.t_s >= t0 && m.t_s <= t1)
@@ -266,8 +270,13 @@ pub fn time_chart_svg(title: &str, spans: &[Span], markers: &[Marker], t0_s: f64
         let (x, label) = (x_of(m.t_s), escape(&m.label));
         out!(
             "<line class=\"marker\" x1=\"{x:.1}\" y1=\"{line_top:.1}\" x2=\"{x:.1}\" y2=\"{lanes_bottom:.1}\" \
-             stroke=\"#cc0000\" stroke-dasharray=\"4 3\"/>"
+             stroke=\"#cc0000\" stroke-dasharray=\"4 3\"><title>{label}</title></line>"
         );
+        let half_w = m.label.chars().count() as f64 * MARKER_CHAR_W / 2.0;
+        if x - half_w < labels_end_x + 4.0 {
+            continue;
+        }
+        labels_end_x = x + half_w;
         out!(
             "<text x=\"{x:.1}\" y=\"{marker_label_y:.1}\" text-anchor=\"middle\" font-size=\"10\" \
              fill=\"#cc0000\">{label}</text>"
@@ -346,6 +355,25 @@ mod tests {
             plot_w / 4.0
         )));
         assert!(svg.contains("-1.000 s to 0.500 s (1.500 s)"));
+    }
+
+    #[test]
+    fn marker_labels_that_would_overlap_are_left_to_their_lines_tooltip() {
+        // Over 40 s, releases 0.3 s apart are 8 px apart: each keeps its line and tooltip, only
+        // every few gets a printed label; releases 4 s apart (a hundred px) all get one.
+        let marker = |t_s: f64, k: usize| Marker {
+            t_s,
+            label: format!("release {k}"),
+        };
+        let close: Vec<Marker> = (0..10).map(|k| marker(10.0 + 0.3 * k as f64, k)).collect();
+        let svg = time_chart_svg("close", &[span(Lane::Pick, 0.0, 40.0, "")], &close, 0.0, 40.0);
+        let printed = svg.matches("fill=\"#cc0000\">release").count();
+        assert_eq!(svg.matches("<title>release").count(), 10);
+        assert!((2..=4).contains(&printed), "{printed} labels printed");
+        // Control: far apart, every label is printed.
+        let far: Vec<Marker> = (0..10).map(|k| marker(2.0 + 4.0 * k as f64, k)).collect();
+        let svg = time_chart_svg("far", &[span(Lane::Pick, 0.0, 40.0, "")], &far, 0.0, 40.0);
+        assert_eq!(svg.matches("fill=\"#cc0000\">release").count(), 10);
     }
 
     #[test]
