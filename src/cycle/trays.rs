@@ -204,11 +204,7 @@ impl Run<'_, '_> {
             .wrapping_add(fill.wrapping_mul(0x9E37_79B9_7F4A_7C15));
         // The new pile falls in at the exchange's start and rests for the rest of it: the
         // exchange takes `refill_s`, however long the physics takes to settle it.
-        self.pour(PileOptions::into_running_cell(self.cell.pile_count, seed))?;
-        self.st.trays.pouring = true;
-        let rested = self.idle_until(t + self.cell.scene.cycle.refill_s);
-        self.st.trays.pouring = false;
-        rested?;
+        self.pour(self.cell.pile_count, seed, t + self.cell.scene.cycle.refill_s)?;
         self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
         self.st.arm.free_s = self.st.world.time_s();
         self.st.compute_from_s = self.st.world.time_s();
@@ -251,11 +247,7 @@ impl Run<'_, '_> {
             .seed
             .wrapping_add(n.wrapping_mul(0xD1B5_4A32_D192_ED03))
             .rotate_left(17);
-        self.pour(PileOptions::into_running_cell(parts, seed))?;
-        self.st.trays.pouring = true;
-        let waited = self.idle_until(t0 + dose_s);
-        self.st.trays.pouring = false;
-        waited?;
+        self.pour(parts, seed, t0 + dose_s)?;
         self.span(Stage::Stall, t0, self.st.world.time_s(), "hopper dose");
         let trays = &mut self.st.trays;
         trays.doses += 1;
@@ -266,18 +258,23 @@ impl Run<'_, '_> {
         Ok(())
     }
 
-    /// Pours a refill or a dose through the physics. A part that bounces out of the tray is
-    /// lost, as one dragged out by a pick: taken out of the cell and counted, and the cell goes
-    /// on (a feeder spills now and then; it does not end the shift).
-    fn pour(&mut self, opts: PileOptions) -> Result<(), CycleError> {
+    /// Pours a refill or a dose of `count` parts (pile seed `seed`) through the physics, then
+    /// waits, the arm still, until `until_s` (s): the cell's set time, not the pile's settling
+    /// ([`PileOptions::into_running_cell`]). A part that bounces out of the tray meanwhile is
+    /// lost to the pour, as one dragged out by a pick: taken out of the cell and counted, and the
+    /// cell goes on (a feeder spills now and then; it does not end the shift).
+    fn pour(&mut self, count: usize, seed: u64, until_s: f64) -> Result<(), CycleError> {
         let obs = &mut *self.obs;
         let report = self
             .st
             .world
-            .build_pile_observed(&opts, &mut |w| obs.stepped(w))
+            .build_pile_observed(&PileOptions::into_running_cell(count, seed), &mut |w| obs.stepped(w))
             .map_err(CycleError::Pour)?;
         self.lose_spilled(report.spilled);
-        Ok(())
+        self.st.trays.pouring = true;
+        let waited = self.idle_until(until_s);
+        self.st.trays.pouring = false;
+        waited
     }
 
     /// Counts and reports the parts a pour spilled out of the pick tray (the first pile's
