@@ -19,8 +19,8 @@
 //! pinned down (both edges of an axis hidden) or whose yaw is open by more than the model's
 //! `yaw_span_max_rad` (the cell file's `sensor.max_yaw_ambiguity_deg`, [`YAW_SPAN_MAX_RAD`] by
 //! default) is no hypothesis; (6) a hypothesis reaching under the tray floor is impossible; the
-//! others are rendered by ray casting the model into the depth image (each ray at the pieces whose
-//! image box holds its pixel) and compared: agreeing within [`AGREE_TOL_M`] (3 sigma of the depth
+//! others are rendered into the depth image (a primitive model by ray casting, each ray at the
+//! pieces whose image box holds its pixel; a mesh model by rasterizing its triangles) and compared: agreeing within [`AGREE_TOL_M`] (3 sigma of the depth
 //! noise), measured in front (occluded, allowed) or measured behind (a contradiction, unless the
 //! ray only grazes a lead); score = agree / (agree + contradict), evidence = agree - 3 contradict;
 //! (7) per patch the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no
@@ -1319,6 +1319,23 @@ impl<'a> Cloud<'a> {
             clamp(u0, self.u0, self.w),
             clamp(u1, self.u0, self.w).min(self.u0 + self.w - 1),
         );
+        if let Some(mesh) = &model.mesh {
+            if us > ue || vs > ve {
+                return Some(());
+            }
+            let camera_from_part = self.camera.world_from_camera.inverse() * pose;
+            let depth = mesh.depths(self.camera, &camera_from_part, [us, ue], [vs, ve], stride);
+            let nu = (ue - us) / stride + 1;
+            for (j, v) in (vs..=ve).step_by(stride).enumerate() {
+                for (i, u) in (us..=ue).step_by(stride).enumerate() {
+                    let z = depth[j * nu + i];
+                    if z.is_finite() {
+                        at((v - self.v0) * self.w + (u - self.u0), z, false);
+                    }
+                }
+            }
+            return Some(());
+        }
         for v in (vs..=ve).step_by(stride) {
             let y = v as f64 + 0.5;
             in_row.clear();

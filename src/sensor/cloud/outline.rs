@@ -221,7 +221,7 @@ impl Outline {
 
     /// The cell of the field under `p` (face frame): its four corner distances, where `p` lies
     /// in it, and how far `p` lies beyond the grid (m, zero inside).
-    #[inline]
+    #[inline(always)]
     fn cell(&self, f: &Field, p: [f64; 2]) -> Cell {
         let gx = (p[0] - self.origin[0]) / CELL_M;
         let gy = (p[1] - self.origin[1]) / CELL_M;
@@ -246,7 +246,7 @@ impl Outline {
 
     /// The field's distance at `p` (face frame), bilinear between cell centres; beyond the
     /// grid, the edge's distance plus the way out to it.
-    #[inline]
+    #[inline(always)]
     fn value(&self, f: &Field, p: [f64; 2]) -> f64 {
         self.cell(f, p).value()
     }
@@ -264,6 +264,7 @@ struct Cell {
 
 impl Cell {
     /// The bilinear distance in the cell (m).
+    #[inline(always)]
     fn distance(&self) -> f64 {
         let ([d00, d10, d01, d11], [fx, fy]) = (self.d, self.frac);
         d00 * (1.0 - fx) * (1.0 - fy) + d10 * fx * (1.0 - fy) + d01 * (1.0 - fx) * fy + d11 * fx * fy
@@ -271,6 +272,7 @@ impl Cell {
 
     /// The field's distance at the point: bilinear in the grid; beyond it, the edge's distance
     /// plus the way out to it (m).
+    #[inline(always)]
     fn value(&self) -> f64 {
         match self.beyond() {
             Some((out, _)) => self.distance() + out,
@@ -279,6 +281,7 @@ impl Cell {
     }
 
     /// The gradient of [`Cell::value`]: the bilinear one in the grid, the way out beyond it.
+    #[inline(always)]
     fn gradient(&self) -> [f64; 2] {
         match self.beyond() {
             Some((_, g)) => g,
@@ -292,6 +295,7 @@ impl Cell {
     }
 
     /// Beyond the grid: how far (m), and the way out (unit).
+    #[inline(always)]
     fn beyond(&self) -> Option<(f64, [f64; 2])> {
         let [ox, oy] = self.out;
         if ox == 0.0 && oy == 0.0 {
