@@ -187,11 +187,16 @@ impl Run<'_, '_> {
     pub(super) fn step(&mut self) -> Result<Option<HealthEvent>, CycleError> {
         let result = self.st.world.step();
         self.obs.stepped(&self.st.world);
-        if let Some(job) = self.st.pending.as_mut()
-            && let Some(problem) = self.st.sensor.watch(job, &self.st.world)
-        {
-            self.event(Event::CaptureSpoiled(problem));
+        if let Some(job) = self.st.pending.as_mut() {
+            if let Some(confirm) = job.confirm.as_mut() {
+                // A confirming exposure the arm enters is not used (the check falls back).
+                self.st.sensor.watch(confirm, &self.st.world);
+            }
+            if let Some(problem) = self.st.sensor.watch(job, &self.st.world) {
+                self.event(Event::CaptureSpoiled(problem));
+            }
         }
+        self.maybe_confirm();
         let Err(report) = result else {
             return Ok(None);
         };

@@ -8,6 +8,19 @@
 //! again at once. When the arm stands in the view with nothing pending (at the start, after a
 //! fault), move it home first.
 //!
+//! New holes are also what a pile shows after the cell's own disturbance (an agitation, a dose,
+//! a pick) with nothing moving: steep faces turned up. So an image that shows new holes at the
+//! end of its exposure is confirmed by a second exposure right after it, while its recognition
+//! runs, if the arm is out of the view: holes in one image only are a pile in motion, and so
+//! are holes in both wider than a face steeper than the grazing angle can look (a part sliding
+//! slowly through both exposures, blurred in both); the rest are still steep faces, and the image
+//! is picked from. The second exposure costs the cycle nothing (it ends 2 exposures after the
+//! trigger, within the sensor's latency); where the arm enters the view during it, or the
+//! latency is shorter, the check falls back to the new holes against the image before. A part
+//! whose smallest extent is no wider than its steepest face can look (C's 5 mm strips, whose
+//! 150 x 10 mm face stood on end looks 10 mm wide) is not confirmed: a still hole and a moving
+//! part look alike.
+//!
 //! Units: s, rad. Frames: world.
 
 use nalgebra::{Isometry3, Translation3};
@@ -163,6 +176,36 @@ impl Run<'_, '_> {
         }
     }
 
+    /// At the end of the pending capture's exposure: if its image shows new holes over the tray
+    /// (as many as a pile in motion) and the arm is out of the view, takes the confirming
+    /// exposure (see the module's header). Once per capture.
+    pub(super) fn maybe_confirm(&mut self) {
+        let now = self.st.world.time_s();
+        let st = &mut self.st;
+        let Some(job) = st.pending.as_mut() else { return };
+        if job.confirm_decided || job.spoiled.is_some() || now + 1e-9 < job.exposure_end_s {
+            return;
+        }
+        job.confirm_decided = true;
+        // After two recaptures in a row the image is picked from whatever it shows; and a part
+        // whose still holes may be as wide as a moving one's is not confirmed.
+        if st.moving_in_a_row >= MOTION_RECAPTURES || !st.sensor.confirms() {
+            return;
+        }
+        job.apply_blur();
+        if st.sensor.unseen_hole_px(&job.capture) < st.sensor.motion_hole_min_px() {
+            return;
+        }
+        let Ok(confirm) = st.sensor.trigger(&st.world) else {
+            return;
+        };
+        self.event(Event::Capture(confirm.capture.id));
+        self.obs.captured(&confirm.capture);
+        if let Some(job) = self.st.pending.as_mut() {
+            job.confirm = Some(Box::new(confirm));
+        }
+    }
+
     /// Takes the pending capture's result into hand if it has arrived by now (a newer result
     /// replaces the one in hand).
     pub(super) fn collect_ready(&mut self) {
@@ -198,8 +241,18 @@ impl Run<'_, '_> {
         let detections = self.st.sensor.result(&mut job, self.st.world.time_s());
         let recognition_wall_s = wall.elapsed().as_secs_f64();
         // New holes in the image: something moved during the exposure. Looked at again, up to
-        // [`MOTION_RECAPTURES`] times in a row; a hole that stays put is a steep face.
-        let new_holes = self.st.sensor.new_hole_px(&job.capture);
+        // [`MOTION_RECAPTURES`] times in a row; a hole that stays put is a steep face. With a
+        // confirming exposure whole (the arm kept out of it), the holes that are in one of the
+        // two images only.
+        let new_holes = match job.confirm.take() {
+            Some(mut confirm) if confirm.spoiled.is_none() && confirm.exposure_end_s <= job.ready_s + 1e-9 => {
+                confirm.apply_blur();
+                let confirm_s = confirm.exposure_end_s - self.st.sensor.exposure_s;
+                self.span(Stage::Sensor, confirm_s, confirm.exposure_end_s, "confirming exposure");
+                self.st.sensor.changed_hole_px(&job.capture, &confirm.capture)
+            }
+            _ => self.st.sensor.new_hole_px(&job.capture),
+        };
         if new_holes >= self.st.sensor.motion_hole_min_px() && self.st.moving_in_a_row < MOTION_RECAPTURES {
             self.st.moving_in_a_row += 1;
             self.st.sensor.spoiled += 1;

@@ -88,6 +88,60 @@ pub enum CaptureProblem {
 /// and up to 5,210 (C).
 pub const MOTION_HOLE_MIN_M2: f64 = 20.0 * 0.00143 * 0.00143;
 
+/// The pixels of `mask` (rows of `width` pixels) in a part of it wider than `width_px - 1`:
+/// those in a `width_px` x `width_px` square of set pixels (every square that fits, each of its
+/// pixels counted once).
+fn wide_px(mask: &[bool], width: usize, width_px: usize) -> usize {
+    if width == 0 || width_px == 0 {
+        return 0;
+    }
+    let height = mask.len() / width;
+    // Set pixels in a run of at least `width_px` along the row, then of such rows down a column:
+    // the top-left corners of full squares.
+    let mut run_x = vec![0usize; mask.len()];
+    for v in 0..height {
+        let mut run = 0;
+        for u in (0..width).rev() {
+            run = if mask[v * width + u] { run + 1 } else { 0 };
+            run_x[v * width + u] = run;
+        }
+    }
+    let mut corner = vec![false; mask.len()];
+    for u in 0..width {
+        let mut run = 0;
+        for v in (0..height).rev() {
+            run = if run_x[v * width + u] >= width_px { run + 1 } else { 0 };
+            corner[v * width + u] = run >= width_px;
+        }
+    }
+    // Every pixel of a square with its corner set: spread the corners right, then down.
+    let mut covered = vec![false; mask.len()];
+    for v in 0..height {
+        let mut left = 0;
+        for u in 0..width {
+            left = if corner[v * width + u] {
+                width_px
+            } else {
+                left.saturating_sub(1)
+            };
+            covered[v * width + u] = left > 0;
+        }
+    }
+    let mut count = 0;
+    for u in 0..width {
+        let mut up = 0;
+        for v in 0..height {
+            up = if covered[v * width + u] {
+                width_px
+            } else {
+                up.saturating_sub(1)
+            };
+            count += (up > 0) as usize;
+        }
+    }
+    count
+}
+
 /// A capture in progress: exposing, then processing, then ready (or spoiled).
 #[derive(Debug, Clone)]
 pub struct CaptureJob {
@@ -107,6 +161,13 @@ pub struct CaptureJob {
     moved_m: Vec<f64>,
     /// The blurred parts' pixels have been emptied from `capture` (once the exposure ended).
     blur_applied: bool,
+    /// A confirming exposure taken right after this one, when this image showed new holes
+    /// over the tray at its end (see `cycle::sensing`): holes in both images are static (steep
+    /// faces), holes in one only are a pile in motion.
+    pub confirm: Option<Box<CaptureJob>>,
+    /// Whether the image was checked for new holes at its exposure's end (and the confirming
+    /// exposure taken if they call for one).
+    pub confirm_decided: bool,
 }
 
 impl CaptureJob {
@@ -121,9 +182,10 @@ impl CaptureJob {
     }
 
     /// Empties the pixels of the parts blurred during the exposure (no return), once: the image
-    /// as the sensor delivers it. Plant simulation: the ground-truth tag per pixel says which
-    /// pixels a moving part smeared; nothing downstream reads the tags.
-    fn apply_blur(&mut self) {
+    /// as the sensor delivers it (call it once the exposure has ended). Plant simulation: the
+    /// ground-truth tag per pixel says which pixels a moving part smeared; nothing downstream
+    /// reads the tags.
+    pub fn apply_blur(&mut self) {
         if self.blur_applied {
             return;
         }
@@ -184,6 +246,40 @@ pub struct Sensor {
     pub spoiled: u64,
     /// The hole pixels of the last image checked for motion ([`Sensor::new_hole_px`]).
     holes_seen: Vec<bool>,
+    /// How wide a hole a still part can leave (px at the tray floor): a face steeper than the
+    /// grazing angle, at most [`steep_face_width_m`] of the part's box. `None` unless a part in
+    /// motion leaves one at least twice as wide (its [`mean_thickness_m`]): a confirming
+    /// exposure could not tell the two apart, and is not taken.
+    static_hole_max_px: Option<usize>,
+}
+
+/// A part's mean thickness across its box's largest face (m): its volume over that face's area.
+/// What a part in motion leaves as a hole is its silhouette, at least about this wide; its box's
+/// smallest edge can be much more (a relay's 7 mm body under pins in a 10 mm box, a DIP's 3.3
+/// mm body between legs in a 6.8 mm box).
+pub fn mean_thickness_m(size_m: [f64; 3], volume_m3: f64) -> f64 {
+    let largest_face_m2 = (size_m[0] * size_m[1])
+        .max(size_m[1] * size_m[2])
+        .max(size_m[0] * size_m[2]);
+    if largest_face_m2 > 0.0 {
+        volume_m3 / largest_face_m2
+    } else {
+        0.0
+    }
+}
+
+/// The widest a face steeper than the grazing angle `grazing_rad` can look from above (m), for a
+/// part whose box has the edges `size_m`: a face of edges (a, b) tipped about its edge a shows
+/// a by b cos(grazing), at most min(a, b cos(grazing)) across; the widest over the box's faces
+/// and both edges.
+pub fn steep_face_width_m(size_m: [f64; 3], grazing_rad: f64) -> f64 {
+    let c = grazing_rad.cos();
+    let mut widest = 0.0f64;
+    for (i, j) in [(0, 1), (1, 2), (0, 2)] {
+        let (a, b) = (size_m[i], size_m[j]);
+        widest = widest.max(a.min(b * c)).max(b.min(a * c));
+    }
+    widest
 }
 
 impl Sensor {
@@ -221,6 +317,21 @@ impl Sensor {
             let step_m = cloud::ppf::STEP_PX * camera.pixel_size_at_m(z);
             model = model.with_ppf(mesh, step_m);
         }
+        // The widest hole a still part can leave, where a moving part's is twice as wide.
+        let static_hole_max_px = {
+            let floor = world.pick_tray().world_from_tray.translation.vector;
+            let z = (floor - camera.world_from_camera.translation.vector)
+                .dot(&(camera.world_from_camera.rotation * nalgebra::Vector3::z()));
+            let pixel_m = camera.pixel_size_at_m(z);
+            let size_m = workpiece.size_m;
+            let steep_px = (steep_face_width_m(size_m, camera.dropout_grazing_rad) / pixel_m).ceil() as usize;
+            let solid = world.part_shape().mesh.as_deref().or(primitive.as_ref());
+            let volume_m3 = solid
+                .and_then(|m| crate::part::mass::mass_properties(m, crate::part::mass::MassSpec::DensityKgM3(1.0)))
+                .map_or(0.0, |p| p.volume_m3);
+            let thinnest_px = (mean_thickness_m(size_m, volume_m3) / pixel_m).floor() as usize;
+            (thinnest_px >= 2 * steep_px).then_some(steep_px)
+        };
         Some(Sensor {
             frustum: ViewFrustum::over_tray(world.pick_tray(), &camera)?,
             background: std::sync::Arc::new(Background::new(world, &camera)),
@@ -238,6 +349,7 @@ impl Sensor {
             triggered: 0,
             spoiled: 0,
             holes_seen: Vec::new(),
+            static_hole_max_px,
         })
     }
 
@@ -257,6 +369,8 @@ impl Sensor {
             truth,
             moved_m: vec![0.0; world.part_count()],
             blur_applied: false,
+            confirm: None,
+            confirm_decided: false,
         })
     }
 
@@ -360,14 +474,42 @@ impl Sensor {
     /// checked: a static hole (a steep face) shows in both, a part that moved during one
     /// exposure only in that one. Remembers this image's holes for the next call.
     pub fn new_hole_px(&mut self, capture: &Capture) -> usize {
-        let holes = self.hole_px(capture);
-        let new = holes
+        let new = self.unseen_hole_px(capture);
+        self.holes_seen = self.hole_px(capture);
+        new
+    }
+
+    /// [`Sensor::new_hole_px`] without remembering: the count alone.
+    pub fn unseen_hole_px(&self, capture: &Capture) -> usize {
+        self.hole_px(capture)
             .iter()
             .enumerate()
             .filter(|(i, h)| **h && !self.holes_seen.get(*i).copied().unwrap_or(false))
-            .count();
-        self.holes_seen = holes;
-        new
+            .count()
+    }
+
+    /// Whether a confirming exposure can tell a still pile's holes from a moving one's (see
+    /// `static_hole_max_px`).
+    pub fn confirms(&self) -> bool {
+        self.static_hole_max_px.is_some()
+    }
+
+    /// The hole pixels that show motion between two images of the same view (`image` then
+    /// `confirming`, exposed one after the other): those in one image only (a part that moved
+    /// during either exposure), and those in both that lie in a hole wider than a still part's
+    /// steep face can leave (a part moving slowly through both exposures, blurred in both).
+    /// Remembers `image`'s holes as [`Sensor::new_hole_px`] does. Every hole counts where the
+    /// part does not allow the distinction ([`Sensor::confirms`]).
+    pub fn changed_hole_px(&mut self, image: &Capture, confirming: &Capture) -> usize {
+        let (a, b) = (self.hole_px(image), self.hole_px(confirming));
+        let both: Vec<bool> = a.iter().zip(&b).map(|(x, y)| *x && *y).collect();
+        let in_both_moving = match self.static_hole_max_px {
+            Some(steep_px) => wide_px(&both, image.width_px, steep_px + 1),
+            None => both.iter().filter(|x| **x).count(),
+        };
+        let changed = a.iter().zip(&b).filter(|(x, y)| x != y).count() + in_both_moving;
+        self.holes_seen = a;
+        changed
     }
 
     /// Recognition from the capture, the camera, the fixed pick tray and the part's model alone:
@@ -382,5 +524,57 @@ impl Sensor {
                 face_up: Some(d.face_up),
             })
             .collect()
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::{steep_face_width_m, wide_px};
+
+    /// `wide_px` counts the pixels of every full square of the mask, as a brute force over every
+    /// square does; control: a strip one pixel narrower than the square counts nothing.
+    #[test]
+    fn wide_pixels_are_those_in_full_squares() {
+        let (w, h) = (23, 17);
+        let mut state = 12345u64;
+        let mut next = || {
+            state = state
+                .wrapping_mul(6364136223846793005)
+                .wrapping_add(1442695040888963407);
+            (state >> 33) % 100
+        };
+        for fill in [50, 80, 95] {
+            let mask: Vec<bool> = (0..w * h).map(|_| next() < fill).collect();
+            for side in [1, 2, 3, 5] {
+                let mut covered = vec![false; w * h];
+                for v in 0..=h - side {
+                    for u in 0..=w - side {
+                        if (0..side).all(|dv| (0..side).all(|du| mask[(v + dv) * w + u + du])) {
+                            for dv in 0..side {
+                                for du in 0..side {
+                                    covered[(v + dv) * w + u + du] = true;
+                                }
+                            }
+                        }
+                    }
+                }
+                let brute = covered.iter().filter(|c| **c).count();
+                assert_eq!(wide_px(&mask, w, side), brute, "fill {fill} %, side {side}");
+            }
+        }
+        // A strip 4 pixels wide holds squares of 4, not of 5.
+        let strip: Vec<bool> = (0..w * h).map(|k| (3..7).contains(&(k % w))).collect();
+        assert_eq!(wide_px(&strip, w, 4), 4 * h);
+        assert_eq!(wide_px(&strip, w, 5), 0);
+    }
+
+    /// A 30 x 30 x 20 mm block's steepest face looks at most 30 cos(80 deg) = 5.2 mm wide; a
+    /// 150 x 10 x 5 mm strip's 150 x 10 mm face stood on end 10 mm (its 10 mm edge is the
+    /// narrower side of that look).
+    #[test]
+    fn a_steep_face_looks_at_most_its_edge_times_the_grazing_cosine_wide() {
+        let g = 80f64.to_radians();
+        assert!((steep_face_width_m([0.03, 0.03, 0.02], g) - 0.03 * g.cos()).abs() < 1e-12);
+        assert!((steep_face_width_m([0.15, 0.01, 0.005], g) - 0.01).abs() < 1e-12);
     }
 }

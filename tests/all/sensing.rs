@@ -516,3 +516,103 @@ fn a_strip_moving_during_the_exposure_leaves_new_holes_and_a_still_pile_none() {
     assert!(moved >= min_px, "a turning strip leaves only {moved} new hole pixels");
     assert_eq!(sensor.new_hole_px(&job.capture), 0, "the hole is new twice");
 }
+
+/// The confirming exposure (`cycle::sensing`): a block tipped up onto a face steeper than the
+/// sensor's grazing angle shows new holes against the image before (the check against that image
+/// alone would take the pile for moving), and the same holes in a second exposure right after it,
+/// so the holes in one of the two images only are too few to be motion. Negative controls: a
+/// block turning during the first exposure leaves holes the second exposure does not have; a
+/// block creeping through both exposures leaves a hole in both, wider than a steep face.
+#[test]
+fn a_confirming_exposure_tells_a_steep_face_turned_up_from_a_pile_in_motion() {
+    let (mut w, scene, wp, _) = cell("B", 2);
+    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 2, &wp.workpiece).unwrap();
+    let min_px = sensor.motion_hole_min_px();
+    let exposed = |sensor: &mut Sensor, w: &World| {
+        let mut job = sensor.trigger(w).unwrap();
+        job.apply_blur();
+        job
+    };
+    let before = exposed(&mut sensor, &w);
+    sensor.new_hole_px(&before.capture);
+    // A top-layer block stood up on an edge, a largest face 8 degrees from vertical, 8 cm above
+    // where it lay (clear of the pile): nothing moves during either exposure.
+    let i = binpick::sensor::top_layer(&w)[0];
+    let p = w.part_pose(i);
+    let tipped = Isometry3::from_parts(
+        (p.translation.vector + Vector3::z() * 0.08).into(),
+        nalgebra::UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 82f64.to_radians()),
+    );
+    w.set_part_pose(i, &tipped);
+    // One step brings the colliders the capture sees to the new pose (the block falls 0.1 mm).
+    w.step().unwrap();
+    let image = exposed(&mut sensor, &w);
+    let against_before = sensor.unseen_hole_px(&image.capture);
+    assert!(
+        against_before >= min_px,
+        "the tipped block's steep face shows only {against_before} new hole pixels (min {min_px})"
+    );
+    let confirming = exposed(&mut sensor, &w);
+    let changed = sensor.changed_hole_px(&image.capture, &confirming.capture);
+    assert!(
+        changed < min_px,
+        "a still pile changes {changed} hole pixels between two exposures"
+    );
+
+    let mut moving = sensor.trigger(&w).unwrap();
+    turn_during_exposure(&mut w, &mut sensor, &mut moving, i);
+    assert!(moving.blurred() > 0, "the turning block is not blurred");
+    moving.apply_blur();
+    let after = exposed(&mut sensor, &w);
+    let changed = sensor.changed_hole_px(&moving.capture, &after.capture);
+    assert!(
+        changed >= min_px,
+        "a block turning in the first exposure changes only {changed} hole pixels"
+    );
+
+    // A block creeping 0.6 mm through each of the two exposures is blurred in both, its hole
+    // nearly where it was: the hole, wider than any steep face, is motion all the same.
+    let slide = |w: &mut World, sensor: &mut Sensor, job: &mut binpick::sensor::CaptureJob| {
+        let p = w.part_pose(i);
+        w.set_part_pose(
+            i,
+            &Isometry3::from_parts((p.translation.vector + Vector3::x() * 0.0006).into(), p.rotation),
+        );
+        w.step().unwrap();
+        sensor.watch(job, w);
+        job.apply_blur();
+    };
+    let mut first = sensor.trigger(&w).unwrap();
+    slide(&mut w, &mut sensor, &mut first);
+    let mut second = sensor.trigger(&w).unwrap();
+    slide(&mut w, &mut sensor, &mut second);
+    assert!(
+        first.blurred() > 0 && second.blurred() > 0,
+        "the creeping block is not blurred"
+    );
+    let changed = sensor.changed_hole_px(&first.capture, &second.capture);
+    assert!(
+        changed >= min_px,
+        "a block creeping through both exposures changes only {changed} hole pixels"
+    );
+}
+
+/// Which parts the cell confirms with a second exposure: those whose moving silhouette (their
+/// mean thickness) is at least twice as wide as their steepest still face can look (B's 30 mm
+/// blocks, D's cans), not those where the two can look alike (C's strips, A's relays, E's and
+/// F's 5 mm parts).
+#[test]
+fn a_second_exposure_confirms_only_parts_thicker_than_twice_their_steepest_face() {
+    for (workpiece, confirms) in [
+        ("A", false),
+        ("B", true),
+        ("C", false),
+        ("D", true),
+        ("E", false),
+        ("F", false),
+    ] {
+        let (w, scene, wp, _) = cell(workpiece, 1);
+        let sensor = Sensor::new(&scene.scene.sensor, &w, 1, &wp.workpiece).unwrap();
+        assert_eq!(sensor.confirms(), confirms, "{workpiece}");
+    }
+}
