@@ -187,9 +187,13 @@ impl Run<'_, '_> {
             return;
         }
         job.confirm_decided = true;
-        // After two recaptures in a row the image is picked from whatever it shows; and a part
-        // whose still holes may be as wide as a moving one's is not confirmed.
-        if st.moving_in_a_row >= MOTION_RECAPTURES || !st.sensor.confirms() {
+        // After two recaptures in a row the image is picked from whatever it shows; a part whose
+        // still holes may be as wide as a moving one's is not confirmed; nor is an image whose
+        // result comes before a second exposure could end (a latency under two exposures).
+        if st.moving_in_a_row >= MOTION_RECAPTURES
+            || !st.sensor.confirms()
+            || now + st.sensor.exposure_s > job.ready_s + 1e-9
+        {
             return;
         }
         job.apply_blur();
