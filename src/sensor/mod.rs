@@ -90,56 +90,55 @@ pub const MOTION_HOLE_MIN_M2: f64 = 20.0 * 0.00143 * 0.00143;
 
 /// The pixels of `mask` (rows of `width` pixels) in a part of it wider than `width_px - 1`:
 /// those in a `width_px` x `width_px` square of set pixels (every square that fits, each of its
-/// pixels counted once).
+/// pixels counted once): the mask opened by the square, eroded then dilated along rows and
+/// columns.
 fn wide_px(mask: &[bool], width: usize, width_px: usize) -> usize {
     if width == 0 || width_px == 0 {
         return 0;
     }
     let height = mask.len() / width;
-    // Set pixels in a run of at least `width_px` along the row, then of such rows down a column:
-    // the top-left corners of full squares.
-    let mut run_x = vec![0usize; mask.len()];
-    for v in 0..height {
-        let mut run = 0;
-        for u in (0..width).rev() {
-            run = if mask[v * width + u] { run + 1 } else { 0 };
-            run_x[v * width + u] = run;
-        }
-    }
-    let mut corner = vec![false; mask.len()];
-    for u in 0..width {
-        let mut run = 0;
-        for v in (0..height).rev() {
-            run = if run_x[v * width + u] >= width_px { run + 1 } else { 0 };
-            corner[v * width + u] = run >= width_px;
-        }
-    }
-    // Every pixel of a square with its corner set: spread the corners right, then down.
-    let mut covered = vec![false; mask.len()];
-    for v in 0..height {
-        let mut left = 0;
-        for u in 0..width {
-            left = if corner[v * width + u] {
-                width_px
+    let eroded = along_lines(
+        &along_lines(mask, width, height, width_px, true, true),
+        width,
+        height,
+        width_px,
+        false,
+        true,
+    );
+    let opened = along_lines(
+        &along_lines(&eroded, width, height, width_px, true, false),
+        width,
+        height,
+        width_px,
+        false,
+        false,
+    );
+    opened.iter().filter(|x| **x).count()
+}
+
+/// One pass of a run of `n` pixels along every row (`rows`) or column of a `width` x `height`
+/// mask: eroding, a pixel stays set if the `n` pixels from it on (right or down) are all set;
+/// dilating, a pixel is set if any of the `n` pixels up to it (left or up) is.
+fn along_lines(mask: &[bool], width: usize, height: usize, n: usize, rows: bool, erode: bool) -> Vec<bool> {
+    let (lines, len) = if rows { (height, width) } else { (width, height) };
+    let at = |line: usize, k: usize| if rows { line * width + k } else { k * width + line };
+    let mut out = vec![false; mask.len()];
+    for line in 0..lines {
+        let mut run = 0usize;
+        for step in 0..len {
+            if erode {
+                // From the line's end: the set pixels in a row from here on.
+                let k = len - 1 - step;
+                run = if mask[at(line, k)] { run + 1 } else { 0 };
+                out[at(line, k)] = run >= n;
             } else {
-                left.saturating_sub(1)
-            };
-            covered[v * width + u] = left > 0;
+                // From the line's start: how many pixels on a set one still reaches.
+                run = if mask[at(line, step)] { n } else { run.saturating_sub(1) };
+                out[at(line, step)] = run > 0;
+            }
         }
     }
-    let mut count = 0;
-    for u in 0..width {
-        let mut up = 0;
-        for v in 0..height {
-            up = if covered[v * width + u] {
-                width_px
-            } else {
-                up.saturating_sub(1)
-            };
-            count += (up > 0) as usize;
-        }
-    }
-    count
+    out
 }
 
 /// A capture in progress: exposing, then processing, then ready (or spoiled).
