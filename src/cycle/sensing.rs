@@ -16,10 +16,10 @@
 //! slowly through both exposures, blurred in both); the rest are still steep faces, and the image
 //! is picked from. The second exposure costs the cycle nothing (it ends 2 exposures after the
 //! trigger, within the sensor's latency); where the arm enters the view during it, or the
-//! latency is shorter, the check falls back to the new holes against the image before. A part
-//! whose smallest extent is no wider than its steepest face can look (C's 5 mm strips, whose
-//! 150 x 10 mm face stood on end looks 10 mm wide) is not confirmed: a still hole and a moving
-//! part look alike.
+//! latency is shorter, the check falls back to the new holes against the image before. Only a
+//! part whose mean thickness is at least twice as wide as its steepest face can look is
+//! confirmed (B, D): for the others (C's 5 mm strips, whose 150 x 10 mm face stood on end looks
+//! 10 mm wide) a still hole and a moving part look alike.
 //!
 //! Units: s, rad. Frames: world.
 
@@ -246,8 +246,8 @@ impl Run<'_, '_> {
         let recognition_wall_s = wall.elapsed().as_secs_f64();
         // New holes in the image: something moved during the exposure. Looked at again, up to
         // [`MOTION_RECAPTURES`] times in a row; a hole that stays put is a steep face. With a
-        // confirming exposure whole (the arm kept out of it), the holes that are in one of the
-        // two images only.
+        // confirming exposure whole (the arm kept out of it), the holes in one of the two images
+        // only and those in both wider than a steep face.
         let new_holes = match job.confirm.take() {
             Some(mut confirm) if confirm.spoiled.is_none() && confirm.exposure_end_s <= job.ready_s + 1e-9 => {
                 confirm.apply_blur();

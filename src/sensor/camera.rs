@@ -151,6 +151,12 @@ impl Camera {
     pub fn pixel_size_at_m(&self, z: f64) -> f64 {
         z / self.fx_px.min(self.fy_px)
     }
+
+    /// Size of a pixel at the depth of the world point `p` (m).
+    pub fn pixel_size_at_point_m(&self, p: &Vector3<f64>) -> f64 {
+        let z = (p - self.world_from_camera.translation.vector).dot(&(self.world_from_camera.rotation * Vector3::z()));
+        self.pixel_size_at_m(z)
+    }
 }
 
 #[cfg(test)]

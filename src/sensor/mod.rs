@@ -161,8 +161,7 @@ pub struct CaptureJob {
     /// The blurred parts' pixels have been emptied from `capture` (once the exposure ended).
     blur_applied: bool,
     /// A confirming exposure taken right after this one, when this image showed new holes
-    /// over the tray at its end (see `cycle::sensing`): holes in both images are static (steep
-    /// faces), holes in one only are a pile in motion.
+    /// over the tray at its end (see `cycle::sensing` and [`Sensor::changed_hole_px`]).
     pub confirm: Option<Box<CaptureJob>>,
     /// Whether the image was checked for new holes at its exposure's end (and the confirming
     /// exposure taken if they call for one).
@@ -310,18 +309,13 @@ impl Sensor {
         // a step of `ppf::STEP_PX` pixels at the tray floor.
         if let Some(mesh) = cloud::ppf::ppf_mesh(workpiece.recognition.method, &model, pm.as_ref(), primitive.as_ref())
         {
-            let floor =
-                world.pick_tray().world_from_tray.translation.vector - camera.world_from_camera.translation.vector;
-            let z = floor.dot(&(camera.world_from_camera.rotation * nalgebra::Vector3::z()));
-            let step_m = cloud::ppf::STEP_PX * camera.pixel_size_at_m(z);
+            let step_m = cloud::ppf::STEP_PX
+                * camera.pixel_size_at_point_m(&world.pick_tray().world_from_tray.translation.vector);
             model = model.with_ppf(mesh, step_m);
         }
         // The widest hole a still part can leave, where a moving part's is twice as wide.
         let static_hole_max_px = {
-            let floor = world.pick_tray().world_from_tray.translation.vector;
-            let z = (floor - camera.world_from_camera.translation.vector)
-                .dot(&(camera.world_from_camera.rotation * nalgebra::Vector3::z()));
-            let pixel_m = camera.pixel_size_at_m(z);
+            let pixel_m = camera.pixel_size_at_point_m(&world.pick_tray().world_from_tray.translation.vector);
             let size_m = workpiece.size_m;
             let steep_px = (steep_face_width_m(size_m, camera.dropout_grazing_rad) / pixel_m).ceil() as usize;
             let solid = world.part_shape().mesh.as_deref().or(primitive.as_ref());
@@ -462,10 +456,9 @@ impl Sensor {
     /// New hole pixels that show a pile in motion: [`MOTION_HOLE_MIN_M2`] at the tray floor in
     /// this camera's pixels there.
     pub fn motion_hole_min_px(&self) -> usize {
-        let floor = self.pick_tray.world_from_tray.translation.vector;
-        let z = (floor - self.camera.world_from_camera.translation.vector)
-            .dot(&(self.camera.world_from_camera.rotation * nalgebra::Vector3::z()));
-        let pixel_m = self.camera.pixel_size_at_m(z);
+        let pixel_m = self
+            .camera
+            .pixel_size_at_point_m(&self.pick_tray.world_from_tray.translation.vector);
         ((MOTION_HOLE_MIN_M2 / (pixel_m * pixel_m)).round() as usize).max(1)
     }
 
