@@ -920,10 +920,28 @@ impl<'a> Cloud<'a> {
             return (best.into_iter().collect(), fits);
         }
         let halves = self.halves(patch);
-        let found: Vec<CloudDetection> = halves
+        let mut found: Vec<CloudDetection> = halves
             .iter()
             .filter_map(|half| self.best_hypothesis(half, model).0)
             .collect();
+        // One half found, the other not (cut off the junction, it holds a strip of the first
+        // part): the rest of the patch, its pixels more than a pixel outside the found face, is
+        // tried whole.
+        if let [d] = found.as_slice() {
+            let rest = Patch {
+                pixels: patch
+                    .pixels
+                    .iter()
+                    .copied()
+                    .filter(|&i| self.face_distance_m(model, d, &self.pts[i], false) > self.pixel_m_at(d))
+                    .collect(),
+            };
+            if rest.pixels.len() >= MIN_PATCH_PX
+                && let Some(other) = self.best_hypothesis(&rest, model).0
+            {
+                found.push(other);
+            }
+        }
         // Both, if no pixel lies inside both faces; else either alone: the first that covers the
         // whole patch.
         let apart = |a: &CloudDetection, b: &CloudDetection| {
