@@ -165,6 +165,22 @@ fn two_touching_parts_at_different_heights_are_both_found() {
     assert_found(&w, &found, &b, 0.0008, 5.0);
 }
 
+/// The largest patch of `cloud`, asserting that two parts merged into it: larger than every
+/// face of `m`, and no hypothesis explains it whole.
+fn merged_patch(cloud: &Cloud<'_>, m: &CloudModel) -> Patch {
+    let merged = cloud
+        .segment()
+        .into_iter()
+        .max_by_key(|p| p.pixels.len())
+        .expect("a patch");
+    let (whole, _, larger) = cloud.best_hypothesis(&merged, m);
+    assert!(
+        whole.is_none() && larger,
+        "the two parts did not merge into one patch: {whole:?}"
+    );
+    merged
+}
+
 /// Two parts lying level side by side, one turned a quarter turn to the other, make one patch
 /// whose halves are cut off the junction: one half holds the first part and a strip of the
 /// second, and only the other half is found. The rest of the patch, taken out of the found face,
@@ -180,13 +196,7 @@ fn two_level_parts_cut_off_their_junction_are_both_found() {
     let b = resting(&cell, &w, 0.0077 * c, 0.0077 * s, 0.0, yaw(116.0));
     let capture = synthetic(&cell, &[(&m, a), (&m, b)]);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
-    let patches = cloud.segment();
-    let merged = patches.iter().max_by_key(|p| p.pixels.len()).expect("a patch");
-    let (whole, _, larger) = cloud.best_hypothesis(merged, &m);
-    assert!(
-        whole.is_none() && larger,
-        "the two parts did not merge into one patch: {whole:?}"
-    );
+    let merged = &merged_patch(&cloud, &m);
     let halves_found = cloud
         .halves(merged)
         .iter()
@@ -220,13 +230,7 @@ fn two_parts_lying_level_side_by_side_are_both_found() {
     );
     let capture = synthetic(&cell, &[(&m, a), (&m, b)]);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
-    let patches = cloud.segment();
-    let merged = patches.iter().max_by_key(|p| p.pixels.len()).expect("a patch");
-    let (whole, _, larger) = cloud.best_hypothesis(merged, &m);
-    assert!(
-        whole.is_none() && larger,
-        "the two parts did not merge into one patch: {whole:?}"
-    );
+    let merged = &merged_patch(&cloud, &m);
     let found = recognize(&capture, &cell.camera, &cell.tray, &m);
     assert_eq!(found.len(), 2, "{found:?}");
     assert_found(&w, &found, &a, 0.0008, 5.0);
