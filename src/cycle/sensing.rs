@@ -197,7 +197,10 @@ impl Run<'_, '_> {
             return;
         }
         job.apply_blur();
-        if st.sensor.unseen_hole_px(&job.capture) < st.sensor.motion_hole_min_px() {
+        let holes = st.sensor.hole_px(&job.capture);
+        let unseen = st.sensor.unseen_holes(&holes);
+        job.holes = Some(holes);
+        if unseen < st.sensor.motion_hole_min_px() {
             return;
         }
         let Ok(confirm) = st.sensor.trigger(&st.world) else {
@@ -248,14 +251,16 @@ impl Run<'_, '_> {
         // [`MOTION_RECAPTURES`] times in a row; a hole that stays put is a steep face. With a
         // confirming exposure whole (the arm kept out of it), the holes in one of the two images
         // only and those in both wider than a steep face.
+        let holes = job.holes.take().unwrap_or_else(|| self.st.sensor.hole_px(&job.capture));
         let new_holes = match job.confirm.take() {
             Some(mut confirm) if confirm.spoiled.is_none() && confirm.exposure_end_s <= job.ready_s + 1e-9 => {
                 confirm.apply_blur();
                 let confirm_s = confirm.exposure_end_s - self.st.sensor.exposure_s;
                 self.span(Stage::Sensor, confirm_s, confirm.exposure_end_s, "confirming exposure");
-                self.st.sensor.changed_hole_px(&job.capture, &confirm.capture)
+                let confirming = self.st.sensor.hole_px(&confirm.capture);
+                self.st.sensor.changed_holes(holes, &confirming, job.capture.width_px)
             }
-            _ => self.st.sensor.new_hole_px(&job.capture),
+            _ => self.st.sensor.new_holes(holes),
         };
         if new_holes >= self.st.sensor.motion_hole_min_px() && self.st.moving_in_a_row < MOTION_RECAPTURES {
             self.st.moving_in_a_row += 1;

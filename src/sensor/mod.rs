@@ -166,6 +166,9 @@ pub struct CaptureJob {
     /// Whether the image was checked for new holes at its exposure's end (and the confirming
     /// exposure taken if they call for one).
     pub confirm_decided: bool,
+    /// The image's hole map ([`Sensor::hole_px`], blur applied), where that check read it: the
+    /// motion check at the result reads it again.
+    pub holes: Option<Vec<bool>>,
 }
 
 impl CaptureJob {
@@ -364,6 +367,7 @@ impl Sensor {
             blur_applied: false,
             confirm: None,
             confirm_decided: false,
+            holes: None,
         })
     }
 
@@ -466,14 +470,24 @@ impl Sensor {
     /// checked: a static hole (a steep face) shows in both, a part that moved during one
     /// exposure only in that one. Remembers this image's holes for the next call.
     pub fn new_hole_px(&mut self, capture: &Capture) -> usize {
-        let new = self.unseen_hole_px(capture);
-        self.holes_seen = self.hole_px(capture);
+        self.new_holes(self.hole_px(capture))
+    }
+
+    /// [`Sensor::new_hole_px`] of an image's hole map (`holes`, [`Sensor::hole_px`]).
+    pub fn new_holes(&mut self, holes: Vec<bool>) -> usize {
+        let new = self.unseen_holes(&holes);
+        self.holes_seen = holes;
         new
     }
 
     /// [`Sensor::new_hole_px`] without remembering: the count alone.
     pub fn unseen_hole_px(&self, capture: &Capture) -> usize {
-        self.hole_px(capture)
+        self.unseen_holes(&self.hole_px(capture))
+    }
+
+    /// [`Sensor::unseen_hole_px`] of an image's hole map.
+    pub fn unseen_holes(&self, holes: &[bool]) -> usize {
+        holes
             .iter()
             .enumerate()
             .filter(|(i, h)| **h && !self.holes_seen.get(*i).copied().unwrap_or(false))
@@ -493,14 +507,18 @@ impl Sensor {
     /// Remembers `image`'s holes as [`Sensor::new_hole_px`] does. Every hole counts where the
     /// part does not allow the distinction ([`Sensor::confirms`]).
     pub fn changed_hole_px(&mut self, image: &Capture, confirming: &Capture) -> usize {
-        let (a, b) = (self.hole_px(image), self.hole_px(confirming));
-        let both: Vec<bool> = a.iter().zip(&b).map(|(x, y)| *x && *y).collect();
+        self.changed_holes(self.hole_px(image), &self.hole_px(confirming), image.width_px)
+    }
+
+    /// [`Sensor::changed_hole_px`] of the two images' hole maps (rows of `width_px` pixels).
+    pub fn changed_holes(&mut self, image: Vec<bool>, confirming: &[bool], width_px: usize) -> usize {
+        let both: Vec<bool> = image.iter().zip(confirming).map(|(x, y)| *x && *y).collect();
         let in_both_moving = match self.static_hole_max_px {
-            Some(steep_px) => wide_px(&both, image.width_px, steep_px + 1),
+            Some(steep_px) => wide_px(&both, width_px, steep_px + 1),
             None => both.iter().filter(|x| **x).count(),
         };
-        let changed = a.iter().zip(&b).filter(|(x, y)| x != y).count() + in_both_moving;
-        self.holes_seen = a;
+        let changed = image.iter().zip(confirming).filter(|(x, y)| x != y).count() + in_both_moving;
+        self.holes_seen = image;
         changed
     }
 
