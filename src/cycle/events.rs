@@ -169,6 +169,10 @@ pub enum Planned {
 pub enum Event {
     /// The sensor was triggered (capture number).
     Capture(u64),
+    /// The sensor took a confirming exposure, right after a capture whose image shows new holes
+    /// (capture number; [`crate::cycle`]'s sensing step): it only tells still steep faces from a
+    /// pile in motion, recognition reads the image before.
+    ConfirmingCapture(u64),
     /// The exposure was spoiled.
     CaptureSpoiled(CaptureProblem),
     /// A recognition result arrived: parts detected, parts blurred by motion during the exposure.
@@ -280,6 +284,7 @@ impl Event {
     pub fn kind(&self) -> &'static str {
         match self {
             Event::Capture(_) => "capture",
+            Event::ConfirmingCapture(_) => "confirming_capture",
             Event::CaptureSpoiled(_) => "capture_spoiled",
             Event::RecognitionReady { .. } => "recognition_ready",
             Event::GraspChosen { .. } => "grasp_chosen",
@@ -337,6 +342,7 @@ impl fmt::Display for Event {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             Event::Capture(id) => write!(f, "capture {id}"),
+            Event::ConfirmingCapture(id) => write!(f, "capture {id}, confirming the one before"),
             Event::CaptureSpoiled(problem) => write!(f, "{problem:?}"),
             Event::RecognitionReady { detected, blurred } => write!(
                 f,
@@ -500,6 +506,9 @@ pub trait Observer {
     fn stepped(&mut self, _world: &World) {}
     /// The sensor took a capture (at its `trigger_s`).
     fn captured(&mut self, _capture: &Capture) {}
+    /// The sensor took a confirming exposure (at its `trigger_s`; see
+    /// [`Event::ConfirmingCapture`]).
+    fn confirming_captured(&mut self, _capture: &Capture) {}
     /// A recognition result was used.
     fn recognised(&mut self, _result: &Recognised<'_>) {}
     /// The recognition result ready at `t_s` was evaluated against the ground truth at its
@@ -534,6 +543,9 @@ impl Observer for Observers<'_> {
     }
     fn captured(&mut self, capture: &Capture) {
         self.0.iter_mut().for_each(|o| o.captured(capture));
+    }
+    fn confirming_captured(&mut self, capture: &Capture) {
+        self.0.iter_mut().for_each(|o| o.confirming_captured(capture));
     }
     fn recognised(&mut self, result: &Recognised<'_>) {
         self.0.iter_mut().for_each(|o| o.recognised(result));

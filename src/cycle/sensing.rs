@@ -206,8 +206,8 @@ impl Run<'_, '_> {
         let Ok(confirm) = st.sensor.trigger(&st.world) else {
             return;
         };
-        self.event(Event::Capture(confirm.capture.id));
-        self.obs.captured(&confirm.capture);
+        self.event(Event::ConfirmingCapture(confirm.capture.id));
+        self.obs.confirming_captured(&confirm.capture);
         if let Some(job) = self.st.pending.as_mut() {
             job.confirm = Some(Box::new(confirm));
         }

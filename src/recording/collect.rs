@@ -103,8 +103,11 @@ pub struct CaptureImage {
     /// Depth per pixel (mm), 0 where there is no return.
     pub depth_mm: Vec<u16>,
     /// The world points (m) of every [`CLOUD_EVERY_PX`]-th pixel in each direction that has a
-    /// return, row-major, on the [`CLOUD_GRID_M`] grid.
+    /// return, row-major, on the [`CLOUD_GRID_M`] grid (none for a confirming exposure).
     pub points_world_m: Vec<[f32; 3]>,
+    /// A confirming exposure (the cycle's motion check, not the image recognition read): the
+    /// recordings show it apart.
+    pub confirming: bool,
 }
 
 impl CaptureImage {
@@ -392,6 +395,27 @@ impl<'a> Recorder<'a> {
             self.late += 1;
         }
     }
+
+    /// Keeps a capture's image at its trigger time, with its point cloud unless it is a
+    /// confirming exposure.
+    fn keep_capture(&mut self, c: &Capture, confirming: bool) {
+        self.arrived(c.trigger_s);
+        let w = &self.window;
+        debug_assert_eq!(*w, c.tray_window);
+        self.buffer.captures.push(CaptureImage {
+            t_s: c.trigger_s,
+            size_px: (w.width_px, w.height_px),
+            // Depths are non-negative: adding a half and truncating rounds as `round` does, without
+            // its library call per pixel.
+            depth_mm: c.depth_m.iter().map(|d| (d * 1000.0 + 0.5) as u16).collect(),
+            points_world_m: if confirming {
+                Vec::new()
+            } else {
+                cloud_on_grid(c, w, CLOUD_EVERY_PX)
+            },
+            confirming,
+        });
+    }
 }
 
 impl Drop for Recorder<'_> {
@@ -439,17 +463,11 @@ impl Observer for Recorder<'_> {
     }
 
     fn captured(&mut self, c: &Capture) {
-        self.arrived(c.trigger_s);
-        let w = &self.window;
-        debug_assert_eq!(*w, c.tray_window);
-        self.buffer.captures.push(CaptureImage {
-            t_s: c.trigger_s,
-            size_px: (w.width_px, w.height_px),
-            // Depths are non-negative: adding a half and truncating rounds as `round` does, without
-            // its library call per pixel.
-            depth_mm: c.depth_m.iter().map(|d| (d * 1000.0 + 0.5) as u16).collect(),
-            points_world_m: cloud_on_grid(c, w, CLOUD_EVERY_PX),
-        });
+        self.keep_capture(c, false);
+    }
+
+    fn confirming_captured(&mut self, c: &Capture) {
+        self.keep_capture(c, true);
     }
 
     fn evaluated(&mut self, t_s: f64, truth: &TruthAtTrigger, report: &RecognitionReport) {

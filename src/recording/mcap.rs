@@ -47,11 +47,11 @@ use foxglove::messages as fg;
 use nalgebra::{Isometry3, Vector3};
 use serde::Serialize;
 
-use super::Recording;
 use super::{
     CANDIDATE_ARROW_M, RecordError, RunInfo, arm_samples, event_level, event_text, frustum_corners, joint_state_ticks,
     link_name, part_rgb,
 };
+use super::{CaptureImage, Recording};
 use crate::config::Scene;
 use crate::robot::{DOF, RobotModel};
 
@@ -87,6 +87,7 @@ enum Topic {
     Parts,
     Calibration,
     Depth,
+    ConfirmingDepth,
     Points,
     Recognition,
     Truth,
@@ -106,7 +107,7 @@ enum Encoding {
 }
 
 /// The topics, in the order their channels are declared (the order of [`Topic`]).
-const TOPICS: [(Topic, &str, Encoding); 17] = [
+const TOPICS: [(Topic, &str, Encoding); 18] = [
     (Topic::Cell, "/cell", Encoding::Protobuf(fg::SceneUpdate::get_schema)),
     (
         Topic::RobotGeometry,
@@ -138,6 +139,11 @@ const TOPICS: [(Topic, &str, Encoding); 17] = [
     (
         Topic::Depth,
         "/camera/depth",
+        Encoding::Protobuf(fg::RawImage::get_schema),
+    ),
+    (
+        Topic::ConfirmingDepth,
+        "/camera/confirming_depth",
         Encoding::Protobuf(fg::RawImage::get_schema),
     ),
     (
@@ -594,6 +600,19 @@ fn part_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError
     Ok(())
 }
 
+/// A capture's depth image as Foxglove's raw image (16-bit mm, camera frame).
+fn raw_depth(t_s: f64, cap: &CaptureImage) -> fg::RawImage {
+    fg::RawImage {
+        timestamp: stamp(t_s),
+        frame_id: "camera".into(),
+        width: cap.size_px.0 as u32,
+        height: cap.size_px.1 as u32,
+        encoding: "16UC1".into(),
+        step: 2 * cap.size_px.0 as u32,
+        data: cap.depth_le_bytes().into(),
+    }
+}
+
 /// `/camera/*` at each trigger time; `/recognition` and `/recognition/truth_at_trigger` when each
 /// result arrived.
 fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordError> {
@@ -605,6 +624,10 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
     };
     for cap in &result.captures {
         let t = cap.t_s;
+        if cap.confirming {
+            m.proto(t, Topic::ConfirmingDepth, &raw_depth(t, cap))?;
+            continue;
+        }
         m.proto(
             t,
             Topic::Calibration,
@@ -622,20 +645,7 @@ fn sensing_messages(m: &mut Messages, result: &Recording) -> Result<(), RecordEr
                 ],
             },
         )?;
-        let depth = cap.depth_le_bytes();
-        m.proto(
-            t,
-            Topic::Depth,
-            &fg::RawImage {
-                timestamp: stamp(t),
-                frame_id: "camera".into(),
-                width: cap.size_px.0 as u32,
-                height: cap.size_px.1 as u32,
-                encoding: "16UC1".into(),
-                step: 2 * cap.size_px.0 as u32,
-                data: depth.into(),
-            },
-        )?;
+        m.proto(t, Topic::Depth, &raw_depth(t, cap))?;
         let points = cap.points_le_bytes();
         m.proto(
             t,

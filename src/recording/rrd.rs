@@ -237,10 +237,14 @@ fn layout() -> rerun::blueprint::Blueprint {
     );
     series.push(TimeSeriesView::new("takt [s]").with_origin("/cycle/takt").into());
     let cell = Spatial3DView::new("cell").with_origin("/world");
-    let sensing = Vertical::new([
+    // The confirming exposures (where the part has them) in a tab behind the camera's images.
+    let cameras = Tabs::new([
         Spatial2DView::new("depth camera").with_origin("/world/camera").into(),
-        TextLogView::new("events").with_origin("/events").into(),
+        Spatial2DView::new("confirming exposure")
+            .with_origin("/sensor/confirming_depth")
+            .into(),
     ]);
+    let sensing = Vertical::new([cameras.into(), TextLogView::new("events").with_origin("/events").into()]);
     Blueprint::new(
         Horizontal::new([cell.into(), sensing.into(), Tabs::new(series).into()]).with_column_shares([3.0, 2.0, 2.0]),
     )
@@ -458,6 +462,15 @@ fn log_parts(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
 fn log_sensing(rec: &mut Rec, result: &Recording) -> Result<(), RecordError> {
     for c in &result.captures {
         let bytes = c.depth_le_bytes();
+        if c.confirming {
+            // Apart from the camera (not drawn in 3D over the image recognition read).
+            rec.log(
+                c.t_s,
+                "sensor/confirming_depth",
+                &rerun::DepthImage::from_gray16(bytes, [c.size_px.0 as u32, c.size_px.1 as u32]).with_meter(1000.0),
+            )?;
+            continue;
+        }
         rec.log(
             c.t_s,
             "world/camera/depth",

@@ -211,6 +211,7 @@ fn run_mcap_holds_what_the_run_did() {
         topics,
         [
             "/camera/calibration",
+            "/camera/confirming_depth",
             "/camera/depth",
             "/camera/points",
             "/cell",
@@ -435,10 +436,13 @@ fn run_mcap_holds_what_the_run_did() {
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1, "one recording");
     assert_eq!(rrd.blueprints, 1, "one viewer layout");
-    // The layout: the cell, the depth camera, the events, six torques, positions, velocities,
-    // tracking errors, takt.
-    assert_eq!(rrd.blueprint_views, 13);
+    // The layout: the cell, the depth camera and the confirming exposures, the events, six
+    // torques, positions, velocities, tracking errors, takt.
+    assert_eq!(rrd.blueprint_views, 14);
     let rows = |e: &str| rrd.rows.get(e).copied().unwrap_or(0);
+    // E is never confirmed: no confirming exposure in either file.
+    assert_eq!(count.get("/camera/confirming_depth"), None);
+    assert_eq!(rows("/sensor/confirming_depth"), 0);
     assert_eq!(
         rrd.timelines,
         ["sim_time", "step"].iter().map(|s| s.to_string()).collect(),
@@ -539,6 +543,50 @@ fn run_mcap_holds_what_the_run_did() {
 /// Ctrl-C during a run: the pick under way finishes, every file is written and readable, the
 /// summary says `interrupted`, and the exit code is 130.
 #[cfg(unix)]
+/// A confirming exposure (B's blocks are confirmed) is in both files apart from the images
+/// recognition read: one `/camera/confirming_depth` image and `/sensor/confirming_depth` row per
+/// `confirming_capture` event, and the camera's depth images and clouds one per other capture.
+/// (The control, E, which is never confirmed, has none: `run_mcap_holds_what_the_run_did`.)
+#[test]
+fn confirming_exposures_are_recorded_apart_from_the_images_recognition_read() {
+    let ws = Workspace::new();
+    let out = ws.path("out");
+    let args = ["run", "--workpiece", "B", "--picks", "25", "--deterministic", "--out"];
+    let o = binpick_in(ws.dir.path(), &[&args[..], &[out.to_str().unwrap()]].concat());
+    assert!(o.status.success(), "{}", stderr(&o));
+    let dir = out.join("run-B-seed1-det");
+    let events: Vec<serde_json::Value> =
+        serde_json::from_slice(&std::fs::read(dir.join("events.json")).unwrap()).unwrap();
+    let kind = |k: &str| events.iter().filter(|e| e["kind"] == k).count();
+    let (confirming, captures) = (kind("confirming_capture"), kind("capture"));
+    assert!(confirming >= 1 && captures > confirming, "{confirming} of {captures}");
+    let bytes = std::fs::read(dir.join("run.mcap")).unwrap();
+    let mut count = BTreeMap::<String, usize>::new();
+    let mut decoder = McapDecoder::default();
+    for m in mcap::MessageStream::new(&bytes).unwrap() {
+        let m = m.unwrap();
+        let v = decoder.decode(&m).unwrap();
+        if m.channel.topic == "/camera/confirming_depth" {
+            assert_eq!(
+                (v["encoding"].as_str(), v["frame_id"].as_str()),
+                (Some("16UC1"), Some("camera"))
+            );
+        }
+        *count.entry(m.channel.topic.clone()).or_default() += 1;
+    }
+    assert_eq!(count["/camera/confirming_depth"], confirming);
+    assert_eq!(count["/camera/depth"], captures);
+    assert_eq!(count["/camera/points"], captures);
+    let rrd = read_rrd(&dir.join("run.rrd"));
+    let rows = |e: &str| rrd.rows.get(e).copied().unwrap_or(0);
+    assert_eq!(rows("/sensor/confirming_depth"), confirming);
+    assert_eq!(rows("/world/camera/depth"), captures);
+    assert_eq!(rows("/world/cloud"), captures);
+    // The run's capture count holds every exposure the sensor took.
+    let summary: serde_json::Value = serde_json::from_slice(&std::fs::read(dir.join("summary.json")).unwrap()).unwrap();
+    assert_eq!(summary["captures"][0].as_u64(), Some((captures + confirming) as u64));
+}
+
 #[test]
 fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let ws = Workspace::new();
@@ -569,7 +617,7 @@ fn ctrl_c_finishes_the_files_and_says_interrupted() {
     let summary = mcap::read::Summary::read(&bytes)
         .unwrap()
         .expect("finished: a summary section");
-    assert_eq!(summary.channels.len(), 17);
+    assert_eq!(summary.channels.len(), 18);
     assert!(mcap::MessageStream::new(&bytes).unwrap().all(|m| m.is_ok()));
     let rrd = read_rrd(&dir.join("run.rrd"));
     assert_eq!(rrd.stores, 1);
