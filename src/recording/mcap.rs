@@ -48,10 +48,9 @@ use nalgebra::{Isometry3, Vector3};
 use serde::Serialize;
 
 use super::{
-    CANDIDATE_ARROW_M, RecordError, RunInfo, arm_samples, event_level, event_text, frustum_corners, joint_state_ticks,
-    link_name, part_rgb,
+    CANDIDATE_ARROW_M, CaptureImage, RecordError, Recording, RunInfo, arm_samples, event_level, event_text,
+    frustum_corners, joint_state_ticks, link_name, part_rgb,
 };
-use super::{CaptureImage, Recording};
 use crate::config::Scene;
 use crate::robot::{DOF, RobotModel};
 
