@@ -181,6 +181,25 @@ fn merged_patch(cloud: &Cloud<'_>, m: &CloudModel) -> Patch {
     merged
 }
 
+/// Two E parts lying level: the first at the tray's centre, yawed 26 deg; the second `along_m`
+/// along the first's long axis and `across_m` across it, yawed `yaw_b_deg`. Returns the cell,
+/// the workpiece, its model, the two poses and their synthetic capture.
+fn two_level_e_parts(
+    along_m: f64,
+    across_m: f64,
+    yaw_b_deg: f64,
+) -> (Cell, Workpiece, CloudModel, Isometry3<f64>, Isometry3<f64>, Capture) {
+    let cell = cell();
+    let w = workpiece("E");
+    let m = CloudModel::new(&w);
+    let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(26.0));
+    let (c, s) = (26f64.to_radians().cos(), 26f64.to_radians().sin());
+    let (x, y) = (along_m * c - across_m * s, along_m * s + across_m * c);
+    let b = resting(&cell, &w, x, y, 0.0, yaw(yaw_b_deg));
+    let capture = synthetic(&cell, &[(&m, a), (&m, b)]);
+    (cell, w, m, a, b, capture)
+}
+
 /// Two parts lying level side by side, one turned a quarter turn to the other, make one patch
 /// whose halves are cut off the junction: one half holds the first part and a strip of the
 /// second, and only the other half is found. The rest of the patch, taken out of the found face,
@@ -188,13 +207,7 @@ fn merged_patch(cloud: &Cloud<'_>, m: &CloudModel) -> Patch {
 /// half alone leaving the patch unexplained.)
 #[test]
 fn two_level_parts_cut_off_their_junction_are_both_found() {
-    let cell = cell();
-    let w = workpiece("E");
-    let m = CloudModel::new(&w);
-    let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(26.0));
-    let (c, s) = (26f64.to_radians().cos(), 26f64.to_radians().sin());
-    let b = resting(&cell, &w, 0.0077 * c, 0.0077 * s, 0.0, yaw(116.0));
-    let capture = synthetic(&cell, &[(&m, a), (&m, b)]);
+    let (cell, w, m, a, b, capture) = two_level_e_parts(0.0077, 0.0, 116.0);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
     let merged = &merged_patch(&cloud, &m);
     let halves_found = cloud
@@ -213,22 +226,9 @@ fn two_level_parts_cut_off_their_junction_are_both_found() {
 /// and each half is found. The control: the whole patch alone explains nothing.
 #[test]
 fn two_parts_lying_level_side_by_side_are_both_found() {
-    let cell = cell();
-    let w = workpiece("E");
-    let m = CloudModel::new(&w);
     // End to end along the first's long side, 0.2 mm apart: their top faces, 10 x 5 mm each,
     // make one 20 x 5 mm patch.
-    let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(26.0));
-    let (c, s) = (26f64.to_radians().cos(), 26f64.to_radians().sin());
-    let b = resting(
-        &cell,
-        &w,
-        0.0102 * c - 0.0003 * s,
-        0.0102 * s + 0.0003 * c,
-        0.0,
-        yaw(24.0),
-    );
-    let capture = synthetic(&cell, &[(&m, a), (&m, b)]);
+    let (cell, w, m, a, b, capture) = two_level_e_parts(0.0102, 0.0003, 24.0);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
     let merged = &merged_patch(&cloud, &m);
     let found = recognize(&capture, &cell.camera, &cell.tray, &m);
