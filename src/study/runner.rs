@@ -1,13 +1,13 @@
 //! The study runner: every run of a study or of its shard, in parallel on a pool of worker
 //! threads, each optionally recorded, with a progress callback.
 //!
-//! Job: run [`crate::cycle::run`] for each job on `threads` workers (rayon) with its variant's
-//! resolved cell, its workpiece and the arm model it shares with the other variants (nothing is
-//! parsed or built per run), and keep each run's [`Tally`] in job order: results do not depend
-//! on the number of threads or their timing in deterministic mode, and a variant's run gives
-//! what a batch gives on the variant's resolved files. Each run's recordings are written
-//! beside the study's results when asked; each finished run is reported to the caller (a
-//! progress bar).
+//! Job: run [`crate::cycle::run`] for each job on `threads` workers (rayon; a free worker takes
+//! the next job in order) with its variant's resolved cell, its workpiece and the arm model it
+//! shares with the other variants (nothing is parsed or built per run), and keep each run's
+//! [`Tally`] in job order: results do not depend on the number of threads or their timing in
+//! deterministic mode, and a variant's run gives what a batch gives on the variant's resolved
+//! files. Each run's recordings are written beside the study's results when asked; each
+//! finished run is reported to the caller (a progress bar).
 //!
 //! Units: s of wall time per run. Frames: none.
 
@@ -90,6 +90,11 @@ pub struct RunSettings<'a> {
 /// with its wall time ([`super::StudyFile::new`] leaves it out of a deterministic study's
 /// file); `progress` is called (from any worker) after each run. A run that fails, or
 /// whose recording fails, fails the study (the first such in job order is reported).
+///
+/// Each worker takes the next job not yet started, in job order, as it becomes free (a queue):
+/// rayon's own split of the job list would hand each worker a contiguous half up front (A-C and
+/// D-F of a six-part batch), and a worker that finished its half early found nothing left to
+/// take while the other ran its last long run.
 pub fn run_study(
     resolved: &Resolved,
     spec: &StudySpec,
@@ -101,16 +106,38 @@ pub fn run_study(
         .num_threads(settings.threads.max(1))
         .build()
         .map_err(|e| StudyError::Run(format!("starting the worker threads: {e}")))?;
-    let results: Vec<Result<StudyRun, String>> = pool.install(|| {
-        jobs.par_iter()
-            .map(|job| {
-                let run = run_one(resolved, spec, job, settings)?;
-                progress(&run);
-                Ok(run)
-            })
-            .collect()
+    let results = pool.install(|| {
+        in_queue(jobs, settings.threads, |job| {
+            let run = run_one(resolved, spec, job, settings)?;
+            progress(&run);
+            Ok(run)
+        })
     });
     results.into_iter().map(|r| r.map_err(StudyError::Run)).collect()
+}
+
+/// `f` of every item on up to `workers` workers of the current rayon pool, each taking the next
+/// item not yet started, in order, as it becomes free; the results in item order.
+fn in_queue<T: Sync, R: Send>(items: &[T], workers: usize, f: impl Fn(&T) -> R + Sync) -> Vec<R> {
+    use std::sync::atomic::{AtomicUsize, Ordering};
+    use std::sync::{Mutex, PoisonError};
+    let next = AtomicUsize::new(0);
+    let done: Vec<Mutex<Option<R>>> = items.iter().map(|_| Mutex::new(None)).collect();
+    (0..workers.clamp(1, items.len().max(1))).into_par_iter().for_each(|_| {
+        loop {
+            let i = next.fetch_add(1, Ordering::Relaxed);
+            let Some(item) = items.get(i) else { break };
+            let r = f(item);
+            *done[i].lock().unwrap_or_else(PoisonError::into_inner) = Some(r);
+        }
+    });
+    done.into_iter()
+        .map(|slot| {
+            slot.into_inner()
+                .unwrap_or_else(PoisonError::into_inner)
+                .expect("every item is taken by a worker")
+        })
+        .collect()
 }
 
 /// The name a run's files start with: `run-<workpiece>-seed<seed>`, `run-v<variant>-...` when
@@ -228,4 +255,51 @@ fn run_one(resolved: &Resolved, spec: &StudySpec, job: &Job, settings: &RunSetti
             .map_err(|(path, e)| format!("{}: {e}", path.display()))?;
     }
     Ok(StudyRun { variant: *v, tally })
+}
+
+#[cfg(test)]
+mod tests {
+    use std::sync::Mutex;
+    use std::sync::atomic::{AtomicUsize, Ordering};
+
+    use rayon::prelude::*;
+
+    /// Six items on two workers, the first holding its worker until every other item has run:
+    /// the other worker runs items 1 to 5, in order. Returns the order the other worker ran
+    /// them in, with `run` the way the items are handed out.
+    fn others_order(run: impl Fn(&[usize], &(dyn Fn(&usize) + Sync)) + Sync) -> Vec<usize> {
+        let items: Vec<usize> = (0..6).collect();
+        let finished = AtomicUsize::new(0);
+        let order = Mutex::new(Vec::new());
+        let pool = rayon::ThreadPoolBuilder::new().num_threads(2).build().unwrap();
+        pool.install(|| {
+            run(&items, &|&i| {
+                if i == 0 {
+                    let t0 = std::time::Instant::now();
+                    while finished.load(Ordering::SeqCst) < 5 && t0.elapsed().as_secs() < 20 {
+                        std::thread::yield_now();
+                    }
+                } else {
+                    order.lock().unwrap().push(i);
+                    finished.fetch_add(1, Ordering::SeqCst);
+                }
+            })
+        });
+        order.into_inner().unwrap()
+    }
+
+    #[test]
+    fn a_free_worker_takes_the_next_item_in_order() {
+        let queued = others_order(|items, f| {
+            let out = super::in_queue(items, 2, |i| {
+                f(i);
+                *i * 10
+            });
+            assert_eq!(out, [0, 10, 20, 30, 40, 50], "results in item order");
+        });
+        assert_eq!(queued, [1, 2, 3, 4, 5]);
+        // Negative control: rayon's own split hands the second worker the back half first.
+        let split = others_order(|items, f| items.par_iter().for_each(f));
+        assert_ne!(split, [1, 2, 3, 4, 5]);
+    }
 }
