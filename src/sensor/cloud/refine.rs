@@ -33,7 +33,9 @@
 //! (2) Yaw, for a face fitted by its true outline (`outline`: one with features beside it, such
 //! as a DIP's legs). The silhouette fit takes the middle of the yaws its pixel centres allow,
 //! a span of up to the cell's `max_yaw_ambiguity_deg` (12 by default) for a 9 mm face on
-//! 0.85 mm pixels: the estimate is off by up to half of it. The hypothesis is rendered at yaws
+//! 0.85 mm pixels: the estimate is off by up to half of it. That span is measured turning about
+//! the fitted centre; a turn with a shift can stay consistent much farther, so the scan covers
+//! at least [`YAW_SCAN_MIN_RAD`]. The hypothesis is rendered at yaws
 //! [`YAW_STEP_RAD`] apart across that span (about the face normal, through the face centre) and
 //! verified at every pixel; the estimate is the mean of the yaws of greatest evidence, which
 //! counts the pixels on the features beside the face (a DIP's upturned legs) that its outline
@@ -81,6 +83,10 @@ pub const TILT_SCAN_RAD: f64 = 8.0 * std::f64::consts::PI / 180.0;
 pub const TILT_STEP_RAD: f64 = std::f64::consts::PI / 180.0;
 /// The yaw scan's step (rad).
 pub const YAW_STEP_RAD: f64 = 0.5 * std::f64::consts::PI / 180.0;
+/// An outline-fitted face's yaw scan spans at least this (rad): the silhouette's span is
+/// measured turning about a fixed centre, which understates what the silhouette allows (a DIP-8's
+/// back face: 1.75 degrees about its centre, 11 with the centre re-solved at each yaw).
+pub const YAW_SCAN_MIN_RAD: f64 = 8.0 * std::f64::consts::PI / 180.0;
 
 impl super::Cloud<'_> {
     /// `d` (the winner of `patch`, whose least-squares plane is `plane`) settled and turned to
@@ -90,7 +96,7 @@ impl super::Cloud<'_> {
         if d.curved_side_up || model.resting.is_empty() {
             return d;
         }
-        let span = d.yaw_span_rad;
+        let span = yaw_scan_span_rad(model, d.face_up, d.yaw_span_rad);
         let settled = match self
             .settled(model, patch, plane, &d)
             .and_then(|pose| self.check(model, &pose, Some(d.face_up)))
@@ -270,6 +276,17 @@ impl super::Cloud<'_> {
             return Vec::new();
         };
         evidence.iter().filter(|(_, e)| *e == top).map(|(k, _)| *k).collect()
+    }
+}
+
+/// The yaws the refinement scans a detection of face `face_up` over (rad): an outline-fitted
+/// face's at least [`YAW_SCAN_MIN_RAD`] (its silhouette's `span_rad` understates what the
+/// silhouette allows), a face fitted as its rectangle its own (0: no scan).
+pub(super) fn yaw_scan_span_rad(model: &CloudModel, face_up: usize, span_rad: f64) -> f64 {
+    if model.outlines.get(face_up).is_some_and(Option::is_some) {
+        span_rad.max(YAW_SCAN_MIN_RAD)
+    } else {
+        span_rad
     }
 }
 
