@@ -1040,6 +1040,29 @@ fn a_dip_on_its_legs_taken_for_its_back_is_turned_over_by_its_twin_face() {
     assert!(cloud.twin_hypotheses(&ma, &found).is_empty());
 }
 
+/// The outline-fitted face of `m` that looks up in `pose` (asserted to be straight up).
+fn outline_face_on_top(m: &CloudModel, pose: &Isometry3<f64>) -> usize {
+    let up = |i: usize| (pose.rotation * m.faces[i].normal).dot(&Vector3::z());
+    let fi = (0..m.faces.len())
+        .filter(|&i| m.outlines.get(i).is_some_and(Option::is_some))
+        .max_by(|&a, &b| up(a).total_cmp(&up(b)))
+        .expect("an outline face");
+    assert!(up(fi) > 0.999, "face {fi} is not on top");
+    fi
+}
+
+/// `pose` turned by `deg` about face `fi`'s normal through its centre.
+fn turned_about_face(m: &CloudModel, pose: &Isometry3<f64>, fi: usize, deg: f64) -> Isometry3<f64> {
+    let face = &m.faces[fi];
+    let pivot = pose * Point3::from(face.center);
+    let axis = nalgebra::Unit::new_normalize(pose.rotation * face.normal);
+    let q = UnitQuaternion::from_axis_angle(&axis, deg.to_radians());
+    Isometry3::from_parts(
+        Translation3::from(pivot.coords + q * (pose.translation.vector - pivot.coords)),
+        q * pose.rotation,
+    )
+}
+
 #[test]
 fn a_yaw_off_within_the_silhouettes_span_is_turned_to_the_image() {
     // A TO-220 flat on its back: its outline fit can leave the yaw open by several degrees, and
@@ -1053,32 +1076,9 @@ fn a_yaw_off_within_the_silhouettes_span_is_turned_to_the_image() {
     let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
     // The face on top, as the fits report it.
-    let up = Vector3::z();
-    let (fi, face) = m
-        .faces
-        .iter()
-        .enumerate()
-        .filter(|(i, _)| m.outlines.get(*i).is_some_and(Option::is_some))
-        .max_by(|a, b| {
-            (pose.rotation * a.1.normal)
-                .dot(&up)
-                .total_cmp(&(pose.rotation * b.1.normal).dot(&up))
-        })
-        .expect("an outline face");
-    assert!(
-        (pose.rotation * face.normal).dot(&up) > 0.999,
-        "face {fi} is not on top"
-    );
+    let fi = outline_face_on_top(&m, &pose);
     assert!(cloud.check(&m, &pose, Some(fi)).is_some(), "the true pose verifies");
-    let pivot = pose * Point3::from(face.center);
-    let axis = nalgebra::Unit::new_normalize(pose.rotation * face.normal);
-    let turned_by = |deg: f64| {
-        let q = UnitQuaternion::from_axis_angle(&axis, deg.to_radians());
-        Isometry3::from_parts(
-            Translation3::from(pivot.coords + q * (pose.translation.vector - pivot.coords)),
-            q * pose.rotation,
-        )
-    };
+    let turned_by = |deg: f64| turned_about_face(&m, &pose, fi, deg);
     // The smallest turn that fails verification (the negative control).
     let off_deg = (2..=20)
         .map(f64::from)
@@ -1106,28 +1106,8 @@ fn an_outline_faces_yaw_is_scanned_beyond_the_span_its_silhouette_reports() {
     let pose = resting_mesh(&cell, &mesh, 0.01, -0.01, yaw(25.0) * roll(180.0));
     let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
-    let up = Vector3::z();
-    let (fi, face) = m
-        .faces
-        .iter()
-        .enumerate()
-        .max_by(|a, b| {
-            (pose.rotation * a.1.normal)
-                .dot(&up)
-                .total_cmp(&(pose.rotation * b.1.normal).dot(&up))
-        })
-        .expect("a face");
-    assert!(
-        m.outlines.get(fi).is_some_and(Option::is_some),
-        "face {fi} is fitted by its outline"
-    );
-    let pivot = pose * Point3::from(face.center);
-    let axis = nalgebra::Unit::new_normalize(pose.rotation * face.normal);
-    let q = UnitQuaternion::from_axis_angle(&axis, 3.5f64.to_radians());
-    let off = Isometry3::from_parts(
-        Translation3::from(pivot.coords + q * (pose.translation.vector - pivot.coords)),
-        q * pose.rotation,
-    );
+    let fi = outline_face_on_top(&m, &pose);
+    let off = turned_about_face(&m, &pose, fi, 3.5);
     let reported = 1f64.to_radians();
     let error_deg = |p: &Isometry3<f64>| m.symmetry().pose_error(&pose, p).1.to_degrees();
     let span = super::refine::yaw_scan_span_rad(&m, fi, reported);
