@@ -5,7 +5,9 @@
 //! Pipeline: (1) background removal: points within [`FLOOR_TOL_M`] of the tray floor, outside its
 //! inner walls or outside the view frustum over the tray (where the arm may be); pixels without a
 //! return (dropouts, and parts blurred by motion, which the cycle invalidates: depth 0) are neither
-//! part nor background, they say nothing; (2) normals per pixel from the ring of its 8 neighbours;
+//! part nor background, they say nothing; (2) normals per pixel from a ring of 8 neighbours
+//! [`NORMAL_RING_M`] away (in whole pixels: the next ones at the default sensor, two away at its
+//! full resolution);
 //! (3) region growing from smooth seed pixels, highest first: a 4-neighbour joins when it lies
 //! within [`PLANE_TOL_M`] of the region's plane (refitted as it doubles) and its normal within
 //! [`NORMAL_TOL_RAD`] of the plane's; (4) per patch the least-squares plane, and each pixel's ray
@@ -378,9 +380,13 @@ pub struct CloudDetection {
 /// Recognises parts in a capture from the capture, the camera, the pick tray's geometry and the
 /// workpiece model only (no physics world, no ground truth). Best first.
 pub fn recognize(capture: &Capture, camera: &Camera, tray: &TrayVolume, model: &CloudModel) -> Vec<CloudDetection> {
-    let cloud = Cloud::new(capture, camera, tray);
+    recognize_in(&Cloud::new(capture, camera, tray), model)
+}
+
+/// [`recognize`] on the capture prepared.
+fn recognize_in(cloud: &Cloud, model: &CloudModel) -> Vec<CloudDetection> {
     if let Some(p) = &model.ppf {
-        return ppf::detect(&cloud, model, p);
+        return ppf::detect(cloud, model, p);
     }
     let patches = cloud.segment();
     // Patches in parallel, collected in their order: deterministic.
@@ -438,6 +444,8 @@ struct Cloud<'a> {
     height: Vec<f64>,
     /// The tray floor: a point and the upward normal (world).
     floor: Plane,
+    /// The normals' ring of neighbours: this many pixels from the centre ([`NORMAL_RING_M`]).
+    ring_px: i64,
 }
 
 /// A patch's plane, its in-plane basis (e1, e2), the in-plane points of its pixels' rays (inside)
@@ -460,6 +468,12 @@ fn interior_suffices(count: usize, patch: &Patch) -> bool {
 
 /// The 8-ring around a pixel, in circular order.
 const RING: [(i64, i64); 8] = [(1, 0), (1, 1), (0, 1), (-1, 1), (-1, 0), (-1, -1), (0, -1), (1, -1)];
+
+/// A pixel's local normal is taken from the ring of neighbours this far away at the tray floor,
+/// in whole pixels (at least one) (m): the default sensor's pixel there. On a finer sensor the
+/// nearest neighbours are closer than the depth noise allows a normal from (0.42 mm pixels under
+/// 0.3 mm of noise: a normal 30-40 degrees off, and a flat DIP-8's face broken into patches).
+pub const NORMAL_RING_M: f64 = 0.00085;
 
 /// A plane: a point and a unit normal toward the camera.
 #[derive(Debug, Clone, Copy)]
@@ -552,6 +566,9 @@ impl<'a> Cloud<'a> {
                 point: tray.world_from_tray.translation.vector,
                 normal: tray.world_from_tray.rotation * Vector3::z(),
             },
+            ring_px: (NORMAL_RING_M / camera.pixel_size_at_point_m(&tray.world_from_tray.translation.vector))
+                .round()
+                .max(1.0) as i64,
         };
         cloud.normal = cloud.normals();
         cloud
@@ -576,8 +593,8 @@ impl<'a> Cloud<'a> {
         (u >= 0 && v >= 0 && (u as usize) < self.w && (v as usize) < self.h).then(|| v as usize * self.w + u as usize)
     }
 
-    /// Local normals: the summed cross products of consecutive ring neighbours that are
-    /// foreground and within 4 mm of depth.
+    /// Local normals: the summed cross products of consecutive ring neighbours (`ring_px`
+    /// pixels away) that are foreground and within 4 mm of depth.
     fn normals(&self) -> Vec<Vector3<f64>> {
         let mut normal = vec![Vector3::zeros(); self.w * self.h];
         // Row by row in parallel (each pixel on its own).
@@ -589,7 +606,7 @@ impl<'a> Cloud<'a> {
                 }
                 let c = self.pts[i];
                 let ring: [Option<Vector3<f64>>; 8] = RING.map(|(du, dv)| {
-                    self.neighbour_at(u, v, du, dv)
+                    self.neighbour_at(u, v, du * self.ring_px, dv * self.ring_px)
                         .filter(|&j| self.fg[j] && (self.depth[j] - self.depth[i]).abs() < 0.004)
                         .map(|j| self.pts[j] - c)
                 });
