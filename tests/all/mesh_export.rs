@@ -193,12 +193,7 @@ fn recognised_on_the_same_pile(prim: &LoadedWorkpiece, meshed: &LoadedWorkpiece,
     model.yaw_span_max_rad = scene.scene.sensor.max_yaw_ambiguity_deg.to_radians();
     let by_mesh: Vec<Detection> = recognize(&c, &sensor.camera, w.pick_tray(), &model)
         .into_iter()
-        .map(|d| Detection {
-            world_from_part: d.world_from_part,
-            visible_fraction: d.visible_fraction,
-            score: d.score,
-            face_up: Some(d.face_up),
-        })
+        .map(Detection::from)
         .collect();
     let figures = |detections: &[Detection], symmetry: &binpick::sensor::Symmetry| {
         let f = evaluate(&truth, detections, symmetry).figures;

@@ -1162,12 +1162,7 @@ fn a_finer_sensor_takes_its_normals_over_the_same_distance() {
         let evaluated = |cloud: &Cloud| {
             let found: Vec<Detection> = recognize_in(cloud, &sensor.model)
                 .into_iter()
-                .map(|d| Detection {
-                    world_from_part: d.world_from_part,
-                    visible_fraction: d.visible_fraction,
-                    score: d.score,
-                    face_up: Some(d.face_up),
-                })
+                .map(Detection::from)
                 .collect();
             evaluate(&truth, &found, &sensor.symmetry)
         };
