@@ -219,6 +219,12 @@ pub fn face_of_planar(face: &crate::part::faces::PlanarFace) -> Face {
 }
 
 impl CloudModel {
+    /// Face `fi`'s true outline, where it is fitted by one (a mesh face with one); `None` for a
+    /// face fitted as its rectangle or disc.
+    fn outline(&self, fi: usize) -> Option<&outline::Outline> {
+        self.outlines.get(fi).and_then(|o| o.as_deref())
+    }
+
     /// The model of a primitive workpiece (a mesh workpiece gets no faces here: its model is
     /// [`CloudModel::of_part_model`], as the sensor builds it). The faces
     /// are [`body_faces`] (same indices), then the body's faces that only leads stand out of (a
@@ -827,7 +833,7 @@ impl<'a> Cloud<'a> {
             if !model.half_turn_matters && model.faces[..fi].iter().any(twin) {
                 continue;
             }
-            let outline = model.outlines.get(fi).and_then(|o| o.as_deref());
+            let outline = model.outline(fi);
             let ext = match outline {
                 Some(o) => o.reach_extent_m,
                 None => [
@@ -998,7 +1004,7 @@ impl<'a> Cloud<'a> {
         let q = d.world_from_part.inverse() * Point3::from(*p);
         let r = q.coords - face.center;
         let (u, v) = (r.dot(&face.along), r.dot(&face.normal.cross(&face.along)));
-        if let Some(o) = model.outlines.get(d.face_up).and_then(|o| o.as_deref()) {
+        if let Some(o) = model.outline(d.face_up) {
             return o.distance_m([u, v], reach);
         }
         if face.disc {

@@ -283,7 +283,7 @@ impl super::Cloud<'_> {
 /// face's at least [`YAW_SCAN_MIN_RAD`] (its silhouette's `span_rad` understates what the
 /// silhouette allows), a face fitted as its rectangle its own (0: no scan).
 pub(super) fn yaw_scan_span_rad(model: &CloudModel, face_up: usize, span_rad: f64) -> f64 {
-    if model.outlines.get(face_up).is_some_and(Option::is_some) {
+    if model.outline(face_up).is_some() {
         span_rad.max(YAW_SCAN_MIN_RAD)
     } else {
         span_rad

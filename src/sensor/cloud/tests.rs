@@ -1044,7 +1044,7 @@ fn a_dip_on_its_legs_taken_for_its_back_is_turned_over_by_its_twin_face() {
 fn outline_face_on_top(m: &CloudModel, pose: &Isometry3<f64>) -> usize {
     let up = |i: usize| (pose.rotation * m.faces[i].normal).dot(&Vector3::z());
     let fi = (0..m.faces.len())
-        .filter(|&i| m.outlines.get(i).is_some_and(Option::is_some))
+        .filter(|&i| m.outline(i).is_some())
         .max_by(|&a, &b| up(a).total_cmp(&up(b)))
         .expect("an outline face");
     assert!(up(fi) > 0.999, "face {fi} is not on top");
