@@ -88,7 +88,7 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                     Some(m) => {
                         let r = &m.1;
                         format!(
-                            "; mesh of {} triangles in {} {}, {:.2} x {:.2} x {:.2} mm; repaired: {} vertices welded, {} zero-area, {} duplicate and {} inner-wall triangles dropped, {} triangles and {} bodies flipped, {} holes closed",
+                            "; mesh of {} triangles in {} {}, {:.2} x {:.2} x {:.2} mm; repaired: {} vertices welded, {} zero-area, {} duplicate and {} inner-wall triangles dropped, {} T-junctions split, {} triangles and {} bodies flipped, {} holes closed",
                             m.0.triangles.len(),
                             r.bodies,
                             if r.bodies == 1 { "body" } else { "bodies" },
@@ -99,6 +99,7 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                             r.zero_area_triangles,
                             r.duplicate_triangles,
                             2 * r.inner_wall_pairs,
+                            r.t_junctions_split,
                             r.flipped_triangles,
                             r.flipped_bodies,
                             r.holes_closed

@@ -427,11 +427,12 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
             if report.bodies == 1 { "body" } else { "bodies" }
         );
         say(&format!(
-            "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
+            "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} T-junctions split, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
             report.welded_vertices,
             report.zero_area_triangles,
             report.duplicate_triangles,
             report.inner_wall_pairs,
+            report.t_junctions_split,
             report.flipped_triangles,
             report.flipped_bodies,
             report.holes_closed,

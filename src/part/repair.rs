@@ -9,14 +9,18 @@
 //! 4. drop duplicated triangles: twice with the same winding keeps one; twice with opposite
 //!    windings is an inner wall (two bodies meeting face to face) and both go, which leaves their
 //!    union closed;
-//! 5. wind each connected body consistently (flip a triangle that runs an edge in the same
+//! 5. split T-junctions: a vertex lying on another triangle's open edge, between its ends
+//!    (within the weld tolerance of it), splits that triangle in two there, so the two sides of a
+//!    seam meshed with different vertices (an L profile's cap cut into two rectangles, faces
+//!    tessellated apart) share their edges again;
+//! 6. wind each connected body consistently (flip a triangle that runs an edge in the same
 //!    direction as its neighbour), then outward (positive signed volume);
-//! 6. close holes: each loop of boundary edges is capped by a fan about its centroid when the cap
+//! 7. close holes: each loop of boundary edges is capped by a fan about its centroid when the cap
 //!    is small (each under 5 % of the surface, all together under 10 %: missing end caps of leads,
 //!    a dropped sliver); larger holes are refused as an open shell (the mass properties, stable
 //!    poses and contacts of a part need its solid; a hull would invent material where a pocket or
 //!    a gap between leads is, and those decide how the part lies);
-//! 7. move the origin to the bounding box's centre (the part frame).
+//! 8. move the origin to the bounding box's centre (the part frame).
 //!
 //! Several bodies are kept: they make one rigid part (a body and its leads). Stated
 //! simplifications: bodies that interpenetrate are not merged (their overlap counts twice in the
@@ -24,7 +28,7 @@
 //! inner sheet that is not doubled (an edge with three or more triangles) is kept and counted
 //! in [`RepairReport::non_manifold_edges`].
 //!
-//! Units: m after step 1. Frame: the part frame after step 7.
+//! Units: m after step 1. Frame: the part frame after step 8.
 
 use std::collections::HashMap;
 
@@ -55,6 +59,8 @@ pub struct RepairReport {
     pub duplicate_triangles: usize,
     /// Triangle pairs dropped as inner walls.
     pub inner_wall_pairs: usize,
+    /// Triangles split at a T-junction (a vertex on their open edge).
+    pub t_junctions_split: usize,
     /// Triangles flipped to agree with their body's winding.
     pub flipped_triangles: usize,
     /// Bodies turned inside out (flipped whole).
@@ -72,6 +78,16 @@ pub struct RepairReport {
 /// Repairs a raw mesh in file units scaled by `metres_per_unit` (see the module header);
 /// `units` names them in messages.
 pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh, RepairReport), Defect> {
+    repair_with(raw, metres_per_unit, units, true)
+}
+
+/// [`repair`], with step 5 (T-junctions) on or off (off: the tests' control).
+fn repair_with(
+    raw: &RawMesh,
+    metres_per_unit: f64,
+    units: &str,
+    split_t: bool,
+) -> Result<(Mesh, RepairReport), Defect> {
     let mut rep = RepairReport::default();
     if raw.triangles.is_empty() {
         return Err(Defect::Empty("the file holds no triangles".into()));
@@ -88,9 +104,13 @@ pub fn repair(raw: &RawMesh, metres_per_unit: f64, units: &str) -> Result<(Mesh,
     if tris.is_empty() {
         return Err(Defect::Empty("no triangle with an area is left".into()));
     }
-    // 5. Consistent winding per body, then outward.
+    // 5. T-junctions.
+    if split_t {
+        split_t_junctions(&verts, &mut tris, tol, &mut rep);
+    }
+    // 6. Consistent winding per body, then outward.
     orient(&verts, &mut tris, &mut rep);
-    // 6. Holes.
+    // 7. Holes.
     close_holes(&mut verts, &mut tris, &mut rep)?;
     rep.non_manifold_edges = edge_uses(&tris).values().filter(|u| u.len() > 2).count();
     rep.bodies = bodies(&tris).1;
@@ -267,6 +287,109 @@ fn drop_duplicates(tris: &mut Vec<[u32; 3]>, rep: &mut RepairReport) {
     });
 }
 
+/// Most passes of [`split_t_junctions`]: each splits a triangle at most once, so an open edge with
+/// more vertices on it than this keeps the rest (and the hole check judges what is left).
+const T_JUNCTION_PASSES: usize = 64;
+/// Most work of [`split_t_junctions`] in all (vertex tests, and a triangle's share of each pass's
+/// edge table): a soup whose open edges all overlap along the sorted axis stops here instead of
+/// hanging, and the hole check judges what is left.
+const T_JUNCTION_BUDGET: usize = 10_000_000;
+
+/// Splits each triangle whose open edge (an edge of one triangle) has another open edge's vertex
+/// on it, strictly between its ends and within `tol` of it, into two at that vertex (the one
+/// nearest the edge's start first), pass by pass until no open edge has one. Open edges' vertices
+/// are looked up along the mesh's longest axis, so a closed mesh costs one pass over its edges.
+fn split_t_junctions(verts: &[Point3<f64>], tris: &mut Vec<[u32; 3]>, tol: f64, rep: &mut RepairReport) {
+    let axis = {
+        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
+        for p in verts {
+            for a in 0..3 {
+                lo[a] = lo[a].min(p[a]);
+                hi[a] = hi[a].max(p[a]);
+            }
+        }
+        (0..3)
+            .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
+            .unwrap_or(0)
+    };
+    let key = |i: u32| verts[i as usize][axis];
+    let mut work = 0usize;
+    for _ in 0..T_JUNCTION_PASSES {
+        work += tris.len();
+        if work > T_JUNCTION_BUDGET {
+            return;
+        }
+        let uses = edge_uses(tris);
+        let open: Vec<((u32, u32), usize)> = {
+            let mut e: Vec<((u32, u32), usize)> = uses
+                .iter()
+                .filter(|(_, u)| u.len() == 1)
+                .map(|(&k, u)| (k, u[0]))
+                .collect();
+            e.sort_unstable();
+            e
+        };
+        if open.is_empty() {
+            return;
+        }
+        // The open edges' vertices, along the axis.
+        let mut rim: Vec<u32> = open.iter().flat_map(|&((a, b), _)| [a, b]).collect();
+        rim.sort_unstable_by(|&i, &j| key(i).total_cmp(&key(j)).then(i.cmp(&j)));
+        rim.dedup();
+        let mut split = vec![false; tris.len()];
+        let mut added: Vec<[u32; 3]> = Vec::new();
+        let mut exhausted = false;
+        'edges: for &((a, b), k) in &open {
+            if split[k] {
+                continue;
+            }
+            let (pa, pb) = (verts[a as usize], verts[b as usize]);
+            let d = pb - pa;
+            let len2 = d.norm_squared();
+            let (x0, x1) = (pa[axis].min(pb[axis]) - tol, pa[axis].max(pb[axis]) + tol);
+            let from = rim.partition_point(|&i| key(i) < x0);
+            // The vertex on the edge nearest its start, as the parameter along it.
+            let mut best: Option<(f64, u32)> = None;
+            for &v in rim[from..].iter().take_while(|&&i| key(i) <= x1) {
+                work += 1;
+                if work > T_JUNCTION_BUDGET {
+                    // The splits made so far stand (each kept its two halves).
+                    exhausted = true;
+                    break 'edges;
+                }
+                if v == a || v == b {
+                    continue;
+                }
+                let q = verts[v as usize] - pa;
+                let t = q.dot(&d) / len2;
+                if t * len2.sqrt() <= tol || (1.0 - t) * len2.sqrt() <= tol {
+                    continue;
+                }
+                if (q - d * t).norm() <= tol && best.is_none_or(|(bt, _)| t < bt) {
+                    best = Some((t, v));
+                }
+            }
+            let Some((_, v)) = best else { continue };
+            // The triangle as it runs the edge: (s, e, c) with s -> e along its winding.
+            let t = tris[k];
+            let r = (0..3).find(|&r| t[r] == a && t[(r + 1) % 3] == b || t[r] == b && t[(r + 1) % 3] == a);
+            let Some(r) = r else { continue };
+            let (s, e, c) = (t[r], t[(r + 1) % 3], t[(r + 2) % 3]);
+            tris[k] = [s, v, c];
+            added.push([v, e, c]);
+            split[k] = true;
+            rep.t_junctions_split += 1;
+        }
+        if added.is_empty() {
+            return;
+        }
+        tris.extend(added);
+        if exhausted {
+            return;
+        }
+    }
+}
+
 /// Closes each boundary loop with a fan about its centroid, unless a hole (or all holes together)
 /// is too large a share of the surface to be a meshing gap; then winds capped bodies outward again.
 fn close_holes(verts: &mut Vec<Point3<f64>>, tris: &mut Vec<[u32; 3]>, rep: &mut RepairReport) -> Result<(), Defect> {
@@ -418,14 +541,11 @@ fn orient(verts: &[Point3<f64>], tris: &mut [[u32; 3]], rep: &mut RepairReport) 
         let (a, b, c) = (verts[t[0] as usize], verts[t[1] as usize], verts[t[2] as usize]);
         vol[body[k]] += a.coords.dot(&b.coords.cross(&c.coords));
     }
-    for (b, v) in vol.iter().enumerate() {
-        if *v < 0.0 {
-            rep.flipped_bodies += 1;
-            for (k, t) in tris.iter_mut().enumerate() {
-                if body[k] == b {
-                    *t = [t[0], t[2], t[1]];
-                }
-            }
+    let inside_out: Vec<bool> = vol.iter().map(|v| *v < 0.0).collect();
+    rep.flipped_bodies += inside_out.iter().filter(|&&f| f).count();
+    for (k, t) in tris.iter_mut().enumerate() {
+        if inside_out[body[k]] {
+            *t = [t[0], t[2], t[1]];
         }
     }
 }
@@ -566,6 +686,55 @@ mod tests {
         let (m, rep) = repair(&box_with_window(), 0.001, "mm").unwrap();
         assert_eq!(rep.holes_closed, 1);
         assert!((volume(&m) - 1e-6).abs() < 1e-12, "{}", volume(&m));
+    }
+
+    /// An L-profile bracket extruded 12 mm along y (mm): a 20 x 2 mm foot and a 2 x 10 mm upright,
+    /// each end cap meshed as two rectangles (the foot's and the upright's), the side walls one
+    /// quad per profile edge; so the foot's cap edge has the upright's corner on it, and the back
+    /// wall's edge the foot's top corner: four T-junctions.
+    fn l_bracket() -> RawMesh {
+        let mut r = RawMesh::default();
+        let mut quad = |p: [[f64; 3]; 4]| {
+            let b = r.vertices.len() as u32;
+            r.vertices.extend(p);
+            r.triangles.push([b, b + 1, b + 2]);
+            r.triangles.push([b, b + 2, b + 3]);
+        };
+        let at = |x: f64, y: f64, z: f64| [x, y, z];
+        for (y, out) in [(0.0, true), (12.0, false)] {
+            for [x0, z0, x1, z1] in [[0.0, 0.0, 20.0, 2.0], [0.0, 2.0, 2.0, 10.0]] {
+                let c = [at(x0, y, z0), at(x1, y, z0), at(x1, y, z1), at(x0, y, z1)];
+                quad(if out { c } else { [c[3], c[2], c[1], c[0]] });
+            }
+        }
+        let profile = [
+            [0.0, 0.0],
+            [20.0, 0.0],
+            [20.0, 2.0],
+            [2.0, 2.0],
+            [2.0, 10.0],
+            [0.0, 10.0],
+        ];
+        for k in 0..profile.len() {
+            let ([x0, z0], [x1, z1]) = (profile[k], profile[(k + 1) % profile.len()]);
+            quad([at(x0, 0.0, z0), at(x0, 12.0, z0), at(x1, 12.0, z1), at(x1, 0.0, z1)]);
+        }
+        r
+    }
+
+    #[test]
+    fn t_junctions_are_split_and_the_solid_closes() {
+        let (m, rep) = repair(&l_bracket(), 0.001, "mm").unwrap();
+        assert_eq!(rep.t_junctions_split, 4);
+        assert_eq!(rep.holes_closed, 0);
+        assert_eq!(rep.bodies, 1);
+        let v = (20.0 * 2.0 + 2.0 * 8.0) * 12.0 * 1e-9;
+        assert!((volume(&m) - v).abs() < 1e-15, "{} against {v}", volume(&m));
+        assert!(edge_uses(&m.triangles).values().all(|u| u.len() == 2));
+        // The control: without the split, the seams' open edges chain into loops that are no
+        // hole a cap could close, and the part is refused.
+        let e = repair_with(&l_bracket(), 0.001, "mm", false).unwrap_err();
+        assert!(matches!(e, Defect::OpenShell(_)), "{e}");
     }
 
     /// A 10 mm cube whose top face has a 1 mm square window (the window's rim fanned to the
