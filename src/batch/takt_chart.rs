@@ -34,7 +34,7 @@ pub struct TaktBar {
     pub reference_s: Option<f64>,
     /// The physical floor (s) (mean Pick + Place), if known.
     pub floor_s: Option<f64>,
-    /// placed / attempts.
+    /// The success rate (placed within the place tray's tolerance / attempts).
     pub success: f64,
 }
 

@@ -191,7 +191,7 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
     use binpick::results::table::TERMINAL_WIDTH;
     let t = &s.tally;
     let summary = format!(
-        "{} of {} attempts placed ({:.1} %); takt (release to release, everything included, as the reference \
+        "{} of {} attempts placed, {} of them misplaced: success {:.1} %; takt (release to release, everything included, as the reference \
          defines it) {} (reference {}); excluding \
          tray refills {}; Pick {}, Place {} (motion floor {}); waits: sensor {} ({:.2} s), compute {} ({:.2} s); \
          stops {}, collisions {}, drops {}, parts lost {}; captures {} ({} spoiled), agitations {}, refills {}; \
@@ -199,6 +199,7 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
          {:.1} s simulated in {:.2} s wall ({:.0}x real time)",
         t.placed,
         t.attempts,
+        s.placement.misplaced,
         100.0 * s.success_rate,
         takt_text(s),
         s.reference_takt_s.map_or("-".to_string(), |t| format!("{t:.1} s")),
@@ -254,7 +255,7 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
     if p.measured > 0 {
         let placed = format!(
             "placement, against each part's place pose: {} measured, error median {:.2} mm / {:.2} deg, \
-             p95 {:.2} mm / {:.2} deg; misplaced (beyond the place tray's tolerance, counted as placed) {}",
+             p95 {:.2} mm / {:.2} deg; misplaced (beyond the place tray's tolerance, failed attempts) {}",
             p.measured,
             p.position_error_mm[0],
             p.rotation_error_deg[0],

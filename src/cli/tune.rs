@@ -68,7 +68,7 @@ pub struct TuneArgs {
     /// The optimizer's seed (its random numbers come from this seed's `tune-optimizer` stream).
     #[arg(long, default_value_t = 1)]
     pub seed: u64,
-    /// Lowest success rate (placed / attempts, 0 to 1) a best must reach on the training seeds.
+    /// Lowest success rate (placed within the place tray's tolerance / attempts, 0 to 1) a best must reach on the training seeds.
     #[arg(long, default_value_t = 0.95)]
     pub min_success: f64,
     /// Most collisions a best may have over its training runs.

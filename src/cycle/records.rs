@@ -728,6 +728,16 @@ impl Tally {
         }
     }
 
+    /// Placed parts that lay beyond the place tray's tolerance (`misplaced` incidents).
+    pub fn misplaced(&self) -> usize {
+        self.incidents.iter().filter(|i| i.kind == "misplaced").count()
+    }
+
+    /// Placed parts within the place tray's tolerance: what the success rate counts.
+    pub fn placed_in_tolerance(&self) -> usize {
+        self.placed.saturating_sub(self.misplaced())
+    }
+
     /// The merge of `tallies`, in their order (`None` when there is none).
     pub fn merged<'a>(tallies: impl IntoIterator<Item = &'a Tally>) -> Option<Tally> {
         let mut it = tallies.into_iter();

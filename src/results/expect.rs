@@ -8,7 +8,7 @@
 //! ```toml
 //! [E]
 //! takt_max_s = 1.8     # takt mean (s) at most
-//! success_min = 0.95   # placed / attempts at least (a share, 0 to 1)
+//! success_min = 0.95   # success rate at least (a share, 0 to 1)
 //! collisions_max = 0   # collisions at most (a count)
 //! ```
 //!

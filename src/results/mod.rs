@@ -46,7 +46,7 @@ pub const SUSTAINED_PICKS: usize = 180;
 pub struct Summary {
     /// The tally summarised.
     pub tally: Tally,
-    /// placed / attempts.
+    /// Placed within the place tray's tolerance / attempts: a misplaced part is a failed attempt.
     pub success_rate: f64,
     /// Takt as the reference defines it: every release-to-release interval after a run's first.
     pub takt: Stats,
@@ -92,8 +92,8 @@ pub struct PlacementSummary {
     pub position_error_mm: [f64; 2],
     /// Rotation error, median and p95 (nearest rank) (deg; NaN when none was measured).
     pub rotation_error_deg: [f64; 2],
-    /// Placed parts beyond the place tray's tolerance (`misplaced` incidents): they count as
-    /// placed.
+    /// Placed parts beyond the place tray's tolerance (`misplaced` incidents): failed attempts in
+    /// the success rate.
     pub misplaced: usize,
 }
 
@@ -108,7 +108,7 @@ impl PlacementSummary {
             measured: t.placement_error_mm.len(),
             position_error_mm: median_p95(&t.placement_error_mm),
             rotation_error_deg: median_p95(&t.placement_rotation_deg),
-            misplaced: t.incidents.iter().filter(|i| i.kind == "misplaced").count(),
+            misplaced: t.misplaced(),
         }
     }
 }
@@ -130,7 +130,7 @@ impl Summary {
         let (mean_pick_s, mean_place_s) = (mean(&t.pick_s), mean(&t.place_s));
         let takt = Stats::of(&t.takts_s);
         Summary {
-            success_rate: ratio(t.placed, t.attempts),
+            success_rate: ratio(t.placed_in_tolerance(), t.attempts),
             parts_per_hour: per_hour(takt.mean_s),
             takt,
             takt_excl_refills: Stats::of(&t.takts_excl_refills_s),
@@ -165,4 +165,36 @@ pub fn per_workpiece<'a>(order: &[String], tallies: impl Iterator<Item = &'a Tal
         .filter_map(|w| Tally::merged(tallies.clone().filter(|t| &t.workpiece == w)))
         .map(|t| Summary::of(&t))
         .collect()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::cycle::Incident;
+
+    /// A misplaced part is a failed attempt in the success rate (it still ended an interval and
+    /// left the pick tray); the control: the same tally without the incident counts it placed.
+    #[test]
+    fn a_misplaced_part_is_not_a_success() {
+        let incident = |kind: &str| Incident {
+            seed: 1,
+            pick: Some(1),
+            t_s: 3.0,
+            kind: kind.into(),
+            detail: String::new(),
+        };
+        let mut t = Tally {
+            workpiece: "A".into(),
+            runs: 1,
+            attempts: 3,
+            placed: 2,
+            incidents: vec![incident("misplaced"), incident("fault")],
+            ..Tally::default()
+        };
+        assert_eq!((t.misplaced(), t.placed_in_tolerance()), (1, 1));
+        let s = Summary::of(&t);
+        assert_eq!((s.success_rate, s.placement.misplaced), (1.0 / 3.0, 1));
+        t.incidents.remove(0);
+        assert_eq!(Summary::of(&t).success_rate, 2.0 / 3.0);
+    }
 }

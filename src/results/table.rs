@@ -140,7 +140,12 @@ const TERMINAL: &[MdCell] = &[
         s.reference_takt_s.map_or("-".into(), |t| num(t, 1))
     }),
     ("success", true, |s| {
-        format!("{} ({}/{})", pct(s.success_rate, 1), s.tally.placed, s.tally.attempts)
+        format!(
+            "{} ({}/{})",
+            pct(s.success_rate, 1),
+            s.tally.placed_in_tolerance(),
+            s.tally.attempts
+        )
     }),
     ("floor [s]", true, |s| num(s.motion_floor_s, 3)),
     ("waits", true, |s| pct(wait_share(s), 0)),

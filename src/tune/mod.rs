@@ -186,7 +186,7 @@ pub fn parse_varies(texts: &[String]) -> Result<Vec<Dim>, StudyError> {
 /// What a best must meet, each a command-line key.
 #[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
 pub struct Constraints {
-    /// Lowest success rate (placed / attempts), 0 to 1.
+    /// Lowest success rate (placed within the place tray's tolerance / attempts), 0 to 1.
     pub min_success: f64,
     /// Most collisions over the training runs.
     pub max_collisions: usize,
@@ -242,7 +242,7 @@ pub struct Figures {
     /// The intervals of each run's first 21 picks (s): the reference's 20-pick takt.
     #[serde(default)]
     pub first20_takt_s: Option<f64>,
-    /// placed / attempts; none without attempts.
+    /// placed within the place tray's tolerance / attempts; none without attempts.
     pub success_rate: Option<f64>,
     /// Parts placed.
     pub placed: usize,
