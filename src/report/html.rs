@@ -109,7 +109,7 @@ pub const READING_GUIDE: [(&str, &str); 6] = [
     ),
     (
         "success",
-        "parts placed / picks attempted, re-captures counted as attempts",
+        "parts placed within the place tray's tolerance / picks attempted, re-captures counted as attempts; a part placed beyond it (misplaced, listed under the table) is a failed attempt, though it counts in placed / attempts",
     ),
     (
         "motion floor",
