@@ -276,6 +276,23 @@ impl StartMismatch {
     }
 }
 
+/// What an incident a tally lists is: one of the events that are incidents, named in files as
+/// the event log names the event.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum IncidentKind {
+    /// A collision or a protective stop.
+    Fault,
+    /// A part that left the pick tray (not by the cup).
+    PartLost,
+    /// A placed part beyond the place tray's tolerance.
+    Misplaced,
+    /// A physics fault (deep penetration, NaN), which ends its run.
+    PhysicsFault,
+    /// A large step between the arm's state and a motion's start.
+    MotionStartMismatch,
+}
+
 impl Event {
     /// The event's kind, as the event log names it: `capture`, `capture_spoiled`,
     /// `recognition_ready`, `grasp_chosen`, `planned`, `stall`, `pick_start`, `grasped`,
@@ -318,12 +335,16 @@ impl Event {
         )
     }
 
-    /// Whether it is an incident a tally lists ([`super::Incident`]): a fault, a lost part, a
+    /// The incident it is, if a tally lists it ([`super::Incident`]): a fault, a lost part, a
     /// misplaced part, a physics fault, a large step at a motion's start.
-    pub fn is_incident(&self) -> bool {
+    pub fn incident_kind(&self) -> Option<IncidentKind> {
         match self {
-            Event::MotionStartMismatch(m) => m.is_large(),
-            _ => self.is_mishap(),
+            Event::Fault(_) => Some(IncidentKind::Fault),
+            Event::PartLost(_) => Some(IncidentKind::PartLost),
+            Event::Misplaced(_) => Some(IncidentKind::Misplaced),
+            Event::PhysicsFault(_) => Some(IncidentKind::PhysicsFault),
+            Event::MotionStartMismatch(m) if m.is_large() => Some(IncidentKind::MotionStartMismatch),
+            _ => None,
         }
     }
 
@@ -637,8 +658,10 @@ mod tests {
         assert!(!misplaced(at(0.0019, 4.9)));
         assert!(misplaced(at(0.0021, 0.0)) && misplaced(at(0.0, 5.1)));
         let flipped = Event::Misplaced(at(0.00303, 179.0));
-        assert!(flipped.is_incident() && flipped.is_warning());
+        assert!(flipped.incident_kind() == Some(IncidentKind::Misplaced) && flipped.is_warning());
         assert_eq!(flipped.kind(), "misplaced");
+        // Files name an incident as the event log names its event.
+        assert_eq!(serde_json::to_value(IncidentKind::Misplaced).unwrap(), flipped.kind());
         assert_eq!(
             flipped.to_string(),
             "part 15 lies 3.03 mm and 179.0 deg from its place pose"
@@ -651,10 +674,15 @@ mod tests {
     #[test]
     fn incidents_say_what_happened_and_a_tracking_error_is_not_one() {
         let step = |q_rad, qd_rad_s| Event::MotionStartMismatch(StartMismatch { q_rad, qd_rad_s });
-        assert!(!step(0.0013, 0.0).is_incident());
-        assert!(!step(0.0, 0.05).is_incident());
-        assert!(step(0.02, 0.0).is_incident());
-        assert!(step(0.0, 0.5).is_incident());
+        assert_eq!(step(0.0013, 0.0).incident_kind(), None);
+        assert_eq!(step(0.0, 0.05).incident_kind(), None);
+        let large = step(0.02, 0.0);
+        assert_eq!(large.incident_kind(), Some(IncidentKind::MotionStartMismatch));
+        assert_eq!(
+            serde_json::to_value(IncidentKind::MotionStartMismatch).unwrap(),
+            large.kind()
+        );
+        assert!(step(0.0, 0.5).incident_kind().is_some());
         assert_eq!(
             step(0.02, 0.5).to_string(),
             "a motion started 0.0200 rad from the arm, its commanded velocity stepped 0.500 rad/s"

@@ -60,8 +60,8 @@ pub mod trays;
 use nalgebra::{Isometry3, Vector3};
 
 pub use events::{
-    CycleEvent, EndReason, Event, EventLog, LeftDuring, Observer, Observers, PartLoss, PlacementError, Planned,
-    Recognised, Stage, StallCause, StartMismatch, Takt,
+    CycleEvent, EndReason, Event, EventLog, IncidentKind, LeftDuring, Observer, Observers, PartLoss, PlacementError,
+    Planned, Recognised, Stage, StallCause, StartMismatch, Takt,
 };
 pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
@@ -332,12 +332,12 @@ impl Run<'_, '_> {
             Event::Misplaced(m) => Some(m.pick),
             _ => self.st.pick,
         };
-        if event.is_incident() {
+        if let Some(kind) = event.incident_kind() {
             self.st.incidents.push(Incident {
                 seed: self.cell.opts.seed,
                 pick,
                 t_s,
-                kind: event.kind().to_string(),
+                kind,
                 detail: event.to_string(),
             });
         }
@@ -529,7 +529,7 @@ pub fn run(
                 seed: opts.seed,
                 pick: None,
                 t_s: e.time_s,
-                kind: "physics_fault".into(),
+                kind: IncidentKind::PhysicsFault,
                 detail: Event::PhysicsFault(fault.clone()).to_string(),
             });
             tally.physics_faults.push(fault);

@@ -26,7 +26,7 @@
 
 use serde::{Deserialize, Deserializer, Serialize, Serializer};
 
-use super::events::EndReason;
+use super::events::{EndReason, IncidentKind};
 use super::outcome::{Outcome, PhysicsFault};
 use crate::sensor::{RecognitionReport, RecognitionTotals, TruthMatch};
 
@@ -672,8 +672,9 @@ pub struct Incident {
     pub pick: Option<usize>,
     /// Simulation time (s).
     pub t_s: f64,
-    /// The event's kind (`fault`, `part_lost`, `physics_fault`).
-    pub kind: String,
+    /// What it is (in files as the event log names it: `fault`, `part_lost`, `misplaced`,
+    /// `physics_fault`, `motion_start_mismatch`).
+    pub kind: IncidentKind,
     /// The event log's line for it.
     pub detail: String,
 }
@@ -730,7 +731,10 @@ impl Tally {
 
     /// Placed parts that lay beyond the place tray's tolerance (`misplaced` incidents).
     pub fn misplaced(&self) -> usize {
-        self.incidents.iter().filter(|i| i.kind == "misplaced").count()
+        self.incidents
+            .iter()
+            .filter(|i| i.kind == IncidentKind::Misplaced)
+            .count()
     }
 
     /// Placed parts within the place tray's tolerance: what the success rate counts.

@@ -170,17 +170,17 @@ pub fn per_workpiece<'a>(order: &[String], tallies: impl Iterator<Item = &'a Tal
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::cycle::Incident;
+    use crate::cycle::{Incident, IncidentKind};
 
     /// A misplaced part is a failed attempt in the success rate (it still ended an interval and
     /// left the pick tray); the control: the same tally without the incident counts it placed.
     #[test]
     fn a_misplaced_part_is_not_a_success() {
-        let incident = |kind: &str| Incident {
+        let incident = |kind: IncidentKind| Incident {
             seed: 1,
             pick: Some(1),
             t_s: 3.0,
-            kind: kind.into(),
+            kind,
             detail: String::new(),
         };
         let mut t = Tally {
@@ -188,7 +188,7 @@ mod tests {
             runs: 1,
             attempts: 3,
             placed: 2,
-            incidents: vec![incident("misplaced"), incident("fault")],
+            incidents: vec![incident(IncidentKind::Misplaced), incident(IncidentKind::Fault)],
             ..Tally::default()
         };
         assert_eq!((t.misplaced(), t.placed_in_tolerance()), (1, 1));

@@ -806,12 +806,12 @@ mod tests {
 
     #[test]
     fn incidents_are_listed_under_the_table_at_most_five_a_row() {
-        use crate::cycle::Incident;
+        use crate::cycle::{Incident, IncidentKind};
         let incident = |k: usize| Incident {
             seed: 3,
             pick: Some(100 + k),
             t_s: 250.0 + k as f64,
-            kind: "fault".into(),
+            kind: IncidentKind::Fault,
             detail: format!(
                 "collision: link 6 and part {k} during the Place motion, far too long a line to print {}",
                 "x ".repeat(40)

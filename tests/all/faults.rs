@@ -7,7 +7,7 @@
 //! D's pile of seed 13, was cured: its cans sank into each other cap on cap.)
 
 use binpick::config::{LoadedScene, LoadedWorkpiece};
-use binpick::cycle::{self, Cell, EndReason, FaultDuring, RunOptions};
+use binpick::cycle::{self, Cell, EndReason, FaultDuring, IncidentKind, RunOptions};
 use binpick::physics::{HealthEvent, HealthLimits, PartState};
 use binpick::robot::RobotModel;
 
@@ -63,7 +63,11 @@ fn a_fault_in_a_refill_pour_ends_the_run_with_its_typed_record_and_keeps_the_tal
     assert!(t.sim_time_s >= f.time_s);
     // The fault is also the run's last incident, with the log's line for it.
     let last = t.incidents.last().expect("an incident");
-    assert_eq!((last.kind.as_str(), last.t_s), ("physics_fault", f.time_s), "{last:?}");
+    assert_eq!(
+        (last.kind, last.t_s),
+        (IncidentKind::PhysicsFault, f.time_s),
+        "{last:?}"
+    );
     assert!(last.detail.contains("deep penetration"), "{last:?}");
     // The record survives a shard file and reads back as it was.
     let back: binpick::cycle::Tally = serde_json::from_value(serde_json::to_value(t).unwrap()).unwrap();
@@ -173,7 +177,11 @@ fn a_part_the_first_pour_spills_is_lost_and_the_run_goes_on() {
         t.faults.parts_lost, 1,
         "the pile of seed 56 no longer spills: pick another seed whose pour does"
     );
-    let lost: Vec<_> = t.incidents.iter().filter(|i| i.kind == "part_lost").collect();
+    let lost: Vec<_> = t
+        .incidents
+        .iter()
+        .filter(|i| i.kind == IncidentKind::PartLost)
+        .collect();
     assert_eq!(lost.len(), 1, "{:?}", t.incidents);
     assert_eq!(lost[0].pick, None, "lost before the first pick");
     assert!(lost[0].detail.contains("pour"), "{}", lost[0].detail);
