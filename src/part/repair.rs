@@ -94,7 +94,11 @@ fn repair_with(
     }
     // 1. Size of the referenced vertices.
     let used = used_vertices(raw);
-    let (centre, tol) = checked_extent(raw, &used, metres_per_unit, units)?;
+    let Extent {
+        centre,
+        tol,
+        longest_axis,
+    } = checked_extent(raw, &used, metres_per_unit, units)?;
     // 2. Weld on a grid of cells of the tolerance.
     let (mut verts, remap) = weld(raw, &used, metres_per_unit, centre, tol, &mut rep);
     // 3. Zero-area triangles.
@@ -106,7 +110,7 @@ fn repair_with(
     }
     // 5. T-junctions.
     if split_t {
-        split_t_junctions(&verts, &mut tris, tol, &mut rep);
+        split_t_junctions(&verts, &mut tris, tol, longest_axis, &mut rep);
     }
     // 6. Consistent winding per body, then outward.
     orient(&verts, &mut tris, &mut rep);
@@ -134,9 +138,19 @@ fn used_vertices(raw: &RawMesh) -> Vec<usize> {
     (0..raw.vertices.len()).filter(|&i| u[i]).collect()
 }
 
-/// The centre of the used vertices' box (m) and the weld tolerance (m), after checking that the
-/// box's size in metres is one a part can have (else the units are wrong).
-fn checked_extent(raw: &RawMesh, used: &[usize], metres_per_unit: f64, units: &str) -> Result<([f64; 3], f64), Defect> {
+/// The used vertices' box, as the repair reads it.
+struct Extent {
+    /// The box's centre (m, file frame).
+    centre: [f64; 3],
+    /// The weld tolerance (m).
+    tol: f64,
+    /// The axis along which the box is longest (0, 1, 2: x, y, z).
+    longest_axis: usize,
+}
+
+/// The used vertices' box, after checking that its size in metres is one a part can have (else
+/// the units are wrong).
+fn checked_extent(raw: &RawMesh, used: &[usize], metres_per_unit: f64, units: &str) -> Result<Extent, Defect> {
     let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
     for &i in used {
         for a in 0..3 {
@@ -170,7 +184,12 @@ fn checked_extent(raw: &RawMesh, used: &[usize], metres_per_unit: f64, units: &s
     }
     let diag = ext_m.iter().map(|e| e * e).sum::<f64>().sqrt();
     let centre = [0, 1, 2].map(|a| 0.5 * (lo[a] + hi[a]) * metres_per_unit);
-    Ok((centre, WELD_SHARE * diag))
+    let longest_axis = (0..3).max_by(|&a, &b| ext_m[a].total_cmp(&ext_m[b])).unwrap_or(0);
+    Ok(Extent {
+        centre,
+        tol: WELD_SHARE * diag,
+        longest_axis,
+    })
 }
 
 /// Welds the used vertices closer than `tol` on a grid of cells of the tolerance (a vertex checks
@@ -298,20 +317,8 @@ const T_JUNCTION_BUDGET: usize = 10_000_000;
 /// Splits each triangle whose open edge (an edge of one triangle) has another open edge's vertex
 /// on it, strictly between its ends and within `tol` of it, into two at that vertex (the one
 /// nearest the edge's start first), pass by pass until no open edge has one. Open edges' vertices
-/// are looked up along the mesh's longest axis, so a closed mesh costs one pass over its edges.
-fn split_t_junctions(verts: &[Point3<f64>], tris: &mut Vec<[u32; 3]>, tol: f64, rep: &mut RepairReport) {
-    let axis = {
-        let (mut lo, mut hi) = ([f64::INFINITY; 3], [f64::NEG_INFINITY; 3]);
-        for p in verts {
-            for a in 0..3 {
-                lo[a] = lo[a].min(p[a]);
-                hi[a] = hi[a].max(p[a]);
-            }
-        }
-        (0..3)
-            .max_by(|&a, &b| (hi[a] - lo[a]).total_cmp(&(hi[b] - lo[b])))
-            .unwrap_or(0)
-    };
+/// are looked up along `axis` (the mesh's longest), so a closed mesh costs one pass over its edges.
+fn split_t_junctions(verts: &[Point3<f64>], tris: &mut Vec<[u32; 3]>, tol: f64, axis: usize, rep: &mut RepairReport) {
     let key = |i: u32| verts[i as usize][axis];
     let mut work = 0usize;
     for _ in 0..T_JUNCTION_PASSES {
