@@ -705,12 +705,18 @@ impl GraspSelector {
                 let mut point = det.world_from_part * Point3::from(site);
                 let mut local = tray_from_world * point;
                 // Correct the recognised face height by the surface the sensor measured under the
-                // cup: the median of its cells within 3 mm of the recognised height (robust
-                // to depth noise and to neighbouring surfaces).
-                let measured = height_map.surface_within(local.x, local.y, self.cup_radius_m, local.z, 0.003);
-                if measured.is_finite() {
-                    point.z += measured - local.z;
-                    local.z = measured;
+                // cup, its cells within 3 mm of the recognised height (robust to depth noise and
+                // to neighbouring surfaces): the cup goes to the median of their mean heights;
+                // what lies on or beside the face is judged against the median of their highest
+                // points, as the other cells hold theirs.
+                let expected = local.z;
+                let surface = height_map.surface_within(local.x, local.y, self.cup_radius_m, expected, 0.003);
+                if surface.is_finite() {
+                    point.z += surface - expected;
+                }
+                let top = height_map.top_within(local.x, local.y, self.cup_radius_m, expected, 0.003);
+                if top.is_finite() {
+                    local.z = top;
                 }
                 let face_h = local.z;
                 // Clearance from the cloud: nothing higher than the face (plus noise) under the
@@ -1183,6 +1189,7 @@ mod tests {
             ny: n,
             origin_xy_m: [-0.5 * n as f64 * cell; 2],
             height_m: vec![0.0; n * n],
+            mean_m: None,
         };
         for j in 0..n {
             for i in 0..n {
@@ -1256,6 +1263,7 @@ mod tests {
             ny: 200,
             origin_xy_m: [-0.1, -0.1],
             height_m: vec![0.0; 200 * 200],
+            mean_m: None,
         };
         raise(&mut map, &tray_from_part, c.size_m[2], |x, y| {
             x.abs() <= c.size_m[0] / 2.0 && y.abs() <= c.size_m[1] / 2.0

@@ -84,6 +84,7 @@ impl PileColumns {
             ny,
             origin_xy_m: map.origin_xy_m,
             height_m: heights,
+            mean_m: None,
         };
         let center_x_m: Vec<f64> = (0..nx)
             .map(|i| map.origin_xy_m[0] + (i as f64 + 0.5) * map.cell_m)
@@ -287,6 +288,7 @@ mod tests {
             ny,
             origin_xy_m: [-0.001 * nx as f64, -0.001 * ny as f64],
             height_m,
+            mean_m: None,
         }
     }
 

@@ -344,6 +344,7 @@ fn the_planner_does_not_descend_into_what_it_did_not_see() {
         ny,
         origin_xy_m: [-hx, -hy],
         height_m: vec![0.0; nx * ny],
+        mean_m: None,
     };
     let (hole_x, hole_y, hole_half) = (0.05, 0.0, 0.03);
     let cell_of = |x: f64, y: f64| (((y + hy) / cell).floor() as usize) * nx + ((x + hx) / cell).floor() as usize;
