@@ -706,9 +706,9 @@ impl GraspSelector {
                 let mut local = tray_from_world * point;
                 // Correct the recognised face height by the surface the sensor measured under the
                 // cup, its cells within 3 mm of the recognised height (robust to depth noise and
-                // to neighbouring surfaces): the cup goes to the median of their mean heights;
-                // what lies on or beside the face is judged against the median of their highest
-                // points, as the other cells hold theirs.
+                // to neighbouring surfaces): the cup goes to the surface their points' mean
+                // heights give; what lies on or beside the face is judged against the median of
+                // their highest points, as the other cells hold theirs.
                 let expected = local.z;
                 let surface = height_map.surface_within(local.x, local.y, self.cup_radius_m, expected, 0.003);
                 if surface.is_finite() {
