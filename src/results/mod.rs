@@ -129,9 +129,8 @@ impl Summary {
         let t = tally;
         let (mean_pick_s, mean_place_s) = (mean(&t.pick_s), mean(&t.place_s));
         let takt = Stats::of(&t.takts_s);
-        let placement = PlacementSummary::of(t);
         Summary {
-            success_rate: ratio(t.placed.saturating_sub(placement.misplaced), t.attempts),
+            success_rate: ratio(t.placed_in_tolerance(), t.attempts),
             parts_per_hour: per_hour(takt.mean_s),
             takt,
             takt_excl_refills: Stats::of(&t.takts_excl_refills_s),
@@ -147,7 +146,7 @@ impl Summary {
             grasp_success_rate: ratio(t.grasps.1, t.grasps.0),
             picks_per_capture: ratio(t.set_out, t.results_used),
             recognition: t.recognition.summary(),
-            placement,
+            placement: PlacementSummary::of(t),
             tally: tally.clone(),
         }
     }

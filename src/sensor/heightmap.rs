@@ -53,7 +53,8 @@ impl HeightMap {
             height_m: vec![f64::NAN; nx * ny],
             mean_m: None,
         };
-        let mut sum_m = vec![0.0; nx * ny];
+        // Each cell's points' sum, then their mean.
+        let mut mean_m = vec![0.0; nx * ny];
         let mut count = vec![0u32; nx * ny];
         let tray_from_world = t.world_from_tray.inverse();
         let apex = tray_from_world * Point3::from(c.camera_position_m);
@@ -75,17 +76,14 @@ impl HeightMap {
                 if h.is_nan() || l.z > *h {
                     *h = l.z;
                 }
-                sum_m[k] += l.z;
+                mean_m[k] += l.z;
                 count[k] += 1;
             }
         }
-        hm.mean_m = Some(
-            sum_m
-                .iter()
-                .zip(&count)
-                .map(|(s, &n)| if n > 0 { s / n as f64 } else { f64::NAN })
-                .collect(),
-        );
+        for (m, &n) in mean_m.iter_mut().zip(&count) {
+            *m = if n > 0 { *m / n as f64 } else { f64::NAN };
+        }
+        hm.mean_m = Some(mean_m);
         hm
     }
 
