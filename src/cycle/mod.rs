@@ -302,6 +302,10 @@ pub struct CellState {
     pub capture_hold_until_s: f64,
     /// Captures in a row taken for a pile in motion (at most [`sensing::MOTION_RECAPTURES`] are).
     pub moving_in_a_row: usize,
+    /// Parts released over their slots, measured once they rest.
+    settling: Vec<next_pick::Settling>,
+    /// Their placement errors, measured, not yet written into the tally and the records.
+    measured: Vec<PlacementError>,
 }
 
 /// A recognition result in hand.
@@ -443,6 +447,8 @@ impl<'a> Cell<'a> {
             results_collected: 0,
             capture_hold_until_s: f64::NEG_INFINITY,
             moving_in_a_row: 0,
+            settling: Vec::new(),
+            measured: Vec::new(),
         };
         let mut run = Run { cell: self, st, obs };
         run.lose_spilled(spilled);
@@ -549,7 +555,15 @@ pub fn run_from(cell: &Cell<'_>, st: CellState, obs: &mut dyn Observer) -> Resul
     let opts = &cell.opts;
     let mut run = Run { cell, st, obs };
     let mut records = Vec::new();
-    let (ended, fault) = match run.picks(&mut records) {
+    // The parts placed last are measured once they rest (the world runs on until they do), or as
+    // they lie after an interruption or a fault.
+    let ended = run.picks(&mut records).and_then(|ended| match ended {
+        EndReason::Interrupted => Ok(ended),
+        _ => run.settle_placed().map(|()| ended),
+    });
+    run.measure_settled(true);
+    run.apply_placements(&mut records);
+    let (ended, fault) = match ended {
         Ok(ended) => (ended, None),
         Err(CycleError::Health(e)) => (EndReason::PhysicsFault, Some(PhysicsFault::new(&e, FaultDuring::Cycle))),
         Err(CycleError::Pour(e)) => (EndReason::PhysicsFault, Some(PhysicsFault::new(&e, FaultDuring::Pour))),
@@ -628,20 +642,17 @@ impl Run<'_, '_> {
         // The next pick, prepared at the last release.
         let mut next: Option<Prefetched> = None;
         while self.st.tally.attempts < opts.picks {
+            self.measure_settled(false);
+            self.apply_placements(records);
             if opts.stop.is_some_and(|s| s.load(std::sync::atomic::Ordering::Relaxed)) {
-                let fix = self.play_held_retreat(next.take())?;
-                apply_placement_fix(records, &mut self.st.tally, fix);
+                self.play_held_retreat(next.take())?;
                 return Ok(EndReason::Interrupted);
             }
             let index = self.st.tally.attempts;
             self.st.pick = Some(index);
-            let mut late = None;
             let (result, taken, since, compute_from_s, prepared) = match next.take() {
                 // Prepared at the last release, its Pick overlapping that Place's retreat.
-                Some(p) => {
-                    late = p.late;
-                    (p.result, p.taken, p.since, p.compute_from_s, Ok((p.prep, p.wall)))
-                }
+                Some(p) => (p.result, p.taken, p.since, p.compute_from_s, Ok((p.prep, p.wall))),
                 None => {
                     let Some((result, taken, since)) = self.result_for_pick()? else {
                         return Ok(EndReason::NoPathOutOfView);
@@ -728,9 +739,8 @@ impl Run<'_, '_> {
                 .detections
                 .as_deref()
                 .map(|d| d[prep.grasp.detection].world_from_part);
-            let end = self.pick_and_place(&prep, charged, compute_from_s, chosen, late, &mut rec)?;
+            let end = self.pick_and_place(&prep, charged, compute_from_s, chosen, &mut rec)?;
             next = end.next;
-            apply_placement_fix(records, &mut self.st.tally, end.fix);
             if !(rec.outcome == Outcome::Placed || rec.outcome.grasp_failed()) {
                 // The pile may have been disturbed anywhere: no result from before counts.
                 self.st.in_hand = None;
@@ -738,18 +748,21 @@ impl Run<'_, '_> {
             }
             self.keep(records, rec);
         }
-        let fix = self.play_held_retreat(next)?;
-        apply_placement_fix(records, &mut self.st.tally, fix);
+        self.play_held_retreat(next)?;
         Ok(EndReason::PicksDone)
+    }
+
+    /// Writes the placement errors measured since the last call into the tally and the records.
+    fn apply_placements(&mut self, records: &mut [PickRecord]) {
+        for fix in std::mem::take(&mut self.st.measured) {
+            apply_placement_fix(records, &mut self.st.tally, fix);
+        }
     }
 }
 
-/// Writes a placement error measured late (after its pick's record was tallied) into the tally
-/// and into the kept record it belongs to.
-fn apply_placement_fix(records: &mut [PickRecord], tally: &mut Tally, fix: Option<PlacementError>) {
-    let Some(fix) = fix else {
-        return;
-    };
+/// Writes a placement error (measured once the part rested, after its pick's record was
+/// tallied) into the tally and into the kept record it belongs to.
+fn apply_placement_fix(records: &mut [PickRecord], tally: &mut Tally, fix: PlacementError) {
     let (error_mm, rotation_deg) = (fix.error_m * 1e3, fix.rotation_rad.to_degrees());
     tally.placement_error_mm.push(error_mm);
     tally.placement_rotation_deg.push(rotation_deg);

@@ -15,6 +15,7 @@ use super::play::{Capture, Played, Segment};
 use super::records::StageCompute;
 use super::sensing::SensedResult;
 use super::{CycleError, InHand, PickSpot, Run};
+use crate::physics::PartState;
 use crate::sensor::Detection;
 use crate::trajectory::{LineMotion, Motion};
 
@@ -32,20 +33,28 @@ pub(super) struct Prefetched {
     pub(super) wall: StageCompute,
     /// The retreat it overlaps, not played yet.
     pub(super) retreat: LineMotion,
-    /// The last Place's part, measured once the retreat has left it.
-    pub(super) late: Option<LatePlacement>,
 }
 
-/// A part whose Place's retreat runs into the next Pick: its placement error is measured once
-/// that retreat has left it.
-pub(super) struct LatePlacement {
+/// A part released over its slot whose placement error is not measured yet: it is, once the
+/// part has come to rest (a part dropped from the release height rocks for a few tenths of a
+/// second, and measured while it rocks it looked misplaced), or [`SETTLE_TIMEOUT_S`] after its
+/// release, or at once if it left the place tray.
+pub(super) struct Settling {
     /// The pick's record index.
     pub record: usize,
     /// The part.
     pub part: usize,
     /// Where it should lie in its slot (the grasp's `world_from_part_place`).
     pub world_from_part_place: Isometry3<f64>,
+    /// When it was released (s).
+    pub released_s: f64,
 }
+
+/// A placed part not at rest this long after its release is measured as it lies (s).
+pub(super) const SETTLE_TIMEOUT_S: f64 = 2.0;
+
+/// At a run's end, how often the released parts are looked at while they settle (s).
+const SETTLE_POLL_S: f64 = 0.05;
 
 /// A later pick from the same result takes only a part whose recognised box keeps this much
 /// clear of what each earlier pick may have moved (m).
@@ -214,28 +223,52 @@ impl Run<'_, '_> {
             prep,
             wall,
             retreat: up.clone(),
-            late: None,
         };
         Some((next, head_s))
     }
 
-    /// A retreat left for a next Pick that will not come (the run ends): played alone now, and
-    /// the placement error of the part it left measured.
-    pub(super) fn play_held_retreat(&mut self, next: Option<Prefetched>) -> Result<Option<PlacementError>, CycleError> {
+    /// A retreat left for a next Pick that will not come (the run ends): played alone now.
+    pub(super) fn play_held_retreat(&mut self, next: Option<Prefetched>) -> Result<(), CycleError> {
         let Some(p) = next else {
-            return Ok(None);
+            return Ok(());
         };
         let retreat = Segment::new(&p.retreat, self.cell.hand).capturing(Capture::ANY);
         if let Played::Failed(o) = self.play(&retreat)? {
             self.event(Event::Outcome(o));
         }
-        Ok(p.late.map(|l| self.measure_placement(l)))
+        Ok(())
     }
 
-    /// The placement error of a part whose retreat ran into the next Pick, once the cup has
-    /// left it.
-    pub(super) fn measure_placement(&mut self, late: LatePlacement) -> PlacementError {
-        self.placement_error(late.record, late.part, &late.world_from_part_place)
+    /// Measures the released parts that have come to rest (every one, with `all`), in the order
+    /// they were released, into `st.measured`; the others stay in waiting.
+    pub(super) fn measure_settled(&mut self, all: bool) {
+        let now = self.st.world.time_s();
+        let waiting = std::mem::take(&mut self.st.settling);
+        for s in waiting {
+            let w = &self.st.world;
+            let due = all
+                || w.placed_part_at_rest(s.part)
+                || w.part_state(s.part) != PartState::Placed
+                || now - s.released_s >= SETTLE_TIMEOUT_S;
+            if due {
+                let error = self.placement_error(s.record, s.part, &s.world_from_part_place);
+                self.st.measured.push(error);
+            } else {
+                self.st.settling.push(s);
+            }
+        }
+    }
+
+    /// Lets the world run (nothing else moving) until every released part has come to rest or
+    /// its [`SETTLE_TIMEOUT_S`] has passed, and measures them: the run's end.
+    pub(super) fn settle_placed(&mut self) -> Result<(), CycleError> {
+        self.measure_settled(false);
+        while let Some(last_s) = self.st.settling.iter().map(|s| s.released_s).reduce(f64::max) {
+            let t = (self.st.world.time_s() + SETTLE_POLL_S).min(last_s + SETTLE_TIMEOUT_S);
+            self.idle_until(t)?;
+            self.measure_settled(false);
+        }
+        Ok(())
     }
 
     /// How far part `part`, placed by pick `pick`, lies from where it should,

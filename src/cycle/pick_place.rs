@@ -16,9 +16,9 @@
 
 use nalgebra::Isometry3;
 
-use super::events::{Event, PlacementError, Planned, Stage, StallCause};
+use super::events::{Event, Planned, Stage, StallCause};
 use super::motions::{PlaceMotion, Prepared};
-use super::next_pick::{LatePlacement, Prefetched};
+use super::next_pick::{Prefetched, Settling};
 use super::outcome::{NoSeal, Outcome, Slip, WrongPose};
 use super::play::{Capture, Played, Segment, Valve};
 use super::records::StageCompute;
@@ -33,21 +33,17 @@ pub(super) struct PickEnd {
     /// The next pick, prepared at this one's release, its Pick running into this Place's
     /// retreat (not played yet).
     pub next: Option<Prefetched>,
-    /// The placement error of the pick before, measured once this Pick's start left its part.
-    pub fix: Option<PlacementError>,
 }
 
 impl Run<'_, '_> {
     /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute, aimed
-    /// at the part recognised at `aimed` (`world_from_part`, m), after the last Place's part
-    /// `late` (when its retreat runs into this Pick): stalls, motions, outcome.
+    /// at the part recognised at `aimed` (`world_from_part`, m): stalls, motions, outcome.
     pub(super) fn pick_and_place(
         &mut self,
         prep: &Prepared,
         charged: StageCompute,
         ready_s: f64,
         aimed: Option<Isometry3<f64>>,
-        late: Option<LatePlacement>,
         rec: &mut PickRecord,
     ) -> Result<PickEnd, CycleError> {
         let (pick_ready, place_ready) = self.charge(prep, charged, ready_s, rec);
@@ -55,7 +51,7 @@ impl Run<'_, '_> {
         if prep.retreat_blend.is_none() {
             self.idle_until(pick_ready.max(self.st.world.time_s()))?;
         }
-        let (outcome, end) = self.motions(prep, rec, place_ready, aimed, late)?;
+        let (outcome, end) = self.motions(prep, rec, place_ready, aimed)?;
         // Compute for the next pick may start with this Place if it went as planned.
         self.st.compute_from_s = match (&outcome, self.st.planned_end_q) {
             (Outcome::Placed, Some(_)) => self.st.compute_from_s,
@@ -207,20 +203,18 @@ impl Run<'_, '_> {
     }
 
     /// Pick (transfer, descent, vacuum, lift) and Place (transfer, descent, release, retreat),
-    /// after the last Place's retreat when it runs into this Pick (and `late`, that Place's
-    /// part, is measured once the retreat has left it).
+    /// after the last Place's retreat when it runs into this Pick.
     fn motions(
         &mut self,
         prep: &Prepared,
         rec: &mut PickRecord,
         place_ready: f64,
         aimed: Option<Isometry3<f64>>,
-        late: Option<LatePlacement>,
     ) -> Result<(Outcome, PickEnd), CycleError> {
         self.st.arm.max_error_rad = 0.0;
         self.st.arm.peak_demand_ratio = [0.0; crate::robot::DOF];
         self.st.arm.saturated_s = 0.0;
-        let mut end = PickEnd { next: None, fix: None };
+        let mut end = PickEnd { next: None };
         // The last Place's retreat, alone up to where this Pick starts (that Place's end; its
         // servo errors and torques count for this pick). A capture may start only if its
         // exposure ends before the Pick does.
@@ -232,7 +226,6 @@ impl Run<'_, '_> {
                     .flowing_on()
                     .capturing(Capture::EndingBy(until_s)),
             )?;
-            end.fix = late.map(|l| self.measure_placement(l));
             if let Played::Failed(o) = played {
                 return Ok((o, end));
             }
@@ -429,31 +422,32 @@ impl Run<'_, '_> {
             None => {
                 let release = self.release()?;
                 self.obs.marker(release, &format!("release {}", rec.index));
+                // Measured once it rests in its slot (the pick loop looks).
+                if let Some(part) = part {
+                    self.st.settling.push(Settling {
+                        record: rec.index,
+                        part,
+                        world_from_part_place: prep.grasp.world_from_part_place,
+                        released_s: release,
+                    });
+                }
                 (Some(release), self.prefetch_next(up))
             }
         };
         let outcome = dropped.unwrap_or(Outcome::Placed);
-        if let Some((mut next, head_s)) = prefetched {
+        if let Some((next, head_s)) = prefetched {
             // The retreat runs into the next Pick, prepared now: its head alone ends this Place.
             self.place_done(rec, t_place, head_s);
-            next.late = part.map(|part| LatePlacement {
-                record: rec.index,
-                part,
-                world_from_part_place: prep.grasp.world_from_part_place,
-            });
             rec.release_s = release;
             return Ok((outcome, Some(next)));
         }
         if let Played::Failed(o) = self.play(&Segment::new(up, hand).capturing(capture))? {
+            // Not a placed pick: its part is not measured as one.
+            self.st.settling.retain(|s| s.record != rec.index);
             self.place_done(rec, t_place, 0.0);
             return Ok((o, None));
         }
         self.place_done(rec, t_place, 0.0);
-        if let Some(i) = part {
-            let error = self.placement_error(rec.index, i, &prep.grasp.world_from_part_place);
-            rec.placement_error_mm = Some(error.error_m * 1e3);
-            rec.rotation_error_deg = Some(error.rotation_rad.to_degrees());
-        }
         rec.release_s = release;
         Ok((outcome, None))
     }

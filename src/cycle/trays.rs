@@ -298,6 +298,8 @@ impl Run<'_, '_> {
             return Ok(());
         }
         self.st.trays.next_slot = 0;
+        // The parts still settling are measured as they lie, before the tray goes.
+        self.measure_settled(true);
         for i in self.st.world.parts_in_state(PartState::Placed) {
             self.st.world.remove_part(i);
         }

@@ -127,6 +127,14 @@ impl World {
         to_isometry(self.bodies[self.parts[i].body].position())
     }
 
+    /// Whether part `i` lies in the place tray, at rest: fixed in its slot once it moved less
+    /// than [`super::PLACED_REST_M`] and [`super::PLACED_REST_RAD`] over
+    /// [`super::PLACED_REST_WINDOW_S`], or asleep by rapier's rule.
+    pub fn placed_part_at_rest(&self, i: usize) -> bool {
+        let p = &self.parts[i];
+        p.state == PartState::Placed && !self.bodies[p.body].is_dynamic()
+    }
+
     /// Whether every free part is asleep or slower than the given speeds.
     pub fn parts_at_rest(&self, lin_m_s: f64, ang_rad_s: f64) -> bool {
         self.parts.iter().all(|p| {
