@@ -535,10 +535,47 @@ fn print_poses(m: &PartModel, tilt: f64) {
     );
 }
 
-/// Writes `text` to `path` through a temporary file beside it (never half-written).
+/// Writes `text` to `path` through a temporary file beside it (never half-written). A path that
+/// is not a regular file (`/dev/null`, `/dev/stdout`, a pipe) is written to, not replaced: the
+/// rename would have put a regular file in the device's place (as root, `--svg /dev/null` did).
 fn write_atomically(path: &Path, text: &str) -> Result<()> {
+    if std::fs::metadata(path).is_ok_and(|m| !m.is_file() && !m.is_dir()) {
+        std::fs::write(path, text).map_err(|e| InputError(format!("cannot write {}: {e}", path.display())))?;
+        return Ok(());
+    }
     let tmp = path.with_extension("svg.partial");
     std::fs::write(&tmp, text).map_err(|e| InputError(format!("cannot write {}: {e}", tmp.display())))?;
     std::fs::rename(&tmp, path).map_err(|e| InputError(format!("cannot write {}: {e}", path.display())))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A pipe given as the picture's path is written to and stays a pipe (as `/dev/null` must
+    /// stay a device). Control: a regular file's path gets the text through the rename.
+    #[test]
+    fn a_device_or_pipe_is_written_to_not_replaced() {
+        use std::os::unix::fs::FileTypeExt;
+        let dir = std::env::temp_dir().join(format!("binpick-atomic-{}", std::process::id()));
+        std::fs::create_dir_all(&dir).unwrap();
+        let fifo = dir.join("pipe.svg");
+        let _ = std::fs::remove_file(&fifo);
+        let made = std::process::Command::new("mkfifo").arg(&fifo).status().unwrap();
+        assert!(made.success());
+        let reader = {
+            let fifo = fifo.clone();
+            std::thread::spawn(move || std::fs::read_to_string(fifo).unwrap())
+        };
+        write_atomically(&fifo, "<svg/>").unwrap();
+        // Checked before waiting for the reader, which a replaced pipe would leave waiting.
+        assert!(std::fs::metadata(&fifo).unwrap().file_type().is_fifo());
+        assert_eq!(reader.join().unwrap(), "<svg/>");
+        let file = dir.join("picture.svg");
+        write_atomically(&file, "<svg/>").unwrap();
+        assert_eq!(std::fs::read_to_string(&file).unwrap(), "<svg/>");
+        assert!(!dir.join("picture.svg.partial").exists());
+        std::fs::remove_dir_all(&dir).unwrap();
+    }
 }

@@ -488,7 +488,9 @@ fn a_mesh_near_the_cap_is_modelled_within_the_bound() {
 /// site at each face's centre. Independent: the box's arithmetic.
 #[test]
 fn the_part_command_reads_a_built_in_part_through_its_meshed_primitives() {
-    let o = binpick(&["part", "B", "--json", "--piles", "0", "--svg", "/dev/null"]);
+    let tmp = tempdir().unwrap();
+    let svg = tmp.path().join("B.svg");
+    let o = binpick(&["part", "B", "--json", "--piles", "0", "--svg", svg.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let j: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     let faces = j["faces"].as_array().unwrap();
@@ -521,7 +523,9 @@ fn the_part_command_reads_a_built_in_part_through_its_meshed_primitives() {
 /// on its can and its base's flat side, four ways round) are offered. Independent: D's drawing.
 #[test]
 fn the_part_command_says_what_a_bellows_cup_takes_of_a_cans_side() {
-    let o = binpick(&["part", "D", "--json", "--piles", "0", "--svg", "/dev/null"]);
+    let tmp = tempdir().unwrap();
+    let svg = tmp.path().join("D.svg");
+    let o = binpick(&["part", "D", "--json", "--piles", "0", "--svg", svg.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     let j: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
     let side = &j["round_side"];
