@@ -739,8 +739,7 @@ impl Run<'_, '_> {
                 .detections
                 .as_deref()
                 .map(|d| d[prep.grasp.detection].world_from_part);
-            let end = self.pick_and_place(&prep, charged, compute_from_s, chosen, &mut rec)?;
-            next = end.next;
+            next = self.pick_and_place(&prep, charged, compute_from_s, chosen, &mut rec)?;
             if !(rec.outcome == Outcome::Placed || rec.outcome.grasp_failed()) {
                 // The pile may have been disturbed anywhere: no result from before counts.
                 self.st.in_hand = None;

@@ -28,16 +28,11 @@ use crate::physics::suction::GripperEvent;
 use crate::robot::JointVector;
 use crate::trajectory::Motion;
 
-/// What one pick hands on to the pick loop.
-pub(super) struct PickEnd {
-    /// The next pick, prepared at this one's release, its Pick running into this Place's
-    /// retreat (not played yet).
-    pub next: Option<Prefetched>,
-}
-
 impl Run<'_, '_> {
     /// The pick of `prep`, whose compute could start at `ready_s`, with `charged` compute, aimed
-    /// at the part recognised at `aimed` (`world_from_part`, m): stalls, motions, outcome.
+    /// at the part recognised at `aimed` (`world_from_part`, m): stalls, motions, outcome. Hands
+    /// on the next pick when it was prepared at this one's release, its Pick running into this
+    /// Place's retreat (not played yet).
     pub(super) fn pick_and_place(
         &mut self,
         prep: &Prepared,
@@ -45,13 +40,13 @@ impl Run<'_, '_> {
         ready_s: f64,
         aimed: Option<Isometry3<f64>>,
         rec: &mut PickRecord,
-    ) -> Result<PickEnd, CycleError> {
+    ) -> Result<Option<Prefetched>, CycleError> {
         let (pick_ready, place_ready) = self.charge(prep, charged, ready_s, rec);
         // With the last retreat overlapped, the Pick was ready before the retreat's head ends.
         if prep.retreat_blend.is_none() {
             self.idle_until(pick_ready.max(self.st.world.time_s()))?;
         }
-        let (outcome, end) = self.motions(prep, rec, place_ready, aimed)?;
+        let (outcome, next) = self.motions(prep, rec, place_ready, aimed)?;
         // Compute for the next pick may start with this Place if it went as planned.
         self.st.compute_from_s = match (&outcome, self.st.planned_end_q) {
             (Outcome::Placed, Some(_)) => self.st.compute_from_s,
@@ -120,7 +115,7 @@ impl Run<'_, '_> {
         rec.peak_demand_ratio = peak;
         rec.peak_demand_joint = joint + 1;
         rec.saturated_s = arm.saturated_s;
-        Ok(end)
+        Ok(next)
     }
 
     /// The compute of the pick on the simulation clock from `ready_s`: its spans, the grasp
@@ -210,11 +205,10 @@ impl Run<'_, '_> {
         rec: &mut PickRecord,
         place_ready: f64,
         aimed: Option<Isometry3<f64>>,
-    ) -> Result<(Outcome, PickEnd), CycleError> {
+    ) -> Result<(Outcome, Option<Prefetched>), CycleError> {
         self.st.arm.max_error_rad = 0.0;
         self.st.arm.peak_demand_ratio = [0.0; crate::robot::DOF];
         self.st.arm.saturated_s = 0.0;
-        let mut end = PickEnd { next: None };
         // The last Place's retreat, alone up to where this Pick starts (that Place's end; its
         // servo errors and torques count for this pick). A capture may start only if its
         // exposure ends before the Pick does.
@@ -227,16 +221,14 @@ impl Run<'_, '_> {
                     .capturing(Capture::EndingBy(until_s)),
             )?;
             if let Played::Failed(o) = played {
-                return Ok((o, end));
+                return Ok((o, None));
             }
         }
         let t_pick = self.st.world.time_s();
         if let Some(o) = self.pick(prep, rec, t_pick, aimed)? {
-            return Ok((o, end));
+            return Ok((o, None));
         }
-        let (outcome, next) = self.lift_and_place(prep, rec, t_pick, place_ready)?;
-        end.next = next;
-        Ok((outcome, end))
+        self.lift_and_place(prep, rec, t_pick, place_ready)
     }
 
     /// The Pick ends now: its time, its span, the arm free.
