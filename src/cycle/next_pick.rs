@@ -38,7 +38,7 @@ pub(super) struct Prefetched {
 /// A part released over its slot whose placement error is not measured yet: it is, once the
 /// part has come to rest (a part dropped from the release height rocks for a few tenths of a
 /// second, and measured while it rocks it looked misplaced), or [`SETTLE_TIMEOUT_S`] after its
-/// release, or at once if it left the place tray.
+/// release, or at once if it left the place tray, or as it lies when its tray goes.
 pub(super) struct Settling {
     /// The pick's record index.
     pub record: usize,

@@ -298,15 +298,17 @@ impl Run<'_, '_> {
             return Ok(());
         }
         self.st.trays.next_slot = 0;
-        // The parts still settling are measured as they lie, before the tray goes.
+        self.st.trays.exchanges += 1;
+        self.event(Event::PlaceTrayExchange);
+        // The full tray goes at the end of the exchange, its last parts measured at rest (or as
+        // they lie then): the arm places nothing meanwhile.
+        let t = self.st.world.time_s() + self.cell.scene.cycle.place_tray_exchange_s;
+        self.idle_until(t)?;
+        self.measure_settled(false);
         self.measure_settled(true);
         for i in self.st.world.parts_in_state(PartState::Placed) {
             self.st.world.remove_part(i);
         }
-        self.st.trays.exchanges += 1;
-        self.event(Event::PlaceTrayExchange);
-        let t = self.st.world.time_s() + self.cell.scene.cycle.place_tray_exchange_s;
-        self.idle_until(t)?;
         self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
         Ok(())
     }
