@@ -304,7 +304,6 @@ impl Run<'_, '_> {
         // they lie then): the arm places nothing meanwhile.
         let t = self.st.world.time_s() + self.cell.scene.cycle.place_tray_exchange_s;
         self.idle_until(t)?;
-        self.measure_settled(false);
         self.measure_settled(true);
         for i in self.st.world.parts_in_state(PartState::Placed) {
             self.st.world.remove_part(i);
