@@ -13,6 +13,9 @@
 //! hopper's chute conveys parts at a finite rate, so a larger dose costs more time.
 //! `dose_below = 0` (or no section) switches the hopper off: the tray runs down to the
 //! `[agitation]` and `cycle.on_empty` policies, as before.
+//! With `dose_while_placing`, a result that shows few parts but still offers a grasp is picked
+//! from first, and the dose starts once that part has been carried out of the sensor's view: it
+//! runs while the arm places (the cycle's side of it is in `crate::cycle`, its trays step).
 //!
 //! Simplified model: the dose's parts are dropped in waves at its start, as a pile is poured
 //! (see [`crate::physics::pile`]), above the pile as it lies; the cell waits `dose_s` or the
@@ -44,6 +47,12 @@ pub struct FeederConfig {
     /// The hopper chute's flow (parts/s): a dose takes at least `dose_parts` over this.
     #[serde(default = "default_dose_rate")]
     pub dose_rate_parts_per_s: f64,
+    /// A dose called for by a result that still offers a grasp starts when the arm has carried
+    /// that part out of the sensor's view, and runs while it places (`true`); with `false`, the
+    /// default, the cell doses at once and the arm waits out the dose. Doses of more parts than
+    /// one wave of a pour ([`crate::physics::pile::POUR_WAVE`]) are always dosed at once.
+    #[serde(default)]
+    pub dose_while_placing: bool,
 }
 
 /// The flow of a vibratory hopper chute for small parts when a cell file leaves it out (parts/s):
@@ -63,6 +72,7 @@ impl Default for FeederConfig {
             dose_parts: 0,
             dose_s: 0.0,
             dose_rate_parts_per_s: DEFAULT_DOSE_RATE_PARTS_PER_S,
+            dose_while_placing: false,
         }
     }
 }
@@ -164,6 +174,7 @@ mod tests {
             dose_parts: 40,
             dose_s: 2.0,
             dose_rate_parts_per_s: 10.0,
+            dose_while_placing: false,
         };
         assert_eq!(f.dose_time_s(10), 2.0);
         assert_eq!(f.dose_time_s(40), 4.0);
@@ -182,6 +193,7 @@ mod tests {
             dose_parts: 10,
             dose_s: 2.0,
             dose_rate_parts_per_s: 10.0,
+            dose_while_placing: false,
         };
         let r = FeederRecipe {
             dose_below: None,

@@ -650,6 +650,9 @@ impl Run<'_, '_> {
             }
             let index = self.st.tally.attempts;
             self.st.pick = Some(index);
+            // A dose called for on a pick that never reached its Place: the next fresh result
+            // decides again.
+            self.st.trays.dose_due = None;
             let (result, taken, since, compute_from_s, prepared) = match next.take() {
                 // Prepared at the last release, its Pick overlapping that Place's retreat.
                 Some(p) => (p.result, p.taken, p.since, p.compute_from_s, Ok((p.prep, p.wall))),
@@ -659,12 +662,17 @@ impl Run<'_, '_> {
                     };
                     // A fresh result whose image shows few parts (the sensor's count, before
                     // the detections near picks made since are set aside): the hopper doses (if
-                    // the cell has one), and the cell looks again.
+                    // the cell has one), and the cell looks again; a dose that may run while the
+                    // arm places waits for this pick's Place, if it has a grasp.
                     let seen = self.st.in_hand.as_ref().and_then(|h| h.result.detections.as_ref());
-                    if taken == 0
-                        && let Some(seen) = seen.map(Vec::len)
-                        && self.dose_if_low(seen)?
+                    let low = match seen.map(Vec::len) {
+                        Some(seen) if taken == 0 => self.dose_wanted(seen),
+                        _ => None,
+                    };
+                    if let Some(parts) = low
+                        && !self.dose_may_overlap(parts)
                     {
+                        self.dose(parts)?;
                         continue;
                     }
                     self.event(Event::ResultUsed {
@@ -689,6 +697,14 @@ impl Run<'_, '_> {
                             .prepare(dets, &result.job, compute_from_s, self.st.trays.next_slot, None)
                             .map_err(Some),
                     };
+                    if let Some(parts) = low {
+                        if prepared.is_err() {
+                            // Nothing to take from the few parts seen: dose now.
+                            self.dose(parts)?;
+                            continue;
+                        }
+                        self.st.trays.dose_due = Some(parts);
+                    }
                     (result, taken, since, compute_from_s, prepared)
                 }
             };

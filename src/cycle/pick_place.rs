@@ -91,19 +91,22 @@ impl Run<'_, '_> {
             rec.takt_s = self.st.trays.last_release_s.map(|r| release - r);
             let trays = &mut self.st.trays;
             rec.spans_refill = rec.takt_s.is_some() && trays.refilled_since_release;
+            // A dose started during this Place counts for the next interval, whose wait it is.
+            let doses_before = trays.doses - usize::from(trays.dose_during_place);
             rec.interval_cause = rec.takt_s.map(|_| {
                 IntervalCause::of(
                     trays.refilled_since_release,
                     trays.failed_since_release,
-                    trays.doses > trays.doses_at_release,
+                    doses_before > trays.doses_at_release,
                 )
             });
             trays.refilled_since_release = false;
             trays.failed_since_release = false;
-            trays.doses_at_release = trays.doses;
+            trays.doses_at_release = doses_before;
             trays.last_release_s = Some(release);
             trays.next_slot += 1;
         }
+        self.st.trays.dose_during_place = false;
         self.exchange_full_place_tray()?;
         let arm = &self.st.arm;
         rec.max_tracking_error_deg = arm.max_error_rad.to_degrees();

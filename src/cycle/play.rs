@@ -207,7 +207,9 @@ impl Run<'_, '_> {
         // once), a collision or a part pressed into the tray stops the motion.
         let mut fault = None;
         let mut lost_removed = false;
+        let dose_pouring = self.st.world.time_s() < self.st.trays.dose_pours_until_s;
         let during = match self.st.world.held_part() {
+            _ if dose_pouring => LeftDuring::Pour,
             Some(held) => LeftDuring::Holding(held),
             None if self.st.trays.pouring => LeftDuring::Pour,
             None => LeftDuring::CupEmpty,
@@ -333,6 +335,10 @@ impl Run<'_, '_> {
                 return Ok(Played::Failed(Outcome::Collision(what)));
             }
             if let Capture::EndingBy(until_s) = capture {
+                // A dose due starts once the part being placed has left the view.
+                if self.st.trays.dose_due.is_some() && self.st.world.held_part().is_some() {
+                    self.start_due_dose()?;
+                }
                 self.maybe_trigger(*until_s);
             }
             for ev in self.st.world.take_gripper_events() {

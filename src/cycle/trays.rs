@@ -60,6 +60,15 @@ pub struct TrayState {
     /// A dose or a refill is under way: its parts are still falling in (a part that leaves the
     /// tray now was spilled by the pour).
     pub pouring: bool,
+    /// A dose the cell called for on the result it is picking from, to start once the arm has
+    /// carried the part out of the sensor's view (`feeder.dose_while_placing`): its parts.
+    pub dose_due: Option<usize>,
+    /// A dose started during the Place under way: the interval that ends at its release does
+    /// not hold the dose's wait, the next one does.
+    pub dose_during_place: bool,
+    /// A dose started during a Place pours until then (s): a part that leaves the tray before
+    /// was spilled by it.
+    pub dose_pours_until_s: f64,
 }
 
 impl Default for TrayState {
@@ -82,6 +91,9 @@ impl Default for TrayState {
             dosed_since_fill: 0,
             placed_at_fill: 0,
             pouring: false,
+            dose_due: None,
+            dose_during_place: false,
+            dose_pours_until_s: f64::NEG_INFINITY,
         }
     }
 }
@@ -211,51 +223,96 @@ impl Run<'_, '_> {
         Ok(())
     }
 
-    /// A result the cell takes up showed `detected` parts: with a hopper, dose when that is below
-    /// its threshold and the dose cannot fill the tray beyond the pile (by the feeder's own count:
-    /// the pile poured, plus the parts dosed since, less the parts placed since). Returns whether
-    /// it dosed (the results in hand are then gone: the pile changed).
-    pub(super) fn dose_if_low(&mut self, detected: usize) -> Result<bool, CycleError> {
+    /// A result the cell takes up showed `detected` parts: the parts of the dose the hopper
+    /// should pour, if it has one, that count is below its threshold and the dose cannot fill the
+    /// tray beyond the pile (by the feeder's own count: the pile poured, plus the parts dosed
+    /// since, less the parts placed since).
+    pub(super) fn dose_wanted(&self, detected: usize) -> Option<usize> {
         let f = self.cell.scene.feeder;
         if !f.on() || detected >= f.dose_below as usize {
-            return Ok(false);
+            return None;
         }
         let t = &self.st.trays;
         let placed_since = self.st.tally.placed.saturating_sub(t.placed_at_fill);
         let at_most = (self.cell.pile_count + t.dosed_since_fill).saturating_sub(placed_since);
-        if at_most + f.dose_parts as usize > self.cell.pile_count {
-            return Ok(false);
-        }
-        self.dose(f.dose_parts as usize, f.dose_time_s(f.dose_parts as usize))?;
-        Ok(true)
+        (at_most + f.dose_parts as usize <= self.cell.pile_count).then_some(f.dose_parts as usize)
     }
 
-    /// Pours `parts` parts from the hopper onto the pile (through the physics, above the pile as
-    /// it lies), the arm waiting out of the view for `dose_s` (the dose's time,
-    /// [`crate::config::FeederConfig::dose_time_s`]) from the dose's start. Whether the pile has
+    /// Whether a dose of `parts` may run while the arm places (`feeder.dose_while_placing`):
+    /// it falls in one wave, so pouring it takes no step of its own.
+    pub(super) fn dose_may_overlap(&self, parts: usize) -> bool {
+        self.cell.scene.feeder.dose_while_placing && parts <= crate::physics::pile::POUR_WAVE
+    }
+
+    /// Pours `parts` parts from the hopper onto the pile now (through the physics, above the pile
+    /// as it lies), the arm waiting out of the view for the dose's time
+    /// ([`crate::config::FeederConfig::dose_time_s`]) from its start. Whether the pile has
     /// settled by then is the sensor's to tell: a capture that shows it moving is taken again.
-    fn dose(&mut self, parts: usize, dose_s: f64) -> Result<(), CycleError> {
+    /// The results in hand are gone: the pile changed.
+    pub(super) fn dose(&mut self, parts: usize) -> Result<(), CycleError> {
         self.forget_pile();
+        self.st.trays.dose_due = None;
         let t0 = self.st.world.time_s();
         self.event(Event::Dose(parts));
+        let dose_s = self.cell.scene.feeder.dose_time_s(parts);
+        self.pour(parts, self.dose_seed(), t0 + dose_s)?;
+        self.span(Stage::Stall, t0, self.st.world.time_s(), "hopper dose");
+        self.dosed(parts);
+        self.st.arm.free_s = self.st.world.time_s();
+        self.st.compute_from_s = self.st.world.time_s();
+        Ok(())
+    }
+
+    /// Starts the dose due ([`TrayState::dose_due`]) if the arm is out of the sensor's view:
+    /// its parts fall onto the pile while the arm goes on placing, and no capture is triggered
+    /// until the dose's time has passed. The results in hand and any capture under way are gone
+    /// (the pile changed); the plan of the motion under way stands.
+    pub(super) fn start_due_dose(&mut self) -> Result<(), CycleError> {
+        let Some(parts) = self.st.trays.dose_due else {
+            return Ok(());
+        };
+        if self.st.sensor.frustum.arm_inside(&self.st.world).is_some() {
+            return Ok(());
+        }
+        self.st.trays.dose_due = None;
+        self.st.in_hand = None;
+        self.st.pending = None;
+        self.st.pick_spots.clear();
+        let t0 = self.st.world.time_s();
+        self.event(Event::Dose(parts));
+        let spilled = self
+            .st
+            .world
+            .build_pile(&PileOptions::into_running_cell(parts, self.dose_seed()))
+            .map_err(CycleError::Pour)?
+            .spilled;
+        self.lose_spilled(spilled);
+        let until_s = t0 + self.cell.scene.feeder.dose_time_s(parts);
+        self.st.capture_hold_until_s = self.st.capture_hold_until_s.max(until_s);
+        self.st.trays.dose_pours_until_s = until_s;
+        self.st.trays.dose_during_place = true;
+        self.dosed(parts);
+        Ok(())
+    }
+
+    /// The seed of the next dose's pour: its own per dose, apart from the refills' (which add
+    /// multiples of another odd constant to the run seed).
+    fn dose_seed(&self) -> u64 {
         let n = self.st.trays.doses as u64 + 1;
-        // Its own seed per dose, apart from the refills' (which add multiples of another odd
-        // constant to the run seed).
-        let seed = self
-            .cell
+        self.cell
             .opts
             .seed
             .wrapping_add(n.wrapping_mul(0xD1B5_4A32_D192_ED03))
-            .rotate_left(17);
-        self.pour(parts, seed, t0 + dose_s)?;
-        self.span(Stage::Stall, t0, self.st.world.time_s(), "hopper dose");
+            .rotate_left(17)
+    }
+
+    /// A dose of `parts` parts was poured: the feeder's count, and the spots where grasps failed
+    /// are forgotten (the pile changed).
+    fn dosed(&mut self, parts: usize) {
         let trays = &mut self.st.trays;
         trays.doses += 1;
         trays.dosed_since_fill += parts;
         self.st.failed_spots.clear();
-        self.st.arm.free_s = self.st.world.time_s();
-        self.st.compute_from_s = self.st.world.time_s();
-        Ok(())
     }
 
     /// Pours a refill or a dose of `count` parts (pile seed `seed`) through the physics, then

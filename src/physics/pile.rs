@@ -111,6 +111,9 @@ pub struct PileReport {
     pub wall_s: f64,
 }
 
+/// Parts poured at once, one wave, before the pour lets them fall and slow down for the next.
+pub const POUR_WAVE: usize = 12;
+
 /// Uniformly random rotation (Shoemake).
 pub(super) fn random_rotation(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
     let (u1, u2, u3): (f64, f64, f64) = (rng.random(), rng.random(), rng.random());
@@ -125,11 +128,16 @@ pub(super) fn random_rotation(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
 }
 
 impl World {
-    /// Highest point of any free part, or the tray floor (m).
+    /// Highest point of any part not on the cup (the placed parts in the place tray too), or the
+    /// pick tray's floor (m). A part on the cup is left out: a dose poured while the arm carries
+    /// one out of the view would otherwise start above it and fly out of the tray. (Only free
+    /// parts would be right; the placed ones raise a dose into a low pile by the height of the
+    /// place tray's parts, left as it is until the figures are re-measured: CHANGELOG.)
     fn pile_top_z(&self) -> f64 {
         let floor = self.pick_tray.world_from_tray.translation.vector.z;
         self.parts
             .iter()
+            .filter(|p| p.state != PartState::Held)
             .map(|p| self.colliders[p.collider].compute_aabb().maxs.z as f64 / super::SIM_UNITS_PER_M)
             .fold(floor, f64::max)
     }
@@ -165,7 +173,6 @@ impl World {
         let long_normal = nalgebra::Unit::new_unchecked(Vector3::ith((long_i + 1) % 3, 1.0));
         // Parts are poured over the central `POUR_FRACTION` of the tray floor, so they heap.
         const POUR_FRACTION: f64 = 0.7;
-        const WAVE: usize = 12;
         let start_time = self.time_s;
         let mut spawned = 0usize;
         let mut waves = 0usize;
@@ -177,7 +184,7 @@ impl World {
             let mut layer_top = layer_z;
             // World-aligned boxes of this wave's parts, to keep them apart at spawn.
             let mut boxes: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::new();
-            for _ in 0..WAVE.min(opts.count - spawned) {
+            for _ in 0..POUR_WAVE.min(opts.count - spawned) {
                 let rot = if elongated {
                     // Long parts pour lying down: yaw uniform, long axis within 30 deg of level.
                     let yaw = rng.random_range(0.0..std::f64::consts::TAU);

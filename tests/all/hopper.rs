@@ -121,6 +121,7 @@ fn feeder(dose_below: u32, dose_parts: u32, dose_s: f64, dose_rate_parts_per_s: 
         dose_parts,
         dose_s,
         dose_rate_parts_per_s,
+        dose_while_placing: false,
     }
 }
 
@@ -311,13 +312,18 @@ fn a_bad_hopper_recipe_exits_2_naming_file_key_and_value() {
 
 /// Classifies each release-to-release interval from the run's own event stream, apart from the
 /// cycle's bookkeeping: a refill, else a pick that ended in anything but `placed`, else a hopper
-/// dose since the previous placed pick; each takt the run reports pairs with the last placed
-/// pick's interval.
+/// dose since the previous placed pick (one poured while a part was being placed belongs to the
+/// interval after that part's release, whose wait it is); each takt the run reports pairs with
+/// the last placed pick's interval.
 #[derive(Default)]
 struct Intervals {
     refilled: bool,
     failed: bool,
     dosed: bool,
+    /// Between a Place's start and its release.
+    placing: bool,
+    /// A dose poured during the Place under way.
+    dosed_while_placing: bool,
     last: Option<&'static str>,
     /// (cause, takt) per interval.
     seen: Vec<(&'static str, f64)>,
@@ -327,6 +333,10 @@ impl Observer for Intervals {
     fn event(&mut self, _t_s: f64, _pick: Option<usize>, event: &Event) {
         match event {
             Event::Refill(_) => self.refilled = true,
+            Event::PlaceStart => self.placing = true,
+            Event::Released => self.placing = false,
+            Event::Dose(_) if self.placing => self.dosed_while_placing = true,
+            Event::Dose(_) => self.dosed = true,
             Event::Outcome(o) if o.name() == "placed" => {
                 self.last = Some(if self.refilled {
                     "refill"
@@ -337,15 +347,15 @@ impl Observer for Intervals {
                 } else {
                     "clean"
                 });
-                (self.refilled, self.failed, self.dosed) = (false, false, false);
+                (self.refilled, self.failed, self.dosed) = (false, false, self.dosed_while_placing);
+                self.dosed_while_placing = false;
             }
-            Event::Outcome(_) => self.failed = true,
+            Event::Outcome(_) => {
+                self.failed = true;
+                self.placing = false;
+                self.dosed |= std::mem::take(&mut self.dosed_while_placing);
+            }
             _ => {}
-        }
-    }
-    fn span(&mut self, stage: Stage, _start_s: f64, _end_s: f64, label: &str) {
-        if stage == Stage::Stall && label == "hopper dose" {
-            self.dosed = true;
         }
     }
     fn takt(&mut self, takt: &binpick::cycle::Takt) {
@@ -383,6 +393,18 @@ fn the_takt_by_cause_counts_each_interval_as_the_event_log_tells_it() {
         c.count(IntervalCause::Dose) >= 1 && c.count(IntervalCause::Clean) >= 1,
         "{c:?}"
     );
+    // Doses poured while a part is placed count for the interval after its release.
+    let overlapped = FeederConfig {
+        dose_while_placing: true,
+        ..feeder(6, 6, 1.5, 10.0)
+    };
+    let (with, seen) = run::<Intervals>("B", 60, overlapped);
+    causes_match(&with, &seen);
+    assert!(
+        with.takt_causes.count(IntervalCause::Dose) >= 1,
+        "{:?}",
+        with.takt_causes
+    );
     // Negative control: without the hopper the pile runs dry and is exchanged: refills, no dose.
     let (without, seen) = run::<Intervals>("B", 60, FeederConfig::default());
     causes_match(&without, &seen);
@@ -391,4 +413,75 @@ fn the_takt_by_cause_counts_each_interval_as_the_event_log_tells_it() {
         c.count(IntervalCause::Refill) >= 1 && c.count(IntervalCause::Dose) == 0,
         "{c:?}"
     );
+}
+
+/// The times of the events a dose while placing is judged by (s).
+#[derive(Default)]
+struct PlaceDoses {
+    place_starts_s: Vec<f64>,
+    releases_s: Vec<f64>,
+    doses_s: Vec<f64>,
+    captures_s: Vec<f64>,
+    /// Doses the arm waited for (a "hopper dose" stall).
+    waited_doses: usize,
+}
+
+impl Observer for PlaceDoses {
+    fn event(&mut self, t_s: f64, _pick: Option<usize>, event: &Event) {
+        match event {
+            Event::PlaceStart => self.place_starts_s.push(t_s),
+            Event::Released => self.releases_s.push(t_s),
+            Event::Dose(_) => self.doses_s.push(t_s),
+            Event::Capture(_) => self.captures_s.push(t_s),
+            _ => {}
+        }
+    }
+    fn span(&mut self, stage: Stage, _start_s: f64, _end_s: f64, label: &str) {
+        if stage == Stage::Stall && label == "hopper dose" {
+            self.waited_doses += 1;
+        }
+    }
+}
+
+impl PlaceDoses {
+    /// The doses that started during a Place: after its start, before its release.
+    fn during_places(&self) -> Vec<f64> {
+        self.doses_s
+            .iter()
+            .copied()
+            .filter(|&d| {
+                self.place_starts_s
+                    .iter()
+                    .zip(&self.releases_s)
+                    .any(|(&p, &r)| p < d && d < r)
+            })
+            .collect()
+    }
+}
+
+#[test]
+fn a_dose_while_placing_pours_once_the_part_has_left_the_view_and_holds_the_next_capture() {
+    let dose_s = 1.5;
+    let hopper = |dose_while_placing| FeederConfig {
+        dose_while_placing,
+        ..feeder(6, 6, dose_s, 10.0)
+    };
+    let (tally, seen) = run::<PlaceDoses>("B", 60, hopper(true));
+    let during = seen.during_places();
+    assert!(!during.is_empty(), "doses {:?}", seen.doses_s);
+    // The arm waited only for the doses that could not wait for a Place (nothing to pick).
+    assert_eq!(seen.waited_doses + during.len(), tally.doses, "{:?}", seen.doses_s);
+    // No capture while a dose is pouring: the first after it comes once its time is up.
+    for &d in &during {
+        assert!(
+            seen.captures_s.iter().all(|&c| c <= d || c >= d + dose_s - 1e-6),
+            "a capture within {dose_s} s of the dose at {d:.3} s: {:?}",
+            seen.captures_s
+        );
+    }
+    // Negative control: dosed at once, no dose falls inside a Place, and the arm waits out each.
+    let (tally_off, off) = run::<PlaceDoses>("B", 60, hopper(false));
+    assert!(tally_off.doses >= 2, "{tally_off:?}");
+    assert!(off.during_places().is_empty(), "{:?}", off.doses_s);
+    assert_eq!(off.waited_doses, tally_off.doses);
 }
