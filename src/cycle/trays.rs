@@ -194,10 +194,16 @@ impl Run<'_, '_> {
     /// The pile is about to change as a whole: no result from before counts, no capture under
     /// way either.
     fn forget_pile(&mut self) {
+        self.forget_results();
+        self.st.planned_end_q = None;
+    }
+
+    /// The results in hand, the capture under way and the picks made since the last capture
+    /// no longer count: the pile changed.
+    fn forget_results(&mut self) {
         self.st.in_hand = None;
         self.st.pending = None;
         self.st.pick_spots.clear();
-        self.st.planned_end_q = None;
     }
 
     /// Takes the parts left in the pick tray out and pours pile number `fill`.
@@ -251,7 +257,6 @@ impl Run<'_, '_> {
     /// The results in hand are gone: the pile changed.
     pub(super) fn dose(&mut self, parts: usize) -> Result<(), CycleError> {
         self.forget_pile();
-        self.st.trays.dose_due = None;
         let t0 = self.st.world.time_s();
         self.event(Event::Dose(parts));
         let dose_s = self.cell.scene.feeder.dose_time_s(parts);
@@ -275,9 +280,7 @@ impl Run<'_, '_> {
             return Ok(());
         }
         self.st.trays.dose_due = None;
-        self.st.in_hand = None;
-        self.st.pending = None;
-        self.st.pick_spots.clear();
+        self.forget_results();
         let t0 = self.st.world.time_s();
         self.event(Event::Dose(parts));
         let spilled = self
