@@ -128,16 +128,15 @@ pub(super) fn random_rotation(rng: &mut impl RngExt) -> UnitQuaternion<f64> {
 }
 
 impl World {
-    /// Highest point of any part not on the cup (the placed parts in the place tray too), or the
-    /// pick tray's floor (m). A part on the cup is left out: a dose poured while the arm carries
-    /// one out of the view would otherwise start above it and fly out of the tray. (Only free
-    /// parts would be right; the placed ones raise a dose into a low pile by the height of the
-    /// place tray's parts, left as it is until the figures are re-measured: CHANGELOG.)
+    /// Highest point of the free parts (the pile, and any still falling into it), or the pick
+    /// tray's floor (m). A part on the cup is left out (a dose poured while the arm carries one
+    /// out of the view would otherwise start above it and fly out of the tray), and so are the
+    /// parts placed in the other tray, whose height has nothing to do with this pile's.
     fn pile_top_z(&self) -> f64 {
         let floor = self.pick_tray.world_from_tray.translation.vector.z;
         self.parts
             .iter()
-            .filter(|p| p.state != PartState::Held)
+            .filter(|p| p.state == PartState::Free)
             .map(|p| self.colliders[p.collider].compute_aabb().maxs.z as f64 / super::SIM_UNITS_PER_M)
             .fold(floor, f64::max)
     }
@@ -352,4 +351,41 @@ pub fn max_motion(a: &[PartPose], b: &[PartPose]) -> (f64, f64) {
         ));
         (dp.max(d), dr.max(qa.angle_to(&qb)))
     })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::config::{LoadedScene, LoadedWorkpiece};
+    use crate::physics::PartShape;
+    use crate::robot::RobotModel;
+
+    /// A dose is poured over this pile's top: parts on the cup or set down in the place tray do
+    /// not raise it. Control: the same part, free, does.
+    #[test]
+    fn the_pour_height_counts_only_the_free_parts() {
+        let scene = LoadedScene::embedded_default().unwrap();
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let wp = LoadedWorkpiece::resolve("A").unwrap();
+        let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+        let mut w = World::new(&scene.scene, &robot, shape);
+        let floor_z = w.pick_tray.world_from_tray.translation.vector.z;
+        let mut high_over_place_tray = w.place_tray().world_from_tray;
+        high_over_place_tray.translation.vector.z = floor_z + 0.2;
+        let i = w.add_part(&high_over_place_tray);
+        for (state, raised) in [
+            (PartState::Placed, false),
+            (PartState::Held, false),
+            (PartState::Removed, false),
+            (PartState::Free, true),
+        ] {
+            w.parts[i].state = state;
+            let top_z = w.pile_top_z();
+            assert_eq!(
+                top_z > floor_z + 0.1,
+                raised,
+                "{state:?}: pile top {top_z} m, floor {floor_z} m"
+            );
+        }
+    }
 }
