@@ -171,14 +171,21 @@ pub fn planning_environment(scene: &Scene, pile: &HeightMap, grasp: &GraspCandid
 }
 
 /// The pile as the planner sees it: the height map with every cell outside the pick tray's inner
-/// walls cleared (what the sensor saw over the walls is not pile; the walls are in the cell model),
-/// and every unseen cell inside them occupied ([`HeightMap::unseen_filled`]: up to the highest seen
-/// cell bordering its hole, or to the rim): the planner does not assume what it did not see.
+/// walls cleared (the walls are in the cell model) but where something stands more than
+/// [`OVER_RIM_M`] above the rim (a part lying across it), and every unseen cell inside them
+/// occupied ([`HeightMap::unseen_filled`]: up to the highest seen cell bordering its hole, or to
+/// the rim): the planner does not assume what it did not see.
 pub fn pile_map(scene: &Scene, height_map: &HeightMap) -> HeightMap {
     let t = &scene.pick_tray;
     let inner = [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0];
-    height_map.unseen_filled(inner, t.wall_height_m).inner_only(inner)
+    height_map
+        .unseen_filled(inner, t.wall_height_m)
+        .inner_only(inner, t.wall_height_m + OVER_RIM_M)
 }
+
+/// A cell over the pick tray's walls seen this much higher than their rim holds a part (m): well
+/// above the rim's own measured height (its highest point's depth noise, under a millimetre).
+pub const OVER_RIM_M: f64 = 0.002;
 
 /// Sense and grasp on one capture (its maps in `sensed`): the ranked grasps for the part to go to
 /// `world_from_slot` with the arm at `q_now`, and the best one not within

@@ -88,15 +88,18 @@ impl HeightMap {
     }
 
     /// The map with every cell whose centre lies outside the tray's inner walls (`inner_half_m`,
-    /// tray frame) cleared: what the sensor saw over the walls (the arm passing by outside the
-    /// frustum, the walls themselves) is not pile; the walls are in the planner's cell model.
-    pub fn inner_only(&self, inner_half_m: [f64; 2]) -> HeightMap {
+    /// tray frame) cleared, but those seen higher than `keep_above_m`: the walls themselves are
+    /// not pile (they are in the planner's cell model), a part lying across the rim and standing
+    /// above it is. (The map holds only points inside the view frustum, which the arm is out of
+    /// while the sensor exposes: nothing else stands over the rim.)
+    pub fn inner_only(&self, inner_half_m: [f64; 2], keep_above_m: f64) -> HeightMap {
         let mut m = self.clone();
         for j in 0..m.ny {
             for i in 0..m.nx {
                 let x = m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m;
                 let y = m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m;
-                if x.abs() > inner_half_m[0] || y.abs() > inner_half_m[1] {
+                let outside = x.abs() > inner_half_m[0] || y.abs() > inner_half_m[1];
+                if outside && !(m.height_m[j * m.nx + i] > keep_above_m) {
                     m.height_m[j * m.nx + i] = f64::NAN;
                     if let Some(mean) = m.mean_m.as_mut() {
                         mean[j * m.nx + i] = f64::NAN;
@@ -284,6 +287,36 @@ mod tests {
     }
 
     const INNER: [f64; 2] = [0.04, 0.03];
+
+    /// Over the walls (the outer ring, seen at the rim's 6 cm) nothing is pile but a part lying
+    /// across the rim and standing above it. Control: cleared as the walls' cells were before
+    /// (no height kept), the part is gone and the planner would sweep the held part through it.
+    #[test]
+    fn a_part_standing_over_the_rim_stays_in_the_pile_the_walls_do_not() {
+        let mut hm = map(0.01);
+        let ring: Vec<usize> = (0..80)
+            .filter(|k| k % 10 == 0 || k % 10 == 9 || k / 10 == 0 || k / 10 == 7)
+            .collect();
+        for &k in &ring {
+            hm.height_m[k] = 0.0604;
+        }
+        let strip_end = 3 * 10 + 9; // x = +4.5 cm, over the wall
+        hm.height_m[strip_end] = 0.086;
+        let pile = hm.inner_only(INNER, 0.062);
+        for &k in &ring {
+            let kept = pile.height_m[k];
+            if k == strip_end {
+                assert_eq!(kept, 0.086, "the strip's end over the rim");
+            } else {
+                assert!(kept.is_nan(), "wall cell {k} kept at {kept}");
+            }
+        }
+        assert!(pile.height_m[3 * 10 + 4] == 0.01, "inner cells are kept");
+        assert!(
+            hm.inner_only(INNER, f64::INFINITY).height_m[strip_end].is_nan(),
+            "control"
+        );
+    }
 
     /// A flat face 10 mm above the floor of a 10 x 10 cm tray, seen from 1 m above by 0.85 mm
     /// pixels under 0.3 mm of depth noise: the cup goes to the cells' mean surface, on the face
