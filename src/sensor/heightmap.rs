@@ -99,7 +99,8 @@ impl HeightMap {
                 let x = m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m;
                 let y = m.origin_xy_m[1] + (j as f64 + 0.5) * m.cell_m;
                 let outside = x.abs() > inner_half_m[0] || y.abs() > inner_half_m[1];
-                if outside && !(m.height_m[j * m.nx + i] > keep_above_m) {
+                let stands_over_rim = m.height_m[j * m.nx + i] > keep_above_m;
+                if outside && !stands_over_rim {
                     m.height_m[j * m.nx + i] = f64::NAN;
                     if let Some(mean) = m.mean_m.as_mut() {
                         mean[j * m.nx + i] = f64::NAN;
