@@ -788,9 +788,25 @@ impl World {
 }
 
 #[cfg(test)]
+pub(crate) mod test_cell {
+    //! The default cell for the physics' unit tests.
+    use super::PartShape;
+    use crate::config::{LoadedScene, LoadedWorkpiece};
+    use crate::robot::RobotModel;
+
+    /// The embedded default cell, its robot, and the embedded `workpiece`'s shape.
+    pub(crate) fn default_cell_with(workpiece: &str) -> (LoadedScene, RobotModel, PartShape) {
+        let scene = LoadedScene::embedded_default().unwrap();
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let wp = LoadedWorkpiece::resolve(workpiece).unwrap();
+        let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+        (scene, robot, shape)
+    }
+}
+
+#[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{LoadedScene, LoadedWorkpiece};
     use nalgebra::{Translation3, UnitQuaternion};
 
     /// A kinematic body turned by a milliradian, the new rotation given as the other quaternion
@@ -799,10 +815,7 @@ mod tests {
     /// the body at hundreds of rad/s (exactly `-q` of the same rotation it reads as no turn).
     #[test]
     fn a_kinematic_body_given_its_rotations_other_quaternion_does_not_spin() {
-        let scene = LoadedScene::embedded_default().unwrap();
-        let robot = RobotModel::from_scene(&scene).unwrap();
-        let wp = LoadedWorkpiece::resolve("C").unwrap();
-        let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+        let (scene, robot, shape) = test_cell::default_cell_with("C");
         let spin_rad_s = |aligned: bool| {
             let mut w = World::new(&scene.scene, &robot, shape.clone());
             let world_from_part = Isometry3::from_parts(

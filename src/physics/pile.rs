@@ -356,18 +356,13 @@ pub fn max_motion(a: &[PartPose], b: &[PartPose]) -> (f64, f64) {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::config::{LoadedScene, LoadedWorkpiece};
-    use crate::physics::PartShape;
-    use crate::robot::RobotModel;
+    use crate::physics::test_cell::default_cell_with;
 
     /// A dose is poured over this pile's top: parts on the cup or set down in the place tray do
     /// not raise it. Control: the same part, free, does.
     #[test]
     fn the_pour_height_counts_only_the_free_parts() {
-        let scene = LoadedScene::embedded_default().unwrap();
-        let robot = RobotModel::from_scene(&scene).unwrap();
-        let wp = LoadedWorkpiece::resolve("A").unwrap();
-        let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+        let (scene, robot, shape) = default_cell_with("A");
         let mut w = World::new(&scene.scene, &robot, shape);
         let floor_z = w.pick_tray.world_from_tray.translation.vector.z;
         let mut high_over_place_tray = w.place_tray().world_from_tray;
