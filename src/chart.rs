@@ -1,7 +1,7 @@
 //! Report stage: the cycle's time chart as SVG.
 //!
 //! Job: draw one lane per stage of the cell cycle (sensor, recognition, grasp selection, planning,
-//! waiting pose, pick, blind pick, place, stall, agitation) with a box for every interval in which that stage is busy, plus vertical
+//! waiting pose, pick, blind pick, place, stall, feeder: agitations and doses while placing) with a box for every interval in which that stage is busy, plus vertical
 //! markers for events (a part released, a fault), over a window of simulation time, like the time
 //! chart of a bin-picking paper. All times are seconds of simulation time. The output is
 //! deterministic: the same input gives a byte-identical document (fixed decimals, no hash maps).
@@ -23,11 +23,11 @@ pub const LANES: [Lane; 10] = [
     Lane::BlindPick,
     Lane::Place,
     Lane::Stall,
-    Lane::Agitation,
+    Lane::Feeder,
 ];
 
 /// Label shown at the left of a lane ("sensor", "recognition", "grasp selection", "planning",
-/// "waiting pose", "Pick", "blind Pick", "Place", "stall", "agitation").
+/// "waiting pose", "Pick", "blind Pick", "Place", "stall", "feeder").
 pub fn lane_label(lane: Lane) -> &'static str {
     match lane {
         Lane::Sensor => "sensor",
@@ -39,7 +39,7 @@ pub fn lane_label(lane: Lane) -> &'static str {
         Lane::BlindPick => "blind Pick",
         Lane::Place => "Place",
         Lane::Stall => "stall",
-        Lane::Agitation => "agitation",
+        Lane::Feeder => "feeder",
     }
 }
 
@@ -54,7 +54,7 @@ fn lane_colour(lane: Lane) -> &'static str {
         Lane::BlindPick => "#8cd17d",
         Lane::Place => "#edc948",
         Lane::Stall => "#b07aa1",
-        Lane::Agitation => "#9c755f",
+        Lane::Feeder => "#9c755f",
     }
 }
 
@@ -112,7 +112,7 @@ impl crate::cycle::Observer for TimeChart {
 /// Short waits for compute are part of the steady state and do not count.
 fn disturbs_steady_state(span: &Span) -> bool {
     match span.lane {
-        Lane::Agitation | Lane::WaitingPose => true,
+        Lane::Feeder | Lane::WaitingPose => true,
         Lane::Stall => span.label != "waiting for compute",
         _ => false,
     }
@@ -455,7 +455,7 @@ mod tests {
         let releases_s: Vec<f64> = (0..releases).map(|k| 1.0 + 2.0 * k as f64).collect();
         let mut chart = TimeChart::default();
         for (a, b) in disturbed {
-            chart.spans.push(span(Lane::Agitation, *a, *b, "agitation"));
+            chart.spans.push(span(Lane::Feeder, *a, *b, "agitation"));
         }
         chart.spans.push(span(Lane::Stall, 4.0, 4.1, "waiting for compute"));
         let (_, steady) = chart.svgs("t", 30.0, &releases_s);
@@ -476,7 +476,7 @@ mod tests {
         // the close-up moves to release 4 (9 s).
         let chart = {
             let mut c = TimeChart::default();
-            c.spans.push(span(Lane::Agitation, 8.0, 8.5, "agitation"));
+            c.spans.push(span(Lane::Feeder, 8.0, 8.5, "agitation"));
             c
         };
         let releases_s: Vec<f64> = (0..9).map(|k| 1.0 + 2.0 * k as f64).collect();

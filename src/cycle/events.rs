@@ -41,8 +41,10 @@ pub enum Stage {
     Place,
     /// The cell waits (for the sensor, for compute, a fault reset, a refill).
     Stall,
-    /// The pick tray vibrates to loosen the pile, then the pile settles.
-    Agitation,
+    /// The feeder works the pick tray while the cell goes on: it vibrates the tray to loosen the
+    /// pile (then the pile settles), or its hopper doses while the arm places
+    /// (`feeder.dose_while_placing`; a dose the arm waits out is a [`Stage::Stall`]).
+    Feeder,
 }
 
 /// Why a run ended.

@@ -182,7 +182,7 @@ impl Run<'_, '_> {
         }
         self.st.world.set_pick_tray_offset(nalgebra::Vector3::zeros());
         self.step()?;
-        self.span(Stage::Agitation, t0, self.st.world.time_s(), "agitation");
+        self.span(Stage::Feeder, t0, self.st.world.time_s(), "agitation");
         let settled = self.st.world.time_s();
         self.idle_until(settled + a.settle_s)?;
         self.span(Stage::Stall, settled, self.st.world.time_s(), "pile settling");
@@ -291,6 +291,7 @@ impl Run<'_, '_> {
             .spilled;
         self.lose_spilled(spilled);
         let until_s = t0 + self.cell.scene.feeder.dose_time_s(parts);
+        self.span(Stage::Feeder, t0, until_s, "hopper dose");
         self.st.capture_hold_until_s = self.st.capture_hold_until_s.max(until_s);
         self.st.trays.dose_pours_until_s = until_s;
         self.st.trays.dose_during_place = true;

@@ -424,6 +424,8 @@ struct PlaceDoses {
     captures_s: Vec<f64>,
     /// Doses the arm waited for (a "hopper dose" stall).
     waited_doses: usize,
+    /// Doses drawn on the feeder's lane, poured while the arm goes on (start, end) (s).
+    fed_doses_s: Vec<(f64, f64)>,
 }
 
 impl Observer for PlaceDoses {
@@ -436,9 +438,11 @@ impl Observer for PlaceDoses {
             _ => {}
         }
     }
-    fn span(&mut self, stage: Stage, _start_s: f64, _end_s: f64, label: &str) {
-        if stage == Stage::Stall && label == "hopper dose" {
-            self.waited_doses += 1;
+    fn span(&mut self, stage: Stage, start_s: f64, end_s: f64, label: &str) {
+        match (stage, label) {
+            (Stage::Stall, "hopper dose") => self.waited_doses += 1,
+            (Stage::Feeder, "hopper dose") => self.fed_doses_s.push((start_s, end_s)),
+            _ => {}
         }
     }
 }
@@ -479,9 +483,14 @@ fn a_dose_while_placing_pours_once_the_part_has_left_the_view_and_holds_the_next
             seen.captures_s
         );
     }
+    // The time chart shows each on the feeder's lane, from its start for its time.
+    let drawn: Vec<f64> = seen.fed_doses_s.iter().map(|&(s, _)| s).collect();
+    assert_eq!(drawn, during, "feeder spans {:?}", seen.fed_doses_s);
+    assert!(seen.fed_doses_s.iter().all(|&(s, e)| (e - s - dose_s).abs() < 1e-9));
     // Negative control: dosed at once, no dose falls inside a Place, and the arm waits out each.
     let (tally_off, off) = run::<PlaceDoses>("B", 60, hopper(false));
     assert!(tally_off.doses >= 2, "{tally_off:?}");
     assert!(off.during_places().is_empty(), "{:?}", off.doses_s);
     assert_eq!(off.waited_doses, tally_off.doses);
+    assert!(off.fed_doses_s.is_empty(), "{:?}", off.fed_doses_s);
 }
