@@ -18,7 +18,8 @@
 //! runs while the arm places (the cycle's side of it is in `crate::cycle`, its trays step).
 //!
 //! Simplified model: the dose's parts are dropped in waves at its start, as a pile is poured
-//! (see [`crate::physics::pile`]), above the pile as it lies; the cell waits `dose_s` or the
+//! (see [`crate::physics::pile`]), above the pile as it lies, or from the chute's exit
+//! (`chute_height_m`) where that is higher; the cell waits `dose_s` or the
 //! chute's time, whichever is longer, from the dose's start, then looks: whether the pour has
 //! come to rest is its sensor's to tell (a capture showing the pile moving is taken again), never
 //! the physics'.
@@ -53,6 +54,11 @@ pub struct FeederConfig {
     /// one wave of a pour ([`crate::physics::pile::POUR_WAVE`]) are always dosed at once.
     #[serde(default)]
     pub dose_while_placing: bool,
+    /// Height of the hopper chute's exit above the pick tray's floor (m): a dose's parts fall
+    /// from there, or from just above the pile where it stands higher. 0, the default: from just
+    /// above the pile's top (3 mm), wherever it is.
+    #[serde(default)]
+    pub chute_height_m: f64,
 }
 
 /// The flow of a vibratory hopper chute for small parts when a cell file leaves it out (parts/s):
@@ -73,6 +79,7 @@ impl Default for FeederConfig {
             dose_s: 0.0,
             dose_rate_parts_per_s: DEFAULT_DOSE_RATE_PARTS_PER_S,
             dose_while_placing: false,
+            chute_height_m: 0.0,
         }
     }
 }
@@ -108,6 +115,7 @@ impl FeederConfig {
         );
         c.within("feeder.dose_s", self.dose_s, 0.0, 60.0);
         c.within("feeder.dose_rate_parts_per_s", self.dose_rate_parts_per_s, 0.1, 1000.0);
+        c.within("feeder.chute_height_m", self.chute_height_m, 0.0, 0.5);
         if self.on() && self.dose_parts == 0 {
             c.fail(
                 "feeder.dose_parts",
@@ -175,6 +183,7 @@ mod tests {
             dose_s: 2.0,
             dose_rate_parts_per_s: 10.0,
             dose_while_placing: false,
+            chute_height_m: 0.0,
         };
         assert_eq!(f.dose_time_s(10), 2.0);
         assert_eq!(f.dose_time_s(40), 4.0);
@@ -194,6 +203,7 @@ mod tests {
             dose_s: 2.0,
             dose_rate_parts_per_s: 10.0,
             dose_while_placing: false,
+            chute_height_m: 0.0,
         };
         let r = FeederRecipe {
             dose_below: None,

@@ -222,7 +222,10 @@ impl Run<'_, '_> {
             .wrapping_add(fill.wrapping_mul(0x9E37_79B9_7F4A_7C15));
         // The new pile falls in at the exchange's start and rests for the rest of it: the
         // exchange takes `refill_s`, however long the physics takes to settle it.
-        self.pour(self.cell.pile_count, seed, t + self.cell.scene.cycle.refill_s)?;
+        self.pour(
+            PileOptions::into_running_cell(self.cell.pile_count, seed),
+            t + self.cell.scene.cycle.refill_s,
+        )?;
         self.span(Stage::Stall, t, self.st.world.time_s(), "pick tray refill");
         self.st.arm.free_s = self.st.world.time_s();
         self.st.compute_from_s = self.st.world.time_s();
@@ -260,7 +263,7 @@ impl Run<'_, '_> {
         let t0 = self.st.world.time_s();
         self.event(Event::Dose(parts));
         let dose_s = self.cell.scene.feeder.dose_time_s(parts);
-        self.pour(parts, self.dose_seed(), t0 + dose_s)?;
+        self.pour(self.dose_options(parts), t0 + dose_s)?;
         self.span(Stage::Stall, t0, self.st.world.time_s(), "hopper dose");
         self.dosed(parts);
         self.st.arm.free_s = self.st.world.time_s();
@@ -286,7 +289,7 @@ impl Run<'_, '_> {
         let spilled = self
             .st
             .world
-            .build_pile(&PileOptions::into_running_cell(parts, self.dose_seed()))
+            .build_pile(&self.dose_options(parts))
             .map_err(CycleError::Pour)?
             .spilled;
         self.lose_spilled(spilled);
@@ -301,6 +304,11 @@ impl Run<'_, '_> {
 
     /// The seed of the next dose's pour: its own per dose, apart from the refills' (which add
     /// multiples of another odd constant to the run seed).
+    /// The pour of the next dose of `parts` parts: from the hopper's chute, into the running cell.
+    fn dose_options(&self, parts: usize) -> PileOptions {
+        PileOptions::into_running_cell(parts, self.dose_seed()).dropped_from(self.cell.scene.feeder.chute_height_m)
+    }
+
     fn dose_seed(&self) -> u64 {
         let n = self.st.trays.doses as u64 + 1;
         self.cell
@@ -319,17 +327,17 @@ impl Run<'_, '_> {
         self.st.failed_spots.clear();
     }
 
-    /// Pours a refill or a dose of `count` parts (pile seed `seed`) through the physics, then
+    /// Pours a refill or a dose (`opts`, a pour into a running cell) through the physics, then
     /// waits, the arm still, until `until_s` (s): the cell's set time, not the pile's settling
     /// ([`PileOptions::into_running_cell`]). A part that bounces out of the tray meanwhile is
     /// lost to the pour, as one dragged out by a pick: taken out of the cell and counted, and the
     /// cell goes on (a feeder spills now and then; it does not end the shift).
-    fn pour(&mut self, count: usize, seed: u64, until_s: f64) -> Result<(), CycleError> {
+    fn pour(&mut self, opts: PileOptions, until_s: f64) -> Result<(), CycleError> {
         let obs = &mut *self.obs;
         let report = self
             .st
             .world
-            .build_pile_observed(&PileOptions::into_running_cell(count, seed), &mut |w| obs.stepped(w))
+            .build_pile_observed(&opts, &mut |w| obs.stepped(w))
             .map_err(CycleError::Pour)?;
         self.lose_spilled(report.spilled);
         self.st.trays.pouring = true;

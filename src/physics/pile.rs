@@ -38,6 +38,10 @@ pub struct PileOptions {
     /// A pile built before a run does; a pour into a running cell does not: the cell waits the
     /// time it is set to wait, and its sensor tells whether the pile still moves.
     pub settle: bool,
+    /// Lowest height above the tray floor a wave starts from (m): a hopper chute's exit, which
+    /// the parts fall from unless the pile stands higher (then from just above its top, as with
+    /// 0, the default).
+    pub drop_from_m: f64,
 }
 
 impl PileOptions {
@@ -49,6 +53,7 @@ impl PileOptions {
             max_settle_s: 10.0,
             lose_spilled: false,
             settle: true,
+            drop_from_m: 0.0,
         }
     }
 
@@ -65,6 +70,13 @@ impl PileOptions {
     /// As these options, with parts that bounce out of the tray lost instead of a fault.
     pub fn losing_spilled(mut self) -> Self {
         self.lose_spilled = true;
+        self
+    }
+
+    /// As these options, the waves starting at least `height_m` above the tray floor (a hopper
+    /// chute's exit).
+    pub fn dropped_from(mut self, height_m: f64) -> Self {
+        self.drop_from_m = height_m;
         self
     }
 }
@@ -179,7 +191,7 @@ impl World {
         let mut lost = opts.lose_spilled.then_some(&mut spilled);
         while spawned < opts.count {
             waves += 1;
-            let mut layer_z = self.pile_top_z() - floor_z + 0.003;
+            let mut layer_z = (self.pile_top_z() - floor_z + 0.003).max(opts.drop_from_m);
             let mut layer_top = layer_z;
             // World-aligned boxes of this wave's parts, to keep them apart at spawn.
             let mut boxes: Vec<(Vector3<f64>, Vector3<f64>)> = Vec::new();
@@ -382,5 +394,31 @@ mod tests {
                 "{state:?}: pile top {top_z} m, floor {floor_z} m"
             );
         }
+    }
+
+    /// A dose from a hopper chute 8 cm over the floor of an empty tray falls from there; the
+    /// control, from just above the pile (the floor), starts within a part's size of it.
+    #[test]
+    fn a_chute_drops_the_parts_from_its_height() {
+        let (scene, robot, shape) = default_cell_with("A");
+        // One wave into a running cell: the pour returns with its parts where they start.
+        let lowest_start_m = |chute_m: f64| {
+            let mut w = World::new(&scene.scene, &robot, shape.clone());
+            let floor_z = w.pick_tray.world_from_tray.translation.vector.z;
+            w.build_pile(&PileOptions::into_running_cell(6, 3).dropped_from(chute_m))
+                .unwrap();
+            w.parts
+                .iter()
+                .map(|p| w.colliders[p.collider].compute_aabb().mins.z as f64 / crate::physics::SIM_UNITS_PER_M)
+                .fold(f64::INFINITY, f64::min)
+                - floor_z
+        };
+        let from_chute = lowest_start_m(0.08);
+        assert!(
+            (0.079..0.09).contains(&from_chute),
+            "lowest part {from_chute} m over the floor"
+        );
+        let over_pile = lowest_start_m(0.0);
+        assert!(over_pile < 0.02, "control: lowest part {over_pile} m over the floor");
     }
 }

@@ -36,6 +36,11 @@ fn bad_feeder_keys_exit_2_naming_file_key_and_value_and_write_nothing() {
             "dose_rate_parts_per_s = 0.0",
             "feeder.dose_rate_parts_per_s must be within [0.1, 1000], got 0",
         ),
+        (
+            "chute_height_m = 0.0",
+            "chute_height_m = 0.9",
+            "feeder.chute_height_m must be within [0, 0.5], got 0.9",
+        ),
     ] {
         // The first case needs the hopper on to be wrong.
         let on = ws.edit(
@@ -122,6 +127,7 @@ fn feeder(dose_below: u32, dose_parts: u32, dose_s: f64, dose_rate_parts_per_s: 
         dose_s,
         dose_rate_parts_per_s,
         dose_while_placing: false,
+        chute_height_m: 0.0,
     }
 }
 
