@@ -180,7 +180,7 @@ pub fn pile_map(scene: &Scene, height_map: &HeightMap) -> HeightMap {
     let inner = [t.inner_size_m[0] / 2.0, t.inner_size_m[1] / 2.0];
     height_map
         .unseen_filled(inner, t.wall_height_m)
-        .inner_only(inner, t.wall_height_m + OVER_RIM_M)
+        .without_walls(inner, t.wall_height_m + OVER_RIM_M)
 }
 
 /// A cell over the pick tray's walls seen this much higher than their rim holds a part (m): well

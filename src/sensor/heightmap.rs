@@ -92,7 +92,7 @@ impl HeightMap {
     /// not pile (they are in the planner's cell model), a part lying across the rim and standing
     /// above it is. (The map holds only points inside the view frustum, which the arm is out of
     /// while the sensor exposes: nothing else stands over the rim.)
-    pub fn inner_only(&self, inner_half_m: [f64; 2], keep_above_m: f64) -> HeightMap {
+    pub fn without_walls(&self, inner_half_m: [f64; 2], keep_above_m: f64) -> HeightMap {
         let mut m = self.clone();
         for j in 0..m.ny {
             for i in 0..m.nx {
@@ -303,7 +303,7 @@ mod tests {
         }
         let strip_end = 3 * 10 + 9; // x = +4.5 cm, over the wall
         hm.height_m[strip_end] = 0.086;
-        let pile = hm.inner_only(INNER, 0.062);
+        let pile = hm.without_walls(INNER, 0.062);
         for &k in &ring {
             let kept = pile.height_m[k];
             if k == strip_end {
@@ -314,7 +314,7 @@ mod tests {
         }
         assert!(pile.height_m[3 * 10 + 4] == 0.01, "inner cells are kept");
         assert!(
-            hm.inner_only(INNER, f64::INFINITY).height_m[strip_end].is_nan(),
+            hm.without_walls(INNER, f64::INFINITY).height_m[strip_end].is_nan(),
             "control"
         );
     }

@@ -368,7 +368,7 @@ fn the_planner_does_not_descend_into_what_it_did_not_see() {
         env.pile = Some(PileColumns::new(pile, PILE_POOL_CELLS, None));
         CollisionModel::new(&robot, RobotSpheres::new(&robot, &scene.scene, None), env)
     };
-    let as_hole = model_of(&hm.inner_only(inner, f64::INFINITY));
+    let as_hole = model_of(&hm.without_walls(inner, f64::INFINITY));
     let filled = model_of(&pile_map(&scene.scene, &hm));
     // Ground truth: a 4 cm square part 4.5 cm tall under the hole's middle.
     let floor = tray.world_from_tray * nalgebra::Point3::new(hole_x, hole_y, 0.0);
