@@ -15,7 +15,7 @@ use serde::{Serialize, Serializer};
 use super::outcome::{Fault, MotionFailure, Outcome, PhysicsFault};
 use crate::grasp::GraspCandidate;
 use crate::physics::World;
-use crate::sensor::{Capture, CaptureProblem, Detection, RecognitionReport, TruthAtTrigger};
+use crate::sensor::{Capture, CaptureProblem, Detection, RecognitionReport, TruthAtTrigger, TruthMatch};
 use crate::servo::Tick;
 use crate::trajectory::Motion;
 
@@ -476,6 +476,10 @@ pub struct Recognised<'a> {
     pub t_s: f64,
     /// The recognised parts.
     pub detections: &'a [Detection],
+    /// Each detection against the truth at its capture's trigger, in step with `detections`
+    /// (evaluation only: for the recordings, never read by a decision); `None` when the result
+    /// was not evaluated.
+    pub judged: Option<&'a [Option<TruthMatch>]>,
     /// Feasible grasps, best first.
     pub ranked: &'a [GraspCandidate],
     /// Index into `ranked` of the grasp chosen, if any.

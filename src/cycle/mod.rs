@@ -688,13 +688,14 @@ impl Run<'_, '_> {
                             self.obs.recognised(&Recognised {
                                 t_s: result.job.ready_s,
                                 detections: &[],
+                                judged: None,
                                 ranked: &[],
                                 chosen: None,
                             });
                             Err(None)
                         }
-                        Some(dets) => self
-                            .prepare(dets, &result.job, compute_from_s, self.st.trays.next_slot, None)
+                        Some(_) => self
+                            .prepare(&result, compute_from_s, self.st.trays.next_slot, None)
                             .map_err(Some),
                     };
                     if let Some(parts) = low {

@@ -23,12 +23,12 @@ use super::events::Recognised;
 use super::outcome::MotionFailure;
 use super::play::{Capture, Segment, SegmentMotion, Settle, Valve};
 use super::records::StageCompute;
+use super::sensing::SensedResult;
 use crate::geometry::NamedBox;
 use crate::grasp::GraspCandidate;
 use crate::pipeline::{GraspContext, NoGrasp, SensedPile, sense_and_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
 use crate::robot::{JointVector, Payload};
-use crate::sensor::{CaptureJob, Detection};
 use crate::trajectory::{
     CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, OverlapCheck, Overlapped, Trajectory, accelerate_in_corridor,
     limit_tool_force, overlap_end, release_lead_s, straight_line,
@@ -425,15 +425,15 @@ impl Cell<'_> {
 }
 
 impl Run<'_, '_> {
-    /// Grasp selection and motion generation for one recognition result, from `t_s`, the part
+    /// Grasp selection and motion generation for one recognition result (its detections), from
+    /// `t_s`, the part
     /// to go to place slot `slot_index`; with `retreat` (the last Place's retreat, not started
     /// yet, from the part released in the slot before `slot_index`), the Pick overlapped with it
     /// where it can be. Returns the motions and the wall time of each stage (s), or why nothing
     /// can be picked.
     pub(super) fn prepare(
         &mut self,
-        detections: &[Detection],
-        job: &CaptureJob,
+        result: &SensedResult,
         t_s: f64,
         slot_index: usize,
         retreat: Option<&LineMotion>,
@@ -441,6 +441,7 @@ impl Run<'_, '_> {
         let cell = self.cell;
         let robot = cell.robot;
         let wall = Instant::now();
+        let (job, detections) = (&result.job, result.detections.as_deref().unwrap_or(&[]));
         let slot = cell.slots[slot_index % cell.slots.len()];
         // Compute that starts before the last motion ends plans from where it was planned to end.
         let q_now = match self.st.planned_end_q {
@@ -464,6 +465,7 @@ impl Run<'_, '_> {
         self.obs.recognised(&Recognised {
             t_s,
             detections,
+            judged: result.evaluation.as_ref().map(|e| &e.matches[..]),
             ranked: &choice.plan.ranked,
             chosen: choice.chosen.as_ref().map(|c| c.rank),
         });

@@ -188,10 +188,10 @@ impl Run<'_, '_> {
         self.st.arm.free_s = self.st.world.time_s() + up.duration_s();
         let this = self.st.pick.replace(next);
         let prepared = match result.detections.as_deref() {
-            Some(dets) if !dets.is_empty() => {
+            Some(d) if !d.is_empty() => {
                 // This part is in the current slot: the next goes to the one after.
                 let slot = self.st.trays.next_slot + 1;
-                self.prepare(dets, &result.job, compute_from_s, slot, Some(up)).ok()
+                self.prepare(&result, compute_from_s, slot, Some(up)).ok()
             }
             _ => None,
         };

@@ -270,9 +270,6 @@ pub struct Recorder<'a> {
     buffer: Recording,
     /// The events not handed on yet.
     events: EventLog,
-    /// The last evaluation (its result time and the per-detection matches), for the detections
-    /// that follow it.
-    last_matches: Option<(f64, Vec<Option<crate::sensor::TruthMatch>>)>,
     /// Simulation time of the newest step (s).
     now_s: f64,
     /// Everything at or before this time is handed on (s).
@@ -303,7 +300,6 @@ impl<'a> Recorder<'a> {
             window,
             buffer: Recording::empty(camera.cropped(&window), part_size_m),
             events: EventLog::default(),
-            last_matches: None,
             now_s: 0.0,
             handed_until_s: None,
             late: 0,
@@ -470,7 +466,7 @@ impl Observer for Recorder<'_> {
         self.keep_capture(c, true);
     }
 
-    fn evaluated(&mut self, t_s: f64, truth: &TruthAtTrigger, report: &RecognitionReport) {
+    fn evaluated(&mut self, t_s: f64, truth: &TruthAtTrigger, _report: &RecognitionReport) {
         self.arrived(t_s);
         self.buffer.truths.push(TruthRecord {
             t_s,
@@ -480,21 +476,17 @@ impl Observer for Recorder<'_> {
                 .map(|i| (i, truth.world_from_part[i]))
                 .collect(),
         });
-        self.last_matches = Some((t_s, report.matches.clone()));
     }
 
     fn recognised(&mut self, r: &Recognised<'_>) {
         self.arrived(r.t_s);
         let ranked = &r.ranked[..r.ranked.len().min(RECORDED_CANDIDATES)];
-        let matches = self
-            .last_matches
-            .as_ref()
-            .filter(|(t, m)| *t == r.t_s && m.len() == r.detections.len());
+        let matches = r.judged.filter(|m| m.len() == r.detections.len());
         self.buffer.recognitions.push(RecognitionRecord {
             detection_errors: (0..r.detections.len())
                 .map(|k| {
                     matches
-                        .and_then(|(_, m)| m[k])
+                        .and_then(|m| m[k])
                         .map(|m| (m.position_error_m, m.rotation_error_rad, m.correct))
                 })
                 .collect(),

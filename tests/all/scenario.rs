@@ -211,6 +211,25 @@ fn scenario(workpiece: &str) {
     assert!(rec.events.windows(2).all(|w| w[1].t_s >= w[0].t_s - 1e-9));
 }
 
+/// Every recognition result a recorded run used is judged in its recordings: each detection
+/// with its error against the truth at its trigger. (The recorder once matched a result to its
+/// evaluation by the time its grasps were ranked, which is later than its arrival whenever the
+/// arm was still moving: only the first result of a run was labelled.)
+#[test]
+fn every_recorded_detection_is_judged_against_the_truth() {
+    let (_, rec, ..) = run("E", 6);
+    let used: Vec<_> = rec.recognitions.iter().filter(|r| !r.detections.is_empty()).collect();
+    assert!(used.len() >= 4, "{} results used", used.len());
+    for r in used {
+        assert!(
+            r.detection_errors.iter().all(Option::is_some),
+            "the result used at {} s: {:?}",
+            r.t_s,
+            r.detection_errors
+        );
+    }
+}
+
 #[test]
 fn scenario_a() {
     scenario("A");
