@@ -33,6 +33,7 @@ pub use feeder::{FeederConfig, FeederRecipe};
 pub use model_error::ModelErrorConfig;
 pub use scene::*;
 pub use tool::CupConfig;
+pub use tool::ScanMode;
 pub use workpiece::*;
 
 /// One problem found in an input file: which file, which key, what is wrong.

@@ -1,10 +1,12 @@
 //! The set-up per workpiece: the suction cup a workpiece file may bring, overriding the cell's for
-//! that workpiece only (and the hopper recipe it may bring, [`crate::config::FeederRecipe`]).
+//! that workpiece only (and the hopper recipe and shake it may bring,
+//! [`crate::config::FeederRecipe`], [`crate::config::AgitationRecipe`], and the sensor's scan mode,
+//! [`ScanMode`]).
 //!
-//! Job: the workpiece file's optional `[gripper]` section ([`CupConfig`]), its checks, and the one
-//! resolution every stage reads: [`Scene::set_up_for`] gives the cell with the workpiece's cup
-//! and hopper recipe in place of its own, [`crate::config::LoadedScene::for_workpiece`] the same
-//! for a loaded cell.
+//! Job: the workpiece file's optional `[gripper]` and `[sensor]` sections ([`CupConfig`],
+//! [`ScanMode`]), their checks, and the one resolution every stage reads: [`Scene::set_up_for`]
+//! gives the cell with the workpiece's cup, recipes and scan mode in place of its own,
+//! [`crate::config::LoadedScene::for_workpiece`] the same for a loaded cell.
 //! A run resolves its cell once ([`crate::cycle::run`]); the grasp selector's cup fit, the
 //! suction force model, the hand's collision model, the physics gripper, the recordings and the
 //! resolved inputs written beside the run all read that resolved cell.
@@ -23,7 +25,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Checker, GripperConfig, Scene, Workpiece};
+use super::{Checker, GripperConfig, Scene, SensorConfig, Workpiece};
 
 /// The cup a workpiece brings (`[gripper]` in a workpiece file): each key given replaces the
 /// cell's `gripper.` key of the same name for this workpiece; a key left out keeps the cell's.
@@ -89,6 +91,74 @@ impl CupConfig {
     }
 }
 
+/// The sensor's scan mode a workpiece runs with (`[sensor]` in a workpiece file): the cell's
+/// sensor at another of its resolutions, over the same field of view, as a structured-light
+/// scanner's capture settings are chosen per product (a PhoXi M's 1032 x 772 or 2064 x 1544),
+/// and the depth noise per pixel in that mode. Each key given replaces the cell's; the focal
+/// lengths and principal point scale with the image; the rest (latency, exposure, range) stays
+/// the cell's: docs/formats.md, "The scan mode per workpiece".
+#[derive(Debug, Clone, Copy, Default, Serialize, Deserialize, PartialEq)]
+#[serde(deny_unknown_fields)]
+pub struct ScanMode {
+    /// Image size, width and height (px): the same multiple of the cell's along both.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub resolution_px: Option<[u32; 2]>,
+    /// Depth noise standard deviation at 1 m range in this mode (m).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub depth_noise_at_1m_m: Option<f64>,
+}
+
+/// How far a scan mode's two axes may scale the cell's image differently (px of its height).
+pub const SCAN_MODE_ASPECT_TOL_PX: f64 = 1.0;
+
+impl ScanMode {
+    /// Checks the key on its own (the cell's check of the resolved sensor follows in
+    /// [`Workpiece::check_fits_scene`]).
+    pub fn check(&self, c: &mut Checker) {
+        if let Some(v) = self.depth_noise_at_1m_m {
+            c.non_negative("sensor.depth_noise_at_1m_m", v);
+        }
+        for (i, v) in self.resolution_px.iter().flatten().enumerate() {
+            if !(1..=8192).contains(v) {
+                c.fail(
+                    &format!("sensor.resolution_px[{i}]"),
+                    format!("must be within [1, 8192], got {v}"),
+                );
+            }
+        }
+    }
+
+    /// The factor the mode scales the cell sensor `s`'s image by (its width's; 1 without a
+    /// resolution of its own).
+    pub fn scale(&self, s: &SensorConfig) -> f64 {
+        self.resolution_px
+            .map_or(1.0, |r| f64::from(r[0]) / f64::from(s.resolution_px[0].max(1)))
+    }
+
+    /// Whether the mode keeps `s`'s field of view: its height scaled as its width, within
+    /// [`SCAN_MODE_ASPECT_TOL_PX`].
+    pub fn keeps_field_of_view(&self, s: &SensorConfig) -> bool {
+        self.resolution_px.is_none_or(|r| {
+            (f64::from(s.resolution_px[1]) * self.scale(s) - f64::from(r[1])).abs() <= SCAN_MODE_ASPECT_TOL_PX
+        })
+    }
+}
+
+impl SensorConfig {
+    /// The sensor in scan mode `mode`: its resolution, the focal lengths and principal point
+    /// scaled with it (pixel centres at half-integers: the optical axis stays where it is).
+    pub fn with_mode(&self, mode: &ScanMode) -> SensorConfig {
+        let k = mode.scale(self);
+        SensorConfig {
+            resolution_px: mode.resolution_px.unwrap_or(self.resolution_px),
+            focal_px: self.focal_px.map(|f| f * k),
+            principal_point_px: self.principal_point_px.map(|p| p * k),
+            depth_noise_at_1m_m: mode.depth_noise_at_1m_m.unwrap_or(self.depth_noise_at_1m_m),
+            ..self.clone()
+        }
+    }
+}
+
 impl super::LoadedWorkpiece {
     /// The workpiece as written beside a run in `cell`: a cup and a hopper recipe it brings with
     /// every key filled in from the cell's ([`CupConfig::completed`],
@@ -135,6 +205,9 @@ impl Scene {
         if let Some(shake) = &w.agitation {
             s.agitation = self.agitation.with_recipe(shake);
         }
+        if let Some(mode) = &w.sensor {
+            s.sensor = self.sensor.with_mode(mode);
+        }
         s
     }
 
@@ -150,6 +223,7 @@ impl Scene {
             && w.agitation
                 .as_ref()
                 .is_none_or(|r| self.agitation.with_recipe(r) == self.agitation)
+            && w.sensor.is_none_or(|m| self.sensor.with_mode(&m) == self.sensor)
     }
 }
 
@@ -223,5 +297,32 @@ mod tests {
             let back: crate::config::Workpiece = parse_toml("w", &text).unwrap();
             assert_eq!(back, w.workpiece);
         }
+    }
+
+    #[test]
+    fn a_scan_mode_scales_the_image_and_keeps_the_field_of_view() {
+        let cell = LoadedScene::embedded_default().unwrap();
+        let e = LoadedWorkpiece::from_text(
+            "E.toml",
+            crate::config::Source::Embedded,
+            &format!(
+                "{}\n[sensor]\nresolution_px = [2064, 1544]\n",
+                crate::config::embedded::WORKPIECES[4].1
+            ),
+        )
+        .unwrap();
+        let (base, s) = (&cell.scene.sensor, cell.scene.set_up_for(&e.workpiece));
+        assert_eq!(s.sensor.resolution_px, [2064, 1544]);
+        assert_eq!(s.sensor.focal_px, base.focal_px.map(|f| 2.0 * f));
+        assert_eq!(s.sensor.principal_point_px, base.principal_point_px.map(|p| 2.0 * p));
+        // The same rays through the same image points: a pixel's edge-to-edge angle halves.
+        let angle = |c: &crate::config::SensorConfig, u: f64| ((u - c.principal_point_px[0]) / c.focal_px[0]).atan();
+        for u in [0.0, 100.0, 1032.0] {
+            assert!((angle(base, u) - angle(&s.sensor, 2.0 * u)).abs() < 1e-12);
+        }
+        assert_eq!(s.set_up_for(&e.workpiece), s, "resolving twice changes nothing");
+        assert!(s.is_set_up_for(&e.workpiece));
+        // Negative control: the cell itself does not run E's scan mode.
+        assert!(!cell.scene.is_set_up_for(&e.workpiece));
     }
 }

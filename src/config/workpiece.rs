@@ -55,6 +55,11 @@ pub struct Workpiece {
     /// name for this workpiece only (absent: the cell's; [`super::agitation`]).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub agitation: Option<super::AgitationRecipe>,
+    /// The sensor's scan mode this workpiece runs with: the cell's sensor at another of its
+    /// resolutions over the same field of view, for this workpiece only (absent: the cell's;
+    /// [`super::tool::ScanMode`]).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sensor: Option<super::ScanMode>,
     /// Collision shape.
     pub shape: ShapeConfig,
     /// Grasp hints.
@@ -378,6 +383,9 @@ impl Workpiece {
         if let Some(shake) = &self.agitation {
             shake.check(&mut c);
         }
+        if let Some(mode) = &self.sensor {
+            mode.check(&mut c);
+        }
         c.finish()
     }
 
@@ -415,28 +423,45 @@ impl Workpiece {
     /// agree with the cell's cycle (the valve leads within its build-up and release times).
     pub fn check_fits_scene(&self, file: &str, scene: &Scene) -> Result<(), ConfigError> {
         let mut c = Checker::new(file);
+        if let Some(mode) = &self.sensor
+            && !mode.keeps_field_of_view(&scene.sensor)
+        {
+            let [w, h] = scene.sensor.resolution_px;
+            let r = mode.resolution_px.unwrap_or(scene.sensor.resolution_px);
+            c.fail(
+                "sensor.resolution_px",
+                format!(
+                    "must scale the cell's {w} x {h} image alike along both axes (the same field of view): got {r:?}, {:.3} times as wide and {:.3} times as high",
+                    mode.scale(&scene.sensor),
+                    f64::from(r[1]) / f64::from(h.max(1)),
+                ),
+            );
+        }
         let resolved;
-        let scene = if self.gripper.is_some() || self.feeder.is_some() || self.agitation.is_some() {
-            resolved = scene.set_up_for(self);
-            if let Err(e) = resolved.validate(file) {
-                for p in e.problems {
-                    // The cell's check of a key this workpiece's own section set names that
-                    // section; a check across sections (a release lead against the cup) the one
-                    // the workpiece brings.
-                    let what = if p.key.starts_with("agitation.") {
-                        "agitation"
-                    } else if p.key.starts_with("feeder.") || self.gripper.is_none() {
-                        "feeder"
-                    } else {
-                        "gripper"
-                    };
-                    c.fail(&p.key, format!("{} (with this workpiece's {what})", p.message));
+        let scene =
+            if self.gripper.is_some() || self.feeder.is_some() || self.agitation.is_some() || self.sensor.is_some() {
+                resolved = scene.set_up_for(self);
+                if let Err(e) = resolved.validate(file) {
+                    for p in e.problems {
+                        // The cell's check of a key this workpiece's own section set names that
+                        // section; a check across sections (a release lead against the cup) the one
+                        // the workpiece brings.
+                        let what = if p.key.starts_with("agitation.") {
+                            "agitation"
+                        } else if p.key.starts_with("sensor.") {
+                            "sensor"
+                        } else if p.key.starts_with("feeder.") || self.gripper.is_none() {
+                            "feeder"
+                        } else {
+                            "gripper"
+                        };
+                        c.fail(&p.key, format!("{} (with this workpiece's {what})", p.message));
+                    }
                 }
-            }
-            &resolved
-        } else {
-            scene
-        };
+                &resolved
+            } else {
+                scene
+            };
         // Lying flat, the part's two longest edges must fit the tray's inner floor.
         let mut dims = self.size_m;
         dims.sort_by(|a, b| b.total_cmp(a));

@@ -123,12 +123,12 @@ pub fn resolve(
             for (s, v) in sets.iter().zip(vals).filter(|(s, _)| s.target == Target::Workpiece) {
                 set_in(&mut t, &s.path, v.clone()).map_err(|m| ConfigError::one(&wl, &s.key, m))?;
             }
-            // A cell's gripper, feeder or agitation key that the workpiece's own `[gripper]`,
-            // `[feeder]` or `[agitation]` sets would vary nothing for it: refused, so that a
-            // study never reports variants that are the same cell.
+            // A cell's gripper, feeder, agitation or sensor key that the workpiece's own
+            // `[gripper]`, `[feeder]`, `[agitation]` or `[sensor]` sets would vary nothing for
+            // it: refused, so that a study never reports variants that are the same cell.
             for s in sets.iter().filter(|s| s.target == Target::Cell) {
                 if let [Segment::Key(g), Segment::Key(k), ..] = s.path.as_slice()
-                    && (g == "gripper" || g == "feeder" || g == "agitation")
+                    && ["gripper", "feeder", "agitation", "sensor"].contains(&g.as_str())
                     && wtree
                         .get(g.as_str())
                         .and_then(|v| v.as_table())

@@ -23,6 +23,7 @@ mod quiet;
 mod recording;
 mod recording_urdf;
 mod report_html;
+mod scan_mode;
 mod scenario;
 mod sensing;
 mod servo;
