@@ -1,7 +1,8 @@
 //! `binpick part WORKPIECE [--scene S] [--json] [--svg FILE]`: what the cell will see and take of
 //! a part, before a run: its part model (mass properties, planar faces with the cup-fit regions
 //! for the cell's cup, stable resting poses with their likelihoods, symmetry, what the mesh
-//! repair did) and an SVG picture of it with its grasp faces.
+//! repair did), what a few simulated piles offer the cup and how well the cell's sensor (in the
+//! workpiece's scan mode) recognises them, and an SVG picture of it with its grasp faces.
 //!
 //! Units: mm, g and degrees in the text and JSON (named in the keys); SI inside.
 
@@ -16,6 +17,7 @@ use binpick::part::PartModel;
 use binpick::part::model::ModelFace;
 use binpick::part::poses::RestingPose;
 use binpick::part::repair::RepairReport;
+use binpick::sensor::{RecognitionSummary, RecognitionTotals};
 
 use super::{InputError, round};
 
@@ -40,7 +42,7 @@ pub struct PartArgs {
 }
 
 /// What a few simulated piles offer the cup.
-#[derive(Debug, Clone, Copy, Default)]
+#[derive(Debug, Clone, Default)]
 struct PileShare {
     /// Piles built.
     piles: u64,
@@ -48,6 +50,9 @@ struct PileShare {
     in_tray: usize,
     /// Of those, the parts with a grasp face up whose cup disc is uncovered.
     offered: usize,
+    /// The cell's cloud recognition on one capture of each pile, against the truth (`None`
+    /// when the cell's recognition is the oracle).
+    recognition: Option<RecognitionTotals>,
 }
 
 impl PileShare {
@@ -63,8 +68,10 @@ impl PileShare {
 /// Builds `piles` piles (seeds 1..=piles) and counts the settled parts in the tray that offer a
 /// graspable face: a face that takes the cup looks up within the cup's tilt, and a vertical ray
 /// from above at its cup-fit centre and at eight points of the cup's rim about it meets this part
-/// first, within 1 mm of the face (nothing lies on the cup's disc). Read from the simulated
-/// world: a prediction for the user, not a decision of the cell.
+/// first, within 1 mm of the face (nothing lies on the cup's disc). Each pile is also captured
+/// once and recognised from the cloud, as the cell does, and the detections judged against the
+/// parts' poses (`binpick sense`'s evaluation). Read from the simulated world: a prediction for
+/// the user, not a decision of the cell.
 fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: u64, tilt: f64) -> Result<PileShare> {
     use binpick::physics::{PartShape, Tag, World, pile::PileOptions};
     use nalgebra::{Point3, Vector3};
@@ -72,6 +79,8 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
     if piles == 0 {
         return Ok(out);
     }
+    let cloud = loaded.scene.sensor.recognition == binpick::config::RecognitionMode::Cloud;
+    let mut recognition = RecognitionTotals::default();
     let robot = binpick::robot::RobotModel::from_scene(loaded)?;
     let shape = PartShape::build(&wp.workpiece, &wp.source)?;
     let r_cup = 0.5 * m.cup.diameter_m;
@@ -93,6 +102,14 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
     for seed in 1..=piles {
         let mut world = World::new(&loaded.scene, &robot, shape.clone());
         world.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed))?;
+        if cloud {
+            use binpick::sensor::{Sensor, TruthAtTrigger, capture, evaluate};
+            let sensor = Sensor::new(&loaded.scene.sensor, &world, seed, &wp.workpiece)
+                .ok_or_else(|| anyhow::anyhow!("the sensor's pose is degenerate"))?;
+            let c = capture(&world, &sensor.camera, seed, 0);
+            let truth = TruthAtTrigger::take(&world, &sensor, &c);
+            recognition.add(&evaluate(&truth, &sensor.recognize_cloud(&c), &sensor.symmetry));
+        }
         let down = -Vector3::z();
         for i in world.parts_in_pick_tray() {
             out.in_tray += 1;
@@ -111,6 +128,7 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
         }
         out.piles += 1;
     }
+    out.recognition = cloud.then_some(recognition);
     Ok(out)
 }
 
@@ -278,6 +296,9 @@ pub fn part(a: &PartArgs) -> Result<()> {
                 piles.piles
             ));
         }
+        if let Some(r) = piles.recognition.as_ref().map(RecognitionTotals::summary) {
+            say(&recognition_line(&r, &scene.scene));
+        }
         for why in [no_cup_face(&m), no_upright_face(&m, w, tilt)].into_iter().flatten() {
             say(&format!("warning: {why}"));
         }
@@ -308,6 +329,33 @@ fn round_side(m: &PartModel, scene: &binpick::config::Scene) -> Option<RoundSide
             .len(),
         offered: binpick::grasp::offered_side_strips(m, scene).len(),
     })
+}
+
+/// What the recognition on the simulated piles found, as a line of text (with what it means for
+/// the place tray where the rotation errors reach its tolerance).
+fn recognition_line(r: &RecognitionSummary, scene: &Scene) -> String {
+    let [w, h] = scene.sensor.resolution_px;
+    let mut line = format!(
+        "recognition on those piles ({w} x {h} px, one capture each): recall {:.1} % of the top layer ({} of {}), precision {:.1} % ({} of {} detections within 2 mm and 5 deg of a part); pose error of those, median / p95: {:.2} / {:.2} mm, {:.1} / {:.1} deg",
+        100.0 * r.recall,
+        r.top_layer_found,
+        r.top_layer,
+        100.0 * r.precision,
+        r.correct,
+        r.detected,
+        r.position_error_mm[0],
+        r.position_error_mm[1],
+        r.rotation_error_deg[0],
+        r.rotation_error_deg[1],
+    );
+    if r.precision < 0.99 {
+        line.push_str(&format!(
+            "; a wrong detection may be grasped or set down off its pose (the place tray's tolerance: {:.1} mm, {:.0} deg): a finer scan mode for this part (`[sensor] resolution_px` in its file) may help (docs/formats.md)",
+            scene.place_tray.tolerance_m * 1e3,
+            scene.place_tray.tolerance_deg
+        ));
+    }
+    line
 }
 
 /// Millimetres from metres, rounded for the JSON output.
@@ -359,6 +407,7 @@ fn print_json(
             "parts_in_tray": piles.in_tray,
             "parts_offering_a_cup_face": piles.offered,
             "share": round(piles.share(), 6),
+            "recognition": piles.recognition.as_ref().map(RecognitionTotals::summary),
         },
         "warning": no_cup_face(m),
         "svg": svg_path.display().to_string(),

@@ -379,6 +379,25 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     assert!(dip["pile"]["parts_in_tray"].as_u64().unwrap() > 0);
     let dip = part("dip8");
     assert!(dip["pile"]["share"].as_f64().unwrap() > 0.3, "{}", dip["pile"]);
+    // Each pile captured once and recognised as the cell does, judged against the parts: most
+    // of the top layer found. The control, the figures follow the sensor: in a scan mode of a
+    // quarter of the cell's pixels each way (3.4 mm pixels, a DIP's top face 3 x 2 of them) it
+    // finds far fewer.
+    let rec = &dip["pile"]["recognition"];
+    assert_eq!(rec["captures"], 3, "{rec}");
+    let recall = rec["recall"].as_f64().unwrap();
+    assert!(recall > 0.8 && rec["precision"].as_f64().unwrap() > 0.9, "{rec}");
+    ws.edit(
+        "workpieces/dip8.toml",
+        "workpieces/dip8-coarse.toml",
+        "[shape]",
+        "[sensor]\nresolution_px = [258, 193]\n\n[shape]",
+    );
+    let coarse = &part("dip8-coarse")["pile"]["recognition"];
+    assert!(
+        coarse["recall"].as_f64().unwrap() < recall - 0.3,
+        "coarse {coarse}, the cell's {rec}"
+    );
 
     // The TO-220: three bodies and more (body, tab, leads), the tab's hole found; its body's top
     // and back take the cup.
