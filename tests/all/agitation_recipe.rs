@@ -2,7 +2,7 @@
 //! workpiece uses, and only that workpiece; its keys are checked naming file, key and value; a
 //! sweep of the cell's key it sets is refused.
 
-use crate::support::{Workspace, batch_is_refused, binpick_in, stderr, without_cup_section};
+use crate::support::{Workspace, batch_is_refused, binpick_in, cell_sweep_is_refused, stderr, without_cup_section};
 
 /// D's file with the cell's cup (its own bellows cup, which takes lying cans by their side, is
 /// cut: with it, D's first 21 picks of seed 1 need no shake), as `workpieces/D-flat.toml`.
@@ -99,26 +99,5 @@ fn a_bad_shake_exits_2_naming_file_key_and_value() {
         batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
     }
     let bad = shaken(&ws, "bad", "frequency_hz = 22.0\n");
-    let out = ws.path("runs");
-    let o = binpick_in(
-        ws.dir.path(),
-        &[
-            "sweep",
-            "--set",
-            "agitation.frequency_hz=10,20",
-            "--workpieces",
-            bad.to_str().unwrap(),
-            "--picks",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-    );
-    let err = stderr(&o);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("bad.toml") && err.contains("does not reach this workpiece"),
-        "{err}"
-    );
-    assert!(!out.exists(), "the refused sweep wrote {}", out.display());
+    cell_sweep_is_refused(&ws, "agitation.frequency_hz=10,20", &bad);
 }

@@ -3,7 +3,7 @@
 //! workpiece's; its key is checked naming file, key and value; a sweep of the cell's key it sets
 //! is refused.
 
-use crate::support::{Workspace, batch_is_refused, binpick_in, stderr};
+use crate::support::{Workspace, batch_is_refused, binpick_in, cell_sweep_is_refused, stderr};
 
 /// E with `section` before its `[grasp]`, as `workpieces/{name}.toml`.
 fn e_with(ws: &Workspace, name: &str, section: &str) -> std::path::PathBuf {
@@ -91,26 +91,5 @@ fn a_bad_scan_mode_exits_2_naming_file_key_and_value() {
         batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
     }
     let bad = e_with(&ws, "bad", "[sensor]\nresolution_px = [2064, 1544]\n");
-    let out = ws.path("runs");
-    let o = binpick_in(
-        ws.dir.path(),
-        &[
-            "sweep",
-            "--set",
-            "sensor.resolution_px=[1032,772],[516,386]",
-            "--workpieces",
-            bad.to_str().unwrap(),
-            "--picks",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-    );
-    let err = stderr(&o);
-    assert_eq!(o.status.code(), Some(2), "{err}");
-    assert!(
-        err.contains("bad.toml") && err.contains("does not reach this workpiece"),
-        "{err}"
-    );
-    assert!(!out.exists(), "the refused sweep wrote {}", out.display());
+    cell_sweep_is_refused(&ws, "sensor.resolution_px=[1032,772],[516,386]", &bad);
 }

@@ -219,6 +219,34 @@ pub fn batch_is_refused(ws: &Workspace, args: &[&str], why: &str) {
     assert!(!out.exists(), "{args:?} wrote {}", out.display());
 }
 
+/// A two-pick sweep setting the cell's key `set` (`KEY=V1,V2`) over `workpiece`, whose file
+/// (`bad.toml`) brings that key itself, exits 2 saying the key does not reach it, and writes
+/// nothing.
+pub fn cell_sweep_is_refused(ws: &Workspace, set: &str, workpiece: &Path) {
+    let out = ws.path("runs");
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "sweep",
+            "--set",
+            set,
+            "--workpieces",
+            workpiece.to_str().unwrap(),
+            "--picks",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    let err = stderr(&o);
+    assert_eq!(o.status.code(), Some(2), "{err}");
+    assert!(
+        err.contains("bad.toml") && err.contains("does not reach this workpiece"),
+        "{err}"
+    );
+    assert!(!out.exists(), "the refused sweep wrote {}", out.display());
+}
+
 /// A workpiece file's text without its `[gripper]` section (up to the next blank line).
 pub fn without_cup_section(text: &str) -> String {
     match text.find("[gripper]") {
