@@ -331,8 +331,8 @@ fn round_side(m: &PartModel, scene: &binpick::config::Scene) -> Option<RoundSide
     })
 }
 
-/// What the recognition on the simulated piles found, as a line of text (with what it means for
-/// the place tray where the rotation errors reach its tolerance).
+/// What the recognition on the simulated piles found, as a line of text (with what a precision
+/// under 99 % means for the picks and a pointer to the scan mode).
 fn recognition_line(r: &RecognitionSummary, scene: &Scene) -> String {
     let [w, h] = scene.sensor.resolution_px;
     let mut line = format!(

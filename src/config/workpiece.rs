@@ -437,31 +437,29 @@ impl Workpiece {
                 ),
             );
         }
-        let resolved;
-        let scene =
-            if self.gripper.is_some() || self.feeder.is_some() || self.agitation.is_some() || self.sensor.is_some() {
-                resolved = scene.set_up_for(self);
-                if let Err(e) = resolved.validate(file) {
-                    for p in e.problems {
-                        // The cell's check of a key this workpiece's own section set names that
-                        // section; a check across sections (a release lead against the cup) the one
-                        // the workpiece brings.
-                        let what = if p.key.starts_with("agitation.") {
-                            "agitation"
-                        } else if p.key.starts_with("sensor.") {
-                            "sensor"
-                        } else if p.key.starts_with("feeder.") || self.gripper.is_none() {
-                            "feeder"
-                        } else {
-                            "gripper"
-                        };
-                        c.fail(&p.key, format!("{} (with this workpiece's {what})", p.message));
-                    }
-                }
-                &resolved
-            } else {
-                scene
-            };
+        // The cell as it runs this workpiece (its cup, recipes and scan mode in place), checked
+        // as a whole where the workpiece changed it.
+        let resolved = scene.set_up_for(self);
+        if resolved != *scene
+            && let Err(e) = resolved.validate(file)
+        {
+            for p in e.problems {
+                // The cell's check of a key this workpiece's own section set names that section;
+                // a check across sections (a release lead against the cup) the one the
+                // workpiece brings.
+                let what = if p.key.starts_with("agitation.") {
+                    "agitation"
+                } else if p.key.starts_with("sensor.") {
+                    "sensor"
+                } else if p.key.starts_with("feeder.") || self.gripper.is_none() {
+                    "feeder"
+                } else {
+                    "gripper"
+                };
+                c.fail(&p.key, format!("{} (with this workpiece's {what})", p.message));
+            }
+        }
+        let scene = &resolved;
         // Lying flat, the part's two longest edges must fit the tray's inner floor.
         let mut dims = self.size_m;
         dims.sort_by(|a, b| b.total_cmp(a));
