@@ -426,11 +426,10 @@ impl Cell<'_> {
 
 impl Run<'_, '_> {
     /// Grasp selection and motion generation for one recognition result (its detections), from
-    /// `t_s`, the part
-    /// to go to place slot `slot_index`; with `retreat` (the last Place's retreat, not started
-    /// yet, from the part released in the slot before `slot_index`), the Pick overlapped with it
-    /// where it can be. Returns the motions and the wall time of each stage (s), or why nothing
-    /// can be picked.
+    /// `t_s`, the part to go to place slot `slot_index`; with `retreat` (the last Place's retreat,
+    /// not started yet, from the part released in the slot before `slot_index`), the Pick
+    /// overlapped with it where it can be. Returns the motions and the wall time of each stage
+    /// (s), or why nothing can be picked.
     pub(super) fn prepare(
         &mut self,
         result: &SensedResult,
