@@ -280,7 +280,8 @@ mod tests {
             .unwrap_err()
             .to_string();
         assert!(
-            e.contains("B.toml: cycle.release_lead_s must not exceed gripper.release_s (0.01 s)"),
+            e.contains("B.toml: cycle.release_lead_s must not exceed gripper.release_s (0.01 s)")
+                && e.ends_with("(with this workpiece's gripper)"),
             "{e}"
         );
         // Of the six built-in workpieces A, B, D, E and F bring their cups (the default cell,

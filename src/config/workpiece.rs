@@ -443,18 +443,27 @@ impl Workpiece {
         if resolved != *scene
             && let Err(e) = resolved.validate(file)
         {
+            // The sections this workpiece brings.
+            let brought: Vec<&str> = [
+                ("gripper", self.gripper.is_some()),
+                ("feeder", self.feeder.is_some()),
+                ("agitation", self.agitation.is_some()),
+                ("sensor", self.sensor.is_some()),
+            ]
+            .into_iter()
+            .filter_map(|(name, given)| given.then_some(name))
+            .collect();
             for p in e.problems {
-                // The cell's check of a key this workpiece's own section set names that section;
-                // a check across sections (a release lead against the cup) the one the
-                // workpiece brings.
-                let what = if p.key.starts_with("agitation.") {
-                    "agitation"
-                } else if p.key.starts_with("sensor.") {
-                    "sensor"
-                } else if p.key.starts_with("feeder.") || self.gripper.is_none() {
-                    "feeder"
+                // The cell's check of a key in a section this workpiece brings names that
+                // section; a check across sections (the cycle's release lead against the cup)
+                // the cup, if it brings one, else every section it brings.
+                let section = p.key.split('.').next().unwrap_or_default();
+                let what = if brought.contains(&section) {
+                    section.to_string()
+                } else if brought.contains(&"gripper") {
+                    "gripper".to_string()
                 } else {
-                    "gripper"
+                    brought.join(", ")
                 };
                 c.fail(&p.key, format!("{} (with this workpiece's {what})", p.message));
             }

@@ -85,7 +85,10 @@ fn a_bad_scan_mode_exits_2_naming_file_key_and_value() {
             "depth_noise_at_1m_m = -0.001\n",
             "sensor.depth_noise_at_1m_m must be >= 0, got -0.001",
         ),
-        ("resolution_px = [4128, 3088]\n", "must have at most 4194304 pixels"),
+        (
+            "resolution_px = [4128, 3088]\n",
+            "got [4128, 3088] (with this workpiece's sensor)",
+        ),
     ] {
         let bad = e_with(&ws, "bad", &format!("[sensor]\n{section}"));
         batch_is_refused(&ws, &["--workpieces", bad.to_str().unwrap()], why);
