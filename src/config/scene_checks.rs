@@ -13,6 +13,19 @@ use super::scene::{
 };
 use super::{Checker, ConfigError};
 
+/// `sensor.resolution_px`: each side within [1, 8192] px (the cell's and a workpiece's scan
+/// mode's).
+pub(super) fn check_resolution(c: &mut Checker, resolution_px: &[u32; 2]) {
+    for (i, v) in resolution_px.iter().enumerate() {
+        if !(1..=8192).contains(v) {
+            c.fail(
+                &format!("sensor.resolution_px[{i}]"),
+                format!("must be within [1, 8192], got {v}"),
+            );
+        }
+    }
+}
+
 fn check_tray(c: &mut Checker, key: &str, t: &TrayConfig) {
     c.finite_all(&format!("{key}.center_m"), &t.center_m);
     c.finite(&format!("{key}.yaw_deg"), t.yaw_deg);
@@ -111,14 +124,7 @@ impl Scene {
         c.finite_all("sensor.position_m", &s.position_m);
         c.finite_all("sensor.look_at_m", &s.look_at_m);
         c.finite_all("sensor.image_up", &s.image_up);
-        for (i, v) in s.resolution_px.iter().enumerate() {
-            if !(1..=8192).contains(v) {
-                c.fail(
-                    &format!("sensor.resolution_px[{i}]"),
-                    format!("must be within [1, 8192], got {v}"),
-                );
-            }
-        }
+        check_resolution(c, &s.resolution_px);
         let pixels = u64::from(s.resolution_px[0]) * u64::from(s.resolution_px[1]);
         if pixels > MAX_SENSOR_PIXELS {
             c.fail(

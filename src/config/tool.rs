@@ -118,13 +118,8 @@ impl ScanMode {
         if let Some(v) = self.depth_noise_at_1m_m {
             c.non_negative("sensor.depth_noise_at_1m_m", v);
         }
-        for (i, v) in self.resolution_px.iter().flatten().enumerate() {
-            if !(1..=8192).contains(v) {
-                c.fail(
-                    &format!("sensor.resolution_px[{i}]"),
-                    format!("must be within [1, 8192], got {v}"),
-                );
-            }
+        if let Some(r) = &self.resolution_px {
+            super::scene_checks::check_resolution(c, r);
         }
     }
 
