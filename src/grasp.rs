@@ -1,10 +1,12 @@
 //! The grasp selector: suction grasps from what the sensor saw, filtered and ranked.
 //!
 //! Job: from the recognised parts (noisy poses) and the point cloud's height map, propose suction
-//! points on body faces large enough for the cup whose normal is within the cup's tilt of
-//! vertical; drop those the tool would not clear (height map), whose straight approach or retreat
-//! would meet the tray walls (cell geometry), or that the arm cannot reach within its limits along
-//! the whole straight descent. The faces are the part model's planar faces that take the cup
+//! points on body faces large enough for the cup whose normal is within the tool's lean of
+//! vertical (`gripper.max_lean_deg`): straight down onto a face tilted up to the cup's tilt, along
+//! the normal of one tilted further, the part lifted straight up from both; drop those the tool
+//! would not clear along its approach (height map), whose straight approach or retreat would meet
+//! the tray walls (cell geometry), or that the arm cannot reach within its limits along the whole
+//! straight descent and lift. The faces are the part model's planar faces that take the cup
 //! (a CAD part's, or a built-in part's meshed primitives': the selector does not know which),
 //! each grasped at the centre of its cup-fit region farthest from its edges whose approach, cup
 //! and tool body, misses the part's own features above the face (pins, tabs); with a cup that
@@ -68,6 +70,9 @@ struct FacePoint {
     normal: Vector3<f64>,
     /// Height the approach pose must lift the part's bottom to, clear of the pile (m).
     clear_z: f64,
+    /// The line the tool comes down along and leaves by (world, unit, upward): vertical, or the
+    /// face's normal where the face is tilted beyond the cup's tilt (the tool leaning with it).
+    approach_dir: Vector3<f64>,
 }
 
 /// Why a candidate was dropped.
@@ -121,9 +126,13 @@ pub struct GraspCandidate {
     /// The tool at the grasp: cup lip on the face.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
     pub world_from_tool: Isometry3<f64>,
-    /// The tool above the grasp, where the straight descent starts and the retreat ends.
+    /// The tool above the grasp, where the straight descent starts.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
     pub world_from_tool_approach: Isometry3<f64>,
+    /// The tool above the grasp where the straight lift with the part ends: the approach pose,
+    /// or straight above the grasp where the tool came down along a leaning face's normal.
+    #[serde(serialize_with = "crate::sensor::ser_pose")]
+    pub world_from_tool_lifted: Isometry3<f64>,
     /// The tool when the part touches down in its slot.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
     pub world_from_tool_place: Isometry3<f64>,
@@ -132,10 +141,17 @@ pub struct GraspCandidate {
     /// from this, not from the slot's own frame.
     #[serde(serialize_with = "crate::sensor::ser_pose")]
     pub world_from_part_place: Isometry3<f64>,
+    /// The tool's lean from vertical where it comes down along the face's normal, the face
+    /// being tilted beyond what the cup seals on coming straight down (`gripper.max_lean_deg`)
+    /// (rad); `None` where it comes straight down.
+    #[serde(skip_serializing_if = "Option::is_none")]
+    pub lean_rad: Option<f64>,
     /// Joint positions at the approach pose (rad).
     pub q_approach: [f64; 6],
     /// Joint positions at the grasp (rad).
     pub q_grasp: [f64; 6],
+    /// Joint positions at the end of the lift (rad).
+    pub q_lifted: [f64; 6],
     /// Joint positions at the place pose (rad).
     pub q_place: [f64; 6],
     /// Score components and total (higher is better).
@@ -209,6 +225,9 @@ pub struct GraspSelector {
     cup_radius_m: f64,
     face_margin_m: f64,
     max_tilt_rad: f64,
+    /// Faces tilted from vertical beyond `max_tilt_rad` and up to this are approached along their
+    /// normal (`gripper.max_lean_deg`) (rad).
+    max_lean_rad: f64,
     tool_radius_m: f64,
     cup_length_m: f64,
     /// The pick tray's inner walls (and its frame, the height map's), which the approach and
@@ -475,6 +494,7 @@ impl GraspSelector {
             // must stay on the face that much farther from its edges.
             face_margin_m: w.grasp.face_margin_m + 2.0 * scene.sensor.pose_noise_m,
             max_tilt_rad: g.max_tilt_deg.to_radians(),
+            max_lean_rad: g.max_lean_rad(),
             tool_radius_m: g.body_diameter_m / 2.0,
             cup_length_m: crate::geometry::HandGeometry::new(g).cup_length_m,
             pick_walls: Walls::of(t),
@@ -681,7 +701,7 @@ impl GraspSelector {
             for (fi, face) in self.faces.iter().enumerate() {
                 let n = det.world_from_part.rotation * face.normal;
                 let tilt = n.z.clamp(-1.0, 1.0).acos();
-                if tilt > self.max_tilt_rad {
+                if tilt > self.max_lean_rad {
                     // Faces pointing sideways or down are not candidates at all; only count the
                     // ones that face up, within 60 deg, but too steeply for the cup.
                     if tilt < std::f64::consts::FRAC_PI_3 {
@@ -719,9 +739,14 @@ impl GraspSelector {
                     local.z = top;
                 }
                 let face_h = local.z;
+                // A face tilted beyond what a cup coming straight down seals on is approached
+                // along its normal, the tool leaning with it.
+                let approach_dir = if tilt > self.max_tilt_rad { n } else { Vector3::z() };
                 // Clearance from the cloud: nothing higher than the face (plus noise) under the
-                // cup, nothing higher than the cup's top under the tool body.
-                if self.crowded(&occupied, &(tray_from_world * det.world_from_part), fi, &local) {
+                // cup, nothing higher than the cup's top under the tool body, along the approach.
+                let tray_from_part = tray_from_world * det.world_from_part;
+                let axis_tray = tray_from_world.rotation * approach_dir;
+                if self.crowded(&occupied, &tray_from_part, fi, &local, &axis_tray) {
                     plan.rejected.push((di, fi, Rejection::Crowded));
                     continue;
                 }
@@ -751,6 +776,7 @@ impl GraspSelector {
                     point: point.coords,
                     normal: n,
                     clear_z,
+                    approach_dir,
                 };
                 match self.best_yaw(det, fi, &at, world_from_slot, q_now) {
                     Ok(mut c) => {
@@ -796,14 +822,34 @@ impl GraspSelector {
     }
 
     /// Whether the map `hm` (tray frame, unseen cells filled) shows something in the tool's way
-    /// at the cup site `site` (tray frame; its height is the face's): higher than the face plus
-    /// the height tolerance within the cup's radius plus 1 mm, or than the cup's top within the
-    /// tool body's radius plus 2 mm. What the recognised part's own features beside face `fi`
-    /// (at `tray_from_part`) explain is not in the way: the cup site keeps the tool clear of them
+    /// at the cup site `site` (tray frame; its height is the face's), the tool coming down along
+    /// `axis` (tray frame, unit, upward): higher than the face plus the height tolerance within
+    /// the cup's radius plus 1 mm, or than the cup's top within the tool body's radius plus
+    /// 2 mm, both along the axis. What the recognised part's own features beside face `fi` (at
+    /// `tray_from_part`) explain is not in the way: the cup site keeps the tool clear of them
     /// (pins, legs, a tab), and a fine enough map shows them beside the face.
-    fn crowded(&self, hm: &HeightMap, tray_from_part: &Isometry3<f64>, fi: usize, site: &Point3<f64>) -> bool {
+    fn crowded(
+        &self,
+        hm: &HeightMap,
+        tray_from_part: &Isometry3<f64>,
+        fi: usize,
+        site: &Point3<f64>,
+        axis: &Vector3<f64>,
+    ) -> bool {
         let face_h = site.z;
+        let leaning = axis.z < 1.0 - 1e-12;
+        // How far from the site the tool's column reaches over the pile (m): straight down, its
+        // body's radius; leaning, as far as it leans over the rim's height.
+        let lean_reach_m = if leaning {
+            let up_m = (self.pick_walls.rim_height_m + self.approach_above_rim_m - face_h).max(0.0);
+            up_m * (1.0 - axis.z * axis.z).sqrt() / axis.z
+        } else {
+            0.0
+        };
         let in_way = |explained: &dyn Fn(usize, f64) -> bool| {
+            if leaning {
+                return self.in_leaning_way(hm, site, axis, lean_reach_m, explained);
+            }
             let cup_clear = hm.max_within_unexplained(site.x, site.y, self.cup_radius_m + 0.001, explained);
             let body_clear = hm.max_within_unexplained(site.x, site.y, self.tool_radius_m + 0.002, explained);
             cup_clear > face_h + self.height_tolerance_m
@@ -811,9 +857,58 @@ impl GraspSelector {
         };
         // The part's own surface is rendered only where the map alone says crowded.
         in_way(&|_, _| false) && {
-            let own = self.own_heights(hm, tray_from_part, fi, site);
+            let own = self.own_heights(hm, tray_from_part, fi, site, lean_reach_m);
             in_way(&|k, h| own.get(&k).is_some_and(|o| h <= o + OWN_EXPLAINS_M))
         }
+    }
+
+    /// Whether a cell of `hm` (tray frame) not `explained` has its column (from the tray floor
+    /// up to its height, at its centre) inside the tool leaning along `axis` (tray frame, unit,
+    /// upward) from the cup site `site`: within the cup's radius plus 1 mm of the axis and more
+    /// than the height tolerance above the site along it, or within the body's radius plus 2 mm
+    /// and above the cup's top less the tolerance (the straight-down test's margins, a cell's
+    /// reach included, turned with the tool). Cells up to `lean_reach_m` beyond the body's
+    /// radius from the site are looked at.
+    fn in_leaning_way(
+        &self,
+        hm: &HeightMap,
+        site: &Point3<f64>,
+        axis: &Vector3<f64>,
+        lean_reach_m: f64,
+        explained: &dyn Fn(usize, f64) -> bool,
+    ) -> bool {
+        let cell_reach_m = hm.cell_m * 0.71;
+        let zones = [
+            (self.height_tolerance_m, self.cup_radius_m + 0.001 + cell_reach_m),
+            (
+                self.cup_length_m - self.height_tolerance_m,
+                self.tool_radius_m + 0.002 + cell_reach_m,
+            ),
+        ];
+        // Along the column, the offset from the axis is r0 + z w (z the height above the floor).
+        let w = Vector3::z() - axis * axis.z;
+        let ww = w.norm_squared();
+        let reach_m = self.tool_radius_m + 0.002 + cell_reach_m + lean_reach_m;
+        hm.cells_at_within(site.x, site.y, reach_m)
+            .filter(|&(k, _, h)| !h.is_nan() && !explained(k, h))
+            .any(|(_, [cx, cy], h)| {
+                let d0 = Vector3::new(cx - site.x, cy - site.y, -site.z);
+                let a0 = d0.dot(axis);
+                let r0 = d0 - axis * a0;
+                zones.iter().any(|&(a_min_m, radius_m)| {
+                    // The column's part above a_min_m along the axis: z from z_lo to h.
+                    let z_lo = ((a_min_m - a0) / axis.z).max(0.0);
+                    if z_lo > h {
+                        return false;
+                    }
+                    let z = if ww > 1e-12 {
+                        (-r0.dot(&w) / ww).clamp(z_lo, h)
+                    } else {
+                        z_lo
+                    };
+                    (r0 + w * z).norm_squared() < radius_m * radius_m
+                })
+            })
     }
 
     /// The highest point of the part's own features beside face `fi` (standing out of its
@@ -826,8 +921,9 @@ impl GraspSelector {
         tray_from_part: &Isometry3<f64>,
         fi: usize,
         site: &Point3<f64>,
+        lean_reach_m: f64,
     ) -> std::collections::HashMap<usize, f64> {
-        let reach_m = self.tool_radius_m + 0.002 + 2.0 * hm.cell_m;
+        let reach_m = self.tool_radius_m + 0.002 + 2.0 * hm.cell_m + lean_reach_m;
         let mut own = std::collections::HashMap::new();
         for p in &self.own_features_m[fi] {
             let q = tray_from_part * p;
@@ -934,10 +1030,11 @@ impl GraspSelector {
                 + self.pick_walls.rim_height_m
                 + self.approach_above_rim_m)
                 .max(clear_z);
-            // Straight down onto the face and straight up with the part, whatever the face's tilt:
-            // a part lying against a wall slides up along it, not into it.
-            let rise = (top_z - point.z).max(0.02);
-            let approach = Isometry3::from_parts(Translation3::from(point + Vector3::z() * rise), rot);
+            // Straight down onto the face and straight up with the part, whatever the face's tilt
+            // up to the cup's (a part lying against a wall slides up along it, not into it);
+            // along the normal of a face tilted further.
+            let rise = ((top_z - point.z) / at.approach_dir.z).max(0.02);
+            let approach = Isometry3::from_parts(Translation3::from(point + at.approach_dir * rise), rot);
             let Ok(qa) = self.robot.ik_tool_nearest(&approach, q_now).map(|sol| sol.q) else {
                 return Err(Rejection::Unreachable);
             };
@@ -958,6 +1055,29 @@ impl GraspSelector {
                 continue;
             }
             let qg = q;
+            // The lift with the part: straight up, also from a face approached along its normal.
+            let (lifted, q_lifted) = if at.approach_dir.z < 1.0 {
+                let rise = (top_z - point.z).max(0.02);
+                let lifted = Isometry3::from_parts(Translation3::from(point + Vector3::z() * rise), rot);
+                let mut q = qg;
+                let mut ok = true;
+                for s in 1..=6 {
+                    let pose = grasp.lerp_slerp(&lifted, s as f64 / 6.0);
+                    match self.robot.ik_tool_nearest(&pose, &q) {
+                        Ok(sol) if (sol.q - q).amax() < 0.3 => q = sol.q,
+                        _ => {
+                            ok = false;
+                            break;
+                        }
+                    }
+                }
+                if !ok {
+                    continue;
+                }
+                (lifted, q)
+            } else {
+                (approach, qa)
+            };
             // Where the tool is when the part sits in its slot.
             let part_from_tool = det.world_from_part.inverse() * grasp;
             let part_in_slot = Isometry3::from_parts(Translation3::from(part_center_in_slot), slot_rot);
@@ -1003,10 +1123,13 @@ impl GraspSelector {
                         face: 0,
                         world_from_tool: grasp,
                         world_from_tool_approach: approach,
+                        world_from_tool_lifted: lifted,
                         world_from_tool_place: tool_place,
                         world_from_part_place: part_place,
+                        lean_rad: (at.approach_dir.z < 1.0).then(|| at.approach_dir.z.clamp(-1.0, 1.0).acos()),
                         q_approach: qa.into(),
                         q_grasp: qg.into(),
+                        q_lifted: q_lifted.into(),
                         q_place: qp.into(),
                         score: Score {
                             exposure: 0.0,
@@ -1217,11 +1340,11 @@ mod tests {
         // Control: the map alone reads the legs as something in the cup's way.
         let away = Isometry3::translation(1.0, 0.0, 0.0) * tray_from_part;
         assert!(
-            sel.crowded(&map, &away, fi, &site),
+            sel.crowded(&map, &away, fi, &site, &Vector3::z()),
             "the legs do not reach the cup's ring"
         );
         assert!(
-            !sel.crowded(&map, &tray_from_part, fi, &site),
+            !sel.crowded(&map, &tray_from_part, fi, &site, &Vector3::z()),
             "the part's own legs crowd it"
         );
         // Negative control: something resting on the legs, 3 mm above them.
@@ -1232,7 +1355,7 @@ mod tests {
             }
         }
         assert!(
-            sel.crowded(&on_legs, &tray_from_part, fi, &site),
+            sel.crowded(&on_legs, &tray_from_part, fi, &site, &Vector3::z()),
             "what rests on the legs is not seen"
         );
     }
@@ -1361,6 +1484,129 @@ mod tests {
             crate::pipeline::why_none(&plan).to_string(),
             "no feasible grasp (no face up 1)"
         );
+    }
+
+    /// A strip leaning 35 deg about its long axis, its top face's grasp point at the tray's
+    /// centre, on an otherwise empty map of 1 mm cells: the selector built for a cell whose tool
+    /// leans up to `max_lean_deg` (`None`: straight down only), the detection, the map, the
+    /// face's outward normal and its grasp point (tray frame).
+    fn leaning_strip(max_lean_deg: Option<f64>) -> (GraspSelector, Detection, HeightMap, Vector3<f64>, Point3<f64>) {
+        let mut scene = crate::config::LoadedScene::embedded_default().unwrap().scene;
+        scene.gripper.max_lean_deg = max_lean_deg;
+        let robot = crate::robot::test_support::default_robot();
+        let c = LoadedWorkpiece::resolve("C").unwrap();
+        let sel = GraspSelector::for_workpiece(&scene, &robot, &c);
+        let top = sel.faces().iter().position(|f| f.normal == Vector3::z()).unwrap();
+        let rot = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), 35f64.to_radians());
+        let site_part = Point3::from(sel.sites[top].0);
+        // The part placed so that its grasp point lies over the tray's centre, 12 mm up.
+        let site_tray = Point3::new(0.0, 0.0, 0.012);
+        let tray_from_part = Isometry3::from_parts(Translation3::from(site_tray.coords - rot * site_part.coords), rot);
+        let normal = rot * Vector3::z();
+        let mut map = HeightMap {
+            world_from_tray: sel.pick_walls.world_from_tray,
+            cell_m: 0.001,
+            nx: 200,
+            ny: 200,
+            origin_xy_m: [-0.1, -0.1],
+            height_m: vec![0.0; 200 * 200],
+            mean_m: None,
+        };
+        let half = c.workpiece.size_m.map(|v| v / 2.0);
+        let inverse = tray_from_part.inverse();
+        for j in 0..map.ny {
+            for i in 0..map.nx {
+                let (x, y) = (
+                    map.origin_xy_m[0] + (i as f64 + 0.5) * map.cell_m,
+                    map.origin_xy_m[1] + (j as f64 + 0.5) * map.cell_m,
+                );
+                // The top face's plane over (x, y).
+                let z = site_tray.z - (normal.x * (x - site_tray.x) + normal.y * (y - site_tray.y)) / normal.z;
+                let p = inverse * Point3::new(x, y, z);
+                if p.x.abs() <= half[0] && p.y.abs() <= half[1] {
+                    map.height_m[j * map.nx + i] = z;
+                }
+            }
+        }
+        let det = Detection {
+            world_from_part: sel.pick_walls.world_from_tray * tray_from_part,
+            visible_fraction: 1.0,
+            score: 1.0,
+            face_up: None,
+        };
+        (sel, det, map, normal, site_tray)
+    }
+
+    /// A face tilted 35 deg, beyond the cup's 20: not taken by a tool that comes straight down
+    /// (the control); taken by one that may lean 40 deg, coming down along the face's normal and
+    /// lifting the part straight up.
+    #[test]
+    fn a_leaning_tool_takes_a_face_tilted_beyond_the_cup_along_its_normal() {
+        let scene = crate::config::LoadedScene::embedded_default().unwrap();
+        let c = LoadedWorkpiece::resolve("C").unwrap().workpiece;
+        let slot = scene.scene.world_from_slots(&c)[0];
+        let q_now = JointVector::from(scene.scene.robot.home_rad());
+        let (straight, det, map, ..) = leaning_strip(None);
+        let plan = straight.select(std::slice::from_ref(&det), &map, &slot, &q_now);
+        assert!(plan.ranked.is_empty(), "{:?}", plan.ranked.first().map(|g| g.lean_rad));
+        assert!(
+            plan.rejected.iter().any(|(_, _, r)| *r == Rejection::FaceTilted),
+            "{:?}",
+            plan.rejected
+        );
+        let (leaning, det, map, normal, _) = leaning_strip(Some(40.0));
+        let world_normal = leaning.pick_walls.world_from_tray.rotation * normal;
+        let plan = leaning.select(std::slice::from_ref(&det), &map, &slot, &q_now);
+        let g = plan.best().unwrap_or_else(|| panic!("no grasp: {:?}", plan.rejected));
+        assert!(
+            (g.lean_rad.unwrap().to_degrees() - 35.0).abs() < 0.5,
+            "{:?}",
+            g.lean_rad
+        );
+        let down = g.world_from_tool_approach.translation.vector - g.world_from_tool.translation.vector;
+        assert!(down.normalize().dot(&world_normal) > 1.0 - 1e-9, "approach {down:?}");
+        let up = g.world_from_tool_lifted.translation.vector - g.world_from_tool.translation.vector;
+        assert!(up.normalize().z > 1.0 - 1e-9, "lift {up:?}");
+        // The cup's axis along the face's normal, into it.
+        assert!((g.world_from_tool.rotation * Vector3::z()).dot(&-world_normal) > 1.0 - 1e-9);
+    }
+
+    /// A 6 mm block 22 mm from the grasp point, beyond the straight-down test's reach (the body's
+    /// 15 mm radius plus 2 mm), on the side the tool leans to crowds the leaning tool; on the
+    /// side it leans away from it does not (the negative control).
+    #[test]
+    fn what_stands_where_the_tool_leans_crowds_it_and_behind_it_does_not() {
+        let (sel, _, map, normal, site) = leaning_strip(Some(40.0));
+        let toward = Vector3::new(normal.x, normal.y, 0.0).normalize();
+        // The map with a 30 mm high block of 3 mm radius 22 mm from the site, on the side the
+        // tool leans to (1) or away from it (-1).
+        let with_block = |base: &HeightMap, side: f64| {
+            let mut m = base.clone();
+            let at = site.coords + toward * side * 0.022;
+            let cells: Vec<usize> = base.cells_at_within(at.x, at.y, 0.003).map(|(k, ..)| k).collect();
+            for k in cells {
+                m.height_m[k] = 0.030;
+            }
+            m
+        };
+        // (The strip has no features above its top face: where it lies does not matter here.)
+        let own = Isometry3::identity();
+        let clear = |m: &HeightMap, axis: &Vector3<f64>| !sel.crowded(m, &own, 0, &site, axis);
+        assert!(clear(&map, &normal), "the bare leaning strip crowds the tool");
+        assert!(
+            !clear(&with_block(&map, 1.0), &normal),
+            "a block where the tool leans does not crowd it"
+        );
+        assert!(
+            clear(&with_block(&map, -1.0), &normal),
+            "a block behind the leaning tool crowds it"
+        );
+        // Straight down over a bare floor, neither block crowds the tool: both lie beyond the
+        // body's reach.
+        let mut floor = map.clone();
+        floor.height_m.fill(0.0);
+        assert!(clear(&with_block(&floor, 1.0), &Vector3::z()));
+        assert!(clear(&with_block(&floor, -1.0), &Vector3::z()));
     }
 
     #[test]

@@ -223,9 +223,15 @@ pub fn sense_and_grasp(
         if !model.free(&q_approach, &mut PlanStats::default()) {
             continue;
         }
+        // A tool leaning down a face's normal brings its wrist down beside the column the
+        // selector cleared: the hand at the grasp must be clear of the cell and the pile too.
+        if g.lean_rad.is_some() && !model.free(&JointVector::from(g.q_grasp), &mut PlanStats::default()) {
+            continue;
+        }
         let tool_from_part = g.world_from_tool.inverse() * detections[g.detection].world_from_part;
         let held = RobotSpheres::new(ctx.robot, ctx.scene, Some((tool_from_part, ctx.part_half_extents_m)));
-        if CollisionModel::new(ctx.robot, held, env.clone()).free(&q_approach, &mut PlanStats::default()) {
+        let q_lifted = JointVector::from(g.q_lifted);
+        if CollisionModel::new(ctx.robot, held, env.clone()).free(&q_lifted, &mut PlanStats::default()) {
             chosen = Some(ChosenGrasp {
                 rank,
                 grasp: g.clone(),

@@ -66,13 +66,14 @@ impl PileShare {
 }
 
 /// Builds `piles` piles (seeds 1..=piles) and counts the settled parts in the tray that offer a
-/// graspable face: a face that takes the cup looks up within the cup's tilt, and a vertical ray
+/// graspable face: a face that takes the cup looks up within `lean` (the cup's tilt, or the
+/// tool's lean, `gripper.max_lean_deg`, where the cell sets one), and a vertical ray
 /// from above at its cup-fit centre and at eight points of the cup's rim about it meets this part
 /// first, within 1 mm of the face (nothing lies on the cup's disc). Each pile is also captured
 /// once and recognised from the cloud, as the cell does, and the detections judged against the
 /// parts' poses (`binpick sense`'s evaluation). Read from the simulated world: a prediction for
 /// the user, not a decision of the cell.
-fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: u64, tilt: f64) -> Result<PileShare> {
+fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: u64, lean: f64) -> Result<PileShare> {
     use binpick::physics::{PartShape, Tag, World, pile::PileOptions};
     use nalgebra::{Point3, Vector3};
     let mut out = PileShare::default();
@@ -115,7 +116,7 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
             out.in_tray += 1;
             let pose = world.part_pose(i);
             let offered = discs.iter().any(|(n, pts)| {
-                (pose.rotation * n).z >= tilt.cos()
+                (pose.rotation * n).z >= lean.cos()
                     && pts.iter().all(|p| {
                         let w = pose * p;
                         let origin = w.coords + Vector3::z() * 0.2;
@@ -249,6 +250,8 @@ pub fn part(a: &PartArgs) -> Result<()> {
     let report = &wp.mesh.as_ref().map(|m| m.1.clone()).unwrap_or_default();
     let w = &wp.workpiece;
     let tilt = scene.scene.gripper.max_tilt_deg.to_radians();
+    // How far from vertical a face the selector takes may look (the tool leaning with it).
+    let lean = scene.scene.gripper.max_lean_rad();
     let svg_path = a
         .svg
         .clone()
@@ -257,7 +260,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
     // Where the grasp selector puts the cup on each face (the one derivation it reads).
     let sites = m.cup_sites(&binpick::grasp::approach_column(&scene.scene));
     write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title, &sites))?;
-    let piles = pile_share(&scene, &wp, &m, a.piles, tilt)?;
+    let piles = pile_share(&scene, &wp, &m, a.piles, lean)?;
     if a.json {
         print_json(&wp, &m, &sites, report, &scene.scene, &svg_path, &piles)
     } else {
@@ -284,7 +287,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
                 binpick::grasp::SIDE_PLACE_OFF_MAX_RAD.to_degrees()
             ));
         }
-        print_poses(&m, tilt);
+        print_poses(&m, lean);
         if piles.piles > 0 {
             say(&format!(
                 "simulated piles: {} of {} settled parts ({:.1} %) offer a cup face up with nothing on the cup's disc ({} piles of {}, seeds 1-{})",
@@ -375,6 +378,7 @@ fn print_json(
 ) -> Result<()> {
     let w = &wp.workpiece;
     let tilt = scene.gripper.max_tilt_deg.to_radians();
+    let lean = scene.gripper.max_lean_rad();
     let side = round_side(m, scene);
     let out = json!({
         "workpiece": wp.label,
@@ -394,7 +398,7 @@ fn print_json(
         "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(f, site)).collect::<Vec<_>>(),
         "poses": m.poses.iter().map(pose_json).collect::<Vec<_>>(),
         "upright_faces": upright_faces(m, tilt),
-        "graspable_share": round(m.graspable_share(tilt), 6),
+        "graspable_share": round(m.graspable_share(lean), 6),
         "round_side": side.map(|r| json!({
             "cup_round_min_radius_mm": mm(r.min_radius_m),
             "body_radius_mm": mm(r.radius_m),
@@ -560,12 +564,12 @@ fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
     }
 }
 
-/// The text table of the stable resting poses and the share with a cup face up.
-fn print_poses(m: &PartModel, tilt: f64) {
+/// The text table of the stable resting poses and the share with a cup face up within `lean`.
+fn print_poses(m: &PartModel, lean: f64) {
     println!("\nstable resting poses (the part lies on the hull face whose outward normal points down):");
     println!("  down normal               likelihood  CoM height mm  margin mm  a cup face looks up");
     for p in &m.poses {
-        let up = m.grasp_faces().any(|f| -f.face.normal.dot(&p.normal) >= tilt.cos());
+        let up = m.grasp_faces().any(|f| -f.face.normal.dot(&p.normal) >= lean.cos());
         println!(
             "  [{:6.3} {:6.3} {:6.3}]  {:9.1} %  {:13.2}  {:9.2}  {}",
             p.normal.x,
@@ -578,9 +582,9 @@ fn print_poses(m: &PartModel, tilt: f64) {
         );
     }
     println!(
-        "\nshare of resting poses with a cup face up (within the cup's {:.0} deg tilt): {:.1} %",
-        tilt.to_degrees(),
-        100.0 * m.graspable_share(tilt)
+        "\nshare of resting poses with a cup face up (within {:.0} deg of vertical, as the grasp selector takes them): {:.1} %",
+        lean.to_degrees(),
+        100.0 * m.graspable_share(lean)
     );
 }
 

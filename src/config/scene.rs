@@ -157,6 +157,12 @@ pub struct GripperConfig {
     pub cup_flatness_tolerance_m: f64,
     /// Largest tilt of the approach from the face normal at which the cup still seals (deg).
     pub max_tilt_deg: f64,
+    /// The largest lean of the tool from vertical at which the grasp selector takes a face (deg),
+    /// 0 to 60: a face tilted up to `max_tilt_deg` is approached straight down, one tilted
+    /// further (up to this) along its normal, the tool leaning with it, and lifted straight up.
+    /// Left out, or below `max_tilt_deg`: every face is approached straight down.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_lean_deg: Option<f64>,
     /// The smallest radius of a convex round surface (a can's side) the cup's lip seals on, as a
     /// bellows cup's datasheet gives it (m); left out, the cup seals on flat faces only. Must
     /// exceed the cup's radius. The grasp selector then also offers a part's round body's side,
@@ -182,6 +188,14 @@ pub struct GripperConfig {
     /// rigidly, kinder than a real cup (docs/model.md).
     #[serde(default = "seal_loaded_by_parts")]
     pub seal_loaded_by_parts: bool,
+}
+
+impl GripperConfig {
+    /// The largest tilt from vertical of a face the grasp selector takes (rad): the larger of
+    /// `max_lean_deg` and `max_tilt_deg`.
+    pub fn max_lean_rad(&self) -> f64 {
+        self.max_lean_deg.unwrap_or(0.0).max(self.max_tilt_deg).to_radians()
+    }
 }
 
 /// The default of `gripper.seal_loaded_by_parts`.

@@ -87,6 +87,9 @@ impl Scene {
         c.positive("gripper.cup_diameter_m", g.cup_diameter_m);
         c.non_negative("gripper.cup_flatness_tolerance_m", g.cup_flatness_tolerance_m);
         c.within("gripper.max_tilt_deg", g.max_tilt_deg, 0.0, 90.0);
+        if let Some(lean) = g.max_lean_deg {
+            c.within("gripper.max_lean_deg", lean, 0.0, super::tool::MAX_LEAN_DEG);
+        }
         if let Some(r) = g.round_min_radius_m {
             c.positive("gripper.round_min_radius_m", r);
             if r.is_finite() && r <= g.cup_diameter_m / 2.0 {

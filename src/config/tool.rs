@@ -41,6 +41,10 @@ pub struct CupConfig {
     /// Largest tilt of the approach from the face normal at which the cup still seals (deg).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub max_tilt_deg: Option<f64>,
+    /// The largest lean of the tool from vertical at which a face is taken, approached along its
+    /// normal beyond `max_tilt_deg` (deg); left out, the cell's.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub max_lean_deg: Option<f64>,
     /// The smallest radius of a round surface this cup seals on (m) (a bellows cup's datasheet
     /// figure); left out, the cell's (which may be none: a cup for flat faces only).
     #[serde(default, skip_serializing_if = "Option::is_none")]
@@ -65,6 +69,9 @@ impl CupConfig {
         if let Some(v) = self.max_tilt_deg {
             c.within("gripper.max_tilt_deg", v, 0.0, 90.0);
         }
+        if let Some(v) = self.max_lean_deg {
+            c.within("gripper.max_lean_deg", v, 0.0, MAX_LEAN_DEG);
+        }
         if let Some(v) = self.round_min_radius_m {
             c.positive("gripper.round_min_radius_m", v);
         }
@@ -84,12 +91,17 @@ impl CupConfig {
             cup_diameter_m: Some(r.cup_diameter_m),
             cup_flatness_tolerance_m: Some(r.cup_flatness_tolerance_m),
             max_tilt_deg: Some(r.max_tilt_deg),
+            max_lean_deg: r.max_lean_deg,
             round_min_radius_m: r.round_min_radius_m,
             vacuum_build_up_s: Some(r.vacuum_build_up_s),
             release_s: Some(r.release_s),
         }
     }
 }
+
+/// The largest `gripper.max_lean_deg` (deg): the grasp selector counts a face tilted up to 60 deg
+/// as facing up, and a tool leaning further would sweep its body through the pile beside it.
+pub const MAX_LEAN_DEG: f64 = 60.0;
 
 /// The sensor's scan mode a workpiece runs with (`[sensor]` in a workpiece file): the cell's
 /// sensor at another of its resolutions, over the same field of view, as a structured-light
@@ -177,6 +189,7 @@ impl GripperConfig {
             cup_diameter_m: cup.cup_diameter_m.unwrap_or(self.cup_diameter_m),
             cup_flatness_tolerance_m: cup.cup_flatness_tolerance_m.unwrap_or(self.cup_flatness_tolerance_m),
             max_tilt_deg: cup.max_tilt_deg.unwrap_or(self.max_tilt_deg),
+            max_lean_deg: cup.max_lean_deg.or(self.max_lean_deg),
             round_min_radius_m: cup.round_min_radius_m.or(self.round_min_radius_m),
             vacuum_build_up_s: cup.vacuum_build_up_s.unwrap_or(self.vacuum_build_up_s),
             release_s: cup.release_s.unwrap_or(self.release_s),

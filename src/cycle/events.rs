@@ -192,6 +192,8 @@ pub enum Event {
         face: usize,
         /// Score.
         score: f64,
+        /// The tool's lean from vertical, where it comes down along the face's normal (rad).
+        lean_rad: Option<f64>,
     },
     /// A motion was generated.
     Planned(Planned),
@@ -371,8 +373,17 @@ impl fmt::Display for Event {
                 f,
                 "{detected} parts detected, {blurred} blurred by motion during the exposure"
             ),
-            Event::GraspChosen { detection, face, score } => {
-                write!(f, "detection {detection} face {face} score {score:.3}")
+            Event::GraspChosen {
+                detection,
+                face,
+                score,
+                lean_rad,
+            } => {
+                write!(f, "detection {detection} face {face} score {score:.3}")?;
+                match lean_rad {
+                    Some(lean) => write!(f, ", along its normal, leaning {:.0} deg", lean.to_degrees()),
+                    None => Ok(()),
+                }
             }
             Event::Planned(Planned::Pick {
                 transfer_s,

@@ -246,8 +246,10 @@ pub struct PickSpot {
     pub t_s: f64,
     /// The picked part as recognised: `world_from_part` (m).
     pub world_from_part: Isometry3<f64>,
-    /// The tool's origin at its approach pose and at its grasp pose [m, world].
-    pub tool_path_m: [Vector3<f64>; 2],
+    /// The tool's straight lines in and out, each from its top to the grasp: the tool's origin at
+    /// its approach pose and at its grasp pose, and at the end of its lift and at its grasp
+    /// pose (the same line where the tool came straight down) [m, world].
+    pub tool_lines_m: [[Vector3<f64>; 2]; 2],
 }
 
 /// The mutable state of the cell.

@@ -351,14 +351,14 @@ impl Cell<'_> {
             .map(|motion| RetreatBlend { motion, descent_from_s })
     }
 
-    /// The Place motion of `grasp` after the `lift` (from the approach pose `q_approach` when
-    /// there is none): the transfer to above the slot in the `holding` scene, slowed where the
+    /// The Place motion of `grasp` after the `lift` (from the lifted pose `q_lifted` when there
+    /// is none): the transfer to above the slot in the `holding` scene, slowed where the
     /// cup's holding force would not hold, the straight descent to the release pose, the
     /// straight retreat, their overlaps and the release lead; or why not.
     fn place_motion(
         &self,
         grasp: &GraspCandidate,
-        q_approach: JointVector,
+        q_lifted: JointVector,
         lift: Option<&LineMotion>,
         holding: &Holding<'_>,
         rng: &mut ChaCha8Rng,
@@ -374,7 +374,7 @@ impl Cell<'_> {
             .ik_tool_nearest(&above_place, &JointVector::from(grasp.q_place))
             .map_err(MotionFailure::PlacePose)?
             .q;
-        let q_lifted = lift.map_or(q_approach, LineMotion::end_q);
+        let q_lifted = lift.map_or(q_lifted, LineMotion::end_q);
         let path = holding
             .model
             .plan(&q_lifted, &q_above, &PlanOptions::default(), rng)
@@ -476,7 +476,6 @@ impl Run<'_, '_> {
         // Pick: transfer to the approach pose, straight descent.
         let wall = Instant::now();
         let mut rng = crate::rng::stream(cell.opts.seed.wrapping_add(self.st.world.steps()), "planner");
-        let q_approach = JointVector::from(grasp.q_approach);
         let hand = cell.hand;
         let (pick_transfer, descent, pick_blend) = cell.pick_motion(&q_now, &grasp, &empty, &mut rng);
         // The transfer starts while the last retreat ends, where the cell, the pile as seen and
@@ -508,7 +507,7 @@ impl Run<'_, '_> {
         let lift = cell.line(
             &q_grasp,
             &grasp.world_from_tool,
-            &grasp.world_from_tool_approach,
+            &grasp.world_from_tool_lifted,
             &held,
             Some(max_force),
         );
@@ -522,7 +521,13 @@ impl Run<'_, '_> {
             payload: held,
             max_force_m_s2: max_force,
         };
-        let place = cell.place_motion(&grasp, q_approach, lift.as_ref(), &holding, &mut rng);
+        let place = cell.place_motion(
+            &grasp,
+            JointVector::from(grasp.q_lifted),
+            lift.as_ref(),
+            &holding,
+            &mut rng,
+        );
         let place_s = wall.elapsed().as_secs_f64();
         let (Some(descent), Some(lift)) = (descent, lift) else {
             return Err(NoGrasp::NoStraightDescent);

@@ -66,8 +66,9 @@ const TOOL_COLUMN_UP_M: f64 = 0.3;
 
 /// Which of `detections` (boxes of half extents `half_m` at their recognised poses) keep
 /// [`BLIND_PICK_MARGIN_M`] clear of what the picks `since` may have moved: each picked part's
-/// box, the boxes of the detections touching it, and the tool's column (radius `tool_r_m` about
-/// the line from its grasp up through its approach pose and [`TOOL_COLUMN_UP_M`] beyond).
+/// box, the boxes of the detections touching it, and the tool's columns (radius `tool_r_m` about
+/// each line from its grasp up through its approach pose, and through the end of its lift, and
+/// [`TOOL_COLUMN_UP_M`] beyond).
 fn clear_of_picks(detections: &[Detection], since: &[&PickSpot], half_m: &Vector3<f64>, tool_r_m: f64) -> Vec<bool> {
     let apart = |a: &Isometry3<f64>, b: &Isometry3<f64>| {
         crate::geometry::box_box_distance_m(a, half_m, b, half_m) >= BLIND_PICK_MARGIN_M
@@ -85,10 +86,10 @@ fn clear_of_picks(detections: &[Detection], since: &[&PickSpot], half_m: &Vector
     }
     let columns: Vec<[Vector3<f64>; 2]> = since
         .iter()
-        .map(|spot| {
-            let [approach, grasp] = spot.tool_path_m;
-            let up = (approach - grasp).try_normalize(1e-9).unwrap_or_else(Vector3::z);
-            [grasp, approach + up * TOOL_COLUMN_UP_M]
+        .flat_map(|spot| spot.tool_lines_m)
+        .map(|[top, grasp]| {
+            let up = (top - grasp).try_normalize(1e-9).unwrap_or_else(Vector3::z);
+            [grasp, top + up * TOOL_COLUMN_UP_M]
         })
         .collect();
     detections
@@ -112,8 +113,8 @@ impl Run<'_, '_> {
     /// What a pick may have moved, as the cell knows it from its recognition and its own motion:
     /// the picked part's box at its recognised pose, the boxes of the parts this result
     /// recognised touching it (within [`BLIND_PICK_MARGIN_M`]: lifted off, they shift), and the
-    /// tool's column (its body's radius about the line from its grasp up through its approach
-    /// pose). A detection is taken only if its box keeps [`BLIND_PICK_MARGIN_M`] clear of all of
+    /// tool's columns (its body's radius about the lines from its grasp up through its approach
+    /// pose and through the end of its lift). A detection is taken only if its box keeps [`BLIND_PICK_MARGIN_M`] clear of all of
     /// them, for every pick made after the trigger. Whether the part is still there the seal
     /// check tells.
     pub(super) fn usable(&self) -> Option<(SensedResult, usize)> {
@@ -324,7 +325,7 @@ mod tests {
         let spot = PickSpot {
             t_s: 1.0,
             world_from_part: picked.world_from_part,
-            tool_path_m: [Vector3::new(0.0, 0.0, 0.1), Vector3::new(0.0, 0.0, 0.005)],
+            tool_lines_m: [[Vector3::new(0.0, 0.0, 0.1), Vector3::new(0.0, 0.0, 0.005)]; 2],
         };
         let detections = [
             picked.clone(),

@@ -138,6 +138,7 @@ impl Run<'_, '_> {
                 detection: prep.grasp.detection,
                 face: prep.grasp.face,
                 score: prep.grasp.score.total,
+                lean_rad: prep.grasp.lean_rad,
             },
         );
         // Stall before the Pick: waiting for the sensor, then for compute.
@@ -276,9 +277,15 @@ impl Run<'_, '_> {
             self.st.pick_spots.push(PickSpot {
                 t_s: t_descent,
                 world_from_part,
-                tool_path_m: [
-                    g.world_from_tool_approach.translation.vector,
-                    g.world_from_tool.translation.vector,
+                tool_lines_m: [
+                    [
+                        g.world_from_tool_approach.translation.vector,
+                        g.world_from_tool.translation.vector,
+                    ],
+                    [
+                        g.world_from_tool_lifted.translation.vector,
+                        g.world_from_tool.translation.vector,
+                    ],
                 ],
             });
         }

@@ -185,6 +185,11 @@ impl HeightMap {
     /// The cells whose centres lie within `radius_m` of tray point (x, y), in row-major order:
     /// each cell's index ([`HeightMap::index`]) and stored height (m) (NaN where unseen).
     fn cells_within(&self, x: f64, y: f64, radius_m: f64) -> impl Iterator<Item = (usize, f64)> + '_ {
+        self.cells_at_within(x, y, radius_m).map(|(k, _, h)| (k, h))
+    }
+
+    /// As [`HeightMap::cells_within`], with each cell's centre (tray frame, m).
+    pub fn cells_at_within(&self, x: f64, y: f64, radius_m: f64) -> impl Iterator<Item = (usize, [f64; 2], f64)> + '_ {
         let r = (radius_m / self.cell_m).ceil() as isize + 1;
         let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
         let j0 = ((y - self.origin_xy_m[1]) / self.cell_m).floor() as isize;
@@ -198,7 +203,9 @@ impl HeightMap {
             })
             .map(move |(i, j)| {
                 let k = j as usize * self.nx + i as usize;
-                (k, self.height_m[k])
+                let cx = self.origin_xy_m[0] + (i as f64 + 0.5) * self.cell_m;
+                let cy = self.origin_xy_m[1] + (j as f64 + 0.5) * self.cell_m;
+                (k, [cx, cy], self.height_m[k])
             })
     }
 

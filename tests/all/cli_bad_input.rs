@@ -73,6 +73,42 @@ fn negative_size_names_file_key_and_value() {
     assert_eq!(err.lines().count(), 1, "one line per problem: {err}");
 }
 
+/// The tool's lean beyond 60 deg, in the cell and in a workpiece's cup; the control: 60 passes.
+#[test]
+fn a_lean_beyond_sixty_degrees_names_file_key_and_value() {
+    let ws = Workspace::new();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/lean.toml",
+        "max_lean_deg = 40.0",
+        "max_lean_deg = 75.0",
+    );
+    rejects(
+        &ws,
+        "scenes/lean.toml",
+        &["scenes/lean.toml: gripper.max_lean_deg must be within [0, 60], got 75"],
+    );
+    ws.edit(
+        "workpieces/A.toml",
+        "workpieces/lean.toml",
+        "cup_diameter_m = 0.0055",
+        "cup_diameter_m = 0.0055\nmax_lean_deg = -5.0",
+    );
+    rejects(
+        &ws,
+        "workpieces/lean.toml",
+        &["workpieces/lean.toml: gripper.max_lean_deg must be within [0, 60], got -5"],
+    );
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/lean60.toml",
+        "max_lean_deg = 40.0",
+        "max_lean_deg = 60.0",
+    );
+    let out = binpick_in(ws.dir.path(), &["check", "scenes/lean60.toml"]);
+    assert_eq!(out.status.code(), Some(0), "{}", stderr(&out));
+}
+
 #[test]
 fn zero_size() {
     let ws = Workspace::new();

@@ -606,7 +606,8 @@ fn a_placed_part_is_measured_once_it_rests() {
 /// one pick per capture, no hopper, at pick 42) used to spin forever without a physics step,
 /// waiting for a capture that could never be replaced; it must now finish its picks. Since the
 /// cup aims at the cells' mean surface, grasps fail so seldom that no run of one pick per capture
-/// found the case (A-F, seeds 1-40, 10 picks); the default cell's B, seed 1, has it at pick 12
+/// found the case (A-F, seeds 1-40, 10 picks); B, seed 1, has it at pick 12 on the cell whose tool
+/// comes straight down (`gripper.max_lean_deg` left out)
 /// (its capture spoiled by link 5, then a grasp on a detection a quarter turn off). The run goes
 /// on a thread so that a hang fails the test instead of holding up the suite.
 #[test]
@@ -620,7 +621,9 @@ fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
             }
         }
     }
-    let scene = LoadedScene::embedded_default().unwrap();
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    // Found on the cell whose tool came straight down onto every face.
+    scene.scene.gripper.max_lean_deg = None;
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let robot = RobotModel::from_scene(&scene).unwrap();
@@ -726,4 +729,41 @@ fn an_upright_line_places_every_relay_pins_down() {
     assert!(upright.iter().all(|z| *z > 0.99), "z axes' heights {upright:?}");
     let any = placed_z(binpick::config::PlaceOrientation::Any);
     assert!(any.iter().any(|z| *z < 0.99), "z axes' heights {any:?}");
+}
+
+/// The tool leans down the normal of a face tilted beyond the cup's 20 deg and the part is
+/// placed: A, seed 26, whose pick 3 takes a relay lying 36 deg from flat. The plant judges the
+/// pick: its seal check refuses an axis beyond the cup's 20 deg from the face the lip touches,
+/// and a placed part lies in its slot within the place tray's tolerance. Negative
+/// control: on the cell whose tool comes straight down, no pick leans.
+#[test]
+fn a_leaning_tool_takes_a_relay_lying_tilted_and_places_it() {
+    #[derive(Default)]
+    struct Leans(Vec<(usize, f64)>);
+    impl binpick::cycle::Observer for Leans {
+        fn event(&mut self, _t_s: f64, pick: Option<usize>, event: &binpick::cycle::Event) {
+            if let (Some(p), binpick::cycle::Event::GraspChosen { lean_rad: Some(l), .. }) = (pick, event) {
+                self.0.push((p, *l));
+            }
+        }
+    }
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("A").unwrap();
+    let mut leans = Leans::default();
+    let r = binpick::cycle::run(&scene, &robot, &wp, &deterministic(4, 26), &mut leans).unwrap();
+    let &(pick, lean) = leans.0.first().expect("no pick leaned");
+    let lean_deg = lean.to_degrees();
+    assert!(lean_deg > 20.0 && lean_deg <= 40.0 + 1e-9, "lean {lean_deg}");
+    let rec = r.records.iter().find(|p| p.index == pick).unwrap();
+    assert!(
+        matches!(rec.outcome, binpick::cycle::Outcome::Placed),
+        "{:?}",
+        rec.outcome
+    );
+    let mut straight = scene.clone();
+    straight.scene.gripper.max_lean_deg = None;
+    let mut none = Leans::default();
+    binpick::cycle::run(&straight, &robot, &wp, &deterministic(4, 26), &mut none).unwrap();
+    assert!(none.0.is_empty(), "{:?}", none.0);
 }
