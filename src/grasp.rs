@@ -979,6 +979,26 @@ impl GraspSelector {
         true
     }
 
+    /// The joints at `to` at the end of the straight tool line from `from` (joints `q_from`),
+    /// if the line has a continuous joint path: IK in 6 steps along it, no joint moving more
+    /// than 0.3 rad in a step.
+    fn straight_joint_path(
+        &self,
+        from: &Isometry3<f64>,
+        to: &Isometry3<f64>,
+        q_from: JointVector,
+    ) -> Option<JointVector> {
+        let mut q = q_from;
+        for s in 1..=6 {
+            let pose = from.lerp_slerp(to, s as f64 / 6.0);
+            match self.robot.ik_tool_nearest(&pose, &q) {
+                Ok(sol) if (sol.q - q).amax() < 0.3 => q = sol.q,
+                _ => return None,
+            }
+        }
+        Some(q)
+    }
+
     /// For the four tool yaws about the face normal, the reachable one with the quickest place
     /// motion (ties: the first). The descent is checked for a continuous joint path, and the tool
     /// at the place pose for the place tray's walls (a tool tilted over a slot by the wall, as a
@@ -1038,42 +1058,17 @@ impl GraspSelector {
             let Ok(qa) = self.robot.ik_tool_nearest(&approach, q_now).map(|sol| sol.q) else {
                 return Err(Rejection::Unreachable);
             };
-            // The straight descent: a continuous joint path in 6 steps.
-            let mut q = qa;
-            let mut ok = true;
-            for s in 1..=6 {
-                let pose = approach.lerp_slerp(&grasp, s as f64 / 6.0);
-                match self.robot.ik_tool_nearest(&pose, &q) {
-                    Ok(sol) if (sol.q - q).amax() < 0.3 => q = sol.q,
-                    _ => {
-                        ok = false;
-                        break;
-                    }
-                }
-            }
-            if !ok {
+            // The straight descent.
+            let Some(qg) = self.straight_joint_path(&approach, &grasp, qa) else {
                 continue;
-            }
-            let qg = q;
+            };
             // The lift with the part: straight up, also from a face approached along its normal.
             let (lifted, q_lifted) = if at.approach_dir.z < 1.0 {
                 let rise = (top_z - point.z).max(0.02);
                 let lifted = Isometry3::from_parts(Translation3::from(point + Vector3::z() * rise), rot);
-                let mut q = qg;
-                let mut ok = true;
-                for s in 1..=6 {
-                    let pose = grasp.lerp_slerp(&lifted, s as f64 / 6.0);
-                    match self.robot.ik_tool_nearest(&pose, &q) {
-                        Ok(sol) if (sol.q - q).amax() < 0.3 => q = sol.q,
-                        _ => {
-                            ok = false;
-                            break;
-                        }
-                    }
-                }
-                if !ok {
+                let Some(q) = self.straight_joint_path(&grasp, &lifted, qg) else {
                     continue;
-                }
+                };
                 (lifted, q)
             } else {
                 (approach, qa)
@@ -1379,7 +1374,16 @@ mod tests {
             score: 1.0,
             face_up: None,
         };
-        let mut map = HeightMap {
+        let mut map = empty_map(&sel);
+        raise(&mut map, &tray_from_part, c.size_m[2], |x, y| {
+            x.abs() <= c.size_m[0] / 2.0 && y.abs() <= c.size_m[1] / 2.0
+        });
+        (sel, face, det, map, tray_from_part, c.size_m)
+    }
+
+    /// A bare tray floor seen everywhere, 200 x 200 cells of 1 mm about the pick tray's centre.
+    fn empty_map(sel: &GraspSelector) -> HeightMap {
+        HeightMap {
             world_from_tray: sel.pick_walls.world_from_tray,
             cell_m: 0.001,
             nx: 200,
@@ -1387,11 +1391,7 @@ mod tests {
             origin_xy_m: [-0.1, -0.1],
             height_m: vec![0.0; 200 * 200],
             mean_m: None,
-        };
-        raise(&mut map, &tray_from_part, c.size_m[2], |x, y| {
-            x.abs() <= c.size_m[0] / 2.0 && y.abs() <= c.size_m[1] / 2.0
-        });
-        (sel, face, det, map, tray_from_part, c.size_m)
+        }
     }
 
     /// Sets the map to `height_m` wherever `inside` holds for the cell centre in the part frame.
@@ -1503,15 +1503,7 @@ mod tests {
         let site_tray = Point3::new(0.0, 0.0, 0.012);
         let tray_from_part = Isometry3::from_parts(Translation3::from(site_tray.coords - rot * site_part.coords), rot);
         let normal = rot * Vector3::z();
-        let mut map = HeightMap {
-            world_from_tray: sel.pick_walls.world_from_tray,
-            cell_m: 0.001,
-            nx: 200,
-            ny: 200,
-            origin_xy_m: [-0.1, -0.1],
-            height_m: vec![0.0; 200 * 200],
-            mean_m: None,
-        };
+        let mut map = empty_map(&sel);
         let half = c.workpiece.size_m.map(|v| v / 2.0);
         let inverse = tray_from_part.inverse();
         for j in 0..map.ny {
