@@ -180,10 +180,14 @@ impl Trajectory {
         let t = t.clamp(0.0, self.duration_s);
         let n = self.seg_time.len();
         let via_t = &self.via_t;
+        // The blends' edges are matched within a few ulps of the time: `duration_s` and
+        // `via_t` are sums taken in different orders, and at the end (t = duration_s) the last
+        // blend must hold, however long the trajectory.
+        let rounding = 1e-15 + 8.0 * f64::EPSILON * t;
         // Inside a blend around via j?
         for (j, &tv) in via_t.iter().enumerate() {
             let tb = self.blend[j];
-            if (t - tv).abs() <= tb / 2.0 + 1e-15 && tb > 0.0 {
+            if (t - tv).abs() <= tb / 2.0 + rounding && tb > 0.0 {
                 let (before, after) = self.velocities_around(j);
                 let dv = after - before;
                 let tau = t - (tv - tb / 2.0);
@@ -386,6 +390,34 @@ mod tests {
         // The slower joint is synchronised: it moves in proportion.
         let mid = t.sample(0.6);
         assert!((mid.q[1] - mid.q[0] / 2.0).abs() < 1e-12);
+    }
+
+    /// A carry slowed to the accelerator's floor (time scale 0.05: a few seconds to tens) ends,
+    /// sampled at its duration, at its last via point at rest. Its end blend's half-width is
+    /// matched within rounding of the time itself: an absolute 1e-15 s, below one ulp of a time
+    /// of several seconds, dropped the end onto the last segment's straight extension, a jump
+    /// of v tb / 2 (0.32 rad at J1 in the A run that tripped a protective stop 9.09 s into
+    /// its Place). Every scale of the same path, from full speed down, is checked.
+    #[test]
+    fn a_slowed_trajectory_ends_at_its_last_via_point_at_rest() {
+        let via = [
+            JointVector::new(0.3, -0.2, 0.1, 0.0, 0.5, 0.0),
+            JointVector::new(-0.1, 0.3, 0.4, 0.2, 0.1, 0.7),
+            JointVector::new(-0.5271, 0.2, 0.9, -0.3, 0.4, 1.3),
+            JointVector::new(-0.848, 0.1, 1.0, -0.2, 0.6, 1.1),
+        ];
+        let mut worst = 0.0f64;
+        for i in 0..=200 {
+            let k = 0.05 + 0.95 * i as f64 / 200.0;
+            let scaled = MotionLimits {
+                vel_rad_s: limits().vel_rad_s * k * 0.37,
+                accel_rad_s2: limits().accel_rad_s2 * (k * k) * 0.61,
+            };
+            let t = Trajectory::through(&via, &scaled);
+            let end = t.sample(t.duration_s);
+            worst = worst.max((end.q - via[3]).amax()).max(end.qd.amax());
+        }
+        assert!(worst < 1e-9, "an end off its last via point by {worst} rad");
     }
 
     #[test]

@@ -256,3 +256,29 @@ fn a_part_torn_off_the_cup_in_a_blended_lift_leaves_the_arm_on_its_planned_place
     assert!(r.tally.faults.drops >= 2, "{:?}", r.tally.faults);
     assert_eq!(r.tally.faults.collisions, 0, "{:?}", r.tally.incidents);
 }
+
+/// A carry slowed to the accelerator's floor ends where it was planned to: A with a 4.5 mm cup,
+/// seed 11, takes relays on their side, 5 mm from their centre of mass, which the cup barely
+/// holds, so its Place transfers crawl (time scale 0.05, about 9 s). The servo's hold target at
+/// such a transfer's end jumped 0.32 rad (the end fell off the last blend by rounding) and
+/// pick 12 tripped a protective stop, J1 18 deg behind; seen failing so before the fix.
+#[test]
+fn a_crawling_carry_ends_without_a_protective_stop() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let mut wp = LoadedWorkpiece::resolve("A").unwrap();
+    wp.workpiece.gripper.as_mut().unwrap().cup_diameter_m = Some(0.0045);
+    let options = RunOptions {
+        keep_records: true,
+        ..opts(13, 11)
+    };
+    let r = cycle::run(&scene, &robot, &wp, &options, &mut ()).unwrap();
+    let crawling = r
+        .records
+        .iter()
+        .filter(|p| p.suction_speed_factor <= 0.05 + 1e-9)
+        .count();
+    assert!(crawling >= 2, "the case needs carries at the accelerator's floor");
+    assert_eq!(r.tally.faults.protective_stops, 0, "{:?}", r.tally.incidents);
+    assert_eq!(r.tally.ended, Some(EndReason::PicksDone));
+}
