@@ -188,7 +188,9 @@ impl HeightMap {
         self.cells_at_within(x, y, radius_m).map(|(k, _, h)| (k, h))
     }
 
-    /// As [`HeightMap::cells_within`], with each cell's centre (tray frame, m).
+    /// The cells whose centres lie within `radius_m` of tray point (x, y), in row-major order:
+    /// each cell's index ([`HeightMap::index`]), its centre (tray frame, m) and its stored
+    /// height (m) (NaN where unseen).
     pub fn cells_at_within(&self, x: f64, y: f64, radius_m: f64) -> impl Iterator<Item = (usize, [f64; 2], f64)> + '_ {
         let r = (radius_m / self.cell_m).ceil() as isize + 1;
         let i0 = ((x - self.origin_xy_m[0]) / self.cell_m).floor() as isize;
