@@ -846,15 +846,8 @@ impl GraspSelector {
         } else {
             0.0
         };
-        let in_way = |explained: &dyn Fn(usize, f64) -> bool| {
-            if leaning {
-                return self.in_leaning_way(hm, site, axis, lean_reach_m, explained);
-            }
-            let cup_clear = hm.max_within_unexplained(site.x, site.y, self.cup_radius_m + 0.001, explained);
-            let body_clear = hm.max_within_unexplained(site.x, site.y, self.tool_radius_m + 0.002, explained);
-            cup_clear > face_h + self.height_tolerance_m
-                || body_clear > face_h + self.cup_length_m - self.height_tolerance_m
-        };
+        let in_way =
+            |explained: &dyn Fn(usize, f64) -> bool| self.in_tools_way(hm, site, axis, lean_reach_m, explained);
         // The part's own surface is rendered only where the map alone says crowded.
         in_way(&|_, _| false) && {
             let own = self.own_heights(hm, tray_from_part, fi, site, lean_reach_m);
@@ -863,13 +856,14 @@ impl GraspSelector {
     }
 
     /// Whether a cell of `hm` (tray frame) not `explained` has its column (from the tray floor
-    /// up to its height, at its centre) inside the tool leaning along `axis` (tray frame, unit,
-    /// upward) from the cup site `site`: within the cup's radius plus 1 mm of the axis and more
-    /// than the height tolerance above the site along it, or within the body's radius plus 2 mm
-    /// and above the cup's top less the tolerance (the straight-down test's margins, a cell's
-    /// reach included, turned with the tool). Cells up to `lean_reach_m` beyond the body's
-    /// radius from the site are looked at.
-    fn in_leaning_way(
+    /// up to its height, at its centre) inside the tool coming down along `axis` (tray frame,
+    /// unit, upward) onto the cup site `site`: within the cup's radius plus 1 mm of the axis and
+    /// more than the height tolerance above the site along it, or within the body's radius plus
+    /// 2 mm and above the cup's top less the tolerance, a cell's reach included. Straight down
+    /// (`axis` vertical) that is a cell higher than the face plus the tolerance within the cup's
+    /// reach, or than the cup's top within the body's; leaning, the same cylinders turned with
+    /// the tool. Cells up to `lean_reach_m` beyond the body's radius from the site are looked at.
+    fn in_tools_way(
         &self,
         hm: &HeightMap,
         site: &Point3<f64>,
@@ -914,7 +908,7 @@ impl GraspSelector {
     /// The highest point of the part's own features beside face `fi` (standing out of its
     /// plane: pins, legs, a tab; not the face itself, whose tilt the tilt limit judges), at the
     /// recognised pose `tray_from_part`, in each cell of `hm` within the tool's reach of the site
-    /// `site` (tray frame) (m, by cell index).
+    /// `site` (tray frame), `lean_reach_m` farther where the tool leans (m, by cell index).
     fn own_heights(
         &self,
         hm: &HeightMap,
