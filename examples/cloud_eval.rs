@@ -1,19 +1,22 @@
 //! Evaluates recognition from the point cloud (`binpick::sensor::cloud`) on the default pile of
-//! each workpiece: per workpiece A-F over seeds 1-8, a settled pile, one capture, recognition from
-//! the capture alone, then against the ground truth (evaluation only): recall of the top layer,
-//! precision (a detection is right within 2 mm and 5 deg of a part, with the part's symmetries),
-//! pose errors of the right ones (median and p95), compute time per capture (median and max).
+//! each workpiece: per workpiece (A-F, or workpiece files) over seeds 1-8, a settled pile, one
+//! capture, recognition from the capture alone with the model the cell's sensor builds (a mesh
+//! part's from its part model), then against the ground truth (evaluation only): recall of the
+//! top layer, precision (a detection is right within 2 mm and 5 deg of a part, with the part's
+//! symmetries), pose errors of the right ones (median and p95), compute time per capture (median
+//! and max). `CLOUD_EVAL_VERBOSE=1` lists the wrong detections (`CLOUD_EVAL_POSES=1`: with the
+//! poses), `CLOUD_EVAL_MISSED=1` the top-layer parts missed.
 //!
-//! Run: `cargo run --release --example cloud_eval [-- A C --seeds 4 --yaw-deg 12]` (`--yaw-deg`: the
-//! yaw ambiguity accepted, as `sensor.max_yaw_ambiguity_deg`; default the library's 8 degrees).
+//! Run: `cargo run --release --example cloud_eval [-- A workpieces/dip8.toml --seeds 4 --yaw-deg 12]`
+//! (`--yaw-deg`: the yaw ambiguity accepted, as `sensor.max_yaw_ambiguity_deg`; default the
+//! embedded cell's).
 
 use std::time::Instant;
 
 use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::physics::{PartShape, World, pile::PileOptions};
 use binpick::robot::RobotModel;
-use binpick::sensor::cloud::{CloudModel, Symmetry, recognize};
-use binpick::sensor::{Camera, capture, top_layer};
+use binpick::sensor::{Camera, Sensor, capture, top_layer};
 
 /// A detection is right within these of a part.
 const RIGHT_M: f64 = 0.002;
@@ -48,17 +51,15 @@ fn main() -> anyhow::Result<()> {
     let scene = LoadedScene::embedded_default()?;
     let robot = RobotModel::from_scene(&scene)?;
     let camera = Camera::from_config(&scene.scene.sensor).ok_or_else(|| anyhow::anyhow!("degenerate camera"))?;
-    let tray = binpick::geometry::TrayVolume::new(&scene.scene.pick_tray);
     println!(
         "wp  top  found  recall%  det  right  prec%   pos_med/p95_mm   rot_med/p95_deg   ms_med/max  (seeds 1..={seeds})"
     );
     for name in &names {
         let wp = LoadedWorkpiece::resolve(name)?;
-        let mut model = CloudModel::new(&wp.workpiece);
+        let mut sensor_cfg = scene.scene.sensor.clone();
         if let Some(y) = yaw_deg {
-            model.yaw_span_max_rad = y.to_radians();
+            sensor_cfg.max_yaw_ambiguity_deg = y;
         }
-        let sym = Symmetry::of(&wp.workpiece);
         let (mut top_n, mut top_found, mut det_n, mut right_n) = (0, 0, 0, 0);
         let (mut pos, mut rot, mut ms) = (Vec::new(), Vec::new(), Vec::new());
         let (mut wrong_rot, mut wrong_pos, mut wrong_rot_deg) = (0, 0, Vec::new());
@@ -66,9 +67,12 @@ fn main() -> anyhow::Result<()> {
             let shape = PartShape::build(&wp.workpiece, &wp.source)?;
             let mut world = World::new(&scene.scene, &robot, shape);
             world.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed))?;
+            // The model as the cell's sensor builds it (a mesh workpiece's from its part model).
+            let sensor = Sensor::new(&sensor_cfg, &world, seed, &wp.workpiece)
+                .ok_or_else(|| anyhow::anyhow!("degenerate camera"))?;
             let cap = capture(&world, &camera, seed, 0);
             let t0 = Instant::now();
-            let found = recognize(&cap, &camera, &tray, &model);
+            let found = sensor.recognize_cloud(&cap);
             ms.push(t0.elapsed().as_secs_f64() * 1e3);
             // Ground truth, for evaluation only.
             let parts = world.parts_in_pick_tray();
@@ -77,7 +81,7 @@ fn main() -> anyhow::Result<()> {
             for d in &found {
                 let best = parts
                     .iter()
-                    .map(|&i| (i, sym.pose_error(&world.part_pose(i), &d.world_from_part)))
+                    .map(|&i| (i, sensor.symmetry.pose_error(&world.part_pose(i), &d.world_from_part)))
                     .min_by(|a, b| (a.1.0 + a.1.1 * 0.01).total_cmp(&(b.1.0 + b.1.1 * 0.01)));
                 det_n += 1;
                 if let Some((i, (dp, dr))) = best
@@ -97,7 +101,7 @@ fn main() -> anyhow::Result<()> {
                     }
                     if std::env::var_os("CLOUD_EVAL_VERBOSE").is_some() {
                         eprintln!(
-                            "{name} seed {seed}: wrong face {} score {:.2} vis {:.2}: {:.2} mm {:.1} deg",
+                            "{name} seed {seed}: wrong face {:?} score {:.2} vis {:.2}: {:.2} mm {:.1} deg",
                             d.face_up,
                             d.score,
                             d.visible_fraction,
