@@ -180,6 +180,16 @@ impl TrayVolume {
         }
     }
 
+    /// The tray's volume grown by `m` beyond its outer walls and above its rim: where a part
+    /// lying across the rim can reach.
+    pub fn grown_by(&self, m: f64) -> TrayVolume {
+        TrayVolume {
+            half_xy_m: [self.half_xy_m[0] + m, self.half_xy_m[1] + m],
+            wall_height_m: self.wall_height_m + m,
+            ..*self
+        }
+    }
+
     /// Whether a world point is in the tray's column (footprint incl. walls, floor - 2 mm to 1 m).
     pub fn contains(&self, p: &Vector3<f64>) -> bool {
         let l = self.world_from_tray.inverse_transform_point(&(*p).into());

@@ -2,10 +2,13 @@
 //! and the planning scene around it. One function, used by the cell cycle, by `binpick sense`
 //! and by the benchmarks, so they all decide the same way.
 //!
-//! Job: bin the capture's point cloud into a height map over the pick tray; rank suction grasps
+//! Job: bin the capture's point cloud into a height map over the pick tray and as far around it
+//! as a part lying across the rim can reach, with the arm masked out there as the controller knew
+//! it at the trigger (the self-filter); rank suction grasps
 //! on the recognised parts ([`crate::grasp::GraspSelector`]); keep the pile inside the tray's
-//! inner walls as the planner's obstacle columns (max-pooled, conservative; unseen cells occupied
-//! up to the highest seen cell around them, never free), with a disc around
+//! inner walls, and what stands over the rim and beyond the walls, as the planner's obstacle
+//! columns (max-pooled, conservative; unseen cells inside occupied up to the highest seen cell
+//! around them, never free), with a disc around
 //! the grasp point cut out (the part to be picked); take the best-ranked grasp that is not at a
 //! spot where a grasp just failed and whose approach pose is clear in that planning scene, both
 //! with the hand alone (where the Pick ends) and with the part on the cup as recognised (where
@@ -24,12 +27,18 @@ use crate::grasp::{GraspCandidate, GraspPlan, GraspSelector};
 use crate::physics::TrayVolume;
 use crate::planning::{CollisionModel, Environment, PileColumns, PlanStats, RobotSpheres};
 use crate::robot::{JointVector, RobotModel};
-use crate::sensor::{Capture, Detection, HeightMap};
+use crate::sensor::capture::beyond_walls_m;
+use crate::sensor::heightmap::BeyondWalls;
+use crate::sensor::{ArmAtTrigger, Capture, Detection, HeightMap};
 
 /// Height-map cell edge (m).
 pub const HEIGHT_MAP_CELL_M: f64 = 0.002;
 /// Height-map cells per planning column side (the columns keep the highest point of 5 x 5).
 pub const PILE_POOL_CELLS: usize = 5;
+/// A point beyond the pick tray's rim within this of the arm's spheres (links, hand, held part)
+/// at the trigger is the arm's, not a part's (m): the spheres cover the links' shapes and the held
+/// part's recognised pose is good to a millimetre; the rest is depth noise and margin.
+pub const SELF_FILTER_MARGIN_M: f64 = 0.01;
 /// Radius of the disc around the grasp point whose columns the planner ignores (m).
 pub const CUT_OUT_RADIUS_M: f64 = 0.02;
 /// A grasp within this distance of a spot where one failed in the same pile is not tried (m).
@@ -78,9 +87,22 @@ pub struct SensedPile {
 }
 
 impl SensedPile {
-    /// The height map of `capture` over `ctx`'s pick tray, and the planner's pile from it.
-    pub fn new(ctx: &GraspContext<'_>, capture: &Capture) -> Self {
-        let height_map = HeightMap::from_capture(capture, ctx.pick_tray, HEIGHT_MAP_CELL_M);
+    /// The height map of `capture` over `ctx`'s pick tray and as far around it as a part across
+    /// the rim reaches ([`beyond_walls_m`]), the arm at the trigger (`arm`) masked out there,
+    /// and the planner's pile from it.
+    pub fn new(ctx: &GraspContext<'_>, capture: &Capture, arm: &ArmAtTrigger) -> Self {
+        let held = arm
+            .tool_from_held_part
+            .map(|tool_from_part| (tool_from_part, ctx.part_half_extents_m));
+        let spheres = RobotSpheres::new(ctx.robot, ctx.scene, held);
+        let at_trigger = spheres.at(ctx.robot, &arm.q);
+        let is_arm = |p: &Point3<f64>| at_trigger.cover(p, SELF_FILTER_MARGIN_M);
+        let beyond = BeyondWalls {
+            reach_m: beyond_walls_m(&(2.0 * ctx.part_half_extents_m).into()),
+            above_m: ctx.pick_tray.wall_height_m + OVER_RIM_M,
+            is_arm: &is_arm,
+        };
+        let height_map = HeightMap::from_capture(capture, ctx.pick_tray, HEIGHT_MAP_CELL_M, Some(&beyond));
         let pile = pile_map(ctx.scene, &height_map);
         SensedPile {
             capture_id: capture.id,
@@ -242,4 +264,29 @@ pub fn sense_and_grasp(
         }
     }
     GraspChoice { plan, chosen }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::sensor::capture::BEYOND_WALLS_STEP_M;
+
+    /// The map grown beyond the walls pools every cell over the tray into the same planning
+    /// column as the map to the walls: the growth is a whole number of pooled columns. Control:
+    /// a growth of one cell fewer is not.
+    #[test]
+    fn the_growth_beyond_the_walls_is_whole_planning_columns() {
+        let column_m = HEIGHT_MAP_CELL_M * PILE_POOL_CELLS as f64;
+        let whole = |m: f64| ((m / column_m) - (m / column_m).round()).abs() < 1e-9;
+        for size_m in [[0.03, 0.03, 0.02], [0.150, 0.010, 0.005], [0.0065, 0.0065, 0.003]] {
+            let m = beyond_walls_m(&size_m);
+            assert!(whole(m), "{m} m beyond the walls for {size_m:?}");
+            assert!(
+                m >= 0.5 * Vector3::from(size_m).norm(),
+                "{m} m short of the half diagonal"
+            );
+        }
+        assert!(whole(BEYOND_WALLS_STEP_M));
+        assert!(!whole(BEYOND_WALLS_STEP_M - HEIGHT_MAP_CELL_M), "control");
+    }
 }

@@ -153,6 +153,11 @@ pub fn binpicking_queries(
             let sensor = Sensor::new(&scene.scene.sensor, &w, seed, &wp.workpiece).ok_or("degenerate sensor")?;
             let c = crate::sensor::capture(&w, &sensor.camera, seed, 0);
             let det = sensor.recognize_oracle(&crate::sensor::TruthAtTrigger::take(&w, &sensor, &c));
+            // The arm where the pile was captured, its cup empty (the self-filter's input).
+            let at_rest = crate::sensor::ArmAtTrigger {
+                q: w.joints(),
+                tool_from_held_part: None,
+            };
             let slots = scene.scene.world_from_slots(&wp.workpiece);
             let selector = crate::grasp::GraspSelector::for_workpiece(&scene.scene, robot, wp);
             let ctx = GraspContext {
@@ -163,7 +168,7 @@ pub fn binpicking_queries(
                 part_half_extents_m: shape.half_extents_m,
             };
             // The cycle's own grasp ranking and planning scenes; the poses of its motions.
-            let sensed = SensedPile::new(&ctx, &c);
+            let sensed = SensedPile::new(&ctx, &c, &at_rest);
             let choice = sense_and_grasp(&ctx, &sensed, &det, &slots[0], &w.joints(), &[]);
             let pile = &sensed.pile;
             let empty = RobotSpheres::new(robot, &scene.scene, None);

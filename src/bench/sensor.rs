@@ -115,6 +115,11 @@ pub fn sense_bench(
         let selector = crate::grasp::GraspSelector::for_workpiece(&scene.scene, robot, wp);
         let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
         let q = w.joints();
+        // The arm where the pile was captured, its cup empty (the self-filter's input).
+        let at_home = crate::sensor::ArmAtTrigger {
+            q,
+            tool_from_held_part: None,
+        };
         let mut feasible = 0;
         let ctx = crate::pipeline::GraspContext {
             scene: &scene.scene,
@@ -125,7 +130,7 @@ pub fn sense_bench(
         };
         // The cycle's own sense-and-grasp: height map, candidates, IK, ranking, clear approach.
         let grasp = time_ms(&mut || {
-            let sensed = crate::pipeline::SensedPile::new(&ctx, &c);
+            let sensed = crate::pipeline::SensedPile::new(&ctx, &c, &at_home);
             feasible = crate::pipeline::sense_and_grasp(&ctx, &sensed, &detections, &slot, &q, &[])
                 .plan
                 .ranked

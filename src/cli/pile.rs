@@ -161,7 +161,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         pick_tray: world.pick_tray(),
         part_half_extents_m: cell.shape.half_extents_m,
     };
-    let pile = SensedPile::new(&ctx, &job.capture);
+    let pile = SensedPile::new(&ctx, &job.capture, &job.arm);
     let choice = sense_and_grasp(&ctx, &pile, &detections, &cell.slots[0], &world.joints(), &[]);
     let grasp_ms = t1.elapsed().as_secs_f64() * 1e3;
     let chosen = choice.chosen.as_ref().map(|c| &c.grasp);

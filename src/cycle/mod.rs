@@ -264,6 +264,9 @@ pub struct CellState {
     pub arm: ArmState,
     /// Grasp points where a pick failed at the part, in this pile [m, world].
     pub failed_spots: Vec<Vector3<f64>>,
+    /// Where the part being lifted or placed sits on the tool, as its grasp recognised it
+    /// (`tool_from_part`): with a part on the cup, a capture's self-filter masks it there.
+    pub held_tool_from_part: Option<Isometry3<f64>>,
     /// The maps of the capture the last grasp was chosen on.
     pub sensed: Option<crate::pipeline::SensedPile>,
     /// Gripper events seen while a motion played (a seal decided before the descent settled).
@@ -308,6 +311,14 @@ pub struct CellState {
     settling: Vec<next_pick::Settling>,
     /// Their placement errors, measured, not yet written into the tally and the records.
     measured: Vec<PlacementError>,
+}
+
+impl CellState {
+    /// The part on the cup as the controller knows it: its grasp's `tool_from_part` while the
+    /// vacuum holds a part, `None` with the cup empty.
+    pub fn held_part_estimate(&self) -> Option<Isometry3<f64>> {
+        self.world.held_part().and(self.held_tool_from_part)
+    }
 }
 
 /// A recognition result in hand.
@@ -433,6 +444,7 @@ impl<'a> Cell<'a> {
             sensor,
             pending: None,
             failed_spots: Vec::new(),
+            held_tool_from_part: None,
             sensed: None,
             gripper_events: Vec::new(),
             trays: trays::TrayState::default(),

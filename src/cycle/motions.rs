@@ -180,6 +180,9 @@ pub(super) struct Prepared {
     pub place: Result<PlaceMotion, MotionFailure>,
     /// Hand and part as the controller believes them (the nominal part at the cup centre).
     pub held: Payload,
+    /// Where the part will sit on the tool, as recognised (`tool_from_part`): the planner's held
+    /// part, and what the sensor's self-filter masks with the part on the cup.
+    pub tool_from_part: nalgebra::Isometry3<f64>,
 }
 
 impl Prepared {
@@ -457,7 +460,7 @@ impl Run<'_, '_> {
         // The capture's maps, binned once for every pick chosen on it.
         let sensed = match self.st.sensed.take() {
             Some(s) if s.is_of(&job.capture, ctx.pick_tray) => s,
-            _ => SensedPile::new(&ctx, &job.capture),
+            _ => SensedPile::new(&ctx, &job.capture, &job.arm),
         };
         let choice = sense_and_grasp(&ctx, &sensed, detections, &slot, &q_now, &self.st.failed_spots);
         self.st.sensed = Some(sensed);
@@ -542,6 +545,7 @@ impl Run<'_, '_> {
                 lift,
                 place,
                 held,
+                tool_from_part,
             },
             StageCompute {
                 grasp_s,

@@ -357,6 +357,7 @@ impl Run<'_, '_> {
         place_ready: f64,
     ) -> Result<(Outcome, Option<Prefetched>), CycleError> {
         let (hand, held) = (self.cell.hand, prep.held);
+        self.st.held_tool_from_part = Some(prep.tool_from_part);
         // The lift and the Place transfer overlapped, if they could be and the Place is ready
         // when the transfer would start: the Pick ends where the transfer starts.
         let now = self.st.world.time_s();

@@ -105,7 +105,8 @@ impl Run<'_, '_> {
         {
             return;
         }
-        if let Ok(job) = self.st.sensor.trigger(&self.st.world) {
+        if let Ok(mut job) = self.st.sensor.trigger(&self.st.world) {
+            job.arm.tool_from_held_part = self.st.held_part_estimate();
             self.event(Event::Capture(job.capture.id));
             self.obs.captured(&job.capture);
             self.st.pending = Some(job);
@@ -203,9 +204,10 @@ impl Run<'_, '_> {
         if unseen < st.sensor.motion_hole_min_px() {
             return;
         }
-        let Ok(confirm) = st.sensor.trigger(&st.world) else {
+        let Ok(mut confirm) = st.sensor.trigger(&st.world) else {
             return;
         };
+        confirm.arm.tool_from_held_part = st.held_part_estimate();
         self.event(Event::ConfirmingCapture(confirm.capture.id));
         self.obs.confirming_captured(&confirm.capture);
         if let Some(job) = self.st.pending.as_mut() {

@@ -188,6 +188,42 @@ impl RobotSpheres {
             chain_lever_m,
         }
     }
+
+    /// The spheres with the robot at `q`: for point queries ([`SpheresAt::cover`]).
+    pub fn at(&self, robot: &RobotModel, q: &JointVector) -> SpheresAt<'_> {
+        let base_from_links = robot.base_from_links(q);
+        SpheresAt {
+            spheres: self,
+            link_from_world: (0..self.links.len())
+                .map(|li| (robot.world_from_base * base_from_links[li].to_isometry()).inverse())
+                .collect(),
+        }
+    }
+}
+
+/// [`RobotSpheres`] with the robot at one configuration.
+pub struct SpheresAt<'a> {
+    spheres: &'a RobotSpheres,
+    /// `link_from_world` per link.
+    link_from_world: Vec<Isometry3<f64>>,
+}
+
+impl SpheresAt<'_> {
+    /// Whether the world point `p` lies within `margin_m` of a sphere (a link, the hand or the
+    /// held part): a point on the robot as the controller models it. Each link's bounding sphere
+    /// is tried first.
+    pub fn cover(&self, p: &Point3<f64>, margin_m: f64) -> bool {
+        let s = self.spheres;
+        s.links
+            .iter()
+            .zip(&s.bounds)
+            .zip(&self.link_from_world)
+            .any(|((spheres, bound), link_from_world)| {
+                let local = (link_from_world * p).coords;
+                let near = |sp: &Sphere| (local - sp.center_m).norm() <= sp.radius_m + margin_m;
+                near(bound) && spheres.iter().any(near)
+            })
+    }
 }
 
 /// Signed distance from a point to a box (negative inside) (m): the plain formula, the reference

@@ -29,7 +29,7 @@ use crate::cycle::{CycleEvent, Event, EventLog, Observer, Recognised, Takt};
 use crate::geometry::{NamedBox, TrayVolume};
 use crate::physics::{PartState, World};
 use crate::robot::{JointVector, RobotModel};
-use crate::sensor::capture::TRAY_WINDOW_MARGIN_PX;
+use crate::sensor::capture::capture_window;
 use crate::sensor::{Camera, Capture, PixelWindow, RecognitionReport, TruthAtTrigger};
 use crate::servo::Tick;
 use crate::trajectory::Motion;
@@ -291,10 +291,10 @@ pub struct Recorder<'a> {
 impl<'a> Recorder<'a> {
     /// A recorder for a run of `robot` seen by `camera` over `pick_tray`, of parts with bounding
     /// box `part_size_m`, that keeps the whole run in memory ([`Recorder::finish`]). It records
-    /// the pick tray's window of each capture ([`TRAY_WINDOW_MARGIN_PX`] around the tray), as the
+    /// the pick tray's window of each capture ([`capture_window`]), as the
     /// camera [`Camera::cropped`] to it.
     pub fn new(robot: &'a RobotModel, camera: &Camera, pick_tray: &TrayVolume, part_size_m: [f64; 3]) -> Self {
-        let window = camera.window_over(pick_tray, TRAY_WINDOW_MARGIN_PX);
+        let window = capture_window(camera, pick_tray, &part_size_m);
         Recorder {
             robot,
             window,

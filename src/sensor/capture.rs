@@ -52,10 +52,10 @@ pub struct Capture {
     /// recognition model's visibility counts and for evaluation only (see
     /// [`super::recognition`]).
     pub(super) truth: Vec<Option<Tag>>,
-    /// The sensor's region of interest: the pixels that see the pick tray (its outer walls,
-    /// floor to rim) and [`TRAY_WINDOW_MARGIN_PX`] around them. Only these are measured; every
-    /// other pixel has no return. No other pixel's ray meets the tray, so nothing the cell
-    /// decides from looks outside it.
+    /// The sensor's region of interest ([`capture_window`]): the pixels that see the pick tray
+    /// (its outer walls, floor to rim) and what can lie across its rim around and above it, and
+    /// [`TRAY_WINDOW_MARGIN_PX`] around them. Only these are measured; every other pixel has no
+    /// return. No other pixel's ray meets the tray or a part across its rim.
     pub tray_window: PixelWindow,
 }
 
@@ -63,6 +63,27 @@ pub struct Capture {
 /// the tray floor with the default sensor, a wall's thickness, so a part resting on the rim is
 /// in the image.
 pub const TRAY_WINDOW_MARGIN_PX: usize = 10;
+
+/// How far beyond the pick tray's outer walls, and above its rim, a part lying across the rim can
+/// reach (m), for parts of bounding box `part_size_m` (the workpiece's `size_m`): its half
+/// diagonal (a part hanging out by more than half its length has its centre of mass outside and
+/// falls off), rounded up to a whole [`BEYOND_WALLS_STEP_M`]. A capture measures that far around
+/// the tray ([`capture_window`]), and the height map reaches it.
+pub fn beyond_walls_m(part_size_m: &[f64; 3]) -> f64 {
+    let half_diagonal_m = 0.5 * Vector3::from(*part_size_m).norm();
+    (half_diagonal_m / BEYOND_WALLS_STEP_M - 1e-9).ceil().max(1.0) * BEYOND_WALLS_STEP_M
+}
+
+/// The step [`beyond_walls_m`] rounds to (m): a whole number of the planner's pooled pile cells,
+/// so a map grown by it pools every cell over the tray as before (checked in `pipeline`).
+pub const BEYOND_WALLS_STEP_M: f64 = 0.01;
+
+/// The window of `camera`'s image a capture over `tray` measures: the tray and what can lie
+/// across its rim, [`beyond_walls_m`] of parts of bounding box `part_size_m` around its
+/// outer walls and above its rim, with [`TRAY_WINDOW_MARGIN_PX`] around that.
+pub fn capture_window(camera: &Camera, tray: &crate::geometry::TrayVolume, part_size_m: &[f64; 3]) -> PixelWindow {
+    camera.window_over(&tray.grown_by(beyond_walls_m(part_size_m)), TRAY_WINDOW_MARGIN_PX)
+}
 
 impl Capture {
     /// A capture of an image `width_px` x `height_px` with no return in any pixel, measuring the
@@ -213,9 +234,9 @@ pub struct Background {
 
 impl Background {
     /// Rasterizes the fixed colliders of `world` into the pixels of `camera`'s image over the
-    /// pick tray (its tray window).
+    /// pick tray (its tray window, [`capture_window`]).
     pub fn new(world: &World, camera: &Camera) -> Self {
-        let mut zbuffer = ZBuffer::empty(camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX));
+        let mut zbuffer = ZBuffer::empty(capture_window(camera, world.pick_tray(), &world.part_shape().size_m));
         let mut facets = Vec::new();
         rasterize(
             camera,
@@ -234,7 +255,7 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
     let origin = camera.world_from_camera.translation.vector;
     let rotation = camera.world_from_camera.rotation.to_rotation_matrix().into_inner();
     let stream = crate::rng::stream(seed, "sensor");
-    let window = camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX);
+    let window = capture_window(camera, world.pick_tray(), &world.part_shape().size_m);
     // A background rasterized over another window (another tray) does not hold these pixels.
     let fresh;
     let bg = match background {

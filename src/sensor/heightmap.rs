@@ -13,6 +13,18 @@ use super::Capture;
 /// points of a 2 mm cell at 0.85 mm pixels), well below a part's step (1 mm and more).
 pub const SAME_SURFACE_M: f64 = 0.0006;
 
+/// What a height map holds beyond the pick tray's outer walls ([`HeightMap::from_capture`]).
+pub struct BeyondWalls<'a> {
+    /// How far beyond the outer walls the map reaches (m): rounded to whole cells.
+    pub reach_m: f64,
+    /// Only points higher than this above the tray floor count outside the view frustum over the
+    /// tray (m): what stands over the rim.
+    pub above_m: f64,
+    /// Whether a world point is on the arm, its hand or the part it holds, as the controller knows
+    /// them at the trigger (the self-filter).
+    pub is_arm: &'a dyn Fn(&Point3<f64>) -> bool,
+}
+
 /// A height map of the pick tray built from a capture's point cloud: the highest point per cell,
 /// and the mean of its points.
 #[derive(Debug, Clone)]
@@ -38,18 +50,34 @@ pub struct HeightMap {
 impl HeightMap {
     /// Bins the capture's points over the tray (walls included) into `cell_m` cells. Only points
     /// inside the view frustum over the tray count (their ray meets the floor plane within the
-    /// tray): a point above the tray's footprint but outside the frustum (the arm passing by
-    /// high up near the rim) is seen through the air beside the tray, not over it.
-    pub fn from_capture(c: &Capture, t: &crate::geometry::TrayVolume, cell_m: f64) -> Self {
+    /// tray): a point above the tray's footprint but outside the frustum is seen through the air
+    /// beside the tray, not over it, and may be the arm's (the cell keeps the arm out of the
+    /// frustum only). With `beyond`, the map reaches [`BeyondWalls::reach_m`] farther around
+    /// the tray, and a point outside the frustum over the tray but inside the one over that wider
+    /// footprint counts too, if it stands higher than [`BeyondWalls::above_m`] and is not the
+    /// arm's ([`BeyondWalls::is_arm`]): a part lying across the rim, its end beyond the wall.
+    /// Every point the map without `beyond` holds lands in the same cell with it.
+    pub fn from_capture(
+        c: &Capture,
+        t: &crate::geometry::TrayVolume,
+        cell_m: f64,
+        beyond: Option<&BeyondWalls<'_>>,
+    ) -> Self {
         let [hx, hy] = t.half_xy_m;
-        let nx = ((2.0 * hx) / cell_m).ceil() as usize;
-        let ny = ((2.0 * hy) / cell_m).ceil() as usize;
+        let (nx0, ny0) = (
+            ((2.0 * hx) / cell_m).ceil() as usize,
+            ((2.0 * hy) / cell_m).ceil() as usize,
+        );
+        // Whole cells beyond the walls each side.
+        let k = beyond.map_or(0, |b| (b.reach_m / cell_m).round() as usize);
+        let reach_m = k as f64 * cell_m;
+        let (nx, ny) = (nx0 + 2 * k, ny0 + 2 * k);
         let mut hm = HeightMap {
             world_from_tray: t.world_from_tray,
             cell_m,
             nx,
             ny,
-            origin_xy_m: [-hx, -hy],
+            origin_xy_m: [-hx - reach_m, -hy - reach_m],
             height_m: vec![f64::NAN; nx * ny],
             mean_m: None,
         };
@@ -58,20 +86,42 @@ impl HeightMap {
         let mut count = vec![0u32; nx * ny];
         let tray_from_world = t.world_from_tray.inverse();
         let apex = tray_from_world * Point3::from(c.camera_position_m);
-        // The capture holds its tray window's points only: no other pixel sees the tray.
+        // The cell of tray point (x, y), counted from the tray's outer corner as the map without
+        // `beyond` counts it (`over_tray`: within that map), then shifted by the cells beyond.
+        let cell_of = |x: f64, y: f64, over_tray: bool| {
+            let i = ((x + hx) / cell_m).floor() + k as f64;
+            let j = ((y + hy) / cell_m).floor() + k as f64;
+            let (lo, hi_x, hi_y) = if over_tray {
+                (k as f64, (k + nx0) as f64, (k + ny0) as f64)
+            } else {
+                (0.0, nx as f64, ny as f64)
+            };
+            (i >= lo && j >= lo && i < hi_x && j < hi_y).then(|| j as usize * nx + i as usize)
+        };
+        // The capture holds its window's points only: no other pixel sees the tray.
         for p in &c.points_world {
             if !p[0].is_finite() {
                 continue;
             }
-            let l = tray_from_world * Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let world = Point3::new(p[0] as f64, p[1] as f64, p[2] as f64);
+            let l = tray_from_world * world;
+            let mut over_tray = true;
             if apex.z - l.z > 1e-6 {
                 let f = apex.z / (apex.z - l.z);
                 let floor = apex + (l - apex) * f;
                 if floor.x.abs() > hx || floor.y.abs() > hy {
-                    continue;
+                    let Some(b) = beyond else { continue };
+                    if floor.x.abs() > hx + reach_m
+                        || floor.y.abs() > hy + reach_m
+                        || l.z <= b.above_m
+                        || (b.is_arm)(&world)
+                    {
+                        continue;
+                    }
+                    over_tray = false;
                 }
             }
-            if let Some(k) = hm.index(l.x, l.y) {
+            if let Some(k) = cell_of(l.x, l.y, over_tray) {
                 let h = &mut hm.height_m[k];
                 if h.is_nan() || l.z > *h {
                     *h = l.z;
@@ -363,7 +413,7 @@ mod tests {
             wall_height_m: 0.04,
             wall_thickness_m: 0.005,
         };
-        let hm = HeightMap::from_capture(&c, &tray, 0.002);
+        let hm = HeightMap::from_capture(&c, &tray, 0.002, None);
         let (mut surface_err, mut top_err) = (Vec::new(), Vec::new());
         for k in 0..40 {
             let (x, y) = (-0.03 + 0.0015 * k as f64, 0.02 - 0.001 * k as f64);
@@ -382,6 +432,74 @@ mod tests {
         assert!(
             top_bias > 0.0002,
             "the cells' highest points stand only {top_bias} m above the face"
+        );
+    }
+
+    /// Beyond the walls the map holds what stands over the rim outside the view frustum over the
+    /// tray, and not the arm; every point the map to the walls holds lands in the same cell,
+    /// shifted by the cells beyond. Controls: the same points below the rim, on the arm, or beyond
+    /// the wider footprint are not held; the map to the walls has no cell for them.
+    #[test]
+    fn beyond_the_walls_the_map_holds_what_stands_over_the_rim_and_not_the_arm() {
+        // A 10 x 10 cm tray (outer), walls 4 cm, seen from 1 m above its centre.
+        let tray = crate::geometry::TrayVolume {
+            world_from_tray: Isometry3::identity(),
+            half_xy_m: [0.05, 0.05],
+            wall_height_m: 0.04,
+            wall_thickness_m: 0.005,
+        };
+        let points: [[f32; 3]; 6] = [
+            [0.001, -0.0213, 0.012],   // a part in the tray
+            [-0.0449, 0.0301, 0.0401], // on the wall, in the frustum
+            [0.07, 0.0, 0.06],         // a part's end beyond +x, 2 cm over the rim
+            [0.07, 0.02, -0.005],      // the table beyond +x
+            [-0.07, 0.0, 0.08],        // the arm beyond -x
+            [0.0, 0.2, 0.06],          // beyond the wider footprint
+        ];
+        let window = crate::sensor::PixelWindow {
+            x0_px: 0,
+            y0_px: 0,
+            width_px: points.len(),
+            height_px: 1,
+        };
+        let mut c = Capture::blank(0, 0.0, nalgebra::Vector3::new(0.0, 0.0, 1.0), (points.len(), 1), window);
+        c.points_world.copy_from_slice(&points);
+        let is_arm = |p: &Point3<f64>| p.x < -0.06;
+        let beyond = BeyondWalls {
+            reach_m: 0.03,
+            above_m: 0.042,
+            is_arm: &is_arm,
+        };
+        let to_walls = HeightMap::from_capture(&c, &tray, 0.002, None);
+        let wide = HeightMap::from_capture(&c, &tray, 0.002, Some(&beyond));
+        assert_eq!((wide.nx, wide.ny), (to_walls.nx + 30, to_walls.ny + 30));
+        let held = |m: &HeightMap| m.height_m.iter().filter(|h| h.is_finite()).count();
+        assert_eq!(held(&to_walls), 2, "the tray's two points");
+        assert_eq!(held(&wide), 3, "and the part's end beyond the wall");
+        for [x, y, z] in points.iter().take(2).map(|p| p.map(f64::from)) {
+            let (a, b) = (to_walls.index(x, y).unwrap(), wide.index(x, y).unwrap());
+            assert_eq!((a % to_walls.nx + 15, a / to_walls.nx + 15), (b % wide.nx, b / wide.nx));
+            assert_eq!(wide.height_m[b], z as f32 as f64);
+        }
+        assert_eq!(wide.height_m[wide.index(0.07, 0.0).unwrap()], 0.06f32 as f64);
+        assert!(to_walls.index(0.07, 0.0).is_none(), "control: no cell beyond the wall");
+        assert!(
+            wide.height_m[wide.index(0.07, 0.02).unwrap()].is_nan(),
+            "the table is below the rim"
+        );
+        assert!(
+            wide.height_m[wide.index(-0.07, 0.0).unwrap()].is_nan(),
+            "the arm is masked"
+        );
+        let unmasked = BeyondWalls {
+            is_arm: &|_: &Point3<f64>| false,
+            ..beyond
+        };
+        let seen = HeightMap::from_capture(&c, &tray, 0.002, Some(&unmasked));
+        assert_eq!(
+            seen.height_m[seen.index(-0.07, 0.0).unwrap()],
+            0.08f32 as f64,
+            "control: the arm unmasked"
         );
     }
 

@@ -66,6 +66,18 @@ impl ViewFrustum {
     }
 }
 
+/// The arm as the controller knew it at a trigger: its joints as the encoders read them then, and
+/// with a part on the cup, where the grasp put that part on the tool (from its recognised pose).
+/// What the self-filter masks out of the image beyond the tray (`pipeline::SensedPile`).
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct ArmAtTrigger {
+    /// Joint positions (rad).
+    pub q: crate::robot::JointVector,
+    /// `tool_from_part` of the part on the cup, as the grasp estimated it; `None` with the cup
+    /// empty.
+    pub tool_from_held_part: Option<nalgebra::Isometry3<f64>>,
+}
+
 /// Why a capture could not be taken or was spoiled.
 #[derive(Debug, Clone, PartialEq, Serialize)]
 pub enum CaptureProblem {
@@ -154,6 +166,9 @@ pub struct CaptureJob {
     pub spoiled: Option<CaptureProblem>,
     /// Ground truth at the trigger (evaluation and the oracle recognition only).
     pub truth: TruthAtTrigger,
+    /// The arm at the trigger, as the controller knew it: the encoders latched with the trigger
+    /// ([`Sensor::trigger`]); the part on the cup is the cycle's to add.
+    pub arm: ArmAtTrigger,
     /// How far each part's farthest point moved during the exposure (m): its centre's travel
     /// plus its turn times its bounding radius (a 15 cm strip turning about its centre moves its
     /// ends).
@@ -363,6 +378,10 @@ impl Sensor {
             capture,
             spoiled: None,
             truth,
+            arm: ArmAtTrigger {
+                q: world.joints(),
+                tool_from_held_part: None,
+            },
             moved_m: vec![0.0; world.part_count()],
             blur_applied: false,
             confirm: None,

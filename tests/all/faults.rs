@@ -282,3 +282,19 @@ fn a_crawling_carry_ends_without_a_protective_stop() {
     assert_eq!(r.tally.faults.protective_stops, 0, "{:?}", r.tally.incidents);
     assert_eq!(r.tally.ended, Some(EndReason::PicksDone));
 }
+
+/// What hangs out beyond the pick tray's wall is an obstacle: on C's seed 4 (38 picks) the refill
+/// before pick 37 leaves a strip lying across the rim at 34 deg, its end 25 mm beyond the wall's
+/// outer face and 26 mm above the rim. The capture pick 37 is chosen on sees that end (the map
+/// reaches beyond the walls, the arm masked out), and the Place carries its strip clear of it.
+/// Seen failing while the map stopped at the outer walls: the carried strip, 10 mm over the rim,
+/// struck the end 0.2 s into the transfer (deep penetration 2.96 mm, a collision).
+#[test]
+fn a_strip_hanging_out_beyond_the_wall_is_an_obstacle_to_the_carry() {
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("C").unwrap();
+    let r = cycle::run(&scene, &robot, &wp, &opts(38, 4), &mut ()).unwrap();
+    assert_eq!(r.tally.faults.collisions, 0, "{:?}", r.tally.incidents);
+    assert_eq!(r.tally.ended, Some(EndReason::PicksDone));
+}

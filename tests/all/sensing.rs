@@ -167,7 +167,7 @@ fn cloud_recognition_finds_the_top_layer_and_chosen_grasps_are_reachable_and_cle
             assert!(f.top_layer > 0, "{name}: empty top layer");
             (top, found) = (top + f.top_layer, found + f.top_layer_found);
             (detected, correct) = (detected + f.detected, correct + f.correct);
-            let hm = HeightMap::from_capture(&job.capture, w.pick_tray(), 0.002);
+            let hm = HeightMap::from_capture(&job.capture, w.pick_tray(), 0.002, None);
             let selector = GraspSelector::for_workpiece(&scene.scene, &robot, &wp);
             let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
             let plan = selector.select(&detections, &hm, &slot, &w.joints());
@@ -459,7 +459,7 @@ fn lone_block_grasp(offset_x_m: f64) -> (binpick::pipeline::GraspChoice, bool) {
         part_half_extents_m: half,
     };
     let slot = scene.scene.world_from_slots(&wp.workpiece)[0];
-    let sensed = SensedPile::new(&ctx, &job.capture);
+    let sensed = SensedPile::new(&ctx, &job.capture, &job.arm);
     let choice = sense_and_grasp(&ctx, &sensed, &detections, &slot, &w.joints(), &[]);
     let best = choice.plan.best().expect("the selector ranks a grasp on the block");
     let env = planning_environment(&scene.scene, &sensed.pile, best);
@@ -615,4 +615,92 @@ fn a_second_exposure_confirms_only_parts_thicker_than_twice_their_steepest_face(
         let sensor = Sensor::new(&scene.scene.sensor, &w, 1, &wp.workpiece).unwrap();
         assert_eq!(sensor.confirms(), confirms, "{workpiece}");
     }
+}
+
+/// A C strip lying across the pick tray's +x rim, its outer end rising 34 deg beyond the wall
+/// (as a refill left one on C's seed 4), and the arm parked beyond the -x wall above the rim, out
+/// of the view frustum. The planner's pile holds the strip's end beyond the wall, higher than the
+/// rim, and nothing of the arm. Controls: the map that stops at the outer walls (as before) has no
+/// cell there, so the end was no obstacle; and with the controller's joints wrong (the home pose),
+/// the arm is not masked and stands beyond the -x wall as pile.
+#[test]
+fn a_strip_across_the_rim_is_seen_beyond_the_wall_and_the_arm_is_not() {
+    use binpick::pipeline::{GraspContext, HEIGHT_MAP_CELL_M, SensedPile, pile_map};
+    use binpick::sensor::ArmAtTrigger;
+    use nalgebra::{Point3, Translation3, UnitQuaternion};
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("C").unwrap();
+    let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+    let half = shape.half_extents_m;
+    let mut w = World::new(&scene.scene, &robot, shape);
+    let tray = *w.pick_tray();
+    let [hx, _] = tray.half_xy_m;
+    let rim = tray.wall_height_m;
+    let t = tray.world_from_tray;
+    let over_wall = hx - tray.wall_thickness_m / 2.0;
+    w.add_part(
+        &(t * Isometry3::from_parts(
+            Translation3::new(over_wall, 0.0, rim + half.z),
+            UnitQuaternion::from_axis_angle(&Vector3::y_axis(), -34f64.to_radians()),
+        )),
+    );
+    w.place_tool(&tool_down_pose(
+        (t * Point3::new(-hx - 0.045, 0.0, rim + 0.03)).coords,
+        0.0,
+    ))
+    .unwrap();
+    let mut sensor = Sensor::new(&scene.scene.sensor, &w, 1, &wp.workpiece).unwrap();
+    let job = sensor.trigger(&w).expect("the arm is out of the view frustum");
+    let selector = GraspSelector::for_workpiece(&scene.scene, &robot, &wp);
+    let ctx = GraspContext {
+        scene: &scene.scene,
+        robot: &robot,
+        selector: &selector,
+        pick_tray: &tray,
+        part_half_extents_m: half,
+    };
+    let beyond_minus_x = |m: &HeightMap| -> usize {
+        let mut n = 0;
+        for j in 0..m.ny {
+            for i in 0..m.nx {
+                let x = m.origin_xy_m[0] + (i as f64 + 0.5) * m.cell_m;
+                n += usize::from(x < -hx && m.height_m[j * m.nx + i].is_finite());
+            }
+        }
+        n
+    };
+    // 40 mm beyond the outer face the strip stands about 33 mm above the rim.
+    let end = (hx + 0.04, 0.0);
+    let sensed = SensedPile::new(&ctx, &job.capture, &job.arm);
+    let k = sensed
+        .pile
+        .index(end.0, end.1)
+        .expect("the map reaches beyond the wall");
+    assert!(
+        sensed.pile.height_m[k] > rim + 0.02,
+        "the strip's end beyond the wall: {} m above the floor",
+        sensed.pile.height_m[k]
+    );
+    assert_eq!(beyond_minus_x(&sensed.pile), 0, "the arm is masked out");
+    // Control: the map as it was, to the outer walls only.
+    let to_walls = pile_map(
+        &scene.scene,
+        &HeightMap::from_capture(&job.capture, &tray, HEIGHT_MAP_CELL_M, None),
+    );
+    assert!(
+        to_walls.index(end.0, end.1).is_none(),
+        "control: no cell beyond the wall"
+    );
+    // Control: the controller's joints wrong, the arm stands beyond the -x wall as pile.
+    let wrong = ArmAtTrigger {
+        q: JointVector::from(scene.scene.robot.home_rad()),
+        tool_from_held_part: None,
+    };
+    let unmasked = SensedPile::new(&ctx, &job.capture, &wrong);
+    assert!(
+        beyond_minus_x(&unmasked.pile) > 20,
+        "control: the arm unmasked beyond the -x wall ({} cells)",
+        beyond_minus_x(&unmasked.pile)
+    );
 }

@@ -65,6 +65,8 @@ pub struct PartShape {
     pub bounding_radius_m: f64,
     /// Half extents of the bounding box (m).
     pub half_extents_m: Vector3<f64>,
+    /// The workpiece's bounding box as its file gives it or its mesh derives it (`size_m`) (m).
+    pub size_m: [f64; 3],
     /// The convex pieces for the independent overlap check: the primitives' polytopes, or a
     /// mesh collider's convex pieces.
     pub pieces: Option<Vec<super::overlap::Polytope>>,
@@ -600,6 +602,7 @@ impl PartShape {
                 aabb.half_extents().z as f64 / super::SIM_UNITS_PER_M,
             )
             .sup(&he),
+            size_m: workpiece.size_m,
             pieces,
             convex_pieces,
             friction: workpiece.friction,
