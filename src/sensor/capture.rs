@@ -275,6 +275,11 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
     );
     let cos_grazing = camera.dropout_grazing_rad.cos();
     let pairs = w.div_ceil(2);
+    // Beyond the tray's own window only what moves is measured (parts, the arm, the held part):
+    // the fixed cell there (the table, the walls' outer faces) lies below the rim, where nothing
+    // the cell reads looks. Facets from `fixed` on are the moving ones.
+    let tray_window = camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX);
+    let fixed = bg.facets.len() as u32;
     let mut c = Capture::blank(id, world.time_s(), origin, (w, h), window);
     // The pairs of pixels that hold the window's columns.
     let window_pairs = window.x0_px / 2..(window.x0_px + window.width_px).div_ceil(2).min(pairs);
@@ -288,13 +293,12 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
         .for_each(|(row, (((depth, pts), truth), row_facets))| {
             let v = window.y0_px + row;
             let mut rng = stream.clone();
-            // Each u64 draw takes two 32-bit words; the row's draws start at its first pair, the
-            // window's at its first pair.
-            rng.set_word_pos(
-                ((id as u128 * h as u128 + v as u128) * pairs as u128 + window_pairs.start as u128)
-                    * DRAWS_PER_PAIR
-                    * 2,
-            );
+            // Each u64 draw takes two 32-bit words; pair p of row v draws from its own position
+            // in the stream, whichever pairs before it were measured.
+            let word_of = |p: usize| ((id as u128 * h as u128 + v as u128) * pairs as u128 + p as u128) * DRAWS_PER_PAIR * 2;
+            rng.set_word_pos(word_of(window_pairs.start));
+            let row_in_tray = (tray_window.y0_px..tray_window.y0_px + tray_window.height_px).contains(&v);
+            let mut skipped = false;
             // The window's pixel of image column u, if it is in the window.
             let at = |u: usize| u.checked_sub(window.x0_px).filter(|k| *k < window.width_px);
             let y = (v as f64 + 0.5 - camera.cy_px) / camera.fy_px;
@@ -302,6 +306,20 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
             let row_dir = rotation * Vector3::new((0.5 - camera.cx_px) / camera.fx_px, y, 1.0);
             let step = rotation.column(0) / camera.fx_px;
             for p in window_pairs.clone() {
+                let in_tray = row_in_tray
+                    && 2 * p + 1 >= tray_window.x0_px
+                    && 2 * p < tray_window.x0_px + tray_window.width_px;
+                if !in_tray {
+                    let moving = |u: usize| at(u).is_some_and(|k| row_facets[k] != NO_FACET && row_facets[k] >= fixed);
+                    if !moving(2 * p) && !moving((2 * p + 1).min(w - 1)) {
+                        skipped = true;
+                        continue;
+                    }
+                }
+                if skipped {
+                    rng.set_word_pos(word_of(p));
+                    skipped = false;
+                }
                 let noise_bits: u64 = rng.random();
                 let drop_bits: u64 = rng.random();
                 let (u_a, u_b) = (2 * p, (2 * p + 1).min(w - 1));

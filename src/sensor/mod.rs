@@ -461,8 +461,8 @@ impl Sensor {
         };
         let empty = |u: usize, v: usize| capture.depth_at_m(u, v) <= 0.0;
         let mut holes = vec![false; w * h];
-        // Pixels outside the capture's tray window do not look at the tray floor.
-        let win = &capture.tray_window;
+        // Pixels outside the tray's own window (within the capture's) do not look at its floor.
+        let win = &self.camera.window_over(tray, capture::TRAY_WINDOW_MARGIN_PX);
         for v in win.y0_px.max(1)..(win.y0_px + win.height_px).min(h.saturating_sub(1)) {
             for u in win.x0_px.max(1)..(win.x0_px + win.width_px).min(w.saturating_sub(1)) {
                 holes[v * w + u] = empty(u, v)

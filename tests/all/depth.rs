@@ -107,9 +107,10 @@ fn a_lone_box_shows_its_top_face_at_the_depth_geometry_gives() {
     assert!(errors > 0, "a face shifted 1 mm passed");
 }
 
-/// Compares a capture with one ray cast per pixel (every `step`-th row and column) into the
-/// world from `origin_offset_m` off the camera's centre: (pixels compared, pixels only one shows,
-/// pixels whose depths differ by more than `tol_m`).
+/// Compares a capture with one ray cast per pixel (every third row and column of the tray's own
+/// window: beyond it only what moves is measured) into the world from `origin_offset_m` off the
+/// camera's centre: (pixels compared, pixels only one shows, pixels whose depths differ by more
+/// than `tol_m`, of those the ones away from a silhouette).
 fn against_ray_casts(
     c: &Capture,
     w: &World,
@@ -121,8 +122,8 @@ fn against_ray_casts(
     let optical = camera.world_from_camera.rotation * Vector3::z();
     let rays = w.ray_caster(RayTargets::All);
     let (mut compared, mut one_sided, mut off, mut off_inside) = (0, 0, 0, 0);
-    // The sensor measures its region of interest over the pick tray only.
-    let roi = &c.tray_window;
+    // The tray's own window, where the sensor measures every surface.
+    let roi = &camera.window_over(w.pick_tray(), binpick::sensor::capture::TRAY_WINDOW_MARGIN_PX);
     for v in (roi.y0_px..roi.y0_px + roi.height_px).step_by(3) {
         for u in (roi.x0_px..roi.x0_px + roi.width_px).step_by(3) {
             let d = camera.pixel_dir(u, v);
