@@ -295,7 +295,8 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
             let mut rng = stream.clone();
             // Each u64 draw takes two 32-bit words; pair p of row v draws from its own position
             // in the stream, whichever pairs before it were measured.
-            let word_of = |p: usize| ((id as u128 * h as u128 + v as u128) * pairs as u128 + p as u128) * DRAWS_PER_PAIR * 2;
+            let word_of =
+                |p: usize| ((id as u128 * h as u128 + v as u128) * pairs as u128 + p as u128) * DRAWS_PER_PAIR * 2;
             rng.set_word_pos(word_of(window_pairs.start));
             let row_in_tray = (tray_window.y0_px..tray_window.y0_px + tray_window.height_px).contains(&v);
             let mut skipped = false;
@@ -306,9 +307,8 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
             let row_dir = rotation * Vector3::new((0.5 - camera.cx_px) / camera.fx_px, y, 1.0);
             let step = rotation.column(0) / camera.fx_px;
             for p in window_pairs.clone() {
-                let in_tray = row_in_tray
-                    && 2 * p + 1 >= tray_window.x0_px
-                    && 2 * p < tray_window.x0_px + tray_window.width_px;
+                let in_tray =
+                    row_in_tray && 2 * p + 1 >= tray_window.x0_px && 2 * p < tray_window.x0_px + tray_window.width_px;
                 if !in_tray {
                     let moving = |u: usize| at(u).is_some_and(|k| row_facets[k] != NO_FACET && row_facets[k] >= fixed);
                     if !moving(2 * p) && !moving((2 * p + 1).min(w - 1)) {
