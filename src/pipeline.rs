@@ -27,7 +27,6 @@ use crate::grasp::{GraspCandidate, GraspPlan, GraspSelector};
 use crate::physics::TrayVolume;
 use crate::planning::{CollisionModel, Environment, PileColumns, PlanStats, RobotSpheres};
 use crate::robot::{JointVector, RobotModel};
-use crate::sensor::capture::beyond_walls_m;
 use crate::sensor::heightmap::BeyondWalls;
 use crate::sensor::{ArmAtTrigger, Capture, Detection, HeightMap};
 
@@ -87,9 +86,9 @@ pub struct SensedPile {
 }
 
 impl SensedPile {
-    /// The height map of `capture` over `ctx`'s pick tray and as far around it as a part across
-    /// the rim reaches ([`beyond_walls_m`]), the arm at the trigger (`arm`) masked out there,
-    /// and the planner's pile from it.
+    /// The height map of `capture` over `ctx`'s pick tray and as far around it as the capture
+    /// measured (as far as a part across the rim reaches: [`Capture::beyond_walls_m`]), the arm
+    /// at the trigger (`arm`) masked out there, and the planner's pile from it.
     pub fn new(ctx: &GraspContext<'_>, capture: &Capture, arm: &ArmAtTrigger) -> Self {
         let held = arm
             .tool_from_held_part
@@ -98,7 +97,7 @@ impl SensedPile {
         let at_trigger = spheres.at(ctx.robot, &arm.q);
         let is_arm = |p: &Point3<f64>| at_trigger.cover(p, SELF_FILTER_MARGIN_M);
         let beyond = BeyondWalls {
-            reach_m: beyond_walls_m(&(2.0 * ctx.part_half_extents_m).into()),
+            reach_m: capture.beyond_walls_m,
             above_m: ctx.pick_tray.wall_height_m + OVER_RIM_M,
             is_arm: &is_arm,
         };
@@ -269,7 +268,7 @@ pub fn sense_and_grasp(
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::sensor::capture::BEYOND_WALLS_STEP_M;
+    use crate::sensor::capture::{BEYOND_WALLS_STEP_M, beyond_walls_m};
 
     /// The map grown beyond the walls pools every cell over the tray into the same planning
     /// column as the map to the walls: the growth is a whole number of pooled columns. Control:

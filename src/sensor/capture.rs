@@ -57,6 +57,9 @@ pub struct Capture {
     /// [`TRAY_WINDOW_MARGIN_PX`] around them. Only these are measured; every other pixel has no
     /// return. No other pixel's ray meets the tray or a part across its rim.
     pub tray_window: PixelWindow,
+    /// How far beyond the tray's outer walls and above its rim the window reaches
+    /// ([`beyond_walls_m`] of the part) (m); 0 for a window over the tray alone.
+    pub beyond_walls_m: f64,
 }
 
 /// The margin of a capture's [`Capture::tray_window`] around the tray's image (px): 8.5 mm at
@@ -106,6 +109,7 @@ impl Capture {
             points_world: vec![[f32::NAN; 3]; n],
             truth: vec![None; n],
             tray_window,
+            beyond_walls_m: 0.0,
         }
     }
 
@@ -281,6 +285,7 @@ pub fn capture_over(world: &World, camera: &Camera, seed: u64, id: u64, backgrou
     let tray_window = camera.window_over(world.pick_tray(), TRAY_WINDOW_MARGIN_PX);
     let fixed = bg.facets.len() as u32;
     let mut c = Capture::blank(id, world.time_s(), origin, (w, h), window);
+    c.beyond_walls_m = beyond_walls_m(&world.part_shape().size_m);
     // The pairs of pixels that hold the window's columns.
     let window_pairs = window.x0_px / 2..(window.x0_px + window.width_px).div_ceil(2).min(pairs);
     let ww = window.width_px.max(1);
