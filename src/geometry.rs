@@ -265,16 +265,23 @@ impl HandGeometry {
 }
 
 /// The cup's holding-force model (simplified, stated in docs/model.md, "Physics"): a full seal holds
-/// vacuum x cup area; the force the cup must exert on a part, m |a_tool - g|, is amplified for
-/// peeling by (1 + 4 e / d), e the part's centre-of-mass offset from the cup axis and d the cup
-/// diameter; a load other bodies put on the part adds its force and 4 / d times its moment about
-/// the cup centre.
+/// vacuum x cup area. The force F the cup must exert on a part of mass m, m (a - g) with a the
+/// tool's acceleration, is taken in the tool frame and split as the suction makers' load cases
+/// split it (e.g. Schmalz's: m (g + a / mu) for a horizontal cup moved sideways): its pull toward
+/// the cup counts in full, its shear across the lip over the lip's friction coefficient mu
+/// (`gripper.lip_friction`), and its moment about the cup centre across the axis (the centre of
+/// mass off the axis, or below the lip with the load sideways) peels the lip as 4 |M| / d (d the
+/// cup diameter). Straight down and held still, that is m g (1 + 4 e / d), e the centre of mass's
+/// offset from the axis. A load other bodies put on the part adds its force and 4 / d times its
+/// moment about the cup centre.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct SuctionModel {
     /// Cup lip radius (m).
     pub cup_radius_m: f64,
     /// Holding force of a full seal (N).
     pub holding_n: f64,
+    /// Friction coefficient of the lip on the part: shear it holds per newton of holding force.
+    pub lip_friction: f64,
 }
 
 impl SuctionModel {
@@ -284,18 +291,21 @@ impl SuctionModel {
         SuctionModel {
             cup_radius_m: r,
             holding_n: g.vacuum_kpa * 1e3 * std::f64::consts::PI * r * r,
+            lip_friction: g.lip_friction,
         }
     }
 
-    /// The peel amplification (1 + 4 e / d) for a centre-of-mass offset `offset_m` (m).
-    pub fn peel_factor(&self, offset_m: f64) -> f64 {
-        1.0 + 4.0 * offset_m / (2.0 * self.cup_radius_m)
-    }
-
-    /// The force the cup must exert (N) to hold `mass_kg` under a tool specific force of
-    /// magnitude `specific_force_m_s2` (|a - g|), with the centre of mass `offset_m` off the axis.
-    pub fn required_n(&self, mass_kg: f64, specific_force_m_s2: f64, offset_m: f64) -> f64 {
-        mass_kg * specific_force_m_s2 * self.peel_factor(offset_m)
+    /// The force the cup must exert (N) to hold `mass_kg` under the tool's specific force
+    /// `specific_force_tool` (a - g, m/s^2, in the tool frame: z out of the cup toward the part),
+    /// its centre of mass at `com_from_cup_m` (tool frame, from the lip's centre): the pull toward
+    /// the cup, plus the shear across the lip over [`SuctionModel::lip_friction`], plus 4 / d times
+    /// the moment across the axis. A push into the cup is carried by the lip: no pull.
+    pub fn required_n(&self, mass_kg: f64, specific_force_tool: &Vector3<f64>, com_from_cup_m: &Vector3<f64>) -> f64 {
+        let f = specific_force_tool * mass_kg;
+        let pull = (-f.z).max(0.0);
+        let shear = f.xy().norm();
+        let moment = com_from_cup_m.cross(&f);
+        pull + shear / self.lip_friction + 4.0 * moment.xy().norm() / (2.0 * self.cup_radius_m)
     }
 
     /// The force the cup must exert (N) against loads other bodies put on the held part: their
@@ -305,11 +315,35 @@ impl SuctionModel {
     pub fn contact_required_n(&self, force_n: f64, moment_across_nm: f64) -> f64 {
         force_n + 4.0 * moment_across_nm / (2.0 * self.cup_radius_m)
     }
+}
 
-    /// The largest tool specific force [m/s^2] that needs at most `share` of the holding force
-    /// for a part of `mass_kg` held `offset_m` off the cup axis.
-    pub fn max_specific_force_m_s2(&self, share: f64, mass_kg: f64, offset_m: f64) -> f64 {
-        share * self.holding_n / (mass_kg * self.peel_factor(offset_m))
+/// What the plans let a held part ask of the cup: its share of [`SuctionModel::holding_n`], with
+/// the part's mass and its centre of mass where the recognition put it, off by up to
+/// `com_uncertainty_m` in any direction.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SealBudget {
+    /// The cup.
+    pub model: SuctionModel,
+    /// The part's mass (kg).
+    pub mass_kg: f64,
+    /// Its centre of mass from the lip's centre, tool frame (m).
+    pub com_from_cup_m: Vector3<f64>,
+    /// How far the true centre of mass may be from that (m).
+    pub com_uncertainty_m: f64,
+    /// The share of the holding force the plans may ask.
+    pub share: f64,
+}
+
+impl SealBudget {
+    /// The share of the budget (1: all of it) the part asks of the cup with the tool turned
+    /// `world_from_tool` and exerting the specific force `specific_force_world` (a - g, m/s^2,
+    /// world) on it: [`SuctionModel::required_n`], plus the moment an offset of
+    /// `com_uncertainty_m` could add at worst, over the share of the holding force.
+    pub fn load(&self, world_from_tool: &UnitQuaternion<f64>, specific_force_world: &Vector3<f64>) -> f64 {
+        let sf = world_from_tool.inverse_transform_vector(specific_force_world);
+        let m = &self.model;
+        let worst_offset_n = 4.0 * self.com_uncertainty_m * self.mass_kg * sf.norm() / (2.0 * m.cup_radius_m);
+        (m.required_n(self.mass_kg, &sf, &self.com_from_cup_m) + worst_offset_n) / (self.share * m.holding_n)
     }
 }
 
@@ -394,10 +428,49 @@ mod tests {
         let h = HandGeometry::new(&s.gripper);
         assert!((h.body_length_m + h.cup_length_m - h.tool_length_m).abs() < 1e-15);
         let m = SuctionModel::new(&s.gripper);
-        assert_eq!(m.peel_factor(0.0), 1.0);
-        // At the limit the required force equals the share of the holding force.
-        let a = m.max_specific_force_m_s2(0.75, 0.01, 0.002);
-        assert!((m.required_n(0.01, a, 0.002) - 0.75 * m.holding_n).abs() < 1e-9);
+        let g = crate::robot::GRAVITY_M_S2;
+        let d = 2.0 * m.cup_radius_m;
+        // Straight down (tool z down) and still: the cup pulls m g, peeled by 4 e / d.
+        let still = Vector3::new(0.0, 0.0, -g);
+        let (mass, e) = (0.01, 0.002);
+        let below = Vector3::new(e, 0.0, 0.003);
+        let want = mass * g * (1.0 + 4.0 * e / d);
+        assert!((m.required_n(mass, &still, &below) - want).abs() < 1e-12);
+        // Moved sideways at a (the makers' load case m (g + a / mu)), the centre of mass on the
+        // axis and at the lip: the shear over the friction; below the lip, its moment too.
+        let a = 10.0;
+        let sideways = Vector3::new(a, 0.0, -g);
+        let at_lip = Vector3::zeros();
+        let case = mass * (g + a / m.lip_friction);
+        assert!((m.required_n(mass, &sideways, &at_lip) - case).abs() < 1e-12);
+        let deep = Vector3::new(0.0, 0.0, 0.003);
+        let peel = 4.0 * 0.003 * mass * a / d;
+        assert!((m.required_n(mass, &sideways, &deep) - case - peel).abs() < 1e-12);
+        // Control: the old model's m |a - g| (1 + 4 e / d) asks less of the cup sideways.
+        assert!(mass * sideways.norm() < case);
+        // A push into the cup (tool z down, pressed down harder than gravity) pulls nothing.
+        assert_eq!(m.required_n(mass, &Vector3::new(0.0, 0.0, 1.0), &at_lip), 0.0);
+        // The budget: a tool turned 40 degrees from straight down asks more than one straight down.
+        let budget = SealBudget {
+            model: m,
+            mass_kg: mass,
+            com_from_cup_m: deep,
+            com_uncertainty_m: 0.0,
+            share: 0.75,
+        };
+        let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        let up_g = Vector3::new(0.0, 0.0, g);
+        let straight = budget.load(&down, &up_g);
+        assert!((straight * 0.75 * m.holding_n - mass * g).abs() < 1e-12);
+        let leaning = UnitQuaternion::from_axis_angle(&Vector3::y_axis(), 40f64.to_radians()) * down;
+        assert!(budget.load(&leaning, &up_g) > 2.0 * straight);
+        // The uncertainty of the centre of mass adds its worst moment.
+        let unsure = SealBudget {
+            com_uncertainty_m: 0.001,
+            ..budget
+        };
+        let extra = 4.0 * 0.001 * mass * g / d / (0.75 * m.holding_n);
+        assert!((unsure.load(&down, &up_g) - straight - extra).abs() < 1e-12);
     }
 
     #[test]

@@ -172,6 +172,11 @@ pub struct GripperConfig {
     pub round_min_radius_m: Option<f64>,
     /// Vacuum level once sealed (below ambient) (kPa).
     pub vacuum_kpa: f64,
+    /// Friction coefficient of the cup's lip on the part (0.05 to 1.5): the shear the seal holds
+    /// per newton of its holding force, as suction makers size cups moved sideways (Schmalz's
+    /// load cases: 0.5 for dry smooth parts, 0.1 oily, 0.6 rough). Left out: 0.5.
+    #[serde(default = "lip_friction")]
+    pub lip_friction: f64,
     /// Time from valve open to full vacuum (s).
     pub vacuum_build_up_s: f64,
     /// Time from valve closed to part released (s).
@@ -196,6 +201,11 @@ impl GripperConfig {
     pub fn max_lean_rad(&self) -> f64 {
         self.max_lean_deg.unwrap_or(0.0).max(self.max_tilt_deg).to_radians()
     }
+}
+
+/// The default of `gripper.lip_friction`.
+fn lip_friction() -> f64 {
+    0.5
 }
 
 /// The default of `gripper.seal_loaded_by_parts`.

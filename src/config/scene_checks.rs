@@ -104,6 +104,7 @@ impl Scene {
             }
         }
         c.within("gripper.vacuum_kpa", g.vacuum_kpa, 0.0, 101.325);
+        c.within("gripper.lip_friction", g.lip_friction, 0.05, 1.5);
         c.non_negative("gripper.vacuum_build_up_s", g.vacuum_build_up_s);
         c.non_negative("gripper.release_s", g.release_s);
         c.positive("gripper.mass_kg", g.mass_kg);

@@ -40,10 +40,10 @@
 //! through one [`Observer`] ([`events`]).
 //!
 //! Held parts: the transfer, lift and descent motions with a part on the cup are slowed (a
-//! uniform time scaling) where the tool's acceleration would need more than
-//! [`SUCTION_MARGIN`] of the cup's holding force ([`crate::geometry::SuctionModel`], with the
-//! centre-of-mass offset of the grasp as recognised plus three standard deviations of the
-//! recognition's position noise).
+//! uniform time scaling; lines by their acceleration) where the tool's turn and acceleration
+//! would need more than [`SUCTION_MARGIN`] of the cup's holding force
+//! ([`crate::geometry::SealBudget`]: pull, shear and peel, with the centre of mass of the grasp
+//! as recognised, off by up to three standard deviations of the recognition's position noise).
 //!
 //! Units: s, m, rad. Frames: world.
 

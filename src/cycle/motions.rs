@@ -24,7 +24,7 @@ use super::outcome::MotionFailure;
 use super::play::{Capture, Segment, SegmentMotion, Settle, Valve};
 use super::records::StageCompute;
 use super::sensing::SensedResult;
-use crate::geometry::NamedBox;
+use crate::geometry::{NamedBox, SealBudget};
 use crate::grasp::GraspCandidate;
 use crate::pipeline::{GraspContext, NoGrasp, SensedPile, sense_and_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
@@ -156,8 +156,8 @@ pub(super) struct Holding<'a> {
     pub model: &'a CollisionModel,
     /// Hand and part as the controller believes them.
     pub payload: Payload,
-    /// The largest specific force the cup holds with its margin [m/s^2].
-    pub max_force_m_s2: f64,
+    /// What the part may ask of the cup: [`SUCTION_MARGIN`] of its holding force.
+    pub seal: SealBudget,
 }
 
 /// The motions of one pick, generated from one recognition result.
@@ -230,7 +230,7 @@ impl Cell<'_> {
         from: &Isometry3<f64>,
         to: &Isometry3<f64>,
         payload: &Payload,
-        max_force: Option<f64>,
+        seal: Option<&SealBudget>,
     ) -> Option<LineMotion> {
         let limits = LineLimits {
             speed_m_s: self.scene.cycle.line_speed_m_s,
@@ -245,14 +245,14 @@ impl Cell<'_> {
             from,
             to,
             &limits,
-            max_force,
+            seal,
         )
     }
 
     /// `second` started while `first` ends ([`overlap_end`]): by the largest of
     /// [`LINE_OVERLAP_SHARES`] of `line_s` (the lift's or the descent's duration) whose overlap
     /// is clear in `model`, within [`OVERLAP_TORQUE_SHARE`] of the accelerator's torques (or
-    /// what the motions alone demand there) with `payload`, and within `max_force` with a part
+    /// what the motions alone demand there) with `payload`, and within `seal` with a part
     /// held. None when the cell does not overlap lines (`cycle.overlap_lines`).
     pub(super) fn overlap_end<A: Motion + Clone, B: Motion + Clone>(
         &self,
@@ -261,7 +261,7 @@ impl Cell<'_> {
         line_s: f64,
         payload: &Payload,
         model: &CollisionModel,
-        max_force: Option<f64>,
+        seal: Option<&SealBudget>,
     ) -> Option<Overlapped<A, B>> {
         if !self.scene.cycle.overlap_lines {
             return None;
@@ -271,7 +271,7 @@ impl Cell<'_> {
             accel_robot: &self.accel_robot,
             dynamics: &self.accel_robot.dynamics(payload),
             model,
-            max_force_m_s2: max_force,
+            seal,
             torque_share: OVERLAP_TORQUE_SHARE,
             // On the physics step's grid: the head ends moving, and a last step shorter than
             // the others would show the cup a jump in acceleration.
@@ -366,7 +366,7 @@ impl Cell<'_> {
         holding: &Holding<'_>,
         rng: &mut ChaCha8Rng,
     ) -> Result<PlaceMotion, MotionFailure> {
-        let (robot, hand, held, max_force) = (self.robot, self.hand, holding.payload, holding.max_force_m_s2);
+        let (robot, hand, held, seal) = (self.robot, self.hand, holding.payload, &holding.seal);
         let above_place = above_place(grasp);
         let release_pose = Isometry3::from_parts(
             Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * self.release_above_m()),
@@ -385,9 +385,9 @@ impl Cell<'_> {
         let via: Vec<JointVector> = path.waypoints.iter().map(|q| JointVector::from(*q)).collect();
         let (via, acc, _) =
             accelerate_in_corridor(&self.accel_robot, &dyn_held, &via, holding.model, CORRIDOR_CHECK_DT_S);
-        let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, max_force);
+        let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, seal);
         let down = self
-            .line(&q_above, &above_place, &release_pose, &held, Some(max_force))
+            .line(&q_above, &above_place, &release_pose, &held, Some(seal))
             .ok_or(MotionFailure::PlaceDescent)?;
         let q_release = down.end_q();
         let up = self
@@ -395,25 +395,17 @@ impl Cell<'_> {
             .ok_or(MotionFailure::PlaceRetreat)?;
         // The transfer starts while the part still rises, and the descent into the slot
         // while the transfer ends, once the lift is over.
-        let blend =
-            lift.and_then(|l| self.overlap_end(l, &transfer, l.duration_s(), &held, holding.model, Some(max_force)));
+        let blend = lift.and_then(|l| self.overlap_end(l, &transfer, l.duration_s(), &held, holding.model, Some(seal)));
         let lift_end_s = lift.map_or(0.0, LineMotion::duration_s);
         let descent_blend = self
-            .overlap_end(
-                &transfer,
-                &down,
-                down.duration_s(),
-                &held,
-                holding.model,
-                Some(max_force),
-            )
+            .overlap_end(&transfer, &down, down.duration_s(), &held, holding.model, Some(seal))
             .filter(|d| blend.as_ref().is_none_or(|b| b.start_s() + d.start_s() >= lift_end_s));
         // The valve closes before the cup stops, as long before as the venting cup, with
         // the planning margin on what is left of its force, keeps the part until then.
         let (max_lead_s, venting_s) = (self.scene.cycle.release_lead_s, self.scene.gripper.release_s);
         let lead_s = match &descent_blend {
-            Some(d) => release_lead_s(robot, d, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
-            None => release_lead_s(robot, &down, LEAD_CHECK_DT_S, max_lead_s, venting_s, max_force),
+            Some(d) => release_lead_s(robot, d, LEAD_CHECK_DT_S, max_lead_s, venting_s, seal),
+            None => release_lead_s(robot, &down, LEAD_CHECK_DT_S, max_lead_s, venting_s, seal),
         };
         Ok(PlaceMotion {
             transfer,
@@ -493,13 +485,16 @@ impl Run<'_, '_> {
         let wall = Instant::now();
         let world_from_part = detections[grasp.detection].world_from_part;
         let tool_from_part = grasp.world_from_tool.inverse() * world_from_part;
-        // The recognised pose is off by up to three standard deviations of its noise. The peel
-        // arm: the centre of mass the selector's peel model reads (a mesh part's true one).
+        // The peel arm: the centre of mass the selector's peel model reads (a mesh part's true
+        // one), where the recognition put it, off by up to three standard deviations of its noise.
         let com_in_tool = tool_from_part * nalgebra::Point3::from(cell.selector.peel_com_m());
-        let offset = com_in_tool.coords.xy().norm() + 3.0 * self.st.sensor.pose_noise_m;
-        let max_force = cell
-            .suction
-            .max_specific_force_m_s2(SUCTION_MARGIN, cell.shape.mass_kg, offset);
+        let seal = SealBudget {
+            model: cell.suction,
+            mass_kg: cell.shape.mass_kg,
+            com_from_cup_m: com_in_tool.coords,
+            com_uncertainty_m: 3.0 * self.st.sensor.pose_noise_m,
+            share: SUCTION_MARGIN,
+        };
         // The controller's payload: the nominal part at the cup centre (the plant carries the
         // part where the cup actually sealed: see `execute`).
         let held = hand.combined(&cell.nominal_part);
@@ -512,7 +507,7 @@ impl Run<'_, '_> {
             &grasp.world_from_tool,
             &grasp.world_from_tool_lifted,
             &held,
-            Some(max_force),
+            Some(&seal),
         );
         let holding = CollisionModel::new(
             robot,
@@ -522,7 +517,7 @@ impl Run<'_, '_> {
         let holding = Holding {
             model: &holding,
             payload: held,
-            max_force_m_s2: max_force,
+            seal,
         };
         let place = cell.place_motion(
             &grasp,

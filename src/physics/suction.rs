@@ -11,10 +11,11 @@
 //!
 //! Model (simplified, stated in docs/model.md, "Physics"): the seal is probed with rays along the tool axis at
 //! the cup centre and 16 points of the lip circle. Holding force = vacuum x cup area. A part slips
-//! when the force the cup must exert, m |a_tool - g|, amplified for peeling by (1 + 4 e / d)
-//! (e: centre-of-mass offset from the cup axis, d: cup diameter), plus what other parts pull on
-//! it off the cup, |F| + 4 |M| / d (M its moment about the cup centre; [`ContactLoad`], with
-//! `gripper.seal_loaded_by_parts`), exceeds the holding force.
+//! when the force the cup must exert on it, m (a_tool - g) in the tool frame, as its pull toward
+//! the cup plus its shear over the lip's friction plus 4 / d times its moment across the axis
+//! about the cup centre ([`crate::geometry::SuctionModel::required_n`]; d: cup diameter), plus
+//! what other parts pull on it off the cup, |F| + 4 |M| / d (M its moment about the cup centre;
+//! [`ContactLoad`], with `gripper.seal_loaded_by_parts`), exceeds the holding force.
 //! Once the valve closes, the holding force falls linearly to zero over `release_s`: the part
 //! comes off when the force it needs exceeds what is left (earlier for a heavy part or a cup
 //! still decelerating), and at the latest after `release_s`.
@@ -111,6 +112,8 @@ pub struct Seal {
     pub tilt_rad: f64,
     /// Distance of the part's centre of mass from the cup axis (m).
     pub com_offset_m: f64,
+    /// The part's centre of mass from the lip's centre, tool frame (m): it moves with the tool.
+    pub com_from_cup_m: Vector3<f64>,
 }
 
 /// What the gripper did, with the simulation time.
@@ -136,7 +139,7 @@ pub enum GripperEvent {
         time_s: f64,
         /// The part.
         part: usize,
-        /// Force the cup had to exert, peel-amplified (N).
+        /// Force the cup had to exert: pull, shear over the lip's friction, and peel (N).
         required_n: f64,
         /// Force the vacuum holds (N).
         holding_n: f64,
@@ -486,6 +489,7 @@ impl World {
             part,
             tilt_rad: tilt,
             com_offset_m: com_offset,
+            com_from_cup_m: world_from_tool.rotation.inverse_transform_vector(&rel),
         })
     }
 
@@ -591,12 +595,16 @@ impl World {
     }
 
     /// The force the cup must exert on the sealed part against gravity and the tool's
-    /// acceleration now, amplified for peeling, and against what other parts push on it (N).
+    /// acceleration now, in the tool's frame (pull, shear over the lip's friction, peel: the
+    /// cup's [`crate::geometry::SuctionModel::required_n`]), and against what other parts push on it (N).
     fn required_holding_n(&self, seal: &Seal) -> f64 {
         let g = Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
-        let specific_force = (self.tool_acceleration() - g).norm();
+        let specific_force = self
+            .world_from_tool()
+            .rotation
+            .inverse_transform_vector(&(self.tool_acceleration() - g));
         let model = &self.gripper.model;
-        let inertial = model.required_n(self.part_shape.mass_kg, specific_force, seal.com_offset_m);
+        let inertial = model.required_n(self.part_shape.mass_kg, &specific_force, &seal.com_from_cup_m);
         if !self.gripper.loaded_by_parts {
             return inertial;
         }

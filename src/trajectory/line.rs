@@ -2,14 +2,16 @@
 //!
 //! Job: move the tool centre point along a straight line in Cartesian space with a trapezoidal
 //! speed profile, joint positions by inverse kinematics every millisecond, slowed until the
-//! torques stay within the limits given (less the cell's margin) and, holding a part, until the tool's specific force
-//! |a - g| stays within what the suction cup holds; and slow a blended joint trajectory uniformly
-//! in time for the same reason.
+//! torques stay within the limits given (less the cell's margin) and, holding a part, until what
+//! the part asks of the suction cup (its specific force a - g in the turning tool's frame: pull,
+//! shear and peel, [`SealBudget`]) stays within the cup's budget; and slow a blended joint
+//! trajectory uniformly in time for the same reason.
 //!
 //! Units: m, m/s, m/s^2 for the tool; rad, rad/s, rad/s^2, N m for the joints; s.
 //! Frames: tool poses are `world_from_tool`; joints in joint space.
 
 use super::{Motion, MotionLimits, Sample, Trajectory};
+use crate::geometry::SealBudget;
 use crate::robot::{DOF, DynamicsModel, JointVector, RobotModel};
 
 /// A straight line is sampled (inverse kinematics, finite differences) every millisecond (s).
@@ -20,7 +22,7 @@ const ROTATION_LENGTH_M_PER_RAD: f64 = 0.05;
 const LINE_TRIES: usize = 12;
 /// Each slow-down multiplies the tool acceleration by this.
 const LINE_SLOWDOWN: f64 = 0.75;
-/// Lowest tool acceleration a force limit may leave [m/s^2].
+/// Lowest tool acceleration a seal budget may leave [m/s^2].
 const MIN_LINE_ACCEL_M_S2: f64 = 0.5;
 /// Largest joint step between 1 ms samples before it counts as a branch change (rad).
 const MAX_JOINT_STEP_RAD: f64 = 0.05;
@@ -30,12 +32,15 @@ const WRIST_SINGULAR_RAD: f64 = 0.02;
 const WRIST_FIX_POSITION_M: f64 = 2e-5;
 /// ... and this rotation (rad).
 const WRIST_FIX_ANGLE_RAD: f64 = 2e-4;
-/// The tool's specific force is checked on samples this far apart (s).
+/// What the held part asks of the cup is checked on samples this far apart (s).
 const FORCE_CHECK_DT_S: f64 = 0.004;
 /// Slowest uniform time scale [`limit_tool_force`] tries.
 const MIN_TIME_SCALE: f64 = 0.05;
 /// [`limit_tool_force`] bisects its time scale to this.
 const TIME_SCALE_TOLERANCE: f64 = 0.02;
+/// Where gravity alone asks more of the cup than its budget, a motion may add this share of the
+/// budget to what gravity asks ([`seal_overload`]).
+pub const STATIC_SLACK: f64 = 0.05;
 
 /// Speed and acceleration of the tool along a straight line [m/s, m/s^2].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -86,7 +91,9 @@ impl LineMotion {
 /// The straight tool line from `from` (the arm at `q_from`) to `to` under `limits`, slowed until
 /// the torques (with `dynamics`' payload, friction at its worst near rest) stay within `robot`'s
 /// limits (the cell passes them less its torque margin, which the servo's feedback and the
-/// plant's model error need) and, with `max_specific_force_m_s2`, the tool's |a - g| within it (a part on a suction cup).
+/// plant's model error need) and, with `seal`, what a part on the suction cup asks of it within
+/// its budget (the line's acceleration bounded before the torques are checked: see
+/// [`line_accel_within`]).
 /// `None` if the inverse kinematics fails along the line (limits, singularity) or a joint would
 /// jump (a branch change).
 pub fn straight_line(
@@ -96,15 +103,13 @@ pub fn straight_line(
     from: &nalgebra::Isometry3<f64>,
     to: &nalgebra::Isometry3<f64>,
     limits: &LineLimits,
-    max_specific_force_m_s2: Option<f64>,
+    seal: Option<&SealBudget>,
 ) -> Option<LineMotion> {
-    let g = crate::robot::GRAVITY_M_S2;
     let length = (to.translation.vector - from.translation.vector).norm()
         + ROTATION_LENGTH_M_PER_RAD * from.rotation.angle_to(&to.rotation);
     let mut accel = limits.accel_m_s2;
-    if let Some(f) = max_specific_force_m_s2 {
-        // |a u - g| <= |a| + g along any direction u.
-        accel = accel.min((f - g).max(MIN_LINE_ACCEL_M_S2));
+    if let Some(b) = seal {
+        accel = line_accel_within(b, from, to, length, accel);
     }
     let limit = robot.torque_limit_nm();
     for _ in 0..LINE_TRIES {
@@ -198,45 +203,97 @@ pub fn straight_line(
     None
 }
 
-/// The tool's specific force |a - g| [m/s^2] at the middle of three tool positions `dt_s` apart
-/// [m, world], the latest first (a second difference).
-fn specific_force_m_s2(
-    later: &nalgebra::Vector3<f64>,
-    middle: &nalgebra::Vector3<f64>,
-    earlier: &nalgebra::Vector3<f64>,
-    dt_s: f64,
+/// The largest tool acceleration, at most `accel_m_s2`, with which a line from `from` to `to`
+/// (`length` m of [`straight_line`]'s path) keeps what the held part asks of the cup within
+/// `seal`: the line accelerates and brakes along its direction, the tool turning from `from`'s
+/// rotation to `to`'s, so both signs are checked at nine rotations along the way; bisected to
+/// 2 %, at least [`MIN_LINE_ACCEL_M_S2`] (a part the cup cannot hold even at rest is the grasp's
+/// failure, not the line's).
+fn line_accel_within(
+    seal: &SealBudget,
+    from: &nalgebra::Isometry3<f64>,
+    to: &nalgebra::Isometry3<f64>,
+    length: f64,
+    accel_m_s2: f64,
 ) -> f64 {
     let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
-    ((later - 2.0 * middle + earlier) / (dt_s * dt_s) - g).norm()
+    let travel = to.translation.vector - from.translation.vector;
+    // The tool centre's acceleration per unit of the path's: its share of the path's length.
+    let along = if length > 1e-9 { travel / length } else { travel * 0.0 };
+    let holds = |a: f64| {
+        (0..=8).all(|k| {
+            let rot = from.rotation.slerp(&to.rotation, k as f64 / 8.0);
+            [a, -a].iter().all(|&s| seal.load(&rot, &(along * s - g)) <= 1.0)
+        })
+    };
+    if holds(accel_m_s2) {
+        return accel_m_s2;
+    }
+    let (mut lo, mut hi) = (MIN_LINE_ACCEL_M_S2.min(accel_m_s2), accel_m_s2);
+    while hi - lo > 0.02 * hi {
+        let mid = 0.5 * (lo + hi);
+        if holds(mid) {
+            lo = mid;
+        } else {
+            hi = mid;
+        }
+    }
+    lo
 }
 
-/// The largest specific force the tool exerts on what it holds along `motion`: max |a - g| of
-/// the tool centre point, from the forward kinematics sampled every `dt_s` (second differences)
-/// [m/s^2]. At rest it is g.
-pub fn peak_tool_specific_force(robot: &RobotModel, motion: &impl Motion, dt_s: f64) -> f64 {
-    let p: Vec<nalgebra::Vector3<f64>> = motion
+/// The specific force a - g the tool exerts on what it holds [m/s^2, world] at the middle of
+/// three tool poses `dt_s` apart, the latest first (a second difference of their positions).
+fn specific_force_m_s2(
+    later: &nalgebra::Isometry3<f64>,
+    middle: &nalgebra::Isometry3<f64>,
+    earlier: &nalgebra::Isometry3<f64>,
+    dt_s: f64,
+) -> nalgebra::Vector3<f64> {
+    let g = nalgebra::Vector3::new(0.0, 0.0, -crate::robot::GRAVITY_M_S2);
+    let (l, m, e) = (
+        later.translation.vector,
+        middle.translation.vector,
+        earlier.translation.vector,
+    );
+    (l - 2.0 * m + e) / (dt_s * dt_s) - g
+}
+
+/// How far what the held part asks of the cup along `motion` exceeds `seal`'s budget at worst
+/// (in shares of it; at most 0: within it; minus infinity for fewer than three samples): the
+/// tool centre point's specific force a - g in the tool's frame, from the forward kinematics
+/// sampled every `dt_s` (second differences). Where
+/// the tool is turned so that gravity alone asks more than the budget (a part hanging off a
+/// tilted cup), no slowing helps: there the motion may add at most [`STATIC_SLACK`] to what
+/// gravity asks, and the plant decides whether the cup holds.
+pub fn seal_overload(robot: &RobotModel, motion: &impl Motion, dt_s: f64, seal: &SealBudget) -> f64 {
+    let p: Vec<nalgebra::Isometry3<f64>> = motion
         .sampled(dt_s)
         .iter()
-        .map(|s| robot.world_from_tool(&s.q).translation.vector)
+        .map(|s| robot.world_from_tool(&s.q))
         .collect();
+    let up = nalgebra::Vector3::new(0.0, 0.0, crate::robot::GRAVITY_M_S2);
     p.windows(3)
-        .map(|w| specific_force_m_s2(&w[2], &w[1], &w[0], dt_s))
-        .fold(crate::robot::GRAVITY_M_S2, f64::max)
+        .map(|w| {
+            let allowed = 1f64.max(seal.load(&w[1].rotation, &up) + STATIC_SLACK);
+            seal.load(&w[1].rotation, &specific_force_m_s2(&w[2], &w[1], &w[0], dt_s)) - allowed
+        })
+        .fold(f64::NEG_INFINITY, f64::max)
 }
 
 /// The longest lead, at most `max_lead_s`, by which a suction cup's valve may close before
 /// `motion` ends (s) with the part predicted to stay on the cup until the cup stops. Once the
 /// valve closes the holding force falls linearly to zero over `release_s`; at every instant
-/// from then to the end the tool's specific force |a - g| (forward kinematics, second
-/// differences every `dt_s`) must stay within `max_specific_force_m_s2` (what the plans allow
-/// with the full seal) times the share of the force left. A multiple of `dt_s`; 0 if none fits.
+/// from then to the end what the part asks of the cup (its specific force a - g in the tool's
+/// frame, forward kinematics, second differences every `dt_s`) must stay within `seal`'s budget
+/// (what the plans allow with the full seal) times the share of the force left. A multiple of
+/// `dt_s`; 0 if none fits.
 pub fn release_lead_s(
     robot: &RobotModel,
     motion: &impl Motion,
     dt_s: f64,
     max_lead_s: f64,
     release_s: f64,
-    max_specific_force_m_s2: f64,
+    seal: &SealBudget,
 ) -> f64 {
     if max_lead_s <= 0.0 || release_s <= 0.0 {
         return 0.0;
@@ -244,37 +301,38 @@ pub fn release_lead_s(
     let end_s = motion.duration_s();
     let n = (max_lead_s / dt_s + 1e-9).floor() as usize;
     // Tool positions at end - k dt for k = -1 ..= n + 1 (the arm stands still after the end).
-    let pos: Vec<nalgebra::Vector3<f64>> = (0..n + 3)
+    let pos: Vec<nalgebra::Isometry3<f64>> = (0..n + 3)
         .map(|i| {
             let t = (end_s - (i as f64 - 1.0) * dt_s).clamp(0.0, end_s);
-            robot.world_from_tool(&motion.at(t).q).translation.vector
+            robot.world_from_tool(&motion.at(t).q)
         })
         .collect();
-    // The specific force at end - k dt, k = 0 ..= n.
-    let force: Vec<f64> = pos
+    // The share of the budget asked at end - k dt, k = 0 ..= n.
+    let load: Vec<f64> = pos
         .windows(3)
-        .map(|w| specific_force_m_s2(&w[0], &w[1], &w[2], dt_s))
+        .map(|w| seal.load(&w[1].rotation, &specific_force_m_s2(&w[0], &w[1], &w[2], dt_s)))
         .collect();
     (0..=n)
         .rev()
         .find(|&lead| {
             (0..=lead).all(|k| {
                 let vented = (lead - k) as f64 * dt_s / release_s;
-                force[k] <= max_specific_force_m_s2 * (1.0 - vented)
+                load[k] <= 1.0 - vented
             })
         })
         .map_or(0.0, |lead| lead as f64 * dt_s)
 }
 
 /// Slows a trajectory through `via` under `limits` uniformly in time (speeds x k, accelerations
-/// x k^2, which scales the profile's time by 1/k exactly) until the tool's peak specific force
-/// is at most `max_specific_force_m_s2`: a suction cup holds its part only up to a force. Returns
-/// the trajectory and k (1 when no slowing was needed). Bisection on k to 2 %.
+/// x k^2, which scales the profile's time by 1/k exactly) until what the held part asks of the
+/// cup stays within `seal`'s budget ([`seal_overload`] at most 0): a suction cup holds its part
+/// only up to a force. Returns the trajectory and k (1 when no slowing was needed). Bisection on
+/// k to 2 %.
 pub fn limit_tool_force(
     robot: &RobotModel,
     via: &[JointVector],
     limits: &MotionLimits,
-    max_specific_force_m_s2: f64,
+    seal: &SealBudget,
 ) -> (Trajectory, f64) {
     let at = |k: f64| {
         Trajectory::through(
@@ -286,13 +344,13 @@ pub fn limit_tool_force(
         )
     };
     let full = at(1.0);
-    if peak_tool_specific_force(robot, &full, FORCE_CHECK_DT_S) <= max_specific_force_m_s2 {
+    if seal_overload(robot, &full, FORCE_CHECK_DT_S, seal) <= 0.0 {
         return (full, 1.0);
     }
     let (mut lo, mut hi) = (MIN_TIME_SCALE, 1.0);
     while hi - lo > TIME_SCALE_TOLERANCE {
         let mid = 0.5 * (lo + hi);
-        if peak_tool_specific_force(robot, &at(mid), FORCE_CHECK_DT_S) <= max_specific_force_m_s2 {
+        if seal_overload(robot, &at(mid), FORCE_CHECK_DT_S, seal) <= 0.0 {
             lo = mid;
         } else {
             hi = mid;
@@ -308,9 +366,10 @@ mod tests {
     use crate::robot::{Payload, tool_down_pose};
     use nalgebra::Vector3;
 
-    /// A 3 cm descent at 20 m/s^2: while it decelerates the cup must exert g + 20 m/s^2, most at
-    /// its stop, so the valve may close at most R (1 - (g + a) / F) before the stop (F the
-    /// specific force allowed at full vacuum, R the venting time); to a check step or two.
+    /// A 3 cm descent at 20 m/s^2: while it decelerates the cup must pull g + 20 m/s^2 (straight
+    /// down, the centre of mass at the lip: no shear, no peel), most at its stop, so the valve
+    /// may close at most R (1 - (g + a) / F) before the stop (F the specific force allowed at
+    /// full vacuum, R the venting time); to a check step or two.
     #[test]
     fn the_valve_closes_before_the_stop_only_as_early_as_the_venting_cup_holds_the_part() {
         let scene = LoadedScene::embedded_default().unwrap();
@@ -330,9 +389,21 @@ mod tests {
         let down = straight_line(&robot, &dynamics, &q0, &from, &to, &limits, None).unwrap();
         let (dt, venting_s) = (0.001, 0.06);
         let needed = crate::robot::GRAVITY_M_S2 + accel;
+        // A kilogram on a cup that holds `allowed` newtons, all of it the plans' budget.
+        let budget = |allowed: f64| SealBudget {
+            model: crate::geometry::SuctionModel {
+                cup_radius_m: 0.003,
+                holding_n: allowed,
+                lip_friction: 0.5,
+            },
+            mass_kg: 1.0,
+            com_from_cup_m: Vector3::zeros(),
+            com_uncertainty_m: 0.0,
+            share: 1.0,
+        };
         for allowed in [60.0, 120.0, 400.0] {
             let expected = venting_s * (1.0 - needed / allowed);
-            let lead = release_lead_s(&robot, &down, dt, 0.06, venting_s, allowed);
+            let lead = release_lead_s(&robot, &down, dt, 0.06, venting_s, &budget(allowed));
             assert!(
                 lead >= expected - dt - 1e-9 && lead <= expected + 2.0 * dt,
                 "allowed {allowed} m/s^2: lead {:.1} ms, expected {:.1} ms",
@@ -341,7 +412,58 @@ mod tests {
             );
         }
         // Never more than the cell allows, and none when even the stop needs all of the force.
-        assert_eq!(release_lead_s(&robot, &down, dt, 0.02, venting_s, 1e4), 0.02);
-        assert_eq!(release_lead_s(&robot, &down, dt, 0.06, venting_s, needed * 0.9), 0.0);
+        assert_eq!(release_lead_s(&robot, &down, dt, 0.02, venting_s, &budget(1e4)), 0.02);
+        assert_eq!(
+            release_lead_s(&robot, &down, dt, 0.06, venting_s, &budget(needed * 0.9)),
+            0.0
+        );
+    }
+
+    /// A swing of J1 by 0.8 rad with a 30 g block on the cell's 6 mm cup, its centre of mass
+    /// 15 mm below the lip: the carry's sideways acceleration asks its shear over the lip's
+    /// friction and the peel of that depth, so the carry is slowed until the cup's budget holds.
+    /// Negative control: the same block with its centre of mass at the lip, on a lip that grips
+    /// three times as well, is slowed less.
+    #[test]
+    fn a_carry_is_slowed_for_the_shear_and_peel_of_a_centre_of_mass_below_the_lip() {
+        let scene = LoadedScene::embedded_default().unwrap();
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let hand = Payload::from_gripper(&scene.scene.gripper);
+        let limits = crate::trajectory::default_limits(&robot, &hand, 0.6, 200);
+        let q0 = robot
+            .ik_tool_nearest(
+                &tool_down_pose(Vector3::new(0.35, 0.0, 0.10), 0.0),
+                &JointVector::from(scene.scene.robot.home_rad()),
+            )
+            .unwrap()
+            .q;
+        let mut q1 = q0;
+        q1[0] += 0.8;
+        let via = [q0, q1];
+        let deep = SealBudget {
+            model: crate::geometry::SuctionModel::new(&scene.scene.gripper),
+            mass_kg: 0.030,
+            com_from_cup_m: Vector3::new(0.0, 0.0, 0.015),
+            com_uncertainty_m: 0.0,
+            share: 0.75,
+        };
+        let full = Trajectory::through(&via, &limits);
+        assert!(
+            seal_overload(&robot, &full, FORCE_CHECK_DT_S, &deep) > 0.0,
+            "the full-speed swing asks too much"
+        );
+        let (slowed, k) = limit_tool_force(&robot, &via, &limits, &deep);
+        assert!(k < 1.0 && k > MIN_TIME_SCALE, "time scale {k}");
+        assert!(seal_overload(&robot, &slowed, FORCE_CHECK_DT_S, &deep) <= 0.0);
+        let shallow = SealBudget {
+            model: crate::geometry::SuctionModel {
+                lip_friction: 1.5,
+                ..deep.model
+            },
+            com_from_cup_m: Vector3::zeros(),
+            ..deep
+        };
+        let (_, k_shallow) = limit_tool_force(&robot, &via, &limits, &shallow);
+        assert!(k_shallow > k + 0.1, "shallow {k_shallow}, deep {k}");
     }
 }

@@ -40,7 +40,7 @@ pub use accel::{
     optimal_duration, optimise_accelerations,
 };
 pub use blend::{Continuity, MotionLimits, Trajectory};
-pub use line::{LineLimits, LineMotion, limit_tool_force, peak_tool_specific_force, release_lead_s, straight_line};
+pub use line::{LineLimits, LineMotion, limit_tool_force, release_lead_s, seal_overload, straight_line};
 pub use retime::{ArcPath, Retimed, RobotPathConstraints, Shares, toppra};
 pub use superposed::{OverlapCheck, Overlapped, overlap_end};
 pub use toppra::{PathConstraints, PathPoint, PathTiming, StageRow, time_optimal};

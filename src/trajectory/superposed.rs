@@ -13,7 +13,8 @@
 //! Units: s, rad. Frames: joint space.
 
 use super::{CORRIDOR_CHECK_DT_S, LineMotion, Motion, Sample, TORQUE_DT_S, Trajectory};
-use super::{check_corridor, peak_tool_specific_force, torques};
+use super::{check_corridor, seal_overload, torques};
+use crate::geometry::SealBudget;
 use crate::planning::CollisionModel;
 use crate::robot::{DynamicsModel, RobotModel};
 
@@ -27,8 +28,8 @@ pub struct OverlapCheck<'a> {
     pub dynamics: &'a DynamicsModel,
     /// The corridor must be clear in this model.
     pub model: &'a CollisionModel,
-    /// With a part held: the largest specific force the cup may exert on it [m/s^2].
-    pub max_force_m_s2: Option<f64>,
+    /// With a part held: what it may ask of the cup.
+    pub seal: Option<&'a SealBudget>,
     /// Each joint's torque stays within this share of the accelerator's limits, or within what
     /// either motion alone demands there if that is more.
     pub torque_share: f64,
@@ -59,8 +60,8 @@ pub fn overlap_end<A: Motion + Clone, B: Motion + Clone>(
         let alone_second: Vec<Sample> = samples.iter().map(|x| second.at(x.t_s)).collect();
         let (p1, p2) = (peak(&alone_first), peak(&alone_second));
         let ok = check
-            .max_force_m_s2
-            .is_none_or(|f| peak_tool_specific_force(check.robot, &both, TORQUE_DT_S) <= f)
+            .seal
+            .is_none_or(|b| seal_overload(check.robot, &both, TORQUE_DT_S, b) <= 0.0)
             && peak(&samples)
                 .iter()
                 .enumerate()
@@ -254,7 +255,7 @@ mod tests {
                 accel_robot: robot,
                 dynamics,
                 model,
-                max_force_m_s2: None,
+                seal: None,
                 torque_share: share,
                 grid_s: 0.002,
             }

@@ -247,21 +247,23 @@ fn a_part_torn_off_the_cup_in_a_blended_lift_leaves_the_arm_on_its_planned_place
     unloaded.scene.gripper.seal_loaded_by_parts = false;
     let r = cycle::run(&unloaded, &robot, &wp, &opts(5, 4), &mut ()).unwrap();
     assert_eq!(r.tally.faults.drops, 0, "{:?}", r.tally.faults);
-    // The slot a drop leaves empty takes the next part: A seed 23 drops picks 15 and 16 (seed 6
-    // dropped picks 2 and 4 in blended lifts until the cup aimed at the cells' mean surface).
-    // Seen failing when the next pick was prepared for the slot after the dropped one's: pick 5
-    // went one slot on, pick 6 into pick 5's part (a collision, 0.99 mm).
+    // The slot a drop leaves empty takes the next part: A seed 28 drops picks 11 and 17 (seed 23
+    // dropped picks 15 and 16 until the seal's load counted shear and peel; seed 6 picks 2 and
+    // 4 in blended lifts until the cup aimed at the cells' mean surface). Seen failing when the
+    // next pick was prepared for the slot after the dropped one's: pick 5 went one slot on,
+    // pick 6 into pick 5's part (a collision, 0.99 mm).
     let wp = LoadedWorkpiece::resolve("A").unwrap();
-    let r = cycle::run(&scene, &robot, &wp, &opts(18, 23), &mut ()).unwrap();
+    let r = cycle::run(&scene, &robot, &wp, &opts(18, 28), &mut ()).unwrap();
     assert!(r.tally.faults.drops >= 2, "{:?}", r.tally.faults);
     assert_eq!(r.tally.faults.collisions, 0, "{:?}", r.tally.incidents);
 }
 
-/// A carry slowed to the accelerator's floor ends where it was planned to: A with a 4.5 mm cup,
-/// seed 11, takes relays on their side, 5 mm from their centre of mass, which the cup barely
-/// holds, so its Place transfers crawl (time scale 0.05, about 9 s). The servo's hold target at
-/// such a transfer's end jumped 0.32 rad (the end fell off the last blend by rounding) and
-/// pick 12 tripped a protective stop, J1 18 deg behind; seen failing so before the fix.
+/// A crawling carry ends where it was planned to: A with a 4.5 mm cup, seed 11, takes relays on
+/// their side, their centre of mass well below and off the lip, which the cup barely holds, so
+/// its Place transfers crawl (time scale below 0.1: picks 7 and 8, 6-7 s each). The servo's
+/// hold target at such a transfer's end jumped 0.32 rad (the end fell off the last blend by
+/// rounding) and pick 12 tripped a protective stop, J1 18 deg behind; seen failing so before
+/// the fix, when those carries were at the time scale's floor (0.05, about 9 s).
 #[test]
 fn a_crawling_carry_ends_without_a_protective_stop() {
     let scene = LoadedScene::embedded_default().unwrap();
@@ -273,12 +275,8 @@ fn a_crawling_carry_ends_without_a_protective_stop() {
         ..opts(13, 11)
     };
     let r = cycle::run(&scene, &robot, &wp, &options, &mut ()).unwrap();
-    let crawling = r
-        .records
-        .iter()
-        .filter(|p| p.suction_speed_factor <= 0.05 + 1e-9)
-        .count();
-    assert!(crawling >= 2, "the case needs carries at the accelerator's floor");
+    let crawling = r.records.iter().filter(|p| p.suction_speed_factor < 0.1).count();
+    assert!(crawling >= 2, "the case needs crawling carries");
     assert_eq!(r.tally.faults.protective_stops, 0, "{:?}", r.tally.incidents);
     assert_eq!(r.tally.ended, Some(EndReason::PicksDone));
 }

@@ -347,7 +347,12 @@ fn held_and_lifted(workpiece: &str, size_z: f64) -> (World, Isometry3<f64>, f64)
     w.move_tool_line(&lifted, 0.5).unwrap();
     w.run_for(0.05).unwrap();
     let g = binpick::robot::GRAVITY_M_S2;
-    let required_n = w.gripper().model.required_n(wp.workpiece.mass_kg, g, seal.com_offset_m);
+    // Straight down and still: the cup pulls against gravity alone (tool z down).
+    let still = Vector3::new(0.0, 0.0, -g);
+    let required_n = w
+        .gripper()
+        .model
+        .required_n(wp.workpiece.mass_kg, &still, &seal.com_from_cup_m);
     (w, lifted, required_n)
 }
 

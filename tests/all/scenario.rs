@@ -605,11 +605,13 @@ fn a_placed_part_is_measured_once_it_rests() {
 /// capture pending: the cell gets out of the view and triggers again. Such a run (F, seed 11,
 /// one pick per capture, no hopper, at pick 42) used to spin forever without a physics step,
 /// waiting for a capture that could never be replaced; it must now finish its picks. Since the
-/// cup aims at the cells' mean surface, grasps fail so seldom that no run of one pick per capture
-/// found the case (A-F, seeds 1-40, 10 picks); B, seed 1, has it at pick 12 on the cell whose tool
-/// comes straight down (`gripper.max_lean_deg` left out)
-/// (its capture spoiled by link 5, then a grasp on a detection a quarter turn off). The run goes
-/// on a thread so that a hang fails the test instead of holding up the suite.
+/// cup aims at the cells' mean surface, grasps fail so seldom that the cloud's recognition gives
+/// no such case in B's first 14 picks on seeds 1-30 (B seed 1 had one at pick 12 until the
+/// seal's load counted shear and peel), so the case is made: recognition by the oracle with
+/// 3 mm of position noise, which puts many grasps off their faces, on the cell whose tool comes
+/// straight down (`gripper.max_lean_deg` left out). B, seed 14, then has a capture spoiled by
+/// the arm and a failed grasp at picks 3, 6 and 9. The run goes on a thread so that a hang
+/// fails the test instead of holding up the suite.
 #[test]
 fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
     #[derive(Default)]
@@ -622,25 +624,30 @@ fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
         }
     }
     let mut scene = LoadedScene::embedded_default().unwrap();
-    // Found on the cell whose tool came straight down onto every face.
     scene.scene.gripper.max_lean_deg = None;
+    scene.scene.sensor.recognition = binpick::config::RecognitionMode::Oracle;
+    scene.scene.sensor.pose_noise_m = 0.003;
     let (tx, rx) = std::sync::mpsc::channel();
     std::thread::spawn(move || {
         let robot = RobotModel::from_scene(&scene).unwrap();
         let wp = LoadedWorkpiece::resolve("B").unwrap();
         let mut spoiled = Spoiled::default();
-        let r = binpick::cycle::run(&scene, &robot, &wp, &deterministic(14, 1), &mut spoiled).unwrap();
+        let r = binpick::cycle::run(&scene, &robot, &wp, &deterministic(14, 14), &mut spoiled).unwrap();
         let _ = tx.send((r, spoiled.0));
     });
     let (r, spoiled) = rx
         .recv_timeout(std::time::Duration::from_secs(300))
         .expect("the run hangs");
     assert_eq!(r.tally.attempts, 14);
-    // The case it is built on: a failed grasp follows a capture the arm spoiled.
-    assert!(spoiled.contains(&Some(12)), "captures spoiled at picks {spoiled:?}");
+    // The case it is built on: a failed grasp follows a capture the arm spoiled, after the first.
+    let cases = r
+        .records
+        .iter()
+        .filter(|p| p.index > 0 && p.outcome.grasp_failed() && spoiled.contains(&Some(p.index)))
+        .count();
     assert!(
-        r.records.iter().any(|p| p.index == 12 && p.outcome.grasp_failed()),
-        "{:?}",
+        cases >= 2,
+        "captures spoiled at picks {spoiled:?}; {:?}",
         r.records.iter().map(|p| p.outcome.detail()).collect::<Vec<_>>()
     );
 }

@@ -43,9 +43,11 @@ fn placed(cell_cup_m: f64, wp: &LoadedWorkpiece) -> usize {
 
 #[test]
 fn the_cup_a_workpiece_brings_decides_what_the_cell_can_place() {
-    // The cell's 35 mm cup fits none of B's faces (30 x 30 and 30 x 20 mm).
-    let own_fits = b_with("[gripper]\ncup_diameter_m = 0.006\n");
-    assert!(placed(0.035, &own_fits) > 0, "B's own 6 mm cup must place parts");
+    // The cell's 35 mm cup fits none of B's faces (30 x 30 and 30 x 20 mm). (A 6 mm cup fits
+    // them too, but holds the 30 g block, its centre of mass 10-15 mm below the lip, only
+    // while nothing pushes it sideways: its lifts tear it off.)
+    let own_fits = b_with("[gripper]\ncup_diameter_m = 0.010\n");
+    assert!(placed(0.035, &own_fits) > 0, "B's own 10 mm cup must place parts");
     // Negative control: the same cell, B without a cup of its own.
     let plain = b_with("");
     assert_eq!(placed(0.035, &plain), 0, "the cell's 35 mm cup fits no face of B");
