@@ -40,7 +40,7 @@ const MIN_TIME_SCALE: f64 = 0.05;
 const TIME_SCALE_TOLERANCE: f64 = 0.02;
 /// Where gravity alone asks more of the cup than its budget, a motion may add this share of the
 /// budget to what gravity asks ([`seal_overload`]).
-pub const STATIC_SLACK: f64 = 0.05;
+const STATIC_SLACK: f64 = 0.05;
 
 /// Speed and acceleration of the tool along a straight line [m/s, m/s^2].
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -92,8 +92,8 @@ impl LineMotion {
 /// the torques (with `dynamics`' payload, friction at its worst near rest) stay within `robot`'s
 /// limits (the cell passes them less its torque margin, which the servo's feedback and the
 /// plant's model error need) and, with `seal`, what a part on the suction cup asks of it within
-/// its budget (the line's acceleration bounded before the torques are checked: see
-/// [`line_accel_within`]).
+/// its budget (the line's acceleration bounded, before the torques are checked, so that it holds
+/// at nine rotations along the line, accelerating and braking).
 /// `None` if the inverse kinematics fails along the line (limits, singularity) or a joint would
 /// jump (a branch change).
 pub fn straight_line(
@@ -261,10 +261,10 @@ fn specific_force_m_s2(
 /// How far what the held part asks of the cup along `motion` exceeds `seal`'s budget at worst
 /// (in shares of it; at most 0: within it; minus infinity for fewer than three samples): the
 /// tool centre point's specific force a - g in the tool's frame, from the forward kinematics
-/// sampled every `dt_s` (second differences). Where
-/// the tool is turned so that gravity alone asks more than the budget (a part hanging off a
-/// tilted cup), no slowing helps: there the motion may add at most [`STATIC_SLACK`] to what
-/// gravity asks, and the plant decides whether the cup holds.
+/// sampled every `dt_s` (second differences). Where the tool is turned so that gravity alone
+/// asks more than the budget (a part hanging off a tilted cup), no slowing helps: there the
+/// motion may add at most 5 % of the budget to what gravity asks (`STATIC_SLACK`), and the plant
+/// decides whether the cup holds.
 pub fn seal_overload(robot: &RobotModel, motion: &impl Motion, dt_s: f64, seal: &SealBudget) -> f64 {
     let p: Vec<nalgebra::Isometry3<f64>> = motion
         .sampled(dt_s)
