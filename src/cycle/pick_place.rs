@@ -308,7 +308,7 @@ impl Run<'_, '_> {
                     self.event(Event::Grasped {
                         part: seal.part,
                         aimed_at: rec.aimed_at.map(|m| m.part),
-                        com_offset_m: seal.com_offset_m,
+                        com_offset_m: seal.com_offset_m(),
                         tilt_rad: seal.tilt_rad,
                     });
                 }

@@ -110,10 +110,15 @@ pub struct Seal {
     pub part: usize,
     /// Tilt of the tool axis from the face normal (rad).
     pub tilt_rad: f64,
-    /// Distance of the part's centre of mass from the cup axis (m).
-    pub com_offset_m: f64,
     /// The part's centre of mass from the lip's centre, tool frame (m): it moves with the tool.
     pub com_from_cup_m: Vector3<f64>,
+}
+
+impl Seal {
+    /// Distance of the part's centre of mass from the cup axis (m).
+    pub fn com_offset_m(&self) -> f64 {
+        self.com_from_cup_m.xy().norm()
+    }
 }
 
 /// What the gripper did, with the simulation time.
@@ -484,11 +489,9 @@ impl World {
         }
         let com = self.part_pose(part) * nalgebra::Point3::from(self.part_shape.com_m);
         let rel = com.coords - centre;
-        let com_offset = (rel - axis * rel.dot(&axis)).norm();
         Ok(Seal {
             part,
             tilt_rad: tilt,
-            com_offset_m: com_offset,
             com_from_cup_m: world_from_tool.rotation.inverse_transform_vector(&rel),
         })
     }
