@@ -317,6 +317,9 @@ impl SuctionModel {
     }
 }
 
+/// Fraction of the cup's holding force a held-part motion may use (the plans' [`SealBudget`]).
+pub const SUCTION_MARGIN: f64 = 0.75;
+
 /// What the plans let a held part ask of the cup: its share of [`SuctionModel::holding_n`], with
 /// the part's mass and its centre of mass where the recognition put it, off by up to
 /// `com_uncertainty_m` in any direction.
@@ -335,6 +338,19 @@ pub struct SealBudget {
 }
 
 impl SealBudget {
+    /// The plans' budget: [`SUCTION_MARGIN`] of the cup's holding force for a part of
+    /// `mass_kg` with its centre of mass at `com_from_cup_m` (tool frame, from the lip's centre),
+    /// off by up to `com_uncertainty_m`.
+    pub fn planned(model: SuctionModel, mass_kg: f64, com_from_cup_m: Vector3<f64>, com_uncertainty_m: f64) -> Self {
+        SealBudget {
+            model,
+            mass_kg,
+            com_from_cup_m,
+            com_uncertainty_m,
+            share: SUCTION_MARGIN,
+        }
+    }
+
     /// The share of the budget (1: all of it) the part asks of the cup with the tool turned
     /// `world_from_tool` and exerting the specific force `specific_force_world` (a - g, m/s^2,
     /// world) on it: [`SuctionModel::required_n`], plus the moment an offset of

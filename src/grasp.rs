@@ -223,6 +223,11 @@ pub struct GraspSelector {
     /// The workpiece's own face margin, for which the part model's cup-fit regions were made (m).
     fit_margin_m: f64,
     cup_radius_m: f64,
+    /// The cup's holding model, the part's mass (kg) and how far its recognised centre of mass
+    /// may be off (m): what the controller's seal budget will slow a carry for.
+    suction: crate::geometry::SuctionModel,
+    mass_kg: f64,
+    com_uncertainty_m: f64,
     face_margin_m: f64,
     max_tilt_rad: f64,
     /// Faces tilted from vertical beyond `max_tilt_rad` and up to this are approached along their
@@ -490,6 +495,9 @@ impl GraspSelector {
             place_footprint_m: [w.size_m[0], w.size_m[1]],
             fit_margin_m: w.grasp.face_margin_m,
             cup_radius_m: g.cup_diameter_m / 2.0,
+            suction: crate::geometry::SuctionModel::new(g),
+            mass_kg: w.mass_kg,
+            com_uncertainty_m: 3.0 * scene.sensor.pose_noise_m,
             // The recognised pose is off by up to two standard deviations of its noise: the cup
             // must stay on the face that much farther from its edges.
             face_margin_m: w.grasp.face_margin_m + 2.0 * scene.sensor.pose_noise_m,
@@ -669,6 +677,28 @@ impl GraspSelector {
             .fold(0.0, f64::max)
     }
 
+    /// The uniform time scale (1: full speed) by which the controller's seal budget will slow
+    /// the carry of candidate `c` on detection `det`: [`crate::trajectory::limit_tool_force`]
+    /// on the joint move from its lifted pose to its place pose, at the speeds and accelerations
+    /// [`Self::motion_time_s`] assumes, the part's centre of mass where the detection puts it
+    /// ([`crate::geometry::SealBudget::planned`], as the controller reads it). A part held with
+    /// its centre of mass far below or beside the lip is carried slower.
+    fn carry_time_scale(&self, det: &Detection, c: &GraspCandidate) -> f64 {
+        let tool_from_part = c.world_from_tool.inverse() * det.world_from_part;
+        let seal = crate::geometry::SealBudget::planned(
+            self.suction,
+            self.mass_kg,
+            (tool_from_part * Point3::from(self.peel_com_m)).coords,
+            self.com_uncertainty_m,
+        );
+        let limits = crate::trajectory::MotionLimits {
+            vel_rad_s: JointVector::from_fn(|i, _| self.robot.joints[i].max_vel_rad_s),
+            accel_rad_s2: JointVector::from_fn(|i, _| 0.5 * self.robot.joints[i].max_accel_rad_s2),
+        };
+        let via = [JointVector::from(c.q_lifted), JointVector::from(c.q_place)];
+        crate::trajectory::limit_tool_force(&self.robot, &via, &limits, &seal).1
+    }
+
     /// Proposes, filters and ranks grasps on `detections`, to be placed at `world_from_slot`
     /// (the part's upright pose in its slot), starting from joints `q_now`.
     pub fn select(
@@ -794,7 +824,8 @@ impl GraspSelector {
                             * (0.5 + 0.5 * det.visible_fraction);
                         let exposure =
                             ((point.z - floor_z) / pile_top).clamp(0.0, 1.0) * 0.5 + 0.5 * det.visible_fraction;
-                        let motion = self.motion_time_s(&JointVector::from(c.q_grasp), &JointVector::from(c.q_place));
+                        let motion = self.motion_time_s(&JointVector::from(c.q_grasp), &JointVector::from(c.q_place))
+                            / self.carry_time_scale(det, &c);
                         let cl = clearance.min(0.02);
                         c.score = Score {
                             exposure,
@@ -1445,6 +1476,34 @@ mod tests {
             sel.covered(&corner, &det, &face, &face_point),
             "a part on the corner is not seen"
         );
+    }
+
+    /// A grasp's carry is ranked at the speed the controller's seal budget will leave it: the
+    /// flat strip's best grasp carried at full speed when the strip weighs next to nothing (the
+    /// control), slowed when it weighs 50 g (its centre of mass 2.5 mm below and up to a few
+    /// millimetres beside the 6 mm cup), and its ranked motion time is the full-speed one over
+    /// that time scale.
+    #[test]
+    fn a_carry_the_seal_will_slow_ranks_as_slow() {
+        let (mut sel, _, det, map, _, _) = bare_strip();
+        let scene = crate::config::LoadedScene::embedded_default().unwrap();
+        let c = LoadedWorkpiece::resolve("C").unwrap().workpiece;
+        let slot = scene.scene.world_from_slots(&c)[0];
+        let q_now = JointVector::from(scene.scene.robot.home_rad());
+        sel.mass_kg = 1e-4;
+        let light = sel.select(std::slice::from_ref(&det), &map, &slot, &q_now);
+        let best = light.best().expect("the flat strip is a candidate").clone();
+        assert_eq!(sel.carry_time_scale(&det, &best), 1.0);
+        sel.mass_kg = 0.050;
+        let k = sel.carry_time_scale(&det, &best);
+        assert!(k < 0.9, "a 50 g strip carried at {k} of full speed");
+        let heavy = sel.select(std::slice::from_ref(&det), &map, &slot, &q_now);
+        let same = heavy
+            .ranked
+            .iter()
+            .find(|h| h.face == best.face && h.q_place == best.q_place)
+            .expect("the same grasp is ranked");
+        assert!((same.score.motion_s - best.score.motion_s / k).abs() < 1e-9);
     }
 
     /// A strip lying on its 5 mm side shows the cup no face within 60 deg of up: the plan

@@ -59,11 +59,12 @@ pub mod trays;
 
 use nalgebra::{Isometry3, Vector3};
 
+pub use crate::geometry::SUCTION_MARGIN;
 pub use events::{
     CycleEvent, EndReason, Event, EventLog, IncidentKind, LeftDuring, Observer, Observers, PartLoss, PlacementError,
     Planned, Recognised, Stage, StallCause, StartMismatch, Takt,
 };
-pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, SUCTION_MARGIN, above_place};
+pub use motions::{PLACE_APPROACH_M, RELEASE_ABOVE_M, above_place};
 pub use outcome::{Fault, FaultDuring, MotionFailure, NoSeal, Outcome, PhysicsFault, Slip, Stop, WrongPose};
 pub use records::{
     FIRST_PICKS, Faults, Incident, IntervalCause, Overlaps, PickRecord, RunResult, StageCompute, TaktCauses, Tally,

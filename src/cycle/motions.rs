@@ -34,8 +34,6 @@ use crate::trajectory::{
     limit_tool_force, overlap_end, release_lead_s, straight_line,
 };
 
-/// Fraction of the cup's holding force a held-part motion may use.
-pub const SUCTION_MARGIN: f64 = 0.75;
 /// The part is released at least this far above its resting height in the slot (m) (the
 /// recognised pose is a little off; the part drops the rest). See `Cell::release_above_m`.
 pub const RELEASE_ABOVE_M: f64 = 0.003;
@@ -156,7 +154,7 @@ pub(super) struct Holding<'a> {
     pub model: &'a CollisionModel,
     /// Hand and part as the controller believes them.
     pub payload: Payload,
-    /// What the part may ask of the cup: [`SUCTION_MARGIN`] of its holding force.
+    /// What the part may ask of the cup: [`crate::geometry::SUCTION_MARGIN`] of its holding force.
     pub seal: SealBudget,
 }
 
@@ -488,13 +486,12 @@ impl Run<'_, '_> {
         // The peel arm: the centre of mass the selector's peel model reads (a mesh part's true
         // one), where the recognition put it, off by up to three standard deviations of its noise.
         let com_in_tool = tool_from_part * nalgebra::Point3::from(cell.selector.peel_com_m());
-        let seal = SealBudget {
-            model: cell.suction,
-            mass_kg: cell.shape.mass_kg,
-            com_from_cup_m: com_in_tool.coords,
-            com_uncertainty_m: 3.0 * self.st.sensor.pose_noise_m,
-            share: SUCTION_MARGIN,
-        };
+        let seal = SealBudget::planned(
+            cell.suction,
+            cell.shape.mass_kg,
+            com_in_tool.coords,
+            3.0 * self.st.sensor.pose_noise_m,
+        );
         // The controller's payload: the nominal part at the cup centre (the plant carries the
         // part where the cup actually sealed: see `execute`).
         let held = hand.combined(&cell.nominal_part);
