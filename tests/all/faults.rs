@@ -258,24 +258,27 @@ fn a_part_torn_off_the_cup_in_a_blended_lift_leaves_the_arm_on_its_planned_place
     assert_eq!(r.tally.faults.collisions, 0, "{:?}", r.tally.incidents);
 }
 
-/// A crawling carry ends where it was planned to: A with a 4.5 mm cup, seed 11, takes relays on
-/// their side, their centre of mass well below and off the lip, which the cup barely holds, so
-/// its Place transfers crawl (time scale below 0.1: picks 7 and 8, 6-7 s each). The servo's
-/// hold target at such a transfer's end jumped 0.32 rad (the end fell off the last blend by
-/// rounding) and pick 12 tripped a protective stop, J1 18 deg behind; seen failing so before
-/// the fix, when those carries were at the time scale's floor (0.05, about 9 s).
+/// A crawling carry ends where it was planned to: A with a 4.5 mm cup and weighing 20 g, seed 11,
+/// is held with its centre of mass well below and off the lip, which the cup barely holds, so
+/// its Place transfers crawl (time scale below 0.15: picks 3 and 9, 4-5 s each; the grasp
+/// selector, which ranks a carry by what its seal allows, leaves the 12 g relay on this cup no
+/// such carry). The servo's hold target at such a transfer's end jumped 0.32 rad (the end fell
+/// off the last blend by rounding) and pick 12 tripped a protective stop, J1 18 deg behind;
+/// seen failing so before the fix, when those carries were at the time scale's floor (0.05,
+/// about 9 s).
 #[test]
 fn a_crawling_carry_ends_without_a_protective_stop() {
     let scene = LoadedScene::embedded_default().unwrap();
     let robot = RobotModel::from_scene(&scene).unwrap();
     let mut wp = LoadedWorkpiece::resolve("A").unwrap();
     wp.workpiece.gripper.as_mut().unwrap().cup_diameter_m = Some(0.0045);
+    wp.workpiece.mass_kg = 0.020;
     let options = RunOptions {
         keep_records: true,
         ..opts(13, 11)
     };
     let r = cycle::run(&scene, &robot, &wp, &options, &mut ()).unwrap();
-    let crawling = r.records.iter().filter(|p| p.suction_speed_factor < 0.1).count();
+    let crawling = r.records.iter().filter(|p| p.suction_speed_factor < 0.15).count();
     assert!(crawling >= 2, "the case needs crawling carries");
     assert_eq!(r.tally.faults.protective_stops, 0, "{:?}", r.tally.incidents);
     assert_eq!(r.tally.ended, Some(EndReason::PicksDone));

@@ -610,8 +610,9 @@ fn a_placed_part_is_measured_once_it_rests() {
 /// seal's load counted shear and peel), so the case is made: recognition by the oracle with
 /// 3 mm of position noise, which puts many grasps off their faces, on the cell whose tool comes
 /// straight down (`gripper.max_lean_deg` left out). B, seed 14, then has a capture spoiled by
-/// the arm and a failed grasp at picks 3, 6 and 9. The run goes on a thread so that a hang
-/// fails the test instead of holding up the suite.
+/// the arm and a failed grasp at pick 6 (at picks 3, 6 and 9 before the grasp selector ranked a
+/// carry by what its seal allows). The run goes on a thread so that a hang fails the test
+/// instead of holding up the suite.
 #[test]
 fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
     #[derive(Default)]
@@ -646,7 +647,7 @@ fn a_spoiled_capture_with_the_arm_in_the_view_does_not_hang_the_cell() {
         .filter(|p| p.index > 0 && p.outcome.grasp_failed() && spoiled.contains(&Some(p.index)))
         .count();
     assert!(
-        cases >= 2,
+        cases >= 1,
         "captures spoiled at picks {spoiled:?}; {:?}",
         r.records.iter().map(|p| p.outcome.detail()).collect::<Vec<_>>()
     );
