@@ -677,6 +677,25 @@ impl GraspSelector {
             .fold(0.0, f64::max)
     }
 
+    /// What the plans let the part ask of the cup with the tool at `world_from_tool` and the part
+    /// recognised at `world_from_part`: [`crate::geometry::SealBudget::planned`] with the part's
+    /// mass, the centre of mass the peel model reads where the recognition puts it, and three
+    /// standard deviations of the recognition's position noise. The controller's budget for the
+    /// chosen grasp, and the one each candidate's carry is ranked by.
+    pub fn seal_budget(
+        &self,
+        world_from_tool: &Isometry3<f64>,
+        world_from_part: &Isometry3<f64>,
+    ) -> crate::geometry::SealBudget {
+        let tool_from_part = world_from_tool.inverse() * world_from_part;
+        crate::geometry::SealBudget::planned(
+            self.suction,
+            self.mass_kg,
+            (tool_from_part * Point3::from(self.peel_com_m)).coords,
+            self.com_uncertainty_m,
+        )
+    }
+
     /// The uniform time scale (1: full speed) by which the controller's seal budget will slow
     /// the carry of candidate `c` on detection `det`: [`crate::trajectory::limit_tool_force`]
     /// on the joint move from its lifted pose to its place pose, at the speeds and accelerations
@@ -684,13 +703,7 @@ impl GraspSelector {
     /// ([`crate::geometry::SealBudget::planned`], as the controller reads it). A part held with
     /// its centre of mass far below or beside the lip is carried slower.
     fn carry_time_scale(&self, det: &Detection, c: &GraspCandidate) -> f64 {
-        let tool_from_part = c.world_from_tool.inverse() * det.world_from_part;
-        let seal = crate::geometry::SealBudget::planned(
-            self.suction,
-            self.mass_kg,
-            (tool_from_part * Point3::from(self.peel_com_m)).coords,
-            self.com_uncertainty_m,
-        );
+        let seal = self.seal_budget(&c.world_from_tool, &det.world_from_part);
         let limits = crate::trajectory::MotionLimits {
             vel_rad_s: JointVector::from_fn(|i, _| self.robot.joints[i].max_vel_rad_s),
             accel_rad_s2: JointVector::from_fn(|i, _| 0.5 * self.robot.joints[i].max_accel_rad_s2),

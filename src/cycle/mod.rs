@@ -73,7 +73,6 @@ pub use records::{
 pub use sensing::SensedResult;
 
 use crate::config::{LoadedScene, LoadedWorkpiece, Scene};
-use crate::geometry::SuctionModel;
 use crate::grasp::GraspSelector;
 use crate::physics::pile::PileOptions;
 use crate::physics::suction::GripperEvent;
@@ -197,8 +196,6 @@ pub struct Cell<'a> {
     pub nominal_part: Payload,
     /// The workpiece's shape and mass.
     pub shape: PartShape,
-    /// The cup's holding-force model.
-    pub suction: SuctionModel,
     /// The place slots in the world, in filling order.
     pub slots: Vec<Isometry3<f64>>,
     /// Compute budgets charged in deterministic mode: grasp selection, Pick and Place motion.
@@ -407,7 +404,6 @@ impl<'a> Cell<'a> {
             hand: Payload::from_gripper(&s.gripper),
             nominal_part: Payload::point(wp.mass_kg, robot.flange_from_tool.translation.vector),
             shape,
-            suction: SuctionModel::new(&s.gripper),
             slots,
             budgets: StageCompute {
                 grasp_s: s.compute.grasp_estimation_s,

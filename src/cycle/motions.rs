@@ -483,15 +483,9 @@ impl Run<'_, '_> {
         let wall = Instant::now();
         let world_from_part = detections[grasp.detection].world_from_part;
         let tool_from_part = grasp.world_from_tool.inverse() * world_from_part;
-        // The peel arm: the centre of mass the selector's peel model reads (a mesh part's true
-        // one), where the recognition put it, off by up to three standard deviations of its noise.
-        let com_in_tool = tool_from_part * nalgebra::Point3::from(cell.selector.peel_com_m());
-        let seal = SealBudget::planned(
-            cell.suction,
-            cell.shape.mass_kg,
-            com_in_tool.coords,
-            3.0 * self.st.sensor.pose_noise_m,
-        );
+        // What the part may ask of the cup: the budget the selector ranked this grasp's carry by
+        // (the centre of mass its peel model reads, where the recognition put it).
+        let seal = cell.selector.seal_budget(&grasp.world_from_tool, &world_from_part);
         // The controller's payload: the nominal part at the cup centre (the plant carries the
         // part where the cup actually sealed: see `execute`).
         let held = hand.combined(&cell.nominal_part);

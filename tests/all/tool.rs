@@ -70,7 +70,9 @@ fn a_cell_not_resolved_for_the_workpieces_cup_is_refused_by_the_cycle() {
     let resolved = scene.for_workpiece(&b);
     let cell = binpick::cycle::Cell::new(&resolved, &robot, &b, opts).unwrap();
     assert_eq!(cell.scene.gripper.cup_diameter_m, 0.012);
-    assert!((cell.suction.cup_radius_m - 0.006).abs() < 1e-12);
+    let here = nalgebra::Isometry3::identity();
+    let seal = cell.selector.seal_budget(&here, &here);
+    assert!((seal.model.cup_radius_m - 0.006).abs() < 1e-12);
 }
 
 #[test]
