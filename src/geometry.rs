@@ -308,12 +308,14 @@ impl SuctionModel {
         pull + shear / self.lip_friction + 4.0 * moment.xy().norm() / (2.0 * self.cup_radius_m)
     }
 
-    /// The force the cup must exert (N) against loads other bodies put on the held part: their
-    /// force `force_n` (N) and its moment about the cup centre across the cup axis
-    /// `moment_across_nm` (N m), peeling as the offset weight does: |F| + 4 |M| / d. Added to
-    /// [`SuctionModel::required_n`], a bound on the combined load's.
-    pub fn contact_required_n(&self, force_n: f64, moment_across_nm: f64) -> f64 {
-        force_n + 4.0 * moment_across_nm / (2.0 * self.cup_radius_m)
+    /// The force the cup must exert (N) against loads other bodies put on the held part, split
+    /// as [`SuctionModel::required_n`] splits the part's own: their pull off the cup along its
+    /// axis `pull_n` (N) in full, their shear across the lip `shear_n` (N) over
+    /// [`SuctionModel::lip_friction`], and their moment about the cup centre across the axis
+    /// `moment_across_nm` (N m) as peel, 4 |M| / d. Added to [`SuctionModel::required_n`], a
+    /// bound on the combined load's.
+    pub fn contact_required_n(&self, pull_n: f64, shear_n: f64, moment_across_nm: f64) -> f64 {
+        pull_n + shear_n / self.lip_friction + 4.0 * moment_across_nm / (2.0 * self.cup_radius_m)
     }
 }
 
@@ -466,6 +468,15 @@ mod tests {
         assert!(mass * sideways.norm() < case);
         // A push into the cup (tool z down, pressed down harder than gravity) pulls nothing.
         assert_eq!(m.required_n(mass, &Vector3::new(0.0, 0.0, 1.0), &at_lip), 0.0);
+        // Other bodies' loads split the same way: a pull in full, a shear over the friction, a
+        // moment as peel. The weight of the sideways case, applied by a neighbour at the centre
+        // of mass instead of by the motion, asks as much.
+        let (pull_n, shear_n) = (mass * g, mass * a);
+        let contact = m.contact_required_n(pull_n, shear_n, 0.003 * shear_n);
+        assert!((contact - case - peel).abs() < 1e-12);
+        // Control: a push straight along the axis with no lever (the old model's |F|) asks less
+        // than the same force across it.
+        assert!(m.contact_required_n(shear_n, 0.0, 0.0) < m.contact_required_n(0.0, shear_n, 0.0));
         // The budget: a tool turned 40 degrees from straight down asks more than one straight down.
         let budget = SealBudget {
             model: m,

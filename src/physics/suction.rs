@@ -49,10 +49,13 @@ const BELLOWS_TAKE_UP_M: f64 = 0.001;
 /// measured.
 pub const CONTACT_LOAD_LAG_S: f64 = 0.01;
 
-/// What other parts push on the held part with, low-passed over [`CONTACT_LOAD_LAG_S`]: of the
-/// solver's normal contact impulses over the substep, the pull along the cup axis away from the
-/// cup, and its moment. A push toward the cup (a part under the held one) is carried by the lip
-/// and neither loads nor relieves the seal; shear and friction are left out.
+/// What other parts push on the held part with, low-passed over [`CONTACT_LOAD_LAG_S`]: the
+/// solver's normal contact impulses over the substep that do not push the held part toward the
+/// cup, and their moment about the cup centre. A contact that pushes it toward the cup (a part
+/// under the held one, level or slanted) is carried by the lip and neither loads nor relieves
+/// the seal; one across the cup's axis or away from the cup (a neighbour the held part strikes,
+/// drags or carries) pulls, shears the lip and, off the cup's centre, peels it. Friction
+/// impulses are left out.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct ContactLoad {
     /// Their force on the held part [N, world].
@@ -612,9 +615,11 @@ impl World {
             return inertial;
         }
         let axis = self.world_from_tool().rotation * Vector3::z();
-        let m = self.held_load.moment_nm;
+        let (f, m) = (self.held_load.force_n, self.held_load.moment_nm);
+        let along = f.dot(&axis);
+        let shear = (f - axis * along).norm();
         let across = (m - axis * m.dot(&axis)).norm();
-        inertial + model.contact_required_n(self.held_load.force_n.norm(), across)
+        inertial + model.contact_required_n(along.max(0.0), shear, across)
     }
 
     /// The low-passed contact load on the held part ([`ContactLoad`]), if a part is held.
@@ -623,9 +628,10 @@ impl World {
     }
 
     /// After a solved substep of `dt_s` with the tool at `world_from_tool`: the normal impulses
-    /// the solver applied between the held part and the parts touching it, as the pull on the
-    /// held part away from the cup and its moment about the cup centre, into the low pass. Only
-    /// dynamic bodies push: a kinematic held part gets no impulse from the tray or the arm.
+    /// the solver applied between the held part and the parts touching it, those that do not
+    /// push it toward the cup ([`ContactLoad`]), and their moment about the cup centre, into the
+    /// low pass.
+    /// Only dynamic bodies push: a kinematic held part gets no impulse from the tray or the arm.
     pub(super) fn update_held_load(&mut self, world_from_tool: &Isometry3<f64>, dt_s: f64) {
         let Some((seal, _)) = self.gripper.held().filter(|_| self.gripper.loaded_by_parts) else {
             return;
@@ -657,14 +663,13 @@ impl World {
                     }
                     let local = if held_first { pt.local_p1 } else { pt.local_p2 };
                     let at_m = point_from_sim(held_pose.transform_point(local));
-                    // rapier units: kg mm / s; a force in N is that over dt, over 1000. Only
-                    // its pull, away from the cup along its axis.
+                    // rapier units: kg mm / s; a force in N is that over dt, over 1000. A push
+                    // toward the cup (a support under the held part; at rest its slant's
+                    // sideways part is held by its friction, left out) is the lip's to carry.
                     let f = toward_held * (impulse / SIM_UNITS_PER_M / dt_s);
-                    let pull_n = f.dot(&axis);
-                    if pull_n <= 0.0 {
+                    if f.dot(&axis) < 0.0 {
                         continue;
                     }
-                    let f = axis * pull_n;
                     raw.force_n += f;
                     raw.moment_nm += (at_m - cup).cross(&f);
                 }

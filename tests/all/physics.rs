@@ -850,6 +850,97 @@ fn a_part_lying_across_the_held_part_loads_the_cup_with_its_weight_and_peels_it_
     assert_eq!(w.held_contact_load().map(|l| l.force_n.norm()), Some(0.0));
 }
 
+/// What a neighbour the held part drives sideways puts on the cup: a B block held on its top by
+/// its own 16 mm cup, 2 mm off the floor, moved sideways into a second block 15 mm away. The
+/// contacts' push is across the cup's axis: pushing the block along the floor, the held block
+/// feels the floor's friction on it (mu m g, from the workpiece file, within a factor of 3) against
+/// its motion, and hardly any pull; driven on until the second block is jammed against the
+/// tray's wall, the push's shear and peel tear the held block off (`gripper.seal_loaded_by_parts`
+/// on). Before 2026-12-06 the seal counted only a contact's pull along the axis, and a push
+/// across it not at all: neither the load nor the tear-off. Negative controls: nothing in the
+/// way, no load and the block stays; the key off, the jam leaves it on the cup.
+#[test]
+fn a_neighbour_pushed_sideways_shears_the_cup_and_a_jam_tears_the_held_part_off() {
+    // The world after the push, the largest load against the motion and pull seen during it
+    // (N), the block's mass and friction coefficient.
+    let pushed = |neighbour: bool, jam: bool, loaded: bool| {
+        let mut scene = LoadedScene::embedded_default().unwrap();
+        scene.scene.gripper.seal_loaded_by_parts = loaded;
+        // B's own 16 mm cup (its workpiece file's).
+        scene.scene.gripper.cup_diameter_m = 0.016;
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let wp = LoadedWorkpiece::resolve("B").unwrap();
+        let shape = PartShape::build(&wp.workpiece, &wp.source).unwrap();
+        let mut w = World::new(&scene.scene, &robot, shape);
+        // The held block 0.03 m from the tray's centre toward its +y wall (0.12 m): the second
+        // block, 15 mm beyond it, then has 0.03 m to the wall.
+        let y0 = 0.03;
+        let top = lone_part(&mut w, 0.020, (0.0, y0), UnitQuaternion::identity());
+        if neighbour {
+            lone_part(&mut w, 0.020, (0.0, y0 + 0.045), UnitQuaternion::identity());
+        }
+        let ev = grasp_at(&mut w, tool_down_pose(top, 0.0));
+        assert!(matches!(ev, GripperEvent::Grasped { .. }), "{ev:?}");
+        let up = top + Vector3::z() * 0.002;
+        let toward_wall = w.pick_tray().world_from_tray.rotation * Vector3::y();
+        w.move_tool_line(&tool_down_pose(up, 0.0), 0.2).unwrap();
+        // 25 mm toward the wall at a steady 20 mm/s: the 15 mm gap closed, then the second
+        // block pushed 10 mm. The load against the motion, its largest over the push.
+        let start = w.world_from_tool();
+        let n = (0.025 / 0.02 / w.dt_s()).ceil() as usize;
+        let mut against_max_n: f64 = 0.0;
+        let mut pull_max_n: f64 = 0.0;
+        for k in 1..=n {
+            let pose = Isometry3::from_parts(
+                Translation3::from(start.translation.vector + toward_wall * (0.025 * k as f64 / n as f64)),
+                start.rotation,
+            );
+            let q = w.robot().ik_tool_nearest(&pose, &w.joints()).unwrap();
+            w.set_joint_target(&q.q);
+            w.step().unwrap();
+            if let Some(l) = w.held_contact_load() {
+                against_max_n = against_max_n.max(-l.force_n.dot(&toward_wall));
+                pull_max_n = pull_max_n.max(l.force_n.z.abs());
+            }
+        }
+        if jam {
+            // On until the second block meets the wall (20 mm on), and 5 mm into it.
+            let _ = w.move_tool_line(&tool_down_pose(up + toward_wall * 0.050, 0.0), 1.5);
+        }
+        (
+            w,
+            [against_max_n, pull_max_n],
+            wp.workpiece.mass_kg,
+            wp.workpiece.friction,
+        )
+    };
+    // Negative control: nothing in the way.
+    let (w, load, _, _) = pushed(false, false, true);
+    assert_eq!(w.held_part(), Some(0));
+    assert!(load[0] < 1e-6 && load[1] < 1e-6, "{load:?}");
+    // Pushing the block along the floor: a load across the axis, against the motion.
+    let (w, [against_n, pull_n], mass_kg, friction) = pushed(true, false, true);
+    assert_eq!(w.held_part(), Some(0), "the cup holds a block pushed along the floor");
+    let sliding_n = friction * mass_kg * binpick::robot::GRAVITY_M_S2;
+    assert!(
+        against_n > sliding_n / 3.0 && against_n < 3.0 * sliding_n,
+        "{against_n} N against mu m g = {sliding_n} N"
+    );
+    assert!(pull_n < 0.5 * against_n, "{pull_n} N: the push is across the axis");
+    // Into the jam: torn off.
+    let (mut w, _, _, _) = pushed(true, true, true);
+    assert!(w.held_part().is_none(), "the jam's push tears the block off");
+    assert!(
+        w.take_gripper_events()
+            .iter()
+            .any(|e| matches!(e, GripperEvent::Slipped { part: 0, .. })),
+        "no slip"
+    );
+    // The key off: the seal sees no load, and the jam leaves the block on the cup.
+    let (w, _, _, _) = pushed(true, true, false);
+    assert_eq!(w.held_part(), Some(0));
+}
+
 /// D lying on its side on the floor, with the cell's tool given a 4 mm cup that seals on round
 /// surfaces of `round_min_radius_m` and up (`None`: a cup for flat faces); the grasp on the top
 /// line of its can, over the part's centre of mass along the can's axis.
