@@ -363,6 +363,14 @@ impl SealBudget {
         let worst_offset_n = 4.0 * self.com_uncertainty_m * self.mass_kg * sf.norm() / (2.0 * m.cup_radius_m);
         (m.required_n(self.mass_kg, &sf, &self.com_from_cup_m) + worst_offset_n) / (self.share * m.holding_n)
     }
+
+    /// The share of the budget a push of `push_n` (N) on the held part across the cup's axis,
+    /// `depth_m` below the lip, asks: its shear over the lip's friction and its moment as peel
+    /// ([`SuctionModel::contact_required_n`]).
+    pub fn push_share(&self, push_n: f64, depth_m: f64) -> f64 {
+        let m = &self.model;
+        m.contact_required_n(0.0, push_n, push_n * depth_m.abs()) / (self.share * m.holding_n)
+    }
 }
 
 /// The least distance between two boxes, each given by `world_from_box` (its centre and axes)
@@ -403,6 +411,53 @@ pub fn box_column_distance_m(
     .map_or(0.0, |d| d.distance as f64 / 1e3)
 }
 
+/// Convex hull of points in a plane (Andrew's monotone chain), counter-clockwise (m).
+pub fn convex_hull_2d(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
+    let mut p: Vec<[f64; 2]> = pts.to_vec();
+    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
+    p.dedup();
+    if p.len() < 3 {
+        return p;
+    }
+    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
+    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
+    for pass in 0..2 {
+        let start = hull.len();
+        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
+            Box::new(p.iter())
+        } else {
+            Box::new(p.iter().rev())
+        };
+        for &q in iter {
+            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
+                hull.pop();
+            }
+            hull.push(q);
+        }
+        hull.pop();
+    }
+    hull
+}
+
+/// How far the point `p` lies outside the convex polygon `hull` (counter-clockwise, as
+/// [`convex_hull_2d`] gives it) (m): its distance to the nearest edge, 0 on or inside it.
+pub fn outside_convex_m(hull: &[[f64; 2]], p: [f64; 2]) -> f64 {
+    let n = hull.len();
+    let mut inside = n >= 3;
+    let mut nearest = f64::INFINITY;
+    for i in 0..n {
+        let (a, b) = (hull[i], hull[(i + 1) % n]);
+        let (ex, ey) = (b[0] - a[0], b[1] - a[1]);
+        let (px, py) = (p[0] - a[0], p[1] - a[1]);
+        if ex * py - ey * px < 0.0 {
+            inside = false;
+        }
+        let t = ((px * ex + py * ey) / (ex * ex + ey * ey).max(1e-24)).clamp(0.0, 1.0);
+        nearest = nearest.min((px - t * ex).hypot(py - t * ey));
+    }
+    if inside { 0.0 } else { nearest }
+}
+
 /// A vector (m) in millimetres, single precision, for parry.
 fn mm_vector(v_m: &Vector3<f64>) -> rapier3d::math::Vector {
     rapier3d::math::Vector::new((v_m.x * 1e3) as f32, (v_m.y * 1e3) as f32, (v_m.z * 1e3) as f32)
@@ -419,6 +474,21 @@ fn mm_pose(iso: &Isometry3<f64>) -> rapier3d::math::Pose {
 mod tests {
     use super::*;
     use crate::config::LoadedScene;
+
+    /// The hull of a square's corners and an inner point is the square, counter-clockwise; a
+    /// point's distance outside it is to the nearest edge or corner, 0 inside and on it.
+    #[test]
+    fn a_point_outside_a_convex_outline_is_as_far_as_its_nearest_edge_or_corner() {
+        let hull = convex_hull_2d(&[[1.0, 1.0], [0.0, 0.0], [0.5, 0.5], [1.0, 0.0], [0.0, 1.0]]);
+        assert_eq!(hull, vec![[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]]);
+        assert_eq!(outside_convex_m(&hull, [0.5, 0.5]), 0.0);
+        assert_eq!(outside_convex_m(&hull, [1.0, 0.5]), 0.0);
+        assert!((outside_convex_m(&hull, [1.5, 0.5]) - 0.5).abs() < 1e-12);
+        assert!((outside_convex_m(&hull, [-0.3, 1.4]) - 0.5).abs() < 1e-12);
+        // Control: turned clockwise, the same outline reads everything as outside its edges.
+        let clockwise: Vec<[f64; 2]> = hull.iter().rev().cloned().collect();
+        assert!(outside_convex_m(&clockwise, [0.5, 0.5]) > 0.0);
+    }
 
     #[test]
     fn trays_are_five_pieces_that_enclose_the_inner_floor() {

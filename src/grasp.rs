@@ -13,7 +13,8 @@
 //! seals on round surfaces (`gripper.round_min_radius_m`), also a round body's side, as tangent
 //! strips all round ([`crate::part::round_side`]). Pick the tool yaw
 //! that makes the place motion quickest; rank by exposure, clearance, expected grasp success and
-//! expected motion time. Nothing here reads the world's ground truth.
+//! expected motion time, and score how hemmed in by its neighbours each part is (the lift reads
+//! it). Nothing here reads the world's ground truth.
 //!
 //! Units: m, rad, s. Frames: `world_from_part` (detected), `world_from_tool` (z out of the cup,
 //! into the face), the pick tray frame for the height map and the walls.
@@ -40,6 +41,11 @@ pub const COVER_TOLERANCE_M: f64 = 0.003;
 /// place tray's 5 degree tolerance. Allowing the cup's whole tilt instead would set parts down
 /// far from a pose they stay in, with the tool leaning over the slot toward the tray's wall.
 pub const SIDE_PLACE_OFF_MAX_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
+
+/// How far beyond a part's outline the grasp selector reads its neighbours for
+/// [`Score::hemmed`] (m): the gap a neighbour touching or leaning on the part leaves in the
+/// cloud, a cell or two, not the next part over.
+pub const HEM_RING_M: f64 = 0.003;
 
 /// The round body's side strips `scene`'s cup takes, when it seals on round surfaces
 /// (`gripper.round_min_radius_m`), each with the pose the part is set down in
@@ -171,6 +177,9 @@ pub struct Score {
     pub motion_s: f64,
     /// exposure + clearance/20 mm + 2 success - motion time.
     pub total: f64,
+    /// How hemmed in by its neighbours the cloud shows the part ([`GraspSelector::hemmed`]):
+    /// 0 free, about 1 and more standing in a well. Not part of `total`: the lift reads it.
+    pub hemmed: f64,
 }
 
 /// The selector's answer.
@@ -846,6 +855,7 @@ impl GraspSelector {
                             success,
                             motion_s: motion,
                             total: exposure + cl / 0.02 + 2.0 * success - motion,
+                            hemmed: self.hemmed(height_map, &tray_from_part),
                         };
                         plan.ranked.push(c);
                     }
@@ -974,6 +984,50 @@ impl GraspSelector {
             }
         }
         own
+    }
+
+    /// How hemmed in by its neighbours the map `hm` (tray frame, what was seen) shows a part
+    /// recognised at `tray_from_part`: over the seen cells inside the walls whose centres lie
+    /// within [`HEM_RING_M`] outside its outline (its bounding box at that pose, seen from
+    /// above), each cell's height above the part's lowest corner in the part's height there
+    /// (its highest corner's less its lowest's), f; `hemmed` = 4 x the share of those cells with
+    /// f above 1/2, plus how far the highest f exceeds 0.8 (f capped at 1.5). A neighbour
+    /// standing up the part's side, or leaning on it, loads the cup as the part is lifted out
+    /// past it (`gripper.seal_loaded_by_parts`); a part on top of the pile or beside only lower
+    /// ones scores 0, as one where nothing beside it was seen. The weights were chosen on A's
+    /// drops with every lift at the cell's acceleration (docs/model.md, "The cell cycle").
+    pub fn hemmed(&self, hm: &HeightMap, tray_from_part: &Isometry3<f64>) -> f64 {
+        let half_m = Vector3::from(self.size_m) / 2.0;
+        let corners: Vec<Point3<f64>> = (0..8)
+            .map(|i| {
+                let sign = |bit: usize| if i & bit == 0 { -1.0 } else { 1.0 };
+                tray_from_part * Point3::new(sign(1) * half_m.x, sign(2) * half_m.y, sign(4) * half_m.z)
+            })
+            .collect();
+        let low_m = corners.iter().map(|c| c.z).fold(f64::INFINITY, f64::min);
+        let height_m = corners.iter().map(|c| c.z).fold(f64::NEG_INFINITY, f64::max) - low_m;
+        let outline = crate::geometry::convex_hull_2d(&corners.iter().map(|c| [c.x, c.y]).collect::<Vec<_>>());
+        let centre = tray_from_part.translation.vector;
+        let reach_m = half_m.norm() + HEM_RING_M + hm.cell_m;
+        let inner = self.pick_walls.inner_half_m;
+        let (mut ring, mut up, mut highest) = (0usize, 0usize, 0.0f64);
+        for (_, [x, y], h) in hm.cells_at_within(centre.x, centre.y, reach_m) {
+            if h.is_nan() || x.abs() > inner[0] || y.abs() > inner[1] {
+                continue;
+            }
+            let out_m = crate::geometry::outside_convex_m(&outline, [x, y]);
+            if out_m <= 0.5 * hm.cell_m || out_m > HEM_RING_M + 0.5 * hm.cell_m {
+                continue;
+            }
+            let f = ((h - low_m) / height_m.max(1e-4)).clamp(0.0, 1.5);
+            ring += 1;
+            up += usize::from(f > 0.5);
+            highest = highest.max(f);
+        }
+        if ring == 0 {
+            return 0.0;
+        }
+        4.0 * up as f64 / ring as f64 + (highest - 0.8).max(0.0)
     }
 
     /// Free radius around (x, y) in the tray frame: distance to the nearest cell higher than the
@@ -1170,6 +1224,7 @@ impl GraspSelector {
                             success: 0.0,
                             motion_s: time,
                             total: 0.0,
+                            hemmed: 0.0,
                         },
                     },
                 ));
@@ -1417,6 +1472,42 @@ mod tests {
             x.abs() <= c.size_m[0] / 2.0 && y.abs() <= c.size_m[1] / 2.0
         });
         (sel, face, det, map, tray_from_part, c.size_m)
+    }
+
+    /// A relay (A, 20 x 30 x 10 mm) lying flat at the tray's centre, turned 30 deg, is hemmed in
+    /// by what stands up its side in the cloud: nothing around it, 0; a neighbour 12 mm high
+    /// along its long side, 1 mm off it, more than the cell's gate (its whole side, under a
+    /// third of the outline, above its top). Controls: the same neighbour 5 mm off, beyond the
+    /// ring; a lower one (3 mm, under its mid-height) right beside it: 0.
+    #[test]
+    fn a_part_with_a_neighbour_standing_up_its_side_is_hemmed_and_one_beside_low_ones_is_not() {
+        let scene = crate::config::LoadedScene::embedded_default().unwrap();
+        let robot = crate::robot::test_support::default_robot();
+        let a = LoadedWorkpiece::resolve("A").unwrap();
+        let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &a);
+        let size = a.workpiece.size_m;
+        let tray_from_part = Isometry3::from_parts(
+            Translation3::new(0.0, 0.0, size[2] / 2.0),
+            UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.5),
+        );
+        let (hx, hy) = (size[0] / 2.0, size[1] / 2.0);
+        let mut alone = empty_map(&sel);
+        raise(&mut alone, &tray_from_part, size[2], |x, y| {
+            x.abs() <= hx && y.abs() <= hy
+        });
+        assert_eq!(sel.hemmed(&alone, &tray_from_part), 0.0);
+        let beside = |gap_m: f64, height_m: f64| {
+            let mut map = alone.clone();
+            raise(&mut map, &tray_from_part, height_m, |x, y| {
+                x > hx + gap_m && x < hx + gap_m + 0.01 && y.abs() <= hy
+            });
+            sel.hemmed(&map, &tray_from_part)
+        };
+        let gate = scene.scene.cycle.gentle_lift_hemmed.unwrap();
+        let hemmed = beside(0.001, 0.012);
+        assert!(hemmed > gate && hemmed < 4.0 / 3.0 + 0.7, "{hemmed}");
+        assert_eq!(beside(0.005, 0.012), 0.0, "a neighbour beyond the ring");
+        assert_eq!(beside(0.001, 0.003), 0.0, "a low neighbour");
     }
 
     /// A bare tray floor seen everywhere, 200 x 200 cells of 1 mm about the pick tray's centre.

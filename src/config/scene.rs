@@ -482,6 +482,14 @@ pub struct CycleConfig {
     /// force. Absent: false (every motion from rest to rest).
     #[serde(default)]
     pub overlap_lines: bool,
+    /// A part the grasp selector saw hemmed in by its neighbours beyond this
+    /// ([`crate::grasp::Score::hemmed`]) is lifted gently where the seal has no room for a
+    /// neighbour's push: at the largest acceleration, down to a tenth of `line_accel_m_s2`, at
+    /// which the lift leaves in the cup's budget what one part's weight pushing across the cup's
+    /// axis at the part's centre of mass would ask (docs/model.md, "The cell cycle"). Absent:
+    /// every lift at `line_accel_m_s2`.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub gentle_lift_hemmed: Option<f64>,
 }
 
 fn default_max_picks_per_capture() -> u32 {

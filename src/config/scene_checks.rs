@@ -279,6 +279,9 @@ impl Scene {
         c.positive("cycle.line_accel_m_s2", self.cycle.line_accel_m_s2);
         c.non_negative("cycle.vacuum_lead_s", self.cycle.vacuum_lead_s);
         c.non_negative("cycle.release_lead_s", self.cycle.release_lead_s);
+        if let Some(h) = self.cycle.gentle_lift_hemmed {
+            c.non_negative("cycle.gentle_lift_hemmed", h);
+        }
         c.within("cycle.torque_margin", self.cycle.torque_margin, 0.0, 0.5);
         self.model_error.check(c);
         self.agitation.check(c);

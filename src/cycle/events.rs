@@ -148,6 +148,8 @@ pub enum Planned {
     Place {
         /// Lift duration (s).
         lift_s: f64,
+        /// The lift's acceleration where it is gentle (m/s^2) (`cycle.gentle_lift_hemmed`).
+        gentle_lift_m_s2: Option<f64>,
         /// Transfer duration (s).
         transfer_s: f64,
         /// Descent duration (s).
@@ -192,6 +194,8 @@ pub enum Event {
         face: usize,
         /// Score.
         score: f64,
+        /// How hemmed in by its neighbours the part was seen ([`crate::grasp::Score::hemmed`]).
+        hemmed: f64,
         /// The tool's lean from vertical, where it comes down along the face's normal (rad).
         lean_rad: Option<f64>,
     },
@@ -377,9 +381,13 @@ impl fmt::Display for Event {
                 detection,
                 face,
                 score,
+                hemmed,
                 lean_rad,
             } => {
-                write!(f, "detection {detection} face {face} score {score:.3}")?;
+                write!(
+                    f,
+                    "detection {detection} face {face} score {score:.3} hemmed {hemmed:.2}"
+                )?;
                 match lean_rad {
                     Some(lean) => write!(f, ", along its normal, leaning {:.0} deg", lean.to_degrees()),
                     None => Ok(()),
@@ -396,15 +404,22 @@ impl fmt::Display for Event {
             ),
             Event::Planned(Planned::Place {
                 lift_s,
+                gentle_lift_m_s2,
                 transfer_s,
                 descent_s,
                 retreat_s,
                 compute_s,
-            }) => write!(
-                f,
-                "Place motion: lift {lift_s:.3} s + transfer {transfer_s:.3} s + descent {descent_s:.3} s + retreat {retreat_s:.3} s ({:.1} ms compute)",
-                1e3 * compute_s
-            ),
+            }) => {
+                write!(f, "Place motion: lift {lift_s:.3} s")?;
+                if let Some(a) = gentle_lift_m_s2 {
+                    write!(f, " (gentle, {a:.1} m/s^2)")?;
+                }
+                write!(
+                    f,
+                    " + transfer {transfer_s:.3} s + descent {descent_s:.3} s + retreat {retreat_s:.3} s ({:.1} ms compute)",
+                    1e3 * compute_s
+                )
+            }
             Event::Planned(Planned::Failed { motion, why }) => write!(f, "{motion} motion: {why}"),
             Event::Stall { cause, duration_s } => match cause {
                 StallCause::Sensor => write!(f, "waiting for the sensor {duration_s:.3} s"),

@@ -14,7 +14,7 @@
 
 use std::time::Instant;
 
-use nalgebra::{Isometry3, Translation3, Vector3};
+use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
 use rand_chacha::ChaCha8Rng;
 
 use super::Cell;
@@ -28,7 +28,7 @@ use crate::geometry::{NamedBox, SealBudget};
 use crate::grasp::GraspCandidate;
 use crate::pipeline::{GraspContext, NoGrasp, SensedPile, sense_and_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
-use crate::robot::{JointVector, Payload};
+use crate::robot::{GRAVITY_M_S2, JointVector, Payload};
 use crate::trajectory::{
     CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, OverlapCheck, Overlapped, Trajectory, accelerate_in_corridor,
     limit_tool_force, overlap_end, release_lead_s, straight_line,
@@ -53,6 +53,51 @@ pub fn above_place(grasp: &GraspCandidate) -> Isometry3<f64> {
         Translation3::from(grasp.world_from_tool_place.translation.vector + Vector3::z() * PLACE_APPROACH_M),
         grasp.world_from_tool_place.rotation,
     )
+}
+
+/// The least acceleration of a gentle lift, as a share of the cell's line acceleration
+/// (`cycle.gentle_lift_hemmed`): where even that leaves no room for a neighbour's push, the lift
+/// runs at it and the seal decides.
+pub const GENTLE_LIFT_FLOOR: f64 = 0.1;
+
+/// The lift's limits for a grasp with the tool turned `world_from_tool`, the part held within
+/// `seal`: the cell's `line` limits, or, where the selector saw the part hemmed in by its
+/// neighbours (`hemmed`, [`crate::grasp::Score::hemmed`]) beyond `gentle_above`
+/// (`cycle.gentle_lift_hemmed`) and the lift at the cell's acceleration leaves the budget no
+/// room for a neighbour's push (one part's weight across the cup's axis at the depth of the
+/// part's centre of mass below the lip: [`SealBudget::push_share`]), the largest acceleration
+/// down to [`GENTLE_LIFT_FLOOR`] of the cell's that leaves it. The controller's reading: the
+/// pose and the centre of mass are the recognised ones; the neighbour is assumed, not measured.
+fn lift_limits(
+    line: LineLimits,
+    gentle_above: Option<f64>,
+    hemmed: f64,
+    world_from_tool: &UnitQuaternion<f64>,
+    seal: &SealBudget,
+) -> LineLimits {
+    if gentle_above.is_none_or(|above| hemmed <= above) {
+        return line;
+    }
+    let push_share = seal.push_share(seal.mass_kg * GRAVITY_M_S2, seal.com_from_cup_m.z);
+    let up = world_from_tool * -Vector3::z();
+    let room = |accel_m_s2: f64| {
+        seal.load(world_from_tool, &(up * accel_m_s2 + Vector3::z() * GRAVITY_M_S2)) + push_share <= 1.0
+    };
+    let (mut lo, mut hi) = (GENTLE_LIFT_FLOOR * line.accel_m_s2, line.accel_m_s2);
+    if room(hi) {
+        return line;
+    }
+    if room(lo) {
+        for _ in 0..20 {
+            let mid = 0.5 * (lo + hi);
+            if room(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+    }
+    LineLimits { accel_m_s2: lo, ..line }
 }
 
 /// The Place motion after the lift.
@@ -174,6 +219,9 @@ pub(super) struct Prepared {
     pub retreat_blend: Option<RetreatBlend>,
     /// Straight lift with the part, generated while the Pick runs.
     pub lift: LineMotion,
+    /// The lift's acceleration where it is gentle, below the cell's (m/s^2)
+    /// (`cycle.gentle_lift_hemmed`).
+    pub gentle_lift_m_s2: Option<f64>,
     /// The Place motion (or why not), generated while the Pick runs.
     pub place: Result<PlaceMotion, MotionFailure>,
     /// Hand and part as the controller believes them (the nominal part at the cup centre).
@@ -230,10 +278,28 @@ impl Cell<'_> {
         payload: &Payload,
         seal: Option<&SealBudget>,
     ) -> Option<LineMotion> {
-        let limits = LineLimits {
+        self.line_within(q_from, from, to, payload, seal, &self.line_limits())
+    }
+
+    /// The cell's straight-line speed and acceleration.
+    fn line_limits(&self) -> LineLimits {
+        LineLimits {
             speed_m_s: self.scene.cycle.line_speed_m_s,
             accel_m_s2: self.scene.cycle.line_accel_m_s2,
-        };
+        }
+    }
+
+    /// A straight tool line within `limits`, torque-limited and, with a part on the cup,
+    /// limited to the cup's holding force.
+    pub(super) fn line_within(
+        &self,
+        q_from: &JointVector,
+        from: &Isometry3<f64>,
+        to: &Isometry3<f64>,
+        payload: &Payload,
+        seal: Option<&SealBudget>,
+        limits: &LineLimits,
+    ) -> Option<LineMotion> {
         // Within the accelerator's torque share, like every other motion: the margin covers
         // the plant's model error and the servo's feedback.
         straight_line(
@@ -242,7 +308,7 @@ impl Cell<'_> {
             q_from,
             from,
             to,
-            &limits,
+            limits,
             seal,
         )
     }
@@ -493,12 +559,20 @@ impl Run<'_, '_> {
         let q_grasp = descent
             .as_ref()
             .map_or(JointVector::from(grasp.q_grasp), LineMotion::end_q);
-        let lift = cell.line(
+        let lift_limits = lift_limits(
+            cell.line_limits(),
+            cell.scene.cycle.gentle_lift_hemmed,
+            grasp.score.hemmed,
+            &grasp.world_from_tool.rotation,
+            &seal,
+        );
+        let lift = cell.line_within(
             &q_grasp,
             &grasp.world_from_tool,
             &grasp.world_from_tool_lifted,
             &held,
             Some(&seal),
+            &lift_limits,
         );
         let holding = CollisionModel::new(
             robot,
@@ -529,6 +603,8 @@ impl Run<'_, '_> {
                 pick_blend,
                 retreat_blend,
                 lift,
+                gentle_lift_m_s2: (lift_limits.accel_m_s2 < cell.scene.cycle.line_accel_m_s2)
+                    .then_some(lift_limits.accel_m_s2),
                 place,
                 held,
                 tool_from_part,
@@ -547,6 +623,46 @@ mod tests {
     use super::*;
     use crate::robot::test_support::default_robot;
     use crate::trajectory::{LineLimits, MotionLimits};
+
+    /// A hemmed part is lifted at the largest acceleration that leaves its cup room for a
+    /// neighbour's push, checked against the seal's load worked out here by hand: a 16 g part on
+    /// A's 5.5 mm cup at 70 kPa, its centre of mass 5 mm below the lip on the axis,
+    /// lifted straight up. Controls: not hemmed, or the key off, the cell's limits; a light part
+    /// whose cup has room at the cell's acceleration, the cell's limits; one with no room even
+    /// at rest, the floor.
+    #[test]
+    fn a_hemmed_part_is_lifted_as_gently_as_its_seal_needs_to_take_a_neighbours_push() {
+        let mut gripper = crate::config::LoadedScene::embedded_default().unwrap().scene.gripper;
+        gripper.cup_diameter_m = 0.0055;
+        let model = crate::geometry::SuctionModel::new(&gripper);
+        let seal = |mass_kg: f64| SealBudget::planned(model, mass_kg, Vector3::new(0.0, 0.0, 0.005), 0.0);
+        let line = LineLimits {
+            speed_m_s: 1.0,
+            accel_m_s2: 20.0,
+        };
+        let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
+        let a = |gentle_above: Option<f64>, hemmed: f64, mass_kg: f64| {
+            lift_limits(line, gentle_above, hemmed, &down, &seal(mass_kg)).accel_m_s2
+        };
+        // By hand: lifting at a, the cup pulls m (g + a); the push m g shears the lip (over
+        // its friction) and peels it with the moment m g x 5 mm (4 |M| / d); the budget is
+        // SUCTION_MARGIN of 70 kPa over the lip's area.
+        let budget_n = crate::geometry::SUCTION_MARGIN * 70e3 * std::f64::consts::PI * 0.00275f64.powi(2);
+        let g = GRAVITY_M_S2;
+        let asked_n = |mass_kg: f64, accel: f64| {
+            mass_kg * (g + accel) + mass_kg * g / gripper.lip_friction + 4.0 * mass_kg * g * 0.005 / 0.0055
+        };
+        let gentle = a(Some(0.3), 0.5, 0.016);
+        assert!(gentle > 2.0 && gentle < 20.0, "{gentle}");
+        assert!(asked_n(0.016, gentle) <= budget_n * (1.0 + 1e-6), "{gentle}");
+        assert!(asked_n(0.016, gentle + 0.01) > budget_n, "{gentle}: not the largest");
+        assert_eq!(a(Some(0.3), 0.2, 0.016), 20.0, "not hemmed");
+        assert_eq!(a(None, 5.0, 0.016), 20.0, "the key off");
+        assert!(asked_n(0.004, 20.0) < budget_n);
+        assert_eq!(a(Some(0.3), 0.5, 0.004), 20.0, "room at the cell's acceleration");
+        assert!(asked_n(0.03, 0.0) > budget_n);
+        assert_eq!(a(Some(0.3), 0.5, 0.03), 2.0, "no room even at rest: the floor");
+    }
 
     /// A transfer to the home pose, a 3 cm descent from there and the retreat back up.
     fn place_motion(release_lead_s: f64, blended: bool) -> PlaceMotion {

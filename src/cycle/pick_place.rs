@@ -138,6 +138,7 @@ impl Run<'_, '_> {
                 detection: prep.grasp.detection,
                 face: prep.grasp.face,
                 score: prep.grasp.score.total,
+                hemmed: prep.grasp.score.hemmed,
                 lean_rad: prep.grasp.lean_rad,
             },
         );
@@ -159,6 +160,7 @@ impl Run<'_, '_> {
         let place_planned = match &prep.place {
             Ok(p) => Planned::Place {
                 lift_s: prep.lift.duration_s(),
+                gentle_lift_m_s2: prep.gentle_lift_m_s2,
                 transfer_s: p.transfer.duration_s(),
                 descent_s: p.descent.duration_s(),
                 retreat_s: p.retreat.duration_s(),

@@ -47,6 +47,10 @@ fn bad_sweeps_are_refused_naming_the_key_and_the_value() {
         &["--set", "cycle.max_picks_per_capture=2.5"],
         &["cycle.max_picks_per_capture=2.5", "invalid type"],
     );
+    refused(
+        &["--set", "cycle.gentle_lift_hemmed=0.3,-1"],
+        &["sweep variant 2", "cycle.gentle_lift_hemmed", "must be >= 0, got -1"],
+    );
     // An empty list, an empty value in a list.
     refused(
         &["--set", "sensor.latency_s="],

@@ -3,6 +3,7 @@
 //! in the plane's basis (m); yaws (rad).
 
 use super::{FIT_AMBIGUITY_M, FIT_VIOLATION_M};
+use crate::geometry::convex_hull_2d as convex_hull;
 
 /// Yaw of the minimum-area rectangle around the points (rotating calipers on the convex hull)
 /// (rad), in (-pi/2, pi/2].
@@ -34,34 +35,6 @@ pub(super) fn bounds_at(pts: &[[f64; 2]], theta: f64) -> ([f64; 2], [f64; 2]) {
         }
     }
     (lo, hi)
-}
-
-/// Convex hull (Andrew's monotone chain), counter-clockwise.
-pub(super) fn convex_hull(pts: &[[f64; 2]]) -> Vec<[f64; 2]> {
-    let mut p: Vec<[f64; 2]> = pts.to_vec();
-    p.sort_by(|a, b| a[0].total_cmp(&b[0]).then(a[1].total_cmp(&b[1])));
-    p.dedup();
-    if p.len() < 3 {
-        return p;
-    }
-    let cross = |o: [f64; 2], a: [f64; 2], b: [f64; 2]| (a[0] - o[0]) * (b[1] - o[1]) - (a[1] - o[1]) * (b[0] - o[0]);
-    let mut hull: Vec<[f64; 2]> = Vec::with_capacity(2 * p.len());
-    for pass in 0..2 {
-        let start = hull.len();
-        let iter: Box<dyn Iterator<Item = &[f64; 2]>> = if pass == 0 {
-            Box::new(p.iter())
-        } else {
-            Box::new(p.iter().rev())
-        };
-        for &q in iter {
-            while hull.len() >= start + 2 && cross(hull[hull.len() - 2], hull[hull.len() - 1], q) <= 0.0 {
-                hull.pop();
-            }
-            hull.push(q);
-        }
-        hull.pop();
-    }
-    hull
 }
 
 /// A rectangle's silhouette fit: the mean of the placements consistent with the silhouette.

@@ -1453,7 +1453,8 @@ mod refine;
 mod render;
 mod symmetry;
 
-use fit::{convex_hull, fit_disc, fit_rect, min_area_theta};
+use crate::geometry::convex_hull_2d as convex_hull;
+use fit::{fit_disc, fit_rect, min_area_theta};
 #[cfg(test)]
 use render::ray_model;
 pub use symmetry::Symmetry;
