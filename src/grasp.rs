@@ -750,6 +750,8 @@ impl GraspSelector {
         let occupied = height_map.unseen_filled(self.pick_walls.inner_half_m, self.pick_walls.rim_height_m);
         for (di, det) in detections.iter().enumerate() {
             let counted = plan.rejected.len() + plan.ranked.len();
+            // How hemmed in the part is: the part's, not a face's; read once it has a candidate.
+            let mut hemmed = None;
             for (fi, face) in self.faces.iter().enumerate() {
                 let n = det.world_from_part.rotation * face.normal;
                 let tilt = n.z.clamp(-1.0, 1.0).acos();
@@ -855,7 +857,7 @@ impl GraspSelector {
                             success,
                             motion_s: motion,
                             total: exposure + cl / 0.02 + 2.0 * success - motion,
-                            hemmed: self.hemmed(height_map, &tray_from_part),
+                            hemmed: *hemmed.get_or_insert_with(|| self.hemmed(height_map, &tray_from_part)),
                         };
                         plan.ranked.push(c);
                     }
