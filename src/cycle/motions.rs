@@ -291,7 +291,7 @@ impl Cell<'_> {
 
     /// A straight tool line within `limits`, torque-limited and, with a part on the cup,
     /// limited to the cup's holding force.
-    pub(super) fn line_within(
+    fn line_within(
         &self,
         q_from: &JointVector,
         from: &Isometry3<f64>,
