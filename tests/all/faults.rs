@@ -261,6 +261,59 @@ fn a_part_torn_off_the_cup_in_a_blended_lift_leaves_the_arm_on_its_planned_place
     assert_eq!(r.tally.faults.collisions, 0, "{:?}", r.tally.incidents);
 }
 
+/// The gentle lift of a hemmed part (`cycle.gentle_lift_hemmed`) keeps A's relays that a lift at
+/// the cell's acceleration loses to a neighbour's push: seed 28, 18 picks, the case above, drops
+/// both with every lift brisk (the control) and neither gently, and its `planned` events say
+/// which lifts were gentle.
+#[test]
+fn a_hemmed_relay_lifted_gently_stays_on_the_cup() {
+    /// The lifts the `planned` events name gentle, by pick (m/s^2).
+    #[derive(Default)]
+    struct GentleLifts(Vec<(usize, f64)>);
+    impl binpick::cycle::Observer for GentleLifts {
+        fn event(&mut self, _t_s: f64, pick: Option<usize>, event: &binpick::cycle::Event) {
+            if let (
+                Some(p),
+                binpick::cycle::Event::Planned(binpick::cycle::Planned::Place {
+                    gentle_lift_m_s2: Some(a),
+                    ..
+                }),
+            ) = (pick, event)
+            {
+                self.0.push((p, *a));
+            }
+        }
+    }
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    scene.scene.gripper.max_lean_deg = None;
+    let line_accel_m_s2 = scene.scene.cycle.line_accel_m_s2;
+    assert!(
+        scene.scene.cycle.gentle_lift_hemmed.is_some(),
+        "the default cell lifts gently"
+    );
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp = LoadedWorkpiece::resolve("A").unwrap();
+    let run = |scene: &LoadedScene| {
+        let mut lifts = GentleLifts::default();
+        let r = cycle::run(scene, &robot, &wp, &opts(18, 28), &mut lifts).unwrap();
+        (r, lifts.0)
+    };
+    let (gentle, lifts) = run(&scene);
+    assert_eq!(gentle.tally.faults.drops, 0, "{:?}", gentle.tally.faults);
+    assert!(lifts.len() >= 2, "{lifts:?}");
+    assert!(
+        lifts
+            .iter()
+            .all(|&(_, a)| a >= 0.1 * line_accel_m_s2 - 1e-9 && a < line_accel_m_s2),
+        "{lifts:?}"
+    );
+    let mut brisk = scene.clone();
+    brisk.scene.cycle.gentle_lift_hemmed = None;
+    let (brisk, lifts) = run(&brisk);
+    assert!(brisk.tally.faults.drops >= 2, "{:?}", brisk.tally.faults);
+    assert!(lifts.is_empty(), "{lifts:?}");
+}
+
 /// A crawling carry ends where it was planned to: A with a 4.5 mm cup and weighing 20 g, seed 11,
 /// is held with its centre of mass well below and off the lip, which the cup barely holds, so
 /// its Place transfers crawl (time scale below 0.15: picks 3 and 9, 4-5 s each; the grasp
