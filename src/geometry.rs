@@ -364,6 +364,40 @@ impl SealBudget {
         (m.required_n(self.mass_kg, &sf, &self.com_from_cup_m) + worst_offset_n) / (self.share * m.holding_n)
     }
 
+    /// The largest lift acceleration (m/s^2) within `[lowest_m_s2, highest_m_s2]` at which the
+    /// part, lifted straight out along the cup's axis with the tool turned `world_from_tool`,
+    /// leaves in the budget room for a neighbour's push: one part's weight across the axis at the
+    /// depth of its centre of mass below the lip ([`SealBudget::push_share`]). None where even
+    /// `lowest_m_s2` leaves none.
+    pub fn lift_accel_with_room(
+        &self,
+        world_from_tool: &UnitQuaternion<f64>,
+        lowest_m_s2: f64,
+        highest_m_s2: f64,
+    ) -> Option<f64> {
+        let g = crate::robot::GRAVITY_M_S2;
+        let push_share = self.push_share(self.mass_kg * g, self.com_from_cup_m.z);
+        let up = world_from_tool * -Vector3::z();
+        let room =
+            |accel_m_s2: f64| self.load(world_from_tool, &(up * accel_m_s2 + Vector3::z() * g)) + push_share <= 1.0;
+        if room(highest_m_s2) {
+            return Some(highest_m_s2);
+        }
+        if !room(lowest_m_s2) {
+            return None;
+        }
+        let (mut lo, mut hi) = (lowest_m_s2, highest_m_s2);
+        for _ in 0..20 {
+            let mid = 0.5 * (lo + hi);
+            if room(mid) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        Some(lo)
+    }
+
     /// The share of the budget a push of `push_n` (N) on the held part across the cup's axis,
     /// `depth_m` below the lip, asks: its shear over the lip's friction and its moment as peel
     /// ([`SuctionModel::contact_required_n`]).

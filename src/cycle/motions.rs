@@ -28,7 +28,7 @@ use crate::geometry::{NamedBox, SealBudget};
 use crate::grasp::GraspCandidate;
 use crate::pipeline::{GraspContext, NoGrasp, SensedPile, sense_and_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
-use crate::robot::{GRAVITY_M_S2, JointVector, Payload};
+use crate::robot::{JointVector, Payload};
 use crate::trajectory::{
     CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, OverlapCheck, Overlapped, Trajectory, accelerate_in_corridor,
     limit_tool_force, overlap_end, release_lead_s, straight_line,
@@ -65,8 +65,8 @@ pub const GENTLE_LIFT_FLOOR: f64 = 0.1;
 /// neighbours (`hemmed`, [`crate::grasp::Score::hemmed`]) beyond `gentle_above`
 /// (`cycle.gentle_lift_hemmed`) and the lift at the cell's acceleration leaves the budget no
 /// room for a neighbour's push (one part's weight across the cup's axis at the depth of the
-/// part's centre of mass below the lip: [`SealBudget::push_share`]), the largest acceleration
-/// down to [`GENTLE_LIFT_FLOOR`] of the cell's that leaves it. The controller's reading: the
+/// part's centre of mass below the lip: [`SealBudget::lift_accel_with_room`]), the largest
+/// acceleration down to [`GENTLE_LIFT_FLOOR`] of the cell's that leaves it. The controller's reading: the
 /// pose and the centre of mass are the recognised ones; the neighbour is assumed, not measured.
 fn lift_limits(
     line: LineLimits,
@@ -78,26 +78,13 @@ fn lift_limits(
     if gentle_above.is_none_or(|above| hemmed <= above) {
         return line;
     }
-    let push_share = seal.push_share(seal.mass_kg * GRAVITY_M_S2, seal.com_from_cup_m.z);
-    let up = world_from_tool * -Vector3::z();
-    let room = |accel_m_s2: f64| {
-        seal.load(world_from_tool, &(up * accel_m_s2 + Vector3::z() * GRAVITY_M_S2)) + push_share <= 1.0
-    };
-    let (mut lo, mut hi) = (GENTLE_LIFT_FLOOR * line.accel_m_s2, line.accel_m_s2);
-    if room(hi) {
-        return line;
+    let floor_m_s2 = GENTLE_LIFT_FLOOR * line.accel_m_s2;
+    LineLimits {
+        accel_m_s2: seal
+            .lift_accel_with_room(world_from_tool, floor_m_s2, line.accel_m_s2)
+            .unwrap_or(floor_m_s2),
+        ..line
     }
-    if room(lo) {
-        for _ in 0..20 {
-            let mid = 0.5 * (lo + hi);
-            if room(mid) {
-                lo = mid;
-            } else {
-                hi = mid;
-            }
-        }
-    }
-    LineLimits { accel_m_s2: lo, ..line }
 }
 
 /// The Place motion after the lift.
@@ -621,6 +608,7 @@ impl Run<'_, '_> {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::robot::GRAVITY_M_S2;
     use crate::robot::test_support::default_robot;
     use crate::trajectory::{LineLimits, MotionLimits};
 
