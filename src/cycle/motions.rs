@@ -255,30 +255,18 @@ impl Cell<'_> {
         RELEASE_ABOVE_M + h.x.hypot(h.y) * tilt_rad.sin()
     }
 
-    /// A straight tool line at the cell's line speed and acceleration, torque-limited and, with a
-    /// part on the cup, limited to the cup's holding force.
-    pub(super) fn line(
-        &self,
-        q_from: &JointVector,
-        from: &Isometry3<f64>,
-        to: &Isometry3<f64>,
-        payload: &Payload,
-        seal: Option<&SealBudget>,
-    ) -> Option<LineMotion> {
-        self.line_within(q_from, from, to, payload, seal, &self.line_limits())
-    }
-
-    /// The cell's straight-line speed and acceleration.
-    fn line_limits(&self) -> LineLimits {
+    /// The cell's straight-line speed and acceleration (`cycle.line_speed_m_s`,
+    /// `cycle.line_accel_m_s2`).
+    pub(super) fn line_limits(&self) -> LineLimits {
         LineLimits {
             speed_m_s: self.scene.cycle.line_speed_m_s,
             accel_m_s2: self.scene.cycle.line_accel_m_s2,
         }
     }
 
-    /// A straight tool line within `limits`, torque-limited and, with a part on the cup,
-    /// limited to the cup's holding force.
-    fn line_within(
+    /// A straight tool line within `limits` (most lines: [`Cell::line_limits`]), torque-limited
+    /// and, with a part on the cup, limited to the cup's holding force.
+    pub(super) fn line(
         &self,
         q_from: &JointVector,
         from: &Isometry3<f64>,
@@ -364,6 +352,7 @@ impl Cell<'_> {
             &grasp.world_from_tool,
             &hand,
             None,
+            &self.line_limits(),
         );
         // The descent starts while the transfer ends, where the pile as seen allows.
         let pick_blend = match (&pick_transfer, &descent) {
@@ -438,11 +427,25 @@ impl Cell<'_> {
             accelerate_in_corridor(&self.accel_robot, &dyn_held, &via, holding.model, CORRIDOR_CHECK_DT_S);
         let (transfer, k) = limit_tool_force(robot, &via, &acc.limits, seal);
         let down = self
-            .line(&q_above, &above_place, &release_pose, &held, Some(seal))
+            .line(
+                &q_above,
+                &above_place,
+                &release_pose,
+                &held,
+                Some(seal),
+                &self.line_limits(),
+            )
             .ok_or(MotionFailure::PlaceDescent)?;
         let q_release = down.end_q();
         let up = self
-            .line(&q_release, &release_pose, &above_place, &hand, None)
+            .line(
+                &q_release,
+                &release_pose,
+                &above_place,
+                &hand,
+                None,
+                &self.line_limits(),
+            )
             .ok_or(MotionFailure::PlaceRetreat)?;
         // The transfer starts while the part still rises, and the descent into the slot
         // while the transfer ends, once the lift is over.
@@ -553,7 +556,7 @@ impl Run<'_, '_> {
             &grasp.world_from_tool.rotation,
             &seal,
         );
-        let lift = cell.line_within(
+        let lift = cell.line(
             &q_grasp,
             &grasp.world_from_tool,
             &grasp.world_from_tool_lifted,

@@ -376,7 +376,14 @@ impl Run<'_, '_> {
                 tool.rotation,
             );
             let hand = self.cell.hand;
-            if let Some(line) = self.cell.line(&self.st.world.joints(), &tool, &up, &hand, None) {
+            if let Some(line) = self.cell.line(
+                &self.st.world.joints(),
+                &tool,
+                &up,
+                &hand,
+                None,
+                &self.cell.line_limits(),
+            ) {
                 self.play(&Segment::new(&line, hand).capturing(Capture::ANY))?;
             }
             plan = free.plan(&self.st.world.joints(), &home, &PlanOptions::default(), &mut rng);
