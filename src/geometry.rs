@@ -5,7 +5,8 @@
 //! cylinders and the cup's holding-force model, once. The physics world builds its colliders from
 //! them, the planner its obstacles and the hand's spheres, the overlap check its tray pieces, the
 //! grasp selector its cup length, the recordings their cell boxes and the benchmarks their scenes,
-//! so none of these can drift apart.
+//! so none of these can drift apart. Also the plane's convex hull and the distance outside it,
+//! which the sensor's silhouette fits and the grasp selector's part outlines share.
 //!
 //! Units: m, N, kg, m/s^2. Frames: each box is placed in a frame (the world for the table, the
 //! tray frame for tray pieces, the obstacle's own yawed frame) at a centre in that frame, and
