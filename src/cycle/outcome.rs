@@ -233,6 +233,9 @@ pub enum Slip {
         required_n: f64,
         /// Force it held (N).
         holding_n: f64,
+        /// The tool was over the place tray when the seal let go (the arm's own pose against
+        /// the cell's tray): the part may lie in the slot it was bound for.
+        over_place_tray: bool,
     },
 }
 
@@ -244,10 +247,17 @@ impl fmt::Display for Slip {
                 after_s,
                 required_n,
                 holding_n,
-            } => write!(
-                f,
-                "slipped {after_s:.3} s into the motion: {required_n:.2} N needed, {holding_n:.2} N held"
-            ),
+                over_place_tray,
+            } => {
+                write!(
+                    f,
+                    "slipped {after_s:.3} s into the motion: {required_n:.2} N needed, {holding_n:.2} N held"
+                )?;
+                if *over_place_tray {
+                    write!(f, ", over the place tray")?;
+                }
+                Ok(())
+            }
         }
     }
 }
@@ -312,10 +322,21 @@ mod tests {
             after_s: 0.2,
             required_n: 3.0,
             holding_n: 2.5,
+            over_place_tray: false,
         };
         assert_eq!(
             slip.to_string(),
             "slipped 0.200 s into the motion: 3.00 N needed, 2.50 N held"
+        );
+        let over = Slip::Moving {
+            after_s: 0.2,
+            required_n: 3.0,
+            holding_n: 2.5,
+            over_place_tray: true,
+        };
+        assert_eq!(
+            over.to_string(),
+            "slipped 0.200 s into the motion: 3.00 N needed, 2.50 N held, over the place tray"
         );
         assert_eq!(
             Slip::AtRest { required_n: 1.234 }.to_string(),

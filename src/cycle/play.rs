@@ -18,6 +18,7 @@ use nalgebra::{Isometry3, Translation3};
 use super::events::{Event, LeftDuring, PartLoss, Stage, StartMismatch};
 use super::outcome::{Fault, Outcome, Slip, Stop};
 use super::{CycleError, Run};
+use crate::geometry::TrayVolume;
 use crate::physics::suction::GripperEvent;
 use crate::physics::{HealthEvent, PartState};
 use crate::robot::{DOF, JointVector, Payload};
@@ -349,10 +350,12 @@ impl Run<'_, '_> {
                     ..
                 } = ev
                 {
+                    let tool_m = self.st.world.world_from_tool().translation.vector;
                     dropped.get_or_insert(Slip::Moving {
                         after_s: time_s - t0,
                         required_n,
                         holding_n,
+                        over_place_tray: TrayVolume::new(&self.cell.scene.place_tray.tray).contains(&tool_m),
                     });
                 } else {
                     self.st.gripper_events.push(ev);
