@@ -58,6 +58,18 @@ impl Outcome {
         matches!(self, Outcome::Misrecognised { .. })
     }
 
+    /// Whether the pick may have left something in the slot it was bound for, so the next part
+    /// goes to the next slot: a collision or a protective stop once the Place had begun
+    /// (`in_place`: a part that bounced there, or the held one), or a part the cup let go of
+    /// while the tool was over the place tray.
+    pub fn leaves_slot_taken(&self, in_place: bool) -> bool {
+        match self {
+            Outcome::Collision(_) | Outcome::ProtectiveStop(_) => in_place,
+            Outcome::Dropped(Slip::Moving { over_place_tray, .. }) => *over_place_tray,
+            _ => false,
+        }
+    }
+
     /// The cup did not seal (on a right or a wrong detection).
     pub fn grasp_failed(&self) -> bool {
         matches!(self, Outcome::GraspFailed(_) | Outcome::Misrecognised { .. })
@@ -338,6 +350,14 @@ mod tests {
             over.to_string(),
             "slipped 0.200 s into the motion: 3.00 N needed, 2.50 N held, over the place tray"
         );
+        // A drop over the place tray leaves its slot taken; one elsewhere (the control), a slip
+        // at rest or a placed part does not, whether the Place had begun or not.
+        for in_place in [false, true] {
+            assert!(Outcome::Dropped(over).leaves_slot_taken(in_place));
+            assert!(!Outcome::Dropped(slip).leaves_slot_taken(in_place));
+            assert!(!Outcome::Dropped(Slip::AtRest { required_n: 1.0 }).leaves_slot_taken(in_place));
+            assert!(!Outcome::Placed.leaves_slot_taken(in_place));
+        }
         assert_eq!(
             Slip::AtRest { required_n: 1.234 }.to_string(),
             "slipped at rest: 1.23 N"

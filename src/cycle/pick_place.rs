@@ -67,14 +67,7 @@ impl Run<'_, '_> {
             self.st.capture_hold_until_s = self.st.world.time_s() + super::LET_GO_SETTLE_S;
             self.st.arm.free_s = self.st.arm.free_s.max(self.st.world.time_s());
         }
-        // A part the cup let go of over the place tray may lie in its slot.
-        let lost_over_slot = matches!(
-            outcome,
-            Outcome::Dropped(Slip::Moving {
-                over_place_tray: true,
-                ..
-            })
-        );
+        let slot_taken = outcome.leaves_slot_taken(rec.place_s > 0.0);
         // No motion for it is a failure at that spot too: the same pile gives the same plan. A
         // part torn off the cup falls back where it lay, under what tore it off.
         if ((outcome.grasp_failed()
@@ -83,15 +76,13 @@ impl Run<'_, '_> {
                 Outcome::Collision(_) | Outcome::ProtectiveStop(_) | Outcome::NoMotion(_)
             ))
             && rec.place_s == 0.0)
-            || (matches!(outcome, Outcome::Dropped(_)) && !lost_over_slot)
+            || (matches!(outcome, Outcome::Dropped(_)) && !slot_taken)
         {
             self.st.failed_spots.push(prep.grasp.world_from_tool.translation.vector);
         }
-        if (rec.place_s > 0.0 && matches!(outcome, Outcome::Collision(_) | Outcome::ProtectiveStop(_)))
-            || lost_over_slot
-        {
-            // Something is in the slot (a part that bounced there, or the one the cup let go of
-            // over it): the next part goes to the next.
+        if slot_taken {
+            // Something may be in the slot (a part that bounced there, or the one the cup let go
+            // of over it): the next part goes to the next.
             self.event(Event::SlotSkipped(self.st.trays.next_slot % self.cell.slots.len()));
             self.st.trays.next_slot += 1;
         }
