@@ -81,6 +81,10 @@ pub const BEHIND_TOL_M: f64 = 0.0015;
 pub const AGREE_TOL_M: f64 = 0.001;
 /// Smallest patch considered (px).
 pub const MIN_PATCH_PX: usize = 8;
+
+/// How many times in a row a patch larger than every face is cut in two ([`Cloud::cut_candidates`]):
+/// twice tells up to four parts lying level side by side apart.
+const MAX_PATCH_CUTS: usize = 2;
 /// A silhouette fit may violate its constraints by this much (plane error) (m).
 pub const FIT_VIOLATION_M: f64 = 0.0006;
 /// A silhouette fit whose feasible interval is wider than this does not pin the part down (m).
@@ -927,46 +931,85 @@ impl<'a> Cloud<'a> {
     }
 
     /// A patch's hypotheses: its best, or, where it is larger than every face and nothing
-    /// explains it whole, the best of each of its two halves ([`Cloud::halves`]): two parts
-    /// lying level side by side make one patch. The halves' lying fits are left out (the whole
-    /// patch's stand).
+    /// explains it whole, the parts lying level side by side that make it one patch: the best
+    /// of each piece it is cut into ([`Cloud::cut_candidates`]), or where no cut was at a
+    /// junction, of a piece as long as a face at one end ([`Cloud::end_pieces`]) and of the
+    /// rest. The pieces' lying fits are left out (the whole patch's stand).
     ///
-    /// The cut is rarely exactly at the junction, and a face fitted to a half can slide across
-    /// the cut into its level neighbour, where rendering cannot tell (the neighbour agrees). So
-    /// the halves' detections are kept only as the patch's explanation: together their faces
-    /// cover the whole patch but for a row of pixels ([`Cloud::uncovered`]), and no pixel lies
-    /// inside both (a pixel in from their edges). One half's detection alone is kept only where
-    /// it covers the whole patch so (one part and a few pixels of rim or noise beside it).
+    /// A cut is rarely exactly at a junction, and a face fitted to a piece can slide across the
+    /// cut into its level neighbour, where rendering cannot tell (the neighbour agrees). So the
+    /// pieces' detections are kept only as the patch's explanation: together their faces cover
+    /// the whole patch but for a row of pixels ([`Cloud::uncovered`]), and no pixel lies inside
+    /// two of them (a pixel in from their edges). One detection alone is kept only where it
+    /// covers the whole patch so (one part and a few pixels of rim or noise beside it).
     fn patch_hypotheses(&self, patch: &Patch, model: &CloudModel) -> (Vec<CloudDetection>, Vec<lying::AxisFit>) {
         let (best, fits, larger) = self.best_hypothesis(patch, model);
         if best.is_some() || !larger {
             return (best.into_iter().collect(), fits);
         }
-        let halves = self.halves(patch);
-        let mut found: Vec<CloudDetection> = halves
-            .iter()
-            .filter_map(|half| self.best_hypothesis(half, model).0)
-            .collect();
-        // One half found, the other not (cut off the junction, it holds a strip of the first
-        // part): the rest of the patch, its pixels more than a pixel outside the found face, is
-        // tried whole.
-        if let [d] = found.as_slice() {
+        let mut found = self.cut_candidates(patch, model, MAX_PATCH_CUTS);
+        // Pieces cut off a junction hold strips of two parts, and some find nothing: where one
+        // was found, or those found leave part of the patch uncovered, the rest is tried.
+        if found.len() == 1 || (found.len() > 1 && self.uncovered(model, &found, patch) > self.row_px(model, &found)) {
+            self.add_rest(patch, model, &mut found);
+        }
+        let kept = self.explanation(patch, model, &found);
+        if !kept.is_empty() {
+            return (kept, fits);
+        }
+        // No cut was at a junction: a piece as long as a face cut off either end of the patch,
+        // and the rest, kept only where both (or all) explain the patch together: one face alone
+        // over the whole patch would have been found whole.
+        for piece in self.end_pieces(patch, model) {
+            if let Some(d) = self.best_hypothesis(&piece, model).0 {
+                let mut found = vec![d];
+                self.add_rest(patch, model, &mut found);
+                let kept = self.explanation(patch, model, &found);
+                if kept.len() > 1 {
+                    return (kept, fits);
+                }
+            }
+        }
+        (Vec::new(), fits)
+    }
+
+    /// Adds to `found` the best hypotheses of the rest of `patch`: its pixels more than a pixel
+    /// outside every face found, tried whole, or where larger than every face, cut once; again
+    /// on what is left while that finds more, up to the patch's [`MAX_PATCH_CUTS`] + 1 parts
+    /// (a row of parts is taken one or two at a time).
+    fn add_rest(&self, patch: &Patch, model: &CloudModel, found: &mut Vec<CloudDetection>) {
+        for _ in 0..=MAX_PATCH_CUTS {
             let rest = Patch {
                 pixels: patch
                     .pixels
                     .iter()
                     .copied()
-                    .filter(|&i| self.face_distance_m(model, d, &self.pts[i], false) > self.pixel_m_at(d))
+                    .filter(|&i| {
+                        found
+                            .iter()
+                            .all(|d| self.face_distance_m(model, d, &self.pts[i], false) > self.pixel_m_at(d))
+                    })
                     .collect(),
             };
-            if rest.pixels.len() >= MIN_PATCH_PX
-                && let Some(other) = self.best_hypothesis(&rest, model).0
-            {
-                found.push(other);
+            if rest.pixels.len() < MIN_PATCH_PX {
+                return;
+            }
+            let before = found.len();
+            match self.best_hypothesis(&rest, model) {
+                (Some(d), _, _) => found.push(d),
+                (None, _, true) => found.extend(self.cut_candidates(&rest, model, 1)),
+                _ => {}
+            }
+            if found.len() == before {
+                return;
             }
         }
-        // Both, if no pixel lies inside both faces; else either alone: the first that covers the
-        // whole patch.
+    }
+
+    /// The detections of `found` kept as the explanation of `patch`: all of them, if no pixel
+    /// lies inside two faces; else each alone; the first that covers the whole patch but for a
+    /// row of pixels. Empty if none does.
+    fn explanation(&self, patch: &Patch, model: &CloudModel, found: &[CloudDetection]) -> Vec<CloudDetection> {
         let apart = |a: &CloudDetection, b: &CloudDetection| {
             !patch.pixels.iter().any(|&i| {
                 [a, b]
@@ -974,19 +1017,82 @@ impl<'a> Cloud<'a> {
                     .all(|d| self.face_distance_m(model, d, &self.pts[i], false) < -self.pixel_m_at(d))
             })
         };
+        let all_apart = found.len() > 1
+            && found
+                .iter()
+                .enumerate()
+                .all(|(k, a)| found[k + 1..].iter().all(|b| apart(a, b)));
         let mut options: Vec<&[CloudDetection]> = Vec::new();
-        if let [a, b] = found.as_slice()
-            && apart(a, b)
-        {
-            options.push(&found);
+        if all_apart {
+            options.push(found);
         }
         options.extend(found.chunks(1));
-        let kept = options
+        options
             .into_iter()
             .find(|ds| self.uncovered(model, ds, patch) <= self.row_px(model, ds))
             .map(<[CloudDetection]>::to_vec)
-            .unwrap_or_default();
-        (kept, fits)
+            .unwrap_or_default()
+    }
+
+    /// Pieces of a patch cut off either end along its principal axis (in space), each as long
+    /// as one of the model's face extents (an outline face's, with the features beside it) and a
+    /// pixel's slack: where parts lie level in a row, edge to edge, the first of them.
+    fn end_pieces(&self, patch: &Patch, model: &CloudModel) -> Vec<Patch> {
+        let n = patch.pixels.len() as f64;
+        let mean = patch.pixels.iter().map(|&i| self.pts[i]).sum::<Vector3<f64>>() / n;
+        let cov = patch.pixels.iter().fold(Matrix3::zeros(), |c, &i| {
+            let d = self.pts[i] - mean;
+            c + d * d.transpose()
+        });
+        let eig = cov.symmetric_eigen();
+        let axis: Vector3<f64> = eig.eigenvectors.column(eig.eigenvalues.imax()).into_owned();
+        let along: Vec<f64> = patch.pixels.iter().map(|&i| (self.pts[i] - mean).dot(&axis)).collect();
+        let (lo, hi) = along
+            .iter()
+            .fold((f64::MAX, f64::MIN), |(lo, hi), &a| (lo.min(a), hi.max(a)));
+        let pixel_m = self.camera.pixel_size_at_m((mean - self.origin).dot(&self.optical));
+        let mut lengths: Vec<f64> = (0..model.faces.len())
+            .flat_map(|fi| model.outline(fi).map_or(model.faces[fi].extent_m, |o| o.reach_extent_m))
+            .collect();
+        lengths.sort_by(f64::total_cmp);
+        lengths.dedup_by(|a, b| (*a - *b).abs() < 0.5 * pixel_m);
+        let mut pieces = Vec::new();
+        for len in lengths.into_iter().filter(|l| l + pixel_m < hi - lo) {
+            for from_lo in [true, false] {
+                let pixels: Vec<usize> = patch
+                    .pixels
+                    .iter()
+                    .zip(&along)
+                    .filter(|&(_, &a)| {
+                        if from_lo {
+                            a <= lo + len + 0.5 * pixel_m
+                        } else {
+                            a >= hi - len - 0.5 * pixel_m
+                        }
+                    })
+                    .map(|(&i, _)| i)
+                    .collect();
+                if pixels.len() >= MIN_PATCH_PX {
+                    pieces.push(Patch { pixels });
+                }
+            }
+        }
+        pieces
+    }
+
+    /// The best hypothesis of each half of a patch larger than every face ([`Cloud::halves`]);
+    /// a half that finds none and is itself larger than every face is cut again, `cuts` cuts
+    /// deep in all: three or four parts lying level side by side make one patch too.
+    fn cut_candidates(&self, patch: &Patch, model: &CloudModel, cuts: usize) -> Vec<CloudDetection> {
+        let mut found = Vec::new();
+        for half in self.halves(patch) {
+            match self.best_hypothesis(&half, model) {
+                (Some(d), _, _) => found.push(d),
+                (None, _, true) if cuts > 1 => found.extend(self.cut_candidates(&half, model, cuts - 1)),
+                _ => {}
+            }
+        }
+        found
     }
 
     /// The pixel size at a detection's position (m).
