@@ -64,14 +64,15 @@ struct PiledCell {
     count: usize,
 }
 
-/// Loads and checks the cell and workpiece, builds the world and settles the pile.
+/// Loads and checks the cell and workpiece, builds the world and settles the pile as the cell
+/// pours its first: a part the pour spills out of the tray is lost (`in tray` counts the rest).
 fn piled_cell(a: &PileArgs) -> Result<PiledCell> {
     let (loaded, wp, robot) = load_cell(a.scene.as_deref(), &a.workpiece)?;
     let count = pile_count(a, &wp)?;
     let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
     let mut world = binpick::physics::World::new(&loaded.scene, &robot, shape);
     let report = world
-        .build_pile(&binpick::physics::pile::PileOptions::new(count, a.seed))
+        .build_pile(&binpick::physics::pile::PileOptions::new(count, a.seed).losing_spilled())
         .context("building the pile")?;
     Ok(PiledCell {
         loaded,

@@ -106,3 +106,33 @@ fn pile_rejects_bad_input_and_leaves_nothing_behind() {
         );
     }
 }
+
+/// C's first pour of seed 56 throws a strip over the tray's wall: `pile` (and `sense`, `part`,
+/// `bench sensor`) pours as the cell pours its first pile, so the strip is lost and the command
+/// goes on, where before it ended on the spill. The negative control, the strict pour ending on
+/// the same spill, is in `faults.rs` (`a_part_the_first_pour_spills_is_lost_and_the_run_goes_on`).
+#[test]
+fn a_pile_whose_pour_spills_a_part_loses_it_as_the_cell_does() {
+    let ws = Workspace::new();
+    let out = ws.path("out");
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "pile",
+            "--workpiece",
+            "C",
+            "--seed",
+            "56",
+            "--out",
+            out.to_str().unwrap(),
+            "--json",
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let (spawned, in_tray) = (
+        v["report"]["spawned"].as_u64().unwrap(),
+        v["report"]["in_tray"].as_u64().unwrap(),
+    );
+    assert_eq!(in_tray + 1, spawned, "{v}");
+}
