@@ -292,7 +292,6 @@ fn two_relays_end_to_end_are_found_from_a_piece_cut_off_an_end() {
     let cell = cell();
     let w = workpiece("A");
     let m = CloudModel::new(&w);
-    let sym = Symmetry::of(&w);
     let a = resting(&cell, &w, 0.0, 0.0, 0.0, yaw(90.0));
     let b = resting(&cell, &w, 0.0303, 0.005, 0.0, yaw(94.0));
     let capture = synthetic(&cell, &[(&m, a), (&m, b)]);
@@ -306,13 +305,7 @@ fn two_relays_end_to_end_are_found_from_a_piece_cut_off_an_end() {
     let found = recognize(&capture, &cell.camera, &cell.tray, &m);
     assert_eq!(found.len(), 2, "{found:?}");
     for pose in [a, b] {
-        assert!(
-            found.iter().any(|d| {
-                let (dp, dr) = sym.pose_error(&pose, &d.world_from_part);
-                dp <= 0.0008 && dr <= SAME_POSE_RAD
-            }),
-            "{found:?}"
-        );
+        assert_found(&w, &found, &pose, 0.0008, 5.0);
     }
 }
 
