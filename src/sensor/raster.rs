@@ -64,6 +64,7 @@ impl ZBuffer {
 
 /// A triangle in the image: pixel coordinates and inverse depth per vertex, its facet, and the
 /// pixel rows it may cover (inclusive).
+#[derive(Debug)]
 struct ScreenTri {
     x: [f64; 3],
     y: [f64; 3],
@@ -183,7 +184,13 @@ fn draw(t: &ScreenTri, window: &PixelWindow, v0: usize, v1: usize, inv_depth: &m
     for v in t.rows.0.max(v0)..=t.rows.1.min(v1) {
         let py = v as f64 + 0.5;
         let row = (v - v0) * window.width_px;
-        for u in u_lo..=u_hi {
+        // The row's columns that may be inside, widened by a pixel each way: a long thin
+        // triangle across the image covers a small part of its bounding box. The test below
+        // still decides every pixel, so the span changes no result, only the pixels tried.
+        let Some((s_lo, s_hi)) = row_span([e0, e1, e2], py, EPS, u_lo, u_hi) else {
+            continue;
+        };
+        for u in s_lo..=s_hi {
             let px = u as f64 + 0.5;
             let b0 = e0.0 * px + e0.1 * py + e0.2;
             let b1 = e1.0 * px + e1.1 * py + e1.2;
@@ -199,6 +206,26 @@ fn draw(t: &ScreenTri, window: &PixelWindow, v0: usize, v1: usize, inv_depth: &m
             }
         }
     }
+}
+
+/// The columns `u_lo..=u_hi` of a pixel row at `py` whose centres (u + 0.5) may pass all three
+/// edge tests `a x + b y + c >= eps`, widened by a column each way; `None` if none can.
+fn row_span(edges: [(f64, f64, f64); 3], py: f64, eps: f64, u_lo: usize, u_hi: usize) -> Option<(usize, usize)> {
+    let (mut x_lo, mut x_hi) = (f64::NEG_INFINITY, f64::INFINITY);
+    for (a, b, c) in edges {
+        let k = b * py + c;
+        if a > 0.0 {
+            x_lo = x_lo.max((eps - k) / a);
+        } else if a < 0.0 {
+            x_hi = x_hi.min((eps - k) / a);
+        } else if k < eps {
+            return None;
+        }
+    }
+    // Pixel centres u + 0.5 within [x_lo, x_hi], one column more each way.
+    let first = ((x_lo - 0.5).ceil() - 1.0).max(u_lo as f64);
+    let last = ((x_hi - 0.5).floor() + 1.0).min(u_hi as f64);
+    (first <= last).then_some((first as usize, last as usize))
 }
 
 /// Clips a triangle (camera frame, m) at the near plane and projects what is left into the
@@ -248,5 +275,82 @@ fn clip_and_project(camera: &Camera, window: &PixelWindow, v: [Vector3<f64>; 3],
             facet,
             rows: (v_lo as usize, v_hi as usize),
         });
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rand::{RngExt, SeedableRng};
+
+    /// Every pixel of `window` whose centre the triangle's edge functions (as `draw` forms them)
+    /// put inside, tried one by one: what `draw` must cover, whatever pixels it skips.
+    fn covered_by_every_pixel(t: &ScreenTri, window: &PixelWindow) -> Vec<usize> {
+        let ([x0, x1, x2], [y0, y1, y2]) = (t.x, t.y);
+        let inv = 1.0 / ((x1 - x0) * (y2 - y0) - (x2 - x0) * (y1 - y0));
+        let edge = |(xa, ya): (f64, f64), (xb, yb): (f64, f64)| {
+            move |px: f64, py: f64| ((ya - yb) * inv) * px + ((xb - xa) * inv) * py + (xa * yb - xb * ya) * inv
+        };
+        let es = [
+            edge((x1, y1), (x2, y2)),
+            edge((x2, y2), (x0, y0)),
+            edge((x0, y0), (x1, y1)),
+        ];
+        let mut out = Vec::new();
+        for v in window.y0_px..window.y0_px + window.height_px {
+            for u in window.x0_px..window.x0_px + window.width_px {
+                let (px, py) = (u as f64 + 0.5, v as f64 + 0.5);
+                if es.iter().all(|e| e(px, py) >= -1e-12) {
+                    out.push((v - window.y0_px) * window.width_px + u - window.x0_px);
+                }
+            }
+        }
+        out
+    }
+
+    #[test]
+    fn a_triangle_covers_the_same_pixels_as_a_test_of_every_pixel() {
+        let window = PixelWindow {
+            x0_px: 5,
+            y0_px: 3,
+            width_px: 60,
+            height_px: 40,
+        };
+        let mut rng = rand_chacha::ChaCha8Rng::seed_from_u64(11);
+        let (mut thin, mut total) = (0, 0);
+        for case in 0..2000 {
+            // Long thin slivers at every angle (a strip's face) and ordinary triangles.
+            let x: [f64; 3] = std::array::from_fn(|_| rng.random_range(-10.0..80.0));
+            let y: [f64; 3] = std::array::from_fn(|_| rng.random_range(-10.0..50.0));
+            let (x, y) = if case % 2 == 0 {
+                let s = rng.random_range(0.001..0.05);
+                (
+                    [x[0], x[1], x[1] + s * (x[0] - x[1])],
+                    [y[0], y[1], y[1] + s * (y[0] - y[1]) + 1.0],
+                )
+            } else {
+                (x, y)
+            };
+            let ymin = y.iter().copied().fold(f64::INFINITY, f64::min);
+            let ymax = y.iter().copied().fold(f64::NEG_INFINITY, f64::max);
+            let (v_lo, v_hi) = ((ymin - 0.5).ceil().max(3.0), (ymax - 0.5).floor().min(42.0));
+            if v_lo > v_hi {
+                continue;
+            }
+            let t = ScreenTri {
+                x,
+                y,
+                inv_z: [1.0, 1.0, 1.0],
+                facet: 0,
+                rows: (v_lo as usize, v_hi as usize),
+            };
+            let mut zb = ZBuffer::empty(window);
+            draw(&t, &window, 3, 42, &mut zb.inv_depth, &mut zb.facet);
+            let drawn: Vec<usize> = (0..zb.facet.len()).filter(|&i| zb.facet[i] == 0).collect();
+            assert_eq!(drawn, covered_by_every_pixel(&t, &window), "case {case}: {t:?}");
+            total += 1;
+            thin += usize::from(case % 2 == 0 && !drawn.is_empty());
+        }
+        assert!(total > 1500 && thin > 200, "{total} triangles, {thin} slivers drawn");
     }
 }
