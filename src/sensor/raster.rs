@@ -181,13 +181,14 @@ fn draw(t: &ScreenTri, window: &PixelWindow, v0: usize, v1: usize, inv_depth: &m
     let (u_lo, u_hi) = (u_lo as usize, u_hi as usize);
     // Inclusive edges, a hair wide: a pixel centre on an edge shared by two triangles is covered.
     const EPS: f64 = -1e-12;
+    let spans = (u_hi - u_lo >= SPAN_MIN_COLUMNS).then(|| RowSpans::new([e0, e1, e2], EPS));
     for v in t.rows.0.max(v0)..=t.rows.1.min(v1) {
         let py = v as f64 + 0.5;
         let row = (v - v0) * window.width_px;
         // The row's columns that may be inside, widened by a pixel each way: a long thin
         // triangle across the image covers a small part of its bounding box. The test below
         // still decides every pixel, so the span changes no result, only the pixels tried.
-        let Some((s_lo, s_hi)) = row_span([e0, e1, e2], py, EPS, u_lo, u_hi) else {
+        let Some((s_lo, s_hi)) = spans.as_ref().map_or(Some((u_lo, u_hi)), |sp| sp.at(py, u_lo, u_hi)) else {
             continue;
         };
         for u in s_lo..=s_hi {
@@ -208,24 +209,70 @@ fn draw(t: &ScreenTri, window: &PixelWindow, v0: usize, v1: usize, inv_depth: &m
     }
 }
 
-/// The columns `u_lo..=u_hi` of a pixel row at `py` whose centres (u + 0.5) may pass all three
-/// edge tests `a x + b y + c >= eps`, widened by a column each way; `None` if none can.
-fn row_span(edges: [(f64, f64, f64); 3], py: f64, eps: f64, u_lo: usize, u_hi: usize) -> Option<(usize, usize)> {
-    let (mut x_lo, mut x_hi) = (f64::NEG_INFINITY, f64::INFINITY);
-    for (a, b, c) in edges {
-        let k = b * py + c;
-        if a > 0.0 {
-            x_lo = x_lo.max((eps - k) / a);
-        } else if a < 0.0 {
-            x_hi = x_hi.min((eps - k) / a);
-        } else if k < eps {
-            return None;
-        }
+/// A triangle's columns per pixel row: where its three edge tests `a x + b y + c >= eps` may
+/// all pass, as bounds linear in the row's centre y, for a triangle spanning
+/// [`SPAN_MIN_COLUMNS`] or more (a narrower one tries its few columns outright).
+struct RowSpans {
+    edges: [EdgeBound; 3],
+    eps: f64,
+}
+
+/// One edge test as a bound on the columns of a row at y.
+#[derive(Clone, Copy)]
+enum EdgeBound {
+    /// `x >= x0 + dx_dy * y` (`a > 0`).
+    Lower { x0: f64, dx_dy: f64 },
+    /// `x <= x0 + dx_dy * y` (`a < 0`).
+    Upper { x0: f64, dx_dy: f64 },
+    /// `a == 0`: the row passes if `b y + c >= eps`, whatever x.
+    Row { b: f64, c: f64 },
+    /// No bound the span uses.
+    Free,
+}
+
+/// An edge bound's largest slope (columns per row) that [`RowSpans`] uses: its columns are then
+/// exact to far below a column, which the span's one column of widening covers.
+const MAX_SLOPE: f64 = 1e6;
+
+/// Triangles spanning fewer columns than this are drawn without [`RowSpans`] (px).
+const SPAN_MIN_COLUMNS: usize = 16;
+
+impl RowSpans {
+    fn new(edges: [(f64, f64, f64); 3], eps: f64) -> Self {
+        let edges = edges.map(|(a, b, c)| {
+            let (x0, dx_dy) = ((eps - c) / a, -b / a);
+            // An edge within a hair of the row's direction bounds the columns only through
+            // huge terms that cancel: it restricts nothing (the pixel test still applies it).
+            if a != 0.0 && !(dx_dy.abs() <= MAX_SLOPE && x0.abs() <= MAX_SLOPE * 1e3) {
+                EdgeBound::Free
+            } else if a > 0.0 {
+                EdgeBound::Lower { x0, dx_dy }
+            } else if a < 0.0 {
+                EdgeBound::Upper { x0, dx_dy }
+            } else {
+                EdgeBound::Row { b, c }
+            }
+        });
+        RowSpans { edges, eps }
     }
-    // Pixel centres u + 0.5 within [x_lo, x_hi], one column more each way.
-    let first = ((x_lo - 0.5).ceil() - 1.0).max(u_lo as f64);
-    let last = ((x_hi - 0.5).floor() + 1.0).min(u_hi as f64);
-    (first <= last).then_some((first as usize, last as usize))
+
+    /// The columns `u_lo..=u_hi` of the row at `py` whose centres (u + 0.5) may pass all three
+    /// tests, widened by a column each way; `None` if none can.
+    fn at(&self, py: f64, u_lo: usize, u_hi: usize) -> Option<(usize, usize)> {
+        let (mut x_lo, mut x_hi) = (f64::NEG_INFINITY, f64::INFINITY);
+        for e in &self.edges {
+            match *e {
+                EdgeBound::Lower { x0, dx_dy } => x_lo = x_lo.max(x0 + dx_dy * py),
+                EdgeBound::Upper { x0, dx_dy } => x_hi = x_hi.min(x0 + dx_dy * py),
+                EdgeBound::Row { b, c } if b * py + c < self.eps => return None,
+                EdgeBound::Row { .. } | EdgeBound::Free => {}
+            }
+        }
+        // Pixel centres u + 0.5 within [x_lo, x_hi], one column more each way.
+        let first = ((x_lo - 0.5).ceil() - 1.0).max(u_lo as f64);
+        let last = ((x_hi - 0.5).floor() + 1.0).min(u_hi as f64);
+        (first <= last).then_some((first as usize, last as usize))
+    }
 }
 
 /// Clips a triangle (camera frame, m) at the near plane and projects what is left into the
