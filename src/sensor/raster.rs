@@ -3,7 +3,8 @@
 //!
 //! Job: project every triangle of the solids the world shows ([`crate::physics::ViewMesh`]) into
 //! the image, clipped at a near plane; test each pixel centre (u + 0.5, v + 0.5, the centre of
-//! [`Camera::pixel_dir`]) inside it by edge functions, interpolate 1/z (exact for a plane under
+//! [`Camera::pixel_dir`]) inside it by edge functions (a wide triangle's rows only over the
+//! columns its edges allow, and a column either side), interpolate 1/z (exact for a plane under
 //! perspective) and keep the nearest facet. The buffer only decides which facet each pixel sees;
 //! the capture then cuts the pixel's ray with that facet's plane in f64, so depths are the exact
 //! ray-plane distances. Rows are split into bands rasterized in parallel: the result does not
