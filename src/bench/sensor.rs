@@ -91,8 +91,7 @@ pub fn sense_bench(
         let mut first = None;
         for seed in 1..=seeds.max(1) {
             let mut w = World::new(&scene.scene, robot, shape.clone());
-            // The cell's first pile: a part the pour spills is lost, not the seed.
-            w.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed).losing_spilled())?;
+            w.build_pile(&PileOptions::cells_first_pile(wp.workpiece.pile_count as usize, seed))?;
             let sensor = Sensor::new(&scene.scene.sensor, &w, seed, &wp.workpiece).ok_or("degenerate sensor pose")?;
             let c = capture(&w, &sensor.camera, seed, 0);
             // Ground truth at the trigger: evaluation only.

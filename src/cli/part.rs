@@ -102,8 +102,7 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
         .collect();
     for seed in 1..=piles {
         let mut world = World::new(&loaded.scene, &robot, shape.clone());
-        // The cell's first pile: a part the pour spills is lost, not the seed.
-        world.build_pile(&PileOptions::new(wp.workpiece.pile_count as usize, seed).losing_spilled())?;
+        world.build_pile(&PileOptions::cells_first_pile(wp.workpiece.pile_count as usize, seed))?;
         if cloud {
             use binpick::sensor::{Sensor, TruthAtTrigger, capture, evaluate};
             let sensor = Sensor::new(&loaded.scene.sensor, &world, seed, &wp.workpiece)

@@ -72,7 +72,7 @@ fn piled_cell(a: &PileArgs) -> Result<PiledCell> {
     let shape = binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?;
     let mut world = binpick::physics::World::new(&loaded.scene, &robot, shape);
     let report = world
-        .build_pile(&binpick::physics::pile::PileOptions::new(count, a.seed).losing_spilled())
+        .build_pile(&binpick::physics::pile::PileOptions::cells_first_pile(count, a.seed))
         .context("building the pile")?;
     Ok(PiledCell {
         loaded,

@@ -421,7 +421,7 @@ impl<'a> Cell<'a> {
     /// A part the pour spills out of the tray is lost, as in a refill or a dose.
     pub fn start(&self, obs: &mut dyn Observer) -> Result<CellState, CycleError> {
         let mut world = World::new(self.scene, self.robot, self.shape.clone());
-        let pile = PileOptions::new(self.pile_count, self.opts.seed).losing_spilled();
+        let pile = PileOptions::cells_first_pile(self.pile_count, self.opts.seed);
         let spilled = world
             .build_pile_observed(&pile, &mut |w| obs.stepped(w))
             .map_err(CycleError::Pour)?

@@ -57,6 +57,13 @@ impl PileOptions {
         }
     }
 
+    /// The cell's first pile, poured before a run: settled as [`PileOptions::new`], with a part
+    /// the pour spills out of the tray lost, as in a dose or a refill, not the run. Every command
+    /// that pours a pile as the cell does (`run`, `pile`, `sense`, `part`, `bench sensor`) uses it.
+    pub fn cells_first_pile(count: usize, seed: u64) -> Self {
+        PileOptions::new(count, seed).losing_spilled()
+    }
+
     /// A pour into a running cell (a hopper dose, a refill): parts that bounce out of the tray
     /// are lost, and the pour ends when its last wave has been dropped, not when the physics says
     /// the pile has settled (that is the cell's to find out, by looking).

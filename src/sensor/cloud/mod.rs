@@ -994,15 +994,11 @@ impl<'a> Cloud<'a> {
             if rest.pixels.len() < MIN_PATCH_PX {
                 return;
             }
-            let before = found.len();
-            match self.best_hypothesis(&rest, model) {
-                (Some(d), _, _) => found.push(d),
-                (None, _, true) => found.extend(self.cut_candidates(&rest, model, 1)),
-                _ => {}
-            }
-            if found.len() == before {
+            let more = self.best_or_cut(&rest, model, 1);
+            if more.is_empty() {
                 return;
             }
+            found.extend(more);
         }
     }
 
@@ -1084,15 +1080,20 @@ impl<'a> Cloud<'a> {
     /// a half that finds none and is itself larger than every face is cut again, `cuts` cuts
     /// deep in all: three or four parts lying level side by side make one patch too.
     fn cut_candidates(&self, patch: &Patch, model: &CloudModel, cuts: usize) -> Vec<CloudDetection> {
-        let mut found = Vec::new();
-        for half in self.halves(patch) {
-            match self.best_hypothesis(&half, model) {
-                (Some(d), _, _) => found.push(d),
-                (None, _, true) if cuts > 1 => found.extend(self.cut_candidates(&half, model, cuts - 1)),
-                _ => {}
-            }
+        self.halves(patch)
+            .iter()
+            .flat_map(|half| self.best_or_cut(half, model, cuts - 1))
+            .collect()
+    }
+
+    /// A piece's best hypothesis, or where it finds none and is larger than every face, its
+    /// [`Cloud::cut_candidates`] `cuts` cuts deep (none at 0).
+    fn best_or_cut(&self, piece: &Patch, model: &CloudModel, cuts: usize) -> Vec<CloudDetection> {
+        match self.best_hypothesis(piece, model) {
+            (Some(d), _, _) => vec![d],
+            (None, _, true) if cuts > 0 => self.cut_candidates(piece, model, cuts),
+            _ => Vec::new(),
         }
-        found
     }
 
     /// The pixel size at a detection's position (m).
