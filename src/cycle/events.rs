@@ -126,8 +126,11 @@ pub enum PartLoss {
 pub enum LeftDuring {
     /// A hopper dose or a refill was pouring parts in: it bounced out.
     Pour,
-    /// This part was on the cup: dragged out with it, or knocked over the wall.
+    /// This part was on the cup: knocked over the wall by it or by the arm.
     Holding(usize),
+    /// This part was on the cup, and the lost one touched it as it left: carried out with it (a
+    /// double pick) or slid off it over the wall.
+    CarriedWith(usize),
     /// Nothing was on the cup: an agitation, a pile settling, a descent.
     CupEmpty,
 }
@@ -445,6 +448,7 @@ impl fmt::Display for Event {
                 match during {
                     LeftDuring::Pour => f.write_str(" in a pour"),
                     LeftDuring::Holding(part) => write!(f, " while part {part} was on the cup"),
+                    LeftDuring::CarriedWith(part) => write!(f, " with part {part}, which was on the cup"),
                     LeftDuring::CupEmpty => f.write_str(" with the cup empty"),
                 }
             }
@@ -735,6 +739,10 @@ mod tests {
         assert_eq!(
             left(LeftDuring::CupEmpty),
             "part 5 left the pick tray with the cup empty"
+        );
+        assert_eq!(
+            left(LeftDuring::CarriedWith(7)),
+            "part 5 left the pick tray with part 7, which was on the cup"
         );
         let no_path = Event::Fault(Fault::NoPathOutOfView(crate::planning::PlanError::StartInCollision(
             "clearance 1.0 mm between link_6 and the pick tray".into(),

@@ -217,11 +217,20 @@ impl Run<'_, '_> {
         };
         for event in report.events {
             match event {
-                HealthEvent::LeftVolume { body, volume, .. } => {
+                HealthEvent::LeftVolume {
+                    body,
+                    volume,
+                    with_held,
+                    ..
+                } => {
                     if !lost_removed {
                         self.remove_lost_parts();
                         lost_removed = true;
                     }
+                    let during = match during {
+                        LeftDuring::Holding(held) if with_held => LeftDuring::CarriedWith(held),
+                        d => d,
+                    };
                     self.event(Event::PartLost(PartLoss::LeftTray {
                         body,
                         tray: volume,

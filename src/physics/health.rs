@@ -30,7 +30,10 @@ pub enum HealthEvent {
         what: &'static str,
     },
     /// A part left the tray it should be in.
-    #[error("t = {time_s:.4} s: {body} left the {volume} volume, now at ({x:.4}, {y:.4}, {z:.4}) m")]
+    #[error(
+        "t = {time_s:.4} s: {body} left the {volume} volume{}, now at ({x:.4}, {y:.4}, {z:.4}) m",
+        if *with_held { " with the part on the cup" } else { "" }
+    )]
     LeftVolume {
         /// Simulation time (s).
         time_s: f64,
@@ -44,6 +47,9 @@ pub enum HealthEvent {
         y: f64,
         /// Position (m).
         z: f64,
+        /// Whether it touched the part on the cup just before
+        /// ([`World::rode_with_held`]): carried out with it, a double pick.
+        with_held: bool,
     },
     /// Two bodies overlap far more than the solver allows.
     #[error("t = {time_s:.4} s: deep penetration {depth_mm:.2} mm between {a} and {b}")]
@@ -92,6 +98,8 @@ mod known_text {
             x: f64,
             y: f64,
             z: f64,
+            #[serde(default)]
+            with_held: bool,
         },
         DeepPenetration {
             time_s: f64,
@@ -138,6 +146,7 @@ mod known_text {
                     x,
                     y,
                     z,
+                    with_held,
                 } => HealthEvent::LeftVolume {
                     time_s,
                     body,
@@ -145,6 +154,7 @@ mod known_text {
                     x,
                     y,
                     z,
+                    with_held,
                 },
                 Written::DeepPenetration { time_s, a, b, depth_mm } => {
                     HealthEvent::DeepPenetration { time_s, a, b, depth_mm }
@@ -266,6 +276,7 @@ impl HealthMonitor {
                     x: c.x,
                     y: c.y,
                     z: c.z,
+                    with_held: w.rode_with_held(i),
                 });
             }
         }

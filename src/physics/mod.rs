@@ -194,7 +194,14 @@ pub struct PartBody {
     pub state: PartState,
     /// A placed part's pose at the start of its current rest window: (time (s), pose).
     rest_ref: Option<(f64, Isometry3<f64>)>,
+    /// When it last touched the part on the cup, while one was (s): a part that leaves its tray
+    /// within [`RODE_HELD_WINDOW_S`] of that went with the held part.
+    touched_held_s: f64,
 }
+
+/// A part that leaves its tray within this of touching the part on the cup was carried out with
+/// it, or flung out by it (s): its last contact as it slid off the held part over the wall.
+pub const RODE_HELD_WINDOW_S: f64 = 0.1;
 
 /// A placed part whose pose changes less than [`PLACED_REST_M`] and [`PLACED_REST_RAD`] over
 /// this window has come to rest in its slot (s), and becomes a fixed body there: a real part
@@ -534,6 +541,7 @@ impl World {
             }
             self.pipeline_step();
             self.update_held_load(&world_from_tool_next, dt_s / n as f64);
+            self.note_parts_touching_held();
             self.time_s += dt_s / n as f64;
             self.q = q_k;
         }

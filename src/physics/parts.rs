@@ -19,6 +19,7 @@ impl World {
             let p = &mut self.parts[idx];
             p.state = PartState::Free;
             p.rest_ref = None;
+            p.touched_held_s = f64::NEG_INFINITY;
             let b = &mut self.bodies[p.body];
             b.set_enabled(true);
             b.set_body_type(RigidBodyType::Dynamic, false);
@@ -74,6 +75,7 @@ impl World {
             view_collider,
             state: PartState::Free,
             rest_ref: None,
+            touched_held_s: f64::NEG_INFINITY,
         });
         idx
     }

@@ -680,6 +680,37 @@ impl World {
         self.held_load.moment_nm += (raw.moment_nm - self.held_load.moment_nm) * k;
     }
 
+    /// After a solved substep: every part in touch with the held part (an active contact) is
+    /// marked touching it now. Reads the contacts only.
+    pub(super) fn note_parts_touching_held(&mut self) {
+        let Some((seal, _)) = self.gripper.held() else {
+            return;
+        };
+        let held = self.parts[seal.part].collider;
+        let now = self.time_s;
+        for pair in self.narrow_phase.contact_pairs_with(held) {
+            if !pair.has_any_active_contact() {
+                continue;
+            }
+            let other = if pair.collider1 == held {
+                pair.collider2
+            } else {
+                pair.collider1
+            };
+            if let Some(Tag::Part(p)) = self.tag_of(other) {
+                self.parts[p as usize].touched_held_s = now;
+            }
+        }
+    }
+
+    /// Whether part `part` touched the part on the cup within [`super::RODE_HELD_WINDOW_S`]
+    /// before now: leaving its tray, it went with the held part (a double pick).
+    pub fn rode_with_held(&self, part: usize) -> bool {
+        self.parts
+            .get(part)
+            .is_some_and(|p| self.time_s - p.touched_held_s <= super::RODE_HELD_WINDOW_S)
+    }
+
     /// Runs the gripper's timers and moves the held part with the tool; called by `step` before
     /// the solver, with the tool pose at the end of the step.
     pub(super) fn update_gripper(&mut self, world_from_tool_next: &Isometry3<f64>) {

@@ -850,6 +850,72 @@ fn a_part_lying_across_the_held_part_loads_the_cup_with_its_weight_and_peels_it_
     assert_eq!(w.held_contact_load().map(|l| l.force_n.norm()), Some(0.0));
 }
 
+/// A double pick: a C strip lying across the held strip, carried with it out over the pick
+/// tray's wall, leaves the tray with the part on the cup, as the health monitor reports it (the
+/// cell counts it lost, carried with the held part). Negative controls: the strip carried out
+/// with nothing on it reports nothing, and a part that leaves the tray far from the held one
+/// (put down on the table) is not reported as gone with it.
+#[test]
+fn a_part_carried_out_on_the_held_part_is_reported_as_gone_with_it() {
+    let carried_out = |with_upper: bool| {
+        let (mut w, _, _) = world("C");
+        let top = lone_part(&mut w, 0.005, (0.0, 0.0), UnitQuaternion::identity());
+        let ev = grasp_at(&mut w, tool_down_pose(top, 0.0));
+        assert!(matches!(ev, GripperEvent::Grasped { .. }), "{ev:?}");
+        let lifted = top + Vector3::z() * 0.08;
+        w.move_tool_line(&tool_down_pose(lifted, 0.0), 0.5).unwrap();
+        if with_upper {
+            let held = w.part_pose(0);
+            let at = held.translation.vector + held.rotation * Vector3::new(0.02, 0.0, 0.0055);
+            let turn = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), std::f64::consts::FRAC_PI_2);
+            assert_eq!(
+                w.add_part(&Isometry3::from_parts(Translation3::from(at), held.rotation * turn)),
+                1
+            );
+            w.run_for(0.3).unwrap();
+        }
+        // Out over the wall along the tray's y (inner half 120 mm), slowly: 0.3 m/s^2 at most.
+        let out = lifted + w.pick_tray().world_from_tray.rotation * Vector3::new(0.0, -0.22, 0.0);
+        let result = w.move_tool_line(&tool_down_pose(out, 0.0), 2.0);
+        (w, result)
+    };
+    let (w, result) = carried_out(true);
+    let Err(binpick::physics::script::ScriptError::Health(report)) = result else {
+        panic!("the strip on the held one did not leave the tray: {result:?}")
+    };
+    assert_eq!(w.held_part(), Some(0), "{report}");
+    match report.first() {
+        Some(HealthEvent::LeftVolume {
+            body,
+            volume,
+            with_held,
+            ..
+        }) => {
+            assert_eq!((body.as_str(), *volume, *with_held), ("part 1", "pick tray", true));
+        }
+        other => panic!("{other:?}"),
+    }
+    assert!(
+        report
+            .to_string()
+            .contains("left the pick tray volume with the part on the cup"),
+        "{report}"
+    );
+    // Nothing on it: the held strip goes out alone, nothing reported.
+    let (w, result) = carried_out(false);
+    assert!(result.is_ok(), "{result:?}");
+    assert_eq!(w.held_part(), Some(0));
+    // A part on the table while the cup holds one: left the tray, but not with the held part.
+    let (mut w, _) = carried_out(false);
+    w.add_part(&Isometry3::translation(-0.3, -0.3, 0.01));
+    match w.step().unwrap_err().first() {
+        Some(HealthEvent::LeftVolume { body, with_held, .. }) => {
+            assert_eq!((body.as_str(), *with_held), ("part 1", false))
+        }
+        other => panic!("{other:?}"),
+    }
+}
+
 /// What a neighbour the held part drives sideways puts on the cup: a B block held on its top by
 /// its own 16 mm cup, 2 mm off the floor, moved sideways into a second block 15 mm away. The
 /// contacts' push is across the cup's axis: pushing the block along the floor, the held block
