@@ -540,8 +540,7 @@ impl World {
                 self.update_gripper(&world_from_tool_next);
             }
             self.pipeline_step();
-            self.update_held_load(&world_from_tool_next, dt_s / n as f64);
-            self.note_parts_touching_held();
+            self.update_held_contacts(&world_from_tool_next, dt_s / n as f64);
             self.time_s += dt_s / n as f64;
             self.q = q_k;
         }

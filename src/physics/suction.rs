@@ -627,19 +627,23 @@ impl World {
         self.gripper.held().map(|_| self.held_load)
     }
 
-    /// After a solved substep of `dt_s` with the tool at `world_from_tool`: the normal impulses
-    /// the solver applied between the held part and the parts touching it, those that do not
-    /// push it toward the cup ([`ContactLoad`]), and their moment about the cup centre, into the
+    /// After a solved substep of `dt_s` with the tool at `world_from_tool`, one pass over the
+    /// held part's contacts with other parts: each part in active contact with it is marked
+    /// touching it now ([`World::rode_with_held`]); and, where the cell loads the seal with them
+    /// (`gripper.seal_loaded_by_parts`), the normal impulses the solver applied that do not push
+    /// it toward the cup ([`ContactLoad`]), and their moment about the cup centre, go into the
     /// low pass.
     /// Only dynamic bodies push: a kinematic held part gets no impulse from the tray or the arm.
-    pub(super) fn update_held_load(&mut self, world_from_tool: &Isometry3<f64>, dt_s: f64) {
-        let Some((seal, _)) = self.gripper.held().filter(|_| self.gripper.loaded_by_parts) else {
+    pub(super) fn update_held_contacts(&mut self, world_from_tool: &Isometry3<f64>, dt_s: f64) {
+        let Some((seal, _)) = self.gripper.held() else {
             return;
         };
+        let loaded = self.gripper.loaded_by_parts;
         let held = self.parts[seal.part].collider;
         let cup = world_from_tool.translation.vector;
         let axis = world_from_tool.rotation * Vector3::z();
-        let held_pose = self.colliders[held].position();
+        let held_pose = *self.colliders[held].position();
+        let now = self.time_s;
         let mut raw = ContactLoad::default();
         for pair in self.narrow_phase.contact_pairs_with(held) {
             let (held_first, other) = if pair.collider1 == held {
@@ -647,7 +651,13 @@ impl World {
             } else {
                 (false, pair.collider1)
             };
-            if !matches!(self.tag_of(other), Some(Tag::Part(_))) {
+            let Some(Tag::Part(other_part)) = self.tag_of(other) else {
+                continue;
+            };
+            if pair.has_any_active_contact() {
+                self.parts[other_part as usize].touched_held_s = now;
+            }
+            if !loaded {
                 continue;
             }
             // The manifolds the solver saw (its contact clusters where it made them).
@@ -675,32 +685,12 @@ impl World {
                 }
             }
         }
+        if !loaded {
+            return;
+        }
         let k = (dt_s / CONTACT_LOAD_LAG_S).min(1.0);
         self.held_load.force_n += (raw.force_n - self.held_load.force_n) * k;
         self.held_load.moment_nm += (raw.moment_nm - self.held_load.moment_nm) * k;
-    }
-
-    /// After a solved substep: every part in touch with the held part (an active contact) is
-    /// marked touching it now. Reads the contacts only.
-    pub(super) fn note_parts_touching_held(&mut self) {
-        let Some((seal, _)) = self.gripper.held() else {
-            return;
-        };
-        let held = self.parts[seal.part].collider;
-        let now = self.time_s;
-        for pair in self.narrow_phase.contact_pairs_with(held) {
-            if !pair.has_any_active_contact() {
-                continue;
-            }
-            let other = if pair.collider1 == held {
-                pair.collider2
-            } else {
-                pair.collider1
-            };
-            if let Some(Tag::Part(p)) = self.tag_of(other) {
-                self.parts[p as usize].touched_held_s = now;
-            }
-        }
     }
 
     /// Whether part `part` touched the part on the cup within [`super::RODE_HELD_WINDOW_S`]
