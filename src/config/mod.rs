@@ -146,6 +146,16 @@ impl Checker {
         }
     }
 
+    /// An image size (px, width and height): each side within [1, 8192] px (the cell's sensor's
+    /// and a workpiece's scan mode's).
+    pub fn resolution(&mut self, key: &str, resolution_px: &[u32; 2]) {
+        for (i, v) in resolution_px.iter().enumerate() {
+            if !(1..=8192).contains(v) {
+                self.fail(&format!("{key}[{i}]"), format!("must be within [1, 8192], got {v}"));
+            }
+        }
+    }
+
     /// Every element finite.
     pub fn finite_all(&mut self, key: &str, values: &[f64]) {
         for (i, v) in values.iter().enumerate() {

@@ -203,6 +203,10 @@ impl GripperConfig {
     }
 }
 
+/// The largest `gripper.max_lean_deg` (deg): the grasp selector counts a face tilted up to 60 deg
+/// as facing up, and a tool leaning further would sweep its body through the pile beside it.
+pub const MAX_LEAN_DEG: f64 = 60.0;
+
 /// The default of `gripper.lip_friction`.
 fn lip_friction() -> f64 {
     0.5

@@ -8,23 +8,10 @@
 use nalgebra::Vector3;
 
 use super::scene::{
-    CAPTURE_BYTES_PER_PIXEL, MAX_CELL_EXTENT_M, MAX_SENSOR_PIXELS, MIN_CAMERA_ABOVE_RIM_M, MIN_VIEW_BASE_PER_DISTANCE,
-    Scene, SlotPattern, TrayConfig,
+    CAPTURE_BYTES_PER_PIXEL, MAX_CELL_EXTENT_M, MAX_LEAN_DEG, MAX_SENSOR_PIXELS, MIN_CAMERA_ABOVE_RIM_M,
+    MIN_VIEW_BASE_PER_DISTANCE, Scene, SlotPattern, TrayConfig,
 };
 use super::{Checker, ConfigError};
-
-/// `sensor.resolution_px`: each side within [1, 8192] px (the cell's and a workpiece's scan
-/// mode's).
-pub(super) fn check_resolution(c: &mut Checker, resolution_px: &[u32; 2]) {
-    for (i, v) in resolution_px.iter().enumerate() {
-        if !(1..=8192).contains(v) {
-            c.fail(
-                &format!("sensor.resolution_px[{i}]"),
-                format!("must be within [1, 8192], got {v}"),
-            );
-        }
-    }
-}
 
 fn check_tray(c: &mut Checker, key: &str, t: &TrayConfig) {
     c.finite_all(&format!("{key}.center_m"), &t.center_m);
@@ -88,7 +75,7 @@ impl Scene {
         c.non_negative("gripper.cup_flatness_tolerance_m", g.cup_flatness_tolerance_m);
         c.within("gripper.max_tilt_deg", g.max_tilt_deg, 0.0, 90.0);
         if let Some(lean) = g.max_lean_deg {
-            c.within("gripper.max_lean_deg", lean, 0.0, super::tool::MAX_LEAN_DEG);
+            c.within("gripper.max_lean_deg", lean, 0.0, MAX_LEAN_DEG);
         }
         if let Some(r) = g.round_min_radius_m {
             c.positive("gripper.round_min_radius_m", r);
@@ -128,7 +115,7 @@ impl Scene {
         c.finite_all("sensor.position_m", &s.position_m);
         c.finite_all("sensor.look_at_m", &s.look_at_m);
         c.finite_all("sensor.image_up", &s.image_up);
-        check_resolution(c, &s.resolution_px);
+        c.resolution("sensor.resolution_px", &s.resolution_px);
         let pixels = u64::from(s.resolution_px[0]) * u64::from(s.resolution_px[1]);
         if pixels > MAX_SENSOR_PIXELS {
             c.fail(

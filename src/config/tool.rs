@@ -25,7 +25,7 @@
 
 use serde::{Deserialize, Serialize};
 
-use super::{Checker, GripperConfig, Scene, SensorConfig, Workpiece};
+use super::{Checker, GripperConfig, MAX_LEAN_DEG, Scene, SensorConfig, Workpiece};
 
 /// The cup a workpiece brings (`[gripper]` in a workpiece file): each key given replaces the
 /// cell's `gripper.` key of the same name for this workpiece; a key left out keeps the cell's.
@@ -99,10 +99,6 @@ impl CupConfig {
     }
 }
 
-/// The largest `gripper.max_lean_deg` (deg): the grasp selector counts a face tilted up to 60 deg
-/// as facing up, and a tool leaning further would sweep its body through the pile beside it.
-pub const MAX_LEAN_DEG: f64 = 60.0;
-
 /// The sensor's scan mode a workpiece runs with (`[sensor]` in a workpiece file): the cell's
 /// sensor at another of its resolutions, over the same field of view, as a structured-light
 /// scanner's capture settings are chosen per product (a PhoXi M's 1032 x 772 or 2064 x 1544),
@@ -131,7 +127,7 @@ impl ScanMode {
             c.non_negative("sensor.depth_noise_at_1m_m", v);
         }
         if let Some(r) = &self.resolution_px {
-            super::scene_checks::check_resolution(c, r);
+            c.resolution("sensor.resolution_px", r);
         }
     }
 
@@ -306,6 +302,33 @@ mod tests {
             let back: crate::config::Workpiece = parse_toml("w", &text).unwrap();
             assert_eq!(back, w.workpiece);
         }
+    }
+
+    #[test]
+    fn the_lean_and_the_image_size_are_bounded_alike_in_the_cell_and_the_workpiece_file() {
+        let mut cell = LoadedScene::embedded_default().unwrap().scene;
+        // At the lean's bound, and a valid image: accepted, in both files.
+        cell.gripper.max_lean_deg = Some(60.0);
+        cell.validate("s.toml").unwrap();
+        b_with("[gripper]\nmax_lean_deg = 60.0\n\n[sensor]\nresolution_px = [2064, 1544]\n").unwrap();
+        // Beyond them: refused, naming the file, the key and the value.
+        cell.gripper.max_lean_deg = Some(61.0);
+        cell.sensor.resolution_px = [0, 772];
+        let e = cell.validate("s.toml").unwrap_err().to_string();
+        assert!(e.contains("gripper.max_lean_deg must be within [0, 60], got 61"), "{e}");
+        assert!(
+            e.contains("sensor.resolution_px[0] must be within [1, 8192], got 0"),
+            "{e}"
+        );
+        let e = b_with("[gripper]\nmax_lean_deg = 61.0\n").unwrap_err().to_string();
+        assert_eq!(e, "B.toml: gripper.max_lean_deg must be within [0, 60], got 61");
+        let e = b_with("[sensor]\nresolution_px = [1032, 9000]\n")
+            .unwrap_err()
+            .to_string();
+        assert!(
+            e.starts_with("B.toml: sensor.resolution_px[1] must be within [1, 8192], got 9000"),
+            "{e}"
+        );
     }
 
     #[test]
