@@ -259,11 +259,16 @@ mod tests {
         assert_eq!(s.sensor, cell.scene.sensor);
         assert_eq!(s.set_up_for(&b.workpiece), s, "resolving twice changes nothing");
         assert!(s.is_set_up_for(&b.workpiece));
-        // Negative control: the cell itself does not carry B's cup; C brings none.
+        // Negative control: the cell itself does not carry B's cup. C brings only its shake; the
+        // TO-220's file brings nothing.
         assert!(!cell.scene.is_set_up_for(&b.workpiece));
         let c = LoadedWorkpiece::resolve("C").unwrap();
-        assert_eq!(cell.scene.set_up_for(&c.workpiece), cell.scene);
-        assert!(cell.scene.is_set_up_for(&c.workpiece));
+        let for_c = cell.scene.set_up_for(&c.workpiece);
+        assert_eq!(for_c.gripper, cell.scene.gripper);
+        assert_ne!(for_c.agitation, cell.scene.agitation);
+        let to220 = LoadedWorkpiece::resolve("workpieces/to220.toml").unwrap();
+        assert_eq!(cell.scene.set_up_for(&to220.workpiece), cell.scene);
+        assert!(cell.scene.is_set_up_for(&to220.workpiece));
     }
 
     #[test]
