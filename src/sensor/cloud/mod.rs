@@ -26,11 +26,14 @@
 //! noise), measured in front (occluded, allowed) or measured behind (a contradiction, unless the
 //! ray only grazes a lead); score = agree / (agree + contradict), evidence = agree - 3 contradict;
 //! (7) per patch the hypothesis with the most evidence if it scores at least [`MIN_SCORE`] and no
-//! different pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) has as
-//! much (a CAD part's hypotheses joined by their twin faces' at the same placements), refined
-//! (`refine`: settled onto the floor in one of the part's resting poses where the patch's points
-//! allow it; else a CAD part's tilt the patch leaves open scanned by rendering; an outline-fitted
-//! face turned to its best-verified yaw), then non-maximum suppression by centre distance; (8) a
+//! different pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) comes
+//! within [`CLOSE_CALL_PX`] of it (a CAD part's hypotheses joined by their twin faces' at the same
+//! placements); else, a close call, each contender refined and weighed at every pixel by how well
+//! its pixels agree (a log-likelihood under the depth noise), the winner needing
+//! [`CLOSE_CALL_LOG_ODDS`] over every different pose; refined (`refine`: settled onto the floor in
+//! one of the part's resting poses where the patch's points allow it; else a CAD part's tilt the
+//! patch leaves open scanned by rendering; an outline-fitted face turned to its best-verified
+//! yaw), then non-maximum suppression by centre distance; (8) a
 //! part with a body cylinder (D's can) lying on its curved side (`lying`): per patch no flat face
 //! explains, a cylinder of known radius fitted to the points around it, kept if its axis's standard
 //! error is within `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks the turn
@@ -96,15 +99,27 @@ pub const SAME_POSE_M: f64 = 0.002;
 pub const SAME_POSE_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
 /// A hypothesis reaching this far under the tray floor is impossible (m).
 pub const UNDER_FLOOR_M: f64 = 0.001;
-/// A different pose supported by at most this many fewer pixels than the best makes a patch
-/// ambiguous. 0: ties only (on A over seeds 1-8, 3 trades 6 wrong detections for 3 and recall
-/// 93 % for 77 %).
-pub const TIE_MARGIN_PX: i64 = 0;
-/// A different pose within this many points of the best on the verification grid is a close
-/// call, decided at every pixel (`Cloud::decide`). Chosen on `sense` seeds 1-8 of the DIP-8
+/// A different pose within this many points of the best (on the verification grid, or at every
+/// pixel for a part verified so) is a close call, decided at every pixel by how well the pixels
+/// agree (`Cloud::decide`). Chosen on `sense` seeds 1-8 of the DIP-8
 /// (recall 78.7 -> 81.3 %, precision 93.0 -> 93.9 %, the same from 6 to every hypothesis); no
 /// change for A-F, the hex standoff and the TO-220.
 pub const CLOSE_CALL_PX: i64 = 10;
+/// A close call's evidence per agreeing pixel, at zero residual: the log-likelihood ratio of the
+/// depth noise's normal density (sigma [`refine::DEPTH_NOISE_M`]) against a depth spread evenly
+/// over [`BACKGROUND_SPREAD_M`], what a pixel of a neighbour or the floor would show;
+/// a residual r takes r^2 / (2 sigma^2) off it, a contradicting pixel counts as three
+/// agreeing ones against (as in the counted evidence).
+fn agree_log_ratio() -> f64 {
+    (BACKGROUND_SPREAD_M / (refine::DEPTH_NOISE_M * (2.0 * std::f64::consts::PI).sqrt())).ln()
+}
+/// The depths a pixel not on the hypothesised part may show: a pile a few small parts deep (m).
+pub const BACKGROUND_SPREAD_M: f64 = 0.010;
+/// A close call goes to the pose whose every-pixel log-likelihood beats every different pose's
+/// by at least this (odds of 100 to 1); else the patch stays unrecognised. It tells a part's
+/// sides apart by what the agreement band (1 mm) does not see: an SOIC-8 on its back shows its
+/// feet 0.7 mm above its leads' shoulders, and its top face 0.1 mm lower over the floor.
+pub const CLOSE_CALL_LOG_ODDS: f64 = 4.605_170_185_988_091;
 /// Hypotheses of a part without leads are verified on a grid of pixels about this far apart at
 /// the part (m), whatever the sensor's resolution: every other pixel of the default sensor's
 /// 0.85 mm (evidence then counts grid points, and the floors in pixels below are on that grid).
@@ -924,9 +939,7 @@ impl<'a> Cloud<'a> {
         } else {
             Vec::new()
         };
-        let best = self
-            .decide(model, &verified)
-            .map(|d| self.refine(model, patch, &plane, d));
+        let best = self.decide(model, &verified, |d| self.refine(model, patch, &plane, d));
         (best, fits, larger_than_every_face)
     }
 
@@ -1259,34 +1272,61 @@ impl<'a> Cloud<'a> {
         out
     }
 
-    /// The pose the image prefers among a patch's verified hypotheses (evidence, detection). A
-    /// different pose as well supported (a relay's pins not seen: on its back or not?) leaves
-    /// the patch unrecognised. A close call on the verification grid (a different pose within
-    /// [`CLOSE_CALL_PX`] grid points of the best) is decided on the evidence of every pixel:
-    /// a DIP's 0.5 mm legs, which tell on its legs from on its back, fall between grid points.
-    fn decide(&self, model: &CloudModel, verified: &[(i64, CloudDetection)]) -> Option<CloudDetection> {
+    /// The pose the image prefers among a patch's verified hypotheses (evidence, detection),
+    /// refined by `refine`. A close call (a different pose within [`CLOSE_CALL_PX`] points of
+    /// the best) is decided at every pixel, each contender refined first (settled on the floor,
+    /// so its height over the floor counts) and weighed by how well each pixel agrees
+    /// ([`Cloud::log_likelihood`]): a DIP's 0.5 mm legs, which tell on its legs from on its
+    /// back, fall between the grid's points; an SOIC's feet, 0.7 mm over its leads' shoulders
+    /// when it lies on its back, agree within the 1 mm band either way. A different pose as well
+    /// supported (within [`CLOSE_CALL_LOG_ODDS`]: a relay's pins not seen, on its back or not?)
+    /// leaves the patch unrecognised.
+    fn decide(
+        &self,
+        model: &CloudModel,
+        verified: &[(i64, CloudDetection)],
+        refine: impl Fn(CloudDetection) -> CloudDetection,
+    ) -> Option<CloudDetection> {
         // The best, if no different pose comes within `margin` of it.
-        let unrivalled = |hyps: &[(i64, &CloudDetection)], margin: i64| -> Option<CloudDetection> {
-            let (evidence, best) = hyps.iter().max_by_key(|v| v.0)?;
+        let unrivalled = |hyps: &[(f64, &CloudDetection)], margin: f64| -> Option<CloudDetection> {
+            let (evidence, best) = hyps.iter().max_by(|a, b| a.0.total_cmp(&b.0))?;
             let rival = hyps
                 .iter()
                 .any(|(e, d)| *e >= evidence - margin && !model.same_pose(&d.world_from_part, &best.world_from_part));
             (!rival).then(|| (*best).clone())
         };
-        let all: Vec<(i64, &CloudDetection)> = verified.iter().map(|(e, d)| (*e, d)).collect();
-        let (evidence, best) = all.iter().max_by_key(|v| v.0)?;
-        if self.verify_stride(model, &best.world_from_part) == 1 {
-            return unrivalled(&all, TIE_MARGIN_PX);
+        let all: Vec<(f64, &CloudDetection)> = verified.iter().map(|(e, d)| (*e as f64, d)).collect();
+        let (evidence, _) = all.iter().max_by(|a, b| a.0.total_cmp(&b.0))?;
+        if let Some(best) = unrivalled(&all, CLOSE_CALL_PX as f64) {
+            return Some(refine(best));
         }
-        if let Some(best) = unrivalled(&all, CLOSE_CALL_PX) {
-            return Some(best);
-        }
-        let close: Vec<(i64, &CloudDetection)> = all
+        // Each contender refined (settled on the floor where it rests there) before it is
+        // weighed: a pose's height over the floor is part of what it predicts.
+        let refined: Vec<CloudDetection> = all
             .iter()
-            .filter(|(e, _)| *e >= evidence - CLOSE_CALL_PX)
-            .filter_map(|(_, d)| self.verify_every(model, &d.world_from_part, 1).map(|(_, _, e)| (e, *d)))
+            .filter(|(e, _)| *e >= evidence - CLOSE_CALL_PX as f64)
+            .map(|(_, d)| refine((*d).clone()))
             .collect();
-        unrivalled(&close, TIE_MARGIN_PX)
+        let close: Vec<(f64, &CloudDetection)> = refined
+            .iter()
+            .filter_map(|d| self.log_likelihood(model, &d.world_from_part).map(|e| (e, d)))
+            .collect();
+        unrivalled(&close, CLOSE_CALL_LOG_ODDS)
+    }
+
+    /// A hypothesis's evidence at every pixel, weighed by how well each agreeing pixel agrees
+    /// ([`agree_log_ratio`]); `None` as `render`.
+    fn log_likelihood(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<f64> {
+        let (per_pixel, two_var) = (agree_log_ratio(), 2.0 * refine::DEPTH_NOISE_M * refine::DEPTH_NOISE_M);
+        let mut ll = 0.0;
+        self.render(model, pose, 1, |i, predicted, graze| {
+            match self.judge(i, predicted, graze) {
+                Some(true) => ll += per_pixel - (self.depth[i] - predicted).powi(2) / two_var,
+                Some(false) => ll -= 3.0 * per_pixel,
+                None => {}
+            }
+        })?;
+        Some(ll)
     }
 
     /// A hypothesis checked: physically possible (not under the tray floor) and verified by
