@@ -104,7 +104,21 @@ pub fn read(path: &Path) -> Result<RawMesh, MeshError> {
         let mut all = head[..n].to_vec();
         all.extend(rest);
         let text = String::from_utf8_lossy(&all);
-        return stl_ascii(&text).map_err(fail);
+        // Many CAD exporters begin a binary STL's header with "solid" too: one that fails as
+        // text and holds bytes no text has is named as the binary STL it is.
+        let binary_bytes = n == 84 && all[84..].iter().any(|&b| b == 0 || b >= 0x80);
+        return stl_ascii(&text)
+            .map_err(|e| {
+                if binary_bytes {
+                    Defect::Truncated(format!(
+                        "a binary STL whose header begins with \"solid\": its header announces {count} \
+                         triangles ({binary_size} bytes), the file has {bytes} bytes"
+                    ))
+                } else {
+                    e
+                }
+            })
+            .map_err(fail);
     }
     if bytes > MAX_TEXT_BYTES {
         return Err(fail(Defect::TooLarge {

@@ -83,6 +83,12 @@ fn bad_mesh_files_are_refused_naming_the_file_and_the_defect() {
     let mut binary_nan = vec![0u8; 84 + 50];
     binary_nan[80] = 1;
     binary_nan[84 + 12..84 + 16].copy_from_slice(&f32::NAN.to_le_bytes());
+    // A binary STL whose header begins with "solid" (as many exporters write it), cut short: one
+    // of its two triangles kept.
+    let mut solid_binary = vec![b' '; 84 + 50];
+    solid_binary[..11].copy_from_slice(b"solid part1");
+    solid_binary[80..84].copy_from_slice(&2u32.to_le_bytes());
+    solid_binary[84 + 12..84 + 16].copy_from_slice(&1.5f32.to_le_bytes());
     let cases: Vec<(&str, Vec<u8>, &str, &str)> = vec![
         (
             "nan.obj",
@@ -92,6 +98,12 @@ fn bad_mesh_files_are_refused_naming_the_file_and_the_defect() {
         ),
         ("inf.stl", stl_ascii("0 inf 0").into_bytes(), "", "non-finite"),
         ("nanbin.stl", binary_nan, "", "non-finite"),
+        (
+            "solidbin.stl",
+            solid_binary,
+            "",
+            "binary STL whose header begins with \"solid\": its header announces 2 triangles (184 bytes), the file has 134 bytes",
+        ),
         (
             "flat.obj",
             b"v 0 0 0\nv 10 0 0\nv 20 0 0\nf 1 2 3\nf 1 3 2\n".to_vec(),
