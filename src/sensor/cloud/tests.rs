@@ -1184,6 +1184,16 @@ fn an_outline_faces_yaw_is_scanned_beyond_the_span_its_silhouette_reports() {
     assert_eq!(super::refine::yaw_scan_span_rad(&prim, 0, 0.0), 0.0);
 }
 
+/// The default cell with its sensor in the full-resolution mode: 2064 x 1544 px over the same
+/// field of view (0.42 mm pixels at the floor).
+fn full_resolution_cell() -> LoadedScene {
+    let mut loaded = LoadedScene::embedded_default().unwrap();
+    loaded.scene.sensor.resolution_px = [2064, 1544];
+    loaded.scene.sensor.focal_px = [2350.0, 2350.0];
+    loaded.scene.sensor.principal_point_px = [1032.0, 772.0];
+    loaded
+}
+
 #[test]
 fn a_finer_sensor_takes_its_normals_over_the_same_distance() {
     // The sensor's full-resolution mode (2064 x 1544 px, 0.42 mm pixels at the floor) over
@@ -1196,10 +1206,7 @@ fn a_finer_sensor_takes_its_normals_over_the_same_distance() {
     // 88.4 -> 85.0 % and 99.1 -> 97.1 %).
     use crate::physics::{PartShape, World, pile::PileOptions};
     use crate::sensor::{Detection, RecognitionTotals, Sensor, TruthAtTrigger, capture, evaluate};
-    let mut loaded = LoadedScene::embedded_default().unwrap();
-    loaded.scene.sensor.resolution_px = [2064, 1544];
-    loaded.scene.sensor.focal_px = [2350.0, 2350.0];
-    loaded.scene.sensor.principal_point_px = [1032.0, 772.0];
+    let loaded = full_resolution_cell();
     let robot = crate::robot::RobotModel::from_scene(&loaded).unwrap();
     let wp = LoadedWorkpiece::resolve(&format!("{}/workpieces/dip8.toml", env!("CARGO_MANIFEST_DIR"))).unwrap();
     let scene = loaded.for_workpiece(&wp);
@@ -1376,10 +1383,7 @@ fn an_soic_on_its_legs_or_on_its_back_is_told_by_how_well_its_pixels_agree() {
     // (less three per contradiction) at every pixel does not tell the part on its back from the
     // same face placement the other way up in at least 3 of the 12 (the count rule that decided
     // close calls before reported 4 of the 12 on their legs).
-    let mut loaded = LoadedScene::embedded_default().unwrap();
-    loaded.scene.sensor.resolution_px = [2064, 1544];
-    loaded.scene.sensor.focal_px = [2350.0, 2350.0];
-    loaded.scene.sensor.principal_point_px = [1032.0, 772.0];
+    let loaded = full_resolution_cell();
     let cell = Cell {
         camera: Camera::from_config(&loaded.scene.sensor).unwrap(),
         tray: TrayVolume::new(&loaded.scene.pick_tray),
