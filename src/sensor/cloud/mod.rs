@@ -119,7 +119,7 @@ pub const BACKGROUND_SPREAD_M: f64 = 0.010;
 /// by at least this (odds of 100 to 1); else the patch stays unrecognised. It tells a part's
 /// sides apart by what the agreement band (1 mm) does not see: an SOIC-8 on its back shows its
 /// feet 0.7 mm above its leads' shoulders, and its top face 0.1 mm lower over the floor.
-pub const CLOSE_CALL_LOG_ODDS: f64 = 4.605_170_185_988_091;
+pub const CLOSE_CALL_LOG_ODDS: f64 = 2.0 * std::f64::consts::LN_10;
 /// Hypotheses of a part without leads are verified on a grid of pixels about this far apart at
 /// the part (m), whatever the sensor's resolution: every other pixel of the default sensor's
 /// 0.85 mm (evidence then counts grid points, and the floors in pixels below are on that grid).
