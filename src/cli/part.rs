@@ -53,6 +53,10 @@ struct PileShare {
     /// The cell's cloud recognition on one capture of each pile, against the truth (`None`
     /// when the cell's recognition is the oracle).
     recognition: Option<RecognitionTotals>,
+    /// The same at twice the sensor's resolution over the same field of view (the scan mode a
+    /// workpiece may choose), with that resolution; `None` where twice would exceed the cell's
+    /// pixel bound or the recognition is the oracle.
+    recognition_finer: Option<([u32; 2], RecognitionTotals)>,
 }
 
 impl PileShare {
@@ -71,8 +75,8 @@ impl PileShare {
 /// from above at its cup-fit centre and at eight points of the cup's rim about it meets this part
 /// first, within 1 mm of the face (nothing lies on the cup's disc). Each pile is also captured
 /// once and recognised from the cloud, as the cell does, and the detections judged against the
-/// parts' poses (`binpick sense`'s evaluation). Read from the simulated world: a prediction for
-/// the user, not a decision of the cell.
+/// parts' poses (`binpick sense`'s evaluation), and once more at twice the sensor's resolution.
+/// Read from the simulated world: a prediction for the user, not a decision of the cell.
 fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: u64, lean: f64) -> Result<PileShare> {
     use binpick::physics::{PartShape, Tag, World, pile::PileOptions};
     use nalgebra::{Point3, Vector3};
@@ -82,6 +86,16 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
     }
     let cloud = loaded.scene.sensor.recognition == binpick::config::RecognitionMode::Cloud;
     let mut recognition = RecognitionTotals::default();
+    let [w, h] = loaded.scene.sensor.resolution_px;
+    let finer_px = [2 * w, 2 * h];
+    let mut finer = (cloud && u64::from(finer_px[0]) * u64::from(finer_px[1]) <= binpick::config::MAX_SENSOR_PIXELS)
+        .then(|| {
+            let mode = binpick::config::ScanMode {
+                resolution_px: Some(finer_px),
+                depth_noise_at_1m_m: None,
+            };
+            (loaded.scene.sensor.with_mode(&mode), RecognitionTotals::default())
+        });
     let robot = binpick::robot::RobotModel::from_scene(loaded)?;
     let shape = PartShape::build(&wp.workpiece, &wp.source)?;
     let r_cup = 0.5 * m.cup.diameter_m;
@@ -105,11 +119,18 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
         world.build_pile(&PileOptions::cells_first_pile(wp.workpiece.pile_count as usize, seed))?;
         if cloud {
             use binpick::sensor::{Sensor, TruthAtTrigger, capture, evaluate};
-            let sensor = Sensor::new(&loaded.scene.sensor, &world, seed, &wp.workpiece)
-                .ok_or_else(|| anyhow::anyhow!("the sensor's pose is degenerate"))?;
-            let c = capture(&world, &sensor.camera, seed, 0);
-            let truth = TruthAtTrigger::take(&world, &sensor, &c);
-            recognition.add(&evaluate(&truth, &sensor.recognize_cloud(&c), &sensor.symmetry));
+            let recognise = |config: &binpick::config::SensorConfig, totals: &mut RecognitionTotals| -> Result<()> {
+                let sensor = Sensor::new(config, &world, seed, &wp.workpiece)
+                    .ok_or_else(|| anyhow::anyhow!("the sensor's pose is degenerate"))?;
+                let c = capture(&world, &sensor.camera, seed, 0);
+                let truth = TruthAtTrigger::take(&world, &sensor, &c);
+                totals.add(&evaluate(&truth, &sensor.recognize_cloud(&c), &sensor.symmetry));
+                Ok(())
+            };
+            recognise(&loaded.scene.sensor, &mut recognition)?;
+            if let Some((config, totals)) = &mut finer {
+                recognise(config, totals)?;
+            }
         }
         let down = -Vector3::z();
         for i in world.parts_in_pick_tray() {
@@ -130,6 +151,7 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
         out.piles += 1;
     }
     out.recognition = cloud.then_some(recognition);
+    out.recognition_finer = finer.map(|(_, totals)| (finer_px, totals));
     Ok(out)
 }
 
@@ -300,7 +322,8 @@ pub fn part(a: &PartArgs) -> Result<()> {
             ));
         }
         if let Some(r) = piles.recognition.as_ref().map(RecognitionTotals::summary) {
-            say(&recognition_line(&r, &scene.scene));
+            let finer = piles.recognition_finer.as_ref().map(|(px, t)| (*px, t.summary()));
+            say(&recognition_line(&r, finer.as_ref(), &scene.scene));
         }
         for why in [no_cup_face(&m), no_upright_face(&m, w, tilt)].into_iter().flatten() {
             say(&format!("warning: {why}"));
@@ -335,8 +358,8 @@ fn round_side(m: &PartModel, scene: &binpick::config::Scene) -> Option<RoundSide
 }
 
 /// What the recognition on the simulated piles found, as a line of text (with what a precision
-/// under 99 % means for the picks and a pointer to the scan mode).
-fn recognition_line(r: &RecognitionSummary, scene: &Scene) -> String {
+/// under 99 % means for the picks, and what twice the resolution finds: `finer`).
+fn recognition_line(r: &RecognitionSummary, finer: Option<&([u32; 2], RecognitionSummary)>, scene: &Scene) -> String {
     let [w, h] = scene.sensor.resolution_px;
     let mut line = format!(
         "recognition on those piles ({w} x {h} px, one capture each): recall {:.1} % of the top layer ({} of {}), precision {:.1} % ({} of {} detections within 2 mm and 5 deg of a part); pose error of those, median / p95: {:.2} / {:.2} mm, {:.1} / {:.1} deg",
@@ -353,10 +376,17 @@ fn recognition_line(r: &RecognitionSummary, scene: &Scene) -> String {
     );
     if r.precision < 0.99 {
         line.push_str(&format!(
-            "; a wrong detection may be grasped or set down off its pose (the place tray's tolerance: {:.1} mm, {:.0} deg): a finer scan mode for this part (`[sensor] resolution_px` in its file) may help (docs/formats.md)",
+            "; a wrong detection may be grasped or set down off its pose (the place tray's tolerance: {:.1} mm, {:.0} deg)",
             scene.place_tray.tolerance_m * 1e3,
             scene.place_tray.tolerance_deg
         ));
+        if let Some(([fw, fh], f)) = finer {
+            line.push_str(&format!(
+                "; at twice the resolution ({fw} x {fh} px over the same field of view, `[sensor] resolution_px = [{fw}, {fh}]` in the workpiece file, docs/formats.md): recall {:.1} %, precision {:.1} %",
+                100.0 * f.recall,
+                100.0 * f.precision
+            ));
+        }
     }
     line
 }
@@ -412,6 +442,10 @@ fn print_json(
             "parts_offering_a_cup_face": piles.offered,
             "share": round(piles.share(), 6),
             "recognition": piles.recognition.as_ref().map(RecognitionTotals::summary),
+            "recognition_at_twice_the_resolution": piles.recognition_finer.as_ref().map(|(px, t)| serde_json::json!({
+                "resolution_px": px,
+                "summary": t.summary(),
+            })),
         },
         "warning": no_cup_face(m),
         "svg": svg_path.display().to_string(),

@@ -405,11 +405,44 @@ fn shipped_cad_parts_check_and_show_their_faces() {
         "[shape]",
         "[sensor]\nresolution_px = [258, 193]\n\n[shape]",
     );
-    let coarse = &part("dip8-coarse")["pile"]["recognition"];
+    let coarse_part = part("dip8-coarse");
+    let coarse = &coarse_part["pile"]["recognition"];
     assert!(
         coarse["recall"].as_f64().unwrap() < recall - 0.3,
         "coarse {coarse}, the cell's {rec}"
     );
+    // And once more at twice the resolution over the same field of view, what a user choosing
+    // a finer scan mode gets: the coarse mode's double (516 x 386) finds more than the coarse
+    // mode, the cell's double (2064 x 1544) about what the cell finds or more. A mode whose
+    // double exceeds the cell's 4 MP bound gives none.
+    let twice = |v: &serde_json::Value| v["pile"]["recognition_at_twice_the_resolution"].clone();
+    let coarse_twice = twice(&coarse_part);
+    assert_eq!(
+        coarse_twice["resolution_px"],
+        serde_json::json!([516, 386]),
+        "{coarse_twice}"
+    );
+    assert!(
+        coarse_twice["summary"]["recall"].as_f64().unwrap() > coarse["recall"].as_f64().unwrap() + 0.2,
+        "{coarse_twice} against {coarse}"
+    );
+    let dip_twice = twice(&dip);
+    assert_eq!(
+        dip_twice["resolution_px"],
+        serde_json::json!([2064, 1544]),
+        "{dip_twice}"
+    );
+    assert!(
+        dip_twice["summary"]["recall"].as_f64().unwrap() > recall - 0.05,
+        "{dip_twice}"
+    );
+    ws.edit(
+        "workpieces/dip8.toml",
+        "workpieces/dip8-fine.toml",
+        "[shape]",
+        "[sensor]\nresolution_px = [2064, 1544]\n\n[shape]",
+    );
+    assert!(twice(&part("dip8-fine")).is_null());
 
     // The TO-220: three bodies and more (body, tab, leads), the tab's hole found; its body's top
     // and back take the cup.
