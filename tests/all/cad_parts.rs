@@ -416,26 +416,16 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     // mode, the cell's double (2064 x 1544) about what the cell finds or more. A mode whose
     // double exceeds the cell's 4 MP bound gives none.
     let twice = |v: &serde_json::Value| v["pile"]["recognition_at_twice_the_resolution"].clone();
-    let coarse_twice = twice(&coarse_part);
-    assert_eq!(
-        coarse_twice["resolution_px"],
-        serde_json::json!([516, 386]),
-        "{coarse_twice}"
-    );
-    assert!(
-        coarse_twice["summary"]["recall"].as_f64().unwrap() > coarse["recall"].as_f64().unwrap() + 0.2,
-        "{coarse_twice} against {coarse}"
-    );
-    let dip_twice = twice(&dip);
-    assert_eq!(
-        dip_twice["resolution_px"],
-        serde_json::json!([2064, 1544]),
-        "{dip_twice}"
-    );
-    assert!(
-        dip_twice["summary"]["recall"].as_f64().unwrap() > recall - 0.05,
-        "{dip_twice}"
-    );
+    let finds_more = |v: &serde_json::Value, px: [u32; 2], recall_above: f64| {
+        let t = twice(v);
+        assert_eq!(t["resolution_px"], serde_json::json!(px), "{t}");
+        assert!(
+            t["summary"]["recall"].as_f64().unwrap() > recall_above,
+            "{t}, against {recall_above}"
+        );
+    };
+    finds_more(&coarse_part, [516, 386], coarse["recall"].as_f64().unwrap() + 0.2);
+    finds_more(&dip, [2064, 1544], recall - 0.05);
     ws.edit(
         "workpieces/dip8.toml",
         "workpieces/dip8-fine.toml",
