@@ -615,11 +615,12 @@ fn print_poses(m: &PartModel, lean: f64) {
             if up { "yes" } else { "no" }
         );
     }
-    println!(
-        "\nshare of resting poses with a cup face up (within {:.0} deg of vertical, as the grasp selector takes them): {:.1} %",
+    println!();
+    say(&format!(
+        "share of resting poses with a cup face up (within {:.0} deg of vertical, as the grasp selector takes them): {:.1} %",
         lean.to_degrees(),
         100.0 * m.graspable_share(lean)
-    );
+    ));
 }
 
 /// Writes `text` to `path` through a temporary file beside it (never half-written). A path that
