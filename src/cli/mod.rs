@@ -222,6 +222,27 @@ pub fn pose_text(p: &Isometry3<f64>) -> String {
     )
 }
 
+/// A share as a percentage with one decimal ("12.5 %"), or "-" where there is none (a precision
+/// without detections, a recall without a top layer): never `NaN`.
+pub fn percent(share: f64) -> String {
+    if share.is_finite() {
+        format!("{:.1} %", 100.0 * share)
+    } else {
+        "-".into()
+    }
+}
+
+/// The pose errors of a recognition's correct detections as text: "median / p95: 0.11 / 0.29
+/// mm, 0.15 / 0.88 deg", or that there is no correct detection to take them from (never `NaN`).
+pub fn pose_errors_text(r: &binpick::sensor::RecognitionSummary) -> String {
+    let [p50, p95] = r.position_error_mm;
+    let [r50, r95] = r.rotation_error_deg;
+    if r.correct == 0 || !(p50.is_finite() && p95.is_finite() && r50.is_finite() && r95.is_finite()) {
+        return "none: no detection was correct".into();
+    }
+    format!("median / p95: {p50:.2} / {p95:.2} mm, {r50:.2} / {r95:.2} deg")
+}
+
 /// Set when Ctrl-C was pressed: runs end after the pick under way and write what they have.
 pub static STOP: std::sync::atomic::AtomicBool = std::sync::atomic::AtomicBool::new(false);
 
@@ -241,4 +262,47 @@ pub fn stop_on_ctrl_c() -> &'static std::sync::atomic::AtomicBool {
         }
     });
     &STOP
+}
+
+#[cfg(test)]
+mod tests {
+    use binpick::sensor::RecognitionTotals;
+
+    /// A recognition without a correct detection (or without any) prints "-" and says that no
+    /// detection was correct, never `NaN`. Negative control: one correct detection prints its
+    /// errors.
+    #[test]
+    fn recognition_figures_without_a_correct_detection_print_no_nan() {
+        let none = RecognitionTotals {
+            captures: 1,
+            top_layer: 4,
+            detected: 0,
+            ..RecognitionTotals::default()
+        }
+        .summary();
+        assert!(none.precision.is_nan() && none.position_error_mm[0].is_nan());
+        assert_eq!(super::percent(none.precision), "-");
+        assert_eq!(super::percent(none.recall), "0.0 %");
+        let text = super::pose_errors_text(&none);
+        assert!(
+            !text.contains("NaN") && text.contains("no detection was correct"),
+            "{text}"
+        );
+        let one = RecognitionTotals {
+            captures: 1,
+            top_layer: 4,
+            top_layer_found: 1,
+            detected: 2,
+            correct: 1,
+            position_errors_m: vec![0.0002],
+            rotation_errors_rad: vec![0.01],
+        }
+        .summary();
+        assert_eq!(super::percent(one.precision), "50.0 %");
+        let text = super::pose_errors_text(&one);
+        assert!(
+            text.starts_with("median / p95: 0.20 / 0.20 mm, 0.57 / 0.57 deg"),
+            "{text}"
+        );
+    }
 }

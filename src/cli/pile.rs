@@ -217,23 +217,20 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
 /// The text lines of the recognition result against the truth (evaluation only).
 fn print_recognition(loaded: &LoadedScene, report: &RecognitionReport, recognition_wall_s: f64) {
     println!(
-        "  recognition      {} ({:.1} ms): {} detected, {} correct (precision {:.1} %); top layer {} / {} found (recall {:.1} %); {} parts in the tray",
+        "  recognition      {} ({:.1} ms): {} detected, {} correct (precision {}); top layer {} / {} found (recall {}); {} parts in the tray",
         loaded.scene.sensor.recognition.name(),
         recognition_wall_s * 1e3,
         report.figures.detected,
         report.figures.correct,
-        report.figures.precision * 100.0,
+        super::percent(report.figures.precision),
         report.figures.top_layer_found,
         report.figures.top_layer,
-        report.figures.recall * 100.0,
+        super::percent(report.figures.recall),
         report.parts,
     );
     println!(
-        "  pose error       of the correct ones: position median {:.2} / p95 {:.2} mm, rotation median {:.2} / p95 {:.2} deg",
-        report.figures.position_error_mm[0],
-        report.figures.position_error_mm[1],
-        report.figures.rotation_error_deg[0],
-        report.figures.rotation_error_deg[1]
+        "  pose error       of the correct ones, {}",
+        super::pose_errors_text(&report.figures)
     );
 }
 

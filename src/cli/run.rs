@@ -232,20 +232,17 @@ fn print_summary(s: &binpick::results::Summary, recognition: &str, wall_s: f64) 
     }
     let r = &s.recognition;
     let recognised = format!(
-        "recognition ({}), against the truth at each trigger: top layer {} / {} found (recall {:.1} %), \
-         {} of {} detections correct (precision {:.1} %; correct = within 2 mm and 5 deg), pose error median \
-         {:.2} mm / {:.2} deg, p95 {:.2} mm / {:.2} deg; grasps sealed {} / {}, misrecognised {}",
+        "recognition ({}), against the truth at each trigger: top layer {} / {} found (recall {}), \
+         {} of {} detections correct (precision {}; correct = within 2 mm and 5 deg), pose error {}; \
+         grasps sealed {} / {}, misrecognised {}",
         recognition,
         r.top_layer_found,
         r.top_layer,
-        100.0 * r.recall,
+        super::percent(r.recall),
         r.correct,
         r.detected,
-        100.0 * r.precision,
-        r.position_error_mm[0],
-        r.rotation_error_deg[0],
-        r.position_error_mm[1],
-        r.rotation_error_deg[1],
+        super::percent(r.precision),
+        super::pose_errors_text(r),
         t.grasps.1,
         t.grasps.0,
         t.misrecognised
