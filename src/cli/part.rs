@@ -362,17 +362,14 @@ fn round_side(m: &PartModel, scene: &binpick::config::Scene) -> Option<RoundSide
 fn recognition_line(r: &RecognitionSummary, finer: Option<&([u32; 2], RecognitionSummary)>, scene: &Scene) -> String {
     let [w, h] = scene.sensor.resolution_px;
     let mut line = format!(
-        "recognition on those piles ({w} x {h} px, one capture each): recall {:.1} % of the top layer ({} of {}), precision {:.1} % ({} of {} detections within 2 mm and 5 deg of a part); pose error of those, median / p95: {:.2} / {:.2} mm, {:.1} / {:.1} deg",
-        100.0 * r.recall,
+        "recognition on those piles ({w} x {h} px, one capture each): recall {} of the top layer ({} of {}), precision {} ({} of {} detections within 2 mm and 5 deg of a part); pose error of those, {}",
+        super::percent(r.recall),
         r.top_layer_found,
         r.top_layer,
-        100.0 * r.precision,
+        super::percent(r.precision),
         r.correct,
         r.detected,
-        r.position_error_mm[0],
-        r.position_error_mm[1],
-        r.rotation_error_deg[0],
-        r.rotation_error_deg[1],
+        super::pose_errors_text(r),
     );
     if r.precision < 0.99 {
         line.push_str(&format!(
@@ -380,13 +377,16 @@ fn recognition_line(r: &RecognitionSummary, finer: Option<&([u32; 2], Recognitio
             scene.place_tray.tolerance_m * 1e3,
             scene.place_tray.tolerance_deg
         ));
-        if let Some(([fw, fh], f)) = finer {
-            line.push_str(&format!(
-                "; at twice the resolution ({fw} x {fh} px over the same field of view, `[sensor] resolution_px = [{fw}, {fh}]` in the workpiece file, docs/formats.md): recall {:.1} %, precision {:.1} %",
-                100.0 * f.recall,
-                100.0 * f.precision
-            ));
-        }
+    }
+    // Under 99 %, or nothing detected at all: what the finer mode finds.
+    if (r.precision < 0.99 || r.detected == 0)
+        && let Some(([fw, fh], f)) = finer
+    {
+        line.push_str(&format!(
+            "; at twice the resolution ({fw} x {fh} px over the same field of view, `[sensor] resolution_px = [{fw}, {fh}]` in the workpiece file, docs/formats.md): recall {}, precision {}",
+            super::percent(f.recall),
+            super::percent(f.precision)
+        ));
     }
     line
 }
@@ -495,16 +495,16 @@ fn pose_json(p: &RestingPose) -> serde_json::Value {
 fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
     let w = &wp.workpiece;
     if wp.mesh.is_none() {
-        println!(
+        say(&format!(
             "part {:?} ({}): {} primitives, meshed: {} triangles",
             w.name,
             wp.label,
             w.pieces().len(),
             m.mesh.triangles.len()
-        );
+        ));
         println!("repair: none (primitives are meshed closed)");
     } else {
-        println!(
+        say(&format!(
             "part {:?} ({}): mesh {}, {} triangles in {} {}",
             w.name,
             wp.label,
@@ -512,7 +512,7 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
             m.mesh.triangles.len(),
             report.bodies,
             if report.bodies == 1 { "body" } else { "bodies" }
-        );
+        ));
         say(&format!(
             "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} T-junctions split, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
             report.welded_vertices,
@@ -569,13 +569,19 @@ fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
     );
     println!("   #  normal                  area mm^2   extent mm      holes  cup fits  fit area mm^2  cup site mm");
     let largest = m.faces.first().map_or(0.0, |f| f.face.area_m2);
-    let shown = |f: &ModelFace| f.fit.takes_cup() || f.face.area_m2 >= 0.05 * largest;
+    // A face that takes the cup, or one large and wide enough to be a face the recognition
+    // matches (a strip of a tessellated curve, a lead's side is neither).
+    let min_width_m = binpick::sensor::cloud::MESH_FACE_MIN_WIDTH_M;
+    let shown = |f: &ModelFace| {
+        let e = f.face.extent_m();
+        f.fit.takes_cup() || (f.face.area_m2 >= 0.05 * largest && e[0].min(e[1]) >= min_width_m)
+    };
     for (i, (f, site)) in m.faces.iter().zip(sites).enumerate().filter(|(_, (f, _))| shown(f)) {
         let n = f.face.normal;
         let e = f.face.extent_m();
         let best = match site {
             Some((p, _)) => format!("[{:.2} {:.2} {:.2}]", p.x * 1e3, p.y * 1e3, p.z * 1e3),
-            None if f.fit.takes_cup() => "blocked (the part's own features)".to_string(),
+            None if f.fit.takes_cup() => "blocked *".to_string(),
             None => "-".to_string(),
         };
         println!(
@@ -592,9 +598,19 @@ fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
             f.fit.area_m2 * 1e6
         );
     }
+    if m.faces
+        .iter()
+        .zip(sites)
+        .any(|(f, site)| site.is_none() && f.fit.takes_cup())
+    {
+        println!("  * the cup fits the face, but its approach meets the part's own features (pins, tabs)");
+    }
     let hidden = m.faces.iter().filter(|f| !shown(f)).count();
     if hidden > 0 {
-        println!("  (and {hidden} faces under 5 % of the largest face's area: --json lists them)");
+        println!(
+            "  (and {hidden} faces under 5 % of the largest face's area or narrower than {:.1} mm: --json lists them)",
+            min_width_m * 1e3
+        );
     }
 }
 

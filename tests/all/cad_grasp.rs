@@ -12,7 +12,7 @@ use binpick::config::{LoadedScene, LoadedWorkpiece};
 use binpick::grasp::GraspSelector;
 use binpick::robot::RobotModel;
 
-use crate::support::tempdir;
+use crate::support::{binpick_in, stderr, stdout, tempdir};
 
 /// OBJ text (mm) of axis-aligned boxes given by their corners, each a closed body.
 fn boxes_obj(boxes: &[([f64; 3], [f64; 3])]) -> String {
@@ -83,6 +83,22 @@ fn a_face_under_a_tall_post_of_the_part_is_not_offered() {
     let post_axis = nalgebra::Vector3::new(0.0, 0.0, 0.0);
     let d = (site - post_axis).xy().norm();
     assert!(d >= 0.001 + 0.003, "site {site:?} is {d} m from the post's axis");
+    // `binpick part` marks the blocked face within the terminal's 110 columns and says why (its
+    // row ran to 122 with the reason in it); the short post's part has no such mark.
+    let part = |name: &str| {
+        let toml = tmp.path().join(format!("{name}.toml"));
+        let o = binpick_in(tmp.path(), &["part", toml.to_str().unwrap()]);
+        assert!(o.status.success(), "{}", stderr(&o));
+        stdout(&o)
+    };
+    let text = part("tall");
+    let longest = text.lines().map(|l| l.chars().count()).max().unwrap();
+    assert!(longest <= 110, "a line of {longest} characters:\n{text}");
+    assert!(
+        text.contains("blocked *") && text.contains("its approach meets the part's own features"),
+        "{text}"
+    );
+    assert!(!part("short").contains("blocked"));
 }
 
 #[test]

@@ -305,6 +305,17 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     // Each part's summary (mesh, size, repairs: 290 characters for the DIP-8) fits a terminal.
     let longest = stdout(&o).lines().map(|l| l.chars().count()).max().unwrap();
     assert!(longest <= 110, "a line of {longest} characters:\n{}", stdout(&o));
+    // So does each part's `part` text (a face's row, the recognition's figures), with no `NaN`.
+    for f in &files {
+        let o = binpick_in(ws.dir.path(), &["part", f]);
+        assert!(o.status.success(), "{f}: {}", stderr(&o));
+        let text = stdout(&o);
+        let longest = text.lines().map(|l| l.chars().count()).max().unwrap();
+        assert!(
+            longest <= 110 && !text.contains("NaN"),
+            "{f}: a line of {longest} characters:\n{text}"
+        );
+    }
     // The DIP-8 (6.35 mm body) brings its own 4 mm cup: every shipped part has a face for its cup.
     assert_eq!(stderr(&o).matches("warning: ").count(), 0, "{}", stderr(&o));
     // Negative control: without its own cup, the cell's 6 mm cup fits no face, and check says so.
