@@ -59,6 +59,8 @@ struct DropShare {
     per_pose: Vec<usize>,
     /// Drops resting in none of them (no support within [`DROP_MATCH_RAD`]).
     in_none: usize,
+    /// Their supports: the world's down in the part frame (unit).
+    in_none_down: Vec<nalgebra::Vector3<f64>>,
     /// Drops that came to rest near another dropped part (they may have met).
     crowded: usize,
 }
@@ -95,7 +97,10 @@ fn drop_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, count: 
         let down_in_part = pose.rotation.inverse() * -nalgebra::Vector3::z();
         match binpick::part::poses::pose_resting_on(&m.poses, &down_in_part, DROP_MATCH_RAD) {
             Some(i) => out.per_pose[i] += 1,
-            None => out.in_none += 1,
+            None => {
+                out.in_none += 1;
+                out.in_none_down.push(down_in_part);
+            }
         }
     }
     out.dropped = r.rest_poses.len();
@@ -497,6 +502,7 @@ fn print_json(
         "drops": {
             "dropped": drops.dropped,
             "in_no_predicted_pose": drops.in_none,
+            "in_no_predicted_pose_down": drops.in_none_down.iter().map(|d| d.iter().map(|v| round(*v, 3)).collect::<Vec<_>>()).collect::<Vec<_>>(),
             "crowded": drops.crowded,
             "match_within_deg": DROP_MATCH_RAD.to_degrees(),
         },

@@ -8,8 +8,9 @@
 //! the part topples over the edge of the face that the projected centre of mass lies farthest
 //! beyond, onto the hull face across that edge, and on from there until a stable face is
 //! reached (the centre of mass sinks at every step, so the walk ends). A face the part would tip off
-//! with almost no lift of its centre of mass (under [`MIN_TOPPLE_BARRIER_SHARE`] of its reach) is
-//! treated as unstable too: what is left of the landing's motion tips it.
+//! with almost no lift of its centre of mass (under [`MIN_TOPPLE_BARRIER_SHARE`] of its distance
+//! from that edge: a tip of under 8 degrees) is treated as unstable too: what is left of the
+//! landing's motion tips it.
 //!
 //! Stated simplification: no bouncing, rolling momentum or pile contacts (a part in a pile rests
 //! on other parts too); the drops the physics simulates are the check of this estimate.
@@ -26,11 +27,14 @@ use super::mesh::Mesh;
 /// Angle within which hull triangles count as one face (rad).
 pub const HULL_FACE_TOL_RAD: f64 = 1e-3;
 
-/// A face on which the centre of mass must rise less than this share of the part's reach (its
-/// farthest vertex from the centre of mass) to tip over the nearest edge counts as unstable: the
-/// part tips off it with the little motion left after landing. Without it, a DIP-8 "rests" on
-/// one row of lead tips and its body's edge (0.03 mm of rise) in a third of the drops it is
-/// predicted to, where simulated drops put it there in 2 %; with it, that share goes to its back.
+/// A face on which the centre of mass must rise less than this share of its distance from the
+/// nearest edge to tip over it counts as unstable (a tip of under 8.1 degrees): the part tips
+/// off it with the little motion left after landing. Without it, a DIP-8 "rests" on one row of
+/// lead tips and its body's edge (0.03 mm of rise, 0.8 % of 3.6 mm: 7.1 degrees) in a third of
+/// the drops it is predicted to, where simulated drops put it there in 2 %; with it, that share
+/// goes to its back. Until 2026-12-07 the share was of the part's reach (its farthest vertex
+/// from the centre of mass), which called C's strips unstable on their 5 mm sides (a 26.6
+/// degree tip, 0.59 mm of rise against 1 % of 75 mm), where 22 % of its simulated drops rest.
 pub const MIN_TOPPLE_BARRIER_SHARE: f64 = 0.01;
 
 /// A stable resting pose.
@@ -271,6 +275,12 @@ fn barrier(f: &HullFace, com: &Point3<f64>, margin_m: f64) -> f64 {
     (h * h + margin_m * margin_m).sqrt() - h
 }
 
+/// The centre of mass's distance (m) from the edge `margin_m` from its projection on face `f`:
+/// the radius it turns on as the part tips over that edge.
+fn tip_radius(f: &HullFace, com: &Point3<f64>, margin_m: f64) -> f64 {
+    (f.offset - com.coords.dot(&f.normal)).hypot(margin_m)
+}
+
 /// Solid angle of each face at the centre of mass, as a share of the whole sphere.
 fn solid_angle_shares(hull: &Hull, faces: &[HullFace], com: &Point3<f64>) -> Vec<f64> {
     let v = &hull.vertices_m;
@@ -311,12 +321,11 @@ fn topple_targets(
             })
             .max_by(|x, y| x.1.total_cmp(&y.1))
     };
-    let reach = v.iter().map(|p| (p - com).norm()).fold(0.0, f64::max);
     let mut next = vec![None; faces.len()];
     let mut margin = vec![0.0; faces.len()];
     for (i, f) in faces.iter().enumerate() {
         match beyond(f) {
-            Some(((a, b), d)) if d > 0.0 || barrier(f, com, -d) < MIN_TOPPLE_BARRIER_SHARE * reach => {
+            Some(((a, b), d)) if d > 0.0 || barrier(f, com, -d) < MIN_TOPPLE_BARRIER_SHARE * tip_radius(f, com, -d) => {
                 next[i] = edge_tri.get(&(b, a)).map(|&o| face_of[o]);
                 margin[i] = (-d).max(0.0);
             }
@@ -440,8 +449,8 @@ mod tests {
     fn a_face_tipped_off_with_almost_no_lift_is_not_a_pose() {
         // A 20 x 10 x 10 mm block with the centre of mass 0.05 mm inside the edge of an end face
         // (x = 0 end): on that end, the centre of mass rises 0.000125 mm to tip over, under 1 %
-        // of the block's reach: not a pose; its share goes to the face across that edge.
-        // Negative control: 2 mm inside, the rise is 0.2 mm, over 1 %: the end is a pose.
+        // of its 10 mm from that edge: not a pose; its share goes to the face across that edge.
+        // Negative control: 2 mm inside, the rise is 0.2 mm, 2 % of 10.2 mm: the end is a pose.
         let m = box_mesh([0.0, 0.0, 0.0], [0.02, 0.01, 0.01]);
         let end = |p: &[RestingPose]| p.iter().any(|q| q.normal.x < -0.999);
         let near = poses_of(&m, Point3::new(0.01, 0.005, 0.00005));
@@ -450,6 +459,26 @@ mod tests {
         assert!((sum - 1.0).abs() < 1e-9);
         let inside = poses_of(&m, Point3::new(0.01, 0.005, 0.002));
         assert!(end(&inside), "{inside:?}");
+    }
+
+    #[test]
+    fn a_long_strip_rests_on_its_narrow_sides_too() {
+        // C's strip, 150 x 10 x 5 mm: on a 150 x 5 mm side its centre of mass stands 5 mm high
+        // and 2.5 mm inside the edges, a tip of 26.6 deg (0.59 mm of rise, 10.6 % of its 5.59 mm
+        // from the edge): a pose, where 22 % of simulated drops rest (`binpick part C`). The
+        // control: against 1 % of the strip's reach (75.2 mm), the measure before, the same rise
+        // is under the bound, and the sides were no pose.
+        let m = box_mesh([-0.075, -0.005, -0.0025], [0.075, 0.005, 0.0025]);
+        let poses = poses_of(&m, Point3::origin());
+        let side: f64 = poses
+            .iter()
+            .filter(|q| q.normal.y.abs() > 0.999)
+            .map(|q| q.likelihood)
+            .sum();
+        assert!(side > 0.1, "{poses:?}");
+        let rise = 0.005f64.hypot(0.0025) - 0.005;
+        let reach = (0.075f64 * 0.075 + 0.005 * 0.005 + 0.0025 * 0.0025).sqrt();
+        assert!(rise < MIN_TOPPLE_BARRIER_SHARE * reach && rise > MIN_TOPPLE_BARRIER_SHARE * 0.005f64.hypot(0.0025));
     }
 
     #[test]

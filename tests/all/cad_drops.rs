@@ -131,10 +131,13 @@ const BOUND_DIP8: f64 = 0.25;
 
 #[test]
 fn drops_rest_as_the_part_models_predict() {
-    // (part, bound, a wrong centre of mass: shifted within the part (m))
+    // (part, bound, a wrong centre of mass: shifted within the part (m)). The TO-220's 1.5 mm
+    // up its thickness was caught while a pose counted as unstable below 1 % of the part's reach;
+    // measured against the tip's own radius, that model keeps its side pose too and its shares
+    // pass (0.060, as the right one's): 2 mm is caught (0.277).
     let cases = [
         ("hex-standoff", BOUND, [0.0, 0.0, 0.007]),
-        ("to220", BOUND, [0.0, 0.0, 0.0015]),
+        ("to220", BOUND, [0.0, 0.0, 0.002]),
         ("smd-elcap", BOUND, [0.0, 0.0, 0.003]),
         ("dip8", BOUND_DIP8, [0.0, 0.0, -0.0015]),
     ];
