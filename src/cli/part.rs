@@ -50,6 +50,11 @@ pub struct PartArgs {
 /// none.
 const DROP_MATCH_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
 
+/// An axis about which the part's symmetry has this order or more is round for the drops: a drop
+/// turned about it onto a predicted pose counts in that pose (a can on its side rests on
+/// whichever facet of its simplified collider comes down, all alike).
+const DROP_ROUND_ORDER: u32 = 8;
+
 /// Where parts dropped one at a time come to rest, against the predicted poses.
 #[derive(Debug, Clone, Default)]
 struct DropShare {
@@ -78,8 +83,9 @@ impl DropShare {
 /// Drops `count` parts one at a time on the bare pick-tray floor from random orientations
 /// ([`binpick::physics::World::drop_trials`], seed 1) and reads each settled part's support (the
 /// world's down in the part frame) against the part model's predicted poses
-/// ([`binpick::part::poses::pose_resting_on`]). Read from the simulated world: the physics'
-/// collider (a simplified one: docs/model.md) against the file's hull.
+/// ([`binpick::part::poses::pose_resting_on`]), or turned about a round axis of the part onto one
+/// ([`DROP_ROUND_ORDER`]). Read from the simulated world: the physics' collider (a simplified
+/// one: docs/model.md) against the file's hull.
 fn drop_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, count: usize) -> Result<DropShare> {
     use binpick::physics::{PartShape, World, drops::DropOptions};
     let mut out = DropShare {
@@ -93,9 +99,30 @@ fn drop_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, count: 
     let shape = PartShape::build(&wp.workpiece, &wp.source)?;
     let mut world = World::new(&loaded.scene, &robot, shape);
     let r = world.drop_trials(&DropOptions::new(count, 1))?;
+    // The part's round axes (through the centre of mass: angles to them are what turning about
+    // them keeps).
+    let round: Vec<nalgebra::Vector3<f64>> = (0..3)
+        .filter(|&a| m.symmetry.orders[a] >= DROP_ROUND_ORDER)
+        .map(|a| nalgebra::Vector3::ith(a, 1.0))
+        .collect();
+    let about_round_axis = |down: &nalgebra::Vector3<f64>| {
+        round
+            .iter()
+            .flat_map(|axis| {
+                m.poses
+                    .iter()
+                    .enumerate()
+                    .map(move |(i, p)| (i, (down.angle(axis) - p.normal.angle(axis)).abs()))
+            })
+            .filter(|(_, off)| *off <= DROP_MATCH_RAD)
+            .min_by(|a, b| a.1.total_cmp(&b.1))
+            .map(|(i, _)| i)
+    };
     for pose in &r.rest_poses {
         let down_in_part = pose.rotation.inverse() * -nalgebra::Vector3::z();
-        match binpick::part::poses::pose_resting_on(&m.poses, &down_in_part, DROP_MATCH_RAD) {
+        match binpick::part::poses::pose_resting_on(&m.poses, &down_in_part, DROP_MATCH_RAD)
+            .or_else(|| about_round_axis(&down_in_part))
+        {
             Some(i) => out.per_pose[i] += 1,
             None => {
                 out.in_none += 1;
