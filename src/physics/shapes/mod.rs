@@ -133,12 +133,12 @@ pub const MAX_PIECES_PER_SHELL: u32 = 16;
 /// least), so a finely tessellated CAD cylinder costs what the built-in prism costs and rests
 /// on facets as it does.
 pub const MAX_PIECE_VERTICES: usize = 32;
-/// Most points [`decimate`]'s greedy simplification starts from: each step builds hulls of all
+/// Most points `decimate`'s greedy simplification starts from: each step builds hulls of all
 /// that are left, so a finely tessellated can (a 500-sided one: 1,000 hull vertices) took
-/// minutes. A hull of more vertices is first thinned ([`thin`]).
+/// minutes. A hull of more vertices is first thinned (`thin`: one point per cell of a grid).
 pub const MAX_DECIMATE_INPUT: usize = 256;
 /// Most points a shell's hull is built from where parry's hull of all its vertices fails (a
-/// 2000-sided can's 94,000 vertices, most of them coplanar): the rest thinned ([`thin`]).
+/// 2000-sided can's 94,000 vertices, most of them coplanar): the rest thinned (`thin`: one point per cell of a grid).
 pub const MAX_HULL_INPUT: usize = 1024;
 /// Most convex pieces of a whole mesh collider: a mesh that needs more (many shells) is refused.
 pub const MAX_PIECES: usize = 64;
