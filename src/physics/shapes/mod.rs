@@ -138,7 +138,8 @@ pub const MAX_PIECE_VERTICES: usize = 32;
 /// minutes. A hull of more vertices is first thinned (`thin`: one point per cell of a grid).
 pub const MAX_DECIMATE_INPUT: usize = 256;
 /// Most points a shell's hull is built from where parry's hull of all its vertices fails (a
-/// 2000-sided can's 94,000 vertices, most of them coplanar): the rest thinned (`thin`: one point per cell of a grid).
+/// 2000-sided can's 4,002 or, in 46 rings, 94,000 vertices): the rest thinned (`thin`: one
+/// point per cell of a grid).
 pub const MAX_HULL_INPUT: usize = 1024;
 /// Most convex pieces of a whole mesh collider: a mesh that needs more (many shells) is refused.
 pub const MAX_PIECES: usize = 64;
