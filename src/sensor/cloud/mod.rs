@@ -16,7 +16,8 @@
 //! measured point lies behind the plane are "outside" (the ray passed the face), those in front or
 //! missing say nothing; (5) per model face (not smaller than the patch) an exact silhouette fit
 //! (`fit`): every placement of the face's rectangle (or disc) holding every inside point and no
-//! outside point, yaws scanned around the patch's minimum-area rectangle; the estimate is the
+//! outside point, yaws scanned around the patch's minimum-area rectangle (a square face also a
+//! quarter turn round, unless the part is the same so turned); the estimate is the
 //! middle of the consistent yaws and the mean of the consistent centres; a face whose centre is not
 //! pinned down (both edges of an axis hidden) or whose yaw is open by more than the model's
 //! `yaw_span_max_rad` (the cell file's `sensor.max_yaw_ambiguity_deg`, [`YAW_SPAN_MAX_RAD`] by
@@ -912,6 +913,22 @@ impl<'a> Cloud<'a> {
                     {
                         fits.push((f.center, f.yaw_rad));
                     }
+                }
+                // A square face looks the same a quarter turn round; where the part does not (a
+                // heatsink's base with its fins under it), that turn is a hypothesis too, and the
+                // image decides between them or the place is left.
+                if square {
+                    let pose_at = |c: &[f64; 2], yaw: f64| {
+                        let u = e1 * yaw.cos() + e2 * yaw.sin();
+                        pose_from_face(face, &(plane.point + e1 * c[0] + e2 * c[1]), &n, &u)
+                    };
+                    let quarter = std::f64::consts::FRAC_PI_2;
+                    let turned: Vec<([f64; 2], f64)> = fits
+                        .iter()
+                        .filter(|(c, t)| !model.same_pose(&pose_at(c, *t), &pose_at(c, t + quarter)))
+                        .map(|(c, t)| (*c, t + quarter))
+                        .collect();
+                    fits.extend(turned);
                 }
             }
             for (c, theta) in fits {

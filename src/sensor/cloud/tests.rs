@@ -1454,3 +1454,85 @@ fn an_soic_on_its_legs_or_on_its_back_is_told_by_how_well_its_pixels_agree() {
         12 - count_blind
     );
 }
+
+/// A 30 x 30 mm heatsink: a 3 mm base and six 1.5 mm fins 12 mm tall along y (mm, repaired).
+fn heatsink_mesh() -> crate::part::mesh::Mesh {
+    let mut raw = crate::part::raw::RawMesh::default();
+    let mut cuboid = |lo: [f64; 3], hi: [f64; 3]| {
+        let base = raw.vertices.len() as u32;
+        for k in 0..8 {
+            let pick = |bit: usize, a: usize| if k & bit == 0 { lo[a] } else { hi[a] };
+            raw.vertices.push([pick(1, 0), pick(2, 1), pick(4, 2)]);
+        }
+        for [a, b, c] in [
+            [0, 2, 1],
+            [1, 2, 3],
+            [4, 5, 6],
+            [5, 7, 6],
+            [0, 1, 4],
+            [1, 5, 4],
+            [2, 6, 3],
+            [3, 6, 7],
+            [0, 4, 2],
+            [2, 4, 6],
+            [1, 3, 5],
+            [3, 7, 5],
+        ] {
+            raw.triangles.push([base + a, base + b, base + c]);
+        }
+    };
+    cuboid([0.0, 0.0, 0.0], [30.0, 30.0, 3.0]);
+    for i in 0..6 {
+        let x = i as f64 * 28.5 / 5.0;
+        cuboid([x, 0.0, 3.0], [x + 1.5, 30.0, 15.0]);
+    }
+    crate::part::repair::repair(&raw, 0.001, "mm").unwrap().0
+}
+
+#[test]
+fn a_square_face_is_tried_a_quarter_turn_round_where_the_part_is_not_square() {
+    // A heatsink lying on its fins shows its 30 x 30 mm base: its silhouette fits a quarter turn
+    // as well, and the part (symmetric under a half turn only) is not the same turned so. Its
+    // fins' ends show at its sides, where the rendering can tell the turns apart, or the place
+    // is left as a close call. Alone on the floor at 12 yaws: found 6 times, 2 of them a quarter
+    // turn off; seen failing without the turned hypothesis (only the patch's own minimum-area
+    // rectangle tried): found 12 times, 5 a quarter turn off. In piles (`sense`, the build before
+    // beside it) precision rose from 88.3 to 98.5 % (seeds 1-8) and 88.4 to 99.2 % (seeds 41-60).
+    // The rendering of a lone part decides less well than the piles' figures say: left open.
+    let loaded = LoadedScene::embedded_default().unwrap();
+    let cell = Cell {
+        camera: Camera::from_config(&loaded.scene.sensor).unwrap(),
+        tray: TrayVolume::new(&loaded.scene.pick_tray),
+    };
+    let mesh = heatsink_mesh();
+    let cup = crate::part::CupSpec {
+        diameter_m: 0.006,
+        face_margin_m: 0.0005,
+    };
+    let pm =
+        crate::part::PartModel::derive(mesh.clone(), crate::part::mass::MassSpec::MassKg(0.012), cup, None).unwrap();
+    assert_eq!(pm.symmetry.orders[2], 2, "{:?}", pm.symmetry);
+    let m = CloudModel::of_part_model(&pm);
+    let (mut found, mut quarter) = (0, 0);
+    for y in [
+        15.0, 70.0, -35.0, 125.0, 5.0, 33.0, 52.0, 88.0, 101.0, 143.0, 160.0, -12.0,
+    ] {
+        let pose = resting_mesh(&cell, &mesh, 0.02, 0.01, yaw(y) * roll(180.0));
+        let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
+        let Some(d) = recognize(&capture, &cell.camera, &cell.tray, &m).into_iter().next() else {
+            continue;
+        };
+        found += 1;
+        // Independently: the angle between the part's x axes, up to the half turn.
+        let (a, b) = (d.world_from_part.rotation * Vector3::x(), pose.rotation * Vector3::x());
+        let off = a.angle(&b).to_degrees();
+        let off = off.min(180.0 - off);
+        if off > 45.0 {
+            quarter += 1;
+        }
+    }
+    assert!(
+        found >= 6 && quarter <= 2,
+        "found {found}, a quarter turn off {quarter}"
+    );
+}
