@@ -1332,34 +1332,38 @@ fn a_part_carried_over_the_rim_outside_the_frustum_is_not_reported() {
     assert_found(&w, &found, &lying, 0.0008, 2.5);
 }
 
+/// Appends a closed, outward-wound box from `lo` to `hi` (the raw mesh's units) to `raw`.
+fn push_cuboid(raw: &mut crate::part::raw::RawMesh, lo: [f64; 3], hi: [f64; 3]) {
+    let base = raw.vertices.len() as u32;
+    for k in 0..8 {
+        let pick = |bit: usize, a: usize| if k & bit == 0 { lo[a] } else { hi[a] };
+        raw.vertices.push([pick(1, 0), pick(2, 1), pick(4, 2)]);
+    }
+    for [a, b, c] in [
+        [0, 2, 1],
+        [1, 2, 3],
+        [4, 5, 6],
+        [5, 7, 6],
+        [0, 1, 4],
+        [1, 5, 4],
+        [2, 6, 3],
+        [3, 6, 7],
+        [0, 4, 2],
+        [2, 4, 6],
+        [1, 3, 5],
+        [3, 7, 5],
+    ] {
+        raw.triangles.push([base + a, base + b, base + c]);
+    }
+}
+
 /// An SOIC-8 as a CAD mesh (m, centred on its bounding box): a 4.9 x 3.9 x 1.5 mm body 0.1 mm
 /// over the floor when on its legs, and eight gull-wing leads, each a 0.4 mm wide shoulder out
 /// of the body's long side at 0.7-0.9 mm and a foot down to the floor at its end.
 fn soic8_mesh() -> crate::part::mesh::Mesh {
     let mut raw = crate::part::raw::RawMesh::default();
-    let mut cuboid = |lo: [f64; 3], hi: [f64; 3]| {
-        let base = raw.vertices.len() as u32;
-        for k in 0..8 {
-            let pick = |bit: usize, a: usize| if k & bit == 0 { lo[a] } else { hi[a] };
-            raw.vertices.push([pick(1, 0), pick(2, 1), pick(4, 2) - 0.8]);
-        }
-        for [a, b, c] in [
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ] {
-            raw.triangles.push([base + a, base + b, base + c]);
-        }
-    };
+    let mut cuboid =
+        |lo: [f64; 3], hi: [f64; 3]| push_cuboid(&mut raw, [lo[0], lo[1], lo[2] - 0.8], [hi[0], hi[1], hi[2] - 0.8]);
     cuboid([-2.45, -1.95, 0.1], [2.45, 1.95, 1.6]);
     for i in 0..4 {
         let x = -1.905 + 1.27 * i as f64;
@@ -1458,29 +1462,7 @@ fn an_soic_on_its_legs_or_on_its_back_is_told_by_how_well_its_pixels_agree() {
 /// A 30 x 30 mm heatsink: a 3 mm base and six 1.5 mm fins 12 mm tall along y (mm, repaired).
 fn heatsink_mesh() -> crate::part::mesh::Mesh {
     let mut raw = crate::part::raw::RawMesh::default();
-    let mut cuboid = |lo: [f64; 3], hi: [f64; 3]| {
-        let base = raw.vertices.len() as u32;
-        for k in 0..8 {
-            let pick = |bit: usize, a: usize| if k & bit == 0 { lo[a] } else { hi[a] };
-            raw.vertices.push([pick(1, 0), pick(2, 1), pick(4, 2)]);
-        }
-        for [a, b, c] in [
-            [0, 2, 1],
-            [1, 2, 3],
-            [4, 5, 6],
-            [5, 7, 6],
-            [0, 1, 4],
-            [1, 5, 4],
-            [2, 6, 3],
-            [3, 6, 7],
-            [0, 4, 2],
-            [2, 4, 6],
-            [1, 3, 5],
-            [3, 7, 5],
-        ] {
-            raw.triangles.push([base + a, base + b, base + c]);
-        }
-    };
+    let mut cuboid = |lo: [f64; 3], hi: [f64; 3]| push_cuboid(&mut raw, lo, hi);
     cuboid([0.0, 0.0, 0.0], [30.0, 30.0, 3.0]);
     for i in 0..6 {
         let x = i as f64 * 28.5 / 5.0;
