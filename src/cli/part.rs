@@ -86,18 +86,16 @@ impl DropShare {
 /// ([`binpick::part::poses::pose_resting_on`]), or turned about a round axis of the part onto one
 /// ([`DROP_ROUND_ORDER`]). Read from the simulated world: the physics' collider (a simplified
 /// one: docs/model.md) against the file's hull.
-fn drop_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, count: usize) -> Result<DropShare> {
-    use binpick::physics::{PartShape, World, drops::DropOptions};
+fn drop_share(loaded: &LoadedScene, sim: Option<&Sim>, m: &PartModel, count: usize) -> Result<DropShare> {
+    use binpick::physics::drops::DropOptions;
     let mut out = DropShare {
         per_pose: vec![0; m.poses.len()],
         ..DropShare::default()
     };
-    if count == 0 {
+    let Some(sim) = sim.filter(|_| count > 0) else {
         return Ok(out);
-    }
-    let robot = binpick::robot::RobotModel::from_scene(loaded)?;
-    let shape = PartShape::build(&wp.workpiece, &wp.source)?;
-    let mut world = World::new(&loaded.scene, &robot, shape);
+    };
+    let mut world = sim.world(loaded);
     let r = world.drop_trials(&DropOptions::new(count, 1))?;
     // The part's round axes (through the centre of mass: angles to them are what turning about
     // them keeps).
@@ -133,6 +131,26 @@ fn drop_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, count: 
     out.dropped = r.rest_poses.len();
     out.crowded = r.crowded;
     Ok(out)
+}
+
+/// The cell's robot and the part's physics shape, built once for the simulated drops and piles.
+struct Sim {
+    robot: binpick::robot::RobotModel,
+    shape: binpick::physics::PartShape,
+}
+
+impl Sim {
+    fn new(loaded: &LoadedScene, wp: &LoadedWorkpiece) -> Result<Self> {
+        Ok(Sim {
+            robot: binpick::robot::RobotModel::from_scene(loaded)?,
+            shape: binpick::physics::PartShape::build(&wp.workpiece, &wp.source)?,
+        })
+    }
+
+    /// An empty cell with the part's shape.
+    fn world(&self, loaded: &LoadedScene) -> binpick::physics::World {
+        binpick::physics::World::new(&loaded.scene, &self.robot, self.shape.clone())
+    }
 }
 
 /// What a few simulated piles offer the cup.
@@ -171,13 +189,20 @@ impl PileShare {
 /// once and recognised from the cloud, as the cell does, and the detections judged against the
 /// parts' poses (`binpick sense`'s evaluation), and once more at twice the sensor's resolution.
 /// Read from the simulated world: a prediction for the user, not a decision of the cell.
-fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: u64, lean: f64) -> Result<PileShare> {
-    use binpick::physics::{PartShape, Tag, World, pile::PileOptions};
+fn pile_share(
+    loaded: &LoadedScene,
+    wp: &LoadedWorkpiece,
+    sim: Option<&Sim>,
+    m: &PartModel,
+    piles: u64,
+    lean: f64,
+) -> Result<PileShare> {
+    use binpick::physics::{Tag, pile::PileOptions};
     use nalgebra::{Point3, Vector3};
     let mut out = PileShare::default();
-    if piles == 0 {
+    let Some(sim) = sim.filter(|_| piles > 0) else {
         return Ok(out);
-    }
+    };
     let cloud = loaded.scene.sensor.recognition == binpick::config::RecognitionMode::Cloud;
     let mut recognition = RecognitionTotals::default();
     let [w, h] = loaded.scene.sensor.resolution_px;
@@ -190,8 +215,6 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
             };
             (loaded.scene.sensor.with_mode(&mode), RecognitionTotals::default())
         });
-    let robot = binpick::robot::RobotModel::from_scene(loaded)?;
-    let shape = PartShape::build(&wp.workpiece, &wp.source)?;
     let r_cup = 0.5 * m.cup.diameter_m;
     // Each grasp face's cup disc in the part frame: its centre and eight rim points.
     let discs: Vec<(Vector3<f64>, Vec<Point3<f64>>)> = m
@@ -209,7 +232,7 @@ fn pile_share(loaded: &LoadedScene, wp: &LoadedWorkpiece, m: &PartModel, piles: 
         })
         .collect();
     for seed in 1..=piles {
-        let mut world = World::new(&loaded.scene, &robot, shape.clone());
+        let mut world = sim.world(loaded);
         world.build_pile(&PileOptions::cells_first_pile(wp.workpiece.pile_count as usize, seed))?;
         if cloud {
             use binpick::sensor::{Sensor, TruthAtTrigger, capture, evaluate};
@@ -376,8 +399,13 @@ pub fn part(a: &PartArgs) -> Result<()> {
     // Where the grasp selector puts the cup on each face (the one derivation it reads).
     let sites = m.cup_sites(&binpick::grasp::approach_column(&scene.scene));
     write_atomically(&svg_path, &binpick::part::svg::picture(&m, &title, &sites))?;
-    let piles = pile_share(&scene, &wp, &m, a.piles, lean)?;
-    let drops = drop_share(&scene, &wp, &m, a.drops)?;
+    // The physics only where piles or drops are asked for (a mesh the physics cannot take still
+    // shows its model with both at 0).
+    let sim = (a.piles > 0 || a.drops > 0)
+        .then(|| Sim::new(&scene, &wp))
+        .transpose()?;
+    let piles = pile_share(&scene, &wp, sim.as_ref(), &m, a.piles, lean)?;
+    let drops = drop_share(&scene, sim.as_ref(), &m, a.drops)?;
     if a.json {
         print_json(&wp, &m, &sites, report, &scene.scene, &svg_path, (&piles, &drops))
     } else {
