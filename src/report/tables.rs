@@ -225,13 +225,24 @@ pub fn picks_table(records: &[PickRecord]) -> String {
     out
 }
 
-/// `text` in lines of at most `width` characters, broken at spaces; a word longer than the width
-/// is cut across lines.
+/// `text` in lines of at most `width` characters, broken at spaces but never before a `%` (a
+/// figure keeps its unit); a word longer than the width is cut across lines.
 pub fn wrap(text: &str, width: usize) -> String {
     let width = width.max(1);
+    // Words, each with the `%`-words that follow it glued on.
+    let mut words: Vec<String> = Vec::new();
+    for word in text.split(' ') {
+        match words.last_mut() {
+            Some(last) if word.starts_with('%') && !last.is_empty() => {
+                last.push(' ');
+                last.push_str(word);
+            }
+            _ => words.push(word.to_string()),
+        }
+    }
     let mut lines: Vec<String> = Vec::new();
     let mut line = String::new();
-    for word in text.split(' ') {
+    for word in words {
         let mut word: Vec<char> = word.chars().collect();
         // A word longer than a line: lines of its own, cut at the width.
         while word.len() > width {
@@ -256,6 +267,17 @@ pub fn wrap(text: &str, width: usize) -> String {
 mod tests {
     use super::*;
     use crate::cycle::Outcome;
+
+    /// A `%` stays on the line of its figure, where breaking at every space would leave it alone
+    /// on the next (the control: the text's 18th column is the space before the `%`).
+    #[test]
+    fn wrap_keeps_a_percent_sign_with_its_figure() {
+        let text = "cup face up: 75.4 % of poses";
+        assert_eq!(text.find(" %"), Some(17));
+        assert_eq!(wrap(text, 17), "cup face up:\n75.4 % of poses");
+        assert_eq!(wrap(text, 20), "cup face up: 75.4 %\nof poses");
+        assert_eq!(wrap("% alone", 3), "%\nalo\nne");
+    }
 
     /// Every line of the printed table fits its width, and a long detail is printed whole under
     /// its row (negative control: the same detail in one line would not fit).
