@@ -173,6 +173,9 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         .write_depth_png(&run.path("depth.png"))
         .context("writing depth.png")?;
     job.capture
+        .write_depth_view_png(&run.path("depth-view.png"))
+        .context("writing depth-view.png")?;
+    job.capture
         .write_ply(&run.path("cloud.ply"))
         .context("writing cloud.ply")?;
     let file = json!({

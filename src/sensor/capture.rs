@@ -62,6 +62,14 @@ pub struct Capture {
     pub beyond_walls_m: f64,
 }
 
+/// The grey of the farthest return in [`Capture::write_depth_view_png`], apart from the black of
+/// no return.
+pub const DEPTH_VIEW_FARTHEST: u8 = 48;
+
+/// The percentile of the returns' depths that [`Capture::write_depth_view_png`] shows white, and
+/// everything nearer.
+pub const DEPTH_VIEW_NEAR_PERCENT: usize = 10;
+
 /// The margin of a capture's [`Capture::tray_window`] around the tray's image (px): 8.5 mm at
 /// the tray floor with the default sensor, a wall's thickness, so a part resting on the rim is
 /// in the image.
@@ -174,6 +182,49 @@ impl Capture {
             let first = 2 * ((win.y0_px + v) * self.width_px + win.x0_px);
             for (out, d) in bytes[first..first + 2 * row.len()].chunks_exact_mut(2).zip(row) {
                 out.copy_from_slice(&((*d as f64 * 1000.0).round().clamp(0.0, 65535.0) as u16).to_be_bytes());
+            }
+        }
+        w.write_image_data(&bytes).map_err(std::io::Error::other)?;
+        w.finish().map_err(std::io::Error::other)
+    }
+
+    /// Writes the depth image for the eye as an 8-bit greyscale PNG: the nearest returns white
+    /// (255), the farthest dark grey ([`DEPTH_VIEW_FARTHEST`]), no return black; between them the
+    /// grey rises with the square root of the height over the farthest return (the tray floor),
+    /// so that parts a few millimetres high stand out from the floor under walls ten times their
+    /// height. "Nearest" is the [`DEPTH_VIEW_NEAR_PERCENT`]th percentile, so that an arm over the
+    /// tray, a fraction of the returns, does not take the greys from the pile. The millimetres are [`Capture::write_depth_png`]'s: there a tray's depths
+    /// (about 0.6-0.9 m) fill only the darkest hundredth of the 16-bit range, and an ordinary
+    /// viewer shows the image black.
+    pub fn write_depth_view_png(&self, path: &Path) -> std::io::Result<()> {
+        let file = std::fs::File::create(path)?;
+        let mut enc = png::Encoder::new(
+            std::io::BufWriter::new(file),
+            self.width_px as u32,
+            self.height_px as u32,
+        );
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(png::BitDepth::Eight);
+        let mut w = enc.write_header().map_err(std::io::Error::other)?;
+        let mut valid: Vec<f32> = self.depth_m.iter().copied().filter(|d| *d > 0.0).collect();
+        valid.sort_unstable_by(f32::total_cmp);
+        let near_m = valid
+            .get(valid.len() * DEPTH_VIEW_NEAR_PERCENT / 100)
+            .copied()
+            .unwrap_or(0.0);
+        let far_m = valid.last().copied().unwrap_or(0.0);
+        let span_m = (far_m - near_m).max(1e-6);
+        let top = f32::from(u8::MAX);
+        let bottom = f32::from(DEPTH_VIEW_FARTHEST);
+        let mut bytes = vec![0u8; self.width_px * self.height_px];
+        let win = &self.tray_window;
+        for (v, row) in self.depth_m.chunks_exact(win.width_px.max(1)).enumerate() {
+            let first = (win.y0_px + v) * self.width_px + win.x0_px;
+            for (out, d) in bytes[first..first + row.len()].iter_mut().zip(row) {
+                if *d > 0.0 {
+                    let rise = ((far_m - d) / span_m).clamp(0.0, 1.0).sqrt();
+                    *out = (bottom + (top - bottom) * rise).round() as u8;
+                }
             }
         }
         w.write_image_data(&bytes).map_err(std::io::Error::other)?;
@@ -429,6 +480,21 @@ mod tests {
                 .count(),
             1
         );
+        // For the eye: the nearer return white, the farther dark grey, no return black; the
+        // 16-bit image above gave both under 1 % of full scale.
+        let view = dir.join("depth-view.png");
+        c.set_return(5, 3, 0.8, [1.0, 2.0, 3.0]);
+        c.write_depth_view_png(&view).unwrap();
+        let mut reader = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(&view).unwrap()))
+            .read_info()
+            .unwrap();
+        let mut grey = vec![0; reader.output_buffer_size().unwrap()];
+        reader.next_frame(&mut grey).unwrap();
+        assert_eq!(grey.len(), 80);
+        assert_eq!((grey[3 * 10 + 4], grey[3 * 10 + 5]), (255, DEPTH_VIEW_FARTHEST));
+        assert_eq!(grey.iter().filter(|g| **g > 0).count(), 2);
+        assert!(mm(4, 3) < 65535 / 100);
+        c.clear_return(5, 3);
         c.clear_return(4, 3);
         assert_eq!((c.depth_at_m(4, 3), c.valid_count()), (0.0, 0));
         std::fs::remove_dir_all(&dir).ok();

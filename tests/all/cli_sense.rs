@@ -40,6 +40,25 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
     let centre = (386 * 1032 + 516) * 2;
     let mm = u16::from_be_bytes([buf[centre], buf[centre + 1]]);
     assert!((950..=1001).contains(&mm), "depth at the image centre {mm} mm");
+    // The same for the eye: 8-bit, the same size, the pile's tops bright over a darker floor.
+    let decoder = png::Decoder::new(std::io::BufReader::new(
+        std::fs::File::open(dir.join("depth-view.png")).unwrap(),
+    ));
+    let mut reader = decoder.read_info().unwrap();
+    let info = reader.info().clone();
+    assert_eq!(
+        (info.width, info.height, info.bit_depth),
+        (1032, 772, png::BitDepth::Eight)
+    );
+    let mut grey = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut grey).unwrap();
+    let shades = |lo: u8, hi: u8| grey.iter().filter(|g| (lo..=hi).contains(*g)).count();
+    assert!(
+        shades(200, 255) > 1000 && shades(49, 160) > 10_000,
+        "{} {}",
+        shades(200, 255),
+        shades(49, 160)
+    );
     // PLY header and size agree.
     let ply = std::fs::read(dir.join("cloud.ply")).unwrap();
     let header_end = ply.windows(11).position(|w| w == b"end_header\n").unwrap() + 11;
