@@ -225,15 +225,27 @@ pub fn picks_table(records: &[PickRecord]) -> String {
     out
 }
 
-/// `text` in lines of at most `width` characters, broken at spaces but never before a `%` (a
-/// figure keeps its unit); a word longer than the width is cut across lines.
+/// Units a figure keeps on its line ([`wrap`]).
+const UNITS: [&str; 15] = [
+    "%", "mm", "mm^2", "mm^3", "m", "s", "ms", "deg", "g", "kg", "N", "Nm", "px", "Hz", "kg/m^3",
+];
+
+/// Whether `word` (after `previous`) is a figure's unit: a unit of [`UNITS`], perhaps followed
+/// by punctuation, after a word ending in a digit or a bracket; a `%` after anything.
+fn is_unit_of(previous: &str, word: &str) -> bool {
+    let bare = word.trim_end_matches([',', ';', ':', '.', ')']);
+    bare == "%" || (UNITS.contains(&bare) && previous.ends_with(|c: char| c.is_ascii_digit() || c == ']'))
+}
+
+/// `text` in lines of at most `width` characters, broken at spaces but never between a figure
+/// and its unit ([`is_unit_of`]); a word longer than the width is cut across lines.
 pub fn wrap(text: &str, width: usize) -> String {
     let width = width.max(1);
-    // Words, each with the `%`-words that follow it glued on.
+    // Words, each with the unit that follows it glued on.
     let mut words: Vec<String> = Vec::new();
     for word in text.split(' ') {
         match words.last_mut() {
-            Some(last) if word.starts_with('%') && !last.is_empty() => {
+            Some(last) if !last.is_empty() && is_unit_of(last, word) => {
                 last.push(' ');
                 last.push_str(word);
             }
@@ -268,15 +280,19 @@ mod tests {
     use super::*;
     use crate::cycle::Outcome;
 
-    /// A `%` stays on the line of its figure, where breaking at every space would leave it alone
-    /// on the next (the control: the text's 18th column is the space before the `%`).
+    /// A `%` or a unit stays on the line of its figure, where breaking at every space would leave
+    /// it alone on the next (the control: the text's 18th column is the space before the unit);
+    /// a unit's name after a word is a word.
     #[test]
-    fn wrap_keeps_a_percent_sign_with_its_figure() {
+    fn wrap_keeps_a_unit_with_its_figure() {
         let text = "cup face up: 75.4 % of poses";
         assert_eq!(text.find(" %"), Some(17));
         assert_eq!(wrap(text, 17), "cup face up:\n75.4 % of poses");
         assert_eq!(wrap(text, 20), "cup face up: 75.4 %\nof poses");
         assert_eq!(wrap("% alone", 3), "%\nalo\nne");
+        assert_eq!(wrap("centre [0.0 5.6] mm, mass", 16), "centre [0.0\n5.6] mm, mass");
+        assert_eq!(wrap("tray 12.5 s) then", 9), "tray\n12.5 s)\nthen");
+        assert_eq!(wrap("of s and m", 4), "of s\nand\nm");
     }
 
     /// Every line of the printed table fits its width, and a long detail is printed whole under
