@@ -238,7 +238,8 @@ fn is_unit_of(previous: &str, word: &str) -> bool {
 }
 
 /// `text` in lines of at most `width` characters, broken at spaces but never between a figure
-/// and its unit ([`is_unit_of`]); a word longer than the width is cut across lines.
+/// and its unit (`%` always; `mm`, `s`, `deg` and the like after a digit or a bracket); a word
+/// longer than the width is cut across lines.
 pub fn wrap(text: &str, width: usize) -> String {
     let width = width.max(1);
     // Words, each with the unit that follows it glued on.
