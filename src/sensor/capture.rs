@@ -167,25 +167,9 @@ impl Capture {
 
     /// Writes the depth image as a 16-bit greyscale PNG in millimetres (0 = no return).
     pub fn write_depth_png(&self, path: &Path) -> std::io::Result<()> {
-        let file = std::fs::File::create(path)?;
-        let mut enc = png::Encoder::new(
-            std::io::BufWriter::new(file),
-            self.width_px as u32,
-            self.height_px as u32,
-        );
-        enc.set_color(png::ColorType::Grayscale);
-        enc.set_depth(png::BitDepth::Sixteen);
-        let mut w = enc.write_header().map_err(std::io::Error::other)?;
-        let mut bytes = vec![0u8; 2 * self.width_px * self.height_px];
-        let win = &self.tray_window;
-        for (v, row) in self.depth_m.chunks_exact(win.width_px.max(1)).enumerate() {
-            let first = 2 * ((win.y0_px + v) * self.width_px + win.x0_px);
-            for (out, d) in bytes[first..first + 2 * row.len()].chunks_exact_mut(2).zip(row) {
-                out.copy_from_slice(&((*d as f64 * 1000.0).round().clamp(0.0, 65535.0) as u16).to_be_bytes());
-            }
-        }
-        w.write_image_data(&bytes).map_err(std::io::Error::other)?;
-        w.finish().map_err(std::io::Error::other)
+        self.write_grey_png(path, png::BitDepth::Sixteen, |d, out| {
+            out.copy_from_slice(&((d as f64 * 1000.0).round().clamp(0.0, 65535.0) as u16).to_be_bytes());
+        })
     }
 
     /// Writes the depth image for the eye as an 8-bit greyscale PNG: the nearest returns white
@@ -193,19 +177,10 @@ impl Capture {
     /// grey rises with the square root of the height over the farthest return (the tray floor),
     /// so that parts a few millimetres high stand out from the floor under walls ten times their
     /// height. "Nearest" is the [`DEPTH_VIEW_NEAR_PERCENT`]th percentile, so that an arm over the
-    /// tray, a fraction of the returns, does not take the greys from the pile. The millimetres are [`Capture::write_depth_png`]'s: there a tray's depths
-    /// (about 0.6-0.9 m) fill only the darkest hundredth of the 16-bit range, and an ordinary
-    /// viewer shows the image black.
+    /// tray, a fraction of the returns, does not take the greys from the pile. The millimetres
+    /// are [`Capture::write_depth_png`]'s: there a tray's depths (about 0.6-0.9 m) fill only the
+    /// darkest hundredth of the 16-bit range, and an ordinary viewer shows the image black.
     pub fn write_depth_view_png(&self, path: &Path) -> std::io::Result<()> {
-        let file = std::fs::File::create(path)?;
-        let mut enc = png::Encoder::new(
-            std::io::BufWriter::new(file),
-            self.width_px as u32,
-            self.height_px as u32,
-        );
-        enc.set_color(png::ColorType::Grayscale);
-        enc.set_depth(png::BitDepth::Eight);
-        let mut w = enc.write_header().map_err(std::io::Error::other)?;
         let mut valid: Vec<f32> = self.depth_m.iter().copied().filter(|d| *d > 0.0).collect();
         valid.sort_unstable_by(f32::total_cmp);
         let near_m = valid
@@ -216,15 +191,39 @@ impl Capture {
         let span_m = (far_m - near_m).max(1e-6);
         let top = f32::from(u8::MAX);
         let bottom = f32::from(DEPTH_VIEW_FARTHEST);
-        let mut bytes = vec![0u8; self.width_px * self.height_px];
+        self.write_grey_png(path, png::BitDepth::Eight, |d, out| {
+            if d > 0.0 {
+                let rise = ((far_m - d) / span_m).clamp(0.0, 1.0).sqrt();
+                out[0] = (bottom + (top - bottom) * rise).round() as u8;
+            }
+        })
+    }
+
+    /// Writes a greyscale PNG of the whole image at `bit_depth` (8 or 16), each tray-window pixel
+    /// encoded from its depth (m; 0: no return) by `encode` into its bytes (big-endian), every
+    /// other pixel 0.
+    fn write_grey_png(
+        &self,
+        path: &Path,
+        bit_depth: png::BitDepth,
+        encode: impl Fn(f32, &mut [u8]),
+    ) -> std::io::Result<()> {
+        let file = std::fs::File::create(path)?;
+        let mut enc = png::Encoder::new(
+            std::io::BufWriter::new(file),
+            self.width_px as u32,
+            self.height_px as u32,
+        );
+        enc.set_color(png::ColorType::Grayscale);
+        enc.set_depth(bit_depth);
+        let mut w = enc.write_header().map_err(std::io::Error::other)?;
+        let px = if bit_depth == png::BitDepth::Sixteen { 2 } else { 1 };
+        let mut bytes = vec![0u8; px * self.width_px * self.height_px];
         let win = &self.tray_window;
         for (v, row) in self.depth_m.chunks_exact(win.width_px.max(1)).enumerate() {
-            let first = (win.y0_px + v) * self.width_px + win.x0_px;
-            for (out, d) in bytes[first..first + row.len()].iter_mut().zip(row) {
-                if *d > 0.0 {
-                    let rise = ((far_m - d) / span_m).clamp(0.0, 1.0).sqrt();
-                    *out = (bottom + (top - bottom) * rise).round() as u8;
-                }
+            let first = px * ((win.y0_px + v) * self.width_px + win.x0_px);
+            for (out, d) in bytes[first..first + px * row.len()].chunks_exact_mut(px).zip(row) {
+                encode(*d, out);
             }
         }
         w.write_image_data(&bytes).map_err(std::io::Error::other)?;
