@@ -26,32 +26,12 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
     assert!(v["grasp"]["chosen"].is_object(), "no grasp chosen: {v}");
     let dir = out.join("sense-B-seed2");
     // 16-bit PNG in millimetres: the tray floor is about 1000 mm from the camera.
-    let decoder = png::Decoder::new(std::io::BufReader::new(
-        std::fs::File::open(dir.join("depth.png")).unwrap(),
-    ));
-    let mut reader = decoder.read_info().unwrap();
-    let info = reader.info().clone();
-    assert_eq!(
-        (info.width, info.height, info.bit_depth),
-        (1032, 772, png::BitDepth::Sixteen)
-    );
-    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
-    reader.next_frame(&mut buf).unwrap();
+    let buf = read_png(&dir.join("depth.png"), png::BitDepth::Sixteen);
     let centre = (386 * 1032 + 516) * 2;
     let mm = u16::from_be_bytes([buf[centre], buf[centre + 1]]);
     assert!((950..=1001).contains(&mm), "depth at the image centre {mm} mm");
     // The same for the eye: 8-bit, the same size, the pile's tops bright over a darker floor.
-    let decoder = png::Decoder::new(std::io::BufReader::new(
-        std::fs::File::open(dir.join("depth-view.png")).unwrap(),
-    ));
-    let mut reader = decoder.read_info().unwrap();
-    let info = reader.info().clone();
-    assert_eq!(
-        (info.width, info.height, info.bit_depth),
-        (1032, 772, png::BitDepth::Eight)
-    );
-    let mut grey = vec![0; reader.output_buffer_size().unwrap()];
-    reader.next_frame(&mut grey).unwrap();
+    let grey = read_png(&dir.join("depth-view.png"), png::BitDepth::Eight);
     let shades = |lo: u8, hi: u8| grey.iter().filter(|g| (lo..=hi).contains(*g)).count();
     assert!(
         shades(200, 255) > 1000 && shades(49, 160) > 10_000,
@@ -72,6 +52,21 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
     assert_eq!(ply.len() - header_end, n * 12);
     assert_eq!(n as u64, v["capture"]["valid_px"].as_u64().unwrap());
     assert!(dir.join("sense.json").is_file() && dir.join("scene.toml").is_file());
+}
+
+/// The pixels of the PNG at `path`, checked to be the default sensor's 1032 x 772 at `depth`.
+fn read_png(path: &std::path::Path, depth: png::BitDepth) -> Vec<u8> {
+    let decoder = png::Decoder::new(std::io::BufReader::new(std::fs::File::open(path).unwrap()));
+    let mut reader = decoder.read_info().unwrap();
+    let info = reader.info().clone();
+    assert_eq!(
+        (info.width, info.height, info.bit_depth),
+        (1032, 772, depth),
+        "{path:?}"
+    );
+    let mut buf = vec![0; reader.output_buffer_size().unwrap()];
+    reader.next_frame(&mut buf).unwrap();
+    buf
 }
 
 #[test]
