@@ -201,7 +201,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         return Ok(());
     }
     println!(
-        "pile of {count} x {} , seed {seed}: capture at t = {:.3} s, result at {:.3} s",
+        "pile of {count} x {}, seed {seed}: capture at t = {:.3} s, result at {:.3} s",
         wp.workpiece.name, job.capture.trigger_s, job.ready_s
     );
     println!(
@@ -219,21 +219,24 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
 
 /// The text lines of the recognition result against the truth (evaluation only).
 fn print_recognition(loaded: &LoadedScene, report: &RecognitionReport, recognition_wall_s: f64) {
-    println!(
-        "  recognition      {} ({:.1} ms): {} detected, {} correct (precision {}); top layer {} / {} found (recall {}); {} parts in the tray",
-        loaded.scene.sensor.recognition.name(),
-        recognition_wall_s * 1e3,
-        report.figures.detected,
-        report.figures.correct,
-        super::percent(report.figures.precision),
-        report.figures.top_layer_found,
-        report.figures.top_layer,
-        super::percent(report.figures.recall),
-        report.parts,
+    row(
+        "recognition",
+        &format!(
+            "{} ({:.1} ms): {} detected, {} correct (precision {}); top layer {} / {} found (recall {}); {} parts in the tray",
+            loaded.scene.sensor.recognition.name(),
+            recognition_wall_s * 1e3,
+            report.figures.detected,
+            report.figures.correct,
+            super::percent(report.figures.precision),
+            report.figures.top_layer_found,
+            report.figures.top_layer,
+            super::percent(report.figures.recall),
+            report.parts,
+        ),
     );
-    println!(
-        "  pose error       of the correct ones, {}",
-        super::pose_errors_text(&report.figures)
+    row(
+        "pose error",
+        &format!("of the correct ones, {}", super::pose_errors_text(&report.figures)),
     );
 }
 
@@ -242,21 +245,24 @@ fn print_grasp(choice: &GraspChoice, grasp_ms: f64) {
     match choice.chosen.as_ref().map(|c| &c.grasp) {
         Some(g) => {
             let p = g.world_from_tool.translation.vector;
-            println!(
-                "  chosen grasp     detection {} face {}: tool at ({:.4}, {:.4}, {:.4}) m, score {:.3} (exposure {:.2}, clearance {:.1} mm, success {:.2}, place motion {:.3} s)",
-                g.detection,
-                g.face,
-                p.x,
-                p.y,
-                p.z,
-                g.score.total,
-                g.score.exposure,
-                g.score.clearance_m * 1e3,
-                g.score.success,
-                g.score.motion_s
+            row(
+                "chosen grasp",
+                &format!(
+                    "detection {} face {}: tool at ({:.4}, {:.4}, {:.4}) m, score {:.3} (exposure {:.2}, clearance {:.1} mm, success {:.2}, place motion {:.3} s)",
+                    g.detection,
+                    g.face,
+                    p.x,
+                    p.y,
+                    p.z,
+                    g.score.total,
+                    g.score.exposure,
+                    g.score.clearance_m * 1e3,
+                    g.score.success,
+                    g.score.motion_s
+                ),
             );
         }
-        None => println!("  chosen grasp     none: {}", choice.why_none()),
+        None => row("chosen grasp", &format!("none: {}", choice.why_none())),
     }
     let counts: Vec<String> = choice
         .plan
@@ -264,16 +270,35 @@ fn print_grasp(choice: &GraspChoice, grasp_ms: f64) {
         .iter()
         .map(|(k, v)| format!("{k} {v}"))
         .collect();
-    println!(
-        "  candidates       {} feasible; rejected: {}",
-        choice.plan.ranked.len(),
-        if counts.is_empty() {
-            "none".into()
-        } else {
-            counts.join(", ")
-        }
+    row(
+        "candidates",
+        &format!(
+            "{} feasible; rejected: {}",
+            choice.plan.ranked.len(),
+            if counts.is_empty() {
+                "none".into()
+            } else {
+                counts.join(", ")
+            }
+        ),
     );
-    println!("  sense and grasp  {grasp_ms:.2} ms wall (height map, candidates, IK, ranking, clear approach)");
+    row(
+        "sense and grasp",
+        &format!("{grasp_ms:.2} ms wall (height map, candidates, IK, ranking, clear approach)"),
+    );
+}
+
+/// The column where a row's text starts, after its two-space indent and its label.
+const ROW_TEXT_COLUMN: usize = 19;
+
+/// Prints a row of the text output: `label` in its column, then `text`, wrapped within the
+/// terminal's width under its first line.
+fn row(label: &str, text: &str) {
+    let width = binpick::results::table::TERMINAL_WIDTH - ROW_TEXT_COLUMN;
+    for (i, line) in binpick::report::wrap(text, width).lines().enumerate() {
+        let head = if i == 0 { label } else { "" };
+        println!("  {head:<w$}{line}", w = ROW_TEXT_COLUMN - 2);
+    }
 }
 
 /// Evaluation only: each top-layer part at the trigger (its pose, its visible pixels, and whether

@@ -52,6 +52,26 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
     assert_eq!(ply.len() - header_end, n * 12);
     assert_eq!(n as u64, v["capture"]["valid_px"].as_u64().unwrap());
     assert!(dir.join("sense.json").is_file() && dir.join("scene.toml").is_file());
+    // The text a user reads fits a terminal (its recognition and grasp rows ran to 127 columns).
+    let o = binpick_in(
+        ws.dir.path(),
+        &[
+            "sense",
+            "--workpiece",
+            "B",
+            "--seed",
+            "2",
+            "--out",
+            out.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let text = stdout(&o);
+    let longest = text.lines().map(|l| l.chars().count()).max().unwrap();
+    assert!(
+        longest <= 110 && text.contains("recognition") && text.contains("chosen grasp"),
+        "a line of {longest} characters:\n{text}"
+    );
 }
 
 /// The pixels of the PNG at `path`, checked to be the default sensor's 1032 x 772 at `depth`.
