@@ -222,6 +222,14 @@ pub fn pose_text(p: &Isometry3<f64>) -> String {
     )
 }
 
+/// Prints `text` wrapped to the terminal's width ([`binpick::results::table::TERMINAL_WIDTH`]).
+pub fn say(text: &str) {
+    println!(
+        "{}",
+        binpick::report::wrap(text, binpick::results::table::TERMINAL_WIDTH)
+    );
+}
+
 /// A share as a percentage with one decimal ("12.5 %"), or "-" where there is none (a precision
 /// without detections, a recall without a top layer): never `NaN`.
 pub fn percent(share: f64) -> String {

@@ -311,14 +311,6 @@ fn surface_of(wp: &LoadedWorkpiece) -> String {
         .unwrap_or_else(|| "primitives, meshed".into())
 }
 
-/// Prints `text` wrapped to the terminal's width.
-fn say(text: &str) {
-    println!(
-        "{}",
-        binpick::report::wrap(text, binpick::results::table::TERMINAL_WIDTH)
-    );
-}
-
 /// The faces (1-based, as listed) that take the cup and are up when the part rests upright, on
 /// its -z side (up to its symmetry): those `grasp.place_orientation = "upright"` grasps.
 fn upright_faces(m: &PartModel, max_tilt_rad: f64) -> Vec<usize> {
@@ -412,7 +404,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
         print_summary(&wp, &m, report);
         print_faces(&m, &sites);
         let upright = upright_faces(&m, tilt);
-        say(&format!(
+        super::say(&format!(
             "faces up when it rests upright, on its -z side (grasp.place_orientation = \"upright\"): {}",
             if upright.is_empty() {
                 "none that takes the cup".to_string()
@@ -421,7 +413,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
             }
         ));
         if let Some(side) = round_side(&m, &scene.scene) {
-            say(&format!(
+            super::say(&format!(
                 "round side: the cup seals on radii of {:.2} mm and up; the round body (radius {:.2} mm) \
                  offers {} of its {} tangent strips (a clear cup site, and a stable pose with the strip up \
                  within {:.0} deg to set the part down in); the shares below count flat faces only",
@@ -434,7 +426,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
         }
         print_poses(&m, lean, &drops);
         if piles.piles > 0 {
-            say(&format!(
+            super::say(&format!(
                 "simulated piles: {} of {} settled parts ({:.1} %) offer a cup face up with nothing on the cup's disc ({} piles of {}, seeds 1-{})",
                 piles.offered,
                 piles.in_tray,
@@ -446,10 +438,10 @@ pub fn part(a: &PartArgs) -> Result<()> {
         }
         if let Some(r) = piles.recognition.as_ref().map(RecognitionTotals::summary) {
             let finer = piles.recognition_finer.as_ref().map(|(px, t)| (*px, t.summary()));
-            say(&recognition_line(&r, finer.as_ref(), &scene.scene));
+            super::say(&recognition_line(&r, finer.as_ref(), &scene.scene));
         }
         for why in [no_cup_face(&m), no_upright_face(&m, w, tilt)].into_iter().flatten() {
-            say(&format!("warning: {why}"));
+            super::say(&format!("warning: {why}"));
         }
         println!("picture: {}", svg_path.display());
         Ok(())
@@ -629,7 +621,7 @@ fn pose_json(p: &RestingPose) -> serde_json::Value {
 fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
     let w = &wp.workpiece;
     if wp.mesh.is_none() {
-        say(&format!(
+        super::say(&format!(
             "part {:?} ({}): {} primitives, meshed: {} triangles",
             w.name,
             wp.label,
@@ -638,7 +630,7 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
         ));
         println!("repair: none (primitives are meshed closed)");
     } else {
-        say(&format!(
+        super::say(&format!(
             "part {:?} ({}): mesh {}, {} triangles in {} {}",
             w.name,
             wp.label,
@@ -647,7 +639,7 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
             report.bodies,
             if report.bodies == 1 { "body" } else { "bodies" }
         ));
-        say(&format!(
+        super::say(&format!(
             "repair: {} vertices welded, {} zero-area and {} duplicate triangles dropped, {} inner-wall pairs dropped, {} T-junctions split, {} triangles and {} bodies flipped, {} holes closed ({:.3} mm^2), {} non-manifold edges",
             report.welded_vertices,
             report.zero_area_triangles,
@@ -662,7 +654,7 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
         ));
     }
     let c = m.mass.com_m;
-    say(&format!(
+    super::say(&format!(
         "size {:.2} x {:.2} x {:.2} mm, volume {:.1} mm^3, mass {:.3} g ({:.0} kg/m^3), centre of mass [{:.3} {:.3} {:.3}] mm",
         m.size_m[0] * 1e3,
         m.size_m[1] * 1e3,
@@ -782,10 +774,10 @@ fn print_poses(m: &PartModel, lean: f64, drops: &DropShare) {
                  and the recognition and the place pose assume the predicted poses",
             );
         }
-        say(&text);
+        super::say(&text);
     }
     println!();
-    say(&format!(
+    super::say(&format!(
         "share of resting poses with a cup face up (within {:.0} deg of vertical, as the grasp selector takes them): {:.1} %",
         lean.to_degrees(),
         100.0 * m.graspable_share(lean)

@@ -128,10 +128,10 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
         println!("{}", serde_json::to_string_pretty(&out)?);
         return Ok(());
     }
-    println!(
+    super::say(&format!(
         "robot {:?} from {} (scene {})",
         robot.name, loaded.urdf_label, loaded.label
-    );
+    ));
     println!("base in world: {}", pose_text(&robot.world_from_base));
     println!(
         "tool: {:?} hand, {:.3} kg, tool frame {:.3} m beyond the flange, cup {:.1} mm",
@@ -156,7 +156,7 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
         );
     }
     println!();
-    println!(
+    let caps = format!(
         "planned motions' accelerations: {} (robot.drives.accel_cap = \"{}\"); amax is the specification",
         match loaded.scene.robot.drives.accel_cap {
             AccelCap::TorqueOnly => "bound by the torque limits alone",
@@ -164,6 +164,7 @@ fn robot_info(loaded: &LoadedScene, robot: &RobotModel, json: bool) -> Result<()
         },
         loaded.scene.robot.drives.accel_cap.name()
     );
+    super::say(&caps);
     println!("joint     lower_deg upper_deg  vmax_deg_s  amax_deg_s2  torque_nm  armature  coulomb_nm  viscous_nm_s");
     for j in &robot.joints {
         println!(

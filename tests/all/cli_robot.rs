@@ -49,6 +49,15 @@ fn info_lists_six_joints_and_28_kg() {
     );
     let v = json(&["robot", "info", "--json", "--scene", capped.to_str().unwrap()]);
     assert_eq!(v["accel_cap"], "spec");
+    // The text fits a terminal, for either cap (the line that says which ran to 125 columns).
+    for scene in ["scenes/default.toml", capped.to_str().unwrap()] {
+        let text = stdout(&binpick(&["robot", "info", "--scene", scene]));
+        let longest = text.lines().map(|l| l.chars().count()).max().unwrap();
+        assert!(
+            longest <= 110 && text.contains("accel_cap"),
+            "{longest} columns:\n{text}"
+        );
+    }
 }
 
 #[test]
