@@ -324,18 +324,23 @@ fn bench_planner(trials: usize, baseline_trials: usize, seed: u64, json: bool) -
         .iter()
         .map(|p| format!("{} {} / {} ms, {} %", p.name, p.mean_ms, p.max_ms, p.success_pct))
         .collect();
-    println!(
+    super::say(&format!(
         "planner, one core; reference's Table 2 (its Fig. 5 cases, 100 trials, i5-4310U): {}",
         reference.join("; ")
-    );
-    println!(
-        "{:<52} {:<11} {:>6} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9}",
-        "case", "algorithm", "trials", "success", "mean_ms", "p95_ms", "max_ms", "samples", "us/check", "ms/sample"
-    );
+    ));
+    // Each case's name heads its rows (the names run to 52 characters).
+    let mut case = "";
     for r in &rows {
+        if r.case != case {
+            case = &r.case;
+            println!("\n{case}");
+            println!(
+                "  {:<11} {:>6} {:>8} {:>9} {:>9} {:>9} {:>9} {:>8} {:>9}",
+                "algorithm", "trials", "success", "mean_ms", "p95_ms", "max_ms", "samples", "us/check", "ms/sample"
+            );
+        }
         println!(
-            "{:<52} {:<11} {:>6} {:>7.0}% {:>9.3} {:>9.3} {:>9.3} {:>9.1} {:>8.2} {:>9.4}",
-            r.case,
+            "  {:<11} {:>6} {:>7.0}% {:>9.3} {:>9.3} {:>9.3} {:>9.1} {:>8.2} {:>9.4}",
             format!("{:?}", r.algorithm),
             r.trials,
             r.success * 100.0,
