@@ -369,24 +369,26 @@ fn bench_accel(runs: usize, accel_cap: Option<binpick::config::AccelCap>, json: 
         println!("{}", serde_json::to_string_pretty(&rows)?);
         return Ok(());
     }
-    println!(
+    super::say(&format!(
         "motion accelerator, one core, hand + 30 g part, acceleration cap `{}` ({}); {runs} runs per case, each planning with its own seed: the median run shown, compute = max over the runs of planning + §4.2 in the corridor + §4.3",
         robot.accel_cap.name(),
         match robot.accel_cap {
             binpick::config::AccelCap::TorqueOnly => "torque and speed alone bind",
             binpick::config::AccelCap::Spec => "the specification accelerations cap every joint",
         }
+    ));
+    super::say(
+        "optimal_s: the time-optimal bound under torque and speed alone; capped_s: with the specification accelerations as caps too; gap: §4.3 / bound - 1",
     );
+    // Two tables, each within the terminal's width: the motion times, then the path folds,
+    // compute (max / median over the runs), the reference's improvement and compute, the peak
+    // torques and the energy (default -> final).
     println!(
-        "optimal_s: the time-optimal bound under torque and speed alone; capped_s: with the specification accelerations as caps too; gap: §4.3 / bound - 1"
-    );
-    println!(
-        "case   default_s  §4.2_s  §4.3_s  optimal_s  capped_s  toppra_exec_s  improvement  gap_to_opt  gap_to_capped  folds  compute_max/median_ms  corridor | reference: improvement  compute_ms | peak torque/limit J1..J6       energy default -> final"
+        "\ncase   default_s  §4.2_s  §4.3_s  optimal_s  capped_s  toppra_exec_s  improvement  gap_to_opt  gap_to_capped"
     );
     for r in &rows {
-        let peaks: Vec<String> = r.peak_ratio.iter().map(|p| format!("{p:.2}")).collect();
         println!(
-            "{:<6} {:>9.3} {:>7.3} {:>7.3} {:>10.3} {:>9.3} {:>14.3} {:>11.1}% {:>10.1}% {:>13.1}% {:>3}/{:<2} {:>10.2}/{:<5.2}  {:<8} | {:>21.1}% {:>11.1} | {}  {:.0} -> {:.0}",
+            "{:<6} {:>9.3} {:>7.3} {:>7.3} {:>10.3} {:>9.3} {:>14.3} {:>11.1}% {:>10.1}% {:>13.1}%",
             r.case,
             r.default_s,
             r.accelerated_s,
@@ -397,6 +399,14 @@ fn bench_accel(runs: usize, accel_cap: Option<binpick::config::AccelCap>, json: 
             r.improvement * 100.0,
             r.gap_to_optimal * 100.0,
             r.gap_to_capped * 100.0,
+        );
+    }
+    println!("\ncase   folds  max/med ms  corridor  ref: impr.  ref ms  peak torque/limit J1..J6       energy");
+    for r in &rows {
+        let peaks: Vec<String> = r.peak_ratio.iter().map(|p| format!("{p:.2}")).collect();
+        println!(
+            "{:<6} {:>3}/{:<2} {:>6.1}/{:<5.1}  {:<8}  {:>9.1}% {:>7.1}  {:<29}  {:.0} -> {:.0}",
+            r.case,
             r.folds.0,
             r.folds.1,
             r.compute_max_ms,
