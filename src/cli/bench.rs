@@ -258,10 +258,10 @@ fn bench_sensor(
         return Ok(());
     }
     let s = &loaded.scene.sensor;
-    println!(
+    super::say(&format!(
         "sensing, {} x {} px, {} threads, median of {runs} after a warm-up; targets: capture <= {:.0} ms, grasp selection <= {:.0} ms",
         s.resolution_px[0], s.resolution_px[1], b.threads, b.targets_ms.0, b.targets_ms.1
-    );
+    ));
     println!("workpiece  parts  capture_ms (min..max)   1-thread_ms  grasp_ms (min..max)   feasible");
     for r in &b.rows {
         println!(
@@ -278,13 +278,14 @@ fn bench_sensor(
             r.feasible
         );
     }
-    println!(
-        "\nrecognition over seeds 1..={} of the default pile, one capture each, against the truth at the trigger;\n\
-         correct = within 2 mm and 5 deg of a part (its symmetries allowed); recall over the top layer.\n\
+    println!();
+    super::say(&format!(
+        "recognition over seeds 1..={} of the default pile, one capture each, against the truth at the trigger; \
+         correct = within 2 mm and 5 deg of a part (its symmetries allowed); recall over the top layer. \
          targets (cloud): recall >= 90 %, precision >= 99 %, pose median <= 0.7 mm / 1.5 deg, p95 <= 1.5 mm / 4 deg, \
          compute median <= {:.0} ms",
         b.seeds, b.targets_ms.2
-    );
+    ));
     println!(
         "workpiece  recognition  top  found  recall%  det  correct  prec%  pos_mm med/p95  rot_deg med/p95  ms med/max"
     );
