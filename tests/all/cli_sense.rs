@@ -6,9 +6,9 @@ use crate::support::{Workspace, binpick_in, stderr, stdout};
 fn sense_writes_depth_png_cloud_ply_and_a_report() {
     let ws = Workspace::new();
     let out = ws.path("out");
-    let o = binpick_in(
-        ws.dir.path(),
-        &[
+    // `sense` of B, seed 2, with `extra` arguments: its standard output.
+    let sense = |extra: &[&str]| {
+        let mut args = vec![
             "sense",
             "--workpiece",
             "B",
@@ -16,11 +16,14 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
             "2",
             "--out",
             out.to_str().unwrap(),
-            "--json",
-        ],
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        ];
+        args.extend_from_slice(extra);
+        let o = binpick_in(ws.dir.path(), &args);
+        assert!(o.status.success(), "{}", stderr(&o));
+        stdout(&o)
+    };
+    let json = sense(&["--json"]);
+    let v: serde_json::Value = serde_json::from_str(&json).unwrap();
     assert!(v["recognition"]["recall"].as_f64().unwrap() >= 0.9, "{v}");
     assert!(v["recognition"]["precision"].as_f64().unwrap() >= 0.99, "{v}");
     assert!(v["grasp"]["chosen"].is_object(), "no grasp chosen: {v}");
@@ -53,20 +56,7 @@ fn sense_writes_depth_png_cloud_ply_and_a_report() {
     assert_eq!(n as u64, v["capture"]["valid_px"].as_u64().unwrap());
     assert!(dir.join("sense.json").is_file() && dir.join("scene.toml").is_file());
     // The text a user reads fits a terminal (its recognition and grasp rows ran to 127 columns).
-    let o = binpick_in(
-        ws.dir.path(),
-        &[
-            "sense",
-            "--workpiece",
-            "B",
-            "--seed",
-            "2",
-            "--out",
-            out.to_str().unwrap(),
-        ],
-    );
-    assert!(o.status.success(), "{}", stderr(&o));
-    let text = stdout(&o);
+    let text = sense(&[]);
     let longest = text.lines().map(|l| l.chars().count()).max().unwrap();
     assert!(
         longest <= 110 && text.contains("recognition") && text.contains("chosen grasp"),
