@@ -153,14 +153,6 @@ fn bench_robot(loaded: &LoadedScene, robot: &RobotModel, runs: usize, calls: usi
     Ok(())
 }
 
-/// Prints `text` under a table's row: indented four columns, wrapped within the terminal's width.
-fn indented(text: &str) {
-    let width = binpick::results::table::TERMINAL_WIDTH - 4;
-    for line in binpick::report::wrap(text, width).lines() {
-        println!("    {line}");
-    }
-}
-
 fn bench_physics(runs: usize, json: bool) -> Result<()> {
     let (loaded, robot, workpieces) = embedded_cell()?;
     let b = binpick::bench::physics_bench(&loaded, &robot, &workpieces, runs).map_err(|e| anyhow::anyhow!("{e}"))?;
@@ -192,7 +184,7 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
             p.settled
         );
         if let Err(e) = &p.rapier_defaults {
-            indented(&format!("rapier defaults stopped: {e}"));
+            super::say_under("", 4, &format!("rapier defaults stopped: {e}"));
         }
     }
     println!(
@@ -225,7 +217,7 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
         );
         for (what, stops) in [(&m.mesh, &m.stops.0), (&m.primitive, &m.stops.1)] {
             for s in stops {
-                indented(&format!("{what} stopped (left out of the medians): {s}"));
+                super::say_under("", 4, &format!("{what} stopped (left out of the medians): {s}"));
             }
         }
     }

@@ -294,11 +294,7 @@ const ROW_TEXT_COLUMN: usize = 19;
 /// Prints a row of the text output: `label` in its column, then `text`, wrapped within the
 /// terminal's width under its first line.
 fn row(label: &str, text: &str) {
-    let width = binpick::results::table::TERMINAL_WIDTH - ROW_TEXT_COLUMN;
-    for (i, line) in binpick::report::wrap(text, width).lines().enumerate() {
-        let head = if i == 0 { label } else { "" };
-        println!("  {head:<w$}{line}", w = ROW_TEXT_COLUMN - 2);
-    }
+    super::say_under(&format!("  {label}"), ROW_TEXT_COLUMN, text);
 }
 
 /// Evaluation only: each top-layer part at the trigger (its pose, its visible pixels, and whether
