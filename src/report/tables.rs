@@ -237,16 +237,24 @@ fn is_unit_of(previous: &str, word: &str) -> bool {
     bare == "%" || (UNITS.contains(&bare) && previous.ends_with(|c: char| c.is_ascii_digit() || c == ']'))
 }
 
+/// Comparison signs that stay on the line of the figure after them ("<= 5 ms").
+const COMPARISONS: [&str; 6] = ["<=", ">=", "<", ">", "=", "~"];
+
 /// `text` in lines of at most `width` characters, broken at spaces but never between a figure
-/// and its unit (`%` always; `mm`, `s`, `deg` and the like after a digit or a bracket); a word
-/// longer than the width is cut across lines.
+/// and its unit (`%` always; `mm`, `s`, `deg` and the like after a digit or a bracket), nor
+/// between a comparison sign and the figure after it; a word longer than the width is cut
+/// across lines.
 pub fn wrap(text: &str, width: usize) -> String {
     let width = width.max(1);
     // Words, each with the unit that follows it glued on.
     let mut words: Vec<String> = Vec::new();
     for word in text.split(' ') {
         match words.last_mut() {
-            Some(last) if !last.is_empty() && is_unit_of(last, word) => {
+            Some(last)
+                if !last.is_empty()
+                    && (is_unit_of(last, word)
+                        || (COMPARISONS.contains(&last.as_str()) && word.starts_with(|c: char| c.is_ascii_digit()))) =>
+            {
                 last.push(' ');
                 last.push_str(word);
             }
@@ -294,6 +302,11 @@ mod tests {
         assert_eq!(wrap("centre [0.0 5.6] mm, mass", 16), "centre [0.0\n5.6] mm, mass");
         assert_eq!(wrap("tray 12.5 s) then", 9), "tray\n12.5 s)\nthen");
         assert_eq!(wrap("of s and m", 4), "of s\nand\nm");
+        // A comparison sign goes with its figure (and that figure's unit): the control, a sign
+        // before a word, breaks as any word does.
+        assert_eq!(wrap("selection <= 5 ms", 12), "selection\n<= 5 ms");
+        assert_eq!(wrap("recall >= 90 %, x", 10), "recall\n>= 90 %, x");
+        assert_eq!(wrap("a <= b", 4), "a <=\nb");
     }
 
     /// Every line of the printed table fits its width, and a long detail is printed whole under
