@@ -269,7 +269,7 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, how: Finish) -> 
     let wall = if times.study_s.is_finite() {
         format!(", {:.1} s wall on {} threads", times.study_s, times.threads)
     } else {
-        String::new()
+        " (deterministic results keep no run times: each shard's own output printed them)".to_string()
     };
     let width = binpick::results::table::TERMINAL_WIDTH;
     if let Some(rows) = &rows {
@@ -324,12 +324,15 @@ pub fn finish(dir: RunDir, file: &StudyFile, times: &WallTimes, how: Finish) -> 
             file.runs.len(),
             spec.picks,
         );
-        print!("{md}");
+        print!(
+            "{}",
+            binpick::sweep::table::terminal(spec, &binpick::sweep::table::table(file))
+        );
         println!(
             "\n{}",
             wrap(
                 &format!(
-                    "takt as the reference defines it (see `binpick batch`); p5 and p95 are the 5th and 95th percentiles of every interval; faults = protective stops + collisions + drops + parts lost; every column of the batch table is in sweep.csv; {sim_s:.1} s simulated{wall}"
+                    "takt as the reference defines it (see `binpick batch`); success = placed within the place tray's tolerance / attempts; p95 = the 95th percentile of every interval; floor = the motion floor, mean Pick + Place; faults = protective stops + collisions + drops + parts lost; sweep.md adds the p5, sensor waits and picks per capture, sweep.csv every column of the batch table; {sim_s:.1} s simulated{wall}"
                 ),
                 width
             )

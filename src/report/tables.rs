@@ -253,7 +253,8 @@ pub fn wrap(text: &str, width: usize) -> String {
             Some(last)
                 if !last.is_empty()
                     && (is_unit_of(last, word)
-                        || (COMPARISONS.contains(&last.as_str()) && word.starts_with(|c: char| c.is_ascii_digit()))) =>
+                        || (COMPARISONS.contains(&last.as_str())
+                            && word.starts_with(|c: char| c.is_ascii_digit()))) =>
             {
                 last.push(' ');
                 last.push_str(word);

@@ -120,7 +120,7 @@ pub fn wait_share(s: &Summary) -> f64 {
 }
 
 /// A share as a percentage with `d` decimals; `-` when not finite.
-fn pct(v: f64, d: usize) -> String {
+pub fn pct(v: f64, d: usize) -> String {
     if v.is_finite() {
         format!("{:.d$} %", 100.0 * v)
     } else {
@@ -152,6 +152,49 @@ const TERMINAL: &[MdCell] = &[
     ("faults", true, |s| faults(s).to_string()),
 ];
 
+/// An aligned Markdown table: `headers` (text, right-aligned) over the rows of `cells`, each
+/// column as wide as its widest cell (at least 3).
+pub fn aligned(headers: &[(&str, bool)], cells: &[Vec<String>]) -> String {
+    let widths: Vec<usize> = (0..headers.len())
+        .map(|i| {
+            cells
+                .iter()
+                .map(|r| r[i].chars().count())
+                .chain([headers[i].0.chars().count(), 3])
+                .max()
+                .unwrap_or(3)
+        })
+        .collect();
+    let pad = |text: &str, i: usize| {
+        let fill = " ".repeat(widths[i] - text.chars().count());
+        if headers[i].1 {
+            format!("{fill}{text}")
+        } else {
+            format!("{text}{fill}")
+        }
+    };
+    let line = |texts: Vec<String>| format!("| {} |\n", texts.join(" | "));
+    let mut out = line(headers.iter().enumerate().map(|(i, h)| pad(h.0, i)).collect());
+    out += &line(
+        headers
+            .iter()
+            .enumerate()
+            .map(|(i, h)| {
+                let dashes = "-".repeat(widths[i] - 1);
+                if h.1 {
+                    format!("{dashes}:")
+                } else {
+                    format!("{dashes}-")
+                }
+            })
+            .collect(),
+    );
+    for r in cells {
+        out += &line(r.iter().enumerate().map(|(i, t)| pad(t, i)).collect());
+    }
+    out
+}
+
 /// The table as the terminal prints it: the figures a user decides on (part, takt mean over
 /// every pick, the takt of each run's first 20 picks, the reference system's takt, success,
 /// motion floor, the share of the takt spent waiting, faults), as an aligned Markdown table;
@@ -181,42 +224,8 @@ pub fn terminal(rows: &[Summary]) -> String {
             r[0] = r[0].chars().take(part_chars - 1).chain(['…']).collect();
         }
     }
-    let width = |i: usize| {
-        cells
-            .iter()
-            .map(|r| r[i].chars().count())
-            .chain([TERMINAL[i].0.chars().count(), 3])
-            .max()
-            .unwrap_or(3)
-    };
-    let widths: Vec<usize> = (0..TERMINAL.len()).map(width).collect();
-    let pad = |text: &str, i: usize| {
-        let fill = " ".repeat(widths[i] - text.chars().count());
-        if TERMINAL[i].1 {
-            format!("{fill}{text}")
-        } else {
-            format!("{text}{fill}")
-        }
-    };
-    let line = |texts: Vec<String>| format!("| {} |\n", texts.join(" | "));
-    let mut out = line(TERMINAL.iter().enumerate().map(|(i, c)| pad(c.0, i)).collect());
-    out += &line(
-        TERMINAL
-            .iter()
-            .enumerate()
-            .map(|(i, c)| {
-                let dashes = "-".repeat(widths[i] - 1);
-                if c.1 {
-                    format!("{dashes}:")
-                } else {
-                    format!("{dashes}-")
-                }
-            })
-            .collect(),
-    );
-    for r in &cells {
-        out += &line(r.iter().enumerate().map(|(i, t)| pad(t, i)).collect());
-    }
+    let headers: Vec<(&str, bool)> = TERMINAL.iter().map(|c| (c.0, c.1)).collect();
+    let out = aligned(&headers, &cells);
     out + &no_takt_notes(rows) + &incident_notes(rows)
 }
 

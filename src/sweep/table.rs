@@ -7,7 +7,7 @@ use serde::Serialize;
 use serde_json::json;
 
 use crate::results::Summary;
-use crate::results::table::num;
+use crate::results::table::{TERMINAL_WIDTH, aligned, num, pct};
 use crate::study::{Outputs, StudyFile, StudySpec};
 
 /// One row of the sweep table: a workpiece under one variant.
@@ -79,14 +79,99 @@ pub fn markdown(spec: &StudySpec, rows: &[SweepRow]) -> String {
             faults,
         );
     }
+    md + &notes(rows)
+}
+
+/// The notes under the table: why a row has no takt, and its incidents.
+fn notes(rows: &[SweepRow]) -> String {
+    let mut out = String::new();
     for r in rows {
         if let Some(why) = crate::results::table::no_takt_why(&r.row) {
-            md += &format!("\nvariant {}, {why}\n", r.variant + 1);
+            out += &format!("\nvariant {}, {why}\n", r.variant + 1);
         }
         let label = format!("variant {}, {}", r.variant + 1, r.row.tally.workpiece);
-        md += &crate::results::table::incident_note(&label, &r.row);
+        out += &crate::results::table::incident_note(&label, &r.row);
     }
-    md
+    out
+}
+
+/// The table as the terminal prints it, within [`TERMINAL_WIDTH`] where the values allow: the
+/// variant, its values (a column per key; where those columns would not fit, the values are
+/// listed above the table instead), part, success, takt mean and p95, the motion floor and
+/// faults. Every column is in `sweep.md` and `sweep.csv`.
+pub fn terminal(spec: &StudySpec, rows: &[SweepRow]) -> String {
+    let figures = |r: &SweepRow| -> Vec<String> {
+        let w = &r.row;
+        vec![
+            w.tally.workpiece.clone(),
+            format!(
+                "{} ({}/{})",
+                pct(w.success_rate, 1),
+                w.tally.placed_in_tolerance(),
+                w.tally.attempts
+            ),
+            crate::results::table::takt_text(w, w.takt.mean_s),
+            num(w.takt.p95_s, 3),
+            num(w.motion_floor_s, 3),
+            crate::results::table::faults(w).to_string(),
+        ]
+    };
+    let tail = [
+        ("part", false),
+        ("success", true),
+        ("takt [s]", true),
+        ("p95", true),
+        ("floor [s]", true),
+        ("faults", true),
+    ];
+    let with_keys = {
+        let headers: Vec<(&str, bool)> = [("variant", true)]
+            .into_iter()
+            .chain(spec.keys.iter().map(|k| (k.as_str(), false)))
+            .chain(tail)
+            .collect();
+        let cells: Vec<Vec<String>> = rows
+            .iter()
+            .map(|r| {
+                std::iter::once((r.variant + 1).to_string())
+                    .chain(r.values.iter().cloned())
+                    .chain(figures(r))
+                    .collect()
+            })
+            .collect();
+        aligned(&headers, &cells)
+    };
+    let table = if with_keys.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH) {
+        with_keys
+    } else {
+        let mut legend = String::new();
+        for (v, values) in spec.variants.iter().enumerate() {
+            let pairs: Vec<String> = spec
+                .keys
+                .iter()
+                .zip(values)
+                .map(|(k, x)| format!("{k} = {x}"))
+                .collect();
+            let text = format!("variant {}: {}", v + 1, pairs.join(", "));
+            // A value that runs on is indented under its variant.
+            for (i, line) in crate::report::wrap(&text, TERMINAL_WIDTH - 2).lines().enumerate() {
+                legend += if i == 0 { "" } else { "  " };
+                legend += line;
+                legend.push('\n');
+            }
+        }
+        let headers: Vec<(&str, bool)> = [("variant", true)].into_iter().chain(tail).collect();
+        let cells: Vec<Vec<String>> = rows
+            .iter()
+            .map(|r| std::iter::once((r.variant + 1).to_string()).chain(figures(r)).collect())
+            .collect();
+        legend + "\n" + &aligned(&headers, &cells)
+    };
+    let notes: String = notes(rows)
+        .lines()
+        .map(|l| crate::report::wrap(l, TERMINAL_WIDTH) + "\n")
+        .collect();
+    table + &notes
 }
 
 /// Quotes a CSV field where it needs it (commas, quotes, line breaks).
@@ -136,4 +221,69 @@ pub fn outputs(file: &StudyFile) -> Outputs {
         ("sweep.svg", super::sweep_chart::sweep_svg(&file.spec, &rows)),
     ];
     Outputs { files, markdown, table }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A spec of `keys` (values `values` per variant) over workpiece E with one run each.
+    fn rows_of(keys: &[&str], values: &[Vec<String>]) -> (StudySpec, Vec<SweepRow>) {
+        let spec = StudySpec {
+            scene: "s".into(),
+            keys: keys.iter().map(|k| k.to_string()).collect(),
+            variants: values.to_vec(),
+            workpieces: vec!["E".into()],
+            seeds: vec![1],
+            picks: 3,
+            deterministic: true,
+        };
+        let rows = (0..values.len())
+            .flat_map(|v| {
+                let tally = crate::cycle::Tally {
+                    workpiece: "E".into(),
+                    ..Default::default()
+                };
+                crate::results::per_workpiece(&spec.workpieces, std::iter::once(&tally))
+                    .into_iter()
+                    .map(move |row| SweepRow {
+                        variant: v,
+                        values: values[v].clone(),
+                        takt_p5_s: f64::NAN,
+                        row,
+                    })
+            })
+            .collect();
+        (spec, rows)
+    }
+
+    /// Short keys get a column each; keys whose columns would not fit in the terminal's width
+    /// are listed above the table, a long value's line indented under its variant. Control: the
+    /// Markdown table (`sweep.md`) of the same long keys runs past the width.
+    #[test]
+    fn the_terminal_table_fits_its_width() {
+        let (spec, rows) = rows_of(&["sensor.latency_s"], &[vec!["0.3".into()], vec!["1.1".into()]]);
+        let t = terminal(&spec, &rows);
+        assert!(t.starts_with("| variant | sensor.latency_s | part |"), "{t}");
+        assert!(t.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH), "{t}");
+        let long = [
+            "sensor.position_m",
+            "workpiece.grasp.face_margin_m",
+            "cycle.max_picks_per_capture",
+        ];
+        let value = vec!["[0.1, 0.45, 1.008]".to_string(), "0.0005".into(), "3".into()];
+        let (spec, rows) = rows_of(&long, &[value.clone(), value]);
+        let t = terminal(&spec, &rows);
+        assert!(t.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH), "{t}");
+        assert!(
+            t.starts_with("variant 1: sensor.position_m = [0.1, 0.45, 1.008], "),
+            "{t}"
+        );
+        assert!(t.contains("\n\n| variant | part |"), "{t}");
+        assert!(
+            markdown(&spec, &rows)
+                .lines()
+                .any(|l| l.chars().count() > TERMINAL_WIDTH)
+        );
+    }
 }

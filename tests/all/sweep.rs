@@ -238,8 +238,21 @@ fn shards_merge_into_the_whole_sweep_and_a_variant_runs_as_batch_does() {
     let name = "sweep-sensor.latency_s+cycle.max_picks_per_capture-EF-seeds1-picks3-det";
     let with = |extra: &[&str]| -> Vec<String> { sweep.iter().chain(extra).map(|s| s.to_string()).collect() };
     let (whole, shards) = (out("whole"), out("shards"));
+    // The whole sweep's text fits the terminal's 110 columns (the control: sweep.md, which it
+    // printed before, does not).
+    let o = binpick(&with(&["--out", &whole]).iter().map(String::as_str).collect::<Vec<_>>());
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    let said = crate::support::stdout(&o);
+    assert!(said.lines().all(|l| l.chars().count() <= 110), "{said}");
+    // Two keys' columns would not fit: each variant's values are listed above the table.
+    assert!(
+        said.contains("variant 4: sensor.latency_s = 1.1, cycle.max_picks_per_capture = 3\n"),
+        "{said}"
+    );
+    assert!(said.contains("| variant | part |       success | takt [s] |"), "{said}");
+    let md = read(&Path::new(&whole).join(name).join("sweep.md"));
+    assert!(md.lines().any(|l| l.chars().count() > 110), "{md}");
     for a in [
-        with(&["--out", &whole]),
         with(&["--shard", "1/3", "--out", &shards]),
         with(&["--shard", "2/3", "--out", &shards]),
         with(&["--shard", "3/3", "--out", &shards]),
@@ -251,7 +264,11 @@ fn shards_merge_into_the_whole_sweep_and_a_variant_runs_as_batch_does() {
     let mut margs = vec!["merge"];
     margs.extend(shard_dirs.iter().rev().map(String::as_str));
     margs.extend(["--out", &merged]);
-    run_ok(&margs);
+    let o = binpick(&margs);
+    assert_eq!(o.status.code(), Some(0), "{}", stderr(&o));
+    // Deterministic shards carry no run times: the merge says so rather than stop at "simulated".
+    let said = crate::support::stdout(&o);
+    assert!(said.contains("(deterministic results keep no run times"), "{said}");
     let whole_dir = Path::new(&whole).join(name);
     let merged_dir = Path::new(&merged).join(name);
     let csv = read(&whole_dir.join("sweep.csv"));
