@@ -333,14 +333,18 @@ pub fn tune(a: &TuneArgs) -> Result<()> {
         let out = serde_json::json!({"tune": doc["tune"]["best"], "test": doc["tune"]["test"], "dir": dest.display().to_string()});
         println!("{}", serde_json::to_string_pretty(&out)?);
     } else {
-        print!("{md}");
-        println!(
-            "\n{} evaluations ({} from the journal {}), {} cell runs, {:.1} s wall on {threads} threads",
+        print!("{}", binpick::tune::output::terminal(&report));
+        let done = format!(
+            "{} evaluations ({} from the journal {}), {} cell runs, {:.1} s wall on {threads} threads",
             evaluations.len(),
             cell.replayed,
             journal.path().display(),
             cell.runs,
             wall.elapsed().as_secs_f64()
+        );
+        println!(
+            "\n{}",
+            binpick::report::wrap(&done, binpick::results::table::TERMINAL_WIDTH)
         );
         println!("wrote {}", dest.display());
     }

@@ -15,7 +15,8 @@ use serde_json::{Value, json};
 
 use super::journal::Header;
 use super::{Constraints, Evaluation, Figures, Outcome};
-use crate::results::table::num;
+use crate::report::wrap;
+use crate::results::table::{TERMINAL_WIDTH, aligned, num, pct};
 use crate::svg::{Plot, escape, open, tick_label, ticks};
 
 /// What a tune found.
@@ -118,47 +119,73 @@ fn seeds_text(s: &[u64]) -> String {
     s.iter().map(u64::to_string).collect::<Vec<_>>().join(",")
 }
 
+/// The head of `tune.md` and of the terminal's text: the run's paragraph (candidates, picks,
+/// objective, seeds, mode, optimizer) and the constraints'.
+fn intro(r: &Report<'_>) -> [String; 2] {
+    let h = r.header;
+    let c = &r.constraints;
+    [
+        format!(
+            "{} candidates ({} per round), {} picks per run, objective: the {} takt, training seeds {}, test seeds {}, {}; optimizer: {}.",
+            r.evaluations.len(),
+            h.population,
+            h.picks,
+            match h.objective {
+                super::Objective::Sustained => "sustained (every interval)",
+                super::Objective::First20 => "reference's 20-pick (each run's first 21 picks)",
+            },
+            seeds_text(&h.train_seeds),
+            seeds_text(r.test_seeds),
+            if h.deterministic {
+                "deterministic compute budgets"
+            } else {
+                "measured compute"
+            },
+            match h.optimizer {
+                super::Optimizer::Swarm => format!("argmin particle swarm, seed {}", h.seed),
+                super::Optimizer::Grid => "an even grid over the keys (the baseline)".to_string(),
+            },
+        ),
+        format!(
+            "Constraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}, runs ended by a physics fault: none.",
+            100.0 * c.min_success,
+            c.max_collisions,
+            c.max_stops,
+            c.max_parts_lost
+        ),
+    ]
+}
+
+/// The line naming the best, and the sentence on which figure to quote.
+fn best_text(r: &Report<'_>, b: &Evaluation) -> [String; 2] {
+    [
+        format!(
+            "Best (lowest training takt that meets every constraint): evaluation {}, {}.",
+            b.index + 1,
+            r.values_text(&b.values)
+        ),
+        "The figure to quote is the tuned cell on the test seeds (never evaluated by the optimizer).".to_string(),
+    ]
+}
+
+/// What is printed where no candidate met every constraint.
+const NO_BEST: &str =
+    "No candidate met every constraint on the training seeds: there is no best, and nothing was run on the test seeds.";
+
 /// `tune.md`.
 pub fn markdown(r: &Report<'_>) -> String {
     let h = r.header;
     let c = &r.constraints;
+    let [run, limits] = intro(r);
     let mut md = format!(
-        "# tune: workpiece {} in {}\n\n{} candidates ({} per round), {} picks per run, objective: the {} takt, training seeds {}, test seeds {}, {}; optimizer: {}.\n\nConstraints: success >= {:.1} %, collisions <= {}, protective stops <= {}, parts lost <= {}, runs ended by a physics fault: none.\n\n",
-        h.workpiece,
-        h.scene,
-        r.evaluations.len(),
-        h.population,
-        h.picks,
-        match h.objective {
-            super::Objective::Sustained => "sustained (every interval)",
-            super::Objective::First20 => "reference's 20-pick (each run's first 21 picks)",
-        },
-        seeds_text(&h.train_seeds),
-        seeds_text(r.test_seeds),
-        if h.deterministic {
-            "deterministic compute budgets"
-        } else {
-            "measured compute"
-        },
-        match h.optimizer {
-            super::Optimizer::Swarm => format!("argmin particle swarm, seed {}", h.seed),
-            super::Optimizer::Grid => "an even grid over the keys (the baseline)".to_string(),
-        },
-        100.0 * c.min_success,
-        c.max_collisions,
-        c.max_stops,
-        c.max_parts_lost
+        "# tune: workpiece {} in {}\n\n{run}\n\n{limits}\n\n",
+        h.workpiece, h.scene
     );
     let header = "| cell | seeds | takt [s] | success | intervals | collisions | stops | lost | meets the constraints |\n|---|---|---:|---:|---:|---:|---:|---:|---|\n";
     match (r.best, &r.test) {
         (Some(b), Some((tuned, untuned))) => {
-            let _ = writeln!(
-                md,
-                "Best (lowest training takt that meets every constraint): evaluation {}, {}.\n",
-                b.index + 1,
-                r.values_text(&b.values)
-            );
-            md += "The figure to quote is the tuned cell on the test seeds (never evaluated by the optimizer).\n\n";
+            let [best, quote] = best_text(r, b);
+            let _ = write!(md, "{best}\n\n{quote}\n\n");
             md += header;
             if let Some(f) = b.figures() {
                 md += &figs_row("tuned", &format!("train {}", seeds_text(&h.train_seeds)), f, c);
@@ -167,7 +194,7 @@ pub fn markdown(r: &Report<'_>) -> String {
             md += &figs_row("untuned", &format!("test {}", seeds_text(r.test_seeds)), untuned, c);
         }
         _ => {
-            md += "**No candidate met every constraint on the training seeds: there is no best, and nothing was run on the test seeds.**\n"
+            let _ = writeln!(md, "**{NO_BEST}**");
         }
     }
     md += "\n## Evaluations (training seeds)\n\n| # | round | values | takt [s] | success | collisions | stops | lost | feasible |\n|---:|---:|---|---:|---:|---:|---:|---:|---|\n";
@@ -200,6 +227,116 @@ pub fn markdown(r: &Report<'_>) -> String {
         };
     }
     md
+}
+
+/// The terminal's text, within [`TERMINAL_WIDTH`]: `tune.md`'s paragraphs wrapped, the tuned and
+/// untuned cells' figures, and the evaluations (a column per key where the columns fit, else
+/// their values are left to `tune.md`), each constraint a row missed listed under its table.
+pub fn terminal(r: &Report<'_>) -> String {
+    let width = TERMINAL_WIDTH;
+    let h = r.header;
+    let c = &r.constraints;
+    let para = |text: &str| wrap(text, width) + "\n\n";
+    let notes_text = |notes: &[String]| -> String {
+        if notes.is_empty() {
+            return String::new();
+        }
+        "\n".to_string() + &notes.iter().map(|n| wrap(n, width) + "\n").collect::<String>()
+    };
+    let mut out = para(&format!("tune: workpiece {} in {}", h.workpiece, h.scene));
+    for p in intro(r) {
+        out += &para(&p);
+    }
+    match (r.best, &r.test) {
+        (Some(b), Some((tuned, untuned))) => {
+            for p in best_text(r, b) {
+                out += &para(&p);
+            }
+            let (mut rows, mut notes) = (Vec::new(), Vec::new());
+            let train = format!("train {}", seeds_text(&h.train_seeds));
+            let test = format!("test {}", seeds_text(r.test_seeds));
+            let figures = b.figures().map(|f| ("tuned", train, f));
+            for (name, seeds, f) in figures
+                .into_iter()
+                .chain([("tuned", test.clone(), tuned), ("untuned", test, untuned)])
+            {
+                let v = c.violations(f);
+                if !v.is_empty() {
+                    notes.push(format!("{name}, {seeds}: {}", v.join("; ")));
+                }
+                rows.push(vec![
+                    name.to_string(),
+                    seeds,
+                    f.takt_s.map_or("-".into(), |t| num(t, 3)),
+                    f.success_rate.map_or("-".into(), |s| pct(s, 1)),
+                    f.takt_count.to_string(),
+                    f.collisions.to_string(),
+                    f.protective_stops.to_string(),
+                    f.parts_lost.to_string(),
+                    if v.is_empty() { "yes" } else { "no" }.to_string(),
+                ]);
+            }
+            let headers = [
+                ("cell", false),
+                ("seeds", false),
+                ("takt [s]", true),
+                ("success", true),
+                ("intervals", true),
+                ("collisions", true),
+                ("stops", true),
+                ("lost", true),
+                ("meets the constraints", false),
+            ];
+            out += &aligned(&headers, &rows);
+            out += &notes_text(&notes);
+            out += "\n";
+        }
+        _ => out += &para(NO_BEST),
+    }
+    // The evaluations: a column per key where they fit.
+    let (mut rows, mut notes) = (Vec::new(), Vec::new());
+    for e in r.evaluations {
+        if !e.feasible() {
+            notes.push(format!("evaluation {}: {}", e.index + 1, e.violations.join("; ")));
+        }
+        let f = e.figures();
+        rows.push((
+            vec![(e.index + 1).to_string(), e.round.to_string()],
+            super::cell::texts(&h.keys, &e.values),
+            vec![
+                f.and_then(|f| f.takt_s).map_or("-".into(), |t| num(t, 3)),
+                f.and_then(|f| f.success_rate).map_or("-".into(), |s| pct(s, 1)),
+                if e.feasible() { "yes" } else { "no" }.to_string(),
+            ],
+        ));
+    }
+    let head = [("#", true), ("round", true)];
+    let tail = [("takt [s]", true), ("success", true), ("feasible", false)];
+    let with_keys = {
+        let headers: Vec<(&str, bool)> = head
+            .into_iter()
+            .chain(h.keys.iter().map(|d| (d.key.as_str(), true)))
+            .chain(tail)
+            .collect();
+        let cells: Vec<Vec<String>> = rows
+            .iter()
+            .map(|(a, v, b)| a.iter().chain(v).chain(b).cloned().collect())
+            .collect();
+        aligned(&headers, &cells)
+    };
+    if with_keys.lines().all(|l| l.chars().count() <= width) {
+        out += &para("Evaluations (training seeds):");
+        out += &with_keys;
+    } else {
+        out += &para("Evaluations (training seeds; their values are in tune.md):");
+        let headers: Vec<(&str, bool)> = head.into_iter().chain(tail).collect();
+        let cells: Vec<Vec<String>> = rows
+            .iter()
+            .map(|(a, _, b)| a.iter().chain(b).cloned().collect())
+            .collect();
+        out += &aligned(&headers, &cells);
+    }
+    out + &notes_text(&notes)
 }
 
 fn escape_pipe(s: &str) -> String {

@@ -173,6 +173,18 @@ fn a_tiny_deterministic_tune_repeats_resumes_and_its_files_reproduce_its_test_fi
         "{}",
         stdout(&o)
     );
+    // The terminal's text fits 110 columns (but the folder's path); the control: tune.md, which
+    // it printed before, does not.
+    let said = stdout(&o);
+    assert!(
+        said.lines()
+            .filter(|l| !l.starts_with("wrote "))
+            .all(|l| l.chars().count() <= 110),
+        "{said}"
+    );
+    assert!(said.contains("|   7 |"), "{said}");
+    let md = std::fs::read_to_string(folder(&a).join("tune.md")).unwrap();
+    assert!(md.lines().any(|l| l.chars().count() > 110), "{md}");
     let o = tune(&c, &more);
     assert!(o.status.success(), "{}", stderr(&o));
     // Negative control: a fresh folder has no journal to answer from.
