@@ -115,10 +115,10 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             if let Some(c) = e.downcast_ref::<ConfigError>() {
-                eprintln!("{c}");
+                eprintln!("error: {c}");
                 ExitCode::from(2)
             } else if let Some(i) = e.downcast_ref::<binpick::physics::ShapeError>() {
-                eprintln!("{i}");
+                eprintln!("error: {i}");
                 ExitCode::from(2)
             } else if let Some(i) = e.downcast_ref::<InputError>() {
                 eprintln!("error: {i}");
