@@ -373,14 +373,21 @@ pub struct PlaceTrayConfig {
     pub tolerance_deg: f64,
 }
 
+/// A pose within this position error of another is the same pose (m): a detection of a part
+/// counts as correct within it (the sensor's `CORRECT_WITHIN_M`), and a placed part is in its
+/// slot within it (`place_tray.tolerance_m`'s default).
+pub const POSE_WITHIN_M: f64 = 0.002;
+/// ... and within this rotation error, the part's symmetries allowed (rad) (5 deg).
+pub const POSE_WITHIN_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+
 /// `place_tray.tolerance_m` when the cell file leaves it out.
 fn default_place_tolerance_m() -> f64 {
-    crate::sensor::CORRECT_WITHIN_M
+    POSE_WITHIN_M
 }
 
 /// `place_tray.tolerance_deg` when the cell file leaves it out.
 fn default_place_tolerance_deg() -> f64 {
-    crate::sensor::CORRECT_WITHIN_RAD.to_degrees()
+    POSE_WITHIN_RAD.to_degrees()
 }
 
 /// The table top: a box whose upper face is at `top_z_m`.

@@ -190,10 +190,11 @@ pub struct Detection {
     pub face_up: Option<usize>,
 }
 
-/// A detection counts as correct within this position error of a part (m) (the recognition target's definition).
-pub const CORRECT_WITHIN_M: f64 = 0.002;
+/// A detection counts as correct within this position error of a part (m) (the recognition
+/// target's definition; the cell's one pose tolerance, [`crate::config::POSE_WITHIN_M`]).
+pub const CORRECT_WITHIN_M: f64 = crate::config::POSE_WITHIN_M;
 /// ... and within this rotation error, the part's symmetries allowed (rad) (5 deg).
-pub const CORRECT_WITHIN_RAD: f64 = 5.0 * std::f64::consts::PI / 180.0;
+pub const CORRECT_WITHIN_RAD: f64 = crate::config::POSE_WITHIN_RAD;
 
 /// A detection matched with the part it is nearest to at its capture's trigger (evaluation only).
 #[derive(Debug, Clone, Copy, Serialize)]
