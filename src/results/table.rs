@@ -152,10 +152,9 @@ const TERMINAL: &[MdCell] = &[
     ("faults", true, |s| faults(s).to_string()),
 ];
 
-/// An aligned Markdown table: `headers` (text, right-aligned) over the rows of `cells`, each
-/// column as wide as its widest cell (at least 3).
-pub fn aligned(headers: &[(&str, bool)], cells: &[Vec<String>]) -> String {
-    let widths: Vec<usize> = (0..headers.len())
+/// Each column's width in [`aligned`]: its widest cell or header, at least 3 (characters).
+fn column_widths(headers: &[(&str, bool)], cells: &[Vec<String>]) -> Vec<usize> {
+    (0..headers.len())
         .map(|i| {
             cells
                 .iter()
@@ -164,7 +163,13 @@ pub fn aligned(headers: &[(&str, bool)], cells: &[Vec<String>]) -> String {
                 .max()
                 .unwrap_or(3)
         })
-        .collect();
+        .collect()
+}
+
+/// An aligned Markdown table: `headers` (text, right-aligned) over the rows of `cells`, each
+/// column as wide as its widest cell (at least 3).
+pub fn aligned(headers: &[(&str, bool)], cells: &[Vec<String>]) -> String {
+    let widths = column_widths(headers, cells);
     let pad = |text: &str, i: usize| {
         let fill = " ".repeat(widths[i] - text.chars().count());
         if headers[i].1 {
@@ -205,16 +210,8 @@ pub fn terminal(rows: &[Summary]) -> String {
         .iter()
         .map(|s| TERMINAL.iter().map(|c| (c.2)(s)).collect())
         .collect();
-    let others: usize = (1..TERMINAL.len())
-        .map(|i| {
-            cells
-                .iter()
-                .map(|r| r[i].chars().count())
-                .chain([TERMINAL[i].0.chars().count(), 3])
-                .max()
-                .unwrap_or(3)
-        })
-        .sum();
+    let headers: Vec<(&str, bool)> = TERMINAL.iter().map(|c| (c.0, c.1)).collect();
+    let others: usize = column_widths(&headers, &cells)[1..].iter().sum();
     // "| " + cells joined by " | " + " |".
     let part_chars = TERMINAL_WIDTH
         .saturating_sub(others + 3 * (TERMINAL.len() - 1) + 4)
@@ -224,7 +221,6 @@ pub fn terminal(rows: &[Summary]) -> String {
             r[0] = r[0].chars().take(part_chars - 1).chain(['…']).collect();
         }
     }
-    let headers: Vec<(&str, bool)> = TERMINAL.iter().map(|c| (c.0, c.1)).collect();
     let out = aligned(&headers, &cells);
     out + &no_takt_notes(rows) + &incident_notes(rows)
 }
