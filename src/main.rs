@@ -115,10 +115,10 @@ fn main() -> ExitCode {
         Ok(()) => ExitCode::SUCCESS,
         Err(e) => {
             if let Some(c) = e.downcast_ref::<ConfigError>() {
-                eprintln!("error: {c}");
+                eprintln!("{c}");
                 ExitCode::from(2)
             } else if let Some(i) = e.downcast_ref::<binpick::physics::ShapeError>() {
-                eprintln!("error: {i}");
+                eprintln!("{i}");
                 ExitCode::from(2)
             } else if let Some(i) = e.downcast_ref::<InputError>() {
                 eprintln!("error: {i}");
