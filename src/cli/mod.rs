@@ -230,11 +230,8 @@ pub fn say(text: &str) {
 /// Prints `text` wrapped within the terminal's width, from column `indent`: its first line after
 /// `head` (padded to `indent`), the others under it (a table row's label, a note under a row).
 pub fn say_under(head: &str, indent: usize, text: &str) {
-    let width = binpick::results::table::TERMINAL_WIDTH.saturating_sub(indent);
-    for (i, line) in binpick::report::wrap(text, width).lines().enumerate() {
-        let head = if i == 0 { head } else { "" };
-        println!("{head:<indent$}{line}");
-    }
+    let width = binpick::results::table::TERMINAL_WIDTH;
+    print!("{}", binpick::report::wrap_under(head, indent, text, width));
 }
 
 /// A share as a percentage with one decimal ("12.5 %"), or "-" where there is none (a precision

@@ -11,7 +11,7 @@ mod tables;
 
 use std::path::{Path, PathBuf};
 
-pub use tables::{Fixed, PICKS_TABLE_WIDTH, picks_csv, picks_table, to_csv, wrap};
+pub use tables::{Fixed, PICKS_TABLE_WIDTH, picks_csv, picks_table, to_csv, wrap, wrap_under};
 
 use crate::config::{LoadedScene, LoadedWorkpiece, ShapeKind, Source};
 

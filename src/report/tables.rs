@@ -285,6 +285,18 @@ pub fn wrap(text: &str, width: usize) -> String {
     lines.join("\n")
 }
 
+/// `text` wrapped within `width` characters from column `indent`: its first line after `head`
+/// (padded to `indent`), the others under it, each line ending in a newline (a table row's
+/// label and its text, a note under a row, "variant 2: " and the values that run on).
+pub fn wrap_under(head: &str, indent: usize, text: &str, width: usize) -> String {
+    let mut out = String::new();
+    for (i, line) in wrap(text, width.saturating_sub(indent)).lines().enumerate() {
+        let head = if i == 0 { head } else { "" };
+        out += &format!("{head:<indent$}{line}\n");
+    }
+    out
+}
+
 #[cfg(test)]
 mod tests {
     use super::*;
@@ -308,6 +320,9 @@ mod tests {
         assert_eq!(wrap("selection <= 5 ms", 12), "selection\n<= 5 ms");
         assert_eq!(wrap("recall >= 90 %, x", 10), "recall\n>= 90 %, x");
         assert_eq!(wrap("a <= b", 4), "a <=\nb");
+        // Under a head: the text's lines start at the indent.
+        assert_eq!(wrap_under("v1: ", 4, "a = 1, b = 2", 10), "v1: a = 1,\n    b = 2\n");
+        assert_eq!(wrap_under("", 2, "x y", 3), "  x\n  y\n");
     }
 
     /// Every line of the printed table fits its width, and a long detail is printed whole under

@@ -152,13 +152,9 @@ pub fn terminal(spec: &StudySpec, rows: &[SweepRow]) -> String {
                 .zip(values)
                 .map(|(k, x)| format!("{k} = {x}"))
                 .collect();
-            let text = format!("variant {}: {}", v + 1, pairs.join(", "));
-            // A value that runs on is indented under its variant.
-            for (i, line) in crate::report::wrap(&text, TERMINAL_WIDTH - 2).lines().enumerate() {
-                legend += if i == 0 { "" } else { "  " };
-                legend += line;
-                legend.push('\n');
-            }
+            // Values that run on stand under the first.
+            let head = format!("variant {}: ", v + 1);
+            legend += &crate::report::wrap_under(&head, head.len(), &pairs.join(", "), TERMINAL_WIDTH);
         }
         let headers: Vec<(&str, bool)> = [("variant", true)].into_iter().chain(tail).collect();
         let cells: Vec<Vec<String>> = rows

@@ -237,11 +237,12 @@ pub fn terminal(r: &Report<'_>) -> String {
     let h = r.header;
     let c = &r.constraints;
     let para = |text: &str| wrap(text, width) + "\n\n";
-    let notes_text = |notes: &[String]| -> String {
+    let notes_text = |notes: &[(String, String)]| -> String {
         if notes.is_empty() {
             return String::new();
         }
-        "\n".to_string() + &notes.iter().map(|n| wrap(n, width) + "\n").collect::<String>()
+        let under = |(head, text): &(String, String)| crate::report::wrap_under(head, head.len(), text, width);
+        "\n".to_string() + &notes.iter().map(under).collect::<String>()
     };
     let mut out = para(&format!("tune: workpiece {} in {}", h.workpiece, h.scene));
     for p in intro(r) {
@@ -262,7 +263,7 @@ pub fn terminal(r: &Report<'_>) -> String {
             {
                 let v = c.violations(f);
                 if !v.is_empty() {
-                    notes.push(format!("{name}, {seeds}: {}", v.join("; ")));
+                    notes.push((format!("{name}, {seeds}: "), v.join("; ")));
                 }
                 rows.push(vec![
                     name.to_string(),
@@ -297,7 +298,7 @@ pub fn terminal(r: &Report<'_>) -> String {
     let (mut rows, mut notes) = (Vec::new(), Vec::new());
     for e in r.evaluations {
         if !e.feasible() {
-            notes.push(format!("evaluation {}: {}", e.index + 1, e.violations.join("; ")));
+            notes.push((format!("evaluation {}: ", e.index + 1), e.violations.join("; ")));
         }
         let f = e.figures();
         rows.push((
