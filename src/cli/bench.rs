@@ -147,7 +147,7 @@ fn bench_robot(loaded: &LoadedScene, robot: &RobotModel, runs: usize, calls: usi
         );
         // A note (a baseline's success rate) on a line of its own under its row.
         if !t.note.is_empty() {
-            println!("    {}", t.note);
+            super::say_under("", 4, &t.note);
         }
     }
     Ok(())

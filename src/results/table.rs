@@ -200,6 +200,39 @@ pub fn aligned(headers: &[(&str, bool)], cells: &[Vec<String>]) -> String {
     out
 }
 
+/// One row of [`aligned_keyed`]: the cells before the key columns, one value per key, the cells
+/// after them.
+pub type KeyedRow = (Vec<String>, Vec<String>, Vec<String>);
+
+/// [`aligned`] with a column per key (`keys`) between the `head` and `tail` columns where every
+/// line then fits [`TERMINAL_WIDTH`], else the table without the key columns; and whether the
+/// keys' columns are in it (where not, the caller lists the values elsewhere).
+pub fn aligned_keyed(
+    head: &[(&str, bool)],
+    keys: &[(&str, bool)],
+    tail: &[(&str, bool)],
+    rows: &[KeyedRow],
+) -> (String, bool) {
+    let table = |with_keys: bool| {
+        let keys = if with_keys { keys } else { &[] };
+        let headers: Vec<(&str, bool)> = head.iter().chain(keys).chain(tail).copied().collect();
+        let cells: Vec<Vec<String>> = rows
+            .iter()
+            .map(|(a, v, b)| {
+                let v: &[String] = if with_keys { v } else { &[] };
+                a.iter().chain(v).chain(b).cloned().collect()
+            })
+            .collect();
+        aligned(&headers, &cells)
+    };
+    let full = table(true);
+    if full.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH) {
+        (full, true)
+    } else {
+        (table(false), false)
+    }
+}
+
 /// The table as the terminal prints it: the figures a user decides on (part, takt mean over
 /// every pick, the takt of each run's first 20 picks, the reference system's takt, success,
 /// motion floor, the share of the takt spent waiting, faults), as an aligned Markdown table;

@@ -7,7 +7,7 @@ use serde::Serialize;
 use serde_json::json;
 
 use crate::results::Summary;
-use crate::results::table::{TERMINAL_WIDTH, aligned, num, pct};
+use crate::results::table::{KeyedRow, TERMINAL_WIDTH, aligned_keyed, num, pct};
 use crate::study::{Outputs, StudyFile, StudySpec};
 
 /// One row of the sweep table: a workpiece under one variant.
@@ -124,26 +124,16 @@ pub fn terminal(spec: &StudySpec, rows: &[SweepRow]) -> String {
         ("floor [s]", true),
         ("faults", true),
     ];
-    let with_keys = {
-        let headers: Vec<(&str, bool)> = [("variant", true)]
-            .into_iter()
-            .chain(spec.keys.iter().map(|k| (k.as_str(), false)))
-            .chain(tail)
-            .collect();
-        let cells: Vec<Vec<String>> = rows
-            .iter()
-            .map(|r| {
-                std::iter::once((r.variant + 1).to_string())
-                    .chain(r.values.iter().cloned())
-                    .chain(figures(r))
-                    .collect()
-            })
-            .collect();
-        aligned(&headers, &cells)
-    };
-    let table = if with_keys.lines().all(|l| l.chars().count() <= TERMINAL_WIDTH) {
-        with_keys
+    let keys: Vec<(&str, bool)> = spec.keys.iter().map(|k| (k.as_str(), false)).collect();
+    let keyed_rows: Vec<KeyedRow> = rows
+        .iter()
+        .map(|r| (vec![(r.variant + 1).to_string()], r.values.clone(), figures(r)))
+        .collect();
+    let (table, keyed) = aligned_keyed(&[("variant", true)], &keys, &tail, &keyed_rows);
+    let table = if keyed {
+        table
     } else {
+        // Each variant's values above the table, those that run on under the first.
         let mut legend = String::new();
         for (v, values) in spec.variants.iter().enumerate() {
             let pairs: Vec<String> = spec
@@ -152,16 +142,10 @@ pub fn terminal(spec: &StudySpec, rows: &[SweepRow]) -> String {
                 .zip(values)
                 .map(|(k, x)| format!("{k} = {x}"))
                 .collect();
-            // Values that run on stand under the first.
             let head = format!("variant {}: ", v + 1);
             legend += &crate::report::wrap_under(&head, head.len(), &pairs.join(", "), TERMINAL_WIDTH);
         }
-        let headers: Vec<(&str, bool)> = [("variant", true)].into_iter().chain(tail).collect();
-        let cells: Vec<Vec<String>> = rows
-            .iter()
-            .map(|r| std::iter::once((r.variant + 1).to_string()).chain(figures(r)).collect())
-            .collect();
-        legend + "\n" + &aligned(&headers, &cells)
+        legend + "\n" + &table
     };
     let notes: String = notes(rows)
         .lines()

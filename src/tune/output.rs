@@ -16,7 +16,7 @@ use serde_json::{Value, json};
 use super::journal::Header;
 use super::{Constraints, Evaluation, Figures, Outcome};
 use crate::report::wrap;
-use crate::results::table::{TERMINAL_WIDTH, aligned, num, pct};
+use crate::results::table::{TERMINAL_WIDTH, aligned, aligned_keyed, num, pct};
 use crate::svg::{Plot, escape, open, tick_label, ticks};
 
 /// What a tune found.
@@ -312,31 +312,15 @@ pub fn terminal(r: &Report<'_>) -> String {
         ));
     }
     let head = [("#", true), ("round", true)];
+    let keys: Vec<(&str, bool)> = h.keys.iter().map(|d| (d.key.as_str(), true)).collect();
     let tail = [("takt [s]", true), ("success", true), ("feasible", false)];
-    let with_keys = {
-        let headers: Vec<(&str, bool)> = head
-            .into_iter()
-            .chain(h.keys.iter().map(|d| (d.key.as_str(), true)))
-            .chain(tail)
-            .collect();
-        let cells: Vec<Vec<String>> = rows
-            .iter()
-            .map(|(a, v, b)| a.iter().chain(v).chain(b).cloned().collect())
-            .collect();
-        aligned(&headers, &cells)
-    };
-    if with_keys.lines().all(|l| l.chars().count() <= width) {
-        out += &para("Evaluations (training seeds):");
-        out += &with_keys;
+    let (table, keyed) = aligned_keyed(&head, &keys, &tail, &rows);
+    out += &para(if keyed {
+        "Evaluations (training seeds):"
     } else {
-        out += &para("Evaluations (training seeds; their values are in tune.md):");
-        let headers: Vec<(&str, bool)> = head.into_iter().chain(tail).collect();
-        let cells: Vec<Vec<String>> = rows
-            .iter()
-            .map(|(a, _, b)| a.iter().chain(b).cloned().collect())
-            .collect();
-        out += &aligned(&headers, &cells);
-    }
+        "Evaluations (training seeds; their values are in tune.md):"
+    });
+    out += &table;
     out + &notes_text(&notes)
 }
 
