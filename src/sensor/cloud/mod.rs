@@ -30,7 +30,9 @@
 //! different pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) comes
 //! within [`CLOSE_CALL_PX`] of it (a CAD part's hypotheses joined by their twin faces' at the same
 //! placements); else, a close call, each contender refined and weighed at every pixel by how well
-//! its pixels agree (a log-likelihood under the depth noise), the winner needing
+//! its pixels agree (a log-likelihood under the depth noise; a contender not settled on the
+//! floor first moved along the optical axis to the mean depth its agreeing pixels are measured
+//! at, since each face is placed on the patch's plane), the winner needing
 //! [`CLOSE_CALL_LOG_ODDS`] over every different pose; refined (`refine`: settled onto the floor in
 //! one of the part's resting poses where the patch's points allow it; else a CAD part's tilt the
 //! patch leaves open scanned by rendering; an outline-fitted face turned to its best-verified
@@ -1326,9 +1328,39 @@ impl<'a> Cloud<'a> {
             .collect();
         let close: Vec<(f64, &CloudDetection)> = refined
             .iter()
-            .filter_map(|d| self.log_likelihood(model, &d.world_from_part).map(|e| (e, d)))
+            .filter_map(|d| {
+                self.log_likelihood(model, &self.at_measured_depth(model, &d.world_from_part))
+                    .map(|e| (e, d))
+            })
             .collect();
         unrivalled(&close, CLOSE_CALL_LOG_ODDS)
+    }
+
+    /// `pose` moved along the optical axis by the mean depth its agreeing pixels are measured
+    /// off its rendering, unless it rests on the floor (settled by `refine`, whose height the
+    /// floor fixes): a face placed on its patch's plane where the patch also holds a second face
+    /// a little lower or higher (a coin cell's cap and its can's rim, 0.3 mm apart, which one
+    /// plane's band takes in) stands off the points by part of that step, and the contender
+    /// with the other face up by the rest.
+    fn at_measured_depth(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Isometry3<f64> {
+        let up = self.floor.normal;
+        if (model.lowest_along(pose, &up) - self.floor.point.dot(&up)).abs() < 1e-9 {
+            return *pose;
+        }
+        let (mut sum, mut n) = (0.0, 0usize);
+        let rendered = self.render(model, pose, 1, |i, predicted, graze| {
+            if self.judge(i, predicted, graze) == Some(true) {
+                sum += self.depth[i] - predicted;
+                n += 1;
+            }
+        });
+        if rendered.is_none() || n == 0 {
+            return *pose;
+        }
+        Isometry3::from_parts(
+            Translation3::from(pose.translation.vector + self.optical * (sum / n as f64)),
+            pose.rotation,
+        )
     }
 
     /// A hypothesis's evidence at every pixel, weighed by how well each agreeing pixel agrees

@@ -22,7 +22,12 @@
 //! them for noise, the test refused 57 of 522 DIP-8s lying flat on the floor (`sense` seeds
 //! 1-12; the median F was 1.31, where F(3, n) gives 0.8); on the interior the median is 0.83
 //! and 7 are refused. A patch whose interior is too small to stand for it
-//! ([`super::interior_suffices`]) is tested on all its points.
+//! ([`super::interior_suffices`]) is tested on all its points. Where the face's plane fails
+//! the test, the settled pose's rendered surface is tried in its place (each point's distance
+//! from it along its pixel's ray, across the plane; a pose that shows nothing at over a tenth of
+//! the points fails): a patch over two of the part's faces whose step one plane's band takes in
+//! (a coin cell's cap, 0.3 mm proud of its can's rim) fits no single face's plane, and would
+//! otherwise settle only the wrong side up, the one whose flat top the plane stands for.
 //!
 //! (1b) Tilt, for a CAD part's detection that is not settled: a patch a few pixels wide (a
 //! DIP-8's 3.3 mm side) leaves its plane's tilt about its long axis open by several degrees
@@ -121,7 +126,13 @@ impl super::Cloud<'_> {
 
     /// `d`'s pose settled onto the floor, if it is near a resting pose on the floor and the
     /// patch's points allow it.
-    fn settled(&self, model: &CloudModel, patch: &Patch, plane: &Plane, d: &CloudDetection) -> Option<Isometry3<f64>> {
+    pub(super) fn settled(
+        &self,
+        model: &CloudModel,
+        patch: &Patch,
+        plane: &Plane,
+        d: &CloudDetection,
+    ) -> Option<Isometry3<f64>> {
         let pose = d.world_from_part;
         let up = self.floor.normal;
         let down_in_part = pose.rotation.inverse() * -up;
@@ -147,23 +158,47 @@ impl super::Cloud<'_> {
             point: settled.translation.vector + settled.rotation * face.center,
             normal: settled.rotation * face.normal,
         };
-        self.plane_agrees(patch, plane, &settled_plane).then_some(settled)
+        let on_plane = |_: usize, p: &Vector3<f64>| Some(settled_plane.normal.dot(&(p - settled_plane.point)));
+        if self.points_agree(patch, plane, on_plane) {
+            return Some(settled);
+        }
+        // A patch over two of the part's faces that its plane's band takes as one (a coin
+        // cell's cap and the can's rim 0.3 mm below it): the settled pose's rendered surface,
+        // not its face's plane, against the points.
+        let mut predicted = std::collections::HashMap::new();
+        self.render(model, &settled, 1, |i, depth, _| {
+            predicted.insert(i, depth);
+        })?;
+        let on_surface = |i: usize, p: &Vector3<f64>| {
+            let z = (p - self.origin).dot(&self.optical);
+            // Along the pixel's ray to the rendered depth, measured across the patch's plane.
+            Some(plane.normal.dot(&(p - self.origin)) * (1.0 - predicted.get(&i)? / z))
+        };
+        self.points_agree(patch, plane, on_surface).then_some(settled)
     }
 
-    /// Whether the patch's points near `fitted` fit `candidate` as well as their own plane, up to
-    /// the noise (the F test of the module header).
-    fn plane_agrees(&self, patch: &Patch, fitted: &Plane, candidate: &Plane) -> bool {
+    /// Whether the patch's points near `fitted` fit a candidate surface as well as their own
+    /// plane, up to the noise (the F test of the module header). `off(pixel, point)` is the
+    /// point's distance from the candidate across the plane (m), `None` where the candidate
+    /// shows nothing at that pixel: a candidate that leaves over a tenth of the points so does
+    /// not fit.
+    pub(super) fn points_agree(
+        &self,
+        patch: &Patch,
+        fitted: &Plane,
+        off: impl Fn(usize, &Vector3<f64>) -> Option<f64>,
+    ) -> bool {
         // The patch's interior: the pixels whose 8 neighbours are all in it.
         let mut member = patch.pixels.clone();
         member.sort_unstable();
         let interior = |i: usize| self.is_interior(&member, i);
-        let in_band = |keep: &dyn Fn(usize) -> bool| -> Vec<Vector3<f64>> {
+        let in_band = |keep: &dyn Fn(usize) -> bool| -> Vec<(usize, Vector3<f64>)> {
             patch
                 .pixels
                 .iter()
                 .filter(|&&i| keep(i))
-                .map(|&i| self.pts[i])
-                .filter(|p| fitted.normal.dot(&(p - fitted.point)).abs() <= BAND_M)
+                .map(|&i| (i, self.pts[i]))
+                .filter(|(_, p)| fitted.normal.dot(&(p - fitted.point)).abs() <= BAND_M)
                 .collect()
         };
         let mut pts = in_band(&interior);
@@ -173,17 +208,21 @@ impl super::Cloud<'_> {
         if pts.len() < super::MIN_PATCH_PX {
             return false;
         }
-        let origin = pts[0];
+        let origin = pts[0].1;
         let (mut s, mut ss) = (Vector3::zeros(), Matrix3::zeros());
-        for p in &pts {
+        for (_, p) in &pts {
             let r = p - origin;
             s += r;
             ss += r * r.transpose();
         }
         let n = pts.len() as f64;
         let own = plane_from_sums(n, &s, &ss, &origin, &self.origin);
-        let ssr = |q: &Plane| pts.iter().map(|p| q.normal.dot(&(p - q.point)).powi(2)).sum::<f64>();
-        let (ssr_fit, ssr_candidate) = (ssr(&own), ssr(candidate));
+        let ssr_fit: f64 = pts.iter().map(|(_, p)| own.normal.dot(&(p - own.point)).powi(2)).sum();
+        let offs: Vec<f64> = pts.iter().filter_map(|(i, p)| off(*i, p)).collect();
+        if 10 * offs.len() < 9 * pts.len() {
+            return false;
+        }
+        let ssr_candidate = offs.iter().map(|d| d * d).sum::<f64>() * n / offs.len() as f64;
         let variance = ssr_fit / (n - 3.0);
         variance > 0.0 && (ssr_candidate - ssr_fit) / 3.0 <= F_MAX * variance
     }

@@ -1518,3 +1518,170 @@ fn a_square_face_is_tried_a_quarter_turn_round_where_the_part_is_not_square() {
         "found {found}, a quarter turn off {quarter}"
     );
 }
+
+/// A CR2032 coin cell as a CAD export gives it (m, centred on its bounding box): the can, 20 mm
+/// across and 2.9 mm high, and its negative cap, 17 mm across, standing 0.3 mm proud of the can's
+/// top and reaching 0.05 mm into it (two bodies overlapping), each a 48-sided prism.
+fn coin_cell_mesh() -> crate::part::mesh::Mesh {
+    let mut raw = crate::part::raw::RawMesh::default();
+    let mut prism = |r: f64, z0: f64, z1: f64| {
+        let n = 48u32;
+        let base = raw.vertices.len() as u32;
+        for z in [z0, z1] {
+            for k in 0..n {
+                let a = std::f64::consts::TAU * k as f64 / n as f64;
+                raw.vertices.push([r * a.cos(), r * a.sin(), z - 1.6]);
+            }
+        }
+        for k in 1..n - 1 {
+            raw.triangles.push([base, base + k + 1, base + k]);
+            raw.triangles.push([base + n, base + n + k, base + n + k + 1]);
+        }
+        for k in 0..n {
+            let j = (k + 1) % n;
+            raw.triangles.push([base + k, base + j, base + n + j]);
+            raw.triangles.push([base + k, base + n + j, base + n + k]);
+        }
+    };
+    prism(10.0, 0.0, 2.9);
+    prism(8.5, 2.85, 3.2);
+    crate::part::repair::repair(&raw, 0.001, "mm").unwrap().0
+}
+
+/// A coin cell's two sides differ by its cap, 0.3 mm proud of the can's rim: one plane's band
+/// takes cap and rim in as one patch, on which either side's face is placed. Cap up or down, on
+/// the floor at four places and propped 4 mm over it tilted 10 degrees, it is found the right
+/// way up every time. Negative controls, each seen failing: (1) on the floor cap up, the rim's
+/// plane (the face the true pose shows) does not fit the patch's points, so settling by the
+/// face's plane alone leaves the true pose unsettled, 0.3 mm high, where the flat side settles
+/// and wins; its rendered surface fits them. (2) Propped cap up, with each contender's face on
+/// the patch's plane, the flat side up fits the pixels better than the truth; moved to the
+/// depth its pixels are measured at, the truth wins by the close call's odds.
+#[test]
+fn a_coin_cell_is_told_cap_up_from_cap_down_by_its_caps_step() {
+    let cell = cell();
+    let mesh = coin_cell_mesh();
+    let cup = crate::part::CupSpec {
+        diameter_m: 0.006,
+        face_margin_m: 0.0005,
+    };
+    let pm =
+        crate::part::PartModel::derive(mesh.clone(), crate::part::mass::MassSpec::MassKg(0.003), cup, None).unwrap();
+    let m = CloudModel::of_part_model(&pm);
+    let up_z = |p: &Isometry3<f64>| (p.rotation * Vector3::z()).z;
+    let mut propped_found = 0;
+    for (x, y) in [(0.02, 0.01), (-0.03, 0.02), (0.05, -0.03), (-0.06, -0.04)] {
+        for cap_up in [true, false] {
+            let flip = if cap_up { 0.0 } else { 180.0 };
+            for propped in [false, true] {
+                let r = yaw(40.0) * roll(flip + if propped { 10.0 } else { 0.0 });
+                let mut pose = resting_mesh(&cell, &mesh, x, y, r);
+                pose.translation.vector.z += if propped { 0.004 } else { 0.0 };
+                let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
+                let found = recognize(&capture, &cell.camera, &cell.tray, &m);
+                assert!(
+                    found.len() <= 1,
+                    "at ({x}, {y}), cap up {cap_up}, propped {propped}: {found:?}"
+                );
+                let Some(d) = found.first().map(|d| &d.world_from_part) else {
+                    assert!(propped, "at ({x}, {y}), cap up {cap_up}, on the floor: not found");
+                    continue;
+                };
+                propped_found += usize::from(propped);
+                assert!(
+                    (up_z(d) > 0.0) == cap_up,
+                    "at ({x}, {y}), propped {propped}: found cap up {}, truth cap up {cap_up}",
+                    up_z(d) > 0.0
+                );
+                let (dp, dr) = m.symmetry().pose_error(&pose, d);
+                assert!(
+                    dp < 0.0005 && dr.to_degrees() < 2.0,
+                    "{:.2} mm, {:.2} deg off",
+                    dp * 1e3,
+                    dr.to_degrees()
+                );
+            }
+        }
+    }
+    assert!(propped_found >= 4, "propped: {propped_found} of 8 found");
+    // (1) On the floor, cap up: settled by the rendered surface, not by the rim's plane.
+    let pose = resting_mesh(&cell, &mesh, 0.02, 0.01, yaw(40.0));
+    let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
+    let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+    let patch = cloud
+        .segment()
+        .into_iter()
+        .max_by_key(|p| p.pixels.len())
+        .expect("a patch");
+    let (plane, ..) = cloud.silhouette(&patch, m.trim_plane);
+    let rim = m
+        .faces
+        .iter()
+        .position(|f| f.normal.z > 0.99 && f.extent_m[0] > 0.019)
+        .expect("the can's top among the faces");
+    let rim_plane = Plane {
+        point: (pose * Point3::from(m.faces[rim].center)).coords,
+        normal: pose.rotation * m.faces[rim].normal,
+    };
+    let on_rim = |_: usize, p: &Vector3<f64>| Some(rim_plane.normal.dot(&(p - rim_plane.point)));
+    assert!(
+        !cloud.points_agree(&patch, &plane, on_rim),
+        "the rim's plane fits the cap's points"
+    );
+    let truth = CloudDetection {
+        world_from_part: pose,
+        face_up: rim,
+        score: 1.0,
+        visible_fraction: 1.0,
+        curved_side_up: false,
+        yaw_span_rad: 0.0,
+    };
+    let settled = cloud
+        .settled(&m, &patch, &plane, &truth)
+        .expect("settled by its rendered surface");
+    assert!((settled.translation.vector - pose.translation.vector).norm() < 1e-6);
+    // (2) Propped cap up: each side placed by its face on the patch's plane.
+    let pose = resting_mesh(&cell, &mesh, 0.02, 0.01, yaw(40.0) * roll(10.0));
+    let pose = Isometry3::from_parts(
+        Translation3::from(pose.translation.vector + Vector3::z() * 0.004),
+        pose.rotation,
+    );
+    let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
+    let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+    let patch = cloud
+        .segment()
+        .into_iter()
+        .max_by_key(|p| p.pixels.len())
+        .expect("a patch");
+    let (plane, ..) = cloud.silhouette(&patch, m.trim_plane);
+    let n = pose.rotation * Vector3::z();
+    // The truth with its rim on the plane; the other side up with its flat face there.
+    let rim_on_plane = |p: &Isometry3<f64>, top_m: f64| {
+        let top = (p * Point3::new(0.0, 0.0, top_m)).coords;
+        Isometry3::from_parts(
+            Translation3::from(p.translation.vector + n * n.dot(&(plane.point - top))),
+            p.rotation,
+        )
+    };
+    let truth_on_plane = rim_on_plane(&pose, 0.0013);
+    let flipped = Isometry3::from_parts(
+        pose.translation,
+        pose.rotation * UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI),
+    );
+    let flipped_on_plane = rim_on_plane(&flipped, -0.0016);
+    let ll = |p: &Isometry3<f64>| cloud.log_likelihood(&m, p).unwrap();
+    assert!(
+        ll(&truth_on_plane) < ll(&flipped_on_plane),
+        "without the depth fit the truth already wins: {:.1} against {:.1}",
+        ll(&truth_on_plane),
+        ll(&flipped_on_plane)
+    );
+    let (t, f) = (
+        ll(&cloud.at_measured_depth(&m, &truth_on_plane)),
+        ll(&cloud.at_measured_depth(&m, &flipped_on_plane)),
+    );
+    assert!(
+        t > f + CLOSE_CALL_LOG_ODDS,
+        "at the measured depth: truth {t:.1}, flipped {f:.1}"
+    );
+}
