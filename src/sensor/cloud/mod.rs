@@ -188,7 +188,17 @@ pub struct CloudModel {
     /// detection near one, on the floor, is tried settled ([`refine`]). A primitive workpiece's
     /// come from its meshed primitives ([`CloudModel::with_resting`]); empty: not tried.
     resting: Vec<Vector3<f64>>,
+    /// Per face: another planar face of the part faces the same way within [`PLANE_TOL_M`] of
+    /// its plane, a step a patch may take in with it (a coin cell's cap over its can's rim): a
+    /// hypothesis with it up is tried settled by its rendered surface where its plane fails
+    /// ([`refine`]), and weighed in a close call at its measured depth. All false for a
+    /// primitive model.
+    stepped: Vec<bool>,
 }
+
+/// Two planar faces whose normals agree within this face the same way for [`CloudModel`]'s
+/// `stepped` (rad).
+pub const STEP_NORMAL_TOL_RAD: f64 = 0.01;
 
 /// A patch's plane is refitted (twice) without its pixels farther than this from it, when the
 /// model's faces have features beside them within the plane band (m): two sigma of the depth
@@ -282,7 +292,9 @@ impl CloudModel {
             outlines: Vec::new(),
             trim_plane: false,
             resting: Vec::new(),
+            stepped: Vec::new(),
         }
+        .with_stepped_faces(&[])
     }
 
     /// The model with `pm`'s resting poses (a primitive workpiece's, from its meshed primitives):
@@ -338,7 +350,31 @@ impl CloudModel {
             trim_plane: outlines.iter().flatten().any(|o| o.has_band()),
             outlines,
             resting: pm.poses.iter().map(|p| p.normal).collect(),
+            stepped: Vec::new(),
         }
+        .with_stepped_faces(
+            &pm.faces
+                .iter()
+                .map(|f| (f.face.normal, f.face.centroid_m.coords))
+                .collect::<Vec<_>>(),
+        )
+    }
+
+    /// Sets `stepped` per face from the part's planar faces (normal, a point on the plane; part
+    /// frame): parallel within [`STEP_NORMAL_TOL_RAD`], its plane off by more than 10 um and
+    /// at most [`PLANE_TOL_M`].
+    fn with_stepped_faces(mut self, planes: &[(Vector3<f64>, Vector3<f64>)]) -> Self {
+        self.stepped = self
+            .faces
+            .iter()
+            .map(|f| {
+                planes.iter().any(|(n, p)| {
+                    let off = f.normal.dot(&(p - f.center)).abs();
+                    n.dot(&f.normal) >= STEP_NORMAL_TOL_RAD.cos() && off > 1e-5 && off <= PLANE_TOL_M
+                })
+            })
+            .collect();
+        self
     }
 
     /// The turns that leave the part looking the same.
@@ -1329,22 +1365,24 @@ impl<'a> Cloud<'a> {
         let close: Vec<(f64, &CloudDetection)> = refined
             .iter()
             .filter_map(|d| {
-                self.log_likelihood(model, &self.at_measured_depth(model, &d.world_from_part))
+                self.log_likelihood(model, &self.at_measured_depth(model, d))
                     .map(|e| (e, d))
             })
             .collect();
         unrivalled(&close, CLOSE_CALL_LOG_ODDS)
     }
 
-    /// `pose` moved along the optical axis by the mean depth its agreeing pixels are measured
-    /// off its rendering, unless it rests on the floor (settled by `refine`, whose height the
-    /// floor fixes): a face placed on its patch's plane where the patch also holds a second face
-    /// a little lower or higher (a coin cell's cap and its can's rim, 0.3 mm apart, which one
-    /// plane's band takes in) stands off the points by part of that step, and the contender
-    /// with the other face up by the rest.
-    fn at_measured_depth(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Isometry3<f64> {
-        let up = self.floor.normal;
-        if (model.lowest_along(pose, &up) - self.floor.point.dot(&up)).abs() < 1e-9 {
+    /// `d`'s pose moved along the optical axis by the mean depth its agreeing pixels are
+    /// measured off its rendering, where its face up is stepped ([`CloudModel`]'s `stepped`) and
+    /// it does not rest on the floor (settled by `refine`, whose height the floor fixes): a face
+    /// placed on its patch's plane where the patch also holds a second face a little lower or
+    /// higher (a coin cell's cap and its can's rim, 0.3 mm apart, which one plane's band takes
+    /// in) stands off the points by part of that step.
+    fn at_measured_depth(&self, model: &CloudModel, d: &CloudDetection) -> Isometry3<f64> {
+        let (pose, up) = (&d.world_from_part, self.floor.normal);
+        if !model.stepped.get(d.face_up).copied().unwrap_or(false)
+            || (model.lowest_along(pose, &up) - self.floor.point.dot(&up)).abs() < 1e-9
+        {
             return *pose;
         }
         let (mut sum, mut n) = (0.0, 0usize);

@@ -162,6 +162,9 @@ impl super::Cloud<'_> {
         if self.points_agree(patch, plane, on_plane) {
             return Some(settled);
         }
+        if !model.stepped.get(d.face_up).copied().unwrap_or(false) {
+            return None;
+        }
         // A patch over two of the part's faces that its plane's band takes as one (a coin
         // cell's cap and the can's rim 0.3 mm below it): the settled pose's rendered surface,
         // not its face's plane, against the points.
@@ -218,11 +221,14 @@ impl super::Cloud<'_> {
         let n = pts.len() as f64;
         let own = plane_from_sums(n, &s, &ss, &origin, &self.origin);
         let ssr_fit: f64 = pts.iter().map(|(_, p)| own.normal.dot(&(p - own.point)).powi(2)).sum();
-        let offs: Vec<f64> = pts.iter().filter_map(|(i, p)| off(*i, p)).collect();
-        if 10 * offs.len() < 9 * pts.len() {
+        let (shown, ssr_shown) = pts
+            .iter()
+            .filter_map(|(i, p)| off(*i, p))
+            .fold((0usize, 0.0), |(k, ssr), d| (k + 1, ssr + d * d));
+        if 10 * shown < 9 * pts.len() {
             return false;
         }
-        let ssr_candidate = offs.iter().map(|d| d * d).sum::<f64>() * n / offs.len() as f64;
+        let ssr_candidate = ssr_shown * n / shown as f64;
         let variance = ssr_fit / (n - 3.0);
         variance > 0.0 && (ssr_candidate - ssr_fit) / 3.0 <= F_MAX * variance
     }

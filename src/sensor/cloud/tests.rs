@@ -1670,6 +1670,20 @@ fn a_coin_cell_is_told_cap_up_from_cap_down_by_its_caps_step() {
     );
     let flipped_on_plane = rim_on_plane(&flipped, -0.0016);
     let ll = |p: &Isometry3<f64>| cloud.log_likelihood(&m, p).unwrap();
+    let flat = m
+        .faces
+        .iter()
+        .position(|f| f.normal.z < -0.99 && f.extent_m[0] > 0.019)
+        .expect("the can's bottom among the faces");
+    assert!(m.stepped[rim] && !m.stepped[flat], "stepped: {:?}", m.stepped);
+    let contender = |pose: &Isometry3<f64>, face_up: usize| CloudDetection {
+        world_from_part: *pose,
+        face_up,
+        score: 1.0,
+        visible_fraction: 1.0,
+        curved_side_up: false,
+        yaw_span_rad: 0.0,
+    };
     assert!(
         ll(&truth_on_plane) < ll(&flipped_on_plane),
         "without the depth fit the truth already wins: {:.1} against {:.1}",
@@ -1677,8 +1691,8 @@ fn a_coin_cell_is_told_cap_up_from_cap_down_by_its_caps_step() {
         ll(&flipped_on_plane)
     );
     let (t, f) = (
-        ll(&cloud.at_measured_depth(&m, &truth_on_plane)),
-        ll(&cloud.at_measured_depth(&m, &flipped_on_plane)),
+        ll(&cloud.at_measured_depth(&m, &contender(&truth_on_plane, rim))),
+        ll(&cloud.at_measured_depth(&m, &contender(&flipped_on_plane, flat))),
     );
     assert!(
         t > f + CLOSE_CALL_LOG_ODDS,
