@@ -30,9 +30,10 @@
 //! different pose (beyond [`SAME_POSE_M`], [`SAME_POSE_RAD`], up to the part's symmetries) comes
 //! within [`CLOSE_CALL_PX`] of it (a CAD part's hypotheses joined by their twin faces' at the same
 //! placements); else, a close call, each contender refined and weighed at every pixel by how well
-//! its pixels agree (a log-likelihood under the depth noise; a contender not settled on the
-//! floor first moved along the optical axis to the mean depth its agreeing pixels are measured
-//! at, since each face is placed on the patch's plane), the winner needing
+//! its pixels agree (a log-likelihood under the depth noise; a contender with a stepped face
+//! up, not settled on the floor, first moved along the optical axis to the mean depth its
+//! agreeing pixels are measured at, since each face is placed on the patch's plane), the
+//! winner needing
 //! [`CLOSE_CALL_LOG_ODDS`] over every different pose; refined (`refine`: settled onto the floor in
 //! one of the part's resting poses where the patch's points allow it; else a CAD part's tilt the
 //! patch leaves open scanned by rendering; an outline-fitted face turned to its best-verified

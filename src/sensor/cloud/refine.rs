@@ -23,7 +23,8 @@
 //! 1-12; the median F was 1.31, where F(3, n) gives 0.8); on the interior the median is 0.83
 //! and 7 are refused. A patch whose interior is too small to stand for it
 //! ([`super::interior_suffices`]) is tested on all its points. Where the face's plane fails
-//! the test, the settled pose's rendered surface is tried in its place (each point's distance
+//! the test and the face is stepped (the model's `stepped`), the settled pose's rendered
+//! surface is tried in its place (each point's distance
 //! from it along its pixel's ray, across the plane; a pose that shows nothing at over a tenth of
 //! the points fails): a patch over two of the part's faces whose step one plane's band takes in
 //! (a coin cell's cap, 0.3 mm proud of its can's rim) fits no single face's plane, and would
