@@ -1357,6 +1357,16 @@ fn push_cuboid(raw: &mut crate::part::raw::RawMesh, lo: [f64; 3], hi: [f64; 3]) 
     }
 }
 
+/// The part model of a test mesh for a cup of `cup_m` with a face margin of `margin_m`, its mass
+/// `mass_kg`.
+fn mesh_part_model(mesh: &crate::part::mesh::Mesh, cup_m: f64, margin_m: f64, mass_kg: f64) -> crate::part::PartModel {
+    let cup = crate::part::CupSpec {
+        diameter_m: cup_m,
+        face_margin_m: margin_m,
+    };
+    crate::part::PartModel::derive(mesh.clone(), crate::part::mass::MassSpec::MassKg(mass_kg), cup, None).unwrap()
+}
+
 /// An SOIC-8 as a CAD mesh (m, centred on its bounding box): a 4.9 x 3.9 x 1.5 mm body 0.1 mm
 /// over the floor when on its legs, and eight gull-wing leads, each a 0.4 mm wide shoulder out
 /// of the body's long side at 0.7-0.9 mm and a foot down to the floor at its end.
@@ -1393,12 +1403,7 @@ fn an_soic_on_its_legs_or_on_its_back_is_told_by_how_well_its_pixels_agree() {
         tray: TrayVolume::new(&loaded.scene.pick_tray),
     };
     let mesh = soic8_mesh();
-    let cup = crate::part::CupSpec {
-        diameter_m: 0.003,
-        face_margin_m: 0.0003,
-    };
-    let pm =
-        crate::part::PartModel::derive(mesh.clone(), crate::part::mass::MassSpec::MassKg(0.00008), cup, None).unwrap();
+    let pm = mesh_part_model(&mesh, 0.003, 0.0003, 0.00008);
     let m = CloudModel::of_part_model(&pm);
     let (mut right, mut wrong, mut count_blind) = (0, 0, 0);
     for y in [
@@ -1487,12 +1492,7 @@ fn a_square_face_is_tried_a_quarter_turn_round_where_the_part_is_not_square() {
         tray: TrayVolume::new(&loaded.scene.pick_tray),
     };
     let mesh = heatsink_mesh();
-    let cup = crate::part::CupSpec {
-        diameter_m: 0.006,
-        face_margin_m: 0.0005,
-    };
-    let pm =
-        crate::part::PartModel::derive(mesh.clone(), crate::part::mass::MassSpec::MassKg(0.012), cup, None).unwrap();
+    let pm = mesh_part_model(&mesh, 0.006, 0.0005, 0.012);
     assert_eq!(pm.symmetry.orders[2], 2, "{:?}", pm.symmetry);
     let m = CloudModel::of_part_model(&pm);
     let (mut found, mut quarter) = (0, 0);
@@ -1548,6 +1548,17 @@ fn coin_cell_mesh() -> crate::part::mesh::Mesh {
     crate::part::repair::repair(&raw, 0.001, "mm").unwrap().0
 }
 
+/// The largest patch of `cloud` and its plane as recognition fits it.
+fn largest_patch(cloud: &Cloud<'_>, m: &CloudModel) -> (Patch, Plane) {
+    let patch = cloud
+        .segment()
+        .into_iter()
+        .max_by_key(|p| p.pixels.len())
+        .expect("a patch");
+    let (plane, ..) = cloud.silhouette(&patch, m.trim_plane);
+    (patch, plane)
+}
+
 /// A coin cell's two sides differ by its cap, 0.3 mm proud of the can's rim: one plane's band
 /// takes cap and rim in as one patch, on which either side's face is placed. Cap up or down, on
 /// the floor at four places and propped 4 mm over it tilted 10 degrees, it is found the right
@@ -1561,12 +1572,7 @@ fn coin_cell_mesh() -> crate::part::mesh::Mesh {
 fn a_coin_cell_is_told_cap_up_from_cap_down_by_its_caps_step() {
     let cell = cell();
     let mesh = coin_cell_mesh();
-    let cup = crate::part::CupSpec {
-        diameter_m: 0.006,
-        face_margin_m: 0.0005,
-    };
-    let pm =
-        crate::part::PartModel::derive(mesh.clone(), crate::part::mass::MassSpec::MassKg(0.003), cup, None).unwrap();
+    let pm = mesh_part_model(&mesh, 0.006, 0.0005, 0.003);
     let m = CloudModel::of_part_model(&pm);
     let up_z = |p: &Isometry3<f64>| (p.rotation * Vector3::z()).z;
     let mut propped_found = 0;
@@ -1608,12 +1614,7 @@ fn a_coin_cell_is_told_cap_up_from_cap_down_by_its_caps_step() {
     let pose = resting_mesh(&cell, &mesh, 0.02, 0.01, yaw(40.0));
     let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
-    let patch = cloud
-        .segment()
-        .into_iter()
-        .max_by_key(|p| p.pixels.len())
-        .expect("a patch");
-    let (plane, ..) = cloud.silhouette(&patch, m.trim_plane);
+    let (patch, plane) = largest_patch(&cloud, &m);
     let rim = m
         .faces
         .iter()
@@ -1648,12 +1649,7 @@ fn a_coin_cell_is_told_cap_up_from_cap_down_by_its_caps_step() {
     );
     let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
     let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
-    let patch = cloud
-        .segment()
-        .into_iter()
-        .max_by_key(|p| p.pixels.len())
-        .expect("a patch");
-    let (plane, ..) = cloud.silhouette(&patch, m.trim_plane);
+    let (_, plane) = largest_patch(&cloud, &m);
     let n = pose.rotation * Vector3::z();
     // The truth with its rim on the plane; the other side up with its flat face there.
     let rim_on_plane = |p: &Isometry3<f64>, top_m: f64| {
