@@ -740,27 +740,16 @@ fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
     }
 }
 
-/// The rows of the resting poses' table: each row's first pose and its members (poses alike by
-/// their support and in whether a cup face looks up within `lean`), in the poses' order; and per
+/// The rows of the resting poses' table: each row's poses (alike by their support and in
+/// whether a cup face looks up within `lean`: [`binpick::part::poses::alike_groups`]); and per
 /// pose whether a cup face looks up.
-fn pose_rows(m: &PartModel, lean: f64) -> (Vec<(usize, Vec<usize>)>, Vec<bool>) {
-    let class = binpick::part::poses::pose_classes(&m.poses);
+fn pose_rows(m: &PartModel, lean: f64) -> (Vec<Vec<usize>>, Vec<bool>) {
     let up: Vec<bool> = m
         .poses
         .iter()
         .map(|p| m.grasp_faces().any(|f| -f.face.normal.dot(&p.normal) >= lean.cos()))
         .collect();
-    let mut rows: Vec<(usize, Vec<usize>)> = Vec::new();
-    for i in 0..m.poses.len() {
-        match rows
-            .iter_mut()
-            .find(|(head, _)| class[*head] == class[i] && up[*head] == up[i])
-        {
-            Some((_, members)) => members.push(i),
-            None => rows.push((i, vec![i])),
-        }
-    }
-    (rows, up)
+    (binpick::part::poses::alike_groups(&m.poses, &up), up)
 }
 
 /// The text table of the stable resting poses and the share with a cup face up within `lean`.
@@ -771,8 +760,9 @@ fn print_poses(m: &PartModel, lean: f64, drops: &DropShare) {
     println!("\nstable resting poses (the part lies on the hull face whose outward normal points down):");
     println!("  down normal               poses  likelihood  CoM height mm  margin mm  a cup face looks up  dropped");
     let (rows, up) = pose_rows(m, lean);
-    for (head, members) in &rows {
-        let p = &m.poses[*head];
+    for members in &rows {
+        let head = members[0];
+        let p = &m.poses[head];
         println!(
             "  [{:6.3} {:6.3} {:6.3}]  {:5}  {:8.1} %  {:13.2}  {:9.2}  {:19}  {:>7}",
             p.normal.x,
@@ -782,7 +772,7 @@ fn print_poses(m: &PartModel, lean: f64, drops: &DropShare) {
             100.0 * members.iter().map(|&i| m.poses[i].likelihood).sum::<f64>(),
             p.com_height_m * 1e3,
             p.stability_margin_m * 1e3,
-            if up[*head] { "yes" } else { "no" },
+            if up[head] { "yes" } else { "no" },
             super::percent(drops.share(members.iter().map(|&i| drops.per_pose[i]).sum()))
         );
     }
@@ -831,7 +821,8 @@ mod tests {
     use super::*;
 
     /// The hex standoff's eight resting poses are two rows: its six flats and its two ends, every
-    /// pose in one row, the likelihoods summing to 1. Control: the part model lists them apart.
+    /// pose in one row, the likelihoods summing to 1; a flat tagged apart is a row of its own.
+    /// Control: the part model lists them apart.
     #[test]
     fn resting_poses_alike_are_one_row() {
         let lw = binpick::config::LoadedWorkpiece::resolve(concat!(
@@ -842,15 +833,19 @@ mod tests {
         let m = lw.workpiece.part_model(&lw.mesh.as_ref().unwrap().0, 0.006).unwrap();
         assert_eq!(m.poses.len(), 8);
         let (rows, up) = pose_rows(&m, 40f64.to_radians());
-        let sizes: Vec<usize> = rows.iter().map(|(_, members)| members.len()).collect();
+        let sizes: Vec<usize> = rows.iter().map(Vec::len).collect();
         assert_eq!(sizes, [6, 2]);
         assert_eq!(up, [true, true, true, true, true, true, false, false]);
-        let total: f64 = rows
-            .iter()
-            .flat_map(|(_, members)| members)
-            .map(|&i| m.poses[i].likelihood)
-            .sum();
+        let total: f64 = rows.iter().flatten().map(|&i| m.poses[i].likelihood).sum();
         assert!((total - 1.0).abs() < 1e-9);
+        // A flat tagged apart (a cup face up in it alone) is a row of its own.
+        let mut tag = up.clone();
+        tag[0] = false;
+        let sizes: Vec<usize> = binpick::part::poses::alike_groups(&m.poses, &tag)
+            .iter()
+            .map(Vec::len)
+            .collect();
+        assert_eq!(sizes, [1, 5, 2]);
     }
 
     /// A pipe given as the picture's path is written to and stays a pipe (as `/dev/null` must

@@ -179,6 +179,26 @@ pub fn pose_classes(poses: &[RestingPose]) -> Vec<usize> {
     class
 }
 
+/// The poses in groups alike: of one class ([`pose_classes`]) and, where `tag` is given (one
+/// flag per pose), of one tag (whether a cup face looks up). Each group's poses in the poses'
+/// order, the groups in the order of their first pose: a hex prism's six flats are one group,
+/// a coin standing on any facet of its rim another.
+pub fn alike_groups(poses: &[RestingPose], tag: &[bool]) -> Vec<Vec<usize>> {
+    let class = pose_classes(poses);
+    let tag_of = |i: usize| tag.get(i).copied().unwrap_or(false);
+    let mut groups: Vec<Vec<usize>> = Vec::new();
+    for i in 0..poses.len() {
+        match groups
+            .iter_mut()
+            .find(|g| class[g[0]] == class[i] && tag_of(g[0]) == tag_of(i))
+        {
+            Some(g) => g.push(i),
+            None => groups.push(vec![i]),
+        }
+    }
+    groups
+}
+
 /// The hull triangle that runs each directed edge.
 fn triangle_of_edge(hull: &Hull) -> HashMap<(u32, u32), usize> {
     let mut edge_tri: HashMap<(u32, u32), usize> = HashMap::new();

@@ -200,7 +200,8 @@ fn draw_cup_fits(
     }
 }
 
-/// The legend under the views and the most likely resting poses, four to a line.
+/// The legend under the views and the most likely resting poses (poses alike as one), four to
+/// a line.
 fn draw_legend(s: &mut String, model: &PartModel, scale: f64) {
     let legend_y = 40.0 + VIEW_PX + 40.0;
     let _ = writeln!(
@@ -210,17 +211,24 @@ fn draw_legend(s: &mut String, model: &PartModel, scale: f64) {
         model.cup.face_margin_m * 1e3,
         scale / 1e3
     );
-    let poses: Vec<String> = model
-        .poses
+    // Poses alike (a hex prism's six flats) as one: the first one's normal, how many, their
+    // likelihood summed.
+    let poses: Vec<String> = super::poses::alike_groups(&model.poses, &[])
         .iter()
         .take(6)
-        .map(|p| {
+        .map(|g| {
+            let p = &model.poses[g[0]];
+            let count = if g.len() > 1 {
+                format!(" x{}", g.len())
+            } else {
+                String::new()
+            };
             format!(
-                "[{:.2} {:.2} {:.2}] {:.0} %",
+                "[{:.2} {:.2} {:.2}]{count} {:.0} %",
                 p.normal.x,
                 p.normal.y,
                 p.normal.z,
-                100.0 * p.likelihood
+                100.0 * g.iter().map(|&i| model.poses[i].likelihood).sum::<f64>()
             )
         })
         .collect();
