@@ -361,6 +361,11 @@ impl CloudModel {
         )
     }
 
+    /// Whether face `fi` has a step beside it (`stepped`).
+    fn is_stepped(&self, fi: usize) -> bool {
+        self.stepped.get(fi).copied().unwrap_or(false)
+    }
+
     /// Sets `stepped` per face from the part's planar faces (normal, a point on the plane; part
     /// frame): parallel within [`STEP_NORMAL_TOL_RAD`], its plane off by more than 10 um and
     /// at most [`PLANE_TOL_M`].
@@ -1381,9 +1386,7 @@ impl<'a> Cloud<'a> {
     /// in) stands off the points by part of that step.
     fn at_measured_depth(&self, model: &CloudModel, d: &CloudDetection) -> Isometry3<f64> {
         let (pose, up) = (&d.world_from_part, self.floor.normal);
-        if !model.stepped.get(d.face_up).copied().unwrap_or(false)
-            || (model.lowest_along(pose, &up) - self.floor.point.dot(&up)).abs() < 1e-9
-        {
+        if !model.is_stepped(d.face_up) || (model.lowest_along(pose, &up) - self.floor.point.dot(&up)).abs() < 1e-9 {
             return *pose;
         }
         let (mut sum, mut n) = (0.0, 0usize);

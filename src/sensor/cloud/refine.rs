@@ -24,11 +24,11 @@
 //! and 7 are refused. A patch whose interior is too small to stand for it
 //! ([`super::interior_suffices`]) is tested on all its points. Where the face's plane fails
 //! the test and the face is stepped (the model's `stepped`), the settled pose's rendered
-//! surface is tried in its place (each point's distance
-//! from it along its pixel's ray, across the plane; a pose that shows nothing at over a tenth of
-//! the points fails): a patch over two of the part's faces whose step one plane's band takes in
-//! (a coin cell's cap, 0.3 mm proud of its can's rim) fits no single face's plane, and would
-//! otherwise settle only the wrong side up, the one whose flat top the plane stands for.
+//! surface is tried in its place (each point's distance from it along its pixel's ray, across
+//! the plane; a pose that shows nothing at over a tenth of the points fails): a patch over two
+//! of the part's faces whose step one plane's band takes in (a coin cell's cap, 0.3 mm proud of
+//! its can's rim) fits no single face's plane, and would otherwise settle only the wrong side
+//! up, the one whose flat top the plane stands for.
 //!
 //! (1b) Tilt, for a CAD part's detection that is not settled: a patch a few pixels wide (a
 //! DIP-8's 3.3 mm side) leaves its plane's tilt about its long axis open by several degrees
@@ -163,7 +163,7 @@ impl super::Cloud<'_> {
         if self.points_agree(patch, plane, on_plane) {
             return Some(settled);
         }
-        if !model.stepped.get(d.face_up).copied().unwrap_or(false) {
+        if !model.is_stepped(d.face_up) {
             return None;
         }
         // A patch over two of the part's faces that its plane's band takes as one (a coin
