@@ -273,21 +273,29 @@ pub fn evaluate(truth: &TruthAtTrigger, detections: &[Detection], symmetry: &Sym
     let matches: Vec<Option<TruthMatch>> = detections
         .iter()
         .map(|d| {
-            let candidates = (0..truth.free.len()).filter(|&i| truth.free[i]).map(|i| {
-                let (dp, dr) = symmetry.pose_error(&truth.world_from_part[i], &d.world_from_part);
-                TruthMatch {
-                    part: i,
-                    position_error_m: dp,
-                    rotation_error_rad: dr,
-                    correct: dp <= CORRECT_WITHIN_M && dr <= CORRECT_WITHIN_RAD,
-                }
-            });
+            let candidates: Vec<TruthMatch> = (0..truth.free.len())
+                .filter(|&i| truth.free[i])
+                .map(|i| {
+                    let (dp, dr) = symmetry.pose_error(&truth.world_from_part[i], &d.world_from_part);
+                    TruthMatch {
+                        part: i,
+                        position_error_m: dp,
+                        rotation_error_rad: dr,
+                        correct: dp <= CORRECT_WITHIN_M && dr <= CORRECT_WITHIN_RAD,
+                    }
+                })
+                .collect();
             let cost = |m: &TruthMatch| m.position_error_m + m.rotation_error_rad * 0.01;
             candidates
-                .clone()
+                .iter()
                 .filter(|m| m.correct)
                 .min_by(|a, b| cost(a).total_cmp(&cost(b)))
-                .or_else(|| candidates.min_by(|a, b| a.position_error_m.total_cmp(&b.position_error_m)))
+                .or_else(|| {
+                    candidates
+                        .iter()
+                        .min_by(|a, b| a.position_error_m.total_cmp(&b.position_error_m))
+                })
+                .copied()
         })
         .collect();
     let right: Vec<&TruthMatch> = matches.iter().flatten().filter(|m| m.correct).collect();
