@@ -393,8 +393,16 @@ impl PlacePose {
         let down = |turn: &UnitQuaternion<f64>| (self.slot_from_part * (turn * upright.normal)).z < -0.9999;
         match crate::sensor::Symmetry::of_orders(pm.symmetry.orders) {
             crate::sensor::Symmetry::Finite(turns) => turns.iter().any(down),
-            // Any turn about the part's z leaves its -z side down.
-            crate::sensor::Symmetry::AboutZ => down(&UnitQuaternion::identity()),
+            // Any turn about the part's z leaves its -z side down; a part that looks the same
+            // upside down is upright either way up.
+            crate::sensor::Symmetry::AboutZ { flip } => {
+                down(&UnitQuaternion::identity())
+                    || (flip
+                        && down(&UnitQuaternion::from_axis_angle(
+                            &Vector3::x_axis(),
+                            std::f64::consts::PI,
+                        )))
+            }
         }
     }
 

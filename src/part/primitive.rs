@@ -101,6 +101,8 @@ pub struct Face {
     pub extent_m: [f64; 2],
     /// A round face (cylinder cap).
     pub disc: bool,
+    /// A round face's concentric round hole's radius (m; a washer's bore); 0 for none.
+    pub hole_radius_m: f64,
 }
 
 /// The centre of a piece in the part frame (m).
@@ -153,6 +155,7 @@ fn piece_faces(piece: &Piece) -> Vec<Face> {
                         along: Vector3::ith(b, 1.0),
                         extent_m: [2.0 * he[b], 2.0 * he[d]],
                         disc: false,
+                        hole_radius_m: 0.0,
                     });
                 }
             }
@@ -172,6 +175,7 @@ fn piece_faces(piece: &Piece) -> Vec<Face> {
                     along,
                     extent_m: [2.0 * r, 2.0 * r],
                     disc: true,
+                    hole_radius_m: 0.0,
                 });
             }
         }

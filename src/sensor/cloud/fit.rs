@@ -207,21 +207,27 @@ pub(super) fn bit_index_sum(x: u64) -> u64 {
         .sum()
 }
 
-/// Silhouette fit of a disc of radius `r` (`inside` may be just its convex hull): the mean of the centres holding every inside point and
-/// no outside point (within half [`FIT_VIOLATION_M`]), on a 0.2 mm grid around the centroid. `None` if infeasible
-/// or ambiguous (the feasible centres spread wider than [`FIT_AMBIGUITY_M`]).
-pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64) -> Option<[f64; 2]> {
+/// Silhouette fit of a disc of radius `r` with a concentric hole of radius `hole_r` (0: none;
+/// `inside` may be just its convex hull): the mean of the centres holding every inside point
+/// and no outside point but in the hole (within half [`FIT_VIOLATION_M`]), on a 0.2 mm grid
+/// around the centroid. `None` if infeasible or ambiguous (the feasible centres spread wider
+/// than [`FIT_AMBIGUITY_M`]).
+pub(super) fn fit_disc(inside: &[[f64; 2]], outside: &[[f64; 2]], r: f64, hole_r: f64) -> Option<[f64; 2]> {
     let n = inside.len() as f64;
     let c0 = [
         inside.iter().map(|p| p[0]).sum::<f64>() / n,
         inside.iter().map(|p| p[1]).sum::<f64>() / n,
     ];
     // Whether every inside point lies in the disc centred at `c` and every outside point out
-    // of it, each within the tolerance: the first point that violates it decides.
+    // of it or in its hole, each within the tolerance: the first point that violates it decides.
     let tol = -FIT_VIOLATION_M / 2.0;
     let feasible = |c: [f64; 2]| {
         let d = |p: &[f64; 2]| ((p[0] - c[0]).powi(2) + (p[1] - c[1]).powi(2)).sqrt();
-        inside.iter().all(|p| r - d(p) >= tol) && outside.iter().all(|p| d(p) - r >= tol)
+        inside.iter().all(|p| r - d(p) >= tol)
+            && outside.iter().all(|p| {
+                let dp = d(p);
+                dp - r >= tol || (hole_r > 0.0 && hole_r - dp >= tol)
+            })
     };
     let step = 0.0002;
     let (mut sum, mut cnt) = ([0.0; 2], 0.0);

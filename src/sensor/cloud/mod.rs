@@ -217,8 +217,8 @@ pub const DISC_RADIUS_SPREAD: f64 = 0.03;
 pub const DISC_MIN_VERTICES: usize = 12;
 
 /// A part model's planar face as recognition and the grasp selector fit it: a disc when its outer
-/// outline is round (and it has no hole), else its minimum-area bounding rectangle, in the part
-/// frame.
+/// outline is round and it has no hole or one round hole about the same centre (a washer), else
+/// its minimum-area bounding rectangle, in the part frame.
 pub fn face_of_planar(face: &crate::part::faces::PlanarFace) -> Face {
     let pts: Vec<[f64; 2]> = face.outer.iter().map(|p| [p.x, p.y]).collect();
     let hull = convex_hull(&pts);
@@ -227,13 +227,31 @@ pub fn face_of_planar(face: &crate::part::faces::PlanarFace) -> Face {
     let radii: Vec<f64> = pts.iter().map(|p| (p[0] - mid[0]).hypot(p[1] - mid[1])).collect();
     let r_max = radii.iter().cloned().fold(0.0, f64::max);
     let r_min = radii.iter().cloned().fold(f64::INFINITY, f64::min);
-    if face.holes.is_empty() && pts.len() >= DISC_MIN_VERTICES && r_max - r_min <= DISC_RADIUS_SPREAD * r_max {
+    // Round: each ring's vertices within the spread of one radius about the outer ring's middle.
+    let round_radius = |ring: &[[f64; 2]]| -> Option<f64> {
+        let radii: Vec<f64> = ring.iter().map(|p| (p[0] - mid[0]).hypot(p[1] - mid[1])).collect();
+        let r_max = radii.iter().cloned().fold(0.0, f64::max);
+        let r_min = radii.iter().cloned().fold(f64::INFINITY, f64::min);
+        (ring.len() >= DISC_MIN_VERTICES && r_max - r_min <= DISC_RADIUS_SPREAD * r_max)
+            .then(|| radii.iter().sum::<f64>() / radii.len() as f64)
+    };
+    // A disc, or a disc with one concentric round hole (a washer's bore).
+    let hole_radius_m = match face.holes.as_slice() {
+        [] => Some(0.0),
+        [hole] => round_radius(&hole.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>()),
+        _ => None,
+    };
+    if let Some(hole_radius_m) = hole_radius_m
+        && pts.len() >= DISC_MIN_VERTICES
+        && r_max - r_min <= DISC_RADIUS_SPREAD * r_max
+    {
         return Face {
             center: face.centroid_m.coords + face.u * mid[0] + face.v * mid[1],
             normal: face.normal,
             along: face.u,
             extent_m: [2.0 * r_max, 2.0 * r_max],
             disc: true,
+            hole_radius_m,
         };
     }
     let theta = min_area_theta(&hull);
@@ -248,6 +266,7 @@ pub fn face_of_planar(face: &crate::part::faces::PlanarFace) -> Face {
         along: face.u * c + face.v * s,
         extent_m: [hi[0] - lo[0], hi[1] - lo[1]],
         disc: false,
+        hole_radius_m: 0.0,
     }
 }
 
@@ -942,7 +961,7 @@ impl<'a> Cloud<'a> {
                 continue;
             }
             if face.disc {
-                if let Some(c) = fit_disc(&hull, &outside, face.extent_m[0] / 2.0) {
+                if let Some(c) = fit_disc(&hull, &outside, face.extent_m[0] / 2.0, face.hole_radius_m) {
                     // Any yaw looks the same: the face's first axis along the world x in the plane.
                     let x = Vector3::x() - n * n.x;
                     let x = if x.norm() > 1e-6 { x.normalize() } else { e1 };
@@ -1189,7 +1208,8 @@ impl<'a> Cloud<'a> {
             return o.distance_m([u, v], reach);
         }
         if face.disc {
-            return u.hypot(v) - face.extent_m[0] / 2.0;
+            let d = u.hypot(v);
+            return (d - face.extent_m[0] / 2.0).max(face.hole_radius_m - d);
         }
         let (du, dv) = (u.abs() - face.extent_m[0] / 2.0, v.abs() - face.extent_m[1] / 2.0);
         if du > 0.0 || dv > 0.0 {

@@ -787,6 +787,7 @@ mod tests {
             along: Vector3::x(),
             extent_m: [2.0 * r, 0.014],
             disc: false,
+            hole_radius_m: 0.0,
         };
         let empty = Mesh {
             vertices_m: Vec::new(),

@@ -89,7 +89,7 @@ fn ppf_locates_the_smd_elcap_and_reports_no_turn_the_image_leaves_open() {
             .filter(|(_, d)| (d.world_from_part.translation.vector - truth.translation.vector).norm() < 0.005)
             .max_by_key(|(e, _)| *e)
             .map(|(_, d)| d.world_from_part);
-        let e = nearest(&Symmetry::AboutZ, best.as_slice(), truth);
+        let e = nearest(&Symmetry::AboutZ { flip: false }, best.as_slice(), truth);
         assert!(
             e.is_some_and(|(dp, dr)| dp <= 0.5 && dr <= 3.0),
             "{e:?} of {} hypotheses",
