@@ -1,6 +1,8 @@
 //! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs. A mesh workpiece's
 //! mesh is read and repaired (or refused naming the defect), its part model derived, and a
-//! warning printed when none of its faces takes the cell's cup.
+//! warning printed when none of its faces takes the cell's cup, when none is up in an upright
+//! placement that asks for one, or when the part lies too flat for the sensor to tell it from
+//! the tray floor.
 
 use std::path::{Path, PathBuf};
 
@@ -75,6 +77,7 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                     let warnings = [
                         super::part::no_cup_face(&m),
                         super::part::no_upright_face(&m, &wp.workpiece, tilt),
+                        super::part::too_flat_to_see(&m, &s.scene),
                     ];
                     for why in warnings.into_iter().flatten() {
                         let text = format!("warning: {label}: {why}");
