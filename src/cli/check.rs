@@ -1,8 +1,9 @@
 //! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs. A mesh workpiece's
 //! mesh is read and repaired (or refused naming the defect), its part model derived, and a
-//! warning printed when none of its faces takes the cell's cup, when none is up in an upright
-//! placement that asks for one, or when the part lies too flat for the sensor to tell it from
-//! the tray floor.
+//! warning printed when none of its faces takes the cell's cup (or its approach always meets
+//! the part's own pins), when none that does looks up in any resting pose, when none is up in
+//! an upright placement that asks for one, or when the part lies too flat for the sensor to
+//! tell it from the tray floor.
 
 use std::path::{Path, PathBuf};
 
@@ -72,11 +73,15 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
                     // Its part model derives, and a warning when no face takes the cup.
-                    let m = super::part::model_of(&wp, &s.scene.set_up_for(&wp.workpiece))?;
+                    let scene = s.scene.set_up_for(&wp.workpiece);
+                    let m = super::part::model_of(&wp, &scene)?;
                     let tilt = s.scene.gripper.max_tilt_deg.to_radians();
+                    // Where the grasp selector puts the cup on each face.
+                    let sites = m.cup_sites(&binpick::grasp::approach_column(&scene));
                     let warnings = [
-                        super::part::no_cup_face(&m),
-                        super::part::no_upright_face(&m, &wp.workpiece, tilt),
+                        super::part::no_cup_face(&m, &sites),
+                        super::part::no_cup_face_up(&m, scene.gripper.max_lean_rad(), &sites),
+                        super::part::no_upright_face(&m, &wp.workpiece, tilt, &sites),
                         super::part::too_flat_to_see(&m, &s.scene),
                     ];
                     for why in warnings.into_iter().flatten() {

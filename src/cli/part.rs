@@ -17,6 +17,7 @@ use binpick::part::PartModel;
 use binpick::part::model::ModelFace;
 use binpick::part::poses::RestingPose;
 use binpick::part::repair::RepairReport;
+use binpick::part::svg::CupSites;
 use binpick::sensor::{RecognitionSummary, RecognitionTotals};
 
 use super::{InputError, round};
@@ -196,6 +197,7 @@ fn pile_share(
     m: &PartModel,
     piles: u64,
     lean: f64,
+    sites: &CupSites,
 ) -> Result<PileShare> {
     use binpick::physics::{Tag, pile::PileOptions};
     use nalgebra::{Point3, Vector3};
@@ -216,17 +218,19 @@ fn pile_share(
             (loaded.scene.sensor.with_mode(&mode), RecognitionTotals::default())
         });
     let r_cup = 0.5 * m.cup.diameter_m;
-    // Each grasp face's cup disc in the part frame: its centre and eight rim points.
+    // The cup's disc at each face's site, as the grasp selector puts it (a face whose approach
+    // meets the part's own pins has none): its centre and eight rim points, in the part frame.
     let discs: Vec<(Vector3<f64>, Vec<Point3<f64>>)> = m
-        .grasp_faces()
-        .filter_map(|f| {
-            let c = f.fit.best?;
+        .faces
+        .iter()
+        .zip(sites)
+        .filter_map(|(f, site)| {
+            let (c, _) = (*site)?;
             let pts = std::iter::once(c)
                 .chain((0..8).map(|k| {
                     let a = std::f64::consts::TAU * k as f64 / 8.0;
-                    c + nalgebra::Vector2::new(a.cos(), a.sin()) * r_cup
+                    c + (f.face.u * a.cos() + f.face.v * a.sin()) * r_cup
                 }))
-                .map(|p| f.face.to_part(&p))
                 .collect();
             Some((f.face.normal, pts))
         })
@@ -311,13 +315,14 @@ fn surface_of(wp: &LoadedWorkpiece) -> String {
         .unwrap_or_else(|| "primitives, meshed".into())
 }
 
-/// The faces (1-based, as listed) that take the cup and are up when the part rests upright, on
-/// its -z side (up to its symmetry): those `grasp.place_orientation = "upright"` grasps.
-fn upright_faces(m: &PartModel, max_tilt_rad: f64) -> Vec<usize> {
+/// The faces (1-based, as listed) that take the cup at a site its approach reaches (`sites`) and
+/// are up when the part rests upright, on its -z side (up to its symmetry): those
+/// `grasp.place_orientation = "upright"` grasps.
+fn upright_faces(m: &PartModel, max_tilt_rad: f64, sites: &CupSites) -> Vec<usize> {
     (0..m.faces.len())
         .filter(|&i| {
             let f = &m.faces[i];
-            f.fit.takes_cup()
+            sites[i].is_some()
                 && binpick::grasp::PlacePose::of_face(m, &f.face.normal, max_tilt_rad).is_some_and(|p| p.is_upright(m))
         })
         .map(|i| i + 1)
@@ -326,9 +331,14 @@ fn upright_faces(m: &PartModel, max_tilt_rad: f64) -> Vec<usize> {
 
 /// Why a workpiece that must be placed upright (`grasp.place_orientation = "upright"`) cannot
 /// be, or `None` when a face that takes the cup is up in its upright pose (or any pose will do).
-pub fn no_upright_face(m: &PartModel, w: &binpick::config::Workpiece, max_tilt_rad: f64) -> Option<String> {
+pub fn no_upright_face(
+    m: &PartModel,
+    w: &binpick::config::Workpiece,
+    max_tilt_rad: f64,
+    sites: &CupSites,
+) -> Option<String> {
     if w.grasp.place_orientation != binpick::config::PlaceOrientation::Upright
-        || !upright_faces(m, max_tilt_rad).is_empty()
+        || !upright_faces(m, max_tilt_rad, sites).is_empty()
     {
         return None;
     }
@@ -380,10 +390,30 @@ pub fn too_flat_to_see(m: &PartModel, scene: &binpick::config::Scene) -> Option<
     })
 }
 
-/// Why no face takes the cup, or `None` when one does.
-pub fn no_cup_face(m: &PartModel) -> Option<String> {
-    if m.grasp_faces().next().is_some() {
+/// Why the part will seldom offer the cup a face, or `None`: faces take it (`sites`), but in no
+/// resting pose does one look up within `lean` (a crystal lying on its side, whose only face the
+/// cup takes is its top, with its leads under it).
+pub fn no_cup_face_up(m: &PartModel, lean: f64, sites: &CupSites) -> Option<String> {
+    (sites.iter().any(Option::is_some) && m.graspable_share(lean, sites) == 0.0).then(|| {
+        format!(
+            "in none of its resting poses does a face that takes the cup look up within {:.0} deg: the cell \
+             picks only parts propped up on others (`binpick part` lists the poses)",
+            lean.to_degrees()
+        )
+    })
+}
+
+/// Why no face takes the cup at a site its approach reaches (`sites`), or `None` when one does.
+pub fn no_cup_face(m: &PartModel, sites: &CupSites) -> Option<String> {
+    if sites.iter().any(Option::is_some) {
         return None;
+    }
+    if m.grasp_faces().next().is_some() {
+        return Some(
+            "every face that takes the cup has the cup's approach meet the part's own features (pins, \
+             leads, tabs) at every site, so nothing will be picked (`binpick part` marks them blocked)"
+                .to_string(),
+        );
     }
     let largest = m
         .faces
@@ -437,14 +467,14 @@ pub fn part(a: &PartArgs) -> Result<()> {
     let sim = (a.piles > 0 || a.drops > 0)
         .then(|| Sim::new(&scene, &wp))
         .transpose()?;
-    let piles = pile_share(&scene, &wp, sim.as_ref(), &m, a.piles, lean)?;
+    let piles = pile_share(&scene, &wp, sim.as_ref(), &m, a.piles, lean, &sites)?;
     let drops = drop_share(&scene, sim.as_ref(), &m, a.drops)?;
     if a.json {
         print_json(&wp, &m, &sites, report, &scene.scene, &svg_path, (&piles, &drops))
     } else {
         print_summary(&wp, &m, report);
         print_faces(&m, &sites);
-        let upright = upright_faces(&m, tilt);
+        let upright = upright_faces(&m, tilt, &sites);
         super::say(&format!(
             "faces up when it rests upright, on its -z side (grasp.place_orientation = \"upright\"): {}",
             if upright.is_empty() {
@@ -465,7 +495,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
                 binpick::grasp::SIDE_PLACE_OFF_MAX_RAD.to_degrees()
             ));
         }
-        print_poses(&m, lean, &drops);
+        print_poses(&m, lean, &sites, &drops);
         if piles.piles > 0 {
             super::say(&format!(
                 "simulated piles: {} of {} settled parts ({:.1} %) offer a cup face up with nothing on the cup's disc ({} piles of {}, seeds 1-{})",
@@ -482,8 +512,9 @@ pub fn part(a: &PartArgs) -> Result<()> {
             super::say(&recognition_line(&r, finer.as_ref(), &scene.scene));
         }
         for why in [
-            no_cup_face(&m),
-            no_upright_face(&m, w, tilt),
+            no_cup_face(&m, &sites),
+            no_cup_face_up(&m, lean, &sites),
+            no_upright_face(&m, w, tilt, &sites),
             too_flat_to_see(&m, &scene.scene),
         ]
         .into_iter()
@@ -573,10 +604,15 @@ fn print_json(
     let tilt = scene.gripper.max_tilt_deg.to_radians();
     let lean = scene.gripper.max_lean_rad();
     let side = round_side(m, scene);
-    let warnings: Vec<String> = [no_cup_face(m), no_upright_face(m, w, tilt), too_flat_to_see(m, scene)]
-        .into_iter()
-        .flatten()
-        .collect();
+    let warnings: Vec<String> = [
+        no_cup_face(m, sites),
+        no_cup_face_up(m, lean, sites),
+        no_upright_face(m, w, tilt, sites),
+        too_flat_to_see(m, scene),
+    ]
+    .into_iter()
+    .flatten()
+    .collect();
     let out = json!({
         "workpiece": wp.label,
         "mesh_file": w.shape.mesh_file,
@@ -605,8 +641,8 @@ fn print_json(
             "crowded": drops.crowded,
             "match_within_deg": DROP_MATCH_RAD.to_degrees(),
         },
-        "upright_faces": upright_faces(m, tilt),
-        "graspable_share": round(m.graspable_share(lean), 6),
+        "upright_faces": upright_faces(m, tilt, sites),
+        "graspable_share": round(m.graspable_share(lean, sites), 6),
         "round_side": side.map(|r| json!({
             "cup_round_min_radius_mm": mm(r.min_radius_m),
             "body_radius_mm": mm(r.radius_m),
@@ -794,13 +830,9 @@ fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
 
 /// The rows of the resting poses' table: each row's poses (alike by their support and in
 /// whether a cup face looks up within `lean`: [`binpick::part::poses::alike_groups`]); and per
-/// pose whether a cup face looks up.
-fn pose_rows(m: &PartModel, lean: f64) -> (Vec<Vec<usize>>, Vec<bool>) {
-    let up: Vec<bool> = m
-        .poses
-        .iter()
-        .map(|p| m.grasp_faces().any(|f| -f.face.normal.dot(&p.normal) >= lean.cos()))
-        .collect();
+/// pose whether a cup face looks up ([`PartModel::cup_face_up`], a face with a site).
+fn pose_rows(m: &PartModel, lean: f64, sites: &CupSites) -> (Vec<Vec<usize>>, Vec<bool>) {
+    let up: Vec<bool> = m.poses.iter().map(|p| m.cup_face_up(p, lean, sites)).collect();
     (binpick::part::poses::alike_groups(&m.poses, &up), up)
 }
 
@@ -808,10 +840,10 @@ fn pose_rows(m: &PartModel, lean: f64) -> (Vec<Vec<usize>>, Vec<bool>) {
 /// Poses alike by their support (`pose_classes`: a hex prism's six flats, a coin standing on
 /// any facet of its rim) and alike in whether a cup face looks up are one row: the first one's
 /// normal, how many, their likelihoods and drops summed (`--json` lists each).
-fn print_poses(m: &PartModel, lean: f64, drops: &DropShare) {
+fn print_poses(m: &PartModel, lean: f64, sites: &CupSites, drops: &DropShare) {
     println!("\nstable resting poses (the part lies on the hull face whose outward normal points down):");
     println!("  down normal               poses  likelihood  CoM height mm  margin mm  a cup face looks up  dropped");
-    let (rows, up) = pose_rows(m, lean);
+    let (rows, up) = pose_rows(m, lean, sites);
     for members in &rows {
         let head = members[0];
         let p = &m.poses[head];
@@ -850,7 +882,7 @@ fn print_poses(m: &PartModel, lean: f64, drops: &DropShare) {
     super::say(&format!(
         "share of resting poses with a cup face up (within {:.0} deg of vertical, as the grasp selector takes them): {:.1} %",
         lean.to_degrees(),
-        100.0 * m.graspable_share(lean)
+        100.0 * m.graspable_share(lean, sites)
     ));
 }
 
@@ -884,7 +916,8 @@ mod tests {
         .unwrap();
         let m = lw.workpiece.part_model(&lw.mesh.as_ref().unwrap().0, 0.006).unwrap();
         assert_eq!(m.poses.len(), 8);
-        let (rows, up) = pose_rows(&m, 40f64.to_radians());
+        let sites = m.cup_sites(&[]);
+        let (rows, up) = pose_rows(&m, 40f64.to_radians(), &sites);
         let sizes: Vec<usize> = rows.iter().map(Vec::len).collect();
         assert_eq!(sizes, [6, 2]);
         assert_eq!(up, [true, true, true, true, true, true, false, false]);

@@ -147,17 +147,25 @@ impl PartModel {
         self.faces.iter().filter(|f| f.fit.takes_cup())
     }
 
+    /// Whether, resting in `pose`, the part has a face up (its normal within `tilt_rad` of the
+    /// floor's up direction) that takes the cup at a site the approach reaches (`sites`, from
+    /// [`PartModel::cup_sites`]: a face whose every site's approach meets the part's own pins is
+    /// not one, as the grasp selector leaves it).
+    pub fn cup_face_up(&self, pose: &RestingPose, tilt_rad: f64, sites: &[Option<(Point3<f64>, f64)>]) -> bool {
+        // At rest, the pose's normal points down: a face looks up when its normal is opposite
+        // the pose's.
+        self.faces
+            .iter()
+            .zip(sites)
+            .any(|(f, site)| site.is_some() && -f.face.normal.dot(&pose.normal) >= tilt_rad.cos())
+    }
+
     /// The share of resting poses (by likelihood) in which a face that takes the cup looks up
-    /// (its normal within `tilt_rad` of the floor's up direction at rest).
-    pub fn graspable_share(&self, tilt_rad: f64) -> f64 {
+    /// ([`PartModel::cup_face_up`]).
+    pub fn graspable_share(&self, tilt_rad: f64, sites: &[Option<(Point3<f64>, f64)>]) -> f64 {
         self.poses
             .iter()
-            .filter(|p| {
-                // At rest, the pose's normal points down: a face looks up when its normal is
-                // opposite the pose's.
-                self.grasp_faces()
-                    .any(|f| (-f.face.normal.dot(&p.normal)) >= tilt_rad.cos())
-            })
+            .filter(|p| self.cup_face_up(p, tilt_rad, sites))
             .map(|p| p.likelihood)
             .fold(0.0, |a, b| a + b)
     }
@@ -401,7 +409,7 @@ mod tests {
         assert_eq!(pm.symmetry.orders, [2, 2, 2]);
         // Lying flat is most likely, and then a large face looks up.
         assert!(pm.poses[0].normal.z.abs() > 0.999);
-        let share = pm.graspable_share(0.1);
+        let share = pm.graspable_share(0.1, &pm.cup_sites(&[]));
         let flat: f64 = pm
             .poses
             .iter()
@@ -416,7 +424,7 @@ mod tests {
         };
         let pm = PartModel::derive(pm.mesh.clone(), MassSpec::MassKg(0.002), big, None).unwrap();
         assert_eq!(pm.grasp_faces().count(), 0);
-        assert_eq!(pm.graspable_share(0.1), 0.0);
+        assert_eq!(pm.graspable_share(0.1, &pm.cup_sites(&[])), 0.0);
     }
 
     #[test]

@@ -843,3 +843,105 @@ fn a_washer_is_recognised_and_one_too_flat_to_see_is_warned_about() {
     }
     assert!(recall[0] > 0.6 && recall[1] < 0.3, "recall {recall:?}");
 }
+
+/// An HC-49/S crystal (mm) as OBJ text: a stadium body 11.05 x 4.65 x 3.5 mm, 16 segments a
+/// round end, and, with `leads`, two 0.43 mm leads 13 mm long out of its bottom, 4.88 mm apart.
+fn crystal_obj(leads: bool) -> String {
+    let (r, c, h) = (2.325, 11.05 / 2.0 - 2.325, 3.5);
+    let mut ring = Vec::new();
+    for (cx, a0) in [(c, -std::f64::consts::FRAC_PI_2), (-c, std::f64::consts::FRAC_PI_2)] {
+        for k in 0..=16 {
+            let a = a0 + std::f64::consts::PI * k as f64 / 16.0;
+            ring.push((cx + r * a.cos(), r * a.sin()));
+        }
+    }
+    let n = ring.len();
+    let mut s = String::new();
+    for z in [0.0, h] {
+        for (x, y) in &ring {
+            s += &format!("v {x:.6} {y:.6} {z}\n");
+        }
+    }
+    for i in 1..n - 1 {
+        s += &format!("f 1 {} {}\n", i + 2, i + 1);
+        s += &format!("f {} {} {}\n", n + 1, n + i + 1, n + i + 2);
+    }
+    for i in 0..n {
+        let j = (i + 1) % n;
+        s += &format!(
+            "f {} {} {}\nf {} {} {}\n",
+            i + 1,
+            j + 1,
+            n + j + 1,
+            i + 1,
+            n + j + 1,
+            n + i + 1
+        );
+    }
+    if leads {
+        for x in [-2.44, 2.44] {
+            let base = 2 * n;
+            for k in 0..8 {
+                let (dx, dy, z) = (
+                    if k & 1 == 0 { -0.215 } else { 0.215 },
+                    if k & 2 == 0 { -0.215 } else { 0.215 },
+                    if k & 4 == 0 { -13.0 } else { 0.0 },
+                );
+                s += &format!("v {:.6} {dy} {z}\n", x + dx);
+            }
+            for t in crate::support::BOX_TRIANGLES {
+                s += &format!("f {} {} {}\n", base + t[0] + 1, base + t[1] + 1, base + t[2] + 1);
+            }
+        }
+    }
+    s
+}
+
+/// A crystal whose only face the cup takes is its top, which no resting pose has up (it lies
+/// on its side, or on its top with its leads in the air, its bottom's cup sites blocked by
+/// them): `check` warns, and `part` says no pose and no pile part offers a face. Negative
+/// control: the same body without leads offers its bottom, and nothing is warned.
+#[test]
+fn a_part_with_no_cup_face_up_in_any_pose_is_warned_about() {
+    let dir = tempdir().unwrap();
+    for leads in [true, false] {
+        let name = if leads { "crystal" } else { "crystal-no-leads" };
+        std::fs::write(dir.path().join(format!("{name}.obj")), crystal_obj(leads)).unwrap();
+        let toml = workpiece(dir.path(), name, &format!("{name}.obj"), "");
+        let text = std::fs::read_to_string(&toml).unwrap().replace(
+            "face_margin_m = 0.0005",
+            "face_margin_m = 0.0003\n\n[gripper]\ncup_diameter_m = 0.003",
+        );
+        std::fs::write(&toml, text).unwrap();
+        let check = binpick_in(dir.path(), &["check", toml.to_str().unwrap()]);
+        assert!(check.status.success(), "{}", stderr(&check));
+        let svg = dir.path().join(format!("{name}.svg"));
+        let o = binpick_in(
+            dir.path(),
+            &[
+                "part",
+                toml.to_str().unwrap(),
+                "--json",
+                "--piles",
+                "1",
+                "--drops",
+                "0",
+                "--svg",
+                svg.to_str().unwrap(),
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let share = v["graspable_share"].as_f64().unwrap();
+        let offered = v["pile"]["parts_offering_a_cup_face"].as_u64().unwrap();
+        let warned = stderr(&check).contains("in none of its resting poses does a face");
+        if leads {
+            assert!(warned, "{}", stderr(&check));
+            assert_eq!((share, offered), (0.0, 0), "{}", v["pile"]);
+            assert_eq!(v["warnings"].as_array().unwrap().len(), 1, "{}", v["warnings"]);
+        } else {
+            assert!(!warned, "{}", stderr(&check));
+            assert!(share > 0.1 && offered > 0, "{share} {}", v["pile"]);
+        }
+    }
+}
