@@ -1,9 +1,9 @@
 //! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs. A mesh workpiece's
 //! mesh is read and repaired (or refused naming the defect), its part model derived, and a
 //! warning printed when none of its faces takes the cell's cup (or its approach always meets
-//! the part's own pins), when none that does looks up in any resting pose, when none is up in
-//! an upright placement that asks for one, or when the part lies too flat for the sensor to
-//! tell it from the tray floor.
+//! the part's own pins), when none that does looks up in any resting pose, when turns its mesh
+//! lacks look the same to the sensor, when none is up in an upright placement that asks for
+//! one, or when the part lies too flat for the sensor to tell it from the tray floor.
 
 use std::path::{Path, PathBuf};
 
@@ -81,6 +81,7 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                     let warnings = [
                         super::part::no_cup_face(&m, &sites),
                         super::part::no_cup_face_up(&m, scene.gripper.max_lean_rad(), &sites),
+                        super::part::look_alike_warning(&m, &scene),
                         super::part::no_upright_face(&m, &wp.workpiece, tilt, &sites),
                         super::part::too_flat_to_see(&m, &s.scene),
                     ];

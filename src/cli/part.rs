@@ -403,6 +403,64 @@ pub fn no_cup_face_up(m: &PartModel, lean: f64, sites: &CupSites) -> Option<Stri
     })
 }
 
+/// The turns the part's detected symmetry lacks that the cell's sensor cannot tell from the part
+/// ([`binpick::part::symmetry::look_alike_turns`], at the pick tray floor's pixel and depth
+/// noise, against the recogniser's close-call odds); none where the file declares the symmetry.
+pub fn look_alikes(m: &PartModel, scene: &Scene) -> Vec<binpick::part::symmetry::LookAlike> {
+    let Some(camera) = binpick::sensor::Camera::from_config(&scene.sensor).filter(|_| m.symmetry_detected) else {
+        return Vec::new();
+    };
+    let floor = nalgebra::Vector3::from(scene.pick_tray.center_m);
+    let pixel_m = camera.pixel_size_at_point_m(&floor);
+    // The depth along the optical axis, as the pixel's size reads it.
+    let depth_m = pixel_m * scene.sensor.focal_px[0].min(scene.sensor.focal_px[1]);
+    binpick::part::symmetry::look_alike_turns(
+        &m.mesh,
+        &m.mass.com_m,
+        m.symmetry.orders,
+        pixel_m,
+        scene.sensor.depth_noise_at_1m_m * depth_m * depth_m,
+        binpick::sensor::cloud::CLOSE_CALL_LOG_ODDS,
+    )
+}
+
+/// Why recognition will find few of the part, or `None`: turns its mesh is not the same under
+/// look the same to the sensor ([`look_alikes`]), so recognition, which reports no pose it cannot
+/// tell from another, reports neither; with the orders that declaring them would give.
+pub fn look_alike_warning(m: &PartModel, scene: &Scene) -> Option<String> {
+    let turns = look_alikes(m, scene);
+    if turns.is_empty() {
+        return None;
+    }
+    let mut orders = m.symmetry.orders;
+    for t in &turns {
+        let (a, b) = (orders[t.axis], t.order);
+        // The least common multiple: both turns' orders.
+        orders[t.axis] = (1..=a * b)
+            .find(|k| k.is_multiple_of(a) && k.is_multiple_of(b))
+            .unwrap_or(a * b);
+    }
+    let names = turns
+        .iter()
+        .map(|t| format!("{} deg about {}", 360 / t.order, ["x", "y", "z"][t.axis]))
+        .collect::<Vec<_>>()
+        .join(", ");
+    let off_m = turns.iter().map(|t| t.max_off_m).fold(0.0, f64::max);
+    let evidence = turns.iter().map(|t| t.evidence).fold(0.0, f64::max);
+    Some(format!(
+        "its mesh is not the same turned {names}, but the sensor cannot tell those turns apart (the turned mesh \
+         lies within {:.2} mm of itself: evidence {:.1} of the {:.1} a decision needs), so recognition reports \
+         neither and finds few; where the orientation does not matter in the line, declare \
+         `shape.symmetry_orders = [{}, {}, {}]` (as the SMD electrolytic's file does)",
+        off_m * 1e3,
+        evidence,
+        binpick::sensor::cloud::CLOSE_CALL_LOG_ODDS,
+        orders[0],
+        orders[1],
+        orders[2]
+    ))
+}
+
 /// Why no face takes the cup at a site its approach reaches (`sites`), or `None` when one does.
 pub fn no_cup_face(m: &PartModel, sites: &CupSites) -> Option<String> {
     if sites.iter().any(Option::is_some) {
@@ -514,6 +572,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
         for why in [
             no_cup_face(&m, &sites),
             no_cup_face_up(&m, lean, &sites),
+            look_alike_warning(&m, &scene.scene),
             no_upright_face(&m, w, tilt, &sites),
             too_flat_to_see(&m, &scene.scene),
         ]
@@ -607,6 +666,7 @@ fn print_json(
     let warnings: Vec<String> = [
         no_cup_face(m, sites),
         no_cup_face_up(m, lean, sites),
+        look_alike_warning(m, scene),
         no_upright_face(m, w, tilt, sites),
         too_flat_to_see(m, scene),
     ]

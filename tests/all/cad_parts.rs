@@ -945,3 +945,77 @@ fn a_part_with_no_cup_face_up_in_any_pose_is_warned_about() {
         }
     }
 }
+
+/// An IC body (mm) as OBJ text: a 9.3 x 6.35 x 3.3 mm block and, on its top near a corner, a
+/// 1 x 1 mm pin-1 mark 0.1 mm high (a second body).
+fn marked_ic_obj() -> String {
+    let mut s = String::new();
+    for (n, (lo, hi)) in [
+        ([-4.65, -3.175, 0.0], [4.65, 3.175, 3.3]),
+        ([-3.9, 1.7, 3.3], [-2.9, 2.7, 3.4]),
+    ]
+    .into_iter()
+    .enumerate()
+    {
+        for i in 0..8 {
+            let c = |a: usize| if i >> a & 1 == 0 { lo[a] } else { hi[a] };
+            s += &format!("v {} {} {}\n", c(0), c(1), c(2));
+        }
+        for t in crate::support::BOX_TRIANGLES {
+            s += &format!("f {} {} {}\n", 8 * n + t[0] + 1, 8 * n + t[1] + 1, 8 * n + t[2] + 1);
+        }
+    }
+    s
+}
+
+/// A pin-1 mark 0.1 mm high leaves an IC without a half turn that maps its mesh onto itself,
+/// but no depth image tells the turns apart: `check` warns and names the orders to declare,
+/// and `part` finds few of a pile. Declared (the control), nothing is warned and most are found.
+#[test]
+fn turns_the_sensor_cannot_tell_apart_are_warned_about() {
+    let dir = tempdir().unwrap();
+    std::fs::write(dir.path().join("ic.obj"), marked_ic_obj()).unwrap();
+    let mut recall = Vec::new();
+    for declared in [false, true] {
+        let name = if declared { "ic-declared" } else { "ic" };
+        let toml = workpiece(dir.path(), name, "ic.obj", "");
+        let mut text = std::fs::read_to_string(&toml).unwrap().replace(
+            "face_margin_m = 0.0005",
+            "face_margin_m = 0.0003\n\n[gripper]\ncup_diameter_m = 0.004",
+        );
+        if declared {
+            text = text.replace("units = \"mm\"", "units = \"mm\"\nsymmetry_orders = [2, 2, 2]");
+        }
+        std::fs::write(&toml, text).unwrap();
+        let check = binpick_in(dir.path(), &["check", toml.to_str().unwrap()]);
+        assert!(check.status.success(), "{}", stderr(&check));
+        let warned = stderr(&check).contains("the sensor cannot tell those turns apart");
+        assert_eq!(warned, !declared, "{}", stderr(&check));
+        if !declared {
+            assert!(
+                stderr(&check).contains("`shape.symmetry_orders = [2, 2, 2]`"),
+                "{}",
+                stderr(&check)
+            );
+        }
+        let svg = dir.path().join(format!("{name}.svg"));
+        let o = binpick_in(
+            dir.path(),
+            &[
+                "part",
+                toml.to_str().unwrap(),
+                "--json",
+                "--piles",
+                "1",
+                "--drops",
+                "0",
+                "--svg",
+                svg.to_str().unwrap(),
+            ],
+        );
+        assert!(o.status.success(), "{}", stderr(&o));
+        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        recall.push(v["pile"]["recognition"]["recall"].as_f64().unwrap());
+    }
+    assert!(recall[0] < 0.3 && recall[1] > 0.7, "recall {recall:?}");
+}
