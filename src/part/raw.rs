@@ -12,6 +12,9 @@ use std::path::Path;
 pub const MAX_TRIANGLES: usize = 200_000;
 /// The most vertices a text mesh file may declare.
 pub const MAX_VERTICES: usize = 3 * MAX_TRIANGLES;
+/// The most separate bodies (shells) a part's mesh may have: each is at least one convex piece
+/// of the physics collider ([`crate::physics::shapes::MAX_PIECES`]). A 2 x 50 pin header is 101.
+pub const MAX_BODIES: usize = 256;
 /// The largest text mesh file read (bytes): an ASCII STL of [`MAX_TRIANGLES`] is ~50 MB.
 pub const MAX_TEXT_BYTES: u64 = 96 * 1024 * 1024;
 
@@ -77,6 +80,14 @@ pub enum Defect {
     TooManyTriangles {
         /// Triangles found (or announced, or read before stopping).
         found: u64,
+        /// The cap.
+        cap: usize,
+    },
+    /// More separate bodies than [`MAX_BODIES`].
+    #[error("{found} separate bodies, more than the {cap} a part may have: merge them in the CAD tool")]
+    TooManyBodies {
+        /// Bodies found.
+        found: usize,
         /// The cap.
         cap: usize,
     },

@@ -118,6 +118,12 @@ fn repair_with(
     close_holes(&mut verts, &mut tris, &mut rep)?;
     rep.non_manifold_edges = edge_uses(&tris).values().filter(|u| u.len() > 2).count();
     rep.bodies = bodies(&tris).1;
+    if rep.bodies > super::raw::MAX_BODIES {
+        return Err(Defect::TooManyBodies {
+            found: rep.bodies,
+            cap: super::raw::MAX_BODIES,
+        });
+    }
     Ok((
         Mesh {
             vertices_m: verts,

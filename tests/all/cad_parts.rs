@@ -118,6 +118,25 @@ fn bad_mesh_files_are_refused_naming_the_file_and_the_defect() {
         ),
         ("open.obj", box_obj(&[8, 9]).into_bytes(), "", "open shell"),
         (
+            "grains.obj",
+            {
+                // 300 separate 1 mm cubes: more bodies than a part may have.
+                let mut s = String::new();
+                for i in 0..300 {
+                    let (x, y) = ((i % 20) as f64 * 1.5, (i / 20) as f64 * 1.5);
+                    for k in 0..8 {
+                        s += &format!("v {} {} {}\n", x + (k & 1) as f64, y + (k >> 1 & 1) as f64, (k >> 2 & 1) as f64);
+                    }
+                    for t in crate::support::BOX_TRIANGLES {
+                        s += &format!("f {} {} {}\n", 8 * i + t[0] + 1, 8 * i + t[1] + 1, 8 * i + t[2] + 1);
+                    }
+                }
+                s.into_bytes()
+            },
+            "",
+            "300 separate bodies, more than the 256",
+        ),
+        (
             "index.obj",
             b"v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 9\n".to_vec(),
             "",

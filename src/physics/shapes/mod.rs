@@ -141,8 +141,10 @@ pub const MAX_DECIMATE_INPUT: usize = 256;
 /// 2000-sided can's 4,002 or, in 46 rings, 94,000 vertices): the rest thinned (`thin`: one
 /// point per cell of a grid).
 pub const MAX_HULL_INPUT: usize = 1024;
-/// Most convex pieces of a whole mesh collider: a mesh that needs more (many shells) is refused.
-pub const MAX_PIECES: usize = 64;
+/// Most convex pieces of a whole mesh collider: a mesh that needs more is refused (one of more
+/// bodies than [`crate::part::raw::MAX_BODIES`] already where it is read; where decomposed
+/// shells push the pieces past this, when the collider is built).
+pub const MAX_PIECES: usize = crate::part::raw::MAX_BODIES;
 /// VHACD's voxel grid across the shell's longest edge (a 30 mm part: 0.23 mm voxels, so a
 /// 0.5 mm pin is two voxels wide; at parry's default of 64 the test relay's 0.5 mm pins merge).
 const VHACD_RESOLUTION: u32 = 128;
