@@ -53,6 +53,9 @@ struct Cli {
 #[derive(Subcommand)]
 enum Command {
     /// Validate scene (.toml with [robot]), workpiece (.toml) and URDF (.urdf) files.
+    ///
+    /// A valid workpiece is warned about where it will not be picked well: no face for the cup,
+    /// none up in any resting pose, turns the sensor cannot tell apart, too flat to see.
     Check {
         /// Files to check.
         #[arg(required = true)]
