@@ -812,7 +812,8 @@ fn washer_obj(thick: f64) -> String {
 }
 
 /// A user's M8 washer (a face with a round bore, the same either side up) is recognised in the
-/// piles `binpick part` pours, and `check` says nothing against it; a washer 1 mm thick, which
+/// piles `binpick part` pours and placed by the cell (3 of 5 picks or more, nothing hit or
+/// lost), and `check` says nothing against it; a washer 1 mm thick, which
 /// lies inside the band the sensor takes for the tray floor, is warned about by `check` and
 /// `part`, and is seldom found (the negative control).
 #[test]
@@ -851,6 +852,33 @@ fn a_washer_is_recognised_and_one_too_flat_to_see_is_warned_about() {
         if thick > 1.5 {
             assert!(!stderr(&check).contains("warning"), "{}", stderr(&check));
             assert!(warnings.is_empty(), "{warnings:?}");
+            // In the cell: picked by its ring and set down, nothing hit or lost.
+            let out = dir.path().join("runs");
+            let run = binpick_in(
+                dir.path(),
+                &[
+                    "run",
+                    "--workpiece",
+                    toml.to_str().unwrap(),
+                    "--picks",
+                    "5",
+                    "--deterministic",
+                    "--no-rrd",
+                    "--no-mcap",
+                    "--json",
+                    "--out",
+                    out.to_str().unwrap(),
+                ],
+            );
+            assert!(run.status.success(), "{}", stderr(&run));
+            let s: serde_json::Value = serde_json::from_str(&stdout(&run)).unwrap();
+            let s = &s["summary"];
+            assert!(s["placed"].as_u64().unwrap() >= 3, "{s}");
+            assert_eq!(
+                (&s["collisions"], &s["parts_lost"]),
+                (&serde_json::json!(0), &serde_json::json!(0)),
+                "{s}"
+            );
         } else {
             assert!(
                 stderr(&check).contains("thin-washer.toml: in ") && stderr(&check).contains("stands 1.00 mm high"),
