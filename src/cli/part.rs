@@ -686,6 +686,7 @@ fn print_json(
         "inertia_com_kg_mm2": m.mass.inertia_com_kg_m2.row_iter().map(|r| r.iter().map(|v| round(v * 1e6, 9)).collect::<Vec<_>>()).collect::<Vec<_>>(),
         "symmetry_orders": m.symmetry.orders,
         "symmetry_detected": m.symmetry_detected,
+        "look_alike_turns": look_alikes(m, scene),
         "cup_diameter_mm": mm(m.cup.diameter_m),
         "face_margin_mm": mm(m.cup.face_margin_m),
         "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(f, site)).collect::<Vec<_>>(),

@@ -1063,6 +1063,9 @@ fn turns_the_sensor_cannot_tell_apart_are_warned_about() {
         assert!(o.status.success(), "{}", stderr(&o));
         let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
         recall.push(v["pile"]["recognition"]["recall"].as_f64().unwrap());
+        // The turns, listed for tools: the half turns about x, y and z, undeclared only.
+        let turns = v["look_alike_turns"].as_array().unwrap();
+        assert_eq!(turns.len(), if declared { 0 } else { 3 }, "{turns:?}");
     }
     assert!(recall[0] < 0.3 && recall[1] > 0.7, "recall {recall:?}");
 }
