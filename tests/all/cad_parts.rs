@@ -782,6 +782,47 @@ fn the_part_command_checks_its_predicted_poses_against_drops() {
     assert!(!part("box", false).contains("rests otherwise"));
 }
 
+/// A user's part in `dir`: its OBJ text written as `NAME.obj` and a workpiece file naming it with
+/// its own cup of `cup_m` (a 0.3 mm face margin) and `shape_extra` (lines under `[shape]`);
+/// returns the workpiece file and what `binpick check` said of it (asserted to pass).
+fn user_part(dir: &Path, name: &str, obj: &str, cup_m: f64, shape_extra: &str) -> (PathBuf, std::process::Output) {
+    std::fs::write(dir.join(format!("{name}.obj")), obj).unwrap();
+    let toml = workpiece(dir, name, &format!("{name}.obj"), "");
+    let text = std::fs::read_to_string(&toml)
+        .unwrap()
+        .replace(
+            "face_margin_m = 0.0005",
+            &format!("face_margin_m = 0.0003\n\n[gripper]\ncup_diameter_m = {cup_m}"),
+        )
+        .replace("units = \"mm\"", &format!("units = \"mm\"\n{shape_extra}"));
+    std::fs::write(&toml, text).unwrap();
+    let check = binpick_in(dir, &["check", toml.to_str().unwrap()]);
+    assert!(check.status.success(), "{}", stderr(&check));
+    (toml, check)
+}
+
+/// `binpick part TOML --json` with `piles` simulated piles and no drops.
+fn part_json(dir: &Path, toml: &Path, piles: u32) -> serde_json::Value {
+    let svg = toml.with_extension("svg");
+    let piles = piles.to_string();
+    let o = binpick_in(
+        dir,
+        &[
+            "part",
+            toml.to_str().unwrap(),
+            "--json",
+            "--piles",
+            &piles,
+            "--drops",
+            "0",
+            "--svg",
+            svg.to_str().unwrap(),
+        ],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    serde_json::from_str(&stdout(&o)).unwrap()
+}
+
 /// A flat washer (mm) as OBJ text: 16 mm across, an 8.4 mm bore, `thick` mm thick, 72 sides.
 fn washer_obj(thick: f64) -> String {
     let n = 72;
@@ -821,32 +862,8 @@ fn a_washer_is_recognised_and_one_too_flat_to_see_is_warned_about() {
     let dir = tempdir().unwrap();
     let mut recall = Vec::new();
     for (name, thick) in [("washer", 1.6), ("thin-washer", 1.0)] {
-        std::fs::write(dir.path().join(format!("{name}.obj")), washer_obj(thick)).unwrap();
-        let toml = workpiece(dir.path(), name, &format!("{name}.obj"), "");
-        let text = std::fs::read_to_string(&toml).unwrap().replace(
-            "face_margin_m = 0.0005",
-            "face_margin_m = 0.0003\n\n[gripper]\ncup_diameter_m = 0.003",
-        );
-        std::fs::write(&toml, text).unwrap();
-        let check = binpick_in(dir.path(), &["check", toml.to_str().unwrap()]);
-        assert!(check.status.success(), "{}", stderr(&check));
-        let svg = dir.path().join(format!("{name}.svg"));
-        let o = binpick_in(
-            dir.path(),
-            &[
-                "part",
-                toml.to_str().unwrap(),
-                "--json",
-                "--piles",
-                "2",
-                "--drops",
-                "0",
-                "--svg",
-                svg.to_str().unwrap(),
-            ],
-        );
-        assert!(o.status.success(), "{}", stderr(&o));
-        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let (toml, check) = user_part(dir.path(), name, &washer_obj(thick), 0.003, "");
+        let v = part_json(dir.path(), &toml, 2);
         let warnings = v["warnings"].as_array().unwrap().clone();
         recall.push(v["pile"]["recognition"]["recall"].as_f64().unwrap());
         if thick > 1.5 {
@@ -953,32 +970,8 @@ fn a_part_with_no_cup_face_up_in_any_pose_is_warned_about() {
     let dir = tempdir().unwrap();
     for leads in [true, false] {
         let name = if leads { "crystal" } else { "crystal-no-leads" };
-        std::fs::write(dir.path().join(format!("{name}.obj")), crystal_obj(leads)).unwrap();
-        let toml = workpiece(dir.path(), name, &format!("{name}.obj"), "");
-        let text = std::fs::read_to_string(&toml).unwrap().replace(
-            "face_margin_m = 0.0005",
-            "face_margin_m = 0.0003\n\n[gripper]\ncup_diameter_m = 0.003",
-        );
-        std::fs::write(&toml, text).unwrap();
-        let check = binpick_in(dir.path(), &["check", toml.to_str().unwrap()]);
-        assert!(check.status.success(), "{}", stderr(&check));
-        let svg = dir.path().join(format!("{name}.svg"));
-        let o = binpick_in(
-            dir.path(),
-            &[
-                "part",
-                toml.to_str().unwrap(),
-                "--json",
-                "--piles",
-                "1",
-                "--drops",
-                "0",
-                "--svg",
-                svg.to_str().unwrap(),
-            ],
-        );
-        assert!(o.status.success(), "{}", stderr(&o));
-        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let (toml, check) = user_part(dir.path(), name, &crystal_obj(leads), 0.003, "");
+        let v = part_json(dir.path(), &toml, 1);
         let share = v["graspable_share"].as_f64().unwrap();
         let offered = v["pile"]["parts_offering_a_cup_face"].as_u64().unwrap();
         let warned = stderr(&check).contains("in none of its resting poses does a face");
@@ -1021,21 +1014,11 @@ fn marked_ic_obj() -> String {
 #[test]
 fn turns_the_sensor_cannot_tell_apart_are_warned_about() {
     let dir = tempdir().unwrap();
-    std::fs::write(dir.path().join("ic.obj"), marked_ic_obj()).unwrap();
     let mut recall = Vec::new();
     for declared in [false, true] {
         let name = if declared { "ic-declared" } else { "ic" };
-        let toml = workpiece(dir.path(), name, "ic.obj", "");
-        let mut text = std::fs::read_to_string(&toml).unwrap().replace(
-            "face_margin_m = 0.0005",
-            "face_margin_m = 0.0003\n\n[gripper]\ncup_diameter_m = 0.004",
-        );
-        if declared {
-            text = text.replace("units = \"mm\"", "units = \"mm\"\nsymmetry_orders = [2, 2, 2]");
-        }
-        std::fs::write(&toml, text).unwrap();
-        let check = binpick_in(dir.path(), &["check", toml.to_str().unwrap()]);
-        assert!(check.status.success(), "{}", stderr(&check));
+        let declare = if declared { "symmetry_orders = [2, 2, 2]" } else { "" };
+        let (toml, check) = user_part(dir.path(), name, &marked_ic_obj(), 0.004, declare);
         let warned = stderr(&check).contains("the sensor cannot tell those turns apart");
         assert_eq!(warned, !declared, "{}", stderr(&check));
         if !declared {
@@ -1045,23 +1028,7 @@ fn turns_the_sensor_cannot_tell_apart_are_warned_about() {
                 stderr(&check)
             );
         }
-        let svg = dir.path().join(format!("{name}.svg"));
-        let o = binpick_in(
-            dir.path(),
-            &[
-                "part",
-                toml.to_str().unwrap(),
-                "--json",
-                "--piles",
-                "1",
-                "--drops",
-                "0",
-                "--svg",
-                svg.to_str().unwrap(),
-            ],
-        );
-        assert!(o.status.success(), "{}", stderr(&o));
-        let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+        let v = part_json(dir.path(), &toml, 1);
         recall.push(v["pile"]["recognition"]["recall"].as_f64().unwrap());
         // The turns, listed for tools: the half turns about x, y and z, undeclared only.
         let turns = v["look_alike_turns"].as_array().unwrap();
