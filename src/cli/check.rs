@@ -72,20 +72,13 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 let wp = LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
-                    // Its part model derives, and a warning when no face takes the cup.
+                    // Its part model derives, and the warnings where it will not be picked well.
                     let scene = s.scene.set_up_for(&wp.workpiece);
                     let m = super::part::model_of(&wp, &scene)?;
-                    let tilt = s.scene.gripper.max_tilt_deg.to_radians();
                     // Where the grasp selector puts the cup on each face.
                     let sites = m.cup_sites(&binpick::grasp::approach_column(&scene));
-                    let warnings = [
-                        super::part::no_cup_face(&m, &sites),
-                        super::part::no_cup_face_up(&m, scene.gripper.max_lean_rad(), &sites),
-                        super::part::look_alike_warning(&m, &scene),
-                        super::part::no_upright_face(&m, &wp.workpiece, tilt, &sites),
-                        super::part::too_flat_to_see(&m, &s.scene),
-                    ];
-                    for why in warnings.into_iter().flatten() {
+                    let turns = super::part::look_alikes(&m, &scene);
+                    for why in super::part::warnings(&m, &wp.workpiece, &scene, &sites, &turns) {
                         let text = format!("warning: {label}: {why}");
                         eprintln!(
                             "{}",

@@ -331,7 +331,7 @@ fn upright_faces(m: &PartModel, max_tilt_rad: f64, sites: &CupSites) -> Vec<usiz
 
 /// Why a workpiece that must be placed upright (`grasp.place_orientation = "upright"`) cannot
 /// be, or `None` when a face that takes the cup is up in its upright pose (or any pose will do).
-pub fn no_upright_face(
+fn no_upright_face(
     m: &PartModel,
     w: &binpick::config::Workpiece,
     max_tilt_rad: f64,
@@ -355,7 +355,7 @@ pub fn no_upright_face(
 /// the tray floor ([`binpick::sensor::cloud::FLOOR_TOL_M`]), so most of its pixels on the floor
 /// fall into that band (an M8 washer 1.3 mm thick: 23 % of the top layer found, 1.6 mm thick:
 /// 80 %).
-pub fn too_flat_to_see(m: &PartModel, scene: &binpick::config::Scene) -> Option<String> {
+fn too_flat_to_see(m: &PartModel, scene: &binpick::config::Scene) -> Option<String> {
     use binpick::sensor::cloud::FLOOR_TOL_M;
     let limit_m = FLOOR_TOL_M + scene.sensor.depth_noise_at_1m_m;
     // Each pose's height: the part's extent along its support normal.
@@ -393,7 +393,7 @@ pub fn too_flat_to_see(m: &PartModel, scene: &binpick::config::Scene) -> Option<
 /// Why the part will seldom offer the cup a face, or `None`: faces take it (`sites`), but in no
 /// resting pose does one look up within `lean` (a crystal lying on its side, whose only face the
 /// cup takes is its top, with its leads under it).
-pub fn no_cup_face_up(m: &PartModel, lean: f64, sites: &CupSites) -> Option<String> {
+fn no_cup_face_up(m: &PartModel, lean: f64, sites: &CupSites) -> Option<String> {
     (sites.iter().any(Option::is_some) && m.graspable_share(lean, sites) == 0.0).then(|| {
         format!(
             "in none of its resting poses does a face that takes the cup look up within {:.0} deg: the cell \
@@ -424,16 +424,38 @@ pub fn look_alikes(m: &PartModel, scene: &Scene) -> Vec<binpick::part::symmetry:
     )
 }
 
-/// Why recognition will find few of the part, or `None`: turns its mesh is not the same under
+/// Every warning about a valid workpiece, as `check` and `part` print them and `part --json`
+/// lists them: its part model `m` in `scene` (set up for it), the selector's cup `sites` and
+/// the look-alike `turns` ([`look_alikes`]).
+pub fn warnings(
+    m: &PartModel,
+    w: &binpick::config::Workpiece,
+    scene: &Scene,
+    sites: &CupSites,
+    turns: &[binpick::part::symmetry::LookAlike],
+) -> Vec<String> {
+    let tilt = scene.gripper.max_tilt_deg.to_radians();
+    [
+        no_cup_face(m, sites),
+        no_cup_face_up(m, scene.gripper.max_lean_rad(), sites),
+        look_alike_warning(m, turns),
+        no_upright_face(m, w, tilt, sites),
+        too_flat_to_see(m, scene),
+    ]
+    .into_iter()
+    .flatten()
+    .collect()
+}
+
+/// Why recognition will find few of the part, or `None`: `turns` its mesh is not the same under
 /// look the same to the sensor ([`look_alikes`]), so recognition, which reports no pose it cannot
 /// tell from another, reports neither; with the orders that declaring them would give.
-pub fn look_alike_warning(m: &PartModel, scene: &Scene) -> Option<String> {
-    let turns = look_alikes(m, scene);
+fn look_alike_warning(m: &PartModel, turns: &[binpick::part::symmetry::LookAlike]) -> Option<String> {
     if turns.is_empty() {
         return None;
     }
     let mut orders = m.symmetry.orders;
-    for t in &turns {
+    for t in turns {
         let (a, b) = (orders[t.axis], t.order);
         // The least common multiple: both turns' orders.
         orders[t.axis] = (1..=a * b)
@@ -462,7 +484,7 @@ pub fn look_alike_warning(m: &PartModel, scene: &Scene) -> Option<String> {
 }
 
 /// Why no face takes the cup at a site its approach reaches (`sites`), or `None` when one does.
-pub fn no_cup_face(m: &PartModel, sites: &CupSites) -> Option<String> {
+fn no_cup_face(m: &PartModel, sites: &CupSites) -> Option<String> {
     if sites.iter().any(Option::is_some) {
         return None;
     }
@@ -569,16 +591,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
             let finer = piles.recognition_finer.as_ref().map(|(px, t)| (*px, t.summary()));
             super::say(&recognition_line(&r, finer.as_ref(), &scene.scene));
         }
-        for why in [
-            no_cup_face(&m, &sites),
-            no_cup_face_up(&m, lean, &sites),
-            look_alike_warning(&m, &scene.scene),
-            no_upright_face(&m, w, tilt, &sites),
-            too_flat_to_see(&m, &scene.scene),
-        ]
-        .into_iter()
-        .flatten()
-        {
+        for why in warnings(&m, w, &scene.scene, &sites, &look_alikes(&m, &scene.scene)) {
             super::say(&format!("warning: {why}"));
         }
         println!("picture: {}", svg_path.display());
@@ -663,16 +676,7 @@ fn print_json(
     let tilt = scene.gripper.max_tilt_deg.to_radians();
     let lean = scene.gripper.max_lean_rad();
     let side = round_side(m, scene);
-    let warnings: Vec<String> = [
-        no_cup_face(m, sites),
-        no_cup_face_up(m, lean, sites),
-        look_alike_warning(m, scene),
-        no_upright_face(m, w, tilt, sites),
-        too_flat_to_see(m, scene),
-    ]
-    .into_iter()
-    .flatten()
-    .collect();
+    let turns = look_alikes(m, scene);
     let out = json!({
         "workpiece": wp.label,
         "mesh_file": w.shape.mesh_file,
@@ -686,7 +690,7 @@ fn print_json(
         "inertia_com_kg_mm2": m.mass.inertia_com_kg_m2.row_iter().map(|r| r.iter().map(|v| round(v * 1e6, 9)).collect::<Vec<_>>()).collect::<Vec<_>>(),
         "symmetry_orders": m.symmetry.orders,
         "symmetry_detected": m.symmetry_detected,
-        "look_alike_turns": look_alikes(m, scene),
+        "look_alike_turns": turns,
         "cup_diameter_mm": mm(m.cup.diameter_m),
         "face_margin_mm": mm(m.cup.face_margin_m),
         "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(f, site)).collect::<Vec<_>>(),
@@ -722,7 +726,7 @@ fn print_json(
                 "summary": t.summary(),
             })),
         },
-        "warnings": warnings,
+        "warnings": warnings(m, w, scene, sites, &turns),
         "svg": svg_path.display().to_string(),
     });
     println!("{}", serde_json::to_string_pretty(&out)?);
