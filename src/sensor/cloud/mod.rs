@@ -224,27 +224,22 @@ pub fn face_of_planar(face: &crate::part::faces::PlanarFace) -> Face {
     let hull = convex_hull(&pts);
     let (lo, hi) = fit::bounds_at(&hull, 0.0);
     let mid = [0.5 * (lo[0] + hi[0]), 0.5 * (lo[1] + hi[1])];
-    let radii: Vec<f64> = pts.iter().map(|p| (p[0] - mid[0]).hypot(p[1] - mid[1])).collect();
-    let r_max = radii.iter().cloned().fold(0.0, f64::max);
-    let r_min = radii.iter().cloned().fold(f64::INFINITY, f64::min);
-    // Round: each ring's vertices within the spread of one radius about the outer ring's middle.
-    let round_radius = |ring: &[[f64; 2]]| -> Option<f64> {
+    // A ring is round when its vertices lie within the spread of one radius about the outer
+    // ring's middle: its mean and largest radius.
+    let round = |ring: &[[f64; 2]]| -> Option<(f64, f64)> {
         let radii: Vec<f64> = ring.iter().map(|p| (p[0] - mid[0]).hypot(p[1] - mid[1])).collect();
         let r_max = radii.iter().cloned().fold(0.0, f64::max);
         let r_min = radii.iter().cloned().fold(f64::INFINITY, f64::min);
         (ring.len() >= DISC_MIN_VERTICES && r_max - r_min <= DISC_RADIUS_SPREAD * r_max)
-            .then(|| radii.iter().sum::<f64>() / radii.len() as f64)
+            .then(|| (radii.iter().sum::<f64>() / radii.len() as f64, r_max))
     };
     // A disc, or a disc with one concentric round hole (a washer's bore).
     let hole_radius_m = match face.holes.as_slice() {
         [] => Some(0.0),
-        [hole] => round_radius(&hole.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>()),
+        [hole] => round(&hole.iter().map(|p| [p.x, p.y]).collect::<Vec<_>>()).map(|(mean, _)| mean),
         _ => None,
     };
-    if let Some(hole_radius_m) = hole_radius_m
-        && pts.len() >= DISC_MIN_VERTICES
-        && r_max - r_min <= DISC_RADIUS_SPREAD * r_max
-    {
+    if let (Some((_, r_max)), Some(hole_radius_m)) = (round(&pts), hole_radius_m) {
         return Face {
             center: face.centroid_m.coords + face.u * mid[0] + face.v * mid[1],
             normal: face.normal,
