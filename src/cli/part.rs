@@ -414,10 +414,13 @@ pub fn look_alikes(m: &PartModel, scene: &Scene) -> Vec<binpick::part::symmetry:
     let pixel_m = camera.pixel_size_at_point_m(&floor);
     // The depth along the optical axis, as the pixel's size reads it.
     let depth_m = pixel_m * scene.sensor.focal_px[0].min(scene.sensor.focal_px[1]);
+    // Each resting pose's up direction in the part frame, with its likelihood.
+    let poses: Vec<(nalgebra::Vector3<f64>, f64)> = m.poses.iter().map(|p| (-p.normal, p.likelihood)).collect();
     binpick::part::symmetry::look_alike_turns(
         &m.mesh,
         &m.mass.com_m,
         m.symmetry.orders,
+        &poses,
         pixel_m,
         scene.sensor.depth_noise_at_1m_m * depth_m * depth_m,
         binpick::sensor::cloud::CLOSE_CALL_LOG_ODDS,
@@ -469,11 +472,13 @@ fn look_alike_warning(m: &PartModel, turns: &[binpick::part::symmetry::LookAlike
         .join(", ");
     let off_m = turns.iter().map(|t| t.max_off_m).fold(0.0, f64::max);
     let evidence = turns.iter().map(|t| t.evidence).fold(0.0, f64::max);
+    let share = turns.iter().map(|t| t.share).fold(1.0, f64::min);
     Some(format!(
-        "its mesh is not the same turned {names}, but the sensor cannot tell those turns apart (the turned mesh \
-         lies within {:.2} mm of itself: evidence {:.1} of the {:.1} a decision needs), so recognition reports \
-         neither and finds few; where the orientation does not matter in the line, declare \
-         `shape.symmetry_orders = [{}, {}, {}]` (as the SMD electrolytic's file does)",
+        "its mesh is not the same turned {names}, but in {:.0} % of its resting poses the sensor cannot tell \
+         those turns apart (the turned mesh lies within {:.2} mm of itself: evidence {:.1} of the {:.1} a decision \
+         needs), so recognition reports neither and finds few; where the orientation does not matter in the \
+         line, declare `shape.symmetry_orders = [{}, {}, {}]` (as the SMD electrolytic's file does)",
+        100.0 * share,
         off_m * 1e3,
         evidence,
         binpick::sensor::cloud::CLOSE_CALL_LOG_ODDS,

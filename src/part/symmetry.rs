@@ -109,24 +109,31 @@ pub struct LookAlike {
     pub order: u32,
     /// The farthest the turned mesh's surface lies from the mesh's (m).
     pub max_off_m: f64,
-    /// The log-likelihood ratio a depth image would give between the part and its turn.
+    /// The share of the resting poses (by likelihood) in which a depth image cannot tell the
+    /// part from its turn.
+    pub share: f64,
+    /// The log-likelihood ratio a depth image gives between the part and its turn, averaged
+    /// over those poses (by likelihood).
     pub evidence: f64,
 }
 
 /// The turns a symmetry of `orders` lacks (a half turn about x, y or z, a quarter turn about z)
-/// whose image of `mesh` (about `com`) a depth sensor of pixel `pixel_m` and depth noise
-/// `noise_m` cannot tell from the mesh: the evidence, a log-likelihood ratio between the two
-/// poses, under `min_evidence` (the recogniser's close-call odds). The evidence is estimated
-/// from the turned mesh's surface sampled about once per pixel's area (at least once per
-/// triangle): each sample's distance to the mesh (parry's, through its tree; capped at three
-/// sigma) squared over twice the variance, summed and halved (an image shows about half the
-/// surface). A pin-1 dimple 0.1 mm deep and 1 mm across: about 0.1;
-/// a coin cell's cap 0.3 mm proud over a 17 mm disc: hundreds. Stated simplification: the image
-/// is not rendered; occlusion and grazing dropout are left out.
+/// whose image of `mesh` (about `com`) a depth sensor above it, of pixel `pixel_m` and depth
+/// noise `noise_m`, cannot tell from the mesh in resting poses making up at least half the
+/// likelihood (`poses`: each pose's up direction in the part frame and its likelihood): there
+/// the evidence, a log-likelihood ratio between the two, is under `min_evidence` (the
+/// recogniser's close-call odds). A pose's evidence is estimated from the surface sampled about
+/// once per pixel's area (at least once per triangle), as the part lies and turned, each sample
+/// weighted by how much of its area faces up in the pose (its projection on the image): its
+/// distance to the other (parry's, through its tree; capped at three sigma) squared over twice
+/// the variance, summed, the two images' sums averaged (either may be the truth). A pin-1 dimple 0.1 mm deep and 1 mm across: about 0.1; a coin cell's cap 0.3 mm
+/// proud over a 17 mm disc: hundreds. Stated simplification: the image is not rendered;
+/// occlusion (of the part by itself too) and grazing dropout are left out.
 pub fn look_alike_turns(
     mesh: &Mesh,
     com: &Point3<f64>,
     orders: [u32; 3],
+    poses: &[(Vector3<f64>, f64)],
     pixel_m: f64,
     noise_m: f64,
     min_evidence: f64,
@@ -151,10 +158,24 @@ pub fn look_alike_turns(
         .into_iter()
         .filter_map(|(axis, order)| {
             let r = Rotation3::from_axis_angle(&Vector3::ith_axis(axis), std::f64::consts::TAU / order as f64);
-            let (mut evidence, mut max_off_m) = (0.0, 0.0f64);
+            let turn = |p: &Point3<f64>| com + r * (p - com);
+            let turn_back = |p: &Point3<f64>| com + r.inverse() * (p - com);
+            let mut evidence = vec![0.0; poses.len()];
+            let mut max_off_m = 0.0f64;
             for k in 0..mesh.triangles.len() {
-                let t = mesh.corners(k).map(|p| com + r * (p - com));
-                let area = 0.5 * (t[1] - t[0]).cross(&(t[2] - t[0])).norm();
+                let t = mesh.corners(k);
+                let normal = (t[1] - t[0]).cross(&(t[2] - t[0]));
+                let area = 0.5 * normal.norm();
+                if area <= 0.0 {
+                    continue;
+                }
+                let normal = normal / (2.0 * area);
+                // Each pose's share of the triangle seen from above (its projection), as the part
+                // lies and turned.
+                let seen: Vec<(f64, f64)> = poses
+                    .iter()
+                    .map(|(up, _)| (normal.dot(up).max(0.0), (r * normal).dot(up).max(0.0)))
+                    .collect();
                 // m x m sub-triangles, each about a pixel's area; their centroids.
                 let m = ((2.0 * area).sqrt() / pixel_m).ceil().max(1.0) as usize;
                 let w = area / (m * m) as f64 / (pixel_m * pixel_m);
@@ -175,19 +196,33 @@ pub fn look_alike_turns(
                                 .iter()
                                 .fold((0.0, 0.0), |(a, b), &c| (a + corners[c].0, b + corners[c].1));
                             let p = t[0] + e1 * (a / 3.0) + e2 * (b / 3.0);
-                            let d = distance_m(&p);
-                            max_off_m = max_off_m.max(d);
-                            evidence += w * d * d / (2.0 * noise_m * noise_m);
+                            // The point off the turned mesh (its preimage off the mesh), and the
+                            // turned point off the mesh.
+                            let (d_part, d_turned) = (distance_m(&turn_back(&p)), distance_m(&turn(&p)));
+                            max_off_m = max_off_m.max(d_part).max(d_turned);
+                            let e = |d: f64| w * d * d / (2.0 * noise_m * noise_m);
+                            for (sum, (s_part, s_turned)) in evidence.iter_mut().zip(&seen) {
+                                // Either pose the truth: the mean of the two images' evidence.
+                                *sum += 0.5 * (e(d_part) * s_part + e(d_turned) * s_turned);
+                            }
                         }
                     }
                 }
             }
-            let evidence = 0.5 * evidence;
-            (evidence < min_evidence).then_some(LookAlike {
+            // The poses in which the image cannot tell them apart, and their likelihood.
+            let blind: Vec<(f64, f64)> = poses
+                .iter()
+                .zip(&evidence)
+                .filter(|(_, e)| **e < min_evidence)
+                .map(|((_, l), e)| (*l, *e))
+                .collect();
+            let share: f64 = blind.iter().map(|(l, _)| l).sum();
+            (share >= 0.5).then(|| LookAlike {
                 axis,
                 order,
                 max_off_m,
-                evidence,
+                share,
+                evidence: blind.iter().map(|(l, e)| l * e).sum::<f64>() / share,
             })
         })
         .collect()
@@ -299,7 +334,8 @@ mod tests {
     /// half turn, but a 1 mm nub 0.1 mm high is one no depth image tells apart (0.85 mm pixels,
     /// 0.33 mm noise): the half turns about x, y and z are look-alikes. Negative controls: a
     /// 3 x 3 mm nub 1 mm high is told apart, and so is the small nub by a finer sensor (0.2 mm
-    /// pixels, 0.03 mm noise).
+    /// pixels, 0.03 mm noise) wherever the nub is up (60 % of the poses here; nub down, no
+    /// sensor above tells the turns apart).
     #[test]
     fn a_mark_below_the_depth_noise_makes_turns_look_alike() {
         let with_nub = |side: f64, height: f64| {
@@ -318,7 +354,9 @@ mod tests {
         let orders = detect(&small, &com, 1e-7).orders;
         assert_eq!(orders, [1, 1, 1]);
         let odds = 2.0 * std::f64::consts::LN_10;
-        let turns = look_alike_turns(&small, &com, orders, 0.00085, 0.00033, odds);
+        // Lying on either large face, the nub up a little more often.
+        let flat = [(Vector3::z(), 0.6), (-Vector3::z(), 0.4)];
+        let turns = look_alike_turns(&small, &com, orders, &flat, 0.00085, 0.00033, odds);
         let found: Vec<(usize, u32)> = turns.iter().map(|t| (t.axis, t.order)).collect();
         assert_eq!(found, [(0, 2), (1, 2), (2, 2)], "{turns:?}");
         assert!(
@@ -327,7 +365,7 @@ mod tests {
         );
         let large = with_nub(0.003, 0.001);
         let orders = detect(&large, &com, 1e-7).orders;
-        assert!(look_alike_turns(&large, &com, orders, 0.00085, 0.00033, odds).is_empty());
-        assert!(look_alike_turns(&small, &com, [1, 1, 1], 0.0002, 0.00003, odds).is_empty());
+        assert!(look_alike_turns(&large, &com, orders, &flat, 0.00085, 0.00033, odds).is_empty());
+        assert!(look_alike_turns(&small, &com, [1, 1, 1], &flat, 0.0002, 0.00003, odds).is_empty());
     }
 }
