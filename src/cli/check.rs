@@ -3,7 +3,9 @@
 //! warning printed when none of its faces takes the cell's cup (or its approach always meets
 //! the part's own pins), when none that does looks up in any resting pose, when turns its mesh
 //! lacks look the same to the sensor, when none is up in an upright placement that asks for
-//! one, or when the part lies too flat for the sensor to tell it from the tray floor.
+//! one, or when the part lies too flat for the sensor to tell it from the tray floor. The
+//! physics collider is built as a run builds it, so a part whose collider needs too many convex
+//! pieces is refused here, not at its first run.
 
 use std::path::{Path, PathBuf};
 
@@ -70,6 +72,10 @@ fn check_one(path: &Path, reference: Option<&LoadedScene>) -> Result<String, Con
                 ))
             } else {
                 let wp = LoadedWorkpiece::from_text(&label, Source::File(path.to_path_buf()), &text)?;
+                // The collider every run builds (a mesh's convex decomposition, kept on disk for
+                // the runs that follow): what it refuses, a run would refuse.
+                binpick::physics::PartShape::build(&wp.workpiece, &wp.source)
+                    .map_err(|e| ConfigError::one(&label, "shape", e.to_string()))?;
                 if let Some(s) = reference {
                     wp.workpiece.check_fits_scene(&label, &s.scene)?;
                     // Its part model derives, and the warnings where it will not be picked well.

@@ -52,6 +52,36 @@ fn box_obj(skip: &[usize]) -> String {
     s
 }
 
+/// A 1 mm cube (mm): vertices and outward-wound triangles.
+fn unit_cube() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+    let v = (0..8)
+        .map(|k| [(k & 1) as f64, (k >> 1 & 1) as f64, (k >> 2 & 1) as f64])
+        .collect();
+    (v, crate::support::BOX_TRIANGLES.to_vec())
+}
+
+/// An L-shaped prism (mm): the outline (0,0) (3,0) (3,1) (1,1) (1,3) (0,3), 1 mm high; not
+/// convex, so its collider is decomposed.
+fn l_prism() -> (Vec<[f64; 3]>, Vec<[usize; 3]>) {
+    let outline = [[0.0, 0.0], [3.0, 0.0], [3.0, 1.0], [1.0, 1.0], [1.0, 3.0], [0.0, 3.0]];
+    let n = outline.len();
+    let v = [0.0, 1.0]
+        .iter()
+        .flat_map(|&z| outline.iter().map(move |p| [p[0], p[1], z]))
+        .collect();
+    let mut f = Vec::new();
+    for i in 1..n - 1 {
+        f.push([0, i + 1, i]); // bottom, facing down
+        f.push([n, n + i, n + i + 1]); // top, facing up
+    }
+    for i in 0..n {
+        let j = (i + 1) % n;
+        f.push([i, j, n + j]);
+        f.push([i, n + j, n + i]);
+    }
+    (v, f)
+}
+
 /// Runs `binpick check FILE` and asserts exit 2, the mesh file named on stderr, no panic, and
 /// the time bound; returns stderr.
 fn refused(dir: &Path, toml: &Path, mesh: &str, why: &str) -> String {
@@ -137,6 +167,29 @@ fn bad_mesh_files_are_refused_naming_the_file_and_the_defect() {
             "300 separate bodies, more than the 256",
         ),
         (
+            "lumps.obj",
+            {
+                // 250 separate 1 mm cubes and 4 L-shaped prisms: 254 bodies, but each L is cut in
+                // two or more convex pieces, so the collider needs more than its 256.
+                let mut s = String::new();
+                let mut base = 0;
+                for i in 0..254 {
+                    let (x, y) = ((i % 20) as f64 * 4.0, (i / 20) as f64 * 4.0);
+                    let (v, f) = if i < 250 { unit_cube() } else { l_prism() };
+                    for p in &v {
+                        s += &format!("v {} {} {}\n", x + p[0], y + p[1], p[2]);
+                    }
+                    for t in &f {
+                        s += &format!("f {} {} {}\n", base + t[0] + 1, base + t[1] + 1, base + t[2] + 1);
+                    }
+                    base += v.len();
+                }
+                s.into_bytes()
+            },
+            "",
+            "convex pieces, more than 256: 4 of its bodies are not convex",
+        ),
+        (
             "index.obj",
             b"v 0 0 0\nv 10 0 0\nv 0 10 0\nf 1 2 9\n".to_vec(),
             "",
@@ -219,6 +272,22 @@ fn bad_mesh_files_are_refused_naming_the_file_and_the_defect() {
     let o = binpick_in(d, &["check", toml.to_str().unwrap()]);
     assert!(o.status.success(), "{}", stderr(&o));
     assert!(stdout(&o).contains("ok: "), "{}", stdout(&o));
+    // ... and 254 cubes without the L-shaped prisms: 254 pieces fit.
+    let mut s = String::new();
+    for i in 0..254 {
+        let (x, y) = ((i % 20) as f64 * 4.0, (i / 20) as f64 * 4.0);
+        let (v, f) = unit_cube();
+        for p in &v {
+            s += &format!("v {} {} {}\n", x + p[0], y + p[1], p[2]);
+        }
+        for t in &f {
+            s += &format!("f {} {} {}\n", 8 * i + t[0] + 1, 8 * i + t[1] + 1, 8 * i + t[2] + 1);
+        }
+    }
+    std::fs::write(d.join("cubes.obj"), s).unwrap();
+    let toml = workpiece(d, "cubes", "cubes.obj", "");
+    let o = binpick_in(d, &["check", toml.to_str().unwrap()]);
+    assert!(o.status.success(), "{}", stderr(&o));
 }
 
 #[test]

@@ -169,44 +169,99 @@ struct MeshPiece {
 /// ([`decomposition_cache`]). Flat shells (no volume) are dropped.
 ///
 /// Simplification: shells are solids of their own; a shell inside another (a cavity) is filled.
-/// Also returned: whether a shell was decomposed (its pieces are not its exact surface: a
+/// Also returned: how many shells were decomposed (their pieces are not their exact surface: a
 /// TO-220's tab hole, a standoff's bore are partly filled).
-fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> (Vec<MeshPiece>, bool) {
-    let mut pieces = Vec::new();
-    let mut decomposed_any = false;
-    for (sv, st) in shells(verts, tris) {
-        let Some(hull) = SharedShape::convex_hull(&sv).or_else(|| SharedShape::convex_hull(&thin(&sv, MAX_HULL_INPUT)))
-        else {
-            continue;
-        };
-        if hull_distance(&sv, &st) <= super::sim(HULL_TOLERANCE_M) {
-            pieces.push(mesh_piece(hull));
-            continue;
-        }
-        let params = VHACDParameters {
-            resolution: VHACD_RESOLUTION,
-            max_convex_hulls: MAX_PIECES_PER_SHELL,
-            ..VHACDParameters::default()
-        };
-        let decomposed: Vec<SharedShape> =
-            decomposition_cache::decomposition(CACHE_DIR.as_deref(), &sv, &st, &format!("{params:?}"), || {
-                VHACD::decompose(&params, &sv, &st, true)
-                    .compute_exact_convex_hulls(&sv, &st)
-                    .into_iter()
-                    .map(|(v, _)| v)
-                    .collect()
-            })
-            .into_iter()
-            .filter_map(|v| SharedShape::convex_hull(&v))
-            .collect();
-        if decomposed.is_empty() {
-            pieces.push(mesh_piece(hull));
-        } else {
-            pieces.extend(decomposed.into_iter().map(mesh_piece));
-        }
-        decomposed_any = true;
+///
+/// The shells needing a decomposition are decomposed in parallel, [`DECOMPOSE_BATCH`] at a time
+/// in their order (the result is the same as one by one); a mesh whose pieces pass
+/// [`MAX_PIECES`] is refused as soon as they do, not after every shell's decomposition.
+fn mesh_collider(verts: &[Vector], tris: &[[u32; 3]]) -> Result<(Vec<MeshPiece>, usize), TooManyPieces> {
+    use rayon::prelude::*;
+    /// A shell: its hull, and the shell itself where the hull is not within the tolerance.
+    type Shell = (SharedShape, Option<(Vec<Vector>, Vec<[u32; 3]>)>);
+    let shells: Vec<Shell> = shells(verts, tris)
+        .into_iter()
+        .filter_map(|(sv, st)| {
+            let hull =
+                SharedShape::convex_hull(&sv).or_else(|| SharedShape::convex_hull(&thin(&sv, MAX_HULL_INPUT)))?;
+            let convex = hull_distance(&sv, &st) <= super::sim(HULL_TOLERANCE_M);
+            Some((hull, (!convex).then_some((sv, st))))
+        })
+        .collect();
+    let params = VHACDParameters {
+        resolution: VHACD_RESOLUTION,
+        max_convex_hulls: MAX_PIECES_PER_SHELL,
+        ..VHACDParameters::default()
+    };
+    let decompose = |sv: &[Vector], st: &[[u32; 3]]| -> Vec<SharedShape> {
+        decomposition_cache::decomposition(CACHE_DIR.as_deref(), sv, st, &format!("{params:?}"), || {
+            VHACD::decompose(&params, sv, st, true)
+                .compute_exact_convex_hulls(sv, st)
+                .into_iter()
+                .map(|(v, _)| v)
+                .collect()
+        })
+        .into_iter()
+        .filter_map(|v| SharedShape::convex_hull(&v))
+        .collect()
+    };
+    // Each shell's pieces: its hull, or its decomposition (the hull where that gives nothing).
+    let mut pieces_of: Vec<Option<Vec<SharedShape>>> = shells
+        .iter()
+        .map(|(hull, cut)| cut.is_none().then(|| vec![hull.clone()]))
+        .collect();
+    let to_cut: Vec<usize> = (0..shells.len()).filter(|&i| shells[i].1.is_some()).collect();
+    // At least one piece for each shell still to be cut.
+    let at_least = |pieces_of: &[Option<Vec<SharedShape>>]| -> usize {
+        pieces_of.iter().map(|p| p.as_ref().map_or(1, Vec::len)).sum()
+    };
+    if at_least(&pieces_of) > MAX_PIECES {
+        return Err(TooManyPieces {
+            at_least: at_least(&pieces_of),
+            exact: to_cut.is_empty(),
+            decomposed: 0,
+        });
     }
-    (pieces, decomposed_any)
+    for batch in to_cut.chunks(DECOMPOSE_BATCH) {
+        let done: Vec<Vec<SharedShape>> = batch
+            .par_iter()
+            .map(|&i| {
+                let (hull, cut) = &shells[i];
+                let (sv, st) = cut.as_ref().expect("a shell to cut");
+                let d = decompose(sv, st);
+                if d.is_empty() { vec![hull.clone()] } else { d }
+            })
+            .collect();
+        for (&i, d) in batch.iter().zip(done) {
+            pieces_of[i] = Some(d);
+        }
+        if at_least(&pieces_of) > MAX_PIECES {
+            let decomposed = pieces_of
+                .iter()
+                .zip(&shells)
+                .filter(|(p, s)| p.is_some() && s.1.is_some())
+                .count();
+            return Err(TooManyPieces {
+                at_least: at_least(&pieces_of),
+                exact: batch.last() == to_cut.last(),
+                decomposed,
+            });
+        }
+    }
+    let pieces = pieces_of.into_iter().flatten().flatten().map(mesh_piece).collect();
+    Ok((pieces, to_cut.len()))
+}
+
+/// Shells decomposed in parallel at a time ([`mesh_collider`]): a fixed number, so that where a
+/// mesh is refused, and the count it is refused with, do not depend on the machine's cores.
+const DECOMPOSE_BATCH: usize = 8;
+
+/// A mesh collider past [`MAX_PIECES`]: at least this many pieces (`exact` when every shell was
+/// decomposed), `decomposed` of its shells cut into pieces so far.
+struct TooManyPieces {
+    at_least: usize,
+    exact: bool,
+    decomposed: usize,
 }
 
 /// A convex piece with its view for rays: an axis-aligned box (8 vertices, each on a corner of
@@ -554,18 +609,20 @@ impl PartShape {
     /// The collider is described in the module header.
     pub fn from_mesh(workpiece: &Workpiece, mesh: &Mesh) -> Result<Self, ShapeError> {
         let sim_verts = centred_sim_vertices(workpiece, mesh)?;
-        let (pieces, decomposed) = mesh_collider(&sim_verts, &mesh.triangles);
+        let (pieces, decomposed_shells) = mesh_collider(&sim_verts, &mesh.triangles).map_err(|e| ShapeError::Mesh {
+            file: workpiece.name.clone(),
+            reason: format!(
+                "its collider needs {}{} convex pieces, more than {MAX_PIECES}: {} of its bodies are not \
+                 convex within {:.1} mm and were cut into up to {MAX_PIECES_PER_SHELL} pieces each \
+                 (fewer bodies, or simpler ones, would fit)",
+                if e.exact { "" } else { "at least " },
+                e.at_least,
+                e.decomposed,
+                HULL_TOLERANCE_M * 1e3
+            ),
+        })?;
         if pieces.is_empty() {
             return Err(ShapeError::Degenerate(workpiece.name.clone()));
-        }
-        if pieces.len() > MAX_PIECES {
-            return Err(ShapeError::Mesh {
-                file: workpiece.name.clone(),
-                reason: format!(
-                    "its collider needs {} convex pieces, more than {MAX_PIECES} (too many separate bodies?)",
-                    pieces.len()
-                ),
-            });
         }
         let n = pieces.len();
         let polytopes = pieces.iter().map(|p| polytope_of(&p.shape)).collect();
@@ -587,7 +644,7 @@ impl PartShape {
         let (shape, view_shape) = if single_box {
             (pieces[0].shape.clone(), pieces[0].view.1.clone())
         } else {
-            let view = decomposed
+            let view = (decomposed_shells > 0)
                 .then(exact_view)
                 .flatten()
                 .unwrap_or_else(|| SharedShape::compound(pieces.iter().map(|p| p.view.clone()).collect()));

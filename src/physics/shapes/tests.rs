@@ -419,3 +419,29 @@ fn bad_mesh_is_a_clear_error() {
     };
     assert!(e.contains("x.obj"), "{e}");
 }
+
+#[test]
+fn a_mesh_past_the_pieces_cap_is_refused_after_one_batch_of_decompositions() {
+    use crate::part::tessellate::append;
+    // 200 L-shaped bodies (each cut into two or more pieces) and 54 cubes: 254 bodies, within the
+    // bodies' cap, but past the pieces' as soon as the first L-shapes are cut.
+    let mut m = Mesh::default();
+    for i in 0..254 {
+        let (x, y) = ((i % 20) as f64 * 4.0, (i / 20) as f64 * 4.0);
+        let boxes = if i < 200 {
+            vec![
+                ([x, y, 0.0], [x + 3.0, y + 1.0, 1.0]),
+                ([x, y, 0.0], [x + 1.0, y + 3.0, 1.0]),
+            ]
+        } else {
+            vec![([x, y, 0.0], [x + 1.0, y + 1.0, 1.0])]
+        };
+        append(&mut m, &union_of_boxes_mm(&boxes));
+    }
+    let e = PartShape::from_mesh(&workpiece_of_mesh("ells", &m), &m)
+        .err()
+        .expect("refused")
+        .to_string();
+    let why = format!("{DECOMPOSE_BATCH} of its bodies are not convex");
+    assert!(e.contains("needs at least") && e.contains(&why), "{e}");
+}
