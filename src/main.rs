@@ -43,6 +43,7 @@ use cli::{InputError, Interrupted, RunsFailed};
     version,
     about,
     long_about = None,
+    max_term_width = 110,
     after_help = "Exit codes: 0 success; 2 bad input (nothing written); 3 a run of run, batch or sweep ended on a physics fault (the other runs, the failed run up to its fault and the table are written, the failed run marked); 130 interrupted; 1 any other failure."
 )]
 struct Cli {

@@ -30,6 +30,10 @@ use binpick::tune::{Constraints, Objective, Optimizer, Settings};
 
 /// Arguments of `binpick tune`.
 #[derive(Args)]
+#[command(
+    override_usage = "binpick tune [OPTIONS] --workpiece <WORKPIECE> --vary <KEY=LO:HI>\n       \
+                            --train-seeds <TRAIN_SEEDS> --test-seeds <TEST_SEEDS>"
+)]
 pub struct TuneArgs {
     /// The workpiece: A ... F (embedded) or a path to a workpiece file.
     #[arg(long)]

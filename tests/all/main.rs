@@ -7,6 +7,7 @@ mod cad_parts;
 mod cad_run;
 mod cell_keys;
 mod cli_bad_input;
+mod cli_help;
 mod cli_pile;
 mod cli_robot;
 mod cli_sense;
