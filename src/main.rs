@@ -56,7 +56,7 @@ enum Command {
     /// Validate scene (.toml with [robot]), workpiece (.toml) and URDF (.urdf) files.
     ///
     /// A valid workpiece is warned about where it will not be picked well: no face for the cup,
-    /// none up in any resting pose, turns the sensor cannot tell apart, too flat to see.
+    /// one up in under 5 % of its resting poses, turns the sensor cannot tell apart, too flat to see.
     Check {
         /// Files to check.
         #[arg(required = true)]

@@ -1,7 +1,7 @@
 //! `binpick check FILE... [--scene S]`: validates scenes, workpieces and URDFs. A mesh workpiece's
 //! mesh is read and repaired (or refused naming the defect), its part model derived, and a
 //! warning printed when none of its faces takes the cell's cup (or its approach always meets
-//! the part's own pins), when none that does looks up in any resting pose, when turns its mesh
+//! the part's own pins), when one that does seldom looks up in a resting pose, when turns its mesh
 //! lacks look the same to the sensor, when none is up in an upright placement that asks for
 //! one, or when the part lies too flat for the sensor to tell it from the tray floor. The
 //! physics collider is built as a run builds it, so a part whose collider needs too many convex

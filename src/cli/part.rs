@@ -390,14 +390,37 @@ fn too_flat_to_see(m: &PartModel, scene: &binpick::config::Scene) -> Option<Stri
     })
 }
 
-/// Why the part will seldom offer the cup a face, or `None`: faces take it (`sites`), but in no
-/// resting pose does one look up within `lean` (a crystal lying on its side, whose only face the
-/// cup takes is its top, with its leads under it).
-fn no_cup_face_up(m: &PartModel, lean: f64, sites: &CupSites) -> Option<String> {
-    (sites.iter().any(Option::is_some) && m.graspable_share(lean, sites) == 0.0).then(|| {
+/// Below this share of its resting poses (by likelihood) with a face that takes the cup up, a
+/// part is seldom offered to the cup where it lies on the floor (an M4 bolt: 0.7 %, on its head
+/// with its shank up; the shipped parts' least, the SMD electrolytic with its own cup: 14.3 %).
+pub const SELDOM_CUP_FACE_UP: f64 = 0.05;
+
+/// Why the part will seldom offer the cup a face, or `None`: faces take it (`sites`), but in
+/// resting poses making up less than [`SELDOM_CUP_FACE_UP`] of the likelihood does one look up
+/// within `lean` (a crystal lying on its side, whose only face the cup takes is its top, with its
+/// leads under it: none; a bolt, whose head's top looks up only when it stands on its head), and
+/// the cup takes no strip of a round side.
+fn no_cup_face_up(m: &PartModel, scene: &Scene, sites: &CupSites) -> Option<String> {
+    let lean = scene.gripper.max_lean_rad();
+    let share = m.graspable_share(lean, sites);
+    if !sites.iter().any(Option::is_some)
+        || share >= SELDOM_CUP_FACE_UP
+        || round_side(m, scene).is_some_and(|r| r.offered > 0)
+    {
+        return None;
+    }
+    Some(if share == 0.0 {
         format!(
             "in none of its resting poses does a face that takes the cup look up within {:.0} deg: the cell \
              picks only parts propped up on others (`binpick part` lists the poses)",
+            lean.to_degrees()
+        )
+    } else {
+        format!(
+            "in only {:.1} % of its resting poses (by likelihood) does a face that takes the cup look up \
+             within {:.0} deg: the cell picks mostly parts propped up on others, and few of a pile \
+             (`binpick part` lists the poses and predicts a pile's share)",
+            100.0 * share,
             lean.to_degrees()
         )
     })
@@ -440,7 +463,7 @@ pub fn warnings(
     let tilt = scene.gripper.max_tilt_deg.to_radians();
     [
         no_cup_face(m, sites),
-        no_cup_face_up(m, scene.gripper.max_lean_rad(), sites),
+        no_cup_face_up(m, scene, sites),
         look_alike_warning(m, turns),
         no_upright_face(m, w, tilt, sites),
         too_flat_to_see(m, scene),

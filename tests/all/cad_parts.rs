@@ -1055,6 +1055,76 @@ fn a_part_with_no_cup_face_up_in_any_pose_is_warned_about() {
     }
 }
 
+/// An M4 hex bolt (mm) as OBJ text: a hex head 7 mm across its flats and 2.8 mm high, and a
+/// round shank 4 mm across (24 sides) and `shank_mm` long under it (a second body, 0.5 mm into
+/// the head); none for 0.
+fn bolt_obj(shank_mm: f64) -> String {
+    let mut s = String::new();
+    let mut n = 0;
+    let mut prism = |s: &mut String, outline: &[[f64; 2]], z0: f64, z1: f64| {
+        let k = outline.len();
+        for z in [z0, z1] {
+            for p in outline {
+                *s += &format!("v {} {} {z}\n", p[0], p[1]);
+            }
+        }
+        let v = |i: usize| n + i + 1;
+        for i in 1..k - 1 {
+            *s += &format!("f {} {} {}\n", v(0), v(i + 1), v(i));
+            *s += &format!("f {} {} {}\n", v(k), v(k + i), v(k + i + 1));
+        }
+        for i in 0..k {
+            let j = (i + 1) % k;
+            *s += &format!(
+                "f {} {} {}\nf {} {} {}\n",
+                v(i),
+                v(j),
+                v(k + j),
+                v(i),
+                v(k + j),
+                v(k + i)
+            );
+        }
+        n += 2 * k;
+    };
+    let ring = |sides: usize, r: f64, phase: f64| -> Vec<[f64; 2]> {
+        (0..sides)
+            .map(|i| {
+                let a = phase + std::f64::consts::TAU * i as f64 / sides as f64;
+                [r * a.cos(), r * a.sin()]
+            })
+            .collect()
+    };
+    let across_corners = 3.5 / (std::f64::consts::PI / 6.0).cos();
+    prism(&mut s, &ring(6, across_corners, std::f64::consts::PI / 6.0), 0.0, 2.8);
+    if shank_mm > 0.0 {
+        prism(&mut s, &ring(24, 2.0, 0.0), -shank_mm, 0.5);
+    }
+    s
+}
+
+/// A bolt stands on its head, the one face its 4 mm cup takes up, in under 1 % of its resting
+/// poses: `check` warns that the cup face is seldom up. Negative control: its head alone (a hex
+/// prism) lies on a flat as often as not, and nothing is warned.
+#[test]
+fn a_part_seldom_with_a_cup_face_up_is_warned_about() {
+    let dir = tempdir().unwrap();
+    for shank_mm in [16.0, 0.0] {
+        let name = if shank_mm > 0.0 { "bolt" } else { "bolt-head" };
+        let (toml, check) = user_part(dir.path(), name, &bolt_obj(shank_mm), 0.004, "");
+        let v = part_json(dir.path(), &toml, 0);
+        let share = v["graspable_share"].as_f64().unwrap();
+        let warned = stderr(&check).contains("in only");
+        if shank_mm > 0.0 {
+            assert!(warned, "{}", stderr(&check));
+            assert!(share > 0.0 && share < 0.05, "{share}");
+        } else {
+            assert!(!warned, "{}", stderr(&check));
+            assert!(share > 0.3, "{share}");
+        }
+    }
+}
+
 /// An IC body (mm) as OBJ text: a 9.3 x 6.35 x 3.3 mm block and, on its top near a corner, a
 /// 1 x 1 mm pin-1 mark 0.1 mm high (a second body).
 fn marked_ic_obj() -> String {
