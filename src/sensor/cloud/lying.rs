@@ -2,9 +2,10 @@
 //! fitted to the measured points around a patch (known radius, Gauss-Newton on the points'
 //! distances to the axis, the points on the cylinder re-selected as it converges), with the
 //! axis direction's standard error; and the poses along that axis to verify (either way round,
-//! a few turns about the axis for a base that is not round, stations along the axis). Which
-//! way round it lies is decided by the pixels only one way explains (its base's top), compared
-//! at every pixel.
+//! turns about the axis for a base that is not round, stations along the axis). Which way round
+//! it lies is decided by the pixels only one way explains (its base's top), compared at every
+//! pixel; the turn about the axis, where the part is not round about it, by the verification
+//! evidence of one turn over every other (else the part is not reported).
 //!
 //! Units: m, rad. Frames: world; the fit's basis (`axis`, and two directions across it).
 
@@ -25,7 +26,8 @@ const ALONG_MARGIN_M: f64 = 0.001;
 const MIN_POINTS: usize = 12;
 /// Gauss-Newton iterations of the fit.
 const ITERATIONS: usize = 10;
-/// Turns about the axis tried (rad) (a quarter turn in these steps: D's base is square).
+/// Turns about the axis tried (rad), up to the part's symmetry about it (a quarter turn in these
+/// steps: D's base is square).
 pub(super) const ROLL_STEP_RAD: f64 = 15.0 * std::f64::consts::PI / 180.0;
 
 /// The body cylinder of a model: centre, unit axis, radius (part frame) (m).
@@ -411,19 +413,33 @@ impl super::Cloud<'_> {
             };
             ((s0 + s1 - e0 - e1) / 2.0, s0 - e0, s1 - e1)
         };
+        // The turns about the axis tried: steps of [`ROLL_STEP_RAD`] over a quarter turn (D's square
+        // base shows at each), and on up to the first turn that the part's symmetry maps onto
+        // none (a bolt's hex head with its shank: a half turn), at most a full turn.
+        let full = (std::f64::consts::TAU / ROLL_STEP_RAD).round() as usize;
+        let quarter = full / 4;
+        let steps = (quarter..full)
+            .find(|&k| model.same_pose(&pose(1.0, k as f64 * ROLL_STEP_RAD, s0), &pose(1.0, 0.0, s0)))
+            .unwrap_or(full);
         let mut per_sign = Vec::new();
         for sign in [1.0, -1.0] {
             let (m, a, b) = mid(sign);
-            let mut turn: Option<(i64, f64)> = None;
-            for k in 0..6 {
-                let roll = k as f64 * ROLL_STEP_RAD;
-                if let Some((e, _)) = evidence(&pose(sign, roll, m))
-                    && turn.is_none_or(|t| e > t.0)
-                {
-                    turn = Some((e, roll));
-                }
-            }
-            let Some((_, roll)) = turn else { continue };
+            let turns: Vec<(i64, usize)> = (0..steps)
+                .filter_map(|k| evidence(&pose(sign, k as f64 * ROLL_STEP_RAD, m)).map(|(e, _)| (e, k)))
+                .collect();
+            let Some(&(best_e, best_k)) = turns.iter().rev().max_by_key(|t| t.0) else {
+                continue;
+            };
+            let roll = best_k as f64 * ROLL_STEP_RAD;
+            // Decided where no other turn tried that is a different pose (up to the part's
+            // symmetry) comes within [`super::CLOSE_CALL_PX`] of it: one step off is already past
+            // the 5 degrees a pose may be off. A bolt's hex head, a few pixels at the end of its
+            // round shank, does not decide its turn; D's square base on its round can need not.
+            let decided = !turns.iter().any(|&(e, k)| {
+                k != best_k
+                    && e >= best_e - super::CLOSE_CALL_PX
+                    && !model.same_pose(&pose(sign, roll, m), &pose(sign, k as f64 * ROLL_STEP_RAD, m))
+            });
             let mut top: Option<(i64, f64)> = None;
             for s in [m, a, b] {
                 if let Some((e, _)) = evidence(&pose(sign, roll, s))
@@ -433,25 +449,33 @@ impl super::Cloud<'_> {
                 }
             }
             if let Some((_, s)) = top {
-                per_sign.extend(self.place_finely(model, |s| pose(sign, roll, s), s));
+                per_sign.extend(
+                    self.place_finely(model, |s| pose(sign, roll, s), s)
+                        .map(|(e, p, px)| (e, p, px, decided)),
+                );
             }
         }
         // Which way round: one way has [`END_EVIDENCE_MARGIN_PX`] more evidence on every pixel,
         // or the pixels only it explains decide ([`end_votes`]); else the part is not reported.
-        let at = match per_sign.as_slice() {
+        let chosen = match per_sign.as_slice() {
             [] => return None,
-            [one] => one.1,
+            [one] => one,
             [a, b, ..] => {
                 let (va, vb) = end_votes(&a.2, &b.2);
                 if a.0 >= b.0 + END_EVIDENCE_MARGIN_PX || (va >= END_VOTES_MIN && vb * END_VOTE_RATIO <= va) {
-                    a.1
+                    a
                 } else if b.0 >= a.0 + END_EVIDENCE_MARGIN_PX || (vb >= END_VOTES_MIN && va * END_VOTE_RATIO <= vb) {
-                    b.1
+                    b
                 } else {
                     return None;
                 }
             }
         };
+        // A turn about the axis the image does not decide is not reported.
+        if !chosen.3 {
+            return None;
+        }
+        let at = chosen.1;
         let best = evidence(&at)?;
         let axis_w = at.rotation * a_part;
         for probe in [-STATION_PROBE_M, STATION_PROBE_M] {

@@ -41,7 +41,8 @@
 //! part with a body cylinder (D's can) lying on its curved side (`lying`): per patch no flat face
 //! explains, a cylinder of known radius fitted to the points around it, kept if its axis's standard
 //! error is within `lying::AXIS_SIGMA_MAX_RAD`; per distinct axis, verification picks the turn
-//! about the axis and the station along it for either way round; which end is the base is decided
+//! about the axis (where the part's symmetry leaves it to matter, only if no other turn comes
+//! within [`CLOSE_CALL_PX`]) and the station along it for either way round; which end is the base is decided
 //! at every pixel (each way placed by the evidence of every pixel; one way must have
 //! `lying::END_EVIDENCE_MARGIN_PX` more, or explain at least `lying::END_VOTES_MIN` pixels the
 //! other does not, three times as many as the other); reported only if that decides and the station
