@@ -223,9 +223,14 @@ pub struct GraspSelector {
     /// Faces that take the cup but would place the part another way up than its workpiece file
     /// allows (`grasp.place_orientation`): not offered.
     not_upright_faces: usize,
+    /// A part model's faces that take the cup but that no stable pose has up within the tool's
+    /// lean (`gripper.max_lean_deg`): a part held by one could not be set down as held, and
+    /// would tip over in its slot. Not offered.
+    unplaceable_faces: usize,
     /// Per face, how the part lies in its slot when grasped there: the stable pose whose support
-    /// is opposite the face (`None`: no stable pose has the face up within the cup's tilt; the
-    /// part is placed face up on the opposite side of its bounding box).
+    /// is opposite the face, set down with the tool leaning as the face then tilts (`None`, only
+    /// where there is no part model: the part is placed face up on the opposite side of its
+    /// bounding box).
     place: Vec<Option<PlacePose>>,
     /// The part's footprint in its place orientations, along the slot's x and y (m).
     place_footprint_m: [f64; 2],
@@ -508,6 +513,7 @@ impl GraspSelector {
             peel_com_m: Vector3::zeros(),
             blocked_faces: 0,
             not_upright_faces: 0,
+            unplaceable_faces: 0,
             place: Vec::new(),
             place_footprint_m: [w.size_m[0], w.size_m[1]],
             fit_margin_m: w.grasp.face_margin_m,
@@ -546,7 +552,11 @@ impl GraspSelector {
                 sel.blocked_faces += 1;
                 continue;
             };
-            let place = PlacePose::of_face(&pm, &f.face.normal, sel.max_tilt_rad);
+            let Some(place) = PlacePose::of_face(&pm, &f.face.normal, sel.max_lean_rad) else {
+                sel.unplaceable_faces += 1;
+                continue;
+            };
+            let place = Some(place);
             if w.grasp.place_orientation == PlaceOrientation::Upright
                 && !place.as_ref().is_some_and(|p| p.is_upright(&pm))
             {
@@ -605,6 +615,12 @@ impl GraspSelector {
     /// the part another way up than `grasp.place_orientation` allows.
     pub fn not_upright_faces(&self) -> usize {
         self.not_upright_faces
+    }
+
+    /// The part model's faces that take the cup but were not offered because no stable pose has
+    /// them up within the tool's lean (the part would tip over in its slot).
+    pub fn unplaceable_faces(&self) -> usize {
+        self.unplaceable_faces
     }
 
     /// The part's footprint in its place orientations, along the slot's x and y (m): a part

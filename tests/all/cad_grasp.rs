@@ -68,8 +68,12 @@ fn a_face_under_a_tall_post_of_the_part_is_not_offered() {
     let tall = workpiece(tmp.path(), "tall", &plate_with_post(12.0));
     let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &tall);
     assert_eq!(sel.blocked_faces(), 1, "{:?}", sel.faces());
-    assert_eq!(sel.faces().len(), 1);
-    assert!(sel.faces()[0].normal.z < -0.999, "{:?}", sel.faces());
+    // Its bottom is up only where it lies on the post's top and the plate's rim, tilted by at
+    // least atan(12 / 12.7) = 43 deg (12 mm of post against at most 12.7 mm from the post's
+    // corner to the plate's), beyond the tool's 40 deg lean: a part held by it could not be set
+    // down as held, so it is not offered either.
+    assert_eq!(sel.unplaceable_faces(), 1);
+    assert!(sel.faces().is_empty(), "{:?}", sel.faces());
     // Negative control: a 6 mm post stays under the tool body and 3.5 mm from the cup's site:
     // both the top (around the post) and the bottom are offered.
     let short = workpiece(tmp.path(), "short", &plate_with_post(6.0));
@@ -236,5 +240,49 @@ fn a_cup_site_clears_the_features_of_every_pose_recognition_cannot_tell_apart() 
     assert!(
         !clear(&alone),
         "without the turned images the site {alone:?} would clear both pins"
+    );
+}
+
+/// An L-shaped bracket (mm): a 20 x 15 x 1.5 mm base and a 20 x 1.5 x 8.5 mm upright on one long
+/// edge. Lying with its base's underside up it rests tilted on the upright's edge and the base's
+/// far edge, the underside 32.2 deg off level (independently: the hull's edge from (y, z) =
+/// (15, 1.5) to (1.5, 10) has the outward normal (8.5, 13.5) / 15.95 in y, z; cos = 0.846).
+/// That face is offered, its part set down tilted so (a face grasped and set down level tipped
+/// over in its slot: misplaced by 32.2 deg in every such pick); the upright's outer face, up
+/// in no stable pose within the tool's 40 deg lean, is not. Negative control: with no lean
+/// beyond the 20 deg tilt, the underside is not offered either.
+#[test]
+fn a_face_no_stable_pose_has_up_within_the_lean_is_not_offered() {
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let tmp = tempdir().unwrap();
+    let l = workpiece(
+        tmp.path(),
+        "bracket",
+        &[
+            ([0.0, 0.0, 0.0], [20.0, 15.0, 1.5]),
+            ([0.0, 0.0, 1.5], [20.0, 1.5, 10.0]),
+        ],
+    );
+    let sel = GraspSelector::for_workpiece(&scene.scene, &robot, &l);
+    let under = sel
+        .faces()
+        .iter()
+        .position(|f| f.normal.z < -0.999 && f.extent_m[0] * f.extent_m[1] > 2.9e-4)
+        .expect("the base's underside is offered");
+    let place = sel.place_pose(under).expect("a place pose");
+    let up = place.slot_from_part * sel.faces()[under].normal;
+    assert!((up.z - 0.846).abs() < 0.002, "the underside in its slot: {up:?}");
+    assert!(!sel.faces().iter().any(|f| f.normal.y < -0.999), "{:?}", sel.faces());
+    let unplaceable = sel.unplaceable_faces();
+    assert!(unplaceable >= 1);
+    scene.scene.gripper.max_lean_deg = Some(scene.scene.gripper.max_tilt_deg);
+    let level = GraspSelector::for_workpiece(&scene.scene, &robot, &l);
+    assert_eq!(level.unplaceable_faces(), unplaceable + 1);
+    assert!(
+        !level
+            .faces()
+            .iter()
+            .any(|f| f.normal.z < -0.999 && f.extent_m[0] * f.extent_m[1] > 2.9e-4)
     );
 }
