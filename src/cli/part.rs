@@ -581,7 +581,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
         print_json(&wp, &m, &sites, report, &scene.scene, &svg_path, (&piles, &drops))
     } else {
         print_summary(&wp, &m, report);
-        print_faces(&m, &sites);
+        print_faces(&m, &sites, lean);
         let upright = upright_faces(&m, tilt, &sites);
         super::say(&format!(
             "faces up when it rests upright, on its -z side (grasp.place_orientation = \"upright\"): {}",
@@ -721,7 +721,7 @@ fn print_json(
         "look_alike_turns": turns,
         "cup_diameter_mm": mm(m.cup.diameter_m),
         "face_margin_mm": mm(m.cup.face_margin_m),
-        "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(f, site)).collect::<Vec<_>>(),
+        "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(m, f, site, lean)).collect::<Vec<_>>(),
         "poses": m.poses.iter().zip(&drops.per_pose).map(|(p, &n)| {
             let mut j = pose_json(p);
             j["dropped_share"] = json!((drops.dropped > 0).then(|| round(drops.share(n), 6)));
@@ -762,7 +762,12 @@ fn print_json(
 }
 
 /// One planar face with its cup fit, in the JSON output.
-fn face_json(f: &ModelFace, site: &Option<(nalgebra::Point3<f64>, f64)>) -> serde_json::Value {
+fn face_json(
+    m: &PartModel,
+    f: &ModelFace,
+    site: &Option<(nalgebra::Point3<f64>, f64)>,
+    lean: f64,
+) -> serde_json::Value {
     json!({
         "normal": f.face.normal.iter().map(|v| round(*v, 6)).collect::<Vec<_>>(),
         "centroid_mm": f.face.centroid_m.iter().map(|v| mm(*v)).collect::<Vec<_>>(),
@@ -783,6 +788,9 @@ fn face_json(f: &ModelFace, site: &Option<(nalgebra::Point3<f64>, f64)>) -> serd
             // Where the grasp selector puts the cup: the clearest centre whose approach misses
             // the part's features in every pose recognition cannot tell apart.
             "cup_site_mm": site.map(|(p, _)| [mm(p.x), mm(p.y), mm(p.z)]),
+            // Whether a resting pose has the face up within the tool's lean, so that a part
+            // held by it can be set down as held: the grasp selector offers only such faces.
+            "placeable": binpick::grasp::PlacePose::of_face(m, &f.face.normal, lean).is_some(),
         },
     })
 }
@@ -868,7 +876,10 @@ fn print_summary(wp: &LoadedWorkpiece, m: &PartModel, report: &RepairReport) {
 }
 
 /// The text table of the planar faces that matter to a cup (`--json` lists every face).
-fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
+fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites, lean: f64) {
+    // A face with a site that no resting pose has up within the lean: the grasp selector does
+    // not offer it (a part held by it could not be set down as held).
+    let unplaceable = |f: &ModelFace| binpick::grasp::PlacePose::of_face(m, &f.face.normal, lean).is_none();
     println!(
         "\nplanar faces, for the {:.1} mm cup with a {:.1} mm margin (largest first):",
         m.cup.diameter_m * 1e3,
@@ -887,6 +898,7 @@ fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
         let n = f.face.normal;
         let e = f.face.extent_m();
         let best = match site {
+            Some(_) if unplaceable(f) => "no pose +".to_string(),
             Some((p, _)) => format!("[{:.2} {:.2} {:.2}]", p.x * 1e3, p.y * 1e3, p.z * 1e3),
             None if f.fit.takes_cup() => "blocked *".to_string(),
             None => "-".to_string(),
@@ -911,6 +923,17 @@ fn print_faces(m: &PartModel, sites: &binpick::part::svg::CupSites) {
         .any(|(f, site)| site.is_none() && f.fit.takes_cup())
     {
         println!("  * the cup fits the face, but its approach meets the part's own features (pins, tabs)");
+    }
+    if m.faces
+        .iter()
+        .zip(sites)
+        .any(|(f, site)| site.is_some() && unplaceable(f))
+    {
+        println!(
+            "  + the cup fits the face, but no resting pose has it up within the tool's {:.0} deg lean:\n    \
+             a part held by it could not be set down as held, so it is not grasped",
+            lean.to_degrees()
+        );
     }
     let hidden = m.faces.iter().filter(|f| !shown(f)).count();
     if hidden > 0 {

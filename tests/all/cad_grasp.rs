@@ -276,6 +276,30 @@ fn a_face_no_stable_pose_has_up_within_the_lean_is_not_offered() {
     assert!(!sel.faces().iter().any(|f| f.normal.y < -0.999), "{:?}", sel.faces());
     let unplaceable = sel.unplaceable_faces();
     assert!(unplaceable >= 1);
+    // `binpick part` says so: the upright's face not placeable, marked in the faces' table.
+    let toml = tmp.path().join("bracket.toml");
+    let o = binpick_in(
+        tmp.path(),
+        &["part", toml.to_str().unwrap(), "--json", "--piles", "0", "--drops", "0"],
+    );
+    assert!(o.status.success(), "{}", stderr(&o));
+    let v: serde_json::Value = serde_json::from_str(&stdout(&o)).unwrap();
+    let placeable = |ny: f64| {
+        v["faces"]
+            .as_array()
+            .unwrap()
+            .iter()
+            .filter(|f| (f["normal"][1].as_f64().unwrap() - ny).abs() < 1e-3 && f["area_mm2"].as_f64().unwrap() > 100.0)
+            .map(|f| f["cup_fit"]["placeable"].as_bool().unwrap())
+            .collect::<Vec<_>>()
+    };
+    assert_eq!(placeable(-1.0), [false], "{}", v["faces"]);
+    assert!(placeable(0.0).iter().all(|p| *p), "{}", v["faces"]);
+    let o = binpick_in(
+        tmp.path(),
+        &["part", toml.to_str().unwrap(), "--piles", "0", "--drops", "0"],
+    );
+    assert!(stdout(&o).contains("no pose +"), "{}", stdout(&o));
     scene.scene.gripper.max_lean_deg = Some(scene.scene.gripper.max_tilt_deg);
     let level = GraspSelector::for_workpiece(&scene.scene, &robot, &l);
     assert_eq!(level.unplaceable_faces(), unplaceable + 1);
