@@ -318,12 +318,12 @@ fn surface_of(wp: &LoadedWorkpiece) -> String {
 /// The faces (1-based, as listed) that take the cup at a site its approach reaches (`sites`) and
 /// are up when the part rests upright, on its -z side (up to its symmetry): those
 /// `grasp.place_orientation = "upright"` grasps.
-fn upright_faces(m: &PartModel, max_tilt_rad: f64, sites: &CupSites) -> Vec<usize> {
+fn upright_faces(m: &PartModel, max_lean_rad: f64, sites: &CupSites) -> Vec<usize> {
     (0..m.faces.len())
         .filter(|&i| {
             let f = &m.faces[i];
             sites[i].is_some()
-                && binpick::grasp::PlacePose::of_face(m, &f.face.normal, max_tilt_rad).is_some_and(|p| p.is_upright(m))
+                && binpick::grasp::PlacePose::of_face(m, &f.face.normal, max_lean_rad).is_some_and(|p| p.is_upright(m))
         })
         .map(|i| i + 1)
         .collect()
@@ -334,11 +334,11 @@ fn upright_faces(m: &PartModel, max_tilt_rad: f64, sites: &CupSites) -> Vec<usiz
 fn no_upright_face(
     m: &PartModel,
     w: &binpick::config::Workpiece,
-    max_tilt_rad: f64,
+    max_lean_rad: f64,
     sites: &CupSites,
 ) -> Option<String> {
     if w.grasp.place_orientation != binpick::config::PlaceOrientation::Upright
-        || !upright_faces(m, max_tilt_rad, sites).is_empty()
+        || !upright_faces(m, max_lean_rad, sites).is_empty()
     {
         return None;
     }
@@ -460,12 +460,11 @@ pub fn warnings(
     sites: &CupSites,
     turns: &[binpick::part::symmetry::LookAlike],
 ) -> Vec<String> {
-    let tilt = scene.gripper.max_tilt_deg.to_radians();
     [
         no_cup_face(m, sites),
         no_cup_face_up(m, scene, sites),
         look_alike_warning(m, turns),
-        no_upright_face(m, w, tilt, sites),
+        no_upright_face(m, w, scene.gripper.max_lean_rad(), sites),
         too_flat_to_see(m, scene),
     ]
     .into_iter()
@@ -559,7 +558,6 @@ pub fn part(a: &PartArgs) -> Result<()> {
     let m = model_of(&wp, &scene.scene)?;
     let report = &wp.mesh.as_ref().map(|m| m.1.clone()).unwrap_or_default();
     let w = &wp.workpiece;
-    let tilt = scene.scene.gripper.max_tilt_deg.to_radians();
     // How far from vertical a face the selector takes may look (the tool leaning with it).
     let lean = scene.scene.gripper.max_lean_rad();
     let svg_path = a
@@ -582,7 +580,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
     } else {
         print_summary(&wp, &m, report);
         print_faces(&m, &sites, lean);
-        let upright = upright_faces(&m, tilt, &sites);
+        let upright = upright_faces(&m, lean, &sites);
         super::say(&format!(
             "faces up when it rests upright, on its -z side (grasp.place_orientation = \"upright\"): {}",
             if upright.is_empty() {
@@ -701,7 +699,6 @@ fn print_json(
     (piles, drops): (&PileShare, &DropShare),
 ) -> Result<()> {
     let w = &wp.workpiece;
-    let tilt = scene.gripper.max_tilt_deg.to_radians();
     let lean = scene.gripper.max_lean_rad();
     let side = round_side(m, scene);
     let turns = look_alikes(m, scene);
@@ -734,7 +731,7 @@ fn print_json(
             "crowded": drops.crowded,
             "match_within_deg": DROP_MATCH_RAD.to_degrees(),
         },
-        "upright_faces": upright_faces(m, tilt, sites),
+        "upright_faces": upright_faces(m, lean, sites),
         "graspable_share": round(m.graspable_share(lean, sites), 6),
         "round_side": side.map(|r| json!({
             "cup_round_min_radius_mm": mm(r.min_radius_m),
