@@ -228,10 +228,8 @@ pub struct GraspSelector {
     /// would tip over in its slot. Not offered.
     unplaceable_faces: usize,
     /// Per face, how the part lies in its slot when grasped there: the stable pose whose support
-    /// is opposite the face, set down with the tool leaning as the face then tilts (`None`, only
-    /// where there is no part model: the part is placed face up on the opposite side of its
-    /// bounding box).
-    place: Vec<Option<PlacePose>>,
+    /// is opposite the face, set down with the tool leaning as the face then tilts.
+    place: Vec<PlacePose>,
     /// The part's footprint in its place orientations, along the slot's x and y (m).
     place_footprint_m: [f64; 2],
     /// The workpiece's own face margin, for which the part model's cup-fit regions were made (m).
@@ -313,9 +311,11 @@ pub struct PlacePose {
 impl PlacePose {
     /// The stable pose in which the part rests with the face of outward normal `face_normal`
     /// (part frame) up: the pose whose support normal is most nearly opposite it, if the face
-    /// then tilts within `max_tilt_rad` (the cup must press straight down on it).
-    pub fn of_face(pm: &crate::part::PartModel, face_normal: &Vector3<f64>, max_tilt_rad: f64) -> Option<Self> {
-        let pose = Self::supporting(pm, face_normal, max_tilt_rad)?;
+    /// then tilts within `max_lean_rad` (the grasp selector's: the tool leans with the face as
+    /// it sets the part down; a face tilted further in every pose is not grasped, since its part
+    /// would tip over in its slot).
+    pub fn of_face(pm: &crate::part::PartModel, face_normal: &Vector3<f64>, max_lean_rad: f64) -> Option<Self> {
+        let pose = Self::supporting(pm, face_normal, max_lean_rad)?;
         let down = -Vector3::z();
         let tip = UnitQuaternion::rotation_between(&pose.normal, &down)
             .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
@@ -416,9 +416,9 @@ impl PlacePose {
     /// (`yaw_symmetry_rad`, 0: a quarter turn), both the larger of the two for quarter turns and
     /// the diagonal for finer ones.
     /// `None` when no face has a place pose.
-    fn footprint_m(place: &[Option<PlacePose>], yaw_symmetry_rad: f64) -> Option<[f64; 2]> {
+    fn footprint_m(place: &[PlacePose], yaw_symmetry_rad: f64) -> Option<[f64; 2]> {
         let mut fp: Option<[f64; 2]> = None;
-        for p in place.iter().flatten() {
+        for p in place {
             let f = fp.get_or_insert([0.0, 0.0]);
             f[0] = f[0].max(p.footprint_m[0]);
             f[1] = f[1].max(p.footprint_m[1]);
@@ -556,10 +556,7 @@ impl GraspSelector {
                 sel.unplaceable_faces += 1;
                 continue;
             };
-            let place = Some(place);
-            if w.grasp.place_orientation == PlaceOrientation::Upright
-                && !place.as_ref().is_some_and(|p| p.is_upright(&pm))
-            {
+            if w.grasp.place_orientation == PlaceOrientation::Upright && !place.is_upright(&pm) {
                 sel.not_upright_faces += 1;
                 continue;
             }
@@ -577,7 +574,7 @@ impl GraspSelector {
             }
             sel.faces.push(crate::sensor::cloud::face_of_planar(&strip.face));
             sel.sites.push((strip.site_m.coords, strip.clearance_m));
-            sel.place.push(Some(place));
+            sel.place.push(place);
         }
         if let Some(fp) = PlacePose::footprint_m(&sel.place, sel.yaw_symmetry_rad) {
             sel.place_footprint_m = fp;
@@ -633,7 +630,7 @@ impl GraspSelector {
     /// How the part lies in its slot when grasped on face `fi` (`None`: face up on the opposite
     /// side of its box, as for primitives).
     pub fn place_pose(&self, fi: usize) -> Option<&PlacePose> {
-        self.place.get(fi).and_then(Option::as_ref)
+        self.place.get(fi)
     }
 
     /// The centre of mass the peel model reads (part frame, m): see the field.
@@ -1139,20 +1136,11 @@ impl GraspSelector {
         let x0 = (along_world - z_tool * along_world.dot(&z_tool))
             .try_normalize(1e-9)
             .ok_or(Rejection::Unreachable)?;
-        // The part in its slot: the grasped face up, turned to the slot's yaw.
-        let face_up = UnitQuaternion::rotation_between(&face.normal, &Vector3::z())
-            .unwrap_or_else(|| UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI));
-        let height_along_normal = {
-            let k = face.normal.iamax();
-            self.size_m[k]
-        };
         let floor_z = world_from_slot.translation.z - self.size_m[2] / 2.0;
-        // A part model's part rests in its slot in the stable pose with this face up; a
-        // primitive's face up on the opposite side of its box.
-        let (slot_rot, origin_height) = match self.place_pose(fi) {
-            Some(p) => (world_from_slot.rotation * p.slot_from_part, p.origin_height_m),
-            None => (world_from_slot.rotation * face_up, height_along_normal / 2.0),
-        };
+        // The part rests in its slot in the stable pose with this face up, turned to the slot's
+        // yaw (every offered face has one).
+        let place = self.place_pose(fi).ok_or(Rejection::Unreachable)?;
+        let (slot_rot, origin_height) = (world_from_slot.rotation * place.slot_from_part, place.origin_height_m);
         let part_center_in_slot = Vector3::new(
             world_from_slot.translation.x,
             world_from_slot.translation.y,
