@@ -851,7 +851,8 @@ fn the_part_command_checks_its_predicted_poses_against_drops() {
     assert!(d >= 0.5, "to92: {d}");
     // Its arc in 24 pieces, the collider is the file's hull: the likeliest poses (on the round
     // back rolled 5.1 deg either way, 64.6 % together, 0.19 mm of margin) take a third of the
-    // drops or more (45 %; none at 32 vertices a piece).
+    // drops or more (45 %; a collider of 32 vertices a piece, every other facet, rests none
+    // there).
     let j: serde_json::Value = serde_json::from_str(&part("to92-24", true)).unwrap();
     let on_back: f64 = j["poses"]
         .as_array()

@@ -132,8 +132,8 @@ pub const MAX_PIECES_PER_SHELL: u32 = 16;
 /// (greedily, dropping the vertex whose removal moves the hull least), so a finely tessellated
 /// CAD cylinder costs at most what a 32-sided prism costs. A cylinder of up to 32 sides (the
 /// usual CAD export) keeps every facet, so it rests where its part model, built from the file's
-/// hull, says it rests; at 32 vertices (the built-in 16-sided prism's count) a 24-sided one lost
-/// every other facet and rested up to 10 degrees off its predicted poses.
+/// hull, says it rests (a 24-sided one kept to 32 vertices, every other facet, rests up to 10
+/// degrees off).
 pub const MAX_PIECE_VERTICES: usize = 64;
 /// Most points `decimate`'s greedy simplification starts from: each step builds hulls of all
 /// that are left, so a finely tessellated can (a 500-sided one: 1,000 hull vertices) took

@@ -296,7 +296,7 @@ fn a_meshed_prism_overlaps_as_the_primitive_prism_does() {
 }
 
 #[test]
-fn a_finely_tessellated_cylinder_is_simplified_to_the_builtin_prisms_vertex_count() {
+fn a_finely_tessellated_cylinder_is_simplified_to_a_32_sided_prism() {
     use rapier3d::parry::query::PointQuery;
     // A CAD can: 64 sides, 7 mm radius, 6 mm tall.
     let mesh = crate::part::tessellate::prism_mesh(Vector3::zeros(), 0.007, 0.003, crate::config::Axis::Z, 64);
@@ -323,8 +323,8 @@ fn a_finely_tessellated_cylinder_is_simplified_to_the_builtin_prisms_vertex_coun
         .map(|p| kept.distance_to_local_point(*p, true))
         .fold(0.0, f32::max);
     assert!(worst < 0.1, "a vertex is {worst} mm off");
-    // Negative control: a 16-gon (every fourth ring vertex: the 32 vertices a piece kept
-    // before) fails the bound.
+    // Negative control: a 16-gon (every fourth ring vertex, 32 vertices: the built-in prism's)
+    // fails the bound.
     let coarse: Vec<Vector> = pts
         .iter()
         .enumerate()
