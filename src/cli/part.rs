@@ -399,7 +399,9 @@ pub const SELDOM_CUP_FACE_UP: f64 = 0.05;
 /// resting poses making up less than [`SELDOM_CUP_FACE_UP`] of the likelihood does one look up
 /// within `lean` (a crystal lying on its side, whose only face the cup takes is its top, with its
 /// leads under it: none; a bolt, whose head's top looks up only when it stands on its head), and
-/// the cup takes no strip of a round side.
+/// the cup takes no strip of a round side. In none (a share of 0) no such face can be set down
+/// as held (a face is placeable where a resting pose has it up within the same lean,
+/// [`binpick::grasp::PlacePose::of_face`]), so the grasp selector offers none: nothing is picked.
 fn no_cup_face_up(m: &PartModel, scene: &Scene, sites: &CupSites) -> Option<String> {
     let lean = scene.gripper.max_lean_rad();
     let share = m.graspable_share(lean, sites);
@@ -411,8 +413,9 @@ fn no_cup_face_up(m: &PartModel, scene: &Scene, sites: &CupSites) -> Option<Stri
     }
     Some(if share == 0.0 {
         format!(
-            "in none of its resting poses does a face that takes the cup look up within {:.0} deg: the cell \
-             picks only parts propped up on others (`binpick part` lists the poses)",
+            "in none of its resting poses does a face that takes the cup look up within {:.0} deg: a part held \
+             by one could not be set down as held, so none is grasped and nothing will be picked, not even a \
+             part propped up on others (`binpick part` lists the poses and marks the faces `no pose`)",
             lean.to_degrees()
         )
     } else {

@@ -1048,8 +1048,10 @@ fn crystal_obj(leads: bool) -> String {
 
 /// A crystal whose only face the cup takes is its top, which no resting pose has up (it lies
 /// on its side, or on its top with its leads in the air, its bottom's cup sites blocked by
-/// them): `check` warns, and `part` says no pose and no pile part offers a face. Negative
-/// control: the same body without leads offers its bottom, and nothing is warned.
+/// them): `check` warns that nothing will be picked (a part held by its top could not be set
+/// down as held, so the selector offers it not even propped up on others), and `part` says no pose and no
+/// pile part offers a face. Negative control: the same body without leads offers its bottom,
+/// and nothing is warned.
 #[test]
 fn a_part_with_no_cup_face_up_in_any_pose_is_warned_about() {
     let dir = tempdir().unwrap();
@@ -1059,11 +1061,26 @@ fn a_part_with_no_cup_face_up_in_any_pose_is_warned_about() {
         let v = part_json(dir.path(), &toml, 1);
         let share = v["graspable_share"].as_f64().unwrap();
         let offered = v["pile"]["parts_offering_a_cup_face"].as_u64().unwrap();
-        let warned = stderr(&check).contains("in none of its resting poses does a face");
+        // The message as one line (the terminal wraps it at 110 columns).
+        let message = stderr(&check).split_whitespace().collect::<Vec<_>>().join(" ");
+        let warned =
+            message.contains("in none of its resting poses does a face") && message.contains("nothing will be picked");
         if leads {
             assert!(warned, "{}", stderr(&check));
             assert_eq!((share, offered), (0.0, 0), "{}", v["pile"]);
             assert_eq!(v["warnings"].as_array().unwrap().len(), 1, "{}", v["warnings"]);
+            // The faces the cup reaches (the top) are the ones no pose sets down as held.
+            let sited: Vec<_> = v["faces"]
+                .as_array()
+                .unwrap()
+                .iter()
+                .filter(|f| !f["cup_fit"]["cup_site_mm"].is_null())
+                .collect();
+            assert!(
+                !sited.is_empty() && sited.iter().all(|f| f["cup_fit"]["placeable"] == false),
+                "{}",
+                v["faces"]
+            );
         } else {
             assert!(!warned, "{}", stderr(&check));
             assert!(share > 0.1 && offered > 0, "{share} {}", v["pile"]);
