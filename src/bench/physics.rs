@@ -74,6 +74,12 @@ pub struct MeshPileTiming {
     pub primitive_wall_s: (f64, f64, f64),
     /// Median mesh wall time over median primitive wall time.
     pub ratio: f64,
+    /// Simulated time from the first drop to settled, median of runs, mesh and primitive (s):
+    /// a pile that rolls longer costs more wall time at the same cost per step.
+    pub settle_sim_s: (f64, f64),
+    /// The cost of the colliders and their contacts alone: the median over runs of wall time per
+    /// simulated second, the mesh pile's over the primitive's.
+    pub per_sim_s_ratio: f64,
     /// One agitation of the settled pile and its settling: simulated seconds per wall second,
     /// median of runs, mesh and primitive.
     pub agitation_real_time: (f64, f64),
@@ -193,6 +199,7 @@ fn time_piles(
 ) -> BenchResult<PileRuns> {
     use crate::physics::{HealthError, World, pile::PileOptions};
     let mut walls = Vec::new();
+    let mut sims = Vec::new();
     let mut shakes = Vec::new();
     let mut last = None;
     let mut stops = Vec::new();
@@ -219,6 +226,7 @@ fn time_piles(
         match one() {
             Ok((wall, shake, r)) => {
                 walls.push(wall);
+                sims.push(r.settle_sim_s);
                 shakes.push(shake);
                 last = Some(r);
             }
@@ -226,8 +234,11 @@ fn time_piles(
         }
     }
     let last = last.ok_or_else(|| format!("every run stopped: {}", stops.join("; ")))?;
+    let per_sim: Vec<f64> = walls.iter().zip(&sims).map(|(w, s)| w / s.max(1e-9)).collect();
     Ok(PileRuns {
         wall_s: median(walls),
+        settle_sim_s: median(sims).0,
+        wall_per_sim_s: median(per_sim).0,
         shake_real_time: median(shakes).0,
         last,
         stops,
@@ -237,13 +248,18 @@ fn time_piles(
 /// What [`time_piles`] measured.
 struct PileRuns {
     wall_s: (f64, f64, f64),
+    /// Simulated time to settled, median of runs (s).
+    settle_sim_s: f64,
+    /// Wall time per simulated second, median of runs.
+    wall_per_sim_s: f64,
     shake_real_time: f64,
     last: crate::physics::pile::PileReport,
     stops: Vec<String>,
 }
 
 /// CAD parts beside primitives: A, B and E as meshes beside themselves as primitives; the hex
-/// standoff blank as a mesh (ours, and the raw-mesh VHACD collider before) beside a primitive can.
+/// standoff blank as a mesh (ours, and the raw-mesh VHACD collider before) beside a primitive can;
+/// a 64-sided CAD can beside the primitive can and beside a box of its size.
 pub fn mesh_piles(
     scene: &crate::config::LoadedScene,
     robot: &RobotModel,
@@ -325,6 +341,26 @@ pub fn mesh_piles(
         can_shape.clone(),
         60,
     ));
+    // The same can beside a box of its size: the peer the speed issue names ("a box part of the
+    // same size"), whose flat faces neither roll nor need a polyhedron's contacts.
+    let mut box_wp = can.clone();
+    box_wp.name = "box".into();
+    box_wp.shape.parts = vec![ShapePart {
+        primitive: Primitive::Box,
+        role: PartRole::Body,
+        center_m: [0.0; 3],
+        size_m: Some(can.size_m),
+        radius_m: None,
+        length_m: None,
+        axis: None,
+    }];
+    pairs.push((
+        "can64-mesh".into(),
+        PartShape::from_mesh(&can64_wp, &can64)?,
+        "box".into(),
+        PartShape::build(&box_wp, &crate::config::Source::Embedded)?,
+        60,
+    ));
     pairs.push((
         "hex-mesh, raw VHACD (before)".into(),
         PartShape::from_mesh_raw_vhacd(&hex_wp, &hex)?,
@@ -344,6 +380,8 @@ pub fn mesh_piles(
             mesh_wall_s: m.wall_s,
             primitive_wall_s: p.wall_s,
             ratio: m.wall_s.0 / p.wall_s.0,
+            settle_sim_s: (m.settle_sim_s, p.settle_sim_s),
+            per_sim_s_ratio: m.wall_per_sim_s / p.wall_per_sim_s,
             agitation_real_time: (m.shake_real_time, p.shake_real_time),
             max_penetration_m: (m.last.max_penetration_m, p.last.max_penetration_m),
             pile_height_m: (m.last.pile_height_m, p.last.pile_height_m),
