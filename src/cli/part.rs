@@ -163,6 +163,11 @@ struct PileShare {
     in_tray: usize,
     /// Of those, the parts with a grasp face up whose cup disc is uncovered.
     offered: usize,
+    /// Piles still moving when the pour gave up waiting for them to settle
+    /// ([`binpick::physics::pile::PileReport::settled`]).
+    unsettled: u64,
+    /// The pour's limit on settling, simulated (s).
+    max_settle_s: f64,
     /// The cell's cloud recognition on one capture of each pile, against the truth (`None`
     /// when the cell's recognition is the oracle).
     recognition: Option<RecognitionTotals>,
@@ -237,7 +242,9 @@ fn pile_share(
         .collect();
     for seed in 1..=piles {
         let mut world = sim.world(loaded);
-        world.build_pile(&PileOptions::cells_first_pile(wp.workpiece.pile_count as usize, seed))?;
+        let options = PileOptions::cells_first_pile(wp.workpiece.pile_count as usize, seed);
+        out.max_settle_s = options.max_settle_s;
+        out.unsettled += u64::from(!world.build_pile(&options)?.settled);
         if cloud {
             use binpick::sensor::{Sensor, TruthAtTrigger, capture, evaluate};
             let recognise = |config: &binpick::config::SensorConfig, totals: &mut RecognitionTotals| -> Result<()> {
@@ -616,6 +623,14 @@ pub fn part(a: &PartArgs) -> Result<()> {
                 piles.piles
             ));
         }
+        if piles.unsettled > 0 {
+            super::say(&format!(
+                "{} of its {} piles still moved after {:.0} s simulated: parts that roll on a rim or rock on others, \
+                 which the physics keeps up (it has no rolling resistance; docs/model.md, physics): the cell may see \
+                 them move, and steps them for as long as they do",
+                piles.unsettled, piles.piles, piles.max_settle_s
+            ));
+        }
         if let Some(r) = piles.recognition.as_ref().map(RecognitionTotals::summary) {
             let finer = piles.recognition_finer.as_ref().map(|(px, t)| (*px, t.summary()));
             super::say(&recognition_line(&r, finer.as_ref(), &scene.scene));
@@ -747,6 +762,7 @@ fn print_json(
             "piles": piles.piles,
             "parts_in_tray": piles.in_tray,
             "parts_offering_a_cup_face": piles.offered,
+            "unsettled_piles": piles.unsettled,
             "share": round(piles.share(), 6),
             "recognition": piles.recognition.as_ref().map(RecognitionTotals::summary),
             "recognition_at_twice_the_resolution": piles.recognition_finer.as_ref().map(|(px, t)| serde_json::json!({
