@@ -224,12 +224,12 @@ fn bench_physics(runs: usize, json: bool) -> Result<()> {
     // The second table: the piles' fidelity, and where a wall ratio comes from: the time a pile
     // takes to settle (simulated) or the cost of each simulated second (colliders, contacts).
     println!(
-        "\n{:<22} {:>5}  {:>15}  {:>13}  {:>13}  {:>11}  {:>8}",
+        "\n{:<28} {:>5}  {:>15}  {:>13}  {:>14}  {:>12}  {:>9}",
         "mesh part", "vs", "max_pen_mm m/p", "height_mm m/p", "shake x_rt m/p", "settle_s m/p", "per sim s"
     );
     for m in &b.meshes {
         println!(
-            "{:<22} {:>5}  {:>7.3} {:>7.3}  {:>6.2} {:>6.2}  {:>6.1} {:>6.1}  {:>5.2} {:>5.2}  {:>8.2}",
+            "{:<28} {:>5}  {:>7.3} {:>7.3}  {:>6.2} {:>6.2}  {:>6.1} {:>7.1}  {:>5.2} {:>6.2}  {:>9.2}",
             m.mesh,
             m.primitive,
             m.max_penetration_m.0 * 1e3,
