@@ -1525,7 +1525,15 @@ impl<'a> Cloud<'a> {
         let stride = self.verify_stride(model, pose);
         let (counts, rendered) = self.verify_counts(model, pose, stride)?;
         if stride > 1 && rendered < MIN_GRID_SAMPLES {
-            return self.verify_every(model, pose, 1);
+            // Too few grid points to decide: every pixel decides, its evidence counted in grid
+            // points (each stands for stride^2 pixels), so that it weighs against the
+            // hypotheses verified on the grid as theirs does. In pixels, a small part's turn
+            // that fell back won by four times its due: a tactile switch's quarter turn, 32
+            // pixels against the right pose's 12 grid points (44 pixels).
+            let per_point = (stride * stride) as f64;
+            return self
+                .verify_every(model, pose, 1)
+                .map(|(score, visible, evidence)| (score, visible, (evidence as f64 / per_point).round() as i64));
         }
         counts
     }

@@ -1788,3 +1788,63 @@ fn a_washer_is_fitted_as_a_disc_with_its_bore() {
         "a disc without its bore fits"
     );
 }
+
+/// A 6 x 6 mm tactile switch as a CAD mesh (m, centred on its bounding box): a 6 x 6 x 3.5 mm
+/// body, a 3 x 3 x 1.5 mm button on it, and on two opposite sides two legs each, a 1 mm tab out
+/// of the side at its foot and a 0.3 x 0.7 mm leg 3 mm down from it. Turned a quarter turn
+/// about its axis it looks the same but for its legs, thinner than a pixel.
+fn tactile_switch_mesh() -> crate::part::mesh::Mesh {
+    let mut raw = crate::part::raw::RawMesh::default();
+    let mut cuboid =
+        |lo: [f64; 3], hi: [f64; 3]| push_cuboid(&mut raw, [lo[0], lo[1], lo[2] - 1.1], [hi[0], hi[1], hi[2] - 1.1]);
+    cuboid([-3.0, -3.0, 0.0], [3.0, 3.0, 3.5]);
+    cuboid([-1.5, -1.5, 3.5], [1.5, 1.5, 5.0]);
+    for sx in [-1.0, 1.0] {
+        for y in [-2.25, 2.25] {
+            let (x0, x1) = if sx > 0.0 { (3.0, 4.0) } else { (-4.0, -3.0) };
+            cuboid([x0, y - 0.35, 0.2], [x1, y + 0.35, 0.5]);
+            let (l0, l1) = if sx > 0.0 { (3.7, 4.0) } else { (-4.0, -3.7) };
+            cuboid([l0, y - 0.35, -2.8], [l1, y + 0.35, 0.2]);
+        }
+    }
+    crate::part::repair::repair(&raw, 0.001, "mm").unwrap().0
+}
+
+/// A hypothesis too small for the verification grid is verified at every pixel, and its
+/// evidence counted in grid points, as the grid's hypotheses' are: an upside-down tactile switch
+/// alone on the floor (its legs up) at 24 places and yaws, some verified on the grid and some
+/// at every pixel, gets evidence of one scale, within a factor of 2 of each other. Negative
+/// control: counted in pixels where every pixel decides (the rule before), the same poses'
+/// evidence spread over more than a factor of 3, so a small part's pose that fell back
+/// outweighed one verified on the grid (a tactile switch's quarter turn in a pile: 32 pixels
+/// against the right pose's 12 grid points, 44 pixels).
+#[test]
+fn a_small_part_verified_at_every_pixel_weighs_as_the_grid_does() {
+    let cell = cell();
+    let mesh = tactile_switch_mesh();
+    let pm = mesh_part_model(&mesh, 0.004, 0.0003, 0.0003);
+    let m = CloudModel::of_part_model(&pm);
+    let (mut now, mut before, mut fell_back) = (Vec::new(), Vec::new(), 0);
+    for (k, y) in [3.0, 17.0, 29.0, 41.0, 58.0, 66.0, 77.0, 89.0].iter().enumerate() {
+        for (x, yy) in [(0.0137, 0.0012), (-0.0414, 0.0231), (0.0521, -0.0318)] {
+            let pose = resting_mesh(&cell, &mesh, x + 0.0003 * k as f64, yy, yaw(*y) * roll(180.0));
+            let capture = synthetic_meshes(&cell, &[(&mesh, pose)]);
+            let cloud = Cloud::new(&capture, &cell.camera, &cell.tray);
+            let stride = cloud.verify_stride(&m, &pose);
+            let (grid, rendered) = cloud.verify_counts(&m, &pose, stride).unwrap();
+            let every = cloud.verify_every(&m, &pose, 1).unwrap().2;
+            let back = stride > 1 && rendered < MIN_GRID_SAMPLES;
+            fell_back += usize::from(back);
+            now.push(cloud.verify(&m, &pose).unwrap().2 as f64);
+            before.push(if back { every } else { grid.unwrap().2 } as f64);
+        }
+    }
+    let spread = |v: &[f64]| v.iter().copied().fold(0.0, f64::max) / v.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(
+        fell_back > 0 && fell_back < now.len(),
+        "both ways verified: {fell_back} of {} fell back",
+        now.len()
+    );
+    assert!(now.iter().all(|e| *e > 0.0) && spread(&now) < 2.0, "{now:?}");
+    assert!(spread(&before) > 3.0, "the control: {before:?}");
+}
