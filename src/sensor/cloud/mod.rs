@@ -460,6 +460,11 @@ pub struct CloudDetection {
     /// point-pair features).
     #[serde(skip)]
     yaw_span_rad: f64,
+    /// The verification grid's stride where this hypothesis, too small for the grid, was
+    /// verified at every pixel instead (its evidence counts pixels), else 0 (evidence in the
+    /// model's own units: grid points, or pixels for a part verified at every pixel).
+    #[serde(skip)]
+    fell_back_from: usize,
 }
 
 /// Recognises parts in a capture from the capture, the camera, the pick tray's geometry and the
@@ -1372,7 +1377,19 @@ impl<'a> Cloud<'a> {
                 .any(|(e, d)| *e >= evidence - margin && !model.same_pose(&d.world_from_part, &best.world_from_part));
             (!rival).then(|| (*best).clone())
         };
-        let all: Vec<(f64, &CloudDetection)> = verified.iter().map(|(e, d)| (*e as f64, d)).collect();
+        // Where some of a patch's hypotheses were verified on the grid and some, too small for
+        // it, at every pixel, the latter's evidence counts in grid points too (a grid point
+        // stands for stride^2 pixels): in pixels, a tactile switch's quarter turn that fell back
+        // beat the right pose on the grid, 32 pixels against 12 points (44 pixels).
+        let mixed =
+            verified.iter().any(|(_, d)| d.fell_back_from > 0) && verified.iter().any(|(_, d)| d.fell_back_from == 0);
+        let all: Vec<(f64, &CloudDetection)> = verified
+            .iter()
+            .map(|(e, d)| match d.fell_back_from {
+                s if mixed && s > 1 => (*e as f64 / (s * s) as f64, d),
+                _ => (*e as f64, d),
+            })
+            .collect();
         let (evidence, _) = all.iter().max_by(|a, b| a.0.total_cmp(&b.0))?;
         if let Some(best) = unrivalled(&all, CLOSE_CALL_PX as f64) {
             return Some(refine(best));
@@ -1458,7 +1475,7 @@ impl<'a> Cloud<'a> {
         if model.lowest_along(pose, &self.floor.normal) < self.floor.point.dot(&self.floor.normal) - UNDER_FLOOR_M {
             return Err(0.0);
         }
-        let (score, visible, evidence) = self.verify(model, pose).ok_or(0.0)?;
+        let ((score, visible, evidence), fell_back_from) = self.verify(model, pose).ok_or(0.0)?;
         if score < MIN_SCORE {
             return Err(score);
         }
@@ -1472,6 +1489,7 @@ impl<'a> Cloud<'a> {
                 visible_fraction: visible,
                 curved_side_up: face_up.is_none(),
                 yaw_span_rad: 0.0,
+                fell_back_from,
             },
         ))
     }
@@ -1521,21 +1539,15 @@ impl<'a> Cloud<'a> {
     /// A hypothesis whose grid holds fewer than [`MIN_GRID_SAMPLES`] rendered pixels is verified
     /// at every pixel instead: a small footprint (a DIP standing on its end shows 30 pixels, 8
     /// of them on the grid) would otherwise turn on a pixel or two.
-    fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<Verdict> {
+    /// With the verdict, the grid's stride where it fell back to every pixel (its evidence
+    /// then counts pixels, [`CloudDetection`]'s `fell_back_from`), else 0.
+    fn verify(&self, model: &CloudModel, pose: &Isometry3<f64>) -> Option<(Verdict, usize)> {
         let stride = self.verify_stride(model, pose);
         let (counts, rendered) = self.verify_counts(model, pose, stride)?;
         if stride > 1 && rendered < MIN_GRID_SAMPLES {
-            // Too few grid points to decide: every pixel decides, its evidence counted in grid
-            // points (each stands for stride^2 pixels), so that it weighs against the
-            // hypotheses verified on the grid as theirs does. In pixels, a small part's turn
-            // that fell back won by four times its due: a tactile switch's quarter turn, 32
-            // pixels against the right pose's 12 grid points (44 pixels).
-            let per_point = (stride * stride) as f64;
-            return self
-                .verify_every(model, pose, 1)
-                .map(|(score, visible, evidence)| (score, visible, (evidence as f64 / per_point).round() as i64));
+            return self.verify_every(model, pose, 1).map(|v| (v, stride));
         }
-        counts
+        counts.map(|v| (v, 0))
     }
 
     /// [`Cloud::verify`] on every `stride`-th pixel.
