@@ -908,33 +908,45 @@ fn part_json(dir: &Path, toml: &Path, piles: u32) -> serde_json::Value {
     serde_json::from_str(&stdout(&o)).unwrap()
 }
 
-/// A disc (mm) as OBJ text: a regular prism of `sides` sides, 14 mm across its corners and 6 mm
-/// thick.
-fn disc_obj(sides: usize) -> String {
+/// A prism (mm) as OBJ text: the polygon `ring` (counter-clockwise, x y) from `z0` up to `z1`,
+/// its vertices numbered from 1.
+fn prism_obj(ring: &[(f64, f64)], z0: f64, z1: f64) -> String {
+    let n = ring.len();
     let mut s = String::new();
-    for z in [-3.0, 3.0] {
-        for k in 0..sides {
-            let a = std::f64::consts::TAU * k as f64 / sides as f64;
-            s += &format!("v {:.6} {:.6} {z}\n", 7.0 * a.cos(), 7.0 * a.sin());
+    for z in [z0, z1] {
+        for (x, y) in ring {
+            s += &format!("v {x:.6} {y:.6} {z}\n");
         }
     }
-    for k in 1..sides - 1 {
-        s += &format!("f 1 {} {}\n", k + 2, k + 1);
-        s += &format!("f {} {} {}\n", sides + 1, sides + k + 1, sides + k + 2);
+    for i in 1..n - 1 {
+        s += &format!("f 1 {} {}\n", i + 2, i + 1);
+        s += &format!("f {} {} {}\n", n + 1, n + i + 1, n + i + 2);
     }
-    for k in 0..sides {
-        let j = (k + 1) % sides;
+    for i in 0..n {
+        let j = (i + 1) % n;
         s += &format!(
             "f {} {} {}\nf {} {} {}\n",
-            k + 1,
+            i + 1,
             j + 1,
-            sides + j + 1,
-            k + 1,
-            sides + j + 1,
-            sides + k + 1
+            n + j + 1,
+            i + 1,
+            n + j + 1,
+            n + i + 1
         );
     }
     s
+}
+
+/// A disc (mm) as OBJ text: a regular prism of `sides` sides, 14 mm across its corners and 6 mm
+/// thick.
+fn disc_obj(sides: usize) -> String {
+    let ring: Vec<(f64, f64)> = (0..sides)
+        .map(|k| {
+            let a = std::f64::consts::TAU * k as f64 / sides as f64;
+            (7.0 * a.cos(), 7.0 * a.sin())
+        })
+        .collect();
+    prism_obj(&ring, -3.0, 3.0)
 }
 
 /// A pile of 60 discs 14 mm across and 6 mm thick, 64-sided, does not come to rest within the
@@ -1059,31 +1071,10 @@ fn crystal_obj(leads: bool) -> String {
         }
     }
     let n = ring.len();
-    let mut s = String::new();
-    for z in [0.0, h] {
-        for (x, y) in &ring {
-            s += &format!("v {x:.6} {y:.6} {z}\n");
-        }
-    }
-    for i in 1..n - 1 {
-        s += &format!("f 1 {} {}\n", i + 2, i + 1);
-        s += &format!("f {} {} {}\n", n + 1, n + i + 1, n + i + 2);
-    }
-    for i in 0..n {
-        let j = (i + 1) % n;
-        s += &format!(
-            "f {} {} {}\nf {} {} {}\n",
-            i + 1,
-            j + 1,
-            n + j + 1,
-            i + 1,
-            n + j + 1,
-            n + i + 1
-        );
-    }
+    let mut s = prism_obj(&ring, 0.0, h);
     if leads {
-        for x in [-2.44, 2.44] {
-            let base = 2 * n;
+        for (i, x) in [-2.44, 2.44].into_iter().enumerate() {
+            let base = 2 * n + 8 * i;
             for k in 0..8 {
                 let (dx, dy, z) = (
                     if k & 1 == 0 { -0.215 } else { 0.215 },
