@@ -613,8 +613,15 @@ pub fn part(a: &PartArgs) -> Result<()> {
         }
         print_poses(&m, lean, &sites, &drops);
         if piles.piles > 0 {
+            // A pile that never came to rest is counted where its parts lay at the settle limit:
+            // "settled" would claim what the line below denies.
+            let counted = if piles.unsettled > 0 {
+                format!("parts in the tray at the {:.0} s settle limit", piles.max_settle_s)
+            } else {
+                "settled parts".to_string()
+            };
             super::say(&format!(
-                "simulated piles: {} of {} settled parts ({:.1} %) offer a cup face up with nothing on the cup's disc ({} piles of {}, seeds 1-{})",
+                "simulated piles: {} of {} {counted} ({:.1} %) offer a cup face up with nothing on the cup's disc ({} piles of {}, seeds 1-{})",
                 piles.offered,
                 piles.in_tray,
                 100.0 * piles.share(),
