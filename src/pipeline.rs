@@ -209,10 +209,7 @@ pub fn pile_map(scene: &Scene, height_map: &HeightMap) -> HeightMap {
 pub const OVER_RIM_M: f64 = 0.002;
 
 /// Sense and grasp on one capture (its maps in `sensed`): the ranked grasps for the part to go to
-/// `world_from_slot` with the arm at `q_now`, and the best one not within
-/// [`FAILED_SPOT_RADIUS_M`] of a `failed_spots` entry whose approach pose is clear with the hand
-/// alone and with the part held (a part near a wall can hang into it when lifted: the Place
-/// would have nowhere to start from).
+/// `world_from_slot` with the arm at `q_now`, and the best one as [`choose_grasp`] chooses it.
 pub fn sense_and_grasp(
     ctx: &GraspContext<'_>,
     sensed: &SensedPile,
@@ -224,18 +221,34 @@ pub fn sense_and_grasp(
     let plan = ctx
         .selector
         .select(detections, &sensed.height_map, world_from_slot, q_now);
+    let chosen = choose_grasp(ctx, sensed, detections, &plan, failed_spots, |_| false);
+    GraspChoice { plan, chosen }
+}
+
+/// The best of `plan`'s ranked grasps, among the first [`APPROACH_CANDIDATES`] not within
+/// [`FAILED_SPOT_RADIUS_M`] of a `failed_spots` entry and not `passed_over` (by rank: grasps
+/// whose motions the cycle could not generate), whose approach pose is clear with the hand
+/// alone and with the part held (a part near a wall can hang into it when lifted: the Place
+/// would have nowhere to start from).
+pub fn choose_grasp(
+    ctx: &GraspContext<'_>,
+    sensed: &SensedPile,
+    detections: &[Detection],
+    plan: &GraspPlan,
+    failed_spots: &[Vector3<f64>],
+    passed_over: impl Fn(usize) -> bool,
+) -> Option<ChosenGrasp> {
     // Not where a grasp has just failed: the same spot would fail the same way.
     let tried = |g: &GraspCandidate| {
         failed_spots
             .iter()
             .any(|p| (p - g.world_from_tool.translation.vector).norm() < FAILED_SPOT_RADIUS_M)
     };
-    let mut chosen = None;
     for (rank, g) in plan
         .ranked
         .iter()
         .enumerate()
-        .filter(|(_, g)| !tried(g))
+        .filter(|(rank, g)| !tried(g) && !passed_over(*rank))
         .take(APPROACH_CANDIDATES)
     {
         let env = planning_environment(ctx.scene, &sensed.pile, g);
@@ -253,16 +266,15 @@ pub fn sense_and_grasp(
         let held = RobotSpheres::new(ctx.robot, ctx.scene, Some((tool_from_part, ctx.part_half_extents_m)));
         let q_lifted = JointVector::from(g.q_lifted);
         if CollisionModel::new(ctx.robot, held, env.clone()).free(&q_lifted, &mut PlanStats::default()) {
-            chosen = Some(ChosenGrasp {
+            return Some(ChosenGrasp {
                 rank,
                 grasp: g.clone(),
                 env,
                 model,
             });
-            break;
         }
     }
-    GraspChoice { plan, chosen }
+    None
 }
 
 #[cfg(test)]

@@ -162,10 +162,9 @@ pub enum Planned {
         /// Compute charged (s).
         compute_s: f64,
     },
-    /// The motion (`Pick` or `Place`) could not be generated, and why.
+    /// A grasp's motion (`Pick` or `Place`) could not be generated, and why: the grasp was
+    /// passed over for the next.
     Failed {
-        /// Which motion.
-        motion: &'static str,
         /// Why.
         why: MotionFailure,
     },
@@ -423,7 +422,9 @@ impl fmt::Display for Event {
                     1e3 * compute_s
                 )
             }
-            Event::Planned(Planned::Failed { motion, why }) => write!(f, "{motion} motion: {why}"),
+            Event::Planned(Planned::Failed { why }) => {
+                write!(f, "{} motion: {why}; the grasp passed over", why.motion())
+            }
             Event::Stall { cause, duration_s } => match cause {
                 StallCause::Sensor => write!(f, "waiting for the sensor {duration_s:.3} s"),
                 StallCause::Compute => write!(f, "waiting for compute {duration_s:.3} s"),

@@ -80,6 +80,7 @@ use crate::physics::{HealthError, PartShape, World};
 use crate::robot::{Payload, RobotModel};
 use crate::sensor::{CaptureJob, RecognitionReport, Sensor};
 use crate::servo::Servo;
+use motions::Unprepared;
 use next_pick::Prefetched;
 
 pub use crate::reference::reference_takt;
@@ -731,19 +732,33 @@ impl Run<'_, '_> {
                 .map(|e| (e.figures.detected, e.figures.correct));
             let (prep, wall) = match prepared {
                 Ok(p) => p,
-                Err(_) if blind || taken > 0 => {
+                Err(why) if blind || taken > 0 => {
                     // Nothing graspable among the parts clear of the picks since the capture: the
-                    // cell decides so (charged at the grasp selection's budget) and takes the next
-                    // result; no pick was attempted.
+                    // cell decides so (charged at the grasp selection's budget, and the motions'
+                    // of the grasps it tried) and takes the next result; no pick was attempted.
                     self.st.in_hand = None;
-                    let t = self.st.world.time_s().max(compute_from_s) + self.cell.budgets.grasp_s;
+                    let t = self.st.world.time_s().max(compute_from_s) + self.unprepared_compute_s(why.as_ref());
                     self.idle_until(t)?;
                     self.st.compute_from_s = self.st.world.time_s();
                     continue;
                 }
                 Err(why) => {
                     self.st.in_hand = None;
-                    rec.outcome = why.map_or(Outcome::NothingDetected, Outcome::NothingGraspable);
+                    rec.outcome = match why {
+                        None => Outcome::NothingDetected,
+                        Some(Unprepared::NoGrasp(why)) => Outcome::NothingGraspable(why),
+                        Some(Unprepared::NoMotion { ref failures, .. }) => {
+                            // Grasps were chosen but none could be moved and placed: the compute
+                            // spent on them runs out before the cell decides so.
+                            let t =
+                                self.st.world.time_s().max(compute_from_s) + self.unprepared_compute_s(why.as_ref());
+                            self.idle_until(t)?;
+                            for failure in failures {
+                                self.event(Event::Planned(Planned::Failed { why: failure.clone() }));
+                            }
+                            Outcome::NoMotion(failures[0].clone())
+                        }
+                    };
                     self.event(Event::Outcome(rec.outcome.clone()));
                     self.keep(records, rec);
                     if let Some(end) = self.nothing_to_pick()? {
@@ -759,7 +774,7 @@ impl Run<'_, '_> {
                 .as_ref()
                 .and_then(|e| e.matches.get(prep.grasp.detection).copied().flatten());
             self.st.trays.attempted();
-            let charged = if opts.deterministic { self.cell.budgets } else { wall };
+            let charged = self.cell.charged(wall, prep.passed_over.len());
             if let Some(h) = self.st.in_hand.as_mut() {
                 h.taken += 1;
             }

@@ -1,13 +1,15 @@
 //! Cycle step 2, motion generation: from a recognition result to the Pick and Place motions of
 //! one pick.
 //!
-//! Job: choose the grasp ([`crate::pipeline::sense_and_grasp`]); plan the Pick transfer from
+//! Job: choose the grasp ([`crate::pipeline::choose_grasp`]); plan the Pick transfer from
 //! where the arm is to the approach pose above the grasp in the planning scene of that grasp,
 //! accelerate it under the torque limits less the cell's torque margin inside the certified
 //! corridor, and add the straight descent; then, with the part on the cup (as the controller
 //! believes it: the nominal part at the cup centre), the straight lift, the Place transfer to above the slot (planned with the part's box on the
 //! hand, slowed where the cup's holding force would not hold), the straight descent to the
-//! release pose and the straight retreat. The wall time of each stage is measured.
+//! release pose and the straight retreat. A grasp whose motions cannot be generated is passed
+//! over for the next: a pick starts only with its Place in hand. The wall time of each stage is
+//! measured.
 //!
 //! Units: m, rad, s. Frames: world (`world_from_tool`), the tool frame for the held part
 //! (`tool_from_part`), the flange frame for payloads.
@@ -26,9 +28,10 @@ use super::records::StageCompute;
 use super::sensing::SensedResult;
 use crate::geometry::{NamedBox, SealBudget};
 use crate::grasp::GraspCandidate;
-use crate::pipeline::{GraspContext, NoGrasp, SensedPile, sense_and_grasp};
+use crate::pipeline::{ChosenGrasp, GraspContext, NoGrasp, SensedPile, choose_grasp};
 use crate::planning::{CollisionModel, PlanOptions, RobotSpheres};
 use crate::robot::{JointVector, Payload};
+use crate::sensor::Detection;
 use crate::trajectory::{
     CORRIDOR_CHECK_DT_S, LineLimits, LineMotion, Motion, OverlapCheck, Overlapped, Trajectory, accelerate_in_corridor,
     limit_tool_force, overlap_end, release_lead_s, straight_line,
@@ -194,8 +197,8 @@ pub(super) struct Holding<'a> {
 pub(super) struct Prepared {
     /// The grasp (with where the part goes: `world_from_part_place`).
     pub grasp: GraspCandidate,
-    /// Transfer to the approach pose (or why not).
-    pub pick_transfer: Result<Trajectory, MotionFailure>,
+    /// Transfer to the approach pose.
+    pub pick_transfer: Trajectory,
     /// Straight descent to the grasp.
     pub descent: LineMotion,
     /// The transfer and the descent overlapped, when that is clear and within the torques
@@ -209,13 +212,16 @@ pub(super) struct Prepared {
     /// The lift's acceleration where it is gentle, below the cell's (m/s^2)
     /// (`cycle.gentle_lift_hemmed`).
     pub gentle_lift_m_s2: Option<f64>,
-    /// The Place motion (or why not), generated while the Pick runs.
-    pub place: Result<PlaceMotion, MotionFailure>,
+    /// The Place motion, generated while the Pick runs.
+    pub place: PlaceMotion,
     /// Hand and part as the controller believes them (the nominal part at the cup centre).
     pub held: Payload,
     /// Where the part will sit on the tool, as recognised (`tool_from_part`): the planner's held
     /// part, and what the sensor's self-filter masks with the part on the cup.
     pub tool_from_part: nalgebra::Isometry3<f64>,
+    /// Why the motions of each better-ranked grasp tried before it could not be generated
+    /// ([`Run::prepare`]): each was passed over, its compute spent.
+    pub passed_over: Vec<MotionFailure>,
 }
 
 impl Prepared {
@@ -473,21 +479,73 @@ impl Cell<'_> {
     }
 }
 
+/// Grasps whose motions the cycle tries to generate for one result before it gives up on the
+/// result: the best-ranked clear grasp and the next ones, as a controller tries its candidates.
+pub const MOTION_CANDIDATES: usize = 3;
+
+/// A grasp whose Place pose lies within this of one whose Place could not be generated is passed
+/// over without trying (m, rad): every part goes to the same slot at the same yaw, so another
+/// part held by the same face meets the same joint limits and wrist singularity there.
+const SAME_PLACE_M: f64 = 1e-3;
+const SAME_PLACE_RAD: f64 = 0.02;
+
+/// Why no pick was prepared from a recognition result.
+#[derive(Debug, Clone)]
+pub(super) enum Unprepared {
+    /// No grasp to try (the grasp selector's reason), or the first one tried has no straight
+    /// descent or lift.
+    NoGrasp(NoGrasp),
+    /// Grasps were chosen, but the Pick and Place motions of none of those tried could be
+    /// generated: each one's failure, best-ranked first, and the wall time spent (s; the
+    /// motions' in `grasp_s`, as [`Cell::charged`] counts them).
+    NoMotion {
+        failures: Vec<MotionFailure>,
+        wall: StageCompute,
+    },
+}
+
+impl Cell<'_> {
+    /// The compute charged on the simulation clock for a pick prepared in `wall` (s) after
+    /// `passed_over` grasps whose motions failed: the measured wall time, or in deterministic
+    /// mode the cell's budgets. The motions of a grasp passed over count as grasp selection
+    /// (a grasp is chosen once its Pick and Place motions exist): the Pick starts after them.
+    pub(super) fn charged(&self, wall: StageCompute, passed_over: usize) -> StageCompute {
+        if !self.opts.deterministic {
+            return wall;
+        }
+        let b = self.budgets;
+        StageCompute {
+            grasp_s: b.grasp_s + passed_over as f64 * (b.pick_s + b.place_s),
+            ..b
+        }
+    }
+}
+
 impl Run<'_, '_> {
+    /// The compute charged on the simulation clock for a result from which no pick was
+    /// prepared (s): the grasp selection's budget, and the motions of the grasps tried.
+    pub(super) fn unprepared_compute_s(&self, why: Option<&Unprepared>) -> f64 {
+        match why {
+            Some(Unprepared::NoMotion { failures, wall }) => self.cell.charged(*wall, failures.len()).grasp_s,
+            _ => self.cell.budgets.grasp_s,
+        }
+    }
+
     /// Grasp selection and motion generation for one recognition result (its detections), from
     /// `t_s`, the part to go to place slot `slot_index`; with `retreat` (the last Place's retreat,
     /// not started yet, from the part released in the slot before `slot_index`), the Pick
-    /// overlapped with it where it can be. Returns the motions and the wall time of each stage
-    /// (s), or why nothing can be picked.
+    /// overlapped with it where it can be. A grasp whose Pick or Place motions cannot be generated
+    /// is passed over for the next one (up to [`MOTION_CANDIDATES`]): a pick starts only with its
+    /// Place in hand. Returns the motions and the wall time of each stage (s), or why nothing can
+    /// be picked.
     pub(super) fn prepare(
         &mut self,
         result: &SensedResult,
         t_s: f64,
         slot_index: usize,
         retreat: Option<&LineMotion>,
-    ) -> Result<(Prepared, StageCompute), NoGrasp> {
+    ) -> Result<(Prepared, StageCompute), Unprepared> {
         let cell = self.cell;
-        let robot = cell.robot;
         let wall = Instant::now();
         let (job, detections) = (&result.job, result.detections.as_deref().unwrap_or(&[]));
         let slot = cell.slots[slot_index % cell.slots.len()];
@@ -498,7 +556,7 @@ impl Run<'_, '_> {
         };
         let ctx = GraspContext {
             scene: cell.scene,
-            robot,
+            robot: cell.robot,
             selector: &cell.selector,
             pick_tray: self.st.world.pick_tray(),
             part_half_extents_m: cell.shape.half_extents_m,
@@ -508,25 +566,87 @@ impl Run<'_, '_> {
             Some(s) if s.is_of(&job.capture, ctx.pick_tray) => s,
             _ => SensedPile::new(&ctx, &job.capture, &job.arm),
         };
-        let choice = sense_and_grasp(&ctx, &sensed, detections, &slot, &q_now, &self.st.failed_spots);
-        self.st.sensed = Some(sensed);
+        let plan = ctx.selector.select(detections, &sensed.height_map, &slot, &q_now);
+        let mut spent = StageCompute {
+            grasp_s: wall.elapsed().as_secs_f64(),
+            ..StageCompute::default()
+        };
+        // The grasps tried whose motions failed (by rank), and the place poses that failed.
+        let (mut passed_over, mut failed_places) = (Vec::<usize>::new(), Vec::<Isometry3<f64>>::new());
+        let mut failures = Vec::new();
+        let mut outcome = None;
+        while passed_over.len() < MOTION_CANDIDATES {
+            let wall = Instant::now();
+            let chosen = choose_grasp(&ctx, &sensed, detections, &plan, &self.st.failed_spots, |rank| {
+                let place = &plan.ranked[rank].world_from_tool_place;
+                passed_over.contains(&rank)
+                    || failed_places.iter().any(|p| {
+                        (p.translation.vector - place.translation.vector).norm() < SAME_PLACE_M
+                            && p.rotation.angle_to(&place.rotation) < SAME_PLACE_RAD
+                    })
+            });
+            spent.grasp_s += wall.elapsed().as_secs_f64();
+            let Some(chosen) = chosen else { break };
+            let (rank, place) = (chosen.rank, chosen.grasp.world_from_tool_place);
+            let mut this = StageCompute::default();
+            match self.grasp_motions(chosen, detections, &q_now, slot_index, retreat, &mut this) {
+                Ok(prep) => {
+                    (spent.pick_s, spent.place_s) = (this.pick_s, this.place_s);
+                    outcome = Some((rank, prep));
+                    break;
+                }
+                Err(failure) => {
+                    spent.grasp_s += this.pick_s + this.place_s;
+                    // A failure at the slot passes over its place pose; one at the grasp only
+                    // the grasp.
+                    if failure.at_slot() {
+                        failed_places.push(place);
+                    }
+                    passed_over.push(rank);
+                    failures.push(failure);
+                }
+            }
+        }
         self.obs.recognised(&Recognised {
             t_s,
             detections,
             judged: result.evaluation.as_ref().map(|e| &e.matches[..]),
-            ranked: &choice.plan.ranked,
-            chosen: choice.chosen.as_ref().map(|c| c.rank),
+            ranked: &plan.ranked,
+            chosen: outcome.as_ref().map(|(rank, _)| *rank),
         });
-        let Some(chosen) = choice.chosen else {
-            return Err(crate::pipeline::why_none(&choice.plan));
-        };
+        self.st.sensed = Some(sensed);
+        match (outcome, failures.first()) {
+            (Some((_, mut prep)), _) => {
+                prep.passed_over = failures;
+                Ok((prep, spent))
+            }
+            (None, None) => Err(Unprepared::NoGrasp(crate::pipeline::why_none(&plan))),
+            (None, Some(MotionFailure::PickLine)) if failures.len() == 1 => {
+                Err(Unprepared::NoGrasp(NoGrasp::NoStraightDescent))
+            }
+            (None, Some(_)) => Err(Unprepared::NoMotion { failures, wall: spent }),
+        }
+    }
+
+    /// The Pick and Place motions of the `chosen` grasp (see [`Run::prepare`]), their wall time
+    /// added to `spent`; or why not.
+    fn grasp_motions(
+        &self,
+        chosen: ChosenGrasp,
+        detections: &[Detection],
+        q_now: &JointVector,
+        slot_index: usize,
+        retreat: Option<&LineMotion>,
+        spent: &mut StageCompute,
+    ) -> Result<Prepared, MotionFailure> {
+        let cell = self.cell;
+        let robot = cell.robot;
         let (grasp, env, empty) = (chosen.grasp, chosen.env, chosen.model);
-        let grasp_s = wall.elapsed().as_secs_f64();
         // Pick: transfer to the approach pose, straight descent.
         let wall = Instant::now();
         let mut rng = crate::rng::stream(cell.opts.seed.wrapping_add(self.st.world.steps()), "planner");
         let hand = cell.hand;
-        let (pick_transfer, descent, pick_blend) = cell.pick_motion(&q_now, &grasp, &empty, &mut rng);
+        let (pick_transfer, descent, pick_blend) = cell.pick_motion(q_now, &grasp, &empty, &mut rng);
         // The transfer starts while the last retreat ends, where the cell, the pile as seen and
         // the parts placed in this place tray allow (each where the cell put it: its slot, its
         // box grown by [`PLACED_PART_MARGIN_M`]); the retreat ends before the descent starts.
@@ -534,7 +654,8 @@ impl Run<'_, '_> {
             (Some(r), Ok(t), Some(d)) => cell.retreat_blend(r, t, d, pick_blend.as_ref(), slot_index, &empty),
             _ => None,
         };
-        let pick_s = wall.elapsed().as_secs_f64();
+        spent.pick_s += wall.elapsed().as_secs_f64();
+        let pick_transfer = pick_transfer?;
         // Place: with the part on the cup, its centre of mass where the recognition put it.
         let wall = Instant::now();
         let world_from_part = detections[grasp.detection].world_from_part;
@@ -581,30 +702,25 @@ impl Run<'_, '_> {
             &holding,
             &mut rng,
         );
-        let place_s = wall.elapsed().as_secs_f64();
+        spent.place_s += wall.elapsed().as_secs_f64();
         let (Some(descent), Some(lift)) = (descent, lift) else {
-            return Err(NoGrasp::NoStraightDescent);
+            return Err(MotionFailure::PickLine);
         };
-        Ok((
-            Prepared {
-                grasp,
-                pick_transfer,
-                descent,
-                pick_blend,
-                retreat_blend,
-                lift,
-                gentle_lift_m_s2: (lift_limits.accel_m_s2 < cell.scene.cycle.line_accel_m_s2)
-                    .then_some(lift_limits.accel_m_s2),
-                place,
-                held,
-                tool_from_part,
-            },
-            StageCompute {
-                grasp_s,
-                pick_s,
-                place_s,
-            },
-        ))
+        let place = place?;
+        Ok(Prepared {
+            grasp,
+            pick_transfer,
+            descent,
+            pick_blend,
+            retreat_blend,
+            lift,
+            gentle_lift_m_s2: (lift_limits.accel_m_s2 < cell.scene.cycle.line_accel_m_s2)
+                .then_some(lift_limits.accel_m_s2),
+            place,
+            held,
+            tool_from_part,
+            passed_over: Vec::new(),
+        })
     }
 }
 

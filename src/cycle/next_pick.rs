@@ -199,7 +199,7 @@ impl Run<'_, '_> {
         let now = self.st.world.time_s();
         let taken_here = prepared.and_then(|(prep, wall)| {
             let head_s = prep.retreat_blend.as_ref()?.motion.start_s();
-            let charged = if opts.deterministic { cell.budgets } else { wall };
+            let charged = cell.charged(wall, prep.passed_over.len());
             let pick_ready = compute_from_s + charged.grasp_s + charged.pick_s;
             let exposing = self
                 .st

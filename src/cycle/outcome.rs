@@ -192,6 +192,8 @@ impl fmt::Display for WrongPose {
 pub enum MotionFailure {
     /// No path for the Pick transfer.
     PickTransfer(PlanError),
+    /// No joint path along the Pick's straight descent to the grasp or its lift.
+    PickLine,
     /// No joint solution above the slot.
     PlacePose(IkError),
     /// No path for the Place transfer.
@@ -202,10 +204,30 @@ pub enum MotionFailure {
     PlaceRetreat,
 }
 
+impl MotionFailure {
+    /// Whether it failed at the slot (above it, or on the lines into and out of it), where any
+    /// grasp whose part is set down in the same pose fails the same way.
+    pub fn at_slot(&self) -> bool {
+        matches!(
+            self,
+            MotionFailure::PlacePose(_) | MotionFailure::PlaceDescent | MotionFailure::PlaceRetreat
+        )
+    }
+
+    /// The motion that failed: `Pick` or `Place`.
+    pub fn motion(&self) -> &'static str {
+        match self {
+            MotionFailure::PickTransfer(_) | MotionFailure::PickLine => "Pick",
+            _ => "Place",
+        }
+    }
+}
+
 impl fmt::Display for MotionFailure {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         match self {
             MotionFailure::PickTransfer(e) => write!(f, "pick transfer: {e}"),
+            MotionFailure::PickLine => f.write_str("pick descent or lift: no joint path along the line"),
             MotionFailure::PlacePose(e) => write!(f, "place pose: {e}"),
             MotionFailure::PlaceTransfer(e) => write!(f, "place transfer: {e}"),
             MotionFailure::PlaceDescent => f.write_str("place descent: no joint path along the line"),

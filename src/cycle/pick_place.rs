@@ -148,35 +148,30 @@ impl Run<'_, '_> {
         let free = self.st.arm.free_s;
         rec.stall_sensor_s = (ready_s.min(pick_ready) - free).max(0.0);
         rec.stall_compute_s = (pick_ready - free.max(ready_s)).max(0.0);
-        let pick_planned = match &prep.pick_transfer {
-            Ok(t) => Planned::Pick {
-                transfer_s: t.duration_s(),
-                descent_s: prep.descent.duration_s(),
-                compute_s: charged.pick_s,
-            },
-            Err(e) => Planned::Failed {
-                motion: "Pick",
-                why: e.clone(),
-            },
+        let pick_planned = Planned::Pick {
+            transfer_s: prep.pick_transfer.duration_s(),
+            descent_s: prep.descent.duration_s(),
+            compute_s: charged.pick_s,
         };
-        let place_planned = match &prep.place {
-            Ok(p) => Planned::Place {
-                lift_s: prep.lift.duration_s(),
-                gentle_lift_m_s2: prep.gentle_lift_m_s2,
-                transfer_s: p.transfer.duration_s(),
-                descent_s: p.descent.duration_s(),
-                retreat_s: p.retreat.duration_s(),
-                compute_s: charged.place_s,
-            },
-            Err(e) => Planned::Failed {
-                motion: "Place",
-                why: e.clone(),
-            },
+        let p = &prep.place;
+        let place_planned = Planned::Place {
+            lift_s: prep.lift.duration_s(),
+            gentle_lift_m_s2: prep.gentle_lift_m_s2,
+            transfer_s: p.transfer.duration_s(),
+            descent_s: p.descent.duration_s(),
+            retreat_s: p.retreat.duration_s(),
+            compute_s: charged.place_s,
         };
-        let mut stages = vec![
+        // The grasps passed over before this one: their motions failed as the compute ran.
+        let mut stages: Vec<(f64, Event)> = prep
+            .passed_over
+            .iter()
+            .map(|why| (grasp_done, Event::Planned(Planned::Failed { why: why.clone() })))
+            .collect();
+        stages.extend([
             (pick_ready, Event::Planned(pick_planned)),
             (place_ready, Event::Planned(place_planned)),
-        ];
+        ]);
         if rec.stall_sensor_s > 0.0 {
             self.span(Stage::Stall, free, ready_s, "waiting for the sensor");
             let duration_s = rec.stall_sensor_s;
@@ -260,10 +255,7 @@ impl Run<'_, '_> {
         let hand = self.cell.hand;
         self.st.planned_end_q = None;
         self.event(Event::PickStart);
-        let transfer = match &prep.pick_transfer {
-            Ok(t) => t,
-            Err(e) => return Ok(Some(Outcome::NoMotion(e.clone()))),
-        };
+        let transfer = &prep.pick_transfer;
         self.st.gripper_events.clear();
         rec.overlaps.pick_descent_s = prep.pick_blend.as_ref().map_or(0.0, |b| b.both().duration_s());
         if let Some(rb) = &prep.retreat_blend {
@@ -366,9 +358,9 @@ impl Run<'_, '_> {
         // when the transfer would start: the Pick ends where the transfer starts.
         let now = self.st.world.time_s();
         let lift_blend = match &prep.place {
-            Ok(PlaceMotion {
+            PlaceMotion {
                 lift_blend: Some(b), ..
-            }) if place_ready <= now + b.start_s() + 1e-9 => Some(b),
+            } if place_ready <= now + b.start_s() + 1e-9 => Some(b),
             _ => None,
         };
         let lift = match lift_blend {
@@ -396,10 +388,7 @@ impl Run<'_, '_> {
             self.idle_until(place_ready)?;
             self.st.arm.servo.qd = JointVector::zeros();
         }
-        let place = match &prep.place {
-            Ok(p) => p,
-            Err(e) => return Ok((Outcome::NoMotion(e.clone()), None)),
-        };
+        let place = &prep.place;
         let up = &place.retreat;
         rec.suction_speed_factor = place.suction_speed_factor;
         rec.overlaps.place_descent_s = place.descent_blend.as_ref().map_or(0.0, |d| d.both().duration_s());

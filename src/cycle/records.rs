@@ -142,7 +142,8 @@ impl PickRecord {
 /// motion generation. Written as `[grasp, pick, place]` in result files.
 #[derive(Debug, Clone, Copy, Default, PartialEq)]
 pub struct StageCompute {
-    /// Grasp selection (s).
+    /// Grasp selection (s), with the motions of the grasps passed over because their motions
+    /// failed.
     pub grasp_s: f64,
     /// Pick motion generation (s).
     pub pick_s: f64,

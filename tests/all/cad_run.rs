@@ -49,3 +49,119 @@ fn a_hex_standoff_is_recognised_grasped_and_placed() {
     assert_eq!(s.faults.protective_stops, 0, "{outcomes:?}");
     assert_eq!(s.misrecognised, 0, "{outcomes:?}");
 }
+
+/// Axis-aligned boxes (mm, `[x0, y0, z0, x1, y1, z1]`) as one OBJ of closed bodies, as CAD
+/// exporters write a part of several solids.
+fn boxes_obj(boxes: &[[f64; 6]]) -> String {
+    let mut s = String::new();
+    for (n, b) in boxes.iter().enumerate() {
+        for z in [b[2], b[5]] {
+            for (x, y) in [(b[0], b[1]), (b[3], b[1]), (b[3], b[4]), (b[0], b[4])] {
+                s += &format!("v {x} {y} {z}\n");
+            }
+        }
+        let o = 8 * n + 1;
+        for [i, j, k, l] in [
+            [0, 3, 2, 1],
+            [4, 5, 6, 7],
+            [0, 1, 5, 4],
+            [1, 2, 6, 5],
+            [2, 3, 7, 6],
+            [3, 0, 4, 7],
+        ] {
+            s += &format!("f {} {} {}\nf {} {} {}\n", o + i, o + j, o + k, o + i, o + k, o + l);
+        }
+    }
+    s
+}
+
+/// A through-hole RJ45 jack (mm): a 15.9 x 21.3 x 13.5 mm housing with its plug's cavity open at
+/// the front, eight 3 mm pins and two 3.2 mm posts beneath.
+fn jack_obj() -> String {
+    let (w, d, h, cw, ch) = (15.9, 21.3, 13.5, 11.7, 8.0);
+    let (y0, cavity_end) = (-d / 2.0, -d / 2.0 + 14.0);
+    let mut boxes = vec![
+        [-w / 2.0, cavity_end, 0.0, w / 2.0, d / 2.0, h],
+        [-w / 2.0, y0, 0.0, -cw / 2.0, cavity_end, h],
+        [cw / 2.0, y0, 0.0, w / 2.0, cavity_end, h],
+        [-cw / 2.0, y0, 0.0, cw / 2.0, cavity_end, (h - ch) / 2.0],
+        [-cw / 2.0, y0, (h + ch) / 2.0, cw / 2.0, cavity_end, h],
+    ];
+    for k in 0..8 {
+        let x = -4.445 + 1.27 * k as f64;
+        let y = if k % 2 == 1 { 4.0 } else { 6.54 };
+        boxes.push([x - 0.25, y - 0.25, -3.0, x + 0.25, y + 0.25, 0.0]);
+    }
+    for x in [-5.715, 5.715] {
+        boxes.push([x - 1.6, -1.6, -3.2, x + 1.6, 1.6, 0.0]);
+    }
+    boxes_obj(&boxes)
+}
+
+/// Every Place motion the cycle planned, and whether it failed.
+#[derive(Default)]
+struct Planned {
+    failed: Vec<String>,
+    planned: usize,
+}
+
+impl binpick::cycle::Observer for Planned {
+    fn event(&mut self, _t_s: f64, _pick: Option<usize>, event: &binpick::cycle::Event) {
+        match event {
+            binpick::cycle::Event::Planned(binpick::cycle::Planned::Failed { why }) => {
+                self.failed.push(why.to_string())
+            }
+            binpick::cycle::Event::Planned(binpick::cycle::Planned::Place { .. }) => self.planned += 1,
+            _ => {}
+        }
+    }
+}
+
+/// A pick starts only with its Place in hand. An RJ45 jack taken by its top is set down on its
+/// pins, the tool 2.2 deg off vertical, and in the first slot the straight descent into it
+/// passes the arm's wrist singularity: no joint path. The cell passes such a grasp over for the
+/// next (another face, another place pose) and places the part, where it used to grasp the jack,
+/// find no Place, and let it go (seed 1: 5 of 21 picks, 76 % success). The case is exercised:
+/// the cell's first choice had no Place (the failure is logged); no pick grasps a part that it
+/// does not place or drop.
+#[test]
+fn a_grasp_whose_place_cannot_be_generated_is_passed_over() {
+    let dir = crate::support::tempdir().unwrap();
+    std::fs::write(dir.path().join("jack.obj"), jack_obj()).unwrap();
+    let toml = dir.path().join("jack.toml");
+    std::fs::write(
+        &toml,
+        "name = \"jack\"\nkind = \"RJ45 jack\"\nmass_kg = 0.004\nfriction = 0.4\nrestitution = 0.1\n\
+         pile_count = 25\n\n[shape]\nkind = \"mesh\"\nmesh_file = \"jack.obj\"\nunits = \"mm\"\n\n\
+         [grasp]\nyaw_symmetry_deg = 360.0\nplace_yaw_deg = 0.0\nface_margin_m = 0.0005\n",
+    )
+    .unwrap();
+    let wp = LoadedWorkpiece::resolve(toml.to_str().unwrap()).unwrap();
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let opts = RunOptions {
+        picks: 2,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: true,
+    };
+    let mut seen = Planned::default();
+    let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
+    let outcomes: Vec<String> = r
+        .records
+        .iter()
+        .map(|p| format!("{} {} sealed {:?}", p.outcome.name(), p.outcome.detail(), p.sealed))
+        .collect();
+    assert!(
+        seen.failed.iter().any(|why| why.contains("place descent")),
+        "no Place failed: the case is not exercised ({:?}; {outcomes:?})",
+        seen.failed
+    );
+    assert_eq!(r.tally.placed, 2, "{outcomes:?}");
+    for p in &r.records {
+        let grasped_and_kept = p.sealed == Some(true) && p.outcome.name() == "no_motion";
+        assert!(!grasped_and_kept, "a part grasped without a Place: {outcomes:?}");
+    }
+    assert!(seen.planned >= 2, "{} Place motions planned", seen.planned);
+}
