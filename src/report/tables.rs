@@ -191,7 +191,8 @@ pub fn picks_table(records: &[PickRecord]) -> String {
             }
         });
         let err = r.placement_error_mm.map_or("-".to_string(), |e| format!("{e:.2}"));
-        let torque = if r.outcome.set_out() {
+        // Joint 0 is no joint: no motion was played (a pick whose motions could not be generated).
+        let torque = if r.outcome.set_out() && r.peak_demand_joint > 0 {
             format!("{:.0} % J{}", 100.0 * r.peak_demand_ratio, r.peak_demand_joint)
         } else {
             "-".into()
@@ -329,6 +330,19 @@ mod tests {
         // Under a head: the text's lines start at the indent.
         assert_eq!(wrap_under("v1: ", 4, "a = 1, b = 2", 10), "v1: a = 1,\n    b = 2\n");
         assert_eq!(wrap_under("", 2, "x y", 3), "  x\n  y\n");
+    }
+
+    /// A pick whose motions could not be generated played none: its torque column is "-", not a
+    /// "joint 0" (control: a pick that moved shows its joint).
+    #[test]
+    fn a_pick_with_no_motion_played_shows_no_torque() {
+        let mut a = PickRecord::new(1, 1.0, 2.1);
+        a.outcome = Outcome::NoMotion(crate::cycle::MotionFailure::PlaceDescent);
+        let mut b = a.clone();
+        (b.peak_demand_ratio, b.peak_demand_joint) = (0.83, 3);
+        let text = picks_table(&[a, b]);
+        assert!(!text.contains("J0"), "{text}");
+        assert!(text.contains("83 % J3"), "{text}");
     }
 
     /// Every line of the printed table fits its width but one holding a word longer than a line
