@@ -55,21 +55,13 @@ fn a_hex_standoff_is_recognised_grasped_and_placed() {
 fn boxes_obj(boxes: &[[f64; 6]]) -> String {
     let mut s = String::new();
     for (n, b) in boxes.iter().enumerate() {
-        for z in [b[2], b[5]] {
-            for (x, y) in [(b[0], b[1]), (b[3], b[1]), (b[3], b[4]), (b[0], b[4])] {
-                s += &format!("v {x} {y} {z}\n");
-            }
+        // Corners numbered by their bits, as `BOX_TRIANGLES` winds them.
+        for i in 0..8 {
+            let (x, y, z) = (b[3 * (i & 1)], b[1 + 3 * ((i >> 1) & 1)], b[2 + 3 * ((i >> 2) & 1)]);
+            s += &format!("v {x} {y} {z}\n");
         }
-        let o = 8 * n + 1;
-        for [i, j, k, l] in [
-            [0, 3, 2, 1],
-            [4, 5, 6, 7],
-            [0, 1, 5, 4],
-            [1, 2, 6, 5],
-            [2, 3, 7, 6],
-            [3, 0, 4, 7],
-        ] {
-            s += &format!("f {} {} {}\nf {} {} {}\n", o + i, o + j, o + k, o + i, o + k, o + l);
+        for t in crate::support::BOX_TRIANGLES {
+            s += &format!("f {} {} {}\n", 8 * n + t[0] + 1, 8 * n + t[1] + 1, 8 * n + t[2] + 1);
         }
     }
     s
@@ -98,14 +90,14 @@ fn jack_obj() -> String {
     boxes_obj(&boxes)
 }
 
-/// Every Place motion the cycle planned, and whether it failed.
+/// The cycle's motion plans: the Place motions generated, and the failures passed over.
 #[derive(Default)]
-struct Planned {
+struct PlannedMotions {
     failed: Vec<String>,
     planned: usize,
 }
 
-impl binpick::cycle::Observer for Planned {
+impl binpick::cycle::Observer for PlannedMotions {
     fn event(&mut self, _t_s: f64, _pick: Option<usize>, event: &binpick::cycle::Event) {
         match event {
             binpick::cycle::Event::Planned(binpick::cycle::Planned::Failed { why }) => {
@@ -146,7 +138,7 @@ fn a_grasp_whose_place_cannot_be_generated_is_passed_over() {
         stop: None,
         keep_records: true,
     };
-    let mut seen = Planned::default();
+    let mut seen = PlannedMotions::default();
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
     let outcomes: Vec<String> = r
         .records
