@@ -459,6 +459,13 @@ pub struct CycleConfig {
     pub line_speed_m_s: f64,
     /// Tool acceleration of the straight lines before the torque and suction checks [m/s^2].
     pub line_accel_m_s2: f64,
+    /// A straight line the arm cannot follow exactly because it passes the wrist's singularity
+    /// (J5 = 0, where J4 and J6 would have to spin) moves the wrist joints linearly from end
+    /// to end instead, the tool centre point still on the line, if the tool's orientation then
+    /// stays within this of the line's (deg), as industrial controllers offer (docs/model.md,
+    /// "Straight lines"). Absent: 0, such a line fails.
+    #[serde(default)]
+    pub wrist_deviation_max_deg: f64,
     /// The vacuum is switched on this long before the descent ends, so it builds up while the
     /// cup closes the last millimetres (s) (0: at contact).
     pub vacuum_lead_s: f64,

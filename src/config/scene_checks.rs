@@ -264,6 +264,12 @@ impl Scene {
         c.non_negative("cycle.approach_above_rim_m", self.cycle.approach_above_rim_m);
         c.positive("cycle.line_speed_m_s", self.cycle.line_speed_m_s);
         c.positive("cycle.line_accel_m_s2", self.cycle.line_accel_m_s2);
+        c.within(
+            "cycle.wrist_deviation_max_deg",
+            self.cycle.wrist_deviation_max_deg,
+            0.0,
+            10.0,
+        );
         c.non_negative("cycle.vacuum_lead_s", self.cycle.vacuum_lead_s);
         c.non_negative("cycle.release_lead_s", self.cycle.release_lead_s);
         if let Some(h) = self.cycle.gentle_lift_hemmed {

@@ -267,6 +267,7 @@ impl Cell<'_> {
         LineLimits {
             speed_m_s: self.scene.cycle.line_speed_m_s,
             accel_m_s2: self.scene.cycle.line_accel_m_s2,
+            wrist_deviation_max_rad: self.scene.cycle.wrist_deviation_max_deg.to_radians(),
         }
     }
 
@@ -746,6 +747,7 @@ mod tests {
         let line = LineLimits {
             speed_m_s: 1.0,
             accel_m_s2: 20.0,
+            wrist_deviation_max_rad: 0.0,
         };
         let down = UnitQuaternion::from_axis_angle(&Vector3::x_axis(), std::f64::consts::PI);
         let a = |gentle_above: Option<f64>, hemmed: f64, mass_kg: f64| {
@@ -795,6 +797,7 @@ mod tests {
         let line = LineLimits {
             speed_m_s: 0.5,
             accel_m_s2: 5.0,
+            wrist_deviation_max_rad: 0.0,
         };
         let dynamics = robot.dynamics(&Payload::point(0.5, Vector3::zeros()));
         let descent = straight_line(&robot, &dynamics, &home, &above, &below, &line, None).unwrap();

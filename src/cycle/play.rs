@@ -425,6 +425,7 @@ impl Run<'_, '_> {
             let limits = LineLimits {
                 speed_m_s: 0.1,
                 accel_m_s2: 1.0,
+                ..self.cell.line_limits()
             };
             if let Some(line) = straight_line(
                 &self.cell.accel_robot,

@@ -21,6 +21,10 @@ pub const WRIST_SINGULAR_EPS: f64 = 1e-9;
 /// Below this radial distance (m) of the wrist centre from the J1 axis the shoulder is singular.
 pub const SHOULDER_SINGULAR_EPS_M: f64 = 1e-9;
 const STRUCTURE_TOL: f64 = 1e-9;
+/// [`RobotModel::ik_tool_position_wrist_held`] converges to this tool position error (m) ...
+pub const WRIST_HELD_POSITION_M: f64 = 1e-6;
+/// ... within this many Newton steps.
+const WRIST_HELD_ITERATIONS: usize = 8;
 
 /// Why an inverse kinematics query has no answer.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -381,6 +385,31 @@ impl RobotModel {
     /// The in-limit solution nearest `seed` that puts the tool at `world_from_tool`.
     pub fn ik_tool_nearest(&self, world_from_tool: &Isometry3<f64>, seed: &JointVector) -> Result<IkSolution, IkError> {
         self.ik_flange_nearest(&self.base_from_flange_for_tool(world_from_tool), seed)
+    }
+
+    /// The joints that put the tool centre point at `world_tool_m` with the wrist joints (J4-J6)
+    /// held at `seed`'s, the arm joints (J1-J3) found by Newton's method from `seed`'s (so on its
+    /// branch): the tool's orientation is whatever the wrist then gives. `None` if it does not
+    /// converge to [`WRIST_HELD_POSITION_M`] or leaves the joint limits. A controller's straight
+    /// line with the wrist joints interpolated ([`crate::trajectory::straight_line`]) needs it.
+    pub fn ik_tool_position_wrist_held(&self, world_tool_m: &Vector3<f64>, seed: &JointVector) -> Option<JointVector> {
+        let mut q = *seed;
+        for _ in 0..WRIST_HELD_ITERATIONS {
+            let err = world_tool_m - self.world_from_tool(&q).translation.vector;
+            if err.norm() < WRIST_HELD_POSITION_M {
+                return self.within_limits(&q, 0.0).then_some(q);
+            }
+            let err_base = self.world_from_base.rotation.inverse() * err;
+            let jac = self.jacobian_tool(&q).fixed_view::<3, 3>(0, 0).into_owned();
+            let step = jac.lu().solve(&err_base)?;
+            if !step.iter().all(|v| v.is_finite()) {
+                return None;
+            }
+            for i in 0..3 {
+                q[i] += step[i];
+            }
+        }
+        None
     }
 }
 

@@ -49,6 +49,11 @@ pub struct LineLimits {
     pub speed_m_s: f64,
     /// Tool acceleration [m/s^2].
     pub accel_m_s2: f64,
+    /// Where the exact inverse kinematics cannot follow the line (it passes the wrist's
+    /// singularity, J5 = 0, where J4 and J6 would spin), the line may move the wrist joints
+    /// (J4-J6) linearly from end to end, the tool centre point still on the line, as long as
+    /// the tool's orientation stays within this of the line's [rad] (0: never; the line fails).
+    pub wrist_deviation_max_rad: f64,
 }
 
 /// A straight tool line (descent, lift, retreat) with a trapezoidal speed profile along it,
@@ -94,8 +99,9 @@ impl LineMotion {
 /// plant's model error need) and, with `seal`, what a part on the suction cup asks of it within
 /// its budget (the line's acceleration bounded, before the torques are checked, so that it holds
 /// at nine rotations along the line, accelerating and braking).
-/// `None` if the inverse kinematics fails along the line (limits, singularity) or a joint would
-/// jump (a branch change).
+/// Where the inverse kinematics fails along the line (limits, singularity) or a joint would jump
+/// (a branch change), the wrist joints are interpolated within `limits.wrist_deviation_max_rad`
+/// ([`wrist_interpolated_path`]); `None` if that fails too.
 pub fn straight_line(
     robot: &RobotModel,
     dynamics: &DynamicsModel,
@@ -136,28 +142,9 @@ pub fn straight_line(
             (d / length).clamp(0.0, 1.0)
         };
         let n = (duration / LINE_DT_S).ceil() as usize;
-        let mut qs = Vec::with_capacity(n + 1);
-        let mut q = *q_from;
-        for k in 0..=n {
-            let pose = from.lerp_slerp(to, s_at(k as f64 * LINE_DT_S));
-            let mut next = robot.ik_tool_nearest(&pose, &q).ok()?.q;
-            if k > 0 && next[4].abs() < WRIST_SINGULAR_RAD {
-                // Near the wrist singularity (J5 ~ 0) only J4 + J6 is well determined and the
-                // solver's J4 is noise: keep J4, give J6 the sum, if the pose still matches.
-                let mut kept = next;
-                kept[5] += next[3] - q[3];
-                kept[3] = q[3];
-                let err = robot.world_from_tool(&kept).inverse() * pose;
-                if err.translation.vector.norm() < WRIST_FIX_POSITION_M && err.rotation.angle() < WRIST_FIX_ANGLE_RAD {
-                    next = kept;
-                }
-            }
-            if k > 0 && (next - q).amax() > MAX_JOINT_STEP_RAD {
-                return None;
-            }
-            q = next;
-            qs.push(q);
-        }
+        let s_k: Vec<f64> = (0..=n).map(|k| s_at(k as f64 * LINE_DT_S)).collect();
+        let qs = exact_path(robot, q_from, from, to, &s_k)
+            .or_else(|| wrist_interpolated_path(robot, q_from, from, to, &s_k, limits.wrist_deviation_max_rad))?;
         let samples: Vec<Sample> = (0..=n)
             .map(|k| {
                 let (a, b) = (qs[k.saturating_sub(1)], qs[(k + 1).min(n)]);
@@ -201,6 +188,81 @@ pub fn straight_line(
         accel *= LINE_SLOWDOWN;
     }
     None
+}
+
+/// The joints along the line from `from` (the arm at `q_from`) to `to` at the path parameters
+/// `s_k` (0 to 1), by inverse kinematics, each sample nearest the one before; `None` if the
+/// inverse kinematics fails or a joint would jump.
+fn exact_path(
+    robot: &RobotModel,
+    q_from: &JointVector,
+    from: &nalgebra::Isometry3<f64>,
+    to: &nalgebra::Isometry3<f64>,
+    s_k: &[f64],
+) -> Option<Vec<JointVector>> {
+    let mut qs = Vec::with_capacity(s_k.len());
+    let mut q = *q_from;
+    for (k, s) in s_k.iter().enumerate() {
+        let pose = from.lerp_slerp(to, *s);
+        let mut next = robot.ik_tool_nearest(&pose, &q).ok()?.q;
+        if k > 0 && next[4].abs() < WRIST_SINGULAR_RAD {
+            // Near the wrist singularity (J5 ~ 0) only J4 + J6 is well determined and the
+            // solver's J4 is noise: keep J4, give J6 the sum, if the pose still matches.
+            let mut kept = next;
+            kept[5] += next[3] - q[3];
+            kept[3] = q[3];
+            let err = robot.world_from_tool(&kept).inverse() * pose;
+            if err.translation.vector.norm() < WRIST_FIX_POSITION_M && err.rotation.angle() < WRIST_FIX_ANGLE_RAD {
+                next = kept;
+            }
+        }
+        if k > 0 && (next - q).amax() > MAX_JOINT_STEP_RAD {
+            return None;
+        }
+        q = next;
+        qs.push(q);
+    }
+    Some(qs)
+}
+
+/// The line with its wrist joints interpolated, as industrial controllers offer for straight
+/// lines through the wrist's singularity (Mitsubishi's MVS "3-axis XYZ", FANUC's Wjnt, KUKA's
+/// joint orientation type): J4-J6 move linearly from their values at `from` (`q_from`'s) to
+/// those of the solution at `to` nearest `q_from`, the arm joints J1-J3 keep the tool centre
+/// point on the line ([`RobotModel::ik_tool_position_wrist_held`]), and the tool's orientation
+/// drifts from the line's in between. `None` if that drift exceeds `deviation_max_rad` (0:
+/// never tried), the arm leaves its limits or a joint would jump.
+fn wrist_interpolated_path(
+    robot: &RobotModel,
+    q_from: &JointVector,
+    from: &nalgebra::Isometry3<f64>,
+    to: &nalgebra::Isometry3<f64>,
+    s_k: &[f64],
+    deviation_max_rad: f64,
+) -> Option<Vec<JointVector>> {
+    if deviation_max_rad <= 0.0 {
+        return None;
+    }
+    let q_to = robot.ik_tool_nearest(to, q_from).ok()?.q;
+    let mut qs = Vec::with_capacity(s_k.len());
+    let mut q = *q_from;
+    for (k, s) in s_k.iter().enumerate() {
+        let pose = from.lerp_slerp(to, *s);
+        let mut seed = q;
+        for i in 3..DOF {
+            seed[i] = q_from[i] + (q_to[i] - q_from[i]) * s;
+        }
+        let next = robot.ik_tool_position_wrist_held(&pose.translation.vector, &seed)?;
+        if robot.world_from_tool(&next).rotation.angle_to(&pose.rotation) > deviation_max_rad {
+            return None;
+        }
+        if k > 0 && (next - q).amax() > MAX_JOINT_STEP_RAD {
+            return None;
+        }
+        q = next;
+        qs.push(q);
+    }
+    Some(qs)
 }
 
 /// The largest tool acceleration, at most `accel_m_s2`, with which a line from `from` to `to`
@@ -385,6 +447,7 @@ mod tests {
         let limits = LineLimits {
             speed_m_s: 1.0,
             accel_m_s2: accel,
+            wrist_deviation_max_rad: 0.0,
         };
         let down = straight_line(&robot, &dynamics, &q0, &from, &to, &limits, None).unwrap();
         let (dt, venting_s) = (0.001, 0.06);
@@ -417,6 +480,70 @@ mod tests {
             release_lead_s(&robot, &down, dt, 0.06, venting_s, &budget(needed * 0.9)),
             0.0
         );
+    }
+
+    /// A 26 mm descent over the place tray with the tool 2.2 deg off vertical, whose straight
+    /// line passes 0.4 deg from the wrist's singularity (J5 from +1.9 to -2.3 deg: J4 would
+    /// turn 156 deg in a millisecond). Negative control: without the wrist interpolation there
+    /// is no line. With it the tool centre point keeps to the line (measured on the forward
+    /// kinematics of every sample), the tool's orientation stays within the bound, J4-J6 move
+    /// linearly and the line ends at its pose.
+    #[test]
+    fn a_line_through_the_wrist_singularity_interpolates_the_wrist_and_keeps_the_tool_on_it() {
+        let scene = LoadedScene::embedded_default().unwrap();
+        let robot = RobotModel::from_scene(&scene).unwrap();
+        let dynamics = robot.dynamics(&Payload::from_gripper(&scene.scene.gripper));
+        let deg = |q: [f64; 6]| JointVector::from_fn(|i, _| q[i].to_radians());
+        let q_from = deg([-40.94, -49.8, 225.82, 13.05, 1.86, 156.03]);
+        let from = robot.world_from_tool(&q_from);
+        let below = robot.world_from_tool(&deg([-40.94, -43.85, 223.89, -10.74, -2.25, 179.8]));
+        // The same orientation at both ends, straight down the world's z.
+        let to = nalgebra::Isometry3::from_parts(
+            nalgebra::Translation3::from(Vector3::new(
+                from.translation.x,
+                from.translation.y,
+                below.translation.z,
+            )),
+            from.rotation,
+        );
+        let mut limits = LineLimits {
+            speed_m_s: 1.0,
+            accel_m_s2: 20.0,
+            wrist_deviation_max_rad: 0.0,
+        };
+        assert!(straight_line(&robot, &dynamics, &q_from, &from, &to, &limits, None).is_none());
+        limits.wrist_deviation_max_rad = 1f64.to_radians();
+        let line = straight_line(&robot, &dynamics, &q_from, &from, &to, &limits, None).expect("a line");
+        let (a, b) = (from.translation.vector, to.translation.vector);
+        let axis = (b - a).normalize();
+        let (mut off_line_m, mut tilt_rad, mut min_j5) = (0.0f64, 0.0f64, f64::INFINITY);
+        for smp in &line.samples {
+            let pose = robot.world_from_tool(&smp.q);
+            let d = pose.translation.vector - a;
+            off_line_m = off_line_m.max((d - axis * d.dot(&axis)).norm());
+            tilt_rad = tilt_rad.max(pose.rotation.angle_to(&from.rotation));
+            min_j5 = min_j5.min(smp.q[4].abs());
+            // J4 + J6 and J5 along a straight line in the wrist's joints.
+            let s = (smp.q[4] - q_from[4]) / (line.end_q()[4] - q_from[4]);
+            for i in [3, 5] {
+                let expected = q_from[i] + s * (line.end_q()[i] - q_from[i]);
+                assert!((smp.q[i] - expected).abs() < 1e-6, "J{} off its interpolation", i + 1);
+            }
+        }
+        assert!(
+            off_line_m < 1e-5,
+            "the tool centre point left the line by {off_line_m} m"
+        );
+        assert!(
+            tilt_rad <= 1f64.to_radians() + 1e-9 && tilt_rad > 0.1f64.to_radians(),
+            "tilt {tilt_rad} rad"
+        );
+        assert!(
+            min_j5 < 0.2f64.to_radians(),
+            "the wrist passes its singularity: min |J5| {min_j5}"
+        );
+        let end = robot.world_from_tool(&line.end_q());
+        assert!((end.translation.vector - b).norm() < 1e-5 && end.rotation.angle_to(&to.rotation) < 1e-6);
     }
 
     /// A swing of J1 by 0.8 rad with a 30 g block on the cell's 6 mm cup, its centre of mass

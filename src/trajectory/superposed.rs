@@ -191,6 +191,7 @@ mod tests {
         let limits = LineLimits {
             speed_m_s: 1.0,
             accel_m_s2: 20.0,
+            wrist_deviation_max_rad: 0.0,
         };
         let lift = straight_line(&robot, &dynamics, &q0, &from, &to, &limits, None).unwrap();
         let q1 = lift.end_q();

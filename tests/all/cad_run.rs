@@ -109,15 +109,9 @@ impl binpick::cycle::Observer for PlannedMotions {
     }
 }
 
-/// A pick starts only with its Place in hand. An RJ45 jack taken by its top is set down on its
-/// pins, the tool 2.2 deg off vertical, and in the first slot the straight descent into it
-/// passes the arm's wrist singularity: no joint path. The cell passes such a grasp over for the
-/// next (another face, another place pose) and places the part, where it used to grasp the jack,
-/// find no Place, and let it go (seed 1: 5 of 21 picks, 76 % success). The case is exercised:
-/// the cell's first choice had no Place (the failure is logged); no pick grasps a part that it
-/// does not place or drop.
-#[test]
-fn a_grasp_whose_place_cannot_be_generated_is_passed_over() {
+/// The jack's run (2 picks, seed 1, deterministic) with the controller's wrist interpolation
+/// allowed up to `wrist_deviation_max_deg`: the motion failures passed over, and the run.
+fn jack_run(wrist_deviation_max_deg: f64) -> (PlannedMotions, binpick::cycle::RunResult) {
     let dir = crate::support::tempdir().unwrap();
     std::fs::write(dir.path().join("jack.obj"), jack_obj()).unwrap();
     let toml = dir.path().join("jack.toml");
@@ -129,7 +123,8 @@ fn a_grasp_whose_place_cannot_be_generated_is_passed_over() {
     )
     .unwrap();
     let wp = LoadedWorkpiece::resolve(toml.to_str().unwrap()).unwrap();
-    let scene = LoadedScene::embedded_default().unwrap();
+    let mut scene = LoadedScene::embedded_default().unwrap();
+    scene.scene.cycle.wrist_deviation_max_deg = wrist_deviation_max_deg;
     let robot = RobotModel::from_scene(&scene).unwrap();
     let opts = RunOptions {
         picks: 2,
@@ -140,11 +135,28 @@ fn a_grasp_whose_place_cannot_be_generated_is_passed_over() {
     };
     let mut seen = PlannedMotions::default();
     let r = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
-    let outcomes: Vec<String> = r
-        .records
+    (seen, r)
+}
+
+fn outcomes(r: &binpick::cycle::RunResult) -> Vec<String> {
+    r.records
         .iter()
         .map(|p| format!("{} {} sealed {:?}", p.outcome.name(), p.outcome.detail(), p.sealed))
-        .collect();
+        .collect()
+}
+
+/// A pick starts only with its Place in hand. An RJ45 jack taken by its top is set down on its
+/// pins, the tool 2.2 deg off vertical, and in the first slot the straight descent into it
+/// passes the arm's wrist singularity: with a controller that cannot interpolate the wrist
+/// there (`cycle.wrist_deviation_max_deg = 0`), no joint path. The cell passes such a grasp
+/// over for the next (another face, another place pose) and places the part, where it used to
+/// grasp the jack, find no Place, and let it go (seed 1: 5 of 21 picks, 76 % success). The case
+/// is exercised: the cell's first choice had no Place (the failure is logged); no pick grasps a
+/// part that it does not place or drop.
+#[test]
+fn a_grasp_whose_place_cannot_be_generated_is_passed_over() {
+    let (seen, r) = jack_run(0.0);
+    let outcomes = outcomes(&r);
     assert!(
         seen.failed.iter().any(|why| why.contains("place descent")),
         "no Place failed: the case is not exercised ({:?}; {outcomes:?})",
@@ -156,4 +168,20 @@ fn a_grasp_whose_place_cannot_be_generated_is_passed_over() {
         assert!(!grasped_and_kept, "a part grasped without a Place: {outcomes:?}");
     }
     assert!(seen.planned >= 2, "{} Place motions planned", seen.planned);
+}
+
+/// The same jack with the default cell's controller, which moves the wrist joints linearly
+/// where a line passes the wrist singularity (within 1 deg of the line's orientation): the
+/// first choice's descent into the first slot exists, nothing is passed over, both are placed.
+/// (The control is the test above: the same run without it fails that descent.)
+#[test]
+fn a_descent_through_the_wrist_singularity_is_made_with_the_wrist_interpolated() {
+    let (seen, r) = jack_run(1.0);
+    let outcomes = outcomes(&r);
+    assert!(
+        seen.failed.is_empty(),
+        "motions failed: {:?}; {outcomes:?}",
+        seen.failed
+    );
+    assert_eq!(r.tally.placed, 2, "{outcomes:?}");
 }
