@@ -144,6 +144,9 @@ pub enum Planned {
         transfer_s: f64,
         /// Descent duration (s).
         descent_s: f64,
+        /// Where the descent passes the wrist's singularity and was made with the wrist joints
+        /// interpolated, the farthest the tool strays from the line's orientation (rad).
+        wrist_deviation_rad: Option<f64>,
         /// Compute charged (s).
         compute_s: f64,
     },
@@ -159,6 +162,10 @@ pub enum Planned {
         descent_s: f64,
         /// Retreat duration (s).
         retreat_s: f64,
+        /// Where a line (lift, descent or retreat) passes the wrist's singularity and was made
+        /// with the wrist joints interpolated, the farthest the tool strays from its line's
+        /// orientation (rad).
+        wrist_deviation_rad: Option<f64>,
         /// Compute charged (s).
         compute_s: f64,
     },
@@ -168,6 +175,20 @@ pub enum Planned {
         /// Why.
         why: MotionFailure,
     },
+}
+
+/// A motion's note that a line of it went through the wrist's singularity with the wrist joints
+/// interpolated, the tool up to `deviation_rad` off its line's orientation.
+fn write_wrist_deviation(f: &mut std::fmt::Formatter<'_>, deviation_rad: Option<f64>) -> std::fmt::Result {
+    match deviation_rad {
+        Some(d) => write!(
+            f,
+            "; a line through the wrist's singularity, the wrist joints interpolated (the tool up to {:.2} deg off \
+             the line's orientation)",
+            d.to_degrees()
+        ),
+        None => Ok(()),
+    }
 }
 
 /// Something that happened in the cell.
@@ -398,18 +419,23 @@ impl fmt::Display for Event {
             Event::Planned(Planned::Pick {
                 transfer_s,
                 descent_s,
+                wrist_deviation_rad,
                 compute_s,
-            }) => write!(
-                f,
-                "Pick motion: transfer {transfer_s:.3} s + descent {descent_s:.3} s ({:.1} ms compute)",
-                1e3 * compute_s
-            ),
+            }) => {
+                write!(
+                    f,
+                    "Pick motion: transfer {transfer_s:.3} s + descent {descent_s:.3} s ({:.1} ms compute)",
+                    1e3 * compute_s
+                )?;
+                write_wrist_deviation(f, *wrist_deviation_rad)
+            }
             Event::Planned(Planned::Place {
                 lift_s,
                 gentle_lift_m_s2,
                 transfer_s,
                 descent_s,
                 retreat_s,
+                wrist_deviation_rad,
                 compute_s,
             }) => {
                 write!(f, "Place motion: lift {lift_s:.3} s")?;
@@ -420,7 +446,8 @@ impl fmt::Display for Event {
                     f,
                     " + transfer {transfer_s:.3} s + descent {descent_s:.3} s + retreat {retreat_s:.3} s ({:.1} ms compute)",
                     1e3 * compute_s
-                )
+                )?;
+                write_wrist_deviation(f, *wrist_deviation_rad)
             }
             Event::Planned(Planned::Failed { why }) => {
                 write!(f, "{} motion: {why}; the grasp passed over", why.motion())

@@ -151,6 +151,7 @@ impl Run<'_, '_> {
         let pick_planned = Planned::Pick {
             transfer_s: prep.pick_transfer.duration_s(),
             descent_s: prep.descent.duration_s(),
+            wrist_deviation_rad: prep.descent.wrist_deviation_rad,
             compute_s: charged.pick_s,
         };
         let p = &prep.place;
@@ -160,6 +161,10 @@ impl Run<'_, '_> {
             transfer_s: p.transfer.duration_s(),
             descent_s: p.descent.duration_s(),
             retreat_s: p.retreat.duration_s(),
+            wrist_deviation_rad: [&prep.lift, &p.descent, &p.retreat]
+                .iter()
+                .filter_map(|l| l.wrist_deviation_rad)
+                .reduce(f64::max),
             compute_s: charged.place_s,
         };
         // The grasps passed over before this one: their motions failed as the compute ran.

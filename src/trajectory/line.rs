@@ -65,6 +65,9 @@ pub struct LineMotion {
     samples: Vec<Sample>,
     /// The profile's tool acceleration after the torque check [m/s^2].
     pub accel_m_s2: f64,
+    /// Where the wrist joints were interpolated ([`wrist_interpolated_path`]), the farthest the
+    /// tool's orientation strays from the line's (rad); `None` on an exact line.
+    pub wrist_deviation_rad: Option<f64>,
 }
 
 impl Motion for LineMotion {
@@ -143,8 +146,14 @@ pub fn straight_line(
         };
         let n = (duration / LINE_DT_S).ceil() as usize;
         let s_k: Vec<f64> = (0..=n).map(|k| s_at(k as f64 * LINE_DT_S)).collect();
-        let qs = exact_path(robot, q_from, from, to, &s_k)
-            .or_else(|| wrist_interpolated_path(robot, q_from, from, to, &s_k, limits.wrist_deviation_max_rad))?;
+        let (qs, wrist_deviation_rad) = match exact_path(robot, q_from, from, to, &s_k) {
+            Some(qs) => (qs, None),
+            None => {
+                let (qs, deviation_rad) =
+                    wrist_interpolated_path(robot, q_from, from, to, &s_k, limits.wrist_deviation_max_rad)?;
+                (qs, Some(deviation_rad))
+            }
+        };
         let samples: Vec<Sample> = (0..=n)
             .map(|k| {
                 let (a, b) = (qs[k.saturating_sub(1)], qs[(k + 1).min(n)]);
@@ -183,6 +192,7 @@ pub fn straight_line(
                 dt_s: LINE_DT_S,
                 samples,
                 accel_m_s2: accel,
+                wrist_deviation_rad,
             });
         }
         accel *= LINE_SLOWDOWN;
@@ -230,8 +240,9 @@ fn exact_path(
 /// joint orientation type): J4-J6 move linearly from their values at `from` (`q_from`'s) to
 /// those of the solution at `to` nearest `q_from`, the arm joints J1-J3 keep the tool centre
 /// point on the line ([`RobotModel::ik_tool_position_wrist_held`]), and the tool's orientation
-/// drifts from the line's in between. `None` if that drift exceeds `deviation_max_rad` (0:
-/// never tried), the arm leaves its limits or a joint would jump.
+/// drifts from the line's in between: the joints, and the largest drift (rad). `None` if that
+/// drift exceeds `deviation_max_rad` (0: never tried), the arm leaves its limits or a joint would
+/// jump.
 fn wrist_interpolated_path(
     robot: &RobotModel,
     q_from: &JointVector,
@@ -239,11 +250,12 @@ fn wrist_interpolated_path(
     to: &nalgebra::Isometry3<f64>,
     s_k: &[f64],
     deviation_max_rad: f64,
-) -> Option<Vec<JointVector>> {
+) -> Option<(Vec<JointVector>, f64)> {
     if deviation_max_rad <= 0.0 {
         return None;
     }
     let q_to = robot.ik_tool_nearest(to, q_from).ok()?.q;
+    let mut largest_rad = 0.0f64;
     let mut qs = Vec::with_capacity(s_k.len());
     let mut q = *q_from;
     for (k, s) in s_k.iter().enumerate() {
@@ -253,16 +265,18 @@ fn wrist_interpolated_path(
             seed[i] = q_from[i] + (q_to[i] - q_from[i]) * s;
         }
         let next = robot.ik_tool_position_wrist_held(&pose.translation.vector, &seed)?;
-        if robot.world_from_tool(&next).rotation.angle_to(&pose.rotation) > deviation_max_rad {
+        let deviation_rad = robot.world_from_tool(&next).rotation.angle_to(&pose.rotation);
+        if deviation_rad > deviation_max_rad {
             return None;
         }
+        largest_rad = largest_rad.max(deviation_rad);
         if k > 0 && (next - q).amax() > MAX_JOINT_STEP_RAD {
             return None;
         }
         q = next;
         qs.push(q);
     }
-    Some(qs)
+    Some((qs, largest_rad))
 }
 
 /// The largest tool acceleration, at most `accel_m_s2`, with which a line from `from` to `to`

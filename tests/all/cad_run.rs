@@ -90,11 +90,13 @@ fn jack_obj() -> String {
     boxes_obj(&boxes)
 }
 
-/// The cycle's motion plans: the Place motions generated, and the failures passed over.
+/// The cycle's motion plans: the Place motions generated, and the failures passed over; the
+/// largest wrist deviation of a Place line made with the wrist joints interpolated (rad).
 #[derive(Default)]
 struct PlannedMotions {
     failed: Vec<String>,
     planned: usize,
+    wrist_deviation_rad: Option<f64>,
 }
 
 impl binpick::cycle::Observer for PlannedMotions {
@@ -103,7 +105,14 @@ impl binpick::cycle::Observer for PlannedMotions {
             binpick::cycle::Event::Planned(binpick::cycle::Planned::Failed { why }) => {
                 self.failed.push(why.to_string())
             }
-            binpick::cycle::Event::Planned(binpick::cycle::Planned::Place { .. }) => self.planned += 1,
+            binpick::cycle::Event::Planned(binpick::cycle::Planned::Place {
+                wrist_deviation_rad, ..
+            }) => {
+                self.planned += 1;
+                if let Some(d) = wrist_deviation_rad {
+                    self.wrist_deviation_rad = Some(self.wrist_deviation_rad.unwrap_or(0.0).max(*d));
+                }
+            }
             _ => {}
         }
     }
@@ -184,4 +193,12 @@ fn a_descent_through_the_wrist_singularity_is_made_with_the_wrist_interpolated()
         seen.failed
     );
     assert_eq!(r.tally.placed, 2, "{outcomes:?}");
+    // The event log says so, and by how much the tool strayed.
+    let deviation_rad = seen
+        .wrist_deviation_rad
+        .expect("a Place line with the wrist interpolated");
+    assert!(
+        deviation_rad > 0.0 && deviation_rad <= 1f64.to_radians(),
+        "{deviation_rad} rad"
+    );
 }
