@@ -50,6 +50,9 @@ pub struct PartArgs {
 /// (rad): a few degrees, so a pose the collider turns by a facet (5 degrees and more) counts as
 /// none.
 const DROP_MATCH_RAD: f64 = 3.0 * std::f64::consts::PI / 180.0;
+/// A part of a simulated pile counts in the predicted pose nearest its own (its up direction
+/// against the pose's) within this (rad); one tilted farther lies propped up on others.
+const PILE_POSE_MATCH_RAD: f64 = 20.0 * std::f64::consts::PI / 180.0;
 
 /// An axis about which the part's symmetry has this order or more is round for the drops: a drop
 /// turned about it onto a predicted pose counts in that pose (a can on its side rests on
@@ -175,6 +178,38 @@ struct PileShare {
     /// workpiece may choose), with that resolution; `None` where twice would exceed the cell's
     /// pixel bound or the recognition is the oracle.
     recognition_finer: Option<([u32; 2], RecognitionTotals)>,
+    /// The cell's recognition by resting pose: per predicted pose (the part model's order), the
+    /// top-layer parts lying in it ([`PILE_POSE_MATCH_RAD`]) and of those the ones found.
+    by_pose: Vec<Found>,
+    /// The same for top-layer parts in no predicted pose (propped up on others).
+    by_pose_none: Found,
+}
+
+/// Top-layer parts, and of those the ones a correct detection found.
+#[derive(Debug, Clone, Copy, Default)]
+struct Found {
+    found: usize,
+    of: usize,
+}
+
+impl Found {
+    fn add(&mut self, o: Found) {
+        self.found += o.found;
+        self.of += o.of;
+    }
+}
+
+/// The predicted pose (index into `m.poses`) a part turned `world_from_part` rests in: the one
+/// whose up direction is nearest the part's within [`PILE_POSE_MATCH_RAD`].
+fn pose_of(m: &PartModel, world_from_part: &nalgebra::Isometry3<f64>) -> Option<usize> {
+    let up_part = world_from_part.rotation.inverse() * nalgebra::Vector3::z();
+    m.poses
+        .iter()
+        .enumerate()
+        .map(|(i, p)| (i, up_part.angle(&-p.normal)))
+        .filter(|(_, a)| *a <= PILE_POSE_MATCH_RAD)
+        .min_by(|a, b| a.1.total_cmp(&b.1))
+        .map(|(i, _)| i)
 }
 
 impl PileShare {
@@ -206,7 +241,10 @@ fn pile_share(
 ) -> Result<PileShare> {
     use binpick::physics::{Tag, pile::PileOptions};
     use nalgebra::{Point3, Vector3};
-    let mut out = PileShare::default();
+    let mut out = PileShare {
+        by_pose: vec![Found::default(); m.poses.len()],
+        ..PileShare::default()
+    };
     let Some(sim) = sim.filter(|_| piles > 0) else {
         return Ok(out);
     };
@@ -247,15 +285,32 @@ fn pile_share(
         out.unsettled += u64::from(!world.build_pile(&options)?.settled);
         if cloud {
             use binpick::sensor::{Sensor, TruthAtTrigger, capture, evaluate};
-            let recognise = |config: &binpick::config::SensorConfig, totals: &mut RecognitionTotals| -> Result<()> {
+            let recognise = |config: &binpick::config::SensorConfig,
+                             totals: &mut RecognitionTotals|
+             -> Result<(TruthAtTrigger, Vec<bool>)> {
                 let sensor = Sensor::new(config, &world, seed, &wp.workpiece)
                     .ok_or_else(|| anyhow::anyhow!("the sensor's pose is degenerate"))?;
                 let c = capture(&world, &sensor.camera, seed, 0);
                 let truth = TruthAtTrigger::take(&world, &sensor, &c);
-                totals.add(&evaluate(&truth, &sensor.recognize_cloud(&c), &sensor.symmetry));
-                Ok(())
+                let report = evaluate(&truth, &sensor.recognize_cloud(&c), &sensor.symmetry);
+                totals.add(&report);
+                let mut found = vec![false; truth.world_from_part.len()];
+                for m in report.matches.iter().flatten().filter(|m| m.correct) {
+                    found[m.part] = true;
+                }
+                Ok((truth, found))
             };
-            recognise(&loaded.scene.sensor, &mut recognition)?;
+            let (truth, found) = recognise(&loaded.scene.sensor, &mut recognition)?;
+            for &i in &truth.top_layer {
+                let this = Found {
+                    found: usize::from(found[i]),
+                    of: 1,
+                };
+                match pose_of(m, &truth.world_from_part[i]) {
+                    Some(k) => out.by_pose[k].add(this),
+                    None => out.by_pose_none.add(this),
+                }
+            }
             if let Some((config, totals)) = &mut finer {
                 recognise(config, totals)?;
             }
@@ -641,6 +696,7 @@ pub fn part(a: &PartArgs) -> Result<()> {
         if let Some(r) = piles.recognition.as_ref().map(RecognitionTotals::summary) {
             let finer = piles.recognition_finer.as_ref().map(|(px, t)| (*px, t.summary()));
             super::say(&recognition_line(&r, finer.as_ref(), &scene.scene));
+            print_recognition_by_pose(&m, lean, &sites, &piles);
         }
         for why in warnings(&m, w, &scene.scene, &sites, &look_alikes(&m, &scene.scene)) {
             super::say(&format!("warning: {why}"));
@@ -672,6 +728,38 @@ fn round_side(m: &PartModel, scene: &binpick::config::Scene) -> Option<RoundSide
             .len(),
         offered: binpick::grasp::offered_side_strips(m, scene).len(),
     })
+}
+
+/// The cell's recognition on the simulated piles by resting pose, as a table: per row of the
+/// poses table (alike poses together) with parts in the piles' top layer, those found of them.
+fn print_recognition_by_pose(m: &PartModel, lean: f64, sites: &CupSites, piles: &PileShare) {
+    println!(
+        "recognised by resting pose (the piles' top-layer parts, each in the pose nearest its own within {:.0} deg):",
+        PILE_POSE_MATCH_RAD.to_degrees()
+    );
+    println!("  down normal               top layer   found     share");
+    let (rows, _) = pose_rows(m, lean, sites);
+    let row = |name: String, f: Found| {
+        println!(
+            "  {name:24}  {:9}  {:6}  {:>8}",
+            f.of,
+            f.found,
+            super::percent(f.found as f64 / f.of as f64)
+        )
+    };
+    for members in &rows {
+        let mut f = Found::default();
+        for &i in members {
+            f.add(piles.by_pose[i]);
+        }
+        let n = m.poses[members[0]].normal;
+        if f.of > 0 {
+            row(format!("[{:6.3} {:6.3} {:6.3}]", n.x, n.y, n.z), f);
+        }
+    }
+    if piles.by_pose_none.of > 0 {
+        row("propped up on others".to_string(), piles.by_pose_none);
+    }
 }
 
 /// What the recognition on the simulated piles found, as a line of text (with what a precision
@@ -744,9 +832,10 @@ fn print_json(
         "cup_diameter_mm": mm(m.cup.diameter_m),
         "face_margin_mm": mm(m.cup.face_margin_m),
         "faces": m.faces.iter().zip(sites).map(|(f, site)| face_json(m, f, site, lean)).collect::<Vec<_>>(),
-        "poses": m.poses.iter().zip(&drops.per_pose).map(|(p, &n)| {
+        "poses": m.poses.iter().zip(&drops.per_pose).zip(&piles.by_pose).map(|((p, &n), f)| {
             let mut j = pose_json(p);
             j["dropped_share"] = json!((drops.dropped > 0).then(|| round(drops.share(n), 6)));
+            j["top_layer_recognised"] = json!(piles.recognition.is_some().then(|| json!({"found": f.found, "of": f.of})));
             j
         }).collect::<Vec<_>>(),
         "drops": {
@@ -776,6 +865,11 @@ fn print_json(
                 "resolution_px": px,
                 "summary": t.summary(),
             })),
+            "top_layer_recognised_propped_up": piles.recognition.is_some().then(|| json!({
+                "found": piles.by_pose_none.found,
+                "of": piles.by_pose_none.of,
+            })),
+            "pose_match_within_deg": PILE_POSE_MATCH_RAD.to_degrees(),
         },
         "warnings": warnings(m, w, scene, sites, &turns),
         "svg": svg_path.display().to_string(),
@@ -1070,6 +1164,35 @@ mod tests {
             .map(Vec::len)
             .collect();
         assert_eq!(sizes, [1, 5, 2]);
+    }
+
+    /// A part of a pile counts in the resting pose its up direction is nearest: the hex
+    /// standoff on an end (its axis, z, up) is in an end pose, tilted 15 deg still, tilted 25
+    /// deg (leaning on another) in none; on a flat (y up, a flat's normal) in a flat pose. The
+    /// standoff's frame turned about the world's vertical changes nothing.
+    #[test]
+    fn a_pile_part_counts_in_the_resting_pose_nearest_its_own() {
+        use nalgebra::{Isometry3, Translation3, UnitQuaternion, Vector3};
+        let lw = binpick::config::LoadedWorkpiece::resolve(concat!(
+            env!("CARGO_MANIFEST_DIR"),
+            "/workpieces/hex-standoff.toml"
+        ))
+        .unwrap();
+        let m = lw.workpiece.part_model(&lw.mesh.as_ref().unwrap().0, 0.006).unwrap();
+        let turned = |axis: Vector3<f64>, deg: f64| {
+            let yaw = UnitQuaternion::from_axis_angle(&Vector3::z_axis(), 0.7);
+            let tilt = UnitQuaternion::from_axis_angle(&nalgebra::Unit::new_normalize(axis), deg.to_radians());
+            Isometry3::from_parts(Translation3::new(0.1, 0.4, 0.02), yaw * tilt)
+        };
+        let up_in = |k: Option<usize>| k.map(|k| -m.poses[k].normal);
+        let up_z = up_in(pose_of(&m, &turned(Vector3::x(), 0.0))).expect("on an end");
+        assert!(up_z.z.abs() > 0.999, "{up_z:?}");
+        assert!(pose_of(&m, &turned(Vector3::x(), 15.0)).is_some());
+        assert_eq!(pose_of(&m, &turned(Vector3::x(), 25.0)), None);
+        // Lying on a flat: the part's y axis (a flat's normal, the hexagon's vertices on x)
+        // turned up.
+        let flat = up_in(pose_of(&m, &turned(Vector3::x(), 90.0))).expect("on a flat");
+        assert!(flat.z.abs() < 1e-6, "{flat:?}");
     }
 
     /// A pipe given as the picture's path is written to and stays a pipe (as `/dev/null` must

@@ -498,6 +498,18 @@ fn shipped_cad_parts_check_and_show_their_faces() {
     assert_eq!(rec["captures"], 3, "{rec}");
     let recall = rec["recall"].as_f64().unwrap();
     assert!(recall > 0.8 && rec["precision"].as_f64().unwrap() > 0.9, "{rec}");
+    // By resting pose: every top-layer part is counted once, in the pose nearest its own or
+    // propped up, and the ones found add up to the recall's count.
+    let by_pose = |key: &str| -> u64 {
+        let poses = dip["poses"].as_array().unwrap();
+        poses
+            .iter()
+            .map(|p| p["top_layer_recognised"][key].as_u64().unwrap())
+            .sum::<u64>()
+            + dip["pile"]["top_layer_recognised_propped_up"][key].as_u64().unwrap()
+    };
+    assert_eq!(by_pose("of"), rec["top_layer"].as_u64().unwrap(), "{rec}");
+    assert_eq!(by_pose("found"), rec["top_layer_found"].as_u64().unwrap(), "{rec}");
     ws.edit(
         "workpieces/dip8.toml",
         "workpieces/dip8-coarse.toml",
