@@ -52,7 +52,7 @@ pub struct LineLimits {
     /// Where the exact inverse kinematics cannot follow the line (it passes the wrist's
     /// singularity, J5 = 0, where J4 and J6 would spin), the line may move the wrist joints
     /// (J4-J6) linearly from end to end, the tool centre point still on the line, as long as
-    /// the tool's orientation stays within this of the line's [rad] (0: never; the line fails).
+    /// the tool's orientation stays within this of the line's (rad; 0: never, the line fails).
     pub wrist_deviation_max_rad: f64,
 }
 
@@ -65,7 +65,7 @@ pub struct LineMotion {
     samples: Vec<Sample>,
     /// The profile's tool acceleration after the torque check [m/s^2].
     pub accel_m_s2: f64,
-    /// Where the wrist joints were interpolated ([`wrist_interpolated_path`]), the farthest the
+    /// Where the wrist joints were interpolated (see [`straight_line`]), the farthest the
     /// tool's orientation strays from the line's (rad); `None` on an exact line.
     pub wrist_deviation_rad: Option<f64>,
 }
@@ -104,7 +104,8 @@ impl LineMotion {
 /// at nine rotations along the line, accelerating and braking).
 /// Where the inverse kinematics fails along the line (limits, singularity) or a joint would jump
 /// (a branch change), the wrist joints are interpolated within `limits.wrist_deviation_max_rad`
-/// ([`wrist_interpolated_path`]); `None` if that fails too.
+/// (J4-J6 linearly from end to end, J1-J3 keeping the tool centre point on the line); `None` if
+/// that fails too.
 pub fn straight_line(
     robot: &RobotModel,
     dynamics: &DynamicsModel,
