@@ -120,7 +120,7 @@ fn draw_view(
         40.0 + VIEW_PX + 16.0,
         view.name
     );
-    draw_triangles(s, model, view, &px, grasp_of);
+    draw_triangles(s, &model.mesh, view, &px, grasp_of);
     draw_cup_fits(s, model, view, &px, scale, sites);
     // The centre of mass.
     let (x, y) = px(&model.mass.com_m);
@@ -134,34 +134,42 @@ fn draw_view(
     );
 }
 
-/// The triangles facing the viewer, far ones first, shaded; those of cup faces green.
+/// The triangles facing the viewer, far ones first, shaded by their slant and their depth (the
+/// nearest full, the farthest at [`FAR_SHADE`]: a well's floor shows darker than the face it is
+/// sunk in); those of cup faces green.
 fn draw_triangles(
     s: &mut String,
-    model: &PartModel,
+    mesh: &super::mesh::Mesh,
     view: &View,
     px: &impl Fn(&Point3<f64>) -> (f64, f64),
     grasp_of: &[Option<usize>],
 ) {
-    let mut order: Vec<(f64, usize)> = (0..model.mesh.triangles.len())
+    let mut order: Vec<(f64, usize)> = (0..mesh.triangles.len())
         .filter_map(|k| {
-            let n = model.mesh.area_normal(k);
+            let n = mesh.area_normal(k);
             if n.dot(&view.toward) <= 0.0 {
                 return None;
             }
-            let [a, b, c] = model.mesh.corners(k);
+            let [a, b, c] = mesh.corners(k);
             Some(((a.coords + b.coords + c.coords).dot(&view.toward), k))
         })
         .collect();
     order.sort_by(|a, b| a.0.total_cmp(&b.0).then(a.1.cmp(&b.1)));
-    for (_, k) in order {
-        let n = model.mesh.area_normal(k).normalize();
-        let light = 0.35 + 0.65 * n.dot(&view.toward).abs();
+    // The mesh's depth range along the view (three times a centroid's, as `order` holds them).
+    let (near, far) = mesh.vertices_m.iter().fold((f64::MIN, f64::MAX), |(hi, lo), p| {
+        let d = 3.0 * p.coords.dot(&view.toward);
+        (hi.max(d), lo.min(d))
+    });
+    for (depth, k) in order {
+        let n = mesh.area_normal(k).normalize();
+        let nearness = if near > far { (depth - far) / (near - far) } else { 1.0 };
+        let light = (0.35 + 0.65 * n.dot(&view.toward).abs()) * (FAR_SHADE + (1.0 - FAR_SHADE) * nearness);
         let (r, g, b) = if grasp_of[k].is_some() {
             (60.0, 170.0, 80.0)
         } else {
             (170.0, 170.0, 180.0)
         };
-        let [a, bb, c] = model.mesh.corners(k).map(|p| px(&p));
+        let [a, bb, c] = mesh.corners(k).map(|p| px(&p));
         let col = format!("rgb({:.0},{:.0},{:.0})", r * light, g * light, b * light);
         let _ = writeln!(
             s,
@@ -170,6 +178,9 @@ fn draw_triangles(
         );
     }
 }
+
+/// The shade of the triangles farthest from the viewer, against the nearest's (1).
+const FAR_SHADE: f64 = 0.6;
 
 /// Cup-fit regions (dotted) and the cup at its site, on the cup faces looking at the viewer.
 fn draw_cup_fits(
@@ -249,4 +260,67 @@ fn draw_legend(s: &mut String, model: &PartModel, scale: f64) {
 
 fn escape(t: &str) -> String {
     t.replace('&', "&amp;").replace('<', "&lt;").replace('>', "&gt;")
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A step seen from above: a 10 mm slab with a 4 mm block on it. Both tops face the viewer
+    /// square on, so only their depth tells them apart: the slab's top (4 mm farther) is drawn
+    /// darker than the block's. Control: their sides, seen edge on, are not drawn.
+    #[test]
+    fn a_face_farther_from_the_viewer_is_drawn_darker() {
+        use super::super::tessellate::box_mesh;
+        let slab = box_mesh(Vector3::new(0.0, 0.0, 0.001), Vector3::new(0.005, 0.005, 0.001));
+        let block = box_mesh(Vector3::new(0.0, 0.0, 0.004), Vector3::new(0.002, 0.002, 0.002));
+        let n = slab.vertices_m.len() as u32;
+        let mesh = super::super::mesh::Mesh {
+            vertices_m: slab.vertices_m.iter().chain(&block.vertices_m).copied().collect(),
+            triangles: slab
+                .triangles
+                .iter()
+                .copied()
+                .chain(block.triangles.iter().map(|t| t.map(|i| i + n)))
+                .collect(),
+        };
+        let view = View {
+            name: "top",
+            toward: Vector3::z(),
+            h: Vector3::x(),
+            v: Vector3::y(),
+        };
+        let mut s = String::new();
+        draw_triangles(
+            &mut s,
+            &mesh,
+            &view,
+            &|p: &Point3<f64>| (p.x * 1e3, p.y * 1e3),
+            &vec![None; mesh.triangles.len()],
+        );
+        // Each drawn triangle's red channel, far first: the slab's top at z = 2 mm (two
+        // triangles), the block's at 6 mm (two); the mesh spans z = 0 to 6 mm, so the slab's top
+        // is a third of the way from the farthest to the nearest.
+        let reds: Vec<f64> = s
+            .lines()
+            .map(|l| {
+                l.split("fill=\"rgb(")
+                    .nth(1)
+                    .unwrap()
+                    .split(',')
+                    .next()
+                    .unwrap()
+                    .parse()
+                    .unwrap()
+            })
+            .collect();
+        assert_eq!(reds.len(), 4, "{s}");
+        let (slab_top, block_top) = (reds[0], reds[3]);
+        assert!(slab_top < block_top, "{s}");
+        let expected = FAR_SHADE + (1.0 - FAR_SHADE) / 3.0;
+        assert!(
+            (slab_top / block_top - expected).abs() < 0.02,
+            "{slab_top} / {block_top}"
+        );
+    }
 }
