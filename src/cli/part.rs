@@ -200,16 +200,11 @@ impl Found {
 }
 
 /// The predicted pose (index into `m.poses`) a part turned `world_from_part` rests in: the one
-/// whose up direction is nearest the part's within [`PILE_POSE_MATCH_RAD`].
+/// whose support is nearest the part's within [`PILE_POSE_MATCH_RAD`]
+/// ([`binpick::part::poses::pose_resting_on`], as the drops are read).
 fn pose_of(m: &PartModel, world_from_part: &nalgebra::Isometry3<f64>) -> Option<usize> {
-    let up_part = world_from_part.rotation.inverse() * nalgebra::Vector3::z();
-    m.poses
-        .iter()
-        .enumerate()
-        .map(|(i, p)| (i, up_part.angle(&-p.normal)))
-        .filter(|(_, a)| *a <= PILE_POSE_MATCH_RAD)
-        .min_by(|a, b| a.1.total_cmp(&b.1))
-        .map(|(i, _)| i)
+    let down_in_part = world_from_part.rotation.inverse() * -nalgebra::Vector3::z();
+    binpick::part::poses::pose_resting_on(&m.poses, &down_in_part, PILE_POSE_MATCH_RAD)
 }
 
 impl PileShare {
