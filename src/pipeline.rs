@@ -139,8 +139,6 @@ pub enum NoGrasp {
     NoneFeasible(BTreeMap<&'static str, usize>),
     /// None of the best-ranked (this many) has a clear approach.
     NoClearApproach(usize),
-    /// The chosen grasp's straight descent has no joint path (found by the motion generation).
-    NoStraightDescent,
 }
 
 impl fmt::Display for NoGrasp {
@@ -155,7 +153,6 @@ impl fmt::Display for NoGrasp {
                 write!(f, "no feasible grasp ({reasons})")
             }
             NoGrasp::NoClearApproach(among) => write!(f, "no grasp with a clear approach among {among}"),
-            NoGrasp::NoStraightDescent => f.write_str("no joint path along the straight descent"),
         }
     }
 }

@@ -744,16 +744,17 @@ impl Run<'_, '_> {
                 }
                 Err(why) => {
                     self.st.in_hand = None;
+                    if why.is_some() {
+                        // The compute spent on the grasp selection (and on the motions of the
+                        // grasps tried) runs out before the cell decides that none is taken.
+                        rec.compute.grasp_s = self.unprepared_compute_s(why.as_ref());
+                        self.idle_until(self.st.world.time_s().max(compute_from_s) + rec.compute.grasp_s)?;
+                    }
                     rec.outcome = match why {
                         None => Outcome::NothingDetected,
-                        Some(Unprepared::NoGrasp(why)) => Outcome::NothingGraspable(why),
-                        Some(Unprepared::NoMotion { ref failures, .. }) => {
-                            // Grasps were chosen but none could be moved and placed: the compute
-                            // spent on them runs out before the cell decides so.
-                            let t =
-                                self.st.world.time_s().max(compute_from_s) + self.unprepared_compute_s(why.as_ref());
-                            self.idle_until(t)?;
-                            for failure in failures {
+                        Some(Unprepared::NoGrasp { why, .. }) => Outcome::NothingGraspable(why),
+                        Some(Unprepared::NoMotion { failures, .. }) => {
+                            for failure in &failures {
                                 self.event(Event::Planned(Planned::Failed { why: failure.clone() }));
                             }
                             Outcome::NoMotion(failures[0].clone())

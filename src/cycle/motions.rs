@@ -493,9 +493,9 @@ const SAME_PLACE_RAD: f64 = 0.02;
 /// Why no pick was prepared from a recognition result.
 #[derive(Debug, Clone)]
 pub(super) enum Unprepared {
-    /// No grasp to try (the grasp selector's reason), or the first one tried has no straight
-    /// descent or lift.
-    NoGrasp(NoGrasp),
+    /// No grasp to try: the grasp selector's reason, and the wall time it took (s, in
+    /// `grasp_s`).
+    NoGrasp { why: NoGrasp, wall: StageCompute },
     /// Grasps were chosen, but the Pick and Place motions of none of those tried could be
     /// generated: each one's failure, best-ranked first, and the wall time spent (s; the
     /// motions' in `grasp_s`, as [`Cell::charged`] counts them).
@@ -524,11 +524,13 @@ impl Cell<'_> {
 
 impl Run<'_, '_> {
     /// The compute charged on the simulation clock for a result from which no pick was
-    /// prepared (s): the grasp selection's budget, and the motions of the grasps tried.
+    /// prepared (s): the grasp selection, and the motions of the grasps tried (as
+    /// [`Cell::charged`] counts them); with nothing detected, the grasp selection's budget.
     pub(super) fn unprepared_compute_s(&self, why: Option<&Unprepared>) -> f64 {
         match why {
             Some(Unprepared::NoMotion { failures, wall }) => self.cell.charged(*wall, failures.len()).grasp_s,
-            _ => self.cell.budgets.grasp_s,
+            Some(Unprepared::NoGrasp { wall, .. }) => self.cell.charged(*wall, 0).grasp_s,
+            None => self.cell.budgets.grasp_s,
         }
     }
 
@@ -621,10 +623,10 @@ impl Run<'_, '_> {
                 prep.passed_over = failures;
                 Ok((prep, spent))
             }
-            (None, None) => Err(Unprepared::NoGrasp(crate::pipeline::why_none(&plan))),
-            (None, Some(MotionFailure::PickLine)) if failures.len() == 1 => {
-                Err(Unprepared::NoGrasp(NoGrasp::NoStraightDescent))
-            }
+            (None, None) => Err(Unprepared::NoGrasp {
+                why: crate::pipeline::why_none(&plan),
+                wall: spent,
+            }),
             (None, Some(_)) => Err(Unprepared::NoMotion { failures, wall: spent }),
         }
     }

@@ -63,7 +63,8 @@ pub struct PickRecord {
     /// The arm waited for grasp selection or motion generation (s).
     pub stall_compute_s: f64,
     /// Compute charged per stage: grasp selection, Pick motion generation (planning,
-    /// acceleration, the straight lines), Place motion generation.
+    /// acceleration, the straight lines), Place motion generation. A pick not attempted (no
+    /// grasp, or no motions) has the grasp selection's, with the motions of the grasps tried.
     pub compute: StageCompute,
     /// Horizontal placement error (mm) (placed picks): from where the part should lie in its
     /// slot.

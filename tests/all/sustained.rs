@@ -100,3 +100,52 @@ fn a_run_ends_after_three_fruitless_full_trays_in_a_row_not_one() {
     assert!(t.attempts < 200);
     assert_eq!(t.refills as u32, binpick::cycle::trays::FRUITLESS_FILLS_MAX - 1);
 }
+
+/// A capture from which nothing is taken is charged its grasp selection before the cell decides
+/// so, as a capture a pick is made from is (the capacitor: every capture `nothing_graspable`).
+/// Checked on the event log's clock, not on the record: each such outcome is announced no
+/// earlier than its result's arrival plus the cell file's grasp estimation budget.
+#[test]
+fn a_capture_with_nothing_graspable_is_charged_its_grasp_selection() {
+    use binpick::cycle::{Event, Observer, Outcome};
+    /// When each pick's outcome was announced, and what it was.
+    #[derive(Default)]
+    struct Outcomes(Vec<(usize, f64, Outcome)>);
+    impl Observer for Outcomes {
+        fn event(&mut self, t_s: f64, pick: Option<usize>, event: &Event) {
+            if let (Some(pick), Event::Outcome(o)) = (pick, event) {
+                self.0.push((pick, t_s, o.clone()));
+            }
+        }
+    }
+    let scene = LoadedScene::embedded_default().unwrap();
+    let robot = RobotModel::from_scene(&scene).unwrap();
+    let wp =
+        LoadedWorkpiece::resolve(concat!(env!("CARGO_MANIFEST_DIR"), "/workpieces/capacitor-radial.toml")).unwrap();
+    let opts = RunOptions {
+        picks: 6,
+        seed: 1,
+        deterministic: true,
+        stop: None,
+        keep_records: true,
+    };
+    let mut seen = Outcomes::default();
+    let run = binpick::cycle::run(&scene, &robot, &wp, &opts, &mut seen).unwrap();
+    let budget_s = scene.scene.compute.grasp_estimation_s;
+    assert!(budget_s > 0.01, "{budget_s}");
+    let graspless: Vec<_> = seen
+        .0
+        .iter()
+        .filter(|(_, _, o)| matches!(o, Outcome::NothingGraspable(_)))
+        .collect();
+    assert!(graspless.len() >= 3, "{:?}", seen.0);
+    for (pick, t_s, _) in graspless {
+        let rec = &run.records[*pick];
+        assert!(
+            t_s + 1e-9 >= rec.ready_s + budget_s,
+            "pick {pick}: at {t_s} s, result at {} s",
+            rec.ready_s
+        );
+        assert_eq!(rec.compute.grasp_s, budget_s, "pick {pick}");
+    }
+}
