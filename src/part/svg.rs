@@ -1,9 +1,12 @@
-//! A picture of a part model as SVG: three orthographic views (top, front, side) of its mesh,
-//! shaded, with the faces the cell's cup seals on in green, their cup-fit regions dotted and the
-//! cup drawn at each face's site ([`PartModel::cup_sites`]: the grasp selector's).
+//! A picture of a part model as SVG: six orthographic views of its mesh (top, front, side over
+//! bottom, back, other side, so that every face is seen square on), shaded, with the faces the
+//! cell's cup seals on in green, their cup-fit regions dotted and the cup drawn at each face's
+//! site ([`PartModel::cup_sites`]: the grasp selector's).
 //!
-//! Units: m in, pixels out (one scale for the three views). Frames: top looks down the part's
-//! -z (x right, y up), front looks along +y (x right, z up), side looks along -x (y right, z up).
+//! Units: m in, pixels out (one scale for the six views). Frames: top looks down the part's -z
+//! (x right, y up), front looks along +y (x right, z up), side looks along -x (y right, z up);
+//! bottom looks along +z (x right, y down), back along -y (x left, z up), other side along +x
+//! (y left, z up). No view is mirrored.
 
 use std::fmt::Write;
 
@@ -15,6 +18,11 @@ use super::model::PartModel;
 const VIEW_PX: f64 = 300.0;
 /// Margin around the views (px).
 const PAD_PX: f64 = 20.0;
+/// Where the first row of views starts (px from the top), and the height of a row's caption.
+const TOP_PX: f64 = 40.0;
+const CAPTION_PX: f64 = 24.0;
+/// Views per row.
+const PER_ROW: usize = 3;
 /// The most cup-fit centres drawn per face.
 const MAX_DOTS: usize = 600;
 
@@ -26,8 +34,8 @@ struct View {
     v: Vector3<f64>,
 }
 
-/// The three views: top, front, side.
-fn views() -> [View; 3] {
+/// The six views: top, front, side; bottom, back, other side (each `h` × `v` = `toward`).
+fn views() -> [View; 6] {
     [
         View {
             name: "top (looking down z)",
@@ -47,6 +55,24 @@ fn views() -> [View; 3] {
             h: Vector3::y(),
             v: Vector3::z(),
         },
+        View {
+            name: "bottom (looking up along +z)",
+            toward: -Vector3::z(),
+            h: Vector3::x(),
+            v: -Vector3::y(),
+        },
+        View {
+            name: "back (looking along -y)",
+            toward: Vector3::y(),
+            h: -Vector3::x(),
+            v: Vector3::z(),
+        },
+        View {
+            name: "other side (looking along +x)",
+            toward: -Vector3::x(),
+            h: -Vector3::y(),
+            v: Vector3::z(),
+        },
     ]
 }
 
@@ -58,8 +84,9 @@ pub type CupSites = [Option<(Point3<f64>, f64)>];
 pub fn picture(model: &PartModel, title: &str, sites: &CupSites) -> String {
     let largest = model.size_m.iter().cloned().fold(1e-9, f64::max);
     let scale = (VIEW_PX - 2.0 * PAD_PX) / largest;
-    let width = 3.0 * VIEW_PX + 2.0 * PAD_PX;
-    let height = VIEW_PX + 150.0;
+    let rows = views().len().div_ceil(PER_ROW) as f64;
+    let width = PER_ROW as f64 * VIEW_PX + 2.0 * PAD_PX;
+    let height = TOP_PX + rows * (VIEW_PX + CAPTION_PX) + 86.0;
     let grasp_of = grasp_face_of_triangles(model);
     let mut s = String::new();
     let _ = writeln!(
@@ -75,7 +102,7 @@ pub fn picture(model: &PartModel, title: &str, sites: &CupSites) -> String {
     for (vi, view) in views().iter().enumerate() {
         draw_view(&mut s, model, view, vi, scale, &grasp_of, sites);
     }
-    draw_legend(&mut s, model, scale);
+    draw_legend(&mut s, model, scale, TOP_PX + rows * (VIEW_PX + CAPTION_PX) + 16.0);
     s.push_str("</svg>\n");
     s
 }
@@ -93,8 +120,8 @@ fn grasp_face_of_triangles(model: &PartModel) -> Vec<Option<usize>> {
     grasp_of
 }
 
-/// View number `vi`: its frame and caption, the shaded mesh, the cup fits facing the viewer and
-/// the centre of mass.
+/// View number `vi` (rows of [`PER_ROW`]): its frame and caption, the shaded mesh, the cup fits
+/// facing the viewer and the centre of mass.
 fn draw_view(
     s: &mut String,
     model: &PartModel,
@@ -104,12 +131,13 @@ fn draw_view(
     grasp_of: &[Option<usize>],
     sites: &CupSites,
 ) {
-    let ox = PAD_PX + vi as f64 * VIEW_PX + VIEW_PX / 2.0;
-    let oy = 40.0 + VIEW_PX / 2.0;
+    let ox = PAD_PX + (vi % PER_ROW) as f64 * VIEW_PX + VIEW_PX / 2.0;
+    let top = TOP_PX + (vi / PER_ROW) as f64 * (VIEW_PX + CAPTION_PX);
+    let oy = top + VIEW_PX / 2.0;
     let px = |p: &Point3<f64>| (ox + scale * p.coords.dot(&view.h), oy - scale * p.coords.dot(&view.v));
     let _ = writeln!(
         s,
-        "<rect x=\"{:.1}\" y=\"40\" width=\"{:.1}\" height=\"{VIEW_PX:.1}\" fill=\"none\" stroke=\"#ccc\"/>",
+        "<rect x=\"{:.1}\" y=\"{top:.1}\" width=\"{:.1}\" height=\"{VIEW_PX:.1}\" fill=\"none\" stroke=\"#ccc\"/>",
         ox - VIEW_PX / 2.0 + 4.0,
         VIEW_PX - 8.0
     );
@@ -117,7 +145,7 @@ fn draw_view(
         s,
         "<text x=\"{:.1}\" y=\"{:.1}\" text-anchor=\"middle\">{}</text>",
         ox,
-        40.0 + VIEW_PX + 16.0,
+        top + VIEW_PX + 16.0,
         view.name
     );
     draw_triangles(s, &model.mesh, view, &px, grasp_of);
@@ -211,10 +239,9 @@ fn draw_cup_fits(
     }
 }
 
-/// The legend under the views and the most likely resting poses (poses alike as one), four to
-/// a line.
-fn draw_legend(s: &mut String, model: &PartModel, scale: f64) {
-    let legend_y = 40.0 + VIEW_PX + 40.0;
+/// The legend under the views (its first line at `legend_y`, px) and the most likely resting
+/// poses (poses alike as one), four to a line.
+fn draw_legend(s: &mut String, model: &PartModel, scale: f64, legend_y: f64) {
     let _ = writeln!(
         s,
         "<text x=\"{PAD_PX}\" y=\"{legend_y:.0}\">green: faces the {:.1} mm cup seals on (margin {:.1} mm); dots: admissible cup centres; dashed: the cup at its site; red cross: centre of mass. Scale: {:.0} px per mm.</text>",
@@ -269,6 +296,26 @@ mod tests {
     /// A step seen from above: a 10 mm slab with a 4 mm block on it. Both tops face the viewer
     /// square on, so only their depth tells them apart: the slab's top (4 mm farther) is drawn
     /// darker than the block's. Control: their sides, seen edge on, are not drawn.
+    /// Every side of a part is seen square on in exactly one view, and no view is mirrored (a
+    /// view's right and up make a right-handed frame with the direction toward the viewer).
+    /// Control: the three views the picture had before leave three sides unseen.
+    #[test]
+    fn every_side_is_seen_in_one_unmirrored_view() {
+        let seen_by = |views: &[View], side: Vector3<f64>| views.iter().filter(|v| v.toward == side).count();
+        let sides = [Vector3::x(), Vector3::y(), Vector3::z()]
+            .into_iter()
+            .flat_map(|a| [a, -a]);
+        let all = views();
+        for side in sides.clone() {
+            assert_eq!(seen_by(&all, side), 1, "{side:?}");
+        }
+        for v in &all {
+            assert_eq!(v.h.cross(&v.v), v.toward, "{}", v.name);
+        }
+        let unseen = sides.filter(|&side| seen_by(&all[..3], side) == 0).count();
+        assert_eq!(unseen, 3);
+    }
+
     #[test]
     fn a_face_farther_from_the_viewer_is_drawn_darker() {
         use super::super::tessellate::box_mesh;
