@@ -10,6 +10,7 @@ use serde_json::json;
 
 use super::{InputError, load_cell};
 use binpick::config::{LoadedScene, LoadedWorkpiece};
+use binpick::cycle::FirstPick;
 use binpick::pipeline::GraspChoice;
 use binpick::sensor::RecognitionReport;
 
@@ -135,8 +136,10 @@ pub fn pile(a: &PileArgs) -> Result<()> {
 }
 
 /// `binpick sense`: a pile, the cycle's first capture of it (the arm out of view, a spoiled
-/// exposure repeated), the recognition result scored against the world at that moment, and the
-/// grasp the cell would choose ([`binpick::pipeline::sense_and_grasp`]).
+/// exposure repeated), the recognition result scored against the world at that moment, the grasp
+/// selector's ranking ([`binpick::pipeline::sense_and_grasp`]) and the grasp the cell takes, its
+/// Pick and Place motions generated ([`binpick::cycle::first_pick`]: a grasp whose motions fail
+/// is passed over, as in a run).
 pub fn sense(args: &SenseArgs) -> Result<()> {
     let a = &args.pile;
     use binpick::cycle::{Cell, RunOptions};
@@ -165,7 +168,16 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
     let pile = SensedPile::new(&ctx, &job.capture, &job.arm);
     let choice = sense_and_grasp(&ctx, &pile, &detections, &cell.slots[0], &world.joints(), &[]);
     let grasp_ms = t1.elapsed().as_secs_f64() * 1e3;
-    let chosen = choice.chosen.as_ref().map(|c| &c.grasp);
+    let spoiled = state.sensor.spoiled;
+    let t2 = std::time::Instant::now();
+    let first = binpick::cycle::first_pick(&cell, state, &sensed);
+    let motions_ms = t2.elapsed().as_secs_f64() * 1e3;
+    let (chosen, passed_over, why_none) = match &first {
+        FirstPick::Taken { grasp, passed_over } => (Some(grasp), &passed_over[..], None),
+        FirstPick::NoGrasp(why) => (None, &[][..], Some(why.to_string())),
+        FirstPick::NoMotion(failures) => (None, &failures[..], Some(NO_MOTION.to_string())),
+    };
+    let passed_over: Vec<String> = passed_over.iter().map(ToString::to_string).collect();
     let name = format!("sense-{}-seed{seed}", wp.workpiece.name);
     let run = binpick::report::RunDir::create(out, &name)?;
     run.write_inputs(&loaded, Some(&wp))?;
@@ -182,19 +194,20 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         "binpick_version": env!("CARGO_PKG_VERSION"), "workpiece": wp.workpiece.name, "seed": seed, "count": count,
         "capture": {"trigger_s": job.capture.trigger_s, "ready_s": job.ready_s, "width_px": job.capture.width_px,
                     "height_px": job.capture.height_px, "valid_px": job.capture.valid_count(),
-                    "spoiled_before": state.sensor.spoiled},
+                    "spoiled_before": spoiled},
         "recognition": &report, "recognition_mode": loaded.scene.sensor.recognition.name(),
         "detections": &detections,
         "detections_truth": &report.matches,
         "top_layer_truth": top_layer_truth(&job.truth, &report),
-        "grasp": {"chosen": chosen, "ranked": choice.plan.ranked.len(), "rejected": choice.plan.rejected_counts(),
-                  "why_none": chosen.is_none().then(|| choice.why_none())},
+        "grasp": {"chosen": chosen, "passed_over": passed_over, "why_none": why_none,
+                  "ranked": choice.plan.ranked.len(), "rejected": choice.plan.rejected_counts()},
     });
     run.write_json("sense.json", &file)?;
     let dest = run.finish()?;
     if json {
         let mut v = file;
-        v["timing_ms"] = json!({"recognition": sensed.recognition_wall_s * 1e3, "grasp": grasp_ms});
+        v["timing_ms"] =
+            json!({"recognition": sensed.recognition_wall_s * 1e3, "grasp": grasp_ms, "motions": motions_ms});
         v["run_dir"] = json!(dest.display().to_string());
         v.as_object_mut().map(|o| o.remove("detections"));
         println!("{}", serde_json::to_string_pretty(&v)?);
@@ -209,10 +222,10 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         job.capture.width_px,
         job.capture.height_px,
         job.capture.valid_count(),
-        state.sensor.spoiled
+        spoiled
     );
     print_recognition(&loaded, &report, sensed.recognition_wall_s);
-    print_grasp(&choice, grasp_ms);
+    print_grasp(&choice, &first, grasp_ms, motions_ms);
     println!("  wrote            {}", dest.display());
     Ok(())
 }
@@ -240,10 +253,21 @@ fn print_recognition(loaded: &LoadedScene, report: &RecognitionReport, recogniti
     );
 }
 
-/// The text lines of the chosen grasp, the candidates and the time sense-and-grasp took.
-fn print_grasp(choice: &GraspChoice, grasp_ms: f64) {
-    match choice.chosen.as_ref().map(|c| &c.grasp) {
-        Some(g) => {
+/// `sense`'s reason when no grasp tried has its motions.
+const NO_MOTION: &str = "no motions for any grasp tried";
+
+/// The text lines of the grasp the cell takes (`first`) and those it passed over, the selector's
+/// candidates (`choice`) and the time the grasp selection and the motions took.
+fn print_grasp(choice: &GraspChoice, first: &FirstPick, grasp_ms: f64, motions_ms: f64) {
+    let passed_over = match first {
+        FirstPick::Taken { passed_over, .. } | FirstPick::NoMotion(passed_over) => &passed_over[..],
+        FirstPick::NoGrasp(_) => &[],
+    };
+    for (i, why) in passed_over.iter().enumerate() {
+        row("passed over", &format!("grasp {} of those tried: {why}", i + 1));
+    }
+    match first {
+        FirstPick::Taken { grasp: g, .. } => {
             let p = g.world_from_tool.translation.vector;
             row(
                 "chosen grasp",
@@ -262,7 +286,8 @@ fn print_grasp(choice: &GraspChoice, grasp_ms: f64) {
                 ),
             );
         }
-        None => row("chosen grasp", &format!("none: {}", choice.why_none())),
+        FirstPick::NoGrasp(why) => row("chosen grasp", &format!("none: {why}")),
+        FirstPick::NoMotion(_) => row("chosen grasp", &format!("none: {NO_MOTION}")),
     }
     let counts: Vec<String> = choice
         .plan
@@ -284,7 +309,9 @@ fn print_grasp(choice: &GraspChoice, grasp_ms: f64) {
     );
     row(
         "sense and grasp",
-        &format!("{grasp_ms:.2} ms wall (height map, candidates, IK, ranking, clear approach)"),
+        &format!(
+            "{grasp_ms:.2} ms wall (height map, candidates, IK, ranking, clear approach); the motions {motions_ms:.1} ms"
+        ),
     );
 }
 

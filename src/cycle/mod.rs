@@ -618,6 +618,37 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
     Ok((run.st, sensed))
 }
 
+/// What the cell makes of a recognition result before its pick: the grasp it takes, its Pick
+/// and Place motions generated (a grasp whose motions fail passed over for the next, as in a
+/// run), or why it takes none.
+#[derive(Debug, Clone)]
+pub enum FirstPick {
+    /// The grasp taken, after the failures of the grasps passed over (best-ranked first).
+    Taken {
+        grasp: crate::grasp::GraspCandidate,
+        passed_over: Vec<MotionFailure>,
+    },
+    /// No grasp to try: the grasp selector's reason.
+    NoGrasp(crate::pipeline::NoGrasp),
+    /// Grasps were chosen, but none of those tried has its motions: each one's failure.
+    NoMotion(Vec<MotionFailure>),
+}
+
+/// The cell's choice on `sensed` (from [`sense_once`], in `st`): grasp selection and motion
+/// generation as the cycle runs them for a pick into the next place slot.
+pub fn first_pick(cell: &Cell<'_>, st: CellState, sensed: &SensedResult) -> FirstPick {
+    let mut run = Run { cell, st, obs: &mut () };
+    let (t_s, slot) = (sensed.job.ready_s.max(run.st.compute_from_s), run.st.trays.next_slot);
+    match run.prepare(sensed, t_s, slot, None) {
+        Ok((prep, _)) => FirstPick::Taken {
+            grasp: prep.grasp,
+            passed_over: prep.passed_over,
+        },
+        Err(Unprepared::NoGrasp { why, .. }) => FirstPick::NoGrasp(why),
+        Err(Unprepared::NoMotion { failures, .. }) => FirstPick::NoMotion(failures),
+    }
+}
+
 /// After the cell lets a part go over the pick tray (a pick that cannot be placed), no capture
 /// is triggered for this long (s): the part drops a few centimetres, bounces and comes to rest in
 /// about 0.2 s; an exposure meanwhile sees the pile moving (a C strip let go 90 ms before a

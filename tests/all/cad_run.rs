@@ -118,19 +118,18 @@ impl binpick::cycle::Observer for PlannedMotions {
     }
 }
 
+/// The jack's workpiece file (its mesh `jack.obj` beside it, [`jack_obj`]).
+const JACK_TOML: &str = "name = \"jack\"\nkind = \"RJ45 jack\"\nmass_kg = 0.004\nfriction = 0.4\n\
+    restitution = 0.1\npile_count = 25\n\n[shape]\nkind = \"mesh\"\nmesh_file = \"jack.obj\"\nunits = \"mm\"\n\n\
+    [grasp]\nyaw_symmetry_deg = 360.0\nplace_yaw_deg = 0.0\nface_margin_m = 0.0005\n";
+
 /// The jack's run (2 picks, seed 1, deterministic) with the controller's wrist interpolation
 /// allowed up to `wrist_deviation_max_deg`: the motion failures passed over, and the run.
 fn jack_run(wrist_deviation_max_deg: f64) -> (PlannedMotions, binpick::cycle::RunResult) {
     let dir = crate::support::tempdir().unwrap();
     std::fs::write(dir.path().join("jack.obj"), jack_obj()).unwrap();
     let toml = dir.path().join("jack.toml");
-    std::fs::write(
-        &toml,
-        "name = \"jack\"\nkind = \"RJ45 jack\"\nmass_kg = 0.004\nfriction = 0.4\nrestitution = 0.1\n\
-         pile_count = 25\n\n[shape]\nkind = \"mesh\"\nmesh_file = \"jack.obj\"\nunits = \"mm\"\n\n\
-         [grasp]\nyaw_symmetry_deg = 360.0\nplace_yaw_deg = 0.0\nface_margin_m = 0.0005\n",
-    )
-    .unwrap();
+    std::fs::write(&toml, JACK_TOML).unwrap();
     let wp = LoadedWorkpiece::resolve(toml.to_str().unwrap()).unwrap();
     let mut scene = LoadedScene::embedded_default().unwrap();
     scene.scene.cycle.wrist_deviation_max_deg = wrist_deviation_max_deg;
@@ -201,4 +200,51 @@ fn a_descent_through_the_wrist_singularity_is_made_with_the_wrist_interpolated()
         deviation_rad > 0.0 && deviation_rad <= 1f64.to_radians(),
         "{deviation_rad} rad"
     );
+}
+
+/// `binpick sense` shows the grasp the cell takes, its motions generated, not only the grasp
+/// selector's first choice: with a controller that cannot interpolate the wrist, the jack's first
+/// choice has no Place into the first slot (seed 1), and `sense` says it is passed over and what
+/// is taken instead, if anything. Control: with the default cell's controller nothing is passed
+/// over and a grasp is taken.
+#[test]
+fn sense_shows_the_grasp_the_cell_takes_with_its_motions() {
+    let ws = crate::support::Workspace::new();
+    std::fs::write(ws.path("jack.obj"), jack_obj()).unwrap();
+    std::fs::write(ws.path("jack.toml"), JACK_TOML).unwrap();
+    ws.edit(
+        "scenes/default.toml",
+        "scenes/no-wrist-interpolation.toml",
+        "wrist_deviation_max_deg = 1.0",
+        "wrist_deviation_max_deg = 0.0",
+    );
+    let sense = |scene: &str| -> serde_json::Value {
+        let args = [
+            "sense",
+            "--workpiece",
+            "jack.toml",
+            "--seed",
+            "1",
+            "--scene",
+            scene,
+            "--out",
+            "out",
+            "--json",
+        ];
+        let o = crate::support::binpick_in(ws.dir.path(), &args);
+        assert!(o.status.success(), "{}", crate::support::stderr(&o));
+        serde_json::from_str(&crate::support::stdout(&o)).unwrap()
+    };
+    let without = sense("scenes/no-wrist-interpolation.toml");
+    let passed_over = without["grasp"]["passed_over"].as_array().unwrap();
+    assert!(
+        passed_over
+            .iter()
+            .any(|why| why.as_str().unwrap().contains("place descent")),
+        "{}",
+        without["grasp"]
+    );
+    let with = sense("scenes/default.toml");
+    assert_eq!(with["grasp"]["passed_over"], serde_json::json!([]), "{}", with["grasp"]);
+    assert!(with["grasp"]["chosen"].is_object(), "{}", with["grasp"]);
 }
