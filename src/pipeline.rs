@@ -150,7 +150,11 @@ impl fmt::Display for NoGrasp {
                     .map(|(k, v)| format!("{k} {v}"))
                     .collect::<Vec<_>>()
                     .join(", ");
-                write!(f, "no feasible grasp ({reasons})")
+                if reasons.is_empty() {
+                    f.write_str("no feasible grasp")
+                } else {
+                    write!(f, "no feasible grasp ({reasons})")
+                }
             }
             NoGrasp::NoClearApproach(among) => write!(f, "no grasp with a clear approach among {among}"),
         }

@@ -174,6 +174,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
     let motions_ms = t2.elapsed().as_secs_f64() * 1e3;
     let (chosen, passed_over, why_none) = match &first {
         FirstPick::Taken { grasp, passed_over } => (Some(grasp), &passed_over[..], None),
+        FirstPick::NothingDetected => (None, &[][..], Some(NOTHING_DETECTED.to_string())),
         FirstPick::NoGrasp(why) => (None, &[][..], Some(why.to_string())),
         FirstPick::NoMotion(failures) => (None, &failures[..], Some(NO_MOTION.to_string())),
     };
@@ -255,13 +256,15 @@ fn print_recognition(loaded: &LoadedScene, report: &RecognitionReport, recogniti
 
 /// `sense`'s reason when no grasp tried has its motions.
 const NO_MOTION: &str = "no motions for any grasp tried";
+/// `sense`'s reason when the recognition reported no part.
+const NOTHING_DETECTED: &str = "nothing detected";
 
 /// The text lines of the grasp the cell takes (`first`) and those it passed over, the selector's
 /// candidates (`choice`) and the time the grasp selection and the motions took.
 fn print_grasp(choice: &GraspChoice, first: &FirstPick, grasp_ms: f64, motions_ms: f64) {
     let passed_over = match first {
         FirstPick::Taken { passed_over, .. } | FirstPick::NoMotion(passed_over) => &passed_over[..],
-        FirstPick::NoGrasp(_) => &[],
+        FirstPick::NoGrasp(_) | FirstPick::NothingDetected => &[],
     };
     for (i, why) in passed_over.iter().enumerate() {
         row("passed over", &format!("grasp {} of those tried: {why}", i + 1));
@@ -288,6 +291,7 @@ fn print_grasp(choice: &GraspChoice, first: &FirstPick, grasp_ms: f64, motions_m
         }
         FirstPick::NoGrasp(why) => row("chosen grasp", &format!("none: {why}")),
         FirstPick::NoMotion(_) => row("chosen grasp", &format!("none: {NO_MOTION}")),
+        FirstPick::NothingDetected => row("chosen grasp", &format!("none: {NOTHING_DETECTED}")),
     }
     let counts: Vec<String> = choice
         .plan

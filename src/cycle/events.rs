@@ -701,6 +701,9 @@ mod tests {
             [("crowded", 3)].into_iter().collect(),
         )));
         assert_eq!(o.to_string(), "nothing_graspable: no feasible grasp (crowded 3)");
+        // No reason counted (nothing to rank): no empty parentheses.
+        let none = crate::pipeline::NoGrasp::NoneFeasible(Default::default());
+        assert_eq!(none.to_string(), "no feasible grasp");
         assert!(o.is_warning());
         assert!(!Event::Outcome(Outcome::Placed).is_warning());
         assert_eq!(Event::Outcome(Outcome::Placed).to_string(), "placed: ");

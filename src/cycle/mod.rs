@@ -628,6 +628,8 @@ pub enum FirstPick {
         grasp: crate::grasp::GraspCandidate,
         passed_over: Vec<MotionFailure>,
     },
+    /// The recognition reported no part (the run re-captures).
+    NothingDetected,
     /// No grasp to try: the grasp selector's reason.
     NoGrasp(crate::pipeline::NoGrasp),
     /// Grasps were chosen, but none of those tried has its motions: each one's failure.
@@ -637,6 +639,9 @@ pub enum FirstPick {
 /// The cell's choice on `sensed` (from [`sense_once`], in `st`): grasp selection and motion
 /// generation as the cycle runs them for a pick into the next place slot.
 pub fn first_pick(cell: &Cell<'_>, st: CellState, sensed: &SensedResult) -> FirstPick {
+    if sensed.detections.as_deref().is_none_or(<[_]>::is_empty) {
+        return FirstPick::NothingDetected;
+    }
     let mut run = Run { cell, st, obs: &mut () };
     let (t_s, slot) = (sensed.job.ready_s.max(run.st.compute_from_s), run.st.trays.next_slot);
     match run.prepare(sensed, t_s, slot, None) {
