@@ -173,7 +173,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
     let first = binpick::cycle::first_pick(&cell, state, &sensed);
     let motions_ms = t2.elapsed().as_secs_f64() * 1e3;
     let (chosen, passed_over, why_none) = match &first {
-        FirstPick::Taken { grasp, passed_over } => (Some(grasp), &passed_over[..], None),
+        FirstPick::Taken { grasp, passed_over } => (Some(&**grasp), &passed_over[..], None),
         FirstPick::NothingDetected => (None, &[][..], Some(NOTHING_DETECTED.to_string())),
         FirstPick::NoGrasp(why) => (None, &[][..], Some(why.to_string())),
         FirstPick::NoMotion(failures) => (None, &failures[..], Some(NO_MOTION.to_string())),

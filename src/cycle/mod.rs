@@ -625,7 +625,7 @@ pub fn sense_once(cell: &Cell<'_>, obs: &mut dyn Observer) -> Result<(CellState,
 pub enum FirstPick {
     /// The grasp taken, after the failures of the grasps passed over (best-ranked first).
     Taken {
-        grasp: crate::grasp::GraspCandidate,
+        grasp: Box<crate::grasp::GraspCandidate>,
         passed_over: Vec<MotionFailure>,
     },
     /// The recognition reported no part (the run re-captures).
@@ -646,7 +646,7 @@ pub fn first_pick(cell: &Cell<'_>, st: CellState, sensed: &SensedResult) -> Firs
     let (t_s, slot) = (sensed.job.ready_s.max(run.st.compute_from_s), run.st.trays.next_slot);
     match run.prepare(sensed, t_s, slot, None) {
         Ok((prep, _)) => FirstPick::Taken {
-            grasp: prep.grasp,
+            grasp: Box::new(prep.grasp),
             passed_over: prep.passed_over,
         },
         Err(Unprepared::NoGrasp { why, .. }) => FirstPick::NoGrasp(why),
