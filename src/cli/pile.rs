@@ -172,13 +172,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
     let t2 = std::time::Instant::now();
     let first = binpick::cycle::first_pick(&cell, state, &sensed);
     let motions_ms = t2.elapsed().as_secs_f64() * 1e3;
-    let (chosen, passed_over, why_none) = match &first {
-        FirstPick::Taken { grasp, passed_over } => (Some(&**grasp), &passed_over[..], None),
-        FirstPick::NothingDetected => (None, &[][..], Some(NOTHING_DETECTED.to_string())),
-        FirstPick::NoGrasp(why) => (None, &[][..], Some(why.to_string())),
-        FirstPick::NoMotion(failures) => (None, &failures[..], Some(NO_MOTION.to_string())),
-    };
-    let passed_over: Vec<String> = passed_over.iter().map(ToString::to_string).collect();
+    let passed_over: Vec<String> = first.passed_over().iter().map(ToString::to_string).collect();
     let name = format!("sense-{}-seed{seed}", wp.workpiece.name);
     let run = binpick::report::RunDir::create(out, &name)?;
     run.write_inputs(&loaded, Some(&wp))?;
@@ -200,7 +194,7 @@ pub fn sense(args: &SenseArgs) -> Result<()> {
         "detections": &detections,
         "detections_truth": &report.matches,
         "top_layer_truth": top_layer_truth(&job.truth, &report),
-        "grasp": {"chosen": chosen, "passed_over": passed_over, "why_none": why_none,
+        "grasp": {"chosen": first.taken(), "passed_over": passed_over, "why_none": why_none(&first),
                   "ranked": choice.plan.ranked.len(), "rejected": choice.plan.rejected_counts()},
     });
     run.write_json("sense.json", &file)?;
@@ -254,23 +248,24 @@ fn print_recognition(loaded: &LoadedScene, report: &RecognitionReport, recogniti
     );
 }
 
-/// `sense`'s reason when no grasp tried has its motions.
-const NO_MOTION: &str = "no motions for any grasp tried";
-/// `sense`'s reason when the recognition reported no part.
-const NOTHING_DETECTED: &str = "nothing detected";
+/// Why the cell takes no grasp (none if it takes one).
+fn why_none(first: &FirstPick) -> Option<String> {
+    match first {
+        FirstPick::Taken { .. } => None,
+        FirstPick::NothingDetected => Some("nothing detected".into()),
+        FirstPick::NoGrasp(why) => Some(why.to_string()),
+        FirstPick::NoMotion(_) => Some("no motions for any grasp tried".into()),
+    }
+}
 
 /// The text lines of the grasp the cell takes (`first`) and those it passed over, the selector's
 /// candidates (`choice`) and the time the grasp selection and the motions took.
 fn print_grasp(choice: &GraspChoice, first: &FirstPick, grasp_ms: f64, motions_ms: f64) {
-    let passed_over = match first {
-        FirstPick::Taken { passed_over, .. } | FirstPick::NoMotion(passed_over) => &passed_over[..],
-        FirstPick::NoGrasp(_) | FirstPick::NothingDetected => &[],
-    };
-    for (i, why) in passed_over.iter().enumerate() {
+    for (i, why) in first.passed_over().iter().enumerate() {
         row("passed over", &format!("grasp {} of those tried: {why}", i + 1));
     }
-    match first {
-        FirstPick::Taken { grasp: g, .. } => {
+    match first.taken() {
+        Some(g) => {
             let p = g.world_from_tool.translation.vector;
             row(
                 "chosen grasp",
@@ -289,9 +284,10 @@ fn print_grasp(choice: &GraspChoice, first: &FirstPick, grasp_ms: f64, motions_m
                 ),
             );
         }
-        FirstPick::NoGrasp(why) => row("chosen grasp", &format!("none: {why}")),
-        FirstPick::NoMotion(_) => row("chosen grasp", &format!("none: {NO_MOTION}")),
-        FirstPick::NothingDetected => row("chosen grasp", &format!("none: {NOTHING_DETECTED}")),
+        None => row(
+            "chosen grasp",
+            &format!("none: {}", why_none(first).unwrap_or_default()),
+        ),
     }
     let counts: Vec<String> = choice
         .plan

@@ -636,6 +636,24 @@ pub enum FirstPick {
     NoMotion(Vec<MotionFailure>),
 }
 
+impl FirstPick {
+    /// The grasp taken, if any.
+    pub fn taken(&self) -> Option<&crate::grasp::GraspCandidate> {
+        match self {
+            FirstPick::Taken { grasp, .. } => Some(grasp),
+            _ => None,
+        }
+    }
+
+    /// The failures of the grasps tried and passed over, best-ranked first.
+    pub fn passed_over(&self) -> &[MotionFailure] {
+        match self {
+            FirstPick::Taken { passed_over, .. } | FirstPick::NoMotion(passed_over) => passed_over,
+            FirstPick::NothingDetected | FirstPick::NoGrasp(_) => &[],
+        }
+    }
+}
+
 /// The cell's choice on `sensed` (from [`sense_once`], in `st`): grasp selection and motion
 /// generation as the cycle runs them for a pick into the next place slot.
 pub fn first_pick(cell: &Cell<'_>, st: CellState, sensed: &SensedResult) -> FirstPick {
@@ -773,8 +791,7 @@ impl Run<'_, '_> {
                     // cell decides so (charged at the grasp selection's budget, and the motions'
                     // of the grasps it tried) and takes the next result; no pick was attempted.
                     self.st.in_hand = None;
-                    let t = self.st.world.time_s().max(compute_from_s) + self.unprepared_compute_s(why.as_ref());
-                    self.idle_until(t)?;
+                    self.wait_out_unprepared(why.as_ref(), compute_from_s)?;
                     self.st.compute_from_s = self.st.world.time_s();
                     continue;
                 }
@@ -783,8 +800,7 @@ impl Run<'_, '_> {
                     if why.is_some() {
                         // The compute spent on the grasp selection (and on the motions of the
                         // grasps tried) runs out before the cell decides that none is taken.
-                        rec.compute.grasp_s = self.unprepared_compute_s(why.as_ref());
-                        self.idle_until(self.st.world.time_s().max(compute_from_s) + rec.compute.grasp_s)?;
+                        rec.compute.grasp_s = self.wait_out_unprepared(why.as_ref(), compute_from_s)?;
                     }
                     rec.outcome = match why {
                         None => Outcome::NothingDetected,

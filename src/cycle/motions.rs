@@ -534,6 +534,19 @@ impl Run<'_, '_> {
         }
     }
 
+    /// Waits out the compute charged for a result from which no pick was prepared
+    /// ([`Run::unprepared_compute_s`]), started at `compute_from_s` or now, whichever is later;
+    /// returns it (s).
+    pub(super) fn wait_out_unprepared(
+        &mut self,
+        why: Option<&Unprepared>,
+        compute_from_s: f64,
+    ) -> Result<f64, super::CycleError> {
+        let spent_s = self.unprepared_compute_s(why);
+        self.idle_until(self.st.world.time_s().max(compute_from_s) + spent_s)?;
+        Ok(spent_s)
+    }
+
     /// Grasp selection and motion generation for one recognition result (its detections), from
     /// `t_s`, the part to go to place slot `slot_index`; with `retreat` (the last Place's retreat,
     /// not started yet, from the part released in the slot before `slot_index`), the Pick
